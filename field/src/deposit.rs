@@ -1,0 +1,378 @@
+//! Deposit kernels (MODELS.md M1–M4) and the validation every deposit passes before it may touch
+//! a frame. A deposit costs O(kernel area): only the cells within its extent are visited.
+
+use std::fmt;
+
+use crate::geometry::{CellBox, GridGeometry};
+use crate::messages::{DepositMsg, KernelKind};
+use crate::models::ChannelSpec;
+
+/// Why a deposit was refused. The discriminant is the index of its counter in the frame header.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum RejectReason {
+    /// A position, amount, covariance or parameter is NaN or infinite.
+    NonFinite = 0,
+    /// The position covariance is not symmetric positive semi-definite.
+    NotPsd = 1,
+    /// The channel index names no channel of this field.
+    UnknownChannel = 2,
+    /// The kernel code is not one this build knows.
+    UnknownKernel = 3,
+    /// An amount, range or shape parameter is out of the accepted limits.
+    OutOfLimits = 4,
+    /// The kernel's extent does not reach any cell of the grid.
+    OutsideGrid = 5,
+    /// A negative amount on a channel that is not signed.
+    NegativeOnUnsigned = 6,
+}
+
+/// Number of rejection reasons (length of the counters array in the frame header).
+pub const REJECT_REASONS: usize = 7;
+
+impl RejectReason {
+    pub const ALL: [RejectReason; REJECT_REASONS] = [
+        RejectReason::NonFinite,
+        RejectReason::NotPsd,
+        RejectReason::UnknownChannel,
+        RejectReason::UnknownKernel,
+        RejectReason::OutOfLimits,
+        RejectReason::OutsideGrid,
+        RejectReason::NegativeOnUnsigned,
+    ];
+
+    /// Stable snake_case name, used in logs and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            RejectReason::NonFinite => "non_finite",
+            RejectReason::NotPsd => "not_psd",
+            RejectReason::UnknownChannel => "unknown_channel",
+            RejectReason::UnknownKernel => "unknown_kernel",
+            RejectReason::OutOfLimits => "out_of_limits",
+            RejectReason::OutsideGrid => "outside_grid",
+            RejectReason::NegativeOnUnsigned => "negative_on_unsigned",
+        }
+    }
+}
+
+/// A refused deposit: the reason and what was wrong, naming the field and value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rejection {
+    pub reason: RejectReason,
+    pub detail: String,
+}
+
+impl fmt::Display for Rejection {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "deposit rejected ({}): {}", self.reason.name(), self.detail)
+    }
+}
+
+impl std::error::Error for Rejection {}
+
+fn reject(reason: RejectReason, detail: impl Into<String>) -> Rejection {
+    Rejection {
+        reason,
+        detail: detail.into(),
+    }
+}
+
+/// Limits on what a single deposit may ask for.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DepositLimits {
+    /// Largest |amount| (τ, ρt or Q) accepted.
+    pub max_abs_amount: f32,
+    /// Largest kernel radius, in cells (the kernel box is at most (2r+1)² cells).
+    pub max_radius_cells: f32,
+    /// Largest γmax accepted for the M1 kernels.
+    pub max_gamma: f32,
+}
+
+impl Default for DepositLimits {
+    fn default() -> Self {
+        Self {
+            max_abs_amount: 1.0e6,
+            max_radius_cells: 512.0,
+            max_gamma: 1.0e6,
+        }
+    }
+}
+
+/// A validated deposit, with every constant of its kernel computed once.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PreparedDeposit {
+    pub channel: usize,
+    pub cells: CellBox,
+    pub x_m: f32,
+    pub y_m: f32,
+    /// Squared cut-off radius z_rng² (m²).
+    pub range2_m2: f32,
+    pub shape: Shape,
+}
+
+/// The kernel, ready to evaluate at an offset `(dx, dy)` in metres from the deposit's centre.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Shape {
+    /// value = gain·exp(−(a·dx² + 2b·dx·dy + c·dy²)) — both M1 kernels take this form.
+    Quadratic { gain: f32, a: f32, b: f32, c: f32 },
+    /// Seed 001 eq. 3 / seed 004: Δ = (1 − s·ξprev)·s·ρt·exp(−d²/λ²), s = sign of the amount.
+    Saturating { rho: f32, inv_lambda2: f32 },
+    /// Seed 002 eq. 1: amount·μ(d), μ = 1 to `plateau_m`, falling linearly to 0 over `slope_m`.
+    ZShape {
+        amount: f32,
+        plateau_m: f32,
+        slope_m: f32,
+    },
+}
+
+/// The 2×2 position covariance, its eigen-decomposition and the γ of seed 000 eq. 12.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ErrorEllipse {
+    /// Largest and smallest eigenvalue (variances, m²), λ1 ≥ λ2 ≥ 0.
+    pub lambda1: f32,
+    pub lambda2: f32,
+    /// Unit eigenvector of λ1 (the major axis).
+    pub major: (f32, f32),
+}
+
+impl ErrorEllipse {
+    /// Closed-form eigen-decomposition of the symmetric matrix [[xx, xy], [xy, yy]].
+    pub fn from_cov(xx: f32, xy: f32, yy: f32) -> Self {
+        let (xx64, xy64, yy64) = (xx as f64, xy as f64, yy as f64);
+        let mean = 0.5 * (xx64 + yy64);
+        let half_diff = 0.5 * (xx64 - yy64);
+        let root = (half_diff * half_diff + xy64 * xy64).sqrt();
+        let l1 = mean + root;
+        let l2 = (mean - root).max(0.0);
+        // Eigenvector of l1: the angle θ with tan 2θ = 2xy / (xx − yy).
+        let theta = 0.5 * (2.0 * xy64).atan2(xx64 - yy64);
+        Self {
+            lambda1: l1 as f32,
+            lambda2: l2 as f32,
+            major: (theta.cos() as f32, theta.sin() as f32),
+        }
+    }
+
+    /// det Σxy = λ1·λ2.
+    pub fn det(&self) -> f32 {
+        self.lambda1 * self.lambda2
+    }
+}
+
+/// γ = τ / det Σxy, capped at ±γmax (seed 000 eq. 12; a zero determinant gives the cap).
+pub fn gamma(tau: f32, det_m4: f32, gamma_max: f32) -> f32 {
+    let g = if det_m4 > 0.0 {
+        tau as f64 / det_m4 as f64
+    } else {
+        f64::INFINITY.copysign(tau as f64)
+    };
+    (g.clamp(-(gamma_max as f64), gamma_max as f64)) as f32
+}
+
+/// Checks a deposit message against the field and turns it into a kernel.
+pub fn prepare(
+    msg: &DepositMsg,
+    geometry: &GridGeometry,
+    channels: &[ChannelSpec],
+    limits: &DepositLimits,
+) -> Result<PreparedDeposit, Rejection> {
+    let named = [
+        ("x_m", msg.x_m),
+        ("y_m", msg.y_m),
+        ("amount", msg.amount),
+        ("cov_xx", msg.cov_xx),
+        ("cov_xy", msg.cov_xy),
+        ("cov_yy", msg.cov_yy),
+        ("range_m", msg.range_m),
+        ("gamma_max", msg.gamma_max),
+        ("sigma_m", msg.sigma_m),
+        ("plateau_m", msg.plateau_m),
+        ("slope_m", msg.slope_m),
+    ];
+    if let Some((name, v)) = named.iter().find(|(_, v)| !v.is_finite()) {
+        return Err(reject(RejectReason::NonFinite, format!("{name} = {v}")));
+    }
+    let channel = msg.channel as usize;
+    let Some(spec) = channels.get(channel) else {
+        return Err(reject(
+            RejectReason::UnknownChannel,
+            format!("channel = {} (the field has {})", msg.channel, channels.len()),
+        ));
+    };
+    let Some(kernel) = KernelKind::from_code(msg.kernel) else {
+        return Err(reject(RejectReason::UnknownKernel, format!("kernel = {}", msg.kernel)));
+    };
+    if msg.amount.abs() > limits.max_abs_amount {
+        return Err(reject(
+            RejectReason::OutOfLimits,
+            format!("amount = {} (limit ±{})", msg.amount, limits.max_abs_amount),
+        ));
+    }
+    if msg.amount < 0.0 && !spec.signed {
+        return Err(reject(
+            RejectReason::NegativeOnUnsigned,
+            format!("amount = {} on unsigned channel '{}'", msg.amount, spec.name),
+        ));
+    }
+    let h = geometry.cell_size_m;
+    let max_range_m = limits.max_radius_cells * h;
+    let check_len = |name: &str, v: f32, allow_zero: bool| {
+        if v < 0.0 || (!allow_zero && v == 0.0) || v > max_range_m {
+            Err(reject(
+                RejectReason::OutOfLimits,
+                format!(
+                    "{name} = {v} m (must be {} and ≤ {max_range_m} m)",
+                    if allow_zero { "≥ 0" } else { "> 0" }
+                ),
+            ))
+        } else {
+            Ok(())
+        }
+    };
+    let (shape, extent_m) = match kernel {
+        KernelKind::Ellipse | KernelKind::Paper => {
+            check_len("range_m", msg.range_m, false)?;
+            if !(msg.gamma_max > 0.0 && msg.gamma_max <= limits.max_gamma) {
+                return Err(reject(
+                    RejectReason::OutOfLimits,
+                    format!("gamma_max = {} (must be in (0, {}])", msg.gamma_max, limits.max_gamma),
+                ));
+            }
+            let (xx, xy, yy) = (msg.cov_xx, msg.cov_xy, msg.cov_yy);
+            let scale = xx.abs().max(yy.abs()).max(f32::MIN_POSITIVE);
+            if xx < 0.0 || yy < 0.0 || (xx as f64 * yy as f64 - xy as f64 * xy as f64) < -1e-6 * (scale as f64).powi(2) {
+                return Err(reject(
+                    RejectReason::NotPsd,
+                    format!("covariance [[{xx}, {xy}], [{xy}, {yy}]] is not positive semi-definite"),
+                ));
+            }
+            let ellipse = ErrorEllipse::from_cov(xx, xy, yy);
+            let g = gamma(msg.amount, ellipse.det(), msg.gamma_max);
+            // The shape uses variances floored at (h/2)²: a point-like ellipse still lands on
+            // the cell under it instead of falling between cell centres.
+            let floor = 0.25 * h * h;
+            let l1 = ellipse.lambda1.max(floor);
+            let l2 = ellipse.lambda2.max(floor);
+            let (c, s) = ellipse.major;
+            // Weights along the axes: ellipse ½/λ (= ½ dᵀΣ⁻¹d), paper 1/λ² (eq. 14 as printed).
+            let (w1, w2) = match kernel {
+                KernelKind::Ellipse => (0.5 / l1, 0.5 / l2),
+                _ => (1.0 / (l1 * l1), 1.0 / (l2 * l2)),
+            };
+            // Quadratic form R diag(w1, w2) Rᵀ.
+            let a = w1 * c * c + w2 * s * s;
+            let b = (w1 - w2) * c * s;
+            let cc = w1 * s * s + w2 * c * c;
+            (Shape::Quadratic { gain: g, a, b, c: cc }, msg.range_m)
+        }
+        KernelKind::Saturating => {
+            check_len("range_m", msg.range_m, false)?;
+            check_len("sigma_m", msg.sigma_m, false)?;
+            if msg.amount.abs() > 1.0 {
+                return Err(reject(
+                    RejectReason::OutOfLimits,
+                    format!("amount = {} (ρt of a saturating deposit must be within [−1, 1])", msg.amount),
+                ));
+            }
+            (
+                Shape::Saturating {
+                    rho: msg.amount,
+                    inv_lambda2: 1.0 / (msg.sigma_m * msg.sigma_m),
+                },
+                msg.range_m,
+            )
+        }
+        KernelKind::ZShape => {
+            check_len("plateau_m", msg.plateau_m, true)?;
+            check_len("slope_m", msg.slope_m, true)?;
+            let extent = msg.plateau_m + msg.slope_m;
+            check_len("plateau_m + slope_m", extent, true)?;
+            (
+                Shape::ZShape {
+                    amount: msg.amount,
+                    plateau_m: msg.plateau_m,
+                    slope_m: msg.slope_m,
+                },
+                // Reach at least the cell under the centre.
+                extent.max(0.5 * h),
+            )
+        }
+    };
+    let Some(cells) = geometry.cell_box(msg.x_m, msg.y_m, extent_m) else {
+        return Err(reject(
+            RejectReason::OutsideGrid,
+            format!(
+                "({}, {}) m with extent {extent_m} m misses the grid [{}, {}] × [{}, {}] m",
+                msg.x_m,
+                msg.y_m,
+                geometry.origin_x_m,
+                geometry.origin_x_m + geometry.width_m(),
+                geometry.origin_y_m,
+                geometry.origin_y_m + geometry.height_m()
+            ),
+        ));
+    };
+    Ok(PreparedDeposit {
+        channel,
+        cells,
+        x_m: msg.x_m,
+        y_m: msg.y_m,
+        range2_m2: extent_m * extent_m,
+        shape,
+    })
+}
+
+impl PreparedDeposit {
+    /// Adds this deposit to `plane` (the next frame's plane of its channel), reading the previous
+    /// frame's plane `prev` for the saturating factor. Values are clamped to `[lo, hi]`.
+    /// Returns the mass actually added (sum of cell increments).
+    pub fn apply(&self, geometry: &GridGeometry, prev: &[f32], plane: &mut [f32], lo: f32, hi: f32) -> f64 {
+        let w = geometry.width as usize;
+        let h = geometry.cell_size_m;
+        let mut added = 0.0f64;
+        for y in self.cells.y0..=self.cells.y1 {
+            let dy = geometry.origin_y_m + (y as f32 + 0.5) * h - self.y_m;
+            let row = y as usize * w;
+            for x in self.cells.x0..=self.cells.x1 {
+                let dx = geometry.origin_x_m + (x as f32 + 0.5) * h - self.x_m;
+                let d2 = dx * dx + dy * dy;
+                if d2 > self.range2_m2 {
+                    continue;
+                }
+                let i = row + x as usize;
+                let delta = match self.shape {
+                    Shape::Quadratic { gain, a, b, c } => {
+                        gain * (-(a * dx * dx + 2.0 * b * dx * dy + c * dy * dy)).exp()
+                    }
+                    Shape::Saturating { rho, inv_lambda2 } => {
+                        let s = rho.signum();
+                        let room = (1.0 - s * prev[i]).max(0.0);
+                        room * rho * (-d2 * inv_lambda2).exp()
+                    }
+                    Shape::ZShape {
+                        amount,
+                        plateau_m,
+                        slope_m,
+                    } => amount * z_shape(d2.sqrt(), plateau_m, slope_m),
+                };
+                let before = plane[i];
+                let after = (before + delta).clamp(lo, hi);
+                plane[i] = after;
+                added += (after - before) as f64;
+            }
+        }
+        added
+    }
+}
+
+/// Seed 002 eq. 1: μ(x) = 1 for x ≤ c; 1 − (x − c)/σ for c < x ≤ c + σ; 0 beyond.
+pub fn z_shape(x: f32, c: f32, sigma: f32) -> f32 {
+    if x <= c {
+        1.0
+    } else if x <= c + sigma && sigma > 0.0 {
+        1.0 - (x - c) / sigma
+    } else {
+        0.0
+    }
+}

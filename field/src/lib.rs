@@ -1,0 +1,22 @@
+//! # pheromone field
+//!
+//! A virtual pheromone field for several processes on one host: geometry, the models of the
+//! seed papers (MODELS.md M1–M4), the fused tick engine, sampling, the shared-memory message
+//! types and the iceoryx2 service (`shm`, the crate's only `unsafe`).
+
+pub mod deposit;
+pub mod engine;
+pub mod error;
+pub mod geometry;
+pub mod messages;
+pub mod models;
+pub mod sample;
+pub mod tune;
+
+pub use deposit::{DepositLimits, RejectReason, Rejection};
+pub use engine::{FieldConfig, OwnedField, Stepper, TickReport};
+pub use error::ConfigError;
+pub use geometry::GridGeometry;
+pub use messages::{DepositMsg, FrameHeader, KernelKind};
+pub use models::{ChannelSpec, Evaporation};
+pub use sample::{FrameView, Pose2};

@@ -1,0 +1,190 @@
+//! The field's shared-memory message types: fixed-size `#[repr(C)]`, `ZeroCopySend`, no heap
+//! pointers. Their iceoryx2 type names carry a layout version, so a client built against another
+//! layout is refused when it opens the service instead of reading garbage.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use crate::deposit::REJECT_REASONS;
+
+/// Layout version of every message in this module; bump on any change.
+pub const LAYOUT_VERSION: u32 = 1;
+
+/// Deposit kernel codes on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum KernelKind {
+    /// Seed 000, project default: γ·exp(−½ dᵀΣxy⁻¹d), cut at z_rng.
+    Ellipse = 0,
+    /// Seed 000 eq. 14 as printed: γ·exp(−(u²/λ1² + v²/λ2²)), cut at z_rng.
+    Paper = 1,
+    /// Seeds 001/004 eq. 3: (1 − ξ)·ρt·exp(−d²/λ²), cut at z_rng, saturates at ±1.
+    Saturating = 2,
+    /// Seed 002 eq. 1: Q·μ(d), the Z-shape.
+    ZShape = 3,
+}
+
+impl KernelKind {
+    pub fn from_code(code: u32) -> Option<Self> {
+        Some(match code {
+            0 => KernelKind::Ellipse,
+            1 => KernelKind::Paper,
+            2 => KernelKind::Saturating,
+            3 => KernelKind::ZShape,
+            _ => return None,
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            KernelKind::Ellipse => "ellipse",
+            KernelKind::Paper => "paper",
+            KernelKind::Saturating => "saturating",
+            KernelKind::ZShape => "z-shape",
+        }
+    }
+}
+
+impl std::str::FromStr for KernelKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        [KernelKind::Ellipse, KernelKind::Paper, KernelKind::Saturating, KernelKind::ZShape]
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| format!("unknown kernel '{s}' (expected ellipse, paper, saturating or z-shape)"))
+    }
+}
+
+/// One deposit request. Unused parameters of a kernel are ignored but must be finite.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("pheromone::DepositMsg/v1")]
+#[repr(C)]
+pub struct DepositMsg {
+    /// Monotonic stamp (ns, CLOCK_MONOTONIC) when the deposit was made.
+    pub stamp_ns: u64,
+    pub robot_id: u32,
+    /// Channel index.
+    pub channel: u32,
+    /// `KernelKind` code.
+    pub kernel: u32,
+    /// Centre of the deposit, world metres.
+    pub x_m: f32,
+    pub y_m: f32,
+    /// τ (ellipse, paper), ρt (saturating) or Q (z-shape); negative = anti-pheromone.
+    pub amount: f32,
+    /// Position covariance Σxy (m²), for ellipse and paper.
+    pub cov_xx: f32,
+    pub cov_xy: f32,
+    pub cov_yy: f32,
+    /// Cut-off radius z_rng (m), for ellipse, paper and saturating.
+    pub range_m: f32,
+    /// γmax, for ellipse and paper.
+    pub gamma_max: f32,
+    /// λ (m), for saturating.
+    pub sigma_m: f32,
+    /// c and σ (m), for z-shape.
+    pub plateau_m: f32,
+    pub slope_m: f32,
+}
+
+impl DepositMsg {
+    /// A seed 000 deposit: amount τ, pose covariance block Σxy, sensor range z_rng, cap γmax.
+    #[allow(clippy::too_many_arguments)]
+    pub fn ellipse(channel: u32, x_m: f32, y_m: f32, tau: f32, cov: [f32; 3], range_m: f32, gamma_max: f32) -> Self {
+        Self {
+            channel,
+            kernel: KernelKind::Ellipse as u32,
+            x_m,
+            y_m,
+            amount: tau,
+            cov_xx: cov[0],
+            cov_xy: cov[1],
+            cov_yy: cov[2],
+            range_m,
+            gamma_max,
+            ..Default::default()
+        }
+    }
+
+    /// A seed 001/004 saturating deposit of strength ρt ∈ [−1, 1].
+    pub fn saturating(channel: u32, x_m: f32, y_m: f32, rho: f32, sigma_m: f32, range_m: f32) -> Self {
+        Self {
+            channel,
+            kernel: KernelKind::Saturating as u32,
+            x_m,
+            y_m,
+            amount: rho,
+            sigma_m,
+            range_m,
+            ..Default::default()
+        }
+    }
+
+    /// A seed 002 Z-shape deposit of quantum `amount`.
+    pub fn z_shape(channel: u32, x_m: f32, y_m: f32, amount: f32, plateau_m: f32, slope_m: f32) -> Self {
+        Self {
+            channel,
+            kernel: KernelKind::ZShape as u32,
+            x_m,
+            y_m,
+            amount,
+            plateau_m,
+            slope_m,
+            ..Default::default()
+        }
+    }
+}
+
+/// Header of every published frame. Counters are cumulative since the field started (or was
+/// restored).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("pheromone::FrameHeader/v1")]
+#[repr(C)]
+pub struct FrameHeader {
+    pub layout_version: u32,
+    pub channels: u32,
+    pub width: u32,
+    pub height: u32,
+    /// Frame number, +1 per tick.
+    pub sequence: u64,
+    /// CLOCK_MONOTONIC (ns) when the frame was published.
+    pub stamp_ns: u64,
+    /// Field time at this frame (s).
+    pub sim_time_s: f64,
+    pub cell_size_m: f32,
+    pub origin_x_m: f32,
+    pub origin_y_m: f32,
+    pub dt_secs: f32,
+    /// Compute time of the tick that produced this frame (ns).
+    pub tick_compute_ns: u64,
+    pub deposits_applied: u64,
+    /// Rejected deposits, indexed by `RejectReason as usize`.
+    pub deposits_rejected: [u64; REJECT_REASONS],
+    /// Deposits this frame added (this tick only).
+    pub deposits_this_tick: u32,
+    pub _reserved: u32,
+}
+
+impl FrameHeader {
+    pub fn deposits_rejected_total(&self) -> u64 {
+        self.deposits_rejected.iter().sum()
+    }
+
+    pub fn geometry(&self) -> crate::geometry::GridGeometry {
+        crate::geometry::GridGeometry {
+            width: self.width,
+            height: self.height,
+            cell_size_m: self.cell_size_m,
+            origin_x_m: self.origin_x_m,
+            origin_y_m: self.origin_y_m,
+        }
+    }
+
+    /// Number of `f32` cells in the frame.
+    pub fn len(&self) -> usize {
+        self.channels as usize * self.width as usize * self.height as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}

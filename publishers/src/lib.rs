@@ -1,0 +1,7 @@
+//! # pheromone publishers
+//!
+//! The robot roles that attach to the field: world (simulator), localizer, depositor and
+//! follower. Each is a library type, deterministic for a seed and testable in-process, plus a
+//! short process loop.
+
+pub mod messages;

@@ -1,0 +1,162 @@
+//! Messages between the robot roles: fixed-size `#[repr(C)]`, `ZeroCopySend`, each with a robot id
+//! and a monotonic stamp (ns, CLOCK_MONOTONIC). Type names carry the layout version.
+//!
+//! Services (DESIGN.md): `pheromone/<robot>/pose`, `pheromone/<robot>/cmd`,
+//! `pheromone/<robot>/status`, `sim/<robot>/sensors`, `sim/<robot>/truth`.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Most landmark observations one sensor message carries; the world reports the nearest ones.
+pub const MAX_OBSERVATIONS: usize = 32;
+
+/// Pose estimate with its 3×3 covariance (row-major over x, y, θ).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("pheromone::PoseMsg/v1")]
+#[repr(C)]
+pub struct PoseMsg {
+    pub stamp_ns: u64,
+    /// World step this estimate belongs to.
+    pub step: u64,
+    pub robot_id: u32,
+    /// Landmarks associated in this update.
+    pub landmarks_used: u32,
+    pub x_m: f64,
+    pub y_m: f64,
+    pub theta_rad: f64,
+    pub cov: [f64; 9],
+}
+
+impl PoseMsg {
+    /// The position block Σxy as `[xx, xy, yy]`.
+    pub fn cov_xy(&self) -> [f64; 3] {
+        [self.cov[0], self.cov[1], self.cov[4]]
+    }
+}
+
+/// One landmark seen by a robot: range (m), bearing (rad, relative to the heading), signature.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("pheromone::LandmarkObs/v1")]
+#[repr(C)]
+pub struct LandmarkObs {
+    pub range_m: f32,
+    pub bearing_rad: f32,
+    pub signature: u32,
+    pub _pad: u32,
+}
+
+/// What the world tells one robot after a step: the (noisy) velocity it executed — the control
+/// input of the velocity motion model — and the landmarks in sensor range.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("pheromone::SensorMsg/v1")]
+#[repr(C)]
+pub struct SensorMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// Valid entries of `observations`.
+    pub count: u32,
+    pub sim_time_s: f64,
+    pub dt_secs: f64,
+    /// Odometry: linear and angular velocity measured over the last step.
+    pub v_mps: f64,
+    pub omega_radps: f64,
+    pub observations: [LandmarkObs; MAX_OBSERVATIONS],
+}
+
+impl Default for SensorMsg {
+    fn default() -> Self {
+        Self {
+            stamp_ns: 0,
+            step: 0,
+            robot_id: 0,
+            count: 0,
+            sim_time_s: 0.0,
+            dt_secs: 0.0,
+            v_mps: 0.0,
+            omega_radps: 0.0,
+            observations: [LandmarkObs::default(); MAX_OBSERVATIONS],
+        }
+    }
+}
+
+impl SensorMsg {
+    pub fn observations(&self) -> &[LandmarkObs] {
+        &self.observations[..(self.count as usize).min(MAX_OBSERVATIONS)]
+    }
+}
+
+/// The true pose of a robot (for metrics and pictures; robots' own roles never read it).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("pheromone::TruthMsg/v1")]
+#[repr(C)]
+pub struct TruthMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// 1 if the last command was blocked by a wall.
+    pub collided: u32,
+    pub sim_time_s: f64,
+    pub x_m: f64,
+    pub y_m: f64,
+    pub theta_rad: f64,
+}
+
+/// Motion command for one robot: linear and angular velocity.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("pheromone::CmdMsg/v1")]
+#[repr(C)]
+pub struct CmdMsg {
+    pub stamp_ns: u64,
+    /// The world step this command answers (lockstep clock).
+    pub step: u64,
+    pub robot_id: u32,
+    pub _pad: u32,
+    pub v_mps: f64,
+    pub omega_radps: f64,
+}
+
+/// What a follower is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum FollowerState {
+    /// Climbing a trail.
+    Following = 0,
+    /// The sensed level fell below the threshold: the trail was abandoned.
+    TrailAbandoned = 1,
+    /// Looking for pheromone / exploring.
+    Exploring = 2,
+}
+
+impl FollowerState {
+    pub fn from_code(code: u32) -> Option<Self> {
+        Some(match code {
+            0 => FollowerState::Following,
+            1 => FollowerState::TrailAbandoned,
+            2 => FollowerState::Exploring,
+            _ => return None,
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            FollowerState::Following => "following",
+            FollowerState::TrailAbandoned => "trail_abandoned",
+            FollowerState::Exploring => "exploring",
+        }
+    }
+}
+
+/// A follower's status, published with every command.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("pheromone::FollowerStatusMsg/v1")]
+#[repr(C)]
+pub struct FollowerStatusMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// `FollowerState` code.
+    pub state: u32,
+    /// Pheromone level the follower senses at its pose.
+    pub sensed_level: f32,
+    pub _pad: u32,
+}
