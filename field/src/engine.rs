@@ -300,7 +300,7 @@ impl Stepper {
             report.deposits_applied += 1;
         }
         self.counters.applied += report.deposits_applied as u64;
-        self.sim_time_s += dt as f64;
+        self.sim_time_s += 1.0 / self.config.tick_hz as f64;
         self.sequence += 1;
         report
     }

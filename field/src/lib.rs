@@ -11,6 +11,7 @@ pub mod geometry;
 pub mod messages;
 pub mod models;
 pub mod sample;
+pub mod shm;
 pub mod tune;
 
 pub use deposit::{DepositLimits, RejectReason, Rejection};

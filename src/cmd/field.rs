@@ -1,0 +1,343 @@
+//! `pheromone field`: the field process loop.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use clap::{Args, ValueEnum};
+use field::deposit::RejectReason;
+use field::shm::{create_node, frame_pool, FieldServer};
+use field::{Evaporation, FieldConfig};
+
+use super::{bad, read_toml};
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
+pub enum ModelArg {
+    /// No evaporation.
+    None,
+    /// P' = P·e^(−K·dt).
+    Exponential,
+    /// Seed 000 ambient-aware: P' = P·e + (1 − e)·min(P, α·Pa).
+    Ambient,
+    /// Seeds 001/004: ξ' = (1 − ρ)·ξ, deposits saturate at ±1.
+    Saturating,
+    /// Seed 002 counters: lose Q every τ seconds.
+    Quantum,
+}
+
+/// Run a field process: the only writer of the grid.
+///
+/// Each tick it drains the deposits that arrived, computes the next frame from the previous one
+/// (evaporation, optional diffusion, deposits) straight into shared memory and publishes it. Once
+/// a second it logs the tick rate, compute time and deposit counts to stderr. Ctrl-C stops it.
+///
+/// Shared memory: (max-readers + 1) × 3 + 2 frames of width × height × channels × 4 bytes; the
+/// default 512 × 512 × 1 grid with 8 readers uses 29 MiB of /dev/shm. The field refuses to start
+/// if /dev/shm has less free space.
+///
+/// Without --config the field has one channel, 'trail', with the seed 000 ambient-aware model
+/// (K = 0.0057/s, α = 0.5, ambient radius 0.5 m). Flags override the file.
+#[derive(Args, Debug)]
+pub struct FieldArgs {
+    /// Field name: services are pheromone/<NAME>/frame, …/deposit, …/frame-ready.
+    #[arg(long, default_value = "main")]
+    pub name: String,
+    /// TOML file with the field configuration (unknown keys are errors).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Grid width in cells [default: 512].
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Grid height in cells [default: 512].
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Cell size in metres [default: 0.05].
+    #[arg(long, value_name = "M")]
+    pub cell_size: Option<f32>,
+    /// World x of the grid's lower-left corner, metres [default: 0].
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    pub origin_x: Option<f32>,
+    /// World y of the grid's lower-left corner, metres [default: 0].
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    pub origin_y: Option<f32>,
+    /// Ticks per second [default: 50].
+    #[arg(long, value_name = "HZ")]
+    pub tick_hz: Option<f32>,
+    /// Evaporation model of the first channel (replaces the file's).
+    #[arg(long, value_enum)]
+    pub model: Option<ModelArg>,
+    /// Evaporation rate K per second (exponential, ambient) [default: 0.0057].
+    #[arg(long, value_name = "K")]
+    pub decay_per_sec: Option<f32>,
+    /// Ambient weight α in [0, 1] (ambient) [default: 0.5].
+    #[arg(long)]
+    pub alpha: Option<f32>,
+    /// Radius of the ambient mean window in metres (ambient) [default: 0.5].
+    #[arg(long, value_name = "M")]
+    pub ambient_radius: Option<f32>,
+    /// Fraction ρ evaporated per tick (saturating) [default: 0.05].
+    #[arg(long)]
+    pub rho_per_tick: Option<f32>,
+    /// Counter quantum Q lost per time constant (quantum) [default: 1].
+    #[arg(long)]
+    pub quantum: Option<f32>,
+    /// Counter time constant τ in seconds (quantum) [default: 1].
+    #[arg(long, value_name = "SECS")]
+    pub tau_secs: Option<f32>,
+    /// Diffusion coefficient D in m²/s of the first channel (stability D·dt/h² ≤ ¼ is checked).
+    #[arg(long, value_name = "M2_PER_SEC")]
+    pub diffusion: Option<f32>,
+    /// Let the first channel hold negative values (anti-pheromone).
+    #[arg(long)]
+    pub signed: bool,
+    /// Readers the frame service admits [default: 8].
+    #[arg(long)]
+    pub max_readers: Option<usize>,
+    /// Deposit publishers the field admits [default: 64].
+    #[arg(long)]
+    pub max_depositors: Option<usize>,
+    /// Deposits buffered between two ticks [default: 1024].
+    #[arg(long)]
+    pub deposit_buffer: Option<usize>,
+    /// Stop after this many ticks.
+    #[arg(long)]
+    pub ticks: Option<u64>,
+    /// Stop after this many seconds of wall time.
+    #[arg(long, value_name = "SECS")]
+    pub duration: Option<f64>,
+    /// Print the configuration that would run, as TOML, and exit.
+    #[arg(long)]
+    pub print_config: bool,
+    /// At exit, print one JSON summary object on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Builds the configuration from the file (if any), then the flags.
+pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
+    let mut c: FieldConfig = match &a.config {
+        Some(p) => read_toml(p)?,
+        None => FieldConfig::default(),
+    };
+    macro_rules! set {
+        ($($flag:ident => $field:ident),*) => { $(if let Some(v) = a.$flag { c.$field = v; })* };
+    }
+    set!(width => width, height => height, cell_size => cell_size_m, origin_x => origin_x_m,
+         origin_y => origin_y_m, tick_hz => tick_hz, max_readers => max_readers,
+         max_depositors => max_depositors, deposit_buffer => deposit_buffer);
+    let ch = &mut c.channels[0];
+    let current = ch.evaporation;
+    let model = a.model.unwrap_or(match current {
+        Evaporation::None => ModelArg::None,
+        Evaporation::Exponential { .. } => ModelArg::Exponential,
+        Evaporation::Ambient { .. } => ModelArg::Ambient,
+        Evaporation::Saturating { .. } => ModelArg::Saturating,
+        Evaporation::Quantum { .. } => ModelArg::Quantum,
+    });
+    let (k0, alpha0, radius0) = match current {
+        Evaporation::Ambient {
+            decay_per_sec,
+            alpha,
+            radius_m,
+        } => (decay_per_sec, alpha, radius_m),
+        Evaporation::Exponential { decay_per_sec } => (decay_per_sec, 0.5, 0.5),
+        _ => (0.0057, 0.5, 0.5),
+    };
+    let unused = |flag: &str, v: Option<f32>| -> anyhow::Result<()> {
+        match v {
+            Some(v) => Err(bad(format!("--{flag} {v} does not apply to the {model:?} model"))),
+            None => Ok(()),
+        }
+    };
+    ch.evaporation = match model {
+        ModelArg::None => {
+            for (f, v) in [("decay-per-sec", a.decay_per_sec), ("alpha", a.alpha), ("ambient-radius", a.ambient_radius)] {
+                unused(f, v)?;
+            }
+            Evaporation::None
+        }
+        ModelArg::Exponential => {
+            unused("alpha", a.alpha)?;
+            unused("ambient-radius", a.ambient_radius)?;
+            Evaporation::Exponential {
+                decay_per_sec: a.decay_per_sec.unwrap_or(k0),
+            }
+        }
+        ModelArg::Ambient => Evaporation::Ambient {
+            decay_per_sec: a.decay_per_sec.unwrap_or(k0),
+            alpha: a.alpha.unwrap_or(alpha0),
+            radius_m: a.ambient_radius.unwrap_or(radius0),
+        },
+        ModelArg::Saturating => Evaporation::Saturating {
+            rho_per_tick: a.rho_per_tick.unwrap_or(match current {
+                Evaporation::Saturating { rho_per_tick } => rho_per_tick,
+                _ => 0.05,
+            }),
+        },
+        ModelArg::Quantum => {
+            let (q0, t0) = match current {
+                Evaporation::Quantum { quantum, tau_secs } => (quantum, tau_secs),
+                _ => (1.0, 1.0),
+            };
+            Evaporation::Quantum {
+                quantum: a.quantum.unwrap_or(q0),
+                tau_secs: a.tau_secs.unwrap_or(t0),
+            }
+        }
+    };
+    if model != ModelArg::Saturating {
+        unused("rho-per-tick", a.rho_per_tick)?;
+    }
+    if model != ModelArg::Quantum {
+        unused("quantum", a.quantum)?;
+        unused("tau-secs", a.tau_secs)?;
+    }
+    if let Some(d) = a.diffusion {
+        ch.diffusion_m2_per_sec = d;
+    }
+    if a.signed {
+        ch.signed = true;
+    }
+    let origin = a.config.as_ref().map(|p| format!("{}: ", p.display())).unwrap_or_default();
+    c.validate().map_err(|e| bad(format!("{origin}{e}")))?;
+    Ok(c)
+}
+
+pub fn run(a: FieldArgs) -> anyhow::Result<()> {
+    let config = config_from_args(&a)?;
+    field::shm::check_name(&a.name).map_err(|e| bad(e.to_string()))?;
+    if a.print_config {
+        print!("{}", toml::to_string_pretty(&config)?);
+        return Ok(());
+    }
+    let (frames, bytes) = frame_pool(&config);
+    eprintln!(
+        "field '{}': {}×{} cells × {} channel(s), {} m cells, {} Hz; shared memory {:.1} MiB ({} frames)",
+        a.name,
+        config.width,
+        config.height,
+        config.channels.len(),
+        config.cell_size_m,
+        config.tick_hz,
+        bytes as f64 / (1 << 20) as f64,
+        frames
+    );
+    let node = create_node(&format!("field-{}", a.name))?;
+    let mut server = FieldServer::start(&node, &a.name, config.clone(), None)?;
+    let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
+    let started = Instant::now();
+    let mut deadline = started + period;
+    let mut window = Window::new(started);
+    let mut max_compute_ns = 0u64;
+    let mut ticks = 0u64;
+    loop {
+        let now = Instant::now();
+        let wait = deadline.saturating_duration_since(now);
+        if node.wait(wait).is_err() {
+            break; // SIGINT / SIGTERM
+        }
+        deadline += period;
+        if deadline + period < Instant::now() {
+            deadline = Instant::now() + period; // fell behind: don't burst to catch up
+        }
+        let out = server.tick()?;
+        ticks += 1;
+        max_compute_ns = max_compute_ns.max(out.compute_ns);
+        window.add(&out);
+        if window.started.elapsed() >= Duration::from_secs(1) {
+            window.log(&a.name, server.stepper());
+            window = Window::new(Instant::now());
+        }
+        if a.ticks.is_some_and(|n| ticks >= n) || a.duration.is_some_and(|d| started.elapsed().as_secs_f64() >= d) {
+            break;
+        }
+    }
+    let stepper = server.stepper();
+    let counters = stepper.counters;
+    let rejected: serde_json::Map<String, serde_json::Value> = RejectReason::ALL
+        .iter()
+        .map(|r| (r.name().to_string(), counters.rejected[*r as usize].into()))
+        .collect();
+    let (mass, max): (Vec<f64>, Vec<f32>) = match server.latest() {
+        Some((_, view)) => (0..view.channels).map(|c| (view.total(c), view.max(c))).unzip(),
+        None => (vec![], vec![]),
+    };
+    eprintln!(
+        "field '{}' stopped after {ticks} ticks ({:.1} s): {} deposits applied, {} rejected, longest tick {:.3} ms",
+        a.name,
+        started.elapsed().as_secs_f64(),
+        counters.applied,
+        counters.rejected_total(),
+        max_compute_ns as f64 / 1e6
+    );
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "field": a.name,
+                "ticks": ticks,
+                "sequence": stepper.sequence,
+                "sim_time_s": stepper.sim_time_s,
+                "deposits_applied": counters.applied,
+                "deposits_rejected": rejected,
+                "total_mass": mass,
+                "max": max,
+                "max_tick_compute_ms": max_compute_ns as f64 / 1e6,
+            })
+        );
+    }
+    Ok(())
+}
+
+/// Per-second statistics for the log line.
+struct Window {
+    started: Instant,
+    ticks: u64,
+    compute_ns: u64,
+    max_compute_ns: u64,
+    applied: u64,
+    rejected: u64,
+}
+
+impl Window {
+    fn new(started: Instant) -> Self {
+        Self {
+            started,
+            ticks: 0,
+            compute_ns: 0,
+            max_compute_ns: 0,
+            applied: 0,
+            rejected: 0,
+        }
+    }
+
+    fn add(&mut self, out: &field::shm::TickOutcome) {
+        self.ticks += 1;
+        self.compute_ns += out.compute_ns;
+        self.max_compute_ns = self.max_compute_ns.max(out.compute_ns);
+        self.applied += out.report.deposits_applied as u64;
+        self.rejected += out.rejected;
+    }
+
+    fn log(&self, name: &str, stepper: &field::Stepper) {
+        let secs = self.started.elapsed().as_secs_f64();
+        let c = stepper.counters;
+        let reasons: Vec<String> = RejectReason::ALL
+            .iter()
+            .filter(|r| c.rejected[**r as usize] > 0)
+            .map(|r| format!("{} {}", r.name(), c.rejected[*r as usize]))
+            .collect();
+        eprintln!(
+            "field '{name}': {:.1} ticks/s, tick {:.3} ms mean / {:.3} ms max, deposits +{} applied +{} rejected \
+             (total {} applied, {} rejected{}{})",
+            self.ticks as f64 / secs,
+            self.compute_ns as f64 / self.ticks.max(1) as f64 / 1e6,
+            self.max_compute_ns as f64 / 1e6,
+            self.applied,
+            self.rejected,
+            c.applied,
+            c.rejected_total(),
+            if reasons.is_empty() { "" } else { ": " },
+            reasons.join(", ")
+        );
+    }
+}

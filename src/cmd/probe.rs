@@ -1,0 +1,166 @@
+//! `pheromone probe` and `pheromone deposit`: a minimal reader and depositor for scripts, tests
+//! and first steps (the same as the `read` / `deposit` examples).
+
+use std::time::Duration;
+
+use clap::Args;
+use field::shm::{create_node, DepositPublisher, FieldReader};
+use field::{DepositMsg, KernelKind};
+
+use super::bad;
+
+/// Read a running field: wait for a frame, print its header and the value at a point.
+///
+/// With --above or --below it waits (up to --timeout) until the value at the point crosses that
+/// level, and exits with status 1 if it never does.
+#[derive(Args, Debug)]
+pub struct ProbeArgs {
+    /// Field name.
+    #[arg(long, default_value = "main")]
+    pub field: String,
+    /// World x of the probe point (m).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub x: f32,
+    /// World y of the probe point (m).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub y: f32,
+    /// Channel index.
+    #[arg(long, default_value_t = 0)]
+    pub channel: usize,
+    /// Wait until the value is above this level.
+    #[arg(long, conflicts_with = "below")]
+    pub above: Option<f32>,
+    /// Wait until the value is below this level.
+    #[arg(long)]
+    pub below: Option<f32>,
+    /// Seconds to wait for the field and the condition.
+    #[arg(long, default_value_t = 10.0)]
+    pub timeout: f64,
+    /// Print one JSON object on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run_probe(a: ProbeArgs) -> anyhow::Result<()> {
+    let node = create_node(&format!("probe-{}", std::process::id()))?;
+    let timeout = Duration::from_secs_f64(a.timeout);
+    let mut reader = FieldReader::attach_within(&node, &a.field, timeout)?;
+    let (x, y, ch) = (a.x, a.y, a.channel);
+    let pred = |v: f32| match (a.above, a.below) {
+        (Some(l), _) => v > l,
+        (_, Some(l)) => v < l,
+        _ => true,
+    };
+    let frame = reader.wait_until(timeout, |f| ch < f.view.channels && pred(f.view.value(ch, x, y)))?;
+    let Some(frame) = frame else {
+        let last = reader.frame().map(|f| f.view.value(ch.min(f.view.channels.saturating_sub(1)), x, y));
+        anyhow::bail!(
+            "the value at ({x}, {y}) channel {ch} did not reach the condition within {} s (last value {last:?})",
+            a.timeout
+        );
+    };
+    if ch >= frame.view.channels {
+        return Err(bad(format!("--channel {ch}: the field has {} channel(s)", frame.view.channels)));
+    }
+    let h = frame.header;
+    let value = frame.view.value(ch, x, y);
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "field": a.field, "sequence": h.sequence, "sim_time_s": h.sim_time_s,
+                "width": h.width, "height": h.height, "channels": h.channels, "cell_size_m": h.cell_size_m,
+                "deposits_applied": h.deposits_applied, "deposits_rejected": h.deposits_rejected_total(),
+                "x": x, "y": y, "channel": ch, "value": value,
+            })
+        );
+    } else {
+        println!(
+            "frame {} at t = {:.2} s ({}×{}×{}, {} m): value at ({x}, {y}) channel {ch} = {value}; \
+             deposits {} applied, {} rejected",
+            h.sequence,
+            h.sim_time_s,
+            h.width,
+            h.height,
+            h.channels,
+            h.cell_size_m,
+            h.deposits_applied,
+            h.deposits_rejected_total()
+        );
+    }
+    Ok(())
+}
+
+/// Send one deposit to a running field.
+#[derive(Args, Debug)]
+pub struct DepositArgs {
+    /// Field name.
+    #[arg(long, default_value = "main")]
+    pub field: String,
+    /// Robot id stamped on the deposit.
+    #[arg(long, default_value_t = 0)]
+    pub robot: u32,
+    /// Channel index.
+    #[arg(long, default_value_t = 0)]
+    pub channel: u32,
+    /// Kernel: ellipse, paper, saturating or z-shape.
+    #[arg(long, default_value = "ellipse")]
+    pub kernel: KernelKind,
+    /// World x of the centre (m).
+    #[arg(long, allow_negative_numbers = true)]
+    pub x: f32,
+    /// World y of the centre (m).
+    #[arg(long, allow_negative_numbers = true)]
+    pub y: f32,
+    /// τ (ellipse, paper), ρt (saturating) or Q (z-shape); negative for anti-pheromone.
+    #[arg(long, allow_negative_numbers = true)]
+    pub amount: f32,
+    /// Position covariance Σxy as xx,xy,yy (m²).
+    #[arg(long, value_delimiter = ',', default_values_t = [0.01, 0.0, 0.01], allow_negative_numbers = true)]
+    pub cov: Vec<f32>,
+    /// Cut-off radius z_rng (m).
+    #[arg(long, default_value_t = 1.0)]
+    pub range: f32,
+    /// γ cap (ellipse, paper).
+    #[arg(long, default_value_t = 100.0)]
+    pub gamma_max: f32,
+    /// λ (m), saturating kernel.
+    #[arg(long, default_value_t = 0.1)]
+    pub sigma: f32,
+    /// Z-shape plateau c (m).
+    #[arg(long, default_value_t = 0.2)]
+    pub plateau: f32,
+    /// Z-shape slope length σ (m).
+    #[arg(long, default_value_t = 0.3)]
+    pub slope: f32,
+    /// Seconds to wait for the field to exist.
+    #[arg(long, default_value_t = 10.0)]
+    pub timeout: f64,
+}
+
+pub fn run_deposit(a: DepositArgs) -> anyhow::Result<()> {
+    let node = create_node(&format!("deposit-{}", std::process::id()))?;
+    if a.cov.len() != 3 {
+        return Err(bad(format!("--cov needs three values xx,xy,yy, got {}", a.cov.len())));
+    }
+    let mut publisher = DepositPublisher::attach_within(&node, &a.field, a.robot, Duration::from_secs_f64(a.timeout))?;
+    let msg = DepositMsg {
+        channel: a.channel,
+        kernel: a.kernel as u32,
+        x_m: a.x,
+        y_m: a.y,
+        amount: a.amount,
+        cov_xx: a.cov[0],
+        cov_xy: a.cov[1],
+        cov_yy: a.cov[2],
+        range_m: a.range,
+        gamma_max: a.gamma_max,
+        sigma_m: a.sigma,
+        plateau_m: a.plateau,
+        slope_m: a.slope,
+        ..Default::default()
+    };
+    publisher.send(msg)?;
+    eprintln!("deposit sent to field '{}': {} at ({}, {}) amount {}", a.field, a.kernel.name(), a.x, a.y, a.amount);
+    Ok(())
+}

@@ -1,0 +1,92 @@
+//! `pheromone tune`: seed 000 eqs. 23 and 26.
+
+use clap::{Args, Subcommand};
+
+use super::bad;
+
+#[derive(Args)]
+pub struct TuneArgs {
+    #[command(subcommand)]
+    what: TuneWhat,
+}
+
+#[derive(Subcommand)]
+enum TuneWhat {
+    /// The evaporation rate K (1/s) that takes P0 down to P_tm in t_m seconds (eq. 23).
+    K {
+        /// Initial pheromone level P0.
+        #[arg(long)]
+        p0: f64,
+        /// Level P_tm reached after t_m seconds.
+        #[arg(long)]
+        ptm: f64,
+        /// Time t_m in seconds.
+        #[arg(long)]
+        tm: f64,
+        /// Ambient pheromone level Pa.
+        #[arg(long, default_value_t = 0.0)]
+        pa: f64,
+        /// Print one JSON object `{"k_per_s": …}` on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time (s) for P0 to fall to a threshold with rate K (eq. 26); give --level T or --delta δ
+    /// (T = δ·P0).
+    Threshold {
+        /// Initial pheromone level P0.
+        #[arg(long)]
+        p0: f64,
+        /// Evaporation rate K (1/s).
+        #[arg(long)]
+        k: f64,
+        /// Threshold level T.
+        #[arg(long, conflicts_with = "delta", required_unless_present = "delta")]
+        level: Option<f64>,
+        /// Threshold as a fraction of P0 (T = δ·P0).
+        #[arg(long)]
+        delta: Option<f64>,
+        /// Ambient pheromone level Pa.
+        #[arg(long, default_value_t = 0.0)]
+        pa: f64,
+        /// Print one JSON object `{"time_to_threshold_s": …}` on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+pub fn run(args: TuneArgs) -> anyhow::Result<()> {
+    match args.what {
+        TuneWhat::K { p0, ptm, tm, pa, json } => {
+            let k = field::tune::k_per_s(p0, ptm, tm, pa).map_err(|e| bad(e.to_string()))?;
+            if json {
+                println!("{}", serde_json::json!({ "k_per_s": k, "p0": p0, "ptm": ptm, "tm_s": tm, "pa": pa }));
+            } else {
+                println!("K = {k:.6} per second: P0 = {p0} falls to {ptm} in {tm} s with ambient Pa = {pa}.");
+            }
+        }
+        TuneWhat::Threshold {
+            p0,
+            k,
+            level,
+            delta,
+            pa,
+            json,
+        } => {
+            let level = match (level, delta) {
+                (Some(l), _) => l,
+                (None, Some(d)) => d * p0,
+                (None, None) => return Err(bad("give --level or --delta")),
+            };
+            let t = field::tune::time_to_threshold_s(p0, k, level, pa).map_err(|e| bad(e.to_string()))?;
+            if json {
+                println!(
+                    "{}",
+                    serde_json::json!({ "time_to_threshold_s": t, "p0": p0, "k_per_s": k, "level": level, "pa": pa })
+                );
+            } else {
+                println!("P0 = {p0} falls to {level} in {t:.1} s with K = {k} per second and ambient Pa = {pa}.");
+            }
+        }
+    }
+    Ok(())
+}
