@@ -97,3 +97,21 @@ fn a_second_field_with_the_same_name_is_refused() {
     let err = FieldServer::start(&node, &name, small_config(Evaporation::None), None).err().unwrap();
     assert!(matches!(err, ShmError::AlreadyRunning { .. }), "{err}");
 }
+
+#[test]
+fn a_client_with_another_message_layout_gets_a_clear_error() {
+    use iceoryx2::prelude::*;
+    field::shm::set_verbose(false);
+    let name = unique("layout");
+    let node = create_node(&name).unwrap();
+    // Someone created the deposit service with another payload type (an older layout, say).
+    let service_name = ServiceName::new(&format!("pheromone/{name}/deposit")).unwrap();
+    let _other = node
+        .service_builder(&service_name)
+        .publish_subscribe::<[u64; 4]>()
+        .open_or_create()
+        .unwrap();
+    let err = DepositPublisher::attach(&node, &name, 1).err().unwrap();
+    assert!(matches!(err, ShmError::Layout { .. }), "{err}");
+    assert!(err.to_string().contains("DepositMsg/v1"), "{err}");
+}

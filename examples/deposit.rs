@@ -1,0 +1,32 @@
+//! A depositing process: walks a circle around the centre of the default field `main` and
+//! deposits a seed 000 ellipse every 0.2 s, with an uncertainty that grows and shrinks.
+//! See `read.rs` for how to run the pair.
+
+use std::time::Duration;
+
+use field::shm::{create_node, DepositPublisher};
+use field::DepositMsg;
+
+const FIELD: &str = "main";
+const PERIOD: Duration = Duration::from_millis(200);
+
+fn main() -> anyhow::Result<()> {
+    field::shm::set_verbose(false);
+    let node = create_node(&format!("example-deposit-{}", std::process::id()))?;
+    let mut publisher = DepositPublisher::attach_within(&node, FIELD, 1, Duration::from_secs(30))?;
+    let mut step = 0u32;
+    while node.wait(PERIOD).is_ok() {
+        let angle = step as f32 * 0.1;
+        let (x, y) = (12.8 + 3.0 * angle.cos(), 12.8 + 3.0 * angle.sin());
+        // Σxy grows from (5 cm)² to (25 cm)² and back: γ = τ/det Σxy falls as uncertainty grows.
+        let sigma_m = 0.05 + 0.2 * (0.5 - 0.5 * (angle * 0.3).cos());
+        let var = sigma_m * sigma_m;
+        let msg = DepositMsg::ellipse(0, x, y, 0.2, [var, 0.0, var], 1.0, 100.0);
+        match publisher.send(msg) {
+            Ok(()) => println!("deposit {step:>4} at ({x:6.2}, {y:6.2}) m, σ = {sigma_m:.3} m"),
+            Err(e) => eprintln!("deposit {step} not delivered: {e}"),
+        }
+        step += 1;
+    }
+    Ok(())
+}
