@@ -8,6 +8,7 @@ pub mod deposit;
 pub mod engine;
 pub mod error;
 pub mod geometry;
+pub mod link;
 pub mod messages;
 pub mod models;
 pub mod sample;

@@ -1,0 +1,186 @@
+//! Small fixed-size messages between processes: an iceoryx2 publish-subscribe service paired
+//! with an event service, so receivers sleep in the kernel until a sender notifies them (no
+//! polling, no sleeps). Used for poses, sensors, commands and statuses; the field's frames and
+//! deposits have their own services in `shm`.
+
+use std::fmt::Debug;
+use std::time::{Duration, Instant};
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+
+use crate::shm::{service_name, ShmError, Svc};
+
+/// Limits every side of a link agrees on (they are part of the service's identity).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LinkOptions {
+    pub max_publishers: usize,
+    pub max_subscribers: usize,
+    /// Messages a subscriber buffers; with `keep_latest` the oldest is overwritten when full.
+    pub buffer: usize,
+    /// `true`: a full buffer drops its oldest message (state such as poses, where only the newest
+    /// matters). `false`: the sender is told the message was not delivered.
+    pub keep_latest: bool,
+}
+
+impl Default for LinkOptions {
+    fn default() -> Self {
+        Self {
+            max_publishers: 8,
+            max_subscribers: 16,
+            buffer: 64,
+            keep_latest: true,
+        }
+    }
+}
+
+fn err(service: &str, action: &'static str, e: impl Debug) -> ShmError {
+    ShmError::Service {
+        service: service.to_string(),
+        action,
+        detail: format!("{e:?}"),
+    }
+}
+
+fn pubsub<T: Debug + ZeroCopySend>(
+    node: &Node<Svc>,
+    service: &str,
+    o: LinkOptions,
+) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, T, ()>, ShmError> {
+    use iceoryx2::service::builder::publish_subscribe::{
+        PublishSubscribeOpenError as OpenErr, PublishSubscribeOpenOrCreateError as E,
+    };
+    node.service_builder(&service_name(service)?)
+        .publish_subscribe::<T>()
+        .max_publishers(o.max_publishers)
+        .max_subscribers(o.max_subscribers)
+        .subscriber_max_buffer_size(o.buffer)
+        .history_size(1)
+        .enable_safe_overflow(o.keep_latest)
+        .open_or_create()
+        .map_err(|e| match e {
+            E::PublishSubscribeOpenError(OpenErr::IncompatibleTypes) => ShmError::Layout {
+                service: service.to_string(),
+                ours: std::any::type_name::<T>(),
+            },
+            e => err(service, "open or create", e),
+        })
+}
+
+fn event(node: &Node<Svc>, service: &str) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ShmError> {
+    node.service_builder(&service_name(service)?)
+        .event()
+        .max_notifiers(256)
+        .max_listeners(64)
+        .open_or_create()
+        .map_err(|e| err(service, "open or create", e))
+}
+
+/// The sending end: publishes a message and wakes the receivers.
+pub struct Sender<T: Debug + ZeroCopySend + Copy + 'static> {
+    service: String,
+    publisher: Publisher<Svc, T, ()>,
+    notifier: Notifier<Svc>,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> Sender<T> {
+    /// `service` carries the messages; `wake` is the event service its receivers listen on
+    /// (several links may share one, e.g. every robot's command wakes the world).
+    pub fn create(node: &Node<Svc>, service: &str, wake: &str, options: LinkOptions) -> Result<Self, ShmError> {
+        let publisher = pubsub::<T>(node, service, options)?
+            .publisher_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .create()
+            .map_err(|e| err(service, "create publisher", e))?;
+        let notifier = event(node, wake)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| err(wake, "create notifier", e))?;
+        Ok(Self {
+            service: service.to_string(),
+            publisher,
+            notifier,
+        })
+    }
+
+    /// Sends a copy of `msg` and notifies; returns how many receivers got it.
+    pub fn send(&self, msg: T) -> Result<usize, ShmError> {
+        let n = self.publisher.send_copy(msg).map_err(|e| err(&self.service, "send", e))?;
+        let _ = self.notifier.notify();
+        Ok(n)
+    }
+}
+
+/// The receiving end.
+pub struct Receiver<T: Debug + ZeroCopySend + Copy + 'static> {
+    service: String,
+    subscriber: Subscriber<Svc, T, ()>,
+    listener: Listener<Svc>,
+}
+
+impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
+    pub fn create(node: &Node<Svc>, service: &str, wake: &str, options: LinkOptions) -> Result<Self, ShmError> {
+        let subscriber = pubsub::<T>(node, service, options)?
+            .subscriber_builder()
+            .buffer_size(options.buffer)
+            .create()
+            .map_err(|e| err(service, "create subscriber", e))?;
+        let listener = event(node, wake)?
+            .listener_builder()
+            .create()
+            .map_err(|e| err(wake, "create listener", e))?;
+        Ok(Self {
+            service: service.to_string(),
+            subscriber,
+            listener,
+        })
+    }
+
+    /// The next buffered message, if any.
+    pub fn try_recv(&self) -> Result<Option<T>, ShmError> {
+        self.subscriber
+            .receive()
+            .map(|s| s.map(|s| *s.payload()))
+            .map_err(|e| err(&self.service, "receive", e))
+    }
+
+    /// The newest buffered message, dropping older ones.
+    pub fn latest(&self) -> Result<Option<T>, ShmError> {
+        let mut last = None;
+        while let Some(m) = self.try_recv()? {
+            last = Some(m);
+        }
+        Ok(last)
+    }
+
+    /// The next message, waiting up to `timeout` for a sender's notification.
+    pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<T>, ShmError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(m) = self.try_recv()? {
+                return Ok(Some(m));
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(None);
+            }
+            self.wait(left)?;
+        }
+    }
+
+    /// Blocks until a sender notifies (or `timeout`), consuming the notifications.
+    pub fn wait(&self, timeout: Duration) -> Result<(), ShmError> {
+        self.listener
+            .timed_wait(|_| {}, timeout)
+            .map(|_| ())
+            .map_err(|e| err(&self.service, "wait", e))
+    }
+
+    /// The listener, to attach to a WaitSet.
+    pub fn listener(&self) -> &Listener<Svc> {
+        &self.listener
+    }
+}
