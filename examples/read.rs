@@ -23,7 +23,9 @@ fn main() -> anyhow::Result<()> {
             eprintln!("no frame for 1 s: is the field '{FIELD}' still running?");
             continue;
         }
-        let Some(frame) = reader.frame() else { continue };
+        let Some(frame) = reader.frame() else {
+            continue;
+        };
         let h = frame.header;
         // Print at most ~2 lines per second.
         if h.sequence < last_print + (0.5 / h.dt_secs as f64) as u64 {

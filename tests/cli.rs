@@ -10,28 +10,95 @@ use harness::*;
 fn a_deposit_from_another_process_arrives_in_a_frame_then_evaporates() {
     let name = unique("e2e");
     let field = Proc::spawn(&[
-        "field", "--name", &name, "--width", "128", "--height", "128", "--cell-size", "0.1",
-        "--model", "exponential", "--decay-per-sec", "2", "--tick-hz", "50", "--duration", "60", "--json",
+        "field",
+        "--name",
+        &name,
+        "--width",
+        "128",
+        "--height",
+        "128",
+        "--cell-size",
+        "0.1",
+        "--model",
+        "exponential",
+        "--decay-per-sec",
+        "2",
+        "--tick-hz",
+        "50",
+        "--duration",
+        "60",
+        "--json",
     ]);
     // The depositor is its own process; it waits for the field to exist.
-    let dep = run(&["deposit", "--field", &name, "--x", "6.4", "--y", "6.4", "--amount", "0.5", "--cov", "0.01,0,0.01"]);
+    let dep = run(&[
+        "deposit",
+        "--field",
+        &name,
+        "--x",
+        "6.4",
+        "--y",
+        "6.4",
+        "--amount",
+        "0.5",
+        "--cov",
+        "0.01,0,0.01",
+    ]);
     assert!(dep.status.success(), "deposit failed: {}", stderr(&dep));
     // A third process reads frames until the deposit is visible…
-    let seen = run(&["probe", "--field", &name, "--x", "6.4", "--y", "6.4", "--above", "50", "--timeout", "20", "--json"]);
-    assert!(seen.status.success(), "deposit never seen: {}", stderr(&seen));
+    let seen = run(&[
+        "probe",
+        "--field",
+        &name,
+        "--x",
+        "6.4",
+        "--y",
+        "6.4",
+        "--above",
+        "50",
+        "--timeout",
+        "20",
+        "--json",
+    ]);
+    assert!(
+        seen.status.success(),
+        "deposit never seen: {}",
+        stderr(&seen)
+    );
     let seen = json(&seen);
     assert_eq!(seen["deposits_applied"], 1);
     assert!(seen["value"].as_f64().unwrap() > 50.0);
     // …and until it has evaporated (K = 2/s: below 1 within a few seconds).
-    let gone = run(&["probe", "--field", &name, "--x", "6.4", "--y", "6.4", "--below", "1", "--timeout", "20", "--json"]);
-    assert!(gone.status.success(), "deposit never evaporated: {}", stderr(&gone));
+    let gone = run(&[
+        "probe",
+        "--field",
+        &name,
+        "--x",
+        "6.4",
+        "--y",
+        "6.4",
+        "--below",
+        "1",
+        "--timeout",
+        "20",
+        "--json",
+    ]);
+    assert!(
+        gone.status.success(),
+        "deposit never evaporated: {}",
+        stderr(&gone)
+    );
     let gone = json(&gone);
     assert!(gone["sequence"].as_u64().unwrap() > seen["sequence"].as_u64().unwrap());
     assert!(gone["sim_time_s"].as_f64().unwrap() > seen["sim_time_s"].as_f64().unwrap());
     // Ctrl-C stops the field cleanly, with its summary.
     field.interrupt();
     let out = field.wait_exit(Duration::from_secs(10));
-    assert!(out.status.success(), "field exit: {:?} {}", out.status, stderr(&out));
+    assert!(
+        out.status.success(),
+        "field exit: {:?} {}",
+        out.status,
+        stderr(&out)
+    );
     let summary = json(&out);
     assert_eq!(summary["deposits_applied"], 1);
     assert_eq!(summary["field"], name.as_str());
@@ -40,10 +107,30 @@ fn a_deposit_from_another_process_arrives_in_a_frame_then_evaporates() {
 #[test]
 fn rejected_deposits_are_counted_by_reason() {
     let name = unique("reject");
-    let field = Proc::spawn(&["field", "--name", &name, "--width", "64", "--height", "64", "--duration", "60", "--json"]);
+    let field = Proc::spawn(&[
+        "field",
+        "--name",
+        &name,
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "--duration",
+        "60",
+        "--json",
+    ]);
     // Not positive semi-definite (|xy| > √(xx·yy)), outside the grid, negative on an unsigned channel.
     for extra in [
-        &["--x", "1", "--y", "1", "--amount", "1", "--cov", "0.01,0.5,0.01"][..],
+        &[
+            "--x",
+            "1",
+            "--y",
+            "1",
+            "--amount",
+            "1",
+            "--cov",
+            "0.01,0.5,0.01",
+        ][..],
         &["--x", "500", "--y", "1", "--amount", "1"][..],
         &["--x", "1", "--y", "1", "--amount", "-1"][..],
     ] {
@@ -66,11 +153,23 @@ fn rejected_deposits_are_counted_by_reason() {
 
 #[test]
 fn tune_reproduces_the_papers_check() {
-    let o = run(&["tune", "threshold", "--p0", "35", "--k", "0.0057", "--level", "18", "--json"]);
+    let o = run(&[
+        "tune",
+        "threshold",
+        "--p0",
+        "35",
+        "--k",
+        "0.0057",
+        "--level",
+        "18",
+        "--json",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let t = json(&o)["time_to_threshold_s"].as_f64().unwrap();
     assert!((t - 116.0).abs() < 1.0, "t = {t}");
-    let o = run(&["tune", "k", "--p0", "35", "--ptm", "18", "--tm", "116.66", "--json"]);
+    let o = run(&[
+        "tune", "k", "--p0", "35", "--ptm", "18", "--tm", "116.66", "--json",
+    ]);
     let k = json(&o)["k_per_s"].as_f64().unwrap();
     assert!((k - 0.0057).abs() < 1e-5, "k = {k}");
     let o = run(&["tune", "k", "--p0", "35", "--ptm", "18", "--tm", "116.66"]);
@@ -79,9 +178,24 @@ fn tune_reproduces_the_papers_check() {
 
 #[test]
 fn impossible_tuning_exits_2_and_says_why() {
-    let o = run(&["tune", "threshold", "--p0", "35", "--k", "0.0057", "--level", "3", "--pa", "5"]);
+    let o = run(&[
+        "tune",
+        "threshold",
+        "--p0",
+        "35",
+        "--k",
+        "0.0057",
+        "--level",
+        "3",
+        "--pa",
+        "5",
+    ]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("level = 3") && stderr(&o).contains("ambient"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("level = 3") && stderr(&o).contains("ambient"),
+        "{}",
+        stderr(&o)
+    );
     let o = run(&["tune", "k", "--p0", "35", "--ptm", "40", "--tm", "10"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("ptm = 40"), "{}", stderr(&o));
@@ -93,17 +207,44 @@ fn a_malformed_config_exits_2_naming_file_line_and_key() {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("field.toml");
     std::fs::write(&path, "width = 64\nheight = 64\ncell_sise_m = 0.1\n").unwrap();
-    let o = run(&["field", "--name", &unique("cfg"), "--config", path.to_str().unwrap(), "--ticks", "1"]);
+    let o = run(&[
+        "field",
+        "--name",
+        &unique("cfg"),
+        "--config",
+        path.to_str().unwrap(),
+        "--ticks",
+        "1",
+    ]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     let e = stderr(&o);
-    assert!(e.contains("field.toml") && e.contains("line 3") && e.contains("cell_sise_m"), "{e}");
+    assert!(
+        e.contains("field.toml") && e.contains("line 3") && e.contains("cell_sise_m"),
+        "{e}"
+    );
     // A value out of range names the setting and the value.
     std::fs::write(&path, "width = 64\nheight = 64\ntick_hz = -5\n").unwrap();
-    let o = run(&["field", "--name", &unique("cfg"), "--config", path.to_str().unwrap(), "--ticks", "1"]);
+    let o = run(&[
+        "field",
+        "--name",
+        &unique("cfg"),
+        "--config",
+        path.to_str().unwrap(),
+        "--ticks",
+        "1",
+    ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("tick_hz = -5"), "{}", stderr(&o));
     // An unstable diffusion is refused before anything starts.
-    let o = run(&["field", "--name", &unique("cfg"), "--diffusion", "10", "--ticks", "1"]);
+    let o = run(&[
+        "field",
+        "--name",
+        &unique("cfg"),
+        "--diffusion",
+        "10",
+        "--ticks",
+        "1",
+    ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("unstable"), "{}", stderr(&o));
     std::fs::remove_dir_all(&dir).unwrap();
@@ -111,16 +252,32 @@ fn a_malformed_config_exits_2_naming_file_line_and_key() {
 
 #[test]
 fn a_config_file_round_trips_through_print_config() {
-    let o = run(&["field", "--model", "saturating", "--rho-per-tick", "0.1", "--signed", "--print-config"]);
+    let o = run(&[
+        "field",
+        "--model",
+        "saturating",
+        "--rho-per-tick",
+        "0.1",
+        "--signed",
+        "--print-config",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = stdout(&o);
     let dir = std::env::temp_dir().join(unique("print"));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("f.toml");
     std::fs::write(&path, &text).unwrap();
-    let again = run(&["field", "--config", path.to_str().unwrap(), "--print-config"]);
+    let again = run(&[
+        "field",
+        "--config",
+        path.to_str().unwrap(),
+        "--print-config",
+    ]);
     assert!(again.status.success(), "{}", stderr(&again));
     assert_eq!(stdout(&again), text);
-    assert!(text.contains("saturating") && text.contains("rho_per_tick = 0.1"), "{text}");
+    assert!(
+        text.contains("saturating") && text.contains("rho_per_tick = 0.1"),
+        "{text}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -64,7 +64,12 @@ pub struct Rejection {
 
 impl fmt::Display for Rejection {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "deposit rejected ({}): {}", self.reason.name(), self.detail)
+        write!(
+            f,
+            "deposit rejected ({}): {}",
+            self.reason.name(),
+            self.detail
+        )
     }
 }
 
@@ -197,11 +202,18 @@ pub fn prepare(
     let Some(spec) = channels.get(channel) else {
         return Err(reject(
             RejectReason::UnknownChannel,
-            format!("channel = {} (the field has {})", msg.channel, channels.len()),
+            format!(
+                "channel = {} (the field has {})",
+                msg.channel,
+                channels.len()
+            ),
         ));
     };
     let Some(kernel) = KernelKind::from_code(msg.kernel) else {
-        return Err(reject(RejectReason::UnknownKernel, format!("kernel = {}", msg.kernel)));
+        return Err(reject(
+            RejectReason::UnknownKernel,
+            format!("kernel = {}", msg.kernel),
+        ));
     };
     if msg.amount.abs() > limits.max_abs_amount {
         return Err(reject(
@@ -212,7 +224,10 @@ pub fn prepare(
     if msg.amount < 0.0 && !spec.signed {
         return Err(reject(
             RejectReason::NegativeOnUnsigned,
-            format!("amount = {} on unsigned channel '{}'", msg.amount, spec.name),
+            format!(
+                "amount = {} on unsigned channel '{}'",
+                msg.amount, spec.name
+            ),
         ));
     }
     let h = geometry.cell_size_m;
@@ -236,35 +251,54 @@ pub fn prepare(
             if !(msg.gamma_max > 0.0 && msg.gamma_max <= limits.max_gamma) {
                 return Err(reject(
                     RejectReason::OutOfLimits,
-                    format!("gamma_max = {} (must be in (0, {}])", msg.gamma_max, limits.max_gamma),
+                    format!(
+                        "gamma_max = {} (must be in (0, {}])",
+                        msg.gamma_max, limits.max_gamma
+                    ),
                 ));
             }
             let (xx, xy, yy) = (msg.cov_xx, msg.cov_xy, msg.cov_yy);
             let scale = xx.abs().max(yy.abs()).max(f32::MIN_POSITIVE);
-            if xx < 0.0 || yy < 0.0 || (xx as f64 * yy as f64 - xy as f64 * xy as f64) < -1e-6 * (scale as f64).powi(2) {
+            if xx < 0.0
+                || yy < 0.0
+                || (xx as f64 * yy as f64 - xy as f64 * xy as f64) < -1e-6 * (scale as f64).powi(2)
+            {
                 return Err(reject(
                     RejectReason::NotPsd,
-                    format!("covariance [[{xx}, {xy}], [{xy}, {yy}]] is not positive semi-definite"),
+                    format!(
+                        "covariance [[{xx}, {xy}], [{xy}, {yy}]] is not positive semi-definite"
+                    ),
                 ));
             }
             let ellipse = ErrorEllipse::from_cov(xx, xy, yy);
             let g = gamma(msg.amount, ellipse.det(), msg.gamma_max);
             // The shape uses variances floored at (h/2)²: a point-like ellipse still lands on
             // the cell under it instead of falling between cell centres.
-            let floor = 0.25 * h * h;
-            let l1 = ellipse.lambda1.max(floor);
-            let l2 = ellipse.lambda2.max(floor);
-            let (c, s) = ellipse.major;
+            // Computed in f64 and saturated into f32: with tiny cells 1/λ² overflows f32, and
+            // ∞·0 in the rotation below would be NaN.
+            let floor = 0.25 * (h as f64) * (h as f64);
+            let l1 = (ellipse.lambda1 as f64).max(floor);
+            let l2 = (ellipse.lambda2 as f64).max(floor);
+            let (c, s) = (ellipse.major.0 as f64, ellipse.major.1 as f64);
             // Weights along the axes: ellipse ½/λ (= ½ dᵀΣ⁻¹d), paper 1/λ² (eq. 14 as printed).
             let (w1, w2) = match kernel {
                 KernelKind::Ellipse => (0.5 / l1, 0.5 / l2),
                 _ => (1.0 / (l1 * l1), 1.0 / (l2 * l2)),
             };
+            let to_f32 = |v: f64| v.clamp(-(f32::MAX as f64), f32::MAX as f64) as f32;
             // Quadratic form R diag(w1, w2) Rᵀ.
-            let a = w1 * c * c + w2 * s * s;
-            let b = (w1 - w2) * c * s;
-            let cc = w1 * s * s + w2 * c * c;
-            (Shape::Quadratic { gain: g, a, b, c: cc }, msg.range_m)
+            let a = to_f32(w1 * c * c + w2 * s * s);
+            let b = to_f32((w1 - w2) * c * s);
+            let cc = to_f32(w1 * s * s + w2 * c * c);
+            (
+                Shape::Quadratic {
+                    gain: g,
+                    a,
+                    b,
+                    c: cc,
+                },
+                msg.range_m,
+            )
         }
         KernelKind::Saturating => {
             check_len("range_m", msg.range_m, false)?;
@@ -272,13 +306,18 @@ pub fn prepare(
             if msg.amount.abs() > 1.0 {
                 return Err(reject(
                     RejectReason::OutOfLimits,
-                    format!("amount = {} (ρt of a saturating deposit must be within [−1, 1])", msg.amount),
+                    format!(
+                        "amount = {} (ρt of a saturating deposit must be within [−1, 1])",
+                        msg.amount
+                    ),
                 ));
             }
             (
                 Shape::Saturating {
                     rho: msg.amount,
-                    inv_lambda2: 1.0 / (msg.sigma_m * msg.sigma_m),
+                    // A vanishing λ (λ² underflows) must not give 1/λ² = ∞: at d = 0 that
+                    // would be 0·∞ = NaN. f32::MAX keeps it a point deposit.
+                    inv_lambda2: (1.0 / (msg.sigma_m * msg.sigma_m)).min(f32::MAX),
                 },
                 msg.range_m,
             )
@@ -327,7 +366,14 @@ impl PreparedDeposit {
     /// Adds this deposit to `plane` (the next frame's plane of its channel), reading the previous
     /// frame's plane `prev` for the saturating factor. Values are clamped to `[lo, hi]`.
     /// Returns the mass actually added (sum of cell increments).
-    pub fn apply(&self, geometry: &GridGeometry, prev: &[f32], plane: &mut [f32], lo: f32, hi: f32) -> f64 {
+    pub fn apply(
+        &self,
+        geometry: &GridGeometry,
+        prev: &[f32],
+        plane: &mut [f32],
+        lo: f32,
+        hi: f32,
+    ) -> f64 {
         let w = geometry.width as usize;
         let h = geometry.cell_size_m;
         let mut added = 0.0f64;
@@ -356,10 +402,16 @@ impl PreparedDeposit {
                         slope_m,
                     } => amount * z_shape(d2.sqrt(), plateau_m, slope_m),
                 };
+                // Last line of defence for absurd geometries (cells of 1e-20 m or 1e30 m make
+                // f32 kernel arithmetic overflow into ∞ − ∞): a NaN never reaches the frame.
+                if delta.is_nan() {
+                    continue;
+                }
                 let before = plane[i];
                 let after = (before + delta).clamp(lo, hi);
                 plane[i] = after;
-                added += (after - before) as f64;
+                // In f64: the f32 difference of two cells of different magnitude rounds.
+                added += after as f64 - before as f64;
             }
         }
         added

@@ -7,7 +7,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::deposit::{prepare, DepositLimits, PreparedDeposit, RejectReason, Rejection, REJECT_REASONS};
+use crate::deposit::{
+    prepare, DepositLimits, PreparedDeposit, RejectReason, Rejection, REJECT_REASONS,
+};
 use crate::error::ConfigError;
 use crate::geometry::GridGeometry;
 use crate::messages::{DepositMsg, FrameHeader, LAYOUT_VERSION};
@@ -132,10 +134,18 @@ impl FieldConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.geometry().validate()?;
         if !(self.tick_hz.is_finite() && self.tick_hz > 0.0 && self.tick_hz <= 100_000.0) {
-            return Err(ConfigError::invalid("tick_hz", self.tick_hz, "must be within (0, 100000]"));
+            return Err(ConfigError::invalid(
+                "tick_hz",
+                self.tick_hz,
+                "must be within (0, 100000]",
+            ));
         }
         if self.channels.is_empty() || self.channels.len() > 64 {
-            return Err(ConfigError::invalid("channels", self.channels.len(), "must be between 1 and 64"));
+            return Err(ConfigError::invalid(
+                "channels",
+                self.channels.len(),
+                "must be between 1 and 64",
+            ));
         }
         for (i, c) in self.channels.iter().enumerate() {
             if c.name.is_empty() || self.channels[..i].iter().any(|o| o.name == c.name) {
@@ -153,7 +163,11 @@ impl FieldConfig {
             ("deposit_buffer", self.deposit_buffer, 1 << 20),
         ] {
             if v == 0 || v > max {
-                return Err(ConfigError::invalid(name, v, format!("must be between 1 and {max}")));
+                return Err(ConfigError::invalid(
+                    name,
+                    v,
+                    format!("must be between 1 and {max}"),
+                ));
             }
         }
         let l = &self.limits;
@@ -169,7 +183,13 @@ impl FieldConfig {
         if self.frame_bytes() > MAX_FRAME_BYTES {
             return Err(ConfigError::invalid(
                 "frame size",
-                format!("{} bytes ({}×{}×{} channels)", self.frame_bytes(), self.width, self.height, self.channels.len()),
+                format!(
+                    "{} bytes ({}×{}×{} channels)",
+                    self.frame_bytes(),
+                    self.width,
+                    self.height,
+                    self.channels.len()
+                ),
                 format!("exceeds the {MAX_FRAME_BYTES}-byte limit"),
             ));
         }
@@ -254,7 +274,12 @@ impl Stepper {
 
     /// Validates a deposit and queues it for the next tick; a rejection is counted and returned.
     pub fn offer(&mut self, msg: &DepositMsg) -> Result<(), Rejection> {
-        match prepare(msg, &self.geometry, &self.config.channels, &self.config.limits) {
+        match prepare(
+            msg,
+            &self.geometry,
+            &self.config.channels,
+            &self.config.limits,
+        ) {
             Ok(d) => {
                 self.pending.push(d);
                 Ok(())
@@ -276,7 +301,11 @@ impl Stepper {
     /// evaporation pass; deposits then touch only their kernel's cells.
     pub fn step(&mut self, prev: &[f32], next: &mut [f32]) -> TickReport {
         let n = self.geometry.cells();
-        assert_eq!(prev.len(), self.config.frame_len(), "previous frame has the wrong length");
+        assert_eq!(
+            prev.len(),
+            self.config.frame_len(),
+            "previous frame has the wrong length"
+        );
         assert_eq!(next.len(), prev.len(), "next frame has the wrong length");
         let dt = self.config.dt_secs();
         let h = self.geometry.cell_size_m;
@@ -296,7 +325,13 @@ impl Stepper {
         for d in self.pending.drain(..) {
             let (lo, hi) = self.config.channels[d.channel].value_range();
             let range = d.channel * n..(d.channel + 1) * n;
-            report.mass_added += d.apply(&self.geometry, &prev[range.clone()], &mut next[range], lo, hi);
+            report.mass_added += d.apply(
+                &self.geometry,
+                &prev[range.clone()],
+                &mut next[range],
+                lo,
+                hi,
+            );
             report.deposits_applied += 1;
         }
         self.counters.applied += report.deposits_applied as u64;
@@ -353,10 +388,18 @@ impl OwnedField {
     pub fn with_cells(config: FieldConfig, cells: Vec<f32>) -> Result<Self, ConfigError> {
         let mut f = Self::new(config)?;
         if cells.len() != f.current.len() {
-            return Err(ConfigError::invalid("cells", cells.len(), format!("expected {}", f.current.len())));
+            return Err(ConfigError::invalid(
+                "cells",
+                cells.len(),
+                format!("expected {}", f.current.len()),
+            ));
         }
         if let Some(i) = cells.iter().position(|v| !v.is_finite()) {
-            return Err(ConfigError::invalid(format!("cell {i}"), cells[i], "must be finite"));
+            return Err(ConfigError::invalid(
+                format!("cell {i}"),
+                cells[i],
+                "must be finite",
+            ));
         }
         f.current = cells;
         Ok(f)

@@ -60,7 +60,10 @@ impl GridGeometry {
                 "must be a finite number of metres > 0",
             ));
         }
-        for (name, v) in [("origin_x_m", self.origin_x_m), ("origin_y_m", self.origin_y_m)] {
+        for (name, v) in [
+            ("origin_x_m", self.origin_x_m),
+            ("origin_y_m", self.origin_y_m),
+        ] {
             if !v.is_finite() {
                 return Err(ConfigError::invalid(name, v, "must be finite"));
             }
@@ -179,8 +182,9 @@ mod tests {
     #[test]
     fn cell_box_clips_to_the_grid() {
         let g = GridGeometry::new(10, 10, 1.0).unwrap();
+        // Centres within 1 m of (0.5, 0.5): cells 0 and 1 on each axis.
         let b = g.cell_box(0.5, 0.5, 1.0).unwrap();
-        assert_eq!((b.x0, b.y0, b.x1, b.y1), (0, 0, 2, 2));
+        assert_eq!((b.x0, b.y0, b.x1, b.y1), (0, 0, 1, 1));
         assert!(g.cell_box(-50.0, 0.5, 1.0).is_none());
     }
 }

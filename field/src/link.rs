@@ -70,7 +70,10 @@ fn pubsub<T: Debug + ZeroCopySend>(
         })
 }
 
-fn event(node: &Node<Svc>, service: &str) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ShmError> {
+fn event(
+    node: &Node<Svc>,
+    service: &str,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ShmError> {
     node.service_builder(&service_name(service)?)
         .event()
         .max_notifiers(256)
@@ -89,7 +92,12 @@ pub struct Sender<T: Debug + ZeroCopySend + Copy + 'static> {
 impl<T: Debug + ZeroCopySend + Copy + 'static> Sender<T> {
     /// `service` carries the messages; `wake` is the event service its receivers listen on
     /// (several links may share one, e.g. every robot's command wakes the world).
-    pub fn create(node: &Node<Svc>, service: &str, wake: &str, options: LinkOptions) -> Result<Self, ShmError> {
+    pub fn create(
+        node: &Node<Svc>,
+        service: &str,
+        wake: &str,
+        options: LinkOptions,
+    ) -> Result<Self, ShmError> {
         let publisher = pubsub::<T>(node, service, options)?
             .publisher_builder()
             .backpressure_strategy(BackpressureStrategy::DiscardData)
@@ -108,7 +116,10 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sender<T> {
 
     /// Sends a copy of `msg` and notifies; returns how many receivers got it.
     pub fn send(&self, msg: T) -> Result<usize, ShmError> {
-        let n = self.publisher.send_copy(msg).map_err(|e| err(&self.service, "send", e))?;
+        let n = self
+            .publisher
+            .send_copy(msg)
+            .map_err(|e| err(&self.service, "send", e))?;
         let _ = self.notifier.notify();
         Ok(n)
     }
@@ -122,7 +133,12 @@ pub struct Receiver<T: Debug + ZeroCopySend + Copy + 'static> {
 }
 
 impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
-    pub fn create(node: &Node<Svc>, service: &str, wake: &str, options: LinkOptions) -> Result<Self, ShmError> {
+    pub fn create(
+        node: &Node<Svc>,
+        service: &str,
+        wake: &str,
+        options: LinkOptions,
+    ) -> Result<Self, ShmError> {
         let subscriber = pubsub::<T>(node, service, options)?
             .subscriber_builder()
             .buffer_size(options.buffer)

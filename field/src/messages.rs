@@ -47,10 +47,17 @@ impl KernelKind {
 impl std::str::FromStr for KernelKind {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        [KernelKind::Ellipse, KernelKind::Paper, KernelKind::Saturating, KernelKind::ZShape]
-            .into_iter()
-            .find(|k| k.name() == s)
-            .ok_or_else(|| format!("unknown kernel '{s}' (expected ellipse, paper, saturating or z-shape)"))
+        [
+            KernelKind::Ellipse,
+            KernelKind::Paper,
+            KernelKind::Saturating,
+            KernelKind::ZShape,
+        ]
+        .into_iter()
+        .find(|k| k.name() == s)
+        .ok_or_else(|| {
+            format!("unknown kernel '{s}' (expected ellipse, paper, saturating or z-shape)")
+        })
     }
 }
 
@@ -89,7 +96,15 @@ pub struct DepositMsg {
 impl DepositMsg {
     /// A seed 000 deposit: amount τ, pose covariance block Σxy, sensor range z_rng, cap γmax.
     #[allow(clippy::too_many_arguments)]
-    pub fn ellipse(channel: u32, x_m: f32, y_m: f32, tau: f32, cov: [f32; 3], range_m: f32, gamma_max: f32) -> Self {
+    pub fn ellipse(
+        channel: u32,
+        x_m: f32,
+        y_m: f32,
+        tau: f32,
+        cov: [f32; 3],
+        range_m: f32,
+        gamma_max: f32,
+    ) -> Self {
         Self {
             channel,
             kernel: KernelKind::Ellipse as u32,
@@ -106,7 +121,14 @@ impl DepositMsg {
     }
 
     /// A seed 001/004 saturating deposit of strength ρt ∈ [−1, 1].
-    pub fn saturating(channel: u32, x_m: f32, y_m: f32, rho: f32, sigma_m: f32, range_m: f32) -> Self {
+    pub fn saturating(
+        channel: u32,
+        x_m: f32,
+        y_m: f32,
+        rho: f32,
+        sigma_m: f32,
+        range_m: f32,
+    ) -> Self {
         Self {
             channel,
             kernel: KernelKind::Saturating as u32,
@@ -120,7 +142,14 @@ impl DepositMsg {
     }
 
     /// A seed 002 Z-shape deposit of quantum `amount`.
-    pub fn z_shape(channel: u32, x_m: f32, y_m: f32, amount: f32, plateau_m: f32, slope_m: f32) -> Self {
+    pub fn z_shape(
+        channel: u32,
+        x_m: f32,
+        y_m: f32,
+        amount: f32,
+        plateau_m: f32,
+        slope_m: f32,
+    ) -> Self {
         Self {
             channel,
             kernel: KernelKind::ZShape as u32,
@@ -187,4 +216,27 @@ impl FrameHeader {
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
+}
+
+/// A simulation clock tick: the world publishes one per step; a field run with `--clock` ticks
+/// once per message instead of on wall time (lockstep simulation).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("pheromone::ClockMsg/v1")]
+#[repr(C)]
+pub struct ClockMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub sim_time_s: f64,
+    pub dt_secs: f64,
+    /// 1 when the simulation has ended and listeners should stop.
+    pub finished: u32,
+    pub _pad: u32,
+}
+
+/// Service names of a simulation clock `W`: messages and their wake-up event.
+pub fn clock_services(world: &str) -> (String, String) {
+    (
+        format!("sim/{world}/clock"),
+        format!("sim/{world}/clock-ready"),
+    )
 }

@@ -22,13 +22,21 @@ pub struct Pose2 {
 
 impl Pose2 {
     pub fn new(x_m: f32, y_m: f32, theta_rad: f32) -> Self {
-        Self { x_m, y_m, theta_rad }
+        Self {
+            x_m,
+            y_m,
+            theta_rad,
+        }
     }
 }
 
 impl<'a> FrameView<'a> {
     pub fn new(geometry: GridGeometry, channels: usize, cells: &'a [f32]) -> Self {
-        assert_eq!(cells.len(), channels * geometry.cells(), "frame length does not match its geometry");
+        assert_eq!(
+            cells.len(),
+            channels * geometry.cells(),
+            "frame length does not match its geometry"
+        );
         Self {
             geometry,
             channels,
@@ -71,8 +79,10 @@ impl<'a> FrameView<'a> {
     /// (seed 000 eqs. 15–16).
     pub fn gradient(&self, channel: usize, x_m: f32, y_m: f32) -> (f32, f32) {
         let h = self.geometry.cell_size_m;
-        let gx = (self.value(channel, x_m + h, y_m) - self.value(channel, x_m - h, y_m)) / (2.0 * h);
-        let gy = (self.value(channel, x_m, y_m + h) - self.value(channel, x_m, y_m - h)) / (2.0 * h);
+        let gx =
+            (self.value(channel, x_m + h, y_m) - self.value(channel, x_m - h, y_m)) / (2.0 * h);
+        let gy =
+            (self.value(channel, x_m, y_m + h) - self.value(channel, x_m, y_m - h)) / (2.0 * h);
         (gx, gy)
     }
 
@@ -87,7 +97,13 @@ impl<'a> FrameView<'a> {
     /// around the heading, over the half-disc of radius `radius_m` (seed 004, sensing at R_D).
     /// Sector 0 is the rightmost (−90°), the last the leftmost (+90°). Samples are spaced about
     /// one cell apart (at most 64 radially and 64 across a sector).
-    pub fn sector_means(&self, channel: usize, pose: Pose2, radius_m: f32, half_sectors: usize) -> Vec<f32> {
+    pub fn sector_means(
+        &self,
+        channel: usize,
+        pose: Pose2,
+        radius_m: f32,
+        half_sectors: usize,
+    ) -> Vec<f32> {
         let n = 2 * half_sectors + 1;
         let width = std::f32::consts::PI / n as f32;
         let h = self.geometry.cell_size_m;
@@ -102,7 +118,8 @@ impl<'a> FrameView<'a> {
                     let across = ((r * width / h).ceil() as usize).clamp(1, 64);
                     for j in 0..across {
                         let a = a0 + width * (j as f32 + 0.5) / across as f32;
-                        sum += self.value(channel, pose.x_m + r * a.cos(), pose.y_m + r * a.sin()) as f64;
+                        sum += self.value(channel, pose.x_m + r * a.cos(), pose.y_m + r * a.sin())
+                            as f64;
                         count += 1;
                     }
                 }
@@ -118,7 +135,10 @@ impl<'a> FrameView<'a> {
 
     /// Largest cell of a channel.
     pub fn max(&self, channel: usize) -> f32 {
-        self.plane(channel).iter().copied().fold(f32::NEG_INFINITY, f32::max)
+        self.plane(channel)
+            .iter()
+            .copied()
+            .fold(f32::NEG_INFINITY, f32::max)
     }
 
     /// Number of cells (all channels) that are NaN or infinite.
@@ -132,7 +152,10 @@ pub fn antenna_points(pose: Pose2, wheel_base_m: f32) -> ((f32, f32), (f32, f32)
     let half = 0.5 * wheel_base_m;
     let (s, c) = pose.theta_rad.sin_cos();
     let (ox, oy) = (-s * half, c * half);
-    ((pose.x_m + ox, pose.y_m + oy), (pose.x_m - ox, pose.y_m - oy))
+    (
+        (pose.x_m + ox, pose.y_m + oy),
+        (pose.x_m - ox, pose.y_m - oy),
+    )
 }
 
 #[cfg(test)]
@@ -167,7 +190,8 @@ mod tests {
     #[test]
     fn antennas_sit_left_and_right_of_the_heading() {
         // Heading +y: left is −x, right is +x.
-        let ((lx, ly), (rx, ry)) = antenna_points(Pose2::new(1.0, 1.0, std::f32::consts::FRAC_PI_2), 0.4);
+        let ((lx, ly), (rx, ry)) =
+            antenna_points(Pose2::new(1.0, 1.0, std::f32::consts::FRAC_PI_2), 0.4);
         assert_relative_eq!(lx, 0.8, epsilon = 1e-6);
         assert_relative_eq!(ly, 1.0, epsilon = 1e-6);
         assert_relative_eq!(rx, 1.2, epsilon = 1e-6);
@@ -175,7 +199,10 @@ mod tests {
         let (g, cells) = ramp();
         let f = FrameView::new(g, 1, &cells);
         let (pl, pr) = f.antennas(0, Pose2::new(5.0, 2.5, std::f32::consts::FRAC_PI_2), 0.4);
-        assert!(pr > pl, "field grows with x, so the right antenna (+x) reads more");
+        assert!(
+            pr > pl,
+            "field grows with x, so the right antenna (+x) reads more"
+        );
     }
 
     #[test]

@@ -92,7 +92,11 @@ pub fn now_ns() -> u64 {
 
 /// Silences iceoryx2's own log output (e.g. "no config file was loaded") unless `verbose`.
 pub fn set_verbose(verbose: bool) {
-    set_log_level(if verbose { LogLevel::Info } else { LogLevel::Fatal });
+    set_log_level(if verbose {
+        LogLevel::Info
+    } else {
+        LogLevel::Fatal
+    });
 }
 
 /// Service names of one field.
@@ -118,7 +122,9 @@ impl FieldServices {
 pub fn check_name(name: &str) -> Result<(), ShmError> {
     let ok = !name.is_empty()
         && name.len() <= 64
-        && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
     if ok {
         Ok(())
     } else {
@@ -177,7 +183,10 @@ fn frame_service(
     node: &Node<Svc>,
     names: &FieldServices,
     config: Option<&FieldConfig>,
-) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [f32], FrameHeader>, ShmError> {
+) -> Result<
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [f32], FrameHeader>,
+    ShmError,
+> {
     let name = service_name(&names.frame)?;
     let builder = node
         .service_builder(&name)
@@ -230,7 +239,8 @@ fn frame_ready_service(
             .open_or_create()
             .map_err(|e| service_err(&names.frame_ready, "open or create", e))
     } else {
-        b.open().map_err(|e| service_err(&names.frame_ready, "open", e))
+        b.open()
+            .map_err(|e| service_err(&names.frame_ready, "open", e))
     }
 }
 
@@ -238,9 +248,14 @@ fn deposit_service(
     node: &Node<Svc>,
     names: &FieldServices,
     config: Option<&FieldConfig>,
-) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, DepositMsg, ()>, ShmError> {
+) -> Result<
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, DepositMsg, ()>,
+    ShmError,
+> {
     let name = service_name(&names.deposit)?;
-    let builder = node.service_builder(&name).publish_subscribe::<DepositMsg>();
+    let builder = node
+        .service_builder(&name)
+        .publish_subscribe::<DepositMsg>();
     match config {
         Some(c) => builder
             .max_publishers(c.max_depositors)
@@ -254,7 +269,12 @@ fn deposit_service(
             use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as E;
             match e {
                 E::DoesNotExist => ShmError::NoField {
-                    field: names.deposit.split('/').nth(1).unwrap_or_default().to_string(),
+                    field: names
+                        .deposit
+                        .split('/')
+                        .nth(1)
+                        .unwrap_or_default()
+                        .to_string(),
                     service: names.deposit.clone(),
                 },
                 E::IncompatibleTypes => ShmError::Layout {
@@ -318,7 +338,9 @@ impl FieldServer {
         }
         let frame_service = frame_service(node, &names, Some(&config))?;
         if frame_service.dynamic_config().number_of_publishers() > 0 {
-            return Err(ShmError::AlreadyRunning { field: field.into() });
+            return Err(ShmError::AlreadyRunning {
+                field: field.into(),
+            });
         }
         let publisher = frame_service
             .publisher_builder()
@@ -359,7 +381,9 @@ impl FieldServer {
             stepper.resume_from(&header);
         }
         *first.user_header_mut() = stepper.header(now_ns(), 0, &TickReport::default());
-        first.send().map_err(|e| service_err(&names.frame, "send", e))?;
+        first
+            .send()
+            .map_err(|e| service_err(&names.frame, "send", e))?;
         let _ = notifier.notify();
         let previous = own
             .receive()
@@ -418,7 +442,13 @@ impl FieldServer {
         let len = self.stepper.config().frame_len();
         let previous = match self.previous.take() {
             Some(p) => p,
-            None => return Err(service_err(&self.names.frame, "tick", "the previous frame was lost")),
+            None => {
+                return Err(service_err(
+                    &self.names.frame,
+                    "tick",
+                    "the previous frame was lost",
+                ))
+            }
         };
         if previous.payload().len() != len {
             return Err(ShmError::BadFrame {
@@ -440,7 +470,8 @@ impl FieldServer {
         let done = now_ns();
         let compute_ns = done.saturating_sub(started);
         *next.user_header_mut() = self.stepper.header(done, compute_ns, &report);
-        next.send().map_err(|e| service_err(&self.names.frame, "send", e))?;
+        next.send()
+            .map_err(|e| service_err(&self.names.frame, "send", e))?;
         let _ = self.notifier.notify();
         self.previous = self
             .own
@@ -494,7 +525,11 @@ impl FieldReader {
 
     /// Attaches, retrying while the field does not exist yet, for at most `timeout`. Waits with
     /// `node.wait` between tries (returns early on a termination request).
-    pub fn attach_within(node: &Node<Svc>, field: &str, timeout: Duration) -> Result<Self, ShmError> {
+    pub fn attach_within(
+        node: &Node<Svc>,
+        field: &str,
+        timeout: Duration,
+    ) -> Result<Self, ShmError> {
         retry_attach(node, timeout, || Self::attach(node, field))
     }
 
@@ -625,7 +660,12 @@ impl DepositPublisher {
         true
     }
 
-    pub fn attach_within(node: &Node<Svc>, field: &str, robot_id: u32, timeout: Duration) -> Result<Self, ShmError> {
+    pub fn attach_within(
+        node: &Node<Svc>,
+        field: &str,
+        robot_id: u32,
+        timeout: Duration,
+    ) -> Result<Self, ShmError> {
         retry_attach(node, timeout, || Self::attach(node, field, robot_id))
     }
 

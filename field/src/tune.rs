@@ -37,7 +37,11 @@ pub fn k_per_s(p0: f64, p_tm: f64, t_m_secs: f64, pa: f64) -> Result<f64, TuneEr
         return Err(impossible("tm", t_m_secs, "the time must be > 0 s"));
     }
     if p0 <= pa {
-        return Err(impossible("p0", p0, format!("must be above the ambient level pa = {pa}")));
+        return Err(impossible(
+            "p0",
+            p0,
+            format!("must be above the ambient level pa = {pa}"),
+        ));
     }
     if p_tm >= p0 {
         return Err(impossible(
@@ -63,10 +67,18 @@ pub fn time_to_threshold_s(p0: f64, k_per_s: f64, level: f64, pa: f64) -> Result
         finite(n, v)?;
     }
     if k_per_s <= 0.0 {
-        return Err(impossible("k", k_per_s, "the evaporation rate must be > 0 per second"));
+        return Err(impossible(
+            "k",
+            k_per_s,
+            "the evaporation rate must be > 0 per second",
+        ));
     }
     if p0 <= pa {
-        return Err(impossible("p0", p0, format!("must be above the ambient level pa = {pa}")));
+        return Err(impossible(
+            "p0",
+            p0,
+            format!("must be above the ambient level pa = {pa}"),
+        ));
     }
     if level <= pa {
         return Err(impossible(
@@ -76,7 +88,11 @@ pub fn time_to_threshold_s(p0: f64, k_per_s: f64, level: f64, pa: f64) -> Result
         ));
     }
     if level > p0 {
-        return Err(impossible("level", level, format!("must not exceed p0 = {p0}")));
+        return Err(impossible(
+            "level",
+            level,
+            format!("must not exceed p0 = {p0}"),
+        ));
     }
     Ok(-((level - pa) / (p0 - pa)).ln() / k_per_s)
 }
@@ -95,14 +111,20 @@ mod tests {
     #[test]
     fn k_and_threshold_are_inverse() {
         let k = k_per_s(50.0, 20.0, 90.0, 5.0).unwrap();
-        assert_relative_eq!(time_to_threshold_s(50.0, k, 20.0, 5.0).unwrap(), 90.0, epsilon = 1e-9);
+        assert_relative_eq!(
+            time_to_threshold_s(50.0, k, 20.0, 5.0).unwrap(),
+            90.0,
+            epsilon = 1e-9
+        );
     }
 
     #[test]
     fn impossible_inputs_say_why() {
         let e = k_per_s(35.0, 40.0, 10.0, 0.0).unwrap_err().to_string();
         assert!(e.contains("ptm") && e.contains("40"), "{e}");
-        let e = time_to_threshold_s(35.0, 0.0057, 2.0, 5.0).unwrap_err().to_string();
+        let e = time_to_threshold_s(35.0, 0.0057, 2.0, 5.0)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("level") && e.contains("ambient"), "{e}");
         assert!(time_to_threshold_s(35.0, 0.0, 18.0, 0.0).is_err());
     }

@@ -6,7 +6,11 @@ use field::shm::{create_node, DepositPublisher, FieldReader, FieldServer, ShmErr
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
 
 fn unique(tag: &str) -> String {
-    format!("{tag}-{}-{}", std::process::id(), field::shm::now_ns() % 1_000_000_007)
+    format!(
+        "{tag}-{}-{}",
+        std::process::id(),
+        field::shm::now_ns() % 1_000_000_007
+    )
 }
 
 fn small_config(evaporation: Evaporation) -> FieldConfig {
@@ -24,15 +28,32 @@ fn deposit_arrives_in_a_frame_and_evaporates() {
     field::shm::set_verbose(false);
     let name = unique("inproc");
     let node = create_node(&name).unwrap();
-    let mut server = FieldServer::start(&node, &name, small_config(Evaporation::Exponential { decay_per_sec: 5.0 }), None).unwrap();
+    let mut server = FieldServer::start(
+        &node,
+        &name,
+        small_config(Evaporation::Exponential { decay_per_sec: 5.0 }),
+        None,
+    )
+    .unwrap();
     let mut reader = FieldReader::attach(&node, &name).unwrap();
     let mut depositor = DepositPublisher::attach(&node, &name, 7).unwrap();
     depositor
-        .send(DepositMsg::ellipse(0, 3.0, 1.5, 0.01, [0.01, 0.0, 0.01], 1.0, 100.0))
+        .send(DepositMsg::ellipse(
+            0,
+            3.0,
+            1.5,
+            0.01,
+            [0.01, 0.0, 0.01],
+            1.0,
+            100.0,
+        ))
         .unwrap();
     let out = server.tick().unwrap();
     server.tick().unwrap();
-    assert!(depositor.flush(Duration::from_secs(1)), "two frames after the send flush it");
+    assert!(
+        depositor.flush(Duration::from_secs(1)),
+        "two frames after the send flush it"
+    );
     assert_eq!(out.report.deposits_applied, 1);
     assert!(reader.wait_frame(Duration::from_secs(5)).unwrap());
     let f = reader.frame().unwrap();
@@ -40,14 +61,17 @@ fn deposit_arrives_in_a_frame_and_evaporates() {
     assert_eq!(f.header.deposits_applied, 1);
     let peak = f.view.value(0, 3.0, 1.5);
     assert!(peak > 50.0, "peak {peak}");
-    drop(f);
+    let _ = f;
     for _ in 0..20 {
         server.tick().unwrap();
     }
     reader.update().unwrap();
     let later = reader.frame().unwrap().view.value(0, 3.0, 1.5);
     // 20 ticks of dt = 1/50 s at K = 5/s: factor e^(−2).
-    assert!((later / peak - (-2.0f32).exp()).abs() < 1e-3, "{later} vs {peak}");
+    assert!(
+        (later / peak - (-2.0f32).exp()).abs() < 1e-3,
+        "{later} vs {peak}"
+    );
     assert_eq!(reader.frame().unwrap().header.sequence, 22);
 }
 
@@ -56,25 +80,48 @@ fn bad_deposits_are_counted_in_the_header_and_never_reach_the_grid() {
     field::shm::set_verbose(false);
     let name = unique("bad");
     let node = create_node(&name).unwrap();
-    let mut server = FieldServer::start(&node, &name, small_config(Evaporation::None), None).unwrap();
+    let mut server =
+        FieldServer::start(&node, &name, small_config(Evaporation::None), None).unwrap();
     let mut depositor = DepositPublisher::attach(&node, &name, 1).unwrap();
     depositor.flush_timeout = Duration::ZERO;
     let mut nan = DepositMsg::ellipse(0, 3.0, 1.5, 1.0, [0.01, 0.0, 0.01], 1.0, 100.0);
     nan.x_m = f32::NAN;
     depositor.send(nan).unwrap();
     depositor
-        .send(DepositMsg::ellipse(0, 3.0, 1.5, 1.0, [0.01, 0.5, 0.01], 1.0, 100.0))
+        .send(DepositMsg::ellipse(
+            0,
+            3.0,
+            1.5,
+            1.0,
+            [0.01, 0.5, 0.01],
+            1.0,
+            100.0,
+        ))
         .unwrap();
     depositor
-        .send(DepositMsg::ellipse(9, 3.0, 1.5, 1.0, [0.01, 0.0, 0.01], 1.0, 100.0))
+        .send(DepositMsg::ellipse(
+            9,
+            3.0,
+            1.5,
+            1.0,
+            [0.01, 0.0, 0.01],
+            1.0,
+            100.0,
+        ))
         .unwrap();
     let out = server.tick().unwrap();
     assert_eq!(out.rejected, 3);
     let (h, view) = server.latest().unwrap();
     assert_eq!(h.deposits_rejected_total(), 3);
-    assert_eq!(h.deposits_rejected[field::RejectReason::NonFinite as usize], 1);
+    assert_eq!(
+        h.deposits_rejected[field::RejectReason::NonFinite as usize],
+        1
+    );
     assert_eq!(h.deposits_rejected[field::RejectReason::NotPsd as usize], 1);
-    assert_eq!(h.deposits_rejected[field::RejectReason::UnknownChannel as usize], 1);
+    assert_eq!(
+        h.deposits_rejected[field::RejectReason::UnknownChannel as usize],
+        1
+    );
     assert_eq!(view.total(0), 0.0);
 }
 
@@ -94,7 +141,9 @@ fn a_second_field_with_the_same_name_is_refused() {
     let name = unique("twice");
     let node = create_node(&name).unwrap();
     let _first = FieldServer::start(&node, &name, small_config(Evaporation::None), None).unwrap();
-    let err = FieldServer::start(&node, &name, small_config(Evaporation::None), None).err().unwrap();
+    let err = FieldServer::start(&node, &name, small_config(Evaporation::None), None)
+        .err()
+        .unwrap();
     assert!(matches!(err, ShmError::AlreadyRunning { .. }), "{err}");
 }
 

@@ -4,4 +4,8 @@
 //! follower. Each is a library type, deterministic for a seed and testable in-process, plus a
 //! short process loop.
 
+pub mod depositor;
+pub mod follower;
+pub mod localizer;
 pub mod messages;
+pub mod world;

@@ -5,6 +5,8 @@ use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
 use field::deposit::RejectReason;
+use field::link::{LinkOptions, Receiver};
+use field::messages::ClockMsg;
 use field::shm::{create_node, frame_pool, FieldServer};
 use field::{Evaporation, FieldConfig};
 
@@ -98,6 +100,10 @@ pub struct FieldArgs {
     /// Deposits buffered between two ticks [default: 1024].
     #[arg(long)]
     pub deposit_buffer: Option<usize>,
+    /// Tick once per clock message of the simulated world NAME (lockstep simulation) instead of
+    /// on wall time; the field stops when the world says it has finished.
+    #[arg(long, value_name = "WORLD")]
+    pub clock: Option<String>,
     /// Stop after this many ticks.
     #[arg(long)]
     pub ticks: Option<u64>,
@@ -144,13 +150,19 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
     };
     let unused = |flag: &str, v: Option<f32>| -> anyhow::Result<()> {
         match v {
-            Some(v) => Err(bad(format!("--{flag} {v} does not apply to the {model:?} model"))),
+            Some(v) => Err(bad(format!(
+                "--{flag} {v} does not apply to the {model:?} model"
+            ))),
             None => Ok(()),
         }
     };
     ch.evaporation = match model {
         ModelArg::None => {
-            for (f, v) in [("decay-per-sec", a.decay_per_sec), ("alpha", a.alpha), ("ambient-radius", a.ambient_radius)] {
+            for (f, v) in [
+                ("decay-per-sec", a.decay_per_sec),
+                ("alpha", a.alpha),
+                ("ambient-radius", a.ambient_radius),
+            ] {
                 unused(f, v)?;
             }
             Evaporation::None
@@ -197,7 +209,11 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
     if a.signed {
         ch.signed = true;
     }
-    let origin = a.config.as_ref().map(|p| format!("{}: ", p.display())).unwrap_or_default();
+    let origin = a
+        .config
+        .as_ref()
+        .map(|p| format!("{}: ", p.display()))
+        .unwrap_or_default();
     c.validate().map_err(|e| bad(format!("{origin}{e}")))?;
     Ok(c)
 }
@@ -224,20 +240,53 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
     let node = create_node(&format!("field-{}", a.name))?;
     let mut server = FieldServer::start(&node, &a.name, config.clone(), None)?;
     let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
+    let clock = match &a.clock {
+        Some(world) => {
+            let (service, wake) = field::messages::clock_services(world);
+            Some(Receiver::<ClockMsg>::create(
+                &node,
+                &service,
+                &wake,
+                LinkOptions {
+                    keep_latest: false,
+                    buffer: 1024,
+                    ..LinkOptions::default()
+                },
+            )?)
+        }
+        None => None,
+    };
     let started = Instant::now();
     let mut deadline = started + period;
     let mut window = Window::new(started);
     let mut max_compute_ns = 0u64;
     let mut ticks = 0u64;
     loop {
-        let now = Instant::now();
-        let wait = deadline.saturating_duration_since(now);
-        if node.wait(wait).is_err() {
-            break; // SIGINT / SIGTERM
+        if let Some(clock) = &clock {
+            // Lockstep: one tick per world step.
+            match clock.recv_timeout(Duration::from_millis(100))? {
+                Some(msg) if msg.finished != 0 => break,
+                Some(_) => {}
+                None => {
+                    if node.wait(Duration::ZERO).is_err() {
+                        break;
+                    }
+                    continue;
+                }
+            }
+        } else {
+            let now = Instant::now();
+            let wait = deadline.saturating_duration_since(now);
+            if node.wait(wait).is_err() {
+                break; // SIGINT / SIGTERM
+            }
+            deadline += period;
+            if deadline + period < Instant::now() {
+                deadline = Instant::now() + period; // fell behind: don't burst to catch up
+            }
         }
-        deadline += period;
-        if deadline + period < Instant::now() {
-            deadline = Instant::now() + period; // fell behind: don't burst to catch up
+        if clock.is_some() && node.wait(Duration::ZERO).is_err() {
+            break;
         }
         let out = server.tick()?;
         ticks += 1;
@@ -247,7 +296,10 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
             window.log(&a.name, server.stepper());
             window = Window::new(Instant::now());
         }
-        if a.ticks.is_some_and(|n| ticks >= n) || a.duration.is_some_and(|d| started.elapsed().as_secs_f64() >= d) {
+        if a.ticks.is_some_and(|n| ticks >= n)
+            || a.duration
+                .is_some_and(|d| started.elapsed().as_secs_f64() >= d)
+        {
             break;
         }
     }
@@ -258,7 +310,9 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         .map(|r| (r.name().to_string(), counters.rejected[*r as usize].into()))
         .collect();
     let (mass, max): (Vec<f64>, Vec<f32>) = match server.latest() {
-        Some((_, view)) => (0..view.channels).map(|c| (view.total(c), view.max(c))).unzip(),
+        Some((_, view)) => (0..view.channels)
+            .map(|c| (view.total(c), view.max(c)))
+            .unzip(),
         None => (vec![], vec![]),
     };
     eprintln!(

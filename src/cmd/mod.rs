@@ -26,6 +26,7 @@ pub fn bad(msg: impl Into<String>) -> anyhow::Error {
 
 /// Reads a TOML file into `T`; any problem is `BadInput` naming the file, line and key.
 pub fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| bad(format!("{}: cannot read: {e}", path.display())))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| bad(format!("{}: cannot read: {e}", path.display())))?;
     toml::from_str(&text).map_err(|e| bad(format!("{}: {e}", path.display())))
 }

@@ -51,16 +51,24 @@ pub fn run_probe(a: ProbeArgs) -> anyhow::Result<()> {
         (_, Some(l)) => v < l,
         _ => true,
     };
-    let frame = reader.wait_until(timeout, |f| ch < f.view.channels && pred(f.view.value(ch, x, y)))?;
+    let frame = reader.wait_until(timeout, |f| {
+        ch < f.view.channels && pred(f.view.value(ch, x, y))
+    })?;
     let Some(frame) = frame else {
-        let last = reader.frame().map(|f| f.view.value(ch.min(f.view.channels.saturating_sub(1)), x, y));
+        let last = reader.frame().map(|f| {
+            f.view
+                .value(ch.min(f.view.channels.saturating_sub(1)), x, y)
+        });
         anyhow::bail!(
             "the value at ({x}, {y}) channel {ch} did not reach the condition within {} s (last value {last:?})",
             a.timeout
         );
     };
     if ch >= frame.view.channels {
-        return Err(bad(format!("--channel {ch}: the field has {} channel(s)", frame.view.channels)));
+        return Err(bad(format!(
+            "--channel {ch}: the field has {} channel(s)",
+            frame.view.channels
+        )));
     }
     let h = frame.header;
     let value = frame.view.value(ch, x, y);
@@ -141,9 +149,17 @@ pub struct DepositArgs {
 pub fn run_deposit(a: DepositArgs) -> anyhow::Result<()> {
     let node = create_node(&format!("deposit-{}", std::process::id()))?;
     if a.cov.len() != 3 {
-        return Err(bad(format!("--cov needs three values xx,xy,yy, got {}", a.cov.len())));
+        return Err(bad(format!(
+            "--cov needs three values xx,xy,yy, got {}",
+            a.cov.len()
+        )));
     }
-    let mut publisher = DepositPublisher::attach_within(&node, &a.field, a.robot, Duration::from_secs_f64(a.timeout))?;
+    let mut publisher = DepositPublisher::attach_within(
+        &node,
+        &a.field,
+        a.robot,
+        Duration::from_secs_f64(a.timeout),
+    )?;
     let msg = DepositMsg {
         channel: a.channel,
         kernel: a.kernel as u32,
@@ -161,6 +177,13 @@ pub fn run_deposit(a: DepositArgs) -> anyhow::Result<()> {
         ..Default::default()
     };
     publisher.send(msg)?;
-    eprintln!("deposit sent to field '{}': {} at ({}, {}) amount {}", a.field, a.kernel.name(), a.x, a.y, a.amount);
+    eprintln!(
+        "deposit sent to field '{}': {} at ({}, {}) amount {}",
+        a.field,
+        a.kernel.name(),
+        a.x,
+        a.y,
+        a.amount
+    );
     Ok(())
 }

@@ -56,10 +56,19 @@ enum TuneWhat {
 
 pub fn run(args: TuneArgs) -> anyhow::Result<()> {
     match args.what {
-        TuneWhat::K { p0, ptm, tm, pa, json } => {
+        TuneWhat::K {
+            p0,
+            ptm,
+            tm,
+            pa,
+            json,
+        } => {
             let k = field::tune::k_per_s(p0, ptm, tm, pa).map_err(|e| bad(e.to_string()))?;
             if json {
-                println!("{}", serde_json::json!({ "k_per_s": k, "p0": p0, "ptm": ptm, "tm_s": tm, "pa": pa }));
+                println!(
+                    "{}",
+                    serde_json::json!({ "k_per_s": k, "p0": p0, "ptm": ptm, "tm_s": tm, "pa": pa })
+                );
             } else {
                 println!("K = {k:.6} per second: P0 = {p0} falls to {ptm} in {tm} s with ambient Pa = {pa}.");
             }
@@ -77,7 +86,8 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
                 (None, Some(d)) => d * p0,
                 (None, None) => return Err(bad("give --level or --delta")),
             };
-            let t = field::tune::time_to_threshold_s(p0, k, level, pa).map_err(|e| bad(e.to_string()))?;
+            let t = field::tune::time_to_threshold_s(p0, k, level, pa)
+                .map_err(|e| bad(e.to_string()))?;
             if json {
                 println!(
                     "{}",

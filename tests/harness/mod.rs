@@ -21,12 +21,19 @@ pub fn unique(tag: &str) -> String {
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap()
         .subsec_nanos();
-    format!("{tag}-{}-{}-{nanos}", std::process::id(), N.fetch_add(1, Ordering::Relaxed))
+    format!(
+        "{tag}-{}-{}-{nanos}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    )
 }
 
 /// Runs `pheromone ARGS` to completion.
 pub fn run(args: &[&str]) -> Output {
-    Command::new(bin()).args(args).output().expect("run pheromone")
+    Command::new(bin())
+        .args(args)
+        .output()
+        .expect("run pheromone")
 }
 
 /// A background `pheromone` process; killed (SIGKILL) and reaped on drop.
@@ -56,7 +63,9 @@ impl Proc {
 
     /// Sends SIGINT (as Ctrl-C would).
     pub fn interrupt(&self) {
-        let _ = Command::new("kill").args(["-INT", &self.pid().to_string()]).status();
+        let _ = Command::new("kill")
+            .args(["-INT", &self.pid().to_string()])
+            .status();
     }
 
     /// Waits for the process to exit by itself, at most `timeout`; returns its output.
@@ -72,9 +81,17 @@ impl Proc {
                 if let Some(mut e) = self.child.stderr.take() {
                     let _ = e.read_to_end(&mut stderr);
                 }
-                return Output { status, stdout, stderr };
+                return Output {
+                    status,
+                    stdout,
+                    stderr,
+                };
             }
-            assert!(Instant::now() < deadline, "'pheromone {}' did not exit within {timeout:?}", self.what);
+            assert!(
+                Instant::now() < deadline,
+                "'pheromone {}' did not exit within {timeout:?}",
+                self.what
+            );
             // Polling a child's exit status has no event to wait on; 10 ms steps bound the wait.
             std::thread::park_timeout(Duration::from_millis(10));
         }
@@ -95,7 +112,10 @@ pub fn eventually<T>(timeout: Duration, what: &str, mut f: impl FnMut() -> Optio
         if let Some(t) = f() {
             return t;
         }
-        assert!(Instant::now() < deadline, "timed out after {timeout:?} waiting for {what}");
+        assert!(
+            Instant::now() < deadline,
+            "timed out after {timeout:?} waiting for {what}"
+        );
         std::thread::park_timeout(Duration::from_millis(20));
     }
 }
@@ -110,14 +130,23 @@ pub fn stderr(o: &Output) -> String {
 
 /// Parses the single JSON object a `--json` command prints.
 pub fn json(o: &Output) -> serde_json::Value {
-    serde_json::from_slice(&o.stdout)
-        .unwrap_or_else(|e| panic!("stdout is not one JSON object ({e}): {}\nstderr: {}", stdout(o), stderr(o)))
+    serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "stdout is not one JSON object ({e}): {}\nstderr: {}",
+            stdout(o),
+            stderr(o)
+        )
+    })
 }
 
 /// Entries of /dev/shm whose names mention `needle` (iceoryx2 names hash service names, so
 /// callers pass node names or compare counts before/after).
 pub fn shm_entries() -> Vec<String> {
     std::fs::read_dir("/dev/shm")
-        .map(|d| d.filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().into_owned()).collect())
+        .map(|d| {
+            d.filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect()
+        })
         .unwrap_or_default()
 }

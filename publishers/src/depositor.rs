@@ -1,0 +1,915 @@
+//! The depositor role: turns a localizer's pose estimate (`PoseMsg`, mean + 3×3 covariance) into
+//! deposit requests for the field (`field::DepositMsg`). Pure library code; the iceoryx2 loop
+//! lives elsewhere.
+//!
+//! Three modes (MODELS.md M1, M2/M4):
+//! - [`DepositMode::UncertaintyAware`] — seed 000: the error-ellipse kernel (`ellipse`, or the
+//!   `paper` form of eq. 14 as printed) with amount τ. The field computes γ = τ / det Σxy capped
+//!   at γmax (eq. 12) from the position covariance Σxy this module passes on, and cuts the kernel
+//!   at the sensor range z_rng (eq. 14). A well-localized robot deposits much in a small area, a
+//!   lost one little over a wide area.
+//! - [`DepositMode::Saturating`] — seeds 001/004 eq. 3: Δ = (1 − ξ)·ρt·exp(−d²/λ²) with a small
+//!   λ. The strength ρt ∈ [0, ρmax] grows as the uncertainty shrinks (seed 001 eq. 4); this module
+//!   uses ρt = ρmax·exp(−trace(Σxy)/σ0²) (see [`saturating_rho`]).
+//! - [`DepositMode::Constant`] — the traditional scheme seed 000 argues against: the same
+//!   ellipse deposit whatever the localization (a fixed, small, isotropic covariance).
+//!
+//! The leader deposits at intervals, not every step (seed 000, "intermittent time intervals"):
+//! the first accepted pose deposits, later ones only once the robot has moved `interval_m` from
+//! the last deposit or `interval_s` has elapsed since it.
+//!
+//! Bad poses (NaN/inf, a covariance that is not symmetric or not positive semi-definite, values
+//! that do not fit the `f32` deposit message) are rejected with a [`PoseRejection`] and counted
+//! by reason; no `DepositMsg` carrying a non-finite value is ever produced.
+
+use field::{DepositMsg, KernelKind};
+use serde::{Deserialize, Serialize};
+
+use crate::messages::PoseMsg;
+
+/// Which M1 kernel an ellipse deposit uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EllipseKernel {
+    /// Project default: γ·exp(−½ dᵀΣxy⁻¹d) (MODELS.md M1).
+    #[default]
+    Ellipse,
+    /// Seed 000 eq. 14 as printed: γ·exp(−(u²/λ1² + v²/λ2²)).
+    Paper,
+}
+
+impl EllipseKernel {
+    pub fn kind(self) -> KernelKind {
+        match self {
+            EllipseKernel::Ellipse => KernelKind::Ellipse,
+            EllipseKernel::Paper => KernelKind::Paper,
+        }
+    }
+}
+
+/// How a pose becomes a deposit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DepositMode {
+    /// Seed 000 eqs. 12–14: amount τ, γ = τ/det Σxy ≤ γmax, shape = the pose's error ellipse.
+    #[default]
+    UncertaintyAware,
+    /// Seeds 001/004 eq. 3: saturating kernel of strength ρt(Σxy) and small width λ.
+    Saturating,
+    /// `--constant`: the ellipse kernel with a fixed covariance, independent of localization.
+    Constant,
+}
+
+/// Depositor settings. Unknown keys are errors; every key has a default.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DepositorConfig {
+    pub mode: DepositMode,
+    /// Kernel of the `uncertainty-aware` and `constant` modes.
+    pub kernel: EllipseKernel,
+    /// Field channel the deposits go to.
+    pub channel: u32,
+    /// Deposit anti-pheromone (a negative amount; the channel must be signed).
+    pub anti_pheromone: bool,
+    /// τ of seed 000 eq. 12 (pheromone·m⁴): γ = τ / det Σxy. Paper: 0.2.
+    pub tau: f32,
+    /// γmax, the cap on γ (seed 000; paper: 100).
+    pub gamma_max: f32,
+    /// Sensor range z_rng (m): no cell farther than this from the pose receives pheromone
+    /// (seed 000 eq. 14, seed 001 eq. 3).
+    pub range_m: f32,
+    /// Deposit again once the pose has moved this far from the last deposit (m); 0 = off.
+    pub interval_m: f64,
+    /// Deposit again once this much time has elapsed since the last deposit (s); 0 = off.
+    /// With both intervals off every pose deposits; with both on, either one triggers.
+    pub interval_s: f64,
+    /// `constant` mode: the fixed standard deviation (m) of the isotropic covariance used in
+    /// place of the pose's Σxy (covariance = σ²·I).
+    pub constant_sigma_m: f32,
+    /// `saturating` mode: ρmax ∈ (0, 1], the strength of a perfectly localized deposit.
+    pub rho_max: f32,
+    /// `saturating` mode: σ0 (m) in ρt = ρmax·exp(−trace(Σxy)/σ0²).
+    pub rho_sigma0_m: f32,
+    /// `saturating` mode: kernel width λ (m) of seed 001 eq. 3 (small: mostly the robot's own
+    /// cell and its neighbours, eq. 5).
+    pub lambda_m: f32,
+}
+
+impl Default for DepositorConfig {
+    fn default() -> Self {
+        Self {
+            mode: DepositMode::UncertaintyAware,
+            kernel: EllipseKernel::Ellipse,
+            channel: 0,
+            anti_pheromone: false,
+            tau: 0.2,
+            gamma_max: 100.0,
+            range_m: 1.0,
+            interval_m: 0.25,
+            interval_s: 0.0,
+            constant_sigma_m: 0.1,
+            rho_max: 1.0,
+            rho_sigma0_m: 0.5,
+            lambda_m: 0.05,
+        }
+    }
+}
+
+/// A depositor setting that is out of range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("depositor setting {name} = {value}: {reason}")]
+pub struct DepositorConfigError {
+    pub name: &'static str,
+    pub value: String,
+    pub reason: &'static str,
+}
+
+impl DepositorConfig {
+    /// Checks every value; the error names the setting and the value.
+    pub fn validate(&self) -> Result<(), DepositorConfigError> {
+        let bad = |name, value: &dyn std::fmt::Display, reason| DepositorConfigError {
+            name,
+            value: value.to_string(),
+            reason,
+        };
+        let positive32 = [
+            ("tau", self.tau),
+            ("gamma_max", self.gamma_max),
+            ("range_m", self.range_m),
+            ("constant_sigma_m", self.constant_sigma_m),
+            ("rho_sigma0_m", self.rho_sigma0_m),
+            ("lambda_m", self.lambda_m),
+        ];
+        for (name, v) in positive32 {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(name, &v, "must be finite and > 0"));
+            }
+        }
+        if !(self.rho_max.is_finite() && self.rho_max > 0.0 && self.rho_max <= 1.0) {
+            return Err(bad("rho_max", &self.rho_max, "must be within (0, 1]"));
+        }
+        for (name, v) in [
+            ("interval_m", self.interval_m),
+            ("interval_s", self.interval_s),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(bad(name, &v, "must be finite and ≥ 0 (0 = off)"));
+            }
+        }
+        let sigma2 = self.constant_sigma_m * self.constant_sigma_m;
+        if !(sigma2.is_finite() && sigma2 > 0.0) {
+            return Err(bad(
+                "constant_sigma_m",
+                &self.constant_sigma_m,
+                "its square must be a finite f32 > 0",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Why a pose was refused. The discriminant indexes [`DepositorCounters::rejected`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum PoseRejectReason {
+    /// A position, heading or covariance entry is NaN or infinite.
+    NonFinite = 0,
+    /// The 3×3 covariance is not symmetric.
+    NotSymmetric = 1,
+    /// The 3×3 covariance is not positive semi-definite.
+    NotPsd = 2,
+    /// A value is finite in `f64` but does not fit the `f32` deposit message.
+    OutOfRange = 3,
+}
+
+/// Number of pose rejection reasons.
+pub const POSE_REJECT_REASONS: usize = 4;
+
+impl PoseRejectReason {
+    pub const ALL: [PoseRejectReason; POSE_REJECT_REASONS] = [
+        PoseRejectReason::NonFinite,
+        PoseRejectReason::NotSymmetric,
+        PoseRejectReason::NotPsd,
+        PoseRejectReason::OutOfRange,
+    ];
+
+    /// Stable snake_case name, for logs and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            PoseRejectReason::NonFinite => "non_finite",
+            PoseRejectReason::NotSymmetric => "not_symmetric",
+            PoseRejectReason::NotPsd => "not_psd",
+            PoseRejectReason::OutOfRange => "out_of_range",
+        }
+    }
+}
+
+/// A refused pose, naming the offending entry and value.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PoseRejection {
+    #[error("pose rejected (non_finite): {name} = {value}")]
+    NonFinite { name: &'static str, value: f64 },
+    #[error("pose rejected (not_symmetric): cov[{row}][{col}] = {upper} but cov[{col}][{row}] = {lower}")]
+    NotSymmetric {
+        row: usize,
+        col: usize,
+        upper: f64,
+        lower: f64,
+    },
+    #[error("pose rejected (not_psd): covariance has eigenvalue {min_eigenvalue} < 0")]
+    NotPsd { min_eigenvalue: f64 },
+    #[error("pose rejected (out_of_range): {name} = {value} does not fit the f32 deposit message")]
+    OutOfRange { name: &'static str, value: f64 },
+}
+
+impl PoseRejection {
+    pub fn reason(&self) -> PoseRejectReason {
+        match self {
+            PoseRejection::NonFinite { .. } => PoseRejectReason::NonFinite,
+            PoseRejection::NotSymmetric { .. } => PoseRejectReason::NotSymmetric,
+            PoseRejection::NotPsd { .. } => PoseRejectReason::NotPsd,
+            PoseRejection::OutOfRange { .. } => PoseRejectReason::OutOfRange,
+        }
+    }
+}
+
+/// Relative tolerance of the symmetry check: |Σij − Σji| ≤ tol·max|Σ|.
+pub const SYMMETRY_REL_TOL: f64 = 1e-6;
+/// Relative tolerance of the PSD check: λmin ≥ −tol·max|Σ|.
+pub const PSD_REL_TOL: f64 = 1e-9;
+
+const COV_NAMES: [&str; 9] = [
+    "cov_xx",
+    "cov_xy",
+    "cov_xtheta",
+    "cov_yx",
+    "cov_yy",
+    "cov_ytheta",
+    "cov_thetax",
+    "cov_thetay",
+    "cov_thetatheta",
+];
+
+/// Checks a pose: finite mean and covariance, covariance symmetric and positive semi-definite
+/// (MODELS.md M1: anything else is bad input, rejected with a reason, never deposited).
+pub fn validate_pose(pose: &PoseMsg) -> Result<(), PoseRejection> {
+    for (name, value) in [
+        ("x_m", pose.x_m),
+        ("y_m", pose.y_m),
+        ("theta_rad", pose.theta_rad),
+    ] {
+        if !value.is_finite() {
+            return Err(PoseRejection::NonFinite { name, value });
+        }
+    }
+    if let Some(i) = pose.cov.iter().position(|v| !v.is_finite()) {
+        return Err(PoseRejection::NonFinite {
+            name: COV_NAMES[i],
+            value: pose.cov[i],
+        });
+    }
+    let c = &pose.cov;
+    let scale = c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (row, col) in [(0, 1), (0, 2), (1, 2)] {
+        let (upper, lower) = (c[row * 3 + col], c[col * 3 + row]);
+        if (upper - lower).abs() > SYMMETRY_REL_TOL * scale {
+            return Err(PoseRejection::NotSymmetric {
+                row,
+                col,
+                upper,
+                lower,
+            });
+        }
+    }
+    let m = nalgebra::Matrix3::from_row_slice(c);
+    let sym = (m + m.transpose()) * 0.5;
+    let min_eigenvalue = sym.symmetric_eigenvalues().min();
+    if min_eigenvalue < -PSD_REL_TOL * scale {
+        return Err(PoseRejection::NotPsd { min_eigenvalue });
+    }
+    Ok(())
+}
+
+/// ρt = ρmax·exp(−trace(Σxy)/σ0²) — the project's choice for the strength of seed 001 eq. 3 /
+/// seed 004 eq. 4: 1 at perfect localization (times ρmax), falling smoothly as the summed
+/// position variance grows past σ0², never negative and never above ρmax.
+pub fn saturating_rho(rho_max: f32, sigma0_m: f32, cov_xx_m2: f64, cov_yy_m2: f64) -> f32 {
+    let trace = (cov_xx_m2 + cov_yy_m2).max(0.0);
+    let s02 = sigma0_m as f64 * sigma0_m as f64;
+    (rho_max as f64 * (-trace / s02).exp()) as f32
+}
+
+/// Cumulative counters of a depositor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DepositorCounters {
+    /// Poses offered (accepted or not).
+    pub poses: u64,
+    /// Deposit messages produced.
+    pub deposits: u64,
+    /// Valid poses that produced no deposit because no interval had elapsed.
+    pub skipped_interval: u64,
+    /// Rejected poses, indexed by `PoseRejectReason as usize`.
+    pub rejected: [u64; POSE_REJECT_REASONS],
+}
+
+impl DepositorCounters {
+    pub fn rejected_total(&self) -> u64 {
+        self.rejected.iter().sum()
+    }
+
+    pub fn rejected_for(&self, reason: PoseRejectReason) -> u64 {
+        self.rejected[reason as usize]
+    }
+}
+
+/// Where and when the last deposit was made.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LastDeposit {
+    x_m: f64,
+    y_m: f64,
+    stamp_ns: u64,
+}
+
+/// Turns poses into deposits (see the module documentation).
+#[derive(Debug, Clone)]
+pub struct Depositor {
+    config: DepositorConfig,
+    last: Option<LastDeposit>,
+    counters: DepositorCounters,
+}
+
+impl Depositor {
+    pub fn new(config: DepositorConfig) -> Result<Self, DepositorConfigError> {
+        config.validate()?;
+        Ok(Self {
+            config,
+            last: None,
+            counters: DepositorCounters::default(),
+        })
+    }
+
+    pub fn config(&self) -> &DepositorConfig {
+        &self.config
+    }
+
+    pub fn counters(&self) -> &DepositorCounters {
+        &self.counters
+    }
+
+    /// Forgets the last deposit: the next valid pose deposits.
+    pub fn reset(&mut self) {
+        self.last = None;
+    }
+
+    /// Processes one pose: validates it (counting a rejection by reason), applies the interval
+    /// rule and returns the deposit to send, if any. The message's `stamp_ns` and `robot_id` are
+    /// the pose's.
+    pub fn process(&mut self, pose: &PoseMsg) -> Result<Option<DepositMsg>, PoseRejection> {
+        self.counters.poses += 1;
+        let msg = match self.deposit_for(pose) {
+            Ok(m) => m,
+            Err(e) => {
+                self.counters.rejected[e.reason() as usize] += 1;
+                return Err(e);
+            }
+        };
+        if !self.due(pose) {
+            self.counters.skipped_interval += 1;
+            return Ok(None);
+        }
+        self.last = Some(LastDeposit {
+            x_m: pose.x_m,
+            y_m: pose.y_m,
+            stamp_ns: pose.stamp_ns,
+        });
+        self.counters.deposits += 1;
+        Ok(Some(msg))
+    }
+
+    /// Whether the interval rule lets `pose` deposit (the first pose always does). A stamp
+    /// earlier than the last deposit's counts as no time elapsed.
+    fn due(&self, pose: &PoseMsg) -> bool {
+        let Some(last) = self.last else {
+            return true;
+        };
+        let (im, is) = (self.config.interval_m, self.config.interval_s);
+        if im == 0.0 && is == 0.0 {
+            return true;
+        }
+        let moved_m = (pose.x_m - last.x_m).hypot(pose.y_m - last.y_m);
+        let elapsed_s = pose.stamp_ns.saturating_sub(last.stamp_ns) as f64 * 1e-9;
+        (im > 0.0 && moved_m >= im) || (is > 0.0 && elapsed_s >= is)
+    }
+
+    /// The deposit this pose would make, ignoring the interval rule (pure: no counters, no
+    /// state). Every field of the result is finite.
+    pub fn deposit_for(&self, pose: &PoseMsg) -> Result<DepositMsg, PoseRejection> {
+        validate_pose(pose)?;
+        let c = &self.config;
+        let x = to_f32("x_m", pose.x_m)?;
+        let y = to_f32("y_m", pose.y_m)?;
+        let sign = if c.anti_pheromone { -1.0 } else { 1.0 };
+        let [xx, xy, yy] = pose.cov_xy();
+        let mut msg = match c.mode {
+            DepositMode::UncertaintyAware => {
+                let xx32 = to_f32("cov_xx", xx)?;
+                let yy32 = to_f32("cov_yy", yy)?;
+                // Keep Σxy PSD after rounding to f32: |xy| ≤ √(xx·yy).
+                let bound = (xx32 as f64 * yy32 as f64).max(0.0).sqrt();
+                let xy32 = xy.clamp(-bound, bound) as f32;
+                DepositMsg::ellipse(
+                    c.channel,
+                    x,
+                    y,
+                    sign * c.tau,
+                    [xx32, xy32, yy32],
+                    c.range_m,
+                    c.gamma_max,
+                )
+            }
+            DepositMode::Constant => {
+                let s2 = c.constant_sigma_m * c.constant_sigma_m;
+                DepositMsg::ellipse(
+                    c.channel,
+                    x,
+                    y,
+                    sign * c.tau,
+                    [s2, 0.0, s2],
+                    c.range_m,
+                    c.gamma_max,
+                )
+            }
+            DepositMode::Saturating => {
+                let rho = saturating_rho(c.rho_max, c.rho_sigma0_m, xx, yy);
+                DepositMsg::saturating(c.channel, x, y, sign * rho, c.lambda_m, c.range_m)
+            }
+        };
+        if c.mode != DepositMode::Saturating {
+            msg.kernel = c.kernel.kind() as u32;
+        }
+        msg.stamp_ns = pose.stamp_ns;
+        msg.robot_id = pose.robot_id;
+        debug_assert!(msg_is_finite(&msg));
+        Ok(msg)
+    }
+}
+
+fn to_f32(name: &'static str, value: f64) -> Result<f32, PoseRejection> {
+    let v = value as f32;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(PoseRejection::OutOfRange { name, value })
+    }
+}
+
+/// Every `f32` field of a deposit message is finite.
+pub fn msg_is_finite(m: &DepositMsg) -> bool {
+    [
+        m.x_m,
+        m.y_m,
+        m.amount,
+        m.cov_xx,
+        m.cov_xy,
+        m.cov_yy,
+        m.range_m,
+        m.gamma_max,
+        m.sigma_m,
+        m.plateau_m,
+        m.slope_m,
+    ]
+    .iter()
+    .all(|v| v.is_finite())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use field::deposit::{gamma, prepare, DepositLimits, ErrorEllipse};
+    use field::{ChannelSpec, Evaporation, FieldConfig, OwnedField};
+    use proptest::prelude::*;
+
+    /// A 10 m × 10 m, 0.05 m field with one channel that never evaporates.
+    fn still_field(channel: ChannelSpec) -> OwnedField {
+        OwnedField::new(FieldConfig {
+            width: 200,
+            height: 200,
+            cell_size_m: 0.05,
+            channels: vec![channel],
+            ..FieldConfig::default()
+        })
+        .unwrap()
+    }
+
+    /// A pose at a cell centre with the given position covariance and a small heading variance.
+    fn pose(x_m: f64, y_m: f64, xx: f64, xy: f64, yy: f64) -> PoseMsg {
+        PoseMsg {
+            x_m,
+            y_m,
+            cov: [xx, xy, 0.0, xy, yy, 0.0, 0.0, 0.0, 0.01],
+            ..PoseMsg::default()
+        }
+    }
+
+    fn every_pose(mode: DepositMode) -> Depositor {
+        Depositor::new(DepositorConfig {
+            mode,
+            interval_m: 0.0,
+            interval_s: 0.0,
+            ..DepositorConfig::default()
+        })
+        .unwrap()
+    }
+
+    /// Deposits one pose into a fresh still field and returns the value at the pose.
+    fn peak_after_deposit(dep: &Depositor, p: &PoseMsg) -> f32 {
+        let mut f = still_field(ChannelSpec::new("trail", Evaporation::None));
+        f.offer(&dep.deposit_for(p).unwrap()).unwrap();
+        f.tick();
+        f.view().value(0, p.x_m as f32, p.y_m as f32)
+    }
+
+    #[test]
+    fn deposited_peak_scales_as_one_over_det_until_the_cap() {
+        let dep = every_pose(DepositMode::UncertaintyAware);
+        let tau = dep.config().tau as f64;
+        let gmax = dep.config().gamma_max;
+        // (x, y) = (5.025, 5.025) is a cell centre, so the peak cell holds exactly γ.
+        let mut uncapped = Vec::new();
+        for (xx, xy, yy) in [
+            (0.05, 0.0, 0.05),
+            (0.1, 0.0, 0.1),
+            (0.2, 0.05, 0.1),
+            (0.2, 0.0, 0.2),
+            (0.4, 0.1, 0.3),
+        ] {
+            let det = xx * yy - xy * xy;
+            let peak = peak_after_deposit(&dep, &pose(5.025, 5.025, xx, xy, yy));
+            assert!(tau / det < gmax as f64, "case must be below the cap");
+            // γ·det = τ: the deposit scales as 1/det Σxy (seed 000 eq. 12).
+            assert_relative_eq!(peak as f64 * det, tau, max_relative = 1e-4);
+            let e = ErrorEllipse::from_cov(xx as f32, xy as f32, yy as f32);
+            assert_relative_eq!(peak, gamma(tau as f32, e.det(), gmax), max_relative = 1e-4);
+            uncapped.push((det, peak));
+        }
+        // Four times the determinant, a quarter of the peak.
+        assert_relative_eq!(uncapped[1].1 / uncapped[3].1, 4.0, max_relative = 1e-4);
+        // Confident enough to hit the cap: γ = γmax, and a zero covariance is no infinity.
+        for (xx, yy) in [(0.01, 0.01), (1e-6, 1e-6), (0.0, 0.0)] {
+            let peak = peak_after_deposit(&dep, &pose(5.025, 5.025, xx, 0.0, yy));
+            assert_relative_eq!(peak, gmax, max_relative = 1e-5);
+        }
+    }
+
+    #[test]
+    fn ellipse_is_oriented_along_the_major_eigenvector() {
+        for kernel in [EllipseKernel::Ellipse, EllipseKernel::Paper] {
+            let dep = Depositor::new(DepositorConfig {
+                kernel,
+                range_m: 2.0,
+                ..DepositorConfig::default()
+            })
+            .unwrap();
+            // Σxy = R(30°) diag(0.09, 0.01) R(30°)ᵀ: major axis at 30°.
+            let a = 30f64.to_radians();
+            let (c, s) = (a.cos(), a.sin());
+            let (l1, l2) = (0.09, 0.01);
+            let (xx, xy, yy) = (
+                l1 * c * c + l2 * s * s,
+                (l1 - l2) * c * s,
+                l1 * s * s + l2 * c * c,
+            );
+            let mut f = still_field(ChannelSpec::new("trail", Evaporation::None));
+            let p = pose(5.0, 5.0, xx, xy, yy);
+            f.offer(&Depositor::deposit_for(&dep, &p).unwrap()).unwrap();
+            f.tick();
+            let v = f.view();
+            for d in [0.1f64, 0.2, 0.3] {
+                for sgn in [1.0, -1.0] {
+                    let major = v.value(0, (5.0 + sgn * d * c) as f32, (5.0 + sgn * d * s) as f32);
+                    let minor = v.value(0, (5.0 - sgn * d * s) as f32, (5.0 + sgn * d * c) as f32);
+                    assert!(
+                        major > minor,
+                        "{kernel:?} d = {d}: major {major} ≤ minor {minor}"
+                    );
+                }
+            }
+            // The direction of the largest value on a ring of radius 0.2 m is the major axis.
+            let best = (0..360)
+                .map(|k| (k as f64).to_radians())
+                .max_by(|p, q| {
+                    let val = |t: &f64| {
+                        v.value(
+                            0,
+                            (5.0 + 0.2 * t.cos()) as f32,
+                            (5.0 + 0.2 * t.sin()) as f32,
+                        )
+                    };
+                    val(p).total_cmp(&val(q))
+                })
+                .unwrap();
+            let off = (best - a).rem_euclid(std::f64::consts::PI);
+            let off = off.min(std::f64::consts::PI - off);
+            assert!(
+                off < 5f64.to_radians(),
+                "{kernel:?}: ring maximum at {best} rad"
+            );
+        }
+    }
+
+    fn stamped(x_m: f64, stamp_s: f64) -> PoseMsg {
+        PoseMsg {
+            stamp_ns: (stamp_s * 1e9) as u64,
+            ..pose(x_m, 1.0, 0.1, 0.0, 0.1)
+        }
+    }
+
+    fn run(dep: &mut Depositor, poses: &[(f64, f64)]) -> Vec<bool> {
+        poses
+            .iter()
+            .map(|&(x, t)| dep.process(&stamped(x, t)).unwrap().is_some())
+            .collect()
+    }
+
+    #[test]
+    fn deposits_by_distance_interval() {
+        let mut dep = Depositor::new(DepositorConfig {
+            interval_m: 0.5,
+            interval_s: 0.0,
+            ..DepositorConfig::default()
+        })
+        .unwrap();
+        let got = run(
+            &mut dep,
+            &[
+                (0.0, 0.0),
+                (0.2, 1.0),
+                (0.49, 50.0),
+                (0.5, 51.0),
+                (0.6, 52.0),
+                (1.0, 53.0),
+                (0.6, 54.0),
+            ],
+        );
+        assert_eq!(got, [true, false, false, true, false, true, false]);
+        assert_eq!(dep.counters().deposits, 3);
+        assert_eq!(dep.counters().skipped_interval, 4);
+        assert_eq!(dep.counters().poses, 7);
+        dep.reset();
+        assert!(
+            dep.process(&stamped(1.0, 60.0)).unwrap().is_some(),
+            "first pose after reset deposits"
+        );
+    }
+
+    #[test]
+    fn deposits_by_time_interval_and_either_trigger() {
+        let mut dep = Depositor::new(DepositorConfig {
+            interval_m: 0.0,
+            interval_s: 1.0,
+            ..DepositorConfig::default()
+        })
+        .unwrap();
+        let got = run(
+            &mut dep,
+            &[
+                (0.0, 10.0),
+                (5.0, 10.5),
+                (5.0, 11.0),
+                (5.0, 11.9),
+                (5.0, 9.0),
+                (5.0, 12.0),
+            ],
+        );
+        assert_eq!(got, [true, false, true, false, false, true]);
+
+        let mut both = Depositor::new(DepositorConfig {
+            interval_m: 0.5,
+            interval_s: 1.0,
+            ..DepositorConfig::default()
+        })
+        .unwrap();
+        let got = run(
+            &mut both,
+            &[(0.0, 0.0), (0.1, 0.5), (0.7, 0.6), (0.8, 1.6), (0.9, 1.7)],
+        );
+        assert_eq!(got, [true, false, true, true, false]);
+
+        let mut every = every_pose(DepositMode::UncertaintyAware);
+        assert_eq!(
+            run(&mut every, &[(0.0, 0.0), (0.0, 0.0), (0.0, 0.0)]),
+            [true, true, true]
+        );
+    }
+
+    #[test]
+    fn constant_mode_ignores_the_covariance() {
+        let dep = every_pose(DepositMode::Constant);
+        let sharp = pose(5.025, 5.025, 1e-4, 0.0, 1e-4);
+        let lost = pose(5.025, 5.025, 2.0, 0.5, 1.0);
+        let (a, b) = (
+            dep.deposit_for(&sharp).unwrap(),
+            dep.deposit_for(&lost).unwrap(),
+        );
+        assert_eq!(a, b);
+        let s2 = 0.1f32 * 0.1;
+        assert_eq!((a.cov_xx, a.cov_xy, a.cov_yy), (s2, 0.0, s2));
+        assert_eq!(
+            peak_after_deposit(&dep, &sharp),
+            peak_after_deposit(&dep, &lost)
+        );
+        // The uncertainty-aware depositor tells the two apart.
+        let aware = every_pose(DepositMode::UncertaintyAware);
+        assert!(peak_after_deposit(&aware, &sharp) > 10.0 * peak_after_deposit(&aware, &lost));
+    }
+
+    #[test]
+    fn saturating_mode_strength_falls_with_uncertainty() {
+        let dep = every_pose(DepositMode::Saturating);
+        let rho = |xx: f64, yy: f64| {
+            dep.deposit_for(&pose(5.0, 5.0, xx, 0.0, yy))
+                .unwrap()
+                .amount
+        };
+        assert_relative_eq!(rho(0.0, 0.0), 1.0);
+        assert_relative_eq!(rho(0.125, 0.125), (-1.0f32).exp(), max_relative = 1e-6);
+        assert!(
+            rho(0.01, 0.01) > rho(0.1, 0.1) && rho(0.1, 0.1) > rho(1.0, 1.0) && rho(1.0, 1.0) > 0.0
+        );
+        let m = dep.deposit_for(&pose(5.0, 5.0, 0.01, 0.0, 0.01)).unwrap();
+        assert_eq!(m.kernel, KernelKind::Saturating as u32);
+        assert_eq!((m.sigma_m, m.range_m), (0.05, 1.0));
+
+        // Anti-pheromone on a signed saturating channel: negative, saturating at −1.
+        let anti = Depositor::new(DepositorConfig {
+            mode: DepositMode::Saturating,
+            anti_pheromone: true,
+            interval_m: 0.0,
+            ..DepositorConfig::default()
+        })
+        .unwrap();
+        let mut spec = ChannelSpec::new("anti", Evaporation::Saturating { rho_per_tick: 0.0 });
+        spec.signed = true;
+        let mut f = still_field(spec);
+        let p = pose(5.025, 5.025, 0.0, 0.0, 0.0);
+        for _ in 0..20 {
+            f.offer(&anti.deposit_for(&p).unwrap()).unwrap();
+            f.tick();
+        }
+        let v = f.view().value(0, 5.025, 5.025);
+        assert!((-1.0..-0.99).contains(&v), "{v}");
+    }
+
+    #[test]
+    fn anti_pheromone_negates_the_ellipse_amount() {
+        let dep = Depositor::new(DepositorConfig {
+            anti_pheromone: true,
+            channel: 3,
+            kernel: EllipseKernel::Paper,
+            ..DepositorConfig::default()
+        })
+        .unwrap();
+        let m = dep.deposit_for(&pose(1.0, 2.0, 0.1, 0.0, 0.1)).unwrap();
+        assert_eq!(
+            (m.amount, m.channel, m.kernel),
+            (-0.2, 3, KernelKind::Paper as u32)
+        );
+    }
+
+    #[test]
+    fn bad_poses_are_rejected_and_counted() {
+        let mut dep = every_pose(DepositMode::UncertaintyAware);
+        let good = pose(1.0, 1.0, 0.1, 0.02, 0.1);
+        let mut nan_x = good;
+        nan_x.x_m = f64::NAN;
+        let mut inf_cov = good;
+        inf_cov.cov[8] = f64::INFINITY;
+        let mut asym = good;
+        asym.cov[3] = 0.05; // cov_yx ≠ cov_xy
+        let neg_var = pose(1.0, 1.0, -0.1, 0.0, 0.1);
+        let not_psd = pose(1.0, 1.0, 0.1, 0.2, 0.1); // |xy| > √(xx·yy)
+        let mut huge = good;
+        huge.y_m = 1e300;
+        let cases = [
+            (nan_x, PoseRejectReason::NonFinite, "x_m"),
+            (inf_cov, PoseRejectReason::NonFinite, "cov_thetatheta"),
+            (asym, PoseRejectReason::NotSymmetric, "cov[0][1]"),
+            (neg_var, PoseRejectReason::NotPsd, "eigenvalue"),
+            (not_psd, PoseRejectReason::NotPsd, "eigenvalue"),
+            (huge, PoseRejectReason::OutOfRange, "y_m"),
+        ];
+        for (p, reason, mention) in cases {
+            let e = dep.process(&p).unwrap_err();
+            assert_eq!(e.reason(), reason, "{e}");
+            assert!(
+                e.to_string().contains(mention) && e.to_string().contains(reason.name()),
+                "{e}"
+            );
+        }
+        let c = dep.counters();
+        assert_eq!(c.rejected, [2, 1, 2, 1]);
+        assert_eq!((c.rejected_total(), c.deposits, c.poses), (6, 0, 6));
+        assert_eq!(c.rejected_for(PoseRejectReason::NotPsd), 2);
+        // A rejected pose does not count as the first deposit.
+        assert!(dep.process(&good).unwrap().is_some());
+        // Round-off asymmetry and a rank-deficient (but PSD) covariance are accepted.
+        let mut nearly = good;
+        nearly.cov[3] += 1e-12;
+        assert!(dep.process(&nearly).is_ok());
+        assert!(dep.process(&pose(1.0, 1.0, 0.1, 0.1, 0.1)).is_ok());
+    }
+
+    #[test]
+    fn bad_settings_are_refused_with_their_name() {
+        for (cfg, name) in [
+            (
+                DepositorConfig {
+                    tau: f32::NAN,
+                    ..Default::default()
+                },
+                "tau",
+            ),
+            (
+                DepositorConfig {
+                    gamma_max: 0.0,
+                    ..Default::default()
+                },
+                "gamma_max",
+            ),
+            (
+                DepositorConfig {
+                    rho_max: 1.5,
+                    ..Default::default()
+                },
+                "rho_max",
+            ),
+            (
+                DepositorConfig {
+                    interval_m: -1.0,
+                    ..Default::default()
+                },
+                "interval_m",
+            ),
+            (
+                DepositorConfig {
+                    constant_sigma_m: 1e-30,
+                    ..Default::default()
+                },
+                "constant_sigma_m",
+            ),
+        ] {
+            let e = Depositor::new(cfg).unwrap_err();
+            assert_eq!(e.name, name);
+            assert!(e.to_string().contains(name), "{e}");
+        }
+    }
+
+    #[test]
+    fn config_defaults_and_unknown_keys() {
+        use serde::de::value::{Error as DeError, MapDeserializer};
+        let partial: Result<DepositorConfig, DeError> = DepositorConfig::deserialize(
+            MapDeserializer::new([("tau", 0.5f64), ("interval_s", 2.0)].into_iter()),
+        );
+        let partial = partial.unwrap();
+        assert_eq!((partial.tau, partial.interval_s), (0.5, 2.0));
+        assert_eq!(partial.gamma_max, DepositorConfig::default().gamma_max);
+        let unknown: Result<DepositorConfig, DeError> =
+            DepositorConfig::deserialize(MapDeserializer::new([("taw", 0.5f64)].into_iter()));
+        assert!(unknown.unwrap_err().to_string().contains("taw"));
+    }
+
+    proptest! {
+        /// Whatever the pose, a produced deposit is finite and the field accepts it (or the pose
+        /// was rejected); nothing non-finite ever leaves the depositor.
+        #[test]
+        fn never_emits_non_finite(
+            x in prop::num::f64::ANY, y in prop::num::f64::ANY,
+            xx in prop::num::f64::ANY, xy in prop::num::f64::ANY, yy in prop::num::f64::ANY,
+            sx in 0.0f64..10.0, sxy in -1.0f64..1.0, sy in 0.0f64..10.0,
+            mode in prop::sample::select(vec![DepositMode::UncertaintyAware, DepositMode::Saturating, DepositMode::Constant]),
+            wild in any::<bool>(),
+        ) {
+            let dep = every_pose(mode);
+            // Either arbitrary bit patterns or a plausible pose with a PSD covariance.
+            let p = if wild {
+                pose(x, y, xx, xy, yy)
+            } else {
+                let c = sxy * (sx * sy).sqrt();
+                pose(5.0, 5.0, sx, c, sy)
+            };
+            if let Ok(m) = dep.deposit_for(&p) {
+                prop_assert!(msg_is_finite(&m));
+                if !wild {
+                    let cfg = FieldConfig {
+                        width: 200,
+                        height: 200,
+                        cell_size_m: 0.05,
+                        ..FieldConfig::default()
+                    };
+                    prop_assert!(prepare(&m, &cfg.geometry(), &cfg.channels, &DepositLimits::default()).is_ok());
+                }
+            }
+        }
+    }
+}
