@@ -26,6 +26,14 @@ enum Command {
     Field(cmd::field::FieldArgs),
     /// Closed-form tuning of the evaporation rate (seed 000 eqs. 23 and 26).
     Tune(cmd::tune::TuneArgs),
+    /// Run the simulator process (true poses, sensors, scripted deposits, the lockstep clock).
+    World(cmd::roles::WorldArgs),
+    /// Run the localizer (EKF) of one robot.
+    Localizer(cmd::roles::LocalizerArgs),
+    /// Run the depositor of one robot.
+    Depositor(cmd::roles::DepositorArgs),
+    /// Run the follower of one robot.
+    Follower(cmd::roles::FollowerArgs),
     /// Read a running field: print its header and the value at a point (a minimal reader).
     Probe(cmd::probe::ProbeArgs),
     /// Send one deposit to a running field.
@@ -38,6 +46,10 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Field(a) => cmd::field::run(a),
         Command::Tune(a) => cmd::tune::run(a),
+        Command::World(a) => cmd::roles::run_world_cmd(a),
+        Command::Localizer(a) => cmd::roles::run_localizer_cmd(a),
+        Command::Depositor(a) => cmd::roles::run_depositor_cmd(a),
+        Command::Follower(a) => cmd::roles::run_follower_cmd(a),
         Command::Probe(a) => cmd::probe::run_probe(a),
         Command::Deposit(a) => cmd::probe::run_deposit(a),
     };

@@ -281,3 +281,89 @@ fn a_config_file_round_trips_through_print_config() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn world_field_and_one_robots_three_processes_follow_a_scripted_trail() {
+    let field_name = unique("rf");
+    let world = unique("rw");
+    let common = [
+        "--scenario",
+        "trail",
+        "--world",
+        &world,
+        "--field",
+        &field_name,
+        "--json",
+    ];
+    let with = |role: &'static str| {
+        let mut v = vec![role];
+        v.extend_from_slice(&common);
+        v
+    };
+    let field = Proc::spawn(&[
+        "field",
+        "--name",
+        &field_name,
+        "--scenario",
+        "trail",
+        "--clock",
+        &world,
+        "--json",
+    ]);
+    let localizer = Proc::spawn(&with("localizer"));
+    let depositor = Proc::spawn(&with("depositor"));
+    let follower = Proc::spawn(&with("follower"));
+    let world_out = Proc::spawn(&with("world")).wait_exit(Duration::from_secs(120));
+    assert!(world_out.status.success(), "world: {}", stderr(&world_out));
+    let w = json(&world_out);
+    assert_eq!(w["steps"], 80);
+    let pose = &w["robots"][0]["true_pose"];
+    let (x, y) = (pose[0].as_f64().unwrap(), pose[1].as_f64().unwrap());
+    // The trail runs along y = 2.5 m from x = 0.5 m; the robot starts at x = 1 m. Over 8 s it
+    // must have moved along it (Table 2 speed ≤ 1 m/s), staying on it.
+    assert!(
+        x > 4.0,
+        "robot did not follow the trail: ended at ({x:.2}, {y:.2})"
+    );
+    assert!(
+        (y - 2.5).abs() < 0.3,
+        "robot left the trail: ended at ({x:.2}, {y:.2})"
+    );
+    // Every role saw every step and stopped by itself when the world ended.
+    for p in [localizer, depositor, follower] {
+        let what = p.what.clone();
+        let o = p.wait_exit(Duration::from_secs(30));
+        assert!(o.status.success(), "{what}: {}", stderr(&o));
+        let s = json(&o);
+        assert_eq!(s["last_step"], 79, "{what}: {s}");
+        assert_eq!(s["rejected"], 0, "{what}: {s}");
+    }
+    let f = json(&field.wait_exit(Duration::from_secs(30)));
+    assert_eq!(f["ticks"], 80, "one field tick per world step: {f}");
+    // 106 scripted trail deposits plus the robot's own (one every 0.25 m).
+    let applied = f["deposits_applied"].as_u64().unwrap();
+    assert!(applied > 106 + 10, "robot deposits missing: {f}");
+    assert_eq!(f["deposits_rejected"]["non_finite"], 0);
+}
+
+#[test]
+fn every_role_explains_itself_in_help() {
+    for role in [
+        "field",
+        "world",
+        "localizer",
+        "depositor",
+        "follower",
+        "probe",
+        "deposit",
+        "tune",
+    ] {
+        let o = run(&[role, "--help"]);
+        assert!(o.status.success(), "{role} --help");
+        let text = stdout(&o);
+        assert!(text.len() > 300, "{role} --help is too thin:\n{text}");
+    }
+    let o = run(&["follower", "--strategy", "sideways"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("sideways"), "{}", stderr(&o));
+}

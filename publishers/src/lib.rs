@@ -8,4 +8,6 @@ pub mod depositor;
 pub mod follower;
 pub mod localizer;
 pub mod messages;
+pub mod process;
+pub mod scenario;
 pub mod world;

@@ -44,8 +44,11 @@ pub struct FieldArgs {
     #[arg(long, default_value = "main")]
     pub name: String,
     /// TOML file with the field configuration (unknown keys are errors).
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with = "scenario")]
     pub config: Option<PathBuf>,
+    /// Take the field configuration from a scenario (built-in name or TOML file).
+    #[arg(long)]
+    pub scenario: Option<String>,
     /// Grid width in cells [default: 512].
     #[arg(long)]
     pub width: Option<u32>,
@@ -120,9 +123,10 @@ pub struct FieldArgs {
 
 /// Builds the configuration from the file (if any), then the flags.
 pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
-    let mut c: FieldConfig = match &a.config {
-        Some(p) => read_toml(p)?,
-        None => FieldConfig::default(),
+    let mut c: FieldConfig = match (&a.config, &a.scenario) {
+        (Some(p), _) => read_toml(p)?,
+        (None, Some(s)) => super::roles::load_scenario(s)?.field,
+        (None, None) => FieldConfig::default(),
     };
     macro_rules! set {
         ($($flag:ident => $field:ident),*) => { $(if let Some(v) = a.$flag { c.$field = v; })* };
@@ -238,8 +242,6 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         frames
     );
     let node = create_node(&format!("field-{}", a.name))?;
-    let mut server = FieldServer::start(&node, &a.name, config.clone(), None)?;
-    let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
     let clock = match &a.clock {
         Some(world) => {
             let (service, wake) = field::messages::clock_services(world);
@@ -256,17 +258,22 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
+    let mut server = FieldServer::start(&node, &a.name, config.clone(), None)?;
+    let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
     let started = Instant::now();
     let mut deadline = started + period;
     let mut window = Window::new(started);
     let mut max_compute_ns = 0u64;
     let mut ticks = 0u64;
+    let mut last_clock_step: Option<u64> = None;
     loop {
         if let Some(clock) = &clock {
             // Lockstep: one tick per world step.
             match clock.recv_timeout(Duration::from_millis(100))? {
                 Some(msg) if msg.finished != 0 => break,
-                Some(_) => {}
+                // The world re-sends a step nobody answered yet: tick once per step.
+                Some(msg) if last_clock_step.is_some_and(|s| msg.step <= s) => continue,
+                Some(msg) => last_clock_step = Some(msg.step),
                 None => {
                     if node.wait(Duration::ZERO).is_err() {
                         break;

@@ -2,6 +2,7 @@
 
 pub mod field;
 pub mod probe;
+pub mod roles;
 pub mod tune;
 
 use std::fmt;

@@ -1,0 +1,267 @@
+//! `pheromone world | localizer | depositor | follower`: the robot processes. Each reads the
+//! same scenario (a built-in name or a TOML file) and runs its part of it.
+
+use std::time::Duration;
+
+use clap::{Args, ValueEnum};
+use field::shm::create_node;
+use publishers::depositor::{DepositMode, DepositorConfig};
+use publishers::follower::{Follower, FollowerConfig, StrategyKind};
+use publishers::process::{run_depositor, run_follower, run_localizer, run_world, WorldOptions};
+use publishers::scenario::Scenario;
+
+use super::bad;
+
+/// Options every robot process shares.
+#[derive(Args, Debug, Clone)]
+pub struct Common {
+    /// Scenario: a built-in name (trail) or a TOML file.
+    #[arg(long, default_value = "trail")]
+    pub scenario: String,
+    /// Name of the simulated world (its clock is sim/<WORLD>/clock).
+    #[arg(long, default_value = "sim")]
+    pub world: String,
+    /// Name of the field to attach to.
+    #[arg(long, default_value = "main")]
+    pub field: String,
+    /// Print one JSON summary object on stdout at exit.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn load_scenario(name: &str) -> anyhow::Result<Scenario> {
+    Scenario::load(name).map_err(|e| bad(e.to_string()))
+}
+
+fn check_names(c: &Common) -> anyhow::Result<()> {
+    for n in [&c.world, &c.field] {
+        field::shm::check_name(n).map_err(|e| bad(e.to_string()))?;
+    }
+    Ok(())
+}
+
+fn print_json(json: bool, value: impl serde::Serialize) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string(&value)?);
+    }
+    Ok(())
+}
+
+/// Run the simulator: true poses of every robot of the scenario (differential drive, walls),
+/// noisy odometry and landmark observations, scripted deposits, and the simulation clock.
+///
+/// Lockstep (default): step k is published, then the world waits for every robot's command for
+/// step k and advances — as fast as the robots answer. --realtime steps every dt of wall time
+/// with the newest commands instead. Start the field with `--clock WORLD` so it ticks per step.
+#[derive(Args, Debug)]
+pub struct WorldArgs {
+    #[command(flatten)]
+    pub common: Common,
+    /// Step on wall time instead of lockstep.
+    #[arg(long)]
+    pub realtime: bool,
+    /// Lockstep: fail when a robot has not answered a step within this many seconds.
+    #[arg(long, default_value_t = 10.0, value_name = "SECS")]
+    pub stall_timeout: f64,
+}
+
+pub fn run_world_cmd(a: WorldArgs) -> anyhow::Result<()> {
+    check_names(&a.common)?;
+    let scenario = load_scenario(&a.common.scenario)?;
+    let node = create_node(&format!("world-{}", a.common.world))?;
+    let summary = run_world(
+        &node,
+        &scenario,
+        &WorldOptions {
+            world: a.common.world.clone(),
+            field: a.common.field.clone(),
+            realtime: a.realtime,
+            stall_timeout: Duration::from_secs_f64(a.stall_timeout),
+        },
+    )?;
+    eprintln!(
+        "world '{}': {} steps, {:.1} s simulated, {} scripted deposits",
+        a.common.world, summary.steps, summary.sim_time_s, summary.deposits_sent
+    );
+    print_json(a.common.json, &summary)
+}
+
+/// Run the localizer of one robot: the EKF of seed 001 Algorithm 1 (velocity motion model,
+/// maximum-likelihood landmark association) over the world's sensor messages; publishes pose +
+/// covariance (pheromone/r<ID>/pose) for every step. Settings come from the scenario's
+/// `[robot.localizer]` (noise α1..α4, gate, and the `loss` knob that makes a robot lose its
+/// localization).
+#[derive(Args, Debug)]
+pub struct LocalizerArgs {
+    #[command(flatten)]
+    pub common: Common,
+    /// Robot id.
+    #[arg(long, default_value_t = 0)]
+    pub robot: u32,
+}
+
+pub fn run_localizer_cmd(a: LocalizerArgs) -> anyhow::Result<()> {
+    check_names(&a.common)?;
+    let scenario = load_scenario(&a.common.scenario)?;
+    let node = create_node(&format!("localizer-r{}-{}", a.robot, std::process::id()))?;
+    let summary = run_localizer(&node, &scenario, a.robot, &a.common.world)?;
+    eprintln!(
+        "localizer r{}: {} steps, {} rejected",
+        a.robot, summary.steps, summary.rejected
+    );
+    print_json(a.common.json, &summary)
+}
+
+#[derive(Clone, Copy, ValueEnum, Debug)]
+pub enum ModeArg {
+    /// Seed 000: γ = τ/det Σxy (capped), error-ellipse shape.
+    UncertaintyAware,
+    /// Seeds 001/004: saturating deposit, ρt from the covariance.
+    Saturating,
+    /// Traditional: the same deposit whatever the localization.
+    Constant,
+}
+
+/// Run the depositor of one robot: turns each pose + covariance into deposits on the field —
+/// seed 000 (amount ∝ 1/det Σxy, error-ellipse shape, only within z_rng, at intervals), or the
+/// saturating M2/M4 deposit, or constant. Settings come from the scenario's `[robot.depositor]`;
+/// flags override.
+#[derive(Args, Debug)]
+pub struct DepositorArgs {
+    #[command(flatten)]
+    pub common: Common,
+    /// Robot id.
+    #[arg(long, default_value_t = 0)]
+    pub robot: u32,
+    /// Deposit mode.
+    #[arg(long, value_enum)]
+    pub mode: Option<ModeArg>,
+    /// Shorthand for --mode constant (the scheme seed 000 argues against).
+    #[arg(long, conflicts_with = "mode")]
+    pub constant: bool,
+    /// Field channel to deposit into.
+    #[arg(long)]
+    pub channel: Option<u32>,
+    /// Deposit anti-pheromone (negative amounts; the channel must be signed).
+    #[arg(long)]
+    pub anti_pheromone: bool,
+    /// Deposit after moving this far (m); 0 = off.
+    #[arg(long, value_name = "M")]
+    pub interval_m: Option<f64>,
+    /// Deposit after this much time (s); 0 = off.
+    #[arg(long, value_name = "SECS")]
+    pub interval_s: Option<f64>,
+    /// τ of seed 000 eq. 12.
+    #[arg(long)]
+    pub tau: Option<f32>,
+    /// Sensor range z_rng (m).
+    #[arg(long, value_name = "M")]
+    pub range: Option<f32>,
+}
+
+pub fn run_depositor_cmd(a: DepositorArgs) -> anyhow::Result<()> {
+    check_names(&a.common)?;
+    let scenario = load_scenario(&a.common.scenario)?;
+    let mut config: DepositorConfig = scenario
+        .roles(a.robot)
+        .and_then(|r| r.depositor.clone())
+        .unwrap_or_default();
+    if let Some(m) = a.mode {
+        config.mode = match m {
+            ModeArg::UncertaintyAware => DepositMode::UncertaintyAware,
+            ModeArg::Saturating => DepositMode::Saturating,
+            ModeArg::Constant => DepositMode::Constant,
+        };
+    }
+    if a.constant {
+        config.mode = DepositMode::Constant;
+    }
+    if let Some(c) = a.channel {
+        config.channel = c;
+    }
+    config.anti_pheromone |= a.anti_pheromone;
+    if let Some(v) = a.interval_m {
+        config.interval_m = v;
+    }
+    if let Some(v) = a.interval_s {
+        config.interval_s = v;
+    }
+    if let Some(v) = a.tau {
+        config.tau = v;
+    }
+    if let Some(v) = a.range {
+        config.range_m = v;
+    }
+    config.validate().map_err(|e| bad(e.to_string()))?;
+    let node = create_node(&format!("depositor-r{}-{}", a.robot, std::process::id()))?;
+    let summary = run_depositor(
+        &node,
+        &scenario,
+        a.robot,
+        &a.common.world,
+        &a.common.field,
+        config,
+    )?;
+    eprintln!(
+        "depositor r{}: {} poses, {} rejected",
+        a.robot, summary.steps, summary.rejected
+    );
+    print_json(a.common.json, &summary)
+}
+
+/// Run the follower of one robot: reads the newest frame and the robot's pose, publishes a
+/// motion command (pheromone/r<ID>/cmd) and a status (following / trail abandoned / exploring).
+/// Strategies: gradient (seed 000: climb ∇P, trail rejection, speed table), antenna (seed 002),
+/// inverse (seed 004 IAS-SS), uniform (seed 004's random baseline). Settings come from the
+/// scenario's `[robot.follower]`; flags override.
+#[derive(Args, Debug)]
+pub struct FollowerArgs {
+    #[command(flatten)]
+    pub common: Common,
+    /// Robot id.
+    #[arg(long, default_value_t = 0)]
+    pub robot: u32,
+    /// Strategy: gradient, antenna, inverse or uniform.
+    #[arg(long)]
+    pub strategy: Option<StrategyKind>,
+    /// Field channel to read.
+    #[arg(long)]
+    pub channel: Option<u32>,
+    /// Seed of the sector strategies' random choices.
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
+
+pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
+    check_names(&a.common)?;
+    let scenario = load_scenario(&a.common.scenario)?;
+    let mut config: FollowerConfig = scenario
+        .roles(a.robot)
+        .and_then(|r| r.follower.clone())
+        .unwrap_or_default();
+    if let Some(s) = a.strategy {
+        config.strategy = s;
+    }
+    if let Some(c) = a.channel {
+        config.channel = c;
+    }
+    if let Some(s) = a.seed {
+        config.seed = s;
+    }
+    config.validate().map_err(|e| bad(e.to_string()))?;
+    let follower = Follower::from_config(a.robot, &config).map_err(|e| bad(e.to_string()))?;
+    let node = create_node(&format!("follower-r{}-{}", a.robot, std::process::id()))?;
+    let summary = run_follower(
+        &node,
+        a.robot,
+        &a.common.world,
+        &a.common.field,
+        follower,
+        scenario.world.dt_secs,
+    )?;
+    eprintln!(
+        "follower r{}: {} steps, {} rejected",
+        a.robot, summary.steps, summary.rejected
+    );
+    print_json(a.common.json, &summary)
+}
