@@ -295,7 +295,6 @@ pub fn run_world(
         finished: 1,
         _pad: 0,
     });
-    let _ = stopped;
     Ok(WorldSummary {
         steps: world.step_count(),
         sim_time_s: world.sim_time_s(),
@@ -382,7 +381,7 @@ pub fn run_localizer(
         .start;
     let var = roles.initial_sigma_m.powi(2);
     let mut ekf = Ekf::new(
-        roles.localizer.clone(),
+        roles.localizer,
         scenario.world.landmarks.clone(),
         start,
         Matrix3::from_diagonal(&nalgebra::Vector3::new(var, var, (0.05f64).powi(2))),
@@ -430,7 +429,6 @@ pub fn run_localizer(
 /// The depositor process: pose → deposits into the field.
 pub fn run_depositor(
     node: &Node<Svc>,
-    scenario: &Scenario,
     robot: u32,
     world: &str,
     field_name: &str,
@@ -442,7 +440,6 @@ pub fn run_depositor(
     let mut publisher =
         DepositPublisher::attach_within(node, field_name, robot, Duration::from_secs(30))?;
     let end = EndWatch::new(node, world)?;
-    let _ = scenario;
     let mut summary = RoleSummary {
         robot,
         role: "depositor",
