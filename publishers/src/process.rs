@@ -123,6 +123,8 @@ pub struct WorldSummary {
     pub sim_time_s: f64,
     pub robots: Vec<RobotSummary>,
     pub deposits_sent: u64,
+    /// Stopped early by SIGINT/SIGTERM.
+    pub interrupted: bool,
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
@@ -299,6 +301,7 @@ pub fn run_world(
         steps: world.step_count(),
         sim_time_s: world.sim_time_s(),
         deposits_sent,
+        interrupted: stopped,
         robots: ids
             .iter()
             .enumerate()
