@@ -194,14 +194,7 @@ pub fn run_depositor_cmd(a: DepositorArgs) -> anyhow::Result<()> {
     }
     config.validate().map_err(|e| bad(e.to_string()))?;
     let node = create_node(&format!("depositor-r{}-{}", a.robot, std::process::id()))?;
-    let summary = run_depositor(
-        &node,
-        &scenario,
-        a.robot,
-        &a.common.world,
-        &a.common.field,
-        config,
-    )?;
+    let summary = run_depositor(&node, a.robot, &a.common.world, &a.common.field, config)?;
     eprintln!(
         "depositor r{}: {} poses, {} rejected",
         a.robot, summary.steps, summary.rejected
