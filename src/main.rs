@@ -22,6 +22,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run a whole scenario as separate processes and report what happened.
+    Sim(cmd::sim::SimArgs),
     /// Run a field process: owns the grid, ticks, publishes frames, applies deposits.
     Field(cmd::field::FieldArgs),
     /// Closed-form tuning of the evaporation rate (seed 000 eqs. 23 and 26).
@@ -44,6 +46,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     field::shm::set_verbose(cli.verbose);
     let result = match cli.command {
+        Command::Sim(a) => cmd::sim::run(a),
         Command::Field(a) => cmd::field::run(a),
         Command::Tune(a) => cmd::tune::run(a),
         Command::World(a) => cmd::roles::run_world_cmd(a),

@@ -367,3 +367,27 @@ fn every_role_explains_itself_in_help() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("sideways"), "{}", stderr(&o));
 }
+
+#[test]
+fn sim_runs_the_default_scenario_as_processes_and_reports_metrics() {
+    let o = run(&["sim", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m = json(&o);
+    assert_eq!(m["scenario"], "trail");
+    assert_eq!(m["ticks"], 80);
+    assert_eq!(m["sim_time_s"], 8.0);
+    assert_eq!(m["field"]["width"], 240);
+    assert!(m["field"]["deposits_applied"].as_u64().unwrap() > 106);
+    let robot = &m["robots"][0];
+    assert!(robot["true_pose"][0].as_f64().unwrap() > 4.0, "{robot}");
+    assert!(
+        robot["distance_travelled_m"].as_f64().unwrap() > 3.0,
+        "{robot}"
+    );
+    // Every role it started reported and ended.
+    assert_eq!(m["processes"].as_array().unwrap().len(), 4, "{m}");
+    // A scenario that does not exist is bad input.
+    let o = run(&["sim", "no-such-scenario"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("no-such-scenario"), "{}", stderr(&o));
+}

@@ -3,6 +3,7 @@
 pub mod field;
 pub mod probe;
 pub mod roles;
+pub mod sim;
 pub mod tune;
 
 use std::fmt;
