@@ -284,6 +284,15 @@ fn a_config_file_round_trips_through_print_config() {
 
 #[test]
 fn world_field_and_one_robots_three_processes_follow_a_scripted_trail() {
+    run_trail_as_processes(&[]);
+}
+
+#[test]
+fn the_robot_also_follows_the_trail_with_an_ekf_slam_localizer() {
+    run_trail_as_processes(&["--slam"]);
+}
+
+fn run_trail_as_processes(localizer_flags: &[&'static str]) {
     let field_name = unique("rf");
     let world = unique("rw");
     let common = [
@@ -310,7 +319,9 @@ fn world_field_and_one_robots_three_processes_follow_a_scripted_trail() {
         &world,
         "--json",
     ]);
-    let localizer = Proc::spawn(&with("localizer"));
+    let mut localizer_args = with("localizer");
+    localizer_args.extend_from_slice(localizer_flags);
+    let localizer = Proc::spawn(&localizer_args);
     let depositor = Proc::spawn(&with("depositor"));
     let follower = Proc::spawn(&with("follower"));
     let world_out = Proc::spawn(&with("world")).wait_exit(Duration::from_secs(120));

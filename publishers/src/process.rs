@@ -14,7 +14,7 @@ use nalgebra::Matrix3;
 
 use crate::depositor::Depositor;
 use crate::follower::Follower;
-use crate::localizer::Ekf;
+use crate::localizer::{Ekf, EkfSlam, EkfSlamConfig, LocalizerError};
 use crate::messages::{CmdMsg, FollowerStatusMsg, PoseMsg, SensorMsg, TruthMsg};
 use crate::scenario::Scenario;
 use crate::world::World;
@@ -371,6 +371,7 @@ pub fn run_localizer(
     scenario: &Scenario,
     robot: u32,
     world: &str,
+    slam: bool,
 ) -> Result<RoleSummary, ProcessError> {
     let roles = scenario
         .roles(robot)
@@ -383,13 +384,28 @@ pub fn run_localizer(
         .ok_or_else(|| ProcessError::Setup(format!("robot {robot} is not in the world")))?
         .start;
     let var = roles.initial_sigma_m.powi(2);
-    let mut ekf = Ekf::new(
-        roles.localizer,
-        scenario.world.landmarks.clone(),
-        start,
-        Matrix3::from_diagonal(&nalgebra::Vector3::new(var, var, (0.05f64).powi(2))),
-    )
-    .map_err(|e| ProcessError::Setup(e.to_string()))?;
+    let cov0 = Matrix3::from_diagonal(&nalgebra::Vector3::new(var, var, (0.05f64).powi(2)));
+    let mut filter = if slam {
+        // EKF-SLAM: landmarks are not given, they join the state as they are seen.
+        let config = EkfSlamConfig {
+            noise: roles.localizer.noise,
+            limits: roles.localizer.limits,
+            ..EkfSlamConfig::default()
+        };
+        Filter::Slam(Box::new(
+            EkfSlam::new(config, start, cov0).map_err(|e| ProcessError::Setup(e.to_string()))?,
+        ))
+    } else {
+        Filter::Ekf(Box::new(
+            Ekf::new(
+                roles.localizer,
+                scenario.world.landmarks.clone(),
+                start,
+                cov0,
+            )
+            .map_err(|e| ProcessError::Setup(e.to_string()))?,
+        ))
+    };
     let s = RobotServices::new(robot);
     let sensors = receiver::<SensorMsg>(node, &s.sensors)?;
     let poses = sender::<PoseMsg>(node, &s.pose)?;
@@ -408,11 +424,11 @@ pub fn run_localizer(
         |m: &SensorMsg| m.step,
         &mut summary,
         |m| {
-            if let Err(e) = ekf.step(m) {
+            if let Err(e) = filter.step(m) {
                 rejected += 1;
                 eprintln!("localizer r{robot}: step {} rejected: {e}", m.step);
             }
-            let mut p = ekf.to_msg(robot, m.step);
+            let mut p = filter.to_msg(robot, m.step);
             p.stamp_ns = now_ns();
             poses.send(p)?;
             last.set(Some(p));
@@ -552,4 +568,26 @@ pub fn run_follower(
     )?;
     summary.rejected = rejected;
     Ok(summary)
+}
+
+/// The localizer's filter: landmark-based EKF, or EKF-SLAM (faer) when the map is unknown.
+enum Filter {
+    Ekf(Box<Ekf>),
+    Slam(Box<EkfSlam>),
+}
+
+impl Filter {
+    fn step(&mut self, m: &SensorMsg) -> Result<(), LocalizerError> {
+        match self {
+            Filter::Ekf(f) => f.step(m).map(|_| ()),
+            Filter::Slam(f) => f.step(m).map(|_| ()),
+        }
+    }
+
+    fn to_msg(&self, robot: u32, step: u64) -> PoseMsg {
+        match self {
+            Filter::Ekf(f) => f.to_msg(robot, step),
+            Filter::Slam(f) => f.to_msg(robot, step),
+        }
+    }
 }

@@ -98,13 +98,16 @@ pub struct LocalizerArgs {
     /// Robot id.
     #[arg(long, default_value_t = 0)]
     pub robot: u32,
+    /// EKF-SLAM: ignore the scenario's landmark map; landmarks join the state as they are seen.
+    #[arg(long)]
+    pub slam: bool,
 }
 
 pub fn run_localizer_cmd(a: LocalizerArgs) -> anyhow::Result<()> {
     check_names(&a.common)?;
     let scenario = load_scenario(&a.common.scenario)?;
     let node = create_node(&format!("localizer-r{}-{}", a.robot, std::process::id()))?;
-    let summary = run_localizer(&node, &scenario, a.robot, &a.common.world)?;
+    let summary = run_localizer(&node, &scenario, a.robot, &a.common.world, a.slam)?;
     eprintln!(
         "localizer r{}: {} steps, {} rejected",
         a.robot, summary.steps, summary.rejected
