@@ -325,7 +325,15 @@ fn run_trail_as_processes(localizer_flags: &[&'static str]) {
     let depositor = Proc::spawn(&with("depositor"));
     let follower = Proc::spawn(&with("follower"));
     let world_out = Proc::spawn(&with("world")).wait_exit(Duration::from_secs(120));
-    assert!(world_out.status.success(), "world: {}", stderr(&world_out));
+    if !world_out.status.success() {
+        let mut report = format!("world: {}", stderr(&world_out));
+        for p in [localizer, depositor, follower, field] {
+            let what = p.what.clone();
+            let o = p.wait_exit(Duration::from_secs(30));
+            report += &format!("\n{what}: {:?}\n{}", o.status, stderr(&o));
+        }
+        panic!("{report}");
+    }
     let w = json(&world_out);
     assert_eq!(w["steps"], 80);
     let pose = &w["robots"][0]["true_pose"];

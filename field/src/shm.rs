@@ -412,6 +412,16 @@ impl FieldServer {
         &self.stepper
     }
 
+    /// Connects readers that attached since the last frame and hands them the current frame
+    /// (the history). Call it while idle (e.g. a lockstep field waiting for its clock), so a late
+    /// reader does not wait for the next tick.
+    pub fn serve_new_readers(&self) -> Result<(), ShmError> {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        self.publisher
+            .update_connections()
+            .map_err(|e| service_err(&self.names.frame, "update connections", e))
+    }
+
     /// The last published frame.
     pub fn latest(&self) -> Option<(&FrameHeader, FrameView<'_>)> {
         self.previous.as_ref().map(|s| {

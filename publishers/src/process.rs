@@ -48,13 +48,15 @@ pub struct RobotServices {
 }
 
 impl RobotServices {
-    pub fn new(robot: u32) -> Self {
+    /// Robots are named `r<ID>` within their world, so several simulations (or test runs) on one
+    /// host never share a service.
+    pub fn new(world: &str, robot: u32) -> Self {
         Self {
-            sensors: format!("sim/r{robot}/sensors"),
-            truth: format!("sim/r{robot}/truth"),
-            pose: format!("pheromone/r{robot}/pose"),
-            cmd: format!("pheromone/r{robot}/cmd"),
-            status: format!("pheromone/r{robot}/status"),
+            sensors: format!("sim/{world}/r{robot}/sensors"),
+            truth: format!("sim/{world}/r{robot}/truth"),
+            pose: format!("pheromone/{world}/r{robot}/pose"),
+            cmd: format!("pheromone/{world}/r{robot}/cmd"),
+            status: format!("pheromone/{world}/r{robot}/status"),
         }
     }
 }
@@ -160,7 +162,7 @@ pub fn run_world(
     let mut truths = Vec::new();
     let mut cmds = Vec::new();
     for &id in &ids {
-        let s = RobotServices::new(id);
+        let s = RobotServices::new(&o.world, id);
         sensors.push(sender::<SensorMsg>(node, &s.sensors)?);
         truths.push(sender::<TruthMsg>(node, &s.truth)?);
         cmds.push(receiver::<CmdMsg>(node, &s.cmd)?);
@@ -191,104 +193,110 @@ pub fn run_world(
     let dt = scenario.world.dt_secs;
     let mut next_wall = Instant::now();
     let mut stopped = false;
-    for k in 0..steps {
-        let outputs = world.step(&commands);
-        for (i, p) in world.poses().iter().enumerate() {
-            distance[i] +=
-                ((p.x_m - last_pose[i].x_m).powi(2) + (p.y_m - last_pose[i].y_m).powi(2)).sqrt();
-        }
-        last_pose = world.poses().to_vec();
-        // Scripted deposits due by now.
-        while let Some((t, _)) = scripted.first() {
-            if *t > world.sim_time_s() + 1e-9 {
-                break;
+    let mut run = || -> Result<(), ProcessError> {
+        for k in 0..steps {
+            let outputs = world.step(&commands);
+            for (i, p) in world.poses().iter().enumerate() {
+                distance[i] += ((p.x_m - last_pose[i].x_m).powi(2)
+                    + (p.y_m - last_pose[i].y_m).powi(2))
+                .sqrt();
             }
-            let (_, msgs) = scripted.remove(0);
-            if let Some(d) = depositor.as_mut() {
-                for m in msgs {
-                    d.send(m)?;
-                    deposits_sent += 1;
+            last_pose = world.poses().to_vec();
+            // Scripted deposits due by now.
+            while let Some((t, _)) = scripted.first() {
+                if *t > world.sim_time_s() + 1e-9 {
+                    break;
+                }
+                let (_, msgs) = scripted.remove(0);
+                if let Some(d) = depositor.as_mut() {
+                    for m in msgs {
+                        d.send(m)?;
+                        deposits_sent += 1;
+                    }
                 }
             }
-        }
-        let publish = |outputs: &[crate::world::StepOutput]| -> Result<(), ShmError> {
-            let stamp = now_ns();
-            clock.send(ClockMsg {
-                stamp_ns: stamp,
-                step: k,
-                sim_time_s: world.sim_time_s(),
-                dt_secs: dt,
-                finished: 0,
-                _pad: 0,
-            })?;
+            let publish = |outputs: &[crate::world::StepOutput]| -> Result<(), ShmError> {
+                let stamp = now_ns();
+                clock.send(ClockMsg {
+                    stamp_ns: stamp,
+                    step: k,
+                    sim_time_s: world.sim_time_s(),
+                    dt_secs: dt,
+                    finished: 0,
+                    _pad: 0,
+                })?;
+                for (i, out) in outputs.iter().enumerate() {
+                    let mut s = out.sensor;
+                    s.stamp_ns = stamp;
+                    s.step = k;
+                    sensors[i].send(s)?;
+                    let mut t = out.truth;
+                    t.stamp_ns = stamp;
+                    t.step = k;
+                    truths[i].send(t)?;
+                }
+                Ok(())
+            };
             for (i, out) in outputs.iter().enumerate() {
-                let mut s = out.sensor;
-                s.stamp_ns = stamp;
-                s.step = k;
-                sensors[i].send(s)?;
-                let mut t = out.truth;
-                t.stamp_ns = stamp;
-                t.step = k;
-                truths[i].send(t)?;
+                collisions[i] += out.truth.collided as u64;
             }
-            Ok(())
-        };
-        for (i, out) in outputs.iter().enumerate() {
-            collisions[i] += out.truth.collided as u64;
-        }
-        publish(&outputs)?;
-        if o.realtime {
-            next_wall += Duration::from_secs_f64(dt);
-            if node
-                .wait(next_wall.saturating_duration_since(Instant::now()))
-                .is_err()
-            {
-                stopped = true;
-                break;
-            }
-            for (i, rx) in cmds.iter().enumerate() {
-                if let Some(c) = rx.latest()? {
-                    commands[i] = (c.v_mps, c.omega_radps);
+            publish(&outputs)?;
+            if o.realtime {
+                next_wall += Duration::from_secs_f64(dt);
+                if node
+                    .wait(next_wall.saturating_duration_since(Instant::now()))
+                    .is_err()
+                {
+                    stopped = true;
+                    break;
                 }
-            }
-        } else {
-            for (i, rx) in cmds.iter().enumerate() {
-                let since = Instant::now();
-                let mut last_send = Instant::now();
-                loop {
-                    match rx.recv_timeout(RESEND)? {
-                        Some(c) if c.step == k => {
-                            commands[i] = (c.v_mps, c.omega_radps);
+                for (i, rx) in cmds.iter().enumerate() {
+                    if let Some(c) = rx.latest()? {
+                        commands[i] = (c.v_mps, c.omega_radps);
+                    }
+                }
+            } else {
+                for (i, rx) in cmds.iter().enumerate() {
+                    let since = Instant::now();
+                    let mut last_send = Instant::now();
+                    loop {
+                        match rx.recv_timeout(RESEND)? {
+                            Some(c) if c.step == k => {
+                                commands[i] = (c.v_mps, c.omega_radps);
+                                break;
+                            }
+                            Some(_) => continue, // an answer to an older step
+                            None => {}
+                        }
+                        if node.wait(Duration::ZERO).is_err() {
+                            stopped = true;
                             break;
                         }
-                        Some(_) => continue, // an answer to an older step
-                        None => {}
+                        if since.elapsed() > o.stall_timeout {
+                            return Err(ProcessError::Stalled {
+                                robot: ids[i],
+                                step: k,
+                                timeout_s: o.stall_timeout.as_secs_f64(),
+                            });
+                        }
+                        if last_send.elapsed() >= RESEND {
+                            publish(&outputs)?;
+                            last_send = Instant::now();
+                        }
                     }
-                    if node.wait(Duration::ZERO).is_err() {
-                        stopped = true;
+                    if stopped {
                         break;
-                    }
-                    if since.elapsed() > o.stall_timeout {
-                        return Err(ProcessError::Stalled {
-                            robot: ids[i],
-                            step: k,
-                            timeout_s: o.stall_timeout.as_secs_f64(),
-                        });
-                    }
-                    if last_send.elapsed() >= RESEND {
-                        publish(&outputs)?;
-                        last_send = Instant::now();
                     }
                 }
                 if stopped {
                     break;
                 }
             }
-            if stopped {
-                break;
-            }
         }
-    }
+        Ok(())
+    };
+    let result = run();
+    // Announce the end also after a failure, so every role stops.
     let _ = clock.send(ClockMsg {
         stamp_ns: now_ns(),
         step: world.step_count(),
@@ -297,6 +305,7 @@ pub fn run_world(
         finished: 1,
         _pad: 0,
     });
+    result?;
     Ok(WorldSummary {
         steps: world.step_count(),
         sim_time_s: world.sim_time_s(),
@@ -406,7 +415,7 @@ pub fn run_localizer(
             .map_err(|e| ProcessError::Setup(e.to_string()))?,
         ))
     };
-    let s = RobotServices::new(robot);
+    let s = RobotServices::new(world, robot);
     let sensors = receiver::<SensorMsg>(node, &s.sensors)?;
     let poses = sender::<PoseMsg>(node, &s.pose)?;
     let end = EndWatch::new(node, world)?;
@@ -454,7 +463,7 @@ pub fn run_depositor(
     config: crate::depositor::DepositorConfig,
 ) -> Result<RoleSummary, ProcessError> {
     let mut depositor = Depositor::new(config).map_err(|e| ProcessError::Setup(e.to_string()))?;
-    let s = RobotServices::new(robot);
+    let s = RobotServices::new(world, robot);
     let poses = receiver::<PoseMsg>(node, &s.pose)?;
     let mut publisher =
         DepositPublisher::attach_within(node, field_name, robot, Duration::from_secs(30))?;
@@ -501,7 +510,7 @@ pub fn run_follower(
     mut follower: Follower,
     dt_secs: f64,
 ) -> Result<RoleSummary, ProcessError> {
-    let s = RobotServices::new(robot);
+    let s = RobotServices::new(world, robot);
     let poses = receiver::<PoseMsg>(node, &s.pose)?;
     let cmds = sender::<CmdMsg>(node, &s.cmd)?;
     let statuses = sender::<FollowerStatusMsg>(node, &s.status)?;

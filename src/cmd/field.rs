@@ -269,7 +269,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
     loop {
         if let Some(clock) = &clock {
             // Lockstep: one tick per world step.
-            match clock.recv_timeout(Duration::from_millis(100))? {
+            match clock.recv_timeout(Duration::from_millis(20))? {
                 Some(msg) if msg.finished != 0 => break,
                 // The world re-sends a step nobody answered yet: tick once per step.
                 Some(msg) if last_clock_step.is_some_and(|s| msg.step <= s) => continue,
@@ -278,6 +278,8 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
                     if node.wait(Duration::ZERO).is_err() {
                         break;
                     }
+                    // Idle between steps: late readers still get the current frame.
+                    server.serve_new_readers()?;
                     continue;
                 }
             }

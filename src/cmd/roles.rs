@@ -88,7 +88,7 @@ pub fn run_world_cmd(a: WorldArgs) -> anyhow::Result<()> {
 
 /// Run the localizer of one robot: the EKF of seed 001 Algorithm 1 (velocity motion model,
 /// maximum-likelihood landmark association) over the world's sensor messages; publishes pose +
-/// covariance (pheromone/r<ID>/pose) for every step. Settings come from the scenario's
+/// covariance (pheromone/<WORLD>/r<ID>/pose) for every step. Settings come from the scenario's
 /// `[robot.localizer]` (noise α1..α4, gate, and the `loss` knob that makes a robot lose its
 /// localization).
 #[derive(Args, Debug)]
@@ -206,7 +206,7 @@ pub fn run_depositor_cmd(a: DepositorArgs) -> anyhow::Result<()> {
 }
 
 /// Run the follower of one robot: reads the newest frame and the robot's pose, publishes a
-/// motion command (pheromone/r<ID>/cmd) and a status (following / trail abandoned / exploring).
+/// motion command (pheromone/<WORLD>/r<ID>/cmd) and a status (following / trail abandoned / exploring).
 /// Strategies: gradient (seed 000: climb ∇P, trail rejection, speed table), antenna (seed 002),
 /// inverse (seed 004 IAS-SS), uniform (seed 004's random baseline). Settings come from the
 /// scenario's `[robot.follower]`; flags override.
