@@ -85,6 +85,7 @@ fn event(
 /// The sending end: publishes a message and wakes the receivers.
 pub struct Sender<T: Debug + ZeroCopySend + Copy + 'static> {
     service: String,
+    factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, T, ()>,
     publisher: Publisher<Svc, T, ()>,
     notifier: Notifier<Svc>,
 }
@@ -98,7 +99,8 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sender<T> {
         wake: &str,
         options: LinkOptions,
     ) -> Result<Self, ShmError> {
-        let publisher = pubsub::<T>(node, service, options)?
+        let factory = pubsub::<T>(node, service, options)?;
+        let publisher = factory
             .publisher_builder()
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
@@ -109,9 +111,16 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sender<T> {
             .map_err(|e| err(wake, "create notifier", e))?;
         Ok(Self {
             service: service.to_string(),
+            factory,
             publisher,
             notifier,
         })
+    }
+
+    /// Receivers currently attached to the service.
+    pub fn receivers(&self) -> usize {
+        use iceoryx2::prelude::PortFactory;
+        self.factory.dynamic_config().number_of_subscribers()
     }
 
     /// Sends a copy of `msg` and notifies; returns how many receivers got it.
@@ -128,6 +137,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sender<T> {
 /// The receiving end.
 pub struct Receiver<T: Debug + ZeroCopySend + Copy + 'static> {
     service: String,
+    factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, T, ()>,
     subscriber: Subscriber<Svc, T, ()>,
     listener: Listener<Svc>,
 }
@@ -139,7 +149,8 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
         wake: &str,
         options: LinkOptions,
     ) -> Result<Self, ShmError> {
-        let subscriber = pubsub::<T>(node, service, options)?
+        let factory = pubsub::<T>(node, service, options)?;
+        let subscriber = factory
             .subscriber_builder()
             .buffer_size(options.buffer)
             .create()
@@ -150,6 +161,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
             .map_err(|e| err(wake, "create listener", e))?;
         Ok(Self {
             service: service.to_string(),
+            factory,
             subscriber,
             listener,
         })
@@ -193,6 +205,12 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
             .timed_wait(|_| {}, timeout)
             .map(|_| ())
             .map_err(|e| err(&self.service, "wait", e))
+    }
+
+    /// Senders currently attached to the service (0 once the other side has gone).
+    pub fn senders(&self) -> usize {
+        use iceoryx2::prelude::PortFactory;
+        self.factory.dynamic_config().number_of_publishers()
     }
 
     /// The listener, to attach to a WaitSet.

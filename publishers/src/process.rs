@@ -79,22 +79,27 @@ fn receiver<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'stati
     Receiver::create(node, service, &wake(service), LinkOptions::default())
 }
 
-/// Watches the world's clock for the end of the run.
-struct EndWatch(Receiver<ClockMsg>);
+/// Watches the world's clock for the end of the run: its `finished` message, or the world's
+/// clock publisher disappearing after it was seen (a world that ended, or died, before this
+/// subscriber connected to it).
+struct EndWatch(Receiver<ClockMsg>, std::cell::Cell<bool>);
 
 impl EndWatch {
     fn new(node: &Node<Svc>, world: &str) -> Result<Self, ShmError> {
         let (service, wake) = clock_services(world);
-        Ok(Self(Receiver::create(
-            node,
-            &service,
-            &wake,
-            LinkOptions {
-                keep_latest: false,
-                buffer: 1024,
-                ..LinkOptions::default()
-            },
-        )?))
+        Ok(Self(
+            Receiver::create(
+                node,
+                &service,
+                &wake,
+                LinkOptions {
+                    keep_latest: false,
+                    buffer: 1024,
+                    ..LinkOptions::default()
+                },
+            )?,
+            std::cell::Cell::new(false),
+        ))
     }
 
     /// True once the world has announced the end (drains the clock queue).
@@ -103,7 +108,10 @@ impl EndWatch {
         while let Some(m) = self.0.try_recv()? {
             done |= m.finished != 0;
         }
-        Ok(done)
+        let world_attached = self.0.senders() > 0;
+        let world_gone = self.1.get() && !world_attached;
+        self.1.set(self.1.get() | world_attached);
+        Ok(done || world_gone)
     }
 }
 
@@ -191,6 +199,30 @@ pub fn run_world(
     let mut commands = vec![(0.0, 0.0); ids.len()];
     let steps = scenario.steps();
     let dt = scenario.world.dt_secs;
+    // Lockstep: wait until the field and every robot role of the scenario watch the clock, so
+    // none misses the start (or the end) of the run.
+    if !o.realtime {
+        let expected = 1 + scenario
+            .robots
+            .iter()
+            .map(|r| 1 + r.depositor.is_some() as usize + r.follower.is_some() as usize)
+            .sum::<usize>();
+        let since = Instant::now();
+        while clock.receivers() < expected {
+            if since.elapsed() > o.stall_timeout {
+                return Err(ProcessError::Setup(format!(
+                    "only {} of the {expected} processes of the scenario (field, localizers, depositors, followers) attached within {} s",
+                    clock.receivers(),
+                    o.stall_timeout.as_secs_f64()
+                )));
+            }
+            if node.wait(Duration::from_millis(5)).is_err() {
+                return Err(ProcessError::Setup(
+                    "interrupted while waiting for the robot processes".into(),
+                ));
+            }
+        }
+    }
     let mut next_wall = Instant::now();
     let mut stopped = false;
     let mut run = || -> Result<(), ProcessError> {
@@ -362,11 +394,13 @@ fn role_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'stat
                     summary.last_step = Some(step);
                 }
             }
-            None => {
-                if end.finished()? {
-                    return Ok(());
-                }
-            }
+            None => {}
+        }
+        // Read the clock every round, not only when idle: a subscriber connects to the world's
+        // publisher when it receives, and a world that ends before that connection exists
+        // takes its last message with it.
+        if end.finished()? {
+            return Ok(());
         }
         if node.wait(Duration::ZERO).is_err() {
             return Ok(());

@@ -183,7 +183,17 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     let world = world.unwrap_or(Value::Null);
     // The other roles stop by themselves when the world announces the end.
     let mut summaries = Vec::new();
+    let end_deadline = Instant::now() + Duration::from_secs(15);
     for r in roles.iter_mut().take(world_index) {
+        while r.child.try_wait().ok().flatten().is_none() {
+            if Instant::now() > end_deadline {
+                anyhow::bail!(
+                    "{} did not stop within 15 s of the end of the run: stopped every process",
+                    r.name
+                );
+            }
+            std::thread::park_timeout(Duration::from_millis(20));
+        }
         let (ok, out, err) = r.collect();
         if !ok {
             anyhow::bail!("{} failed: {}", r.name, err.trim());
