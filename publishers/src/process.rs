@@ -382,19 +382,16 @@ fn role_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'stat
     mut on_repeat: impl FnMut() -> Result<(), ProcessError>,
 ) -> Result<(), ProcessError> {
     loop {
-        match rx.recv_timeout(Duration::from_millis(100))? {
-            Some(m) => {
-                let step = step_of(&m);
-                if summary.last_step.is_some_and(|l| step <= l) {
-                    summary.repeats += 1;
-                    on_repeat()?;
-                } else {
-                    on_step(&m)?;
-                    summary.steps += 1;
-                    summary.last_step = Some(step);
-                }
+        if let Some(m) = rx.recv_timeout(Duration::from_millis(100))? {
+            let step = step_of(&m);
+            if summary.last_step.is_some_and(|l| step <= l) {
+                summary.repeats += 1;
+                on_repeat()?;
+            } else {
+                on_step(&m)?;
+                summary.steps += 1;
+                summary.last_step = Some(step);
             }
-            None => {}
         }
         // Read the clock every round, not only when idle: a subscriber connects to the world's
         // publisher when it receives, and a world that ends before that connection exists
