@@ -8,9 +8,9 @@
 //! - [`AntennaFollower`] (`antenna`) — seed 002: two virtual antennas half a wheel base to each
 //!   side (eq. 5 with the MODELS.md M3 convention), turn toward the stronger one, forward speed
 //!   K·(1 − |P_L − P_R|) (the evident intent of eq. 6).
-//! - [`InverseAnt`] (`inverse`) — seed 004 IAS-SS: sector means at distance R_D, the subsets U
+//! - [`SectorStrategy::inverse`] (`inverse`) — seed 004 IAS-SS: sector means at distance R_D, the subsets U
 //!   and V, p(s) ∝ 1 − τ_s (eq. 1), steering θ(t) = θ(t−1) + γ·A_s* (eq. 2).
-//! - [`UniformSectors`] (`uniform`) — seed 004's baseline: a sector drawn uniformly, same
+//! - [`SectorStrategy::uniform`] (`uniform`) — seed 004's baseline: a sector drawn uniformly, same
 //!   steering.
 //!
 //! [`Follower`] wraps a strategy and produces the `CmdMsg` and `FollowerStatusMsg` a process
@@ -886,24 +886,42 @@ impl SectorSteer {
     }
 }
 
-/// Seed 004 IAS-SS exploration: each decision senses τ_s in 2S + 1 sectors at R_D, draws a sector
-/// from U ∪ V with p(s) ∝ 1 − τ_s (eq. 1) and sets the heading goal θ(t−1) + γ·A_s* (eq. 2). The
-/// command is ω = wrap(goal − θ)/dt clamped to ±`omega_max_radps` (= γ·A_s*/dt when a sector is
-/// drawn every step and the clamp is not reached), at the constant speed `v_mps`. State is always
-/// `Exploring`.
+/// The two sector strategies of seed 004, sharing one steering core:
+/// - `inverse` (IAS-SS): each decision senses τ_s in 2S + 1 sectors at R_D, draws a sector from
+///   U ∪ V with p(s) ∝ 1 − τ_s (eq. 1) and sets the heading goal θ(t−1) + γ·A_s* (eq. 2);
+/// - `uniform` (the paper's baseline): the sector is drawn uniformly from all 2S + 1.
+///
+/// The command is ω = wrap(goal − θ)/dt clamped to ±`omega_max_radps` (= γ·A_s*/dt when a sector
+/// is drawn every step and the clamp is not reached), at the constant speed `v_mps`. State is
+/// always `Exploring`.
 #[derive(Debug, Clone)]
-pub struct InverseAnt {
+pub struct SectorStrategy {
     core: SectorSteer,
+    rule: SectorRule,
 }
 
-impl InverseAnt {
-    pub fn new(
+impl SectorStrategy {
+    /// The IAS-SS strategy (`inverse`).
+    pub fn inverse(
         channel: usize,
         config: SectorConfig,
         seed: u64,
     ) -> Result<Self, FollowerConfigError> {
         Ok(Self {
             core: SectorSteer::new(channel, config, seed)?,
+            rule: SectorRule::Inverse,
+        })
+    }
+
+    /// The uniform baseline (`uniform`).
+    pub fn uniform(
+        channel: usize,
+        config: SectorConfig,
+        seed: u64,
+    ) -> Result<Self, FollowerConfigError> {
+        Ok(Self {
+            core: SectorSteer::new(channel, config, seed)?,
+            rule: SectorRule::Uniform,
         })
     }
 
@@ -922,9 +940,12 @@ impl InverseAnt {
     }
 }
 
-impl Strategy for InverseAnt {
+impl Strategy for SectorStrategy {
     fn name(&self) -> &'static str {
-        StrategyKind::Inverse.name()
+        match self.rule {
+            SectorRule::Inverse => StrategyKind::Inverse.name(),
+            SectorRule::Uniform => StrategyKind::Uniform.name(),
+        }
     }
 
     fn channel(&self) -> usize {
@@ -932,56 +953,7 @@ impl Strategy for InverseAnt {
     }
 
     fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_secs: f64) -> Decision {
-        self.core.decide(SectorRule::Inverse, frame, pose, dt_secs)
-    }
-
-    fn reset(&mut self) {
-        self.core.reset();
-    }
-}
-
-/// Seed 004's baseline "uniform" strategy: the sector is drawn uniformly from all 2S + 1; the
-/// steering is the same as [`InverseAnt`]'s.
-#[derive(Debug, Clone)]
-pub struct UniformSectors {
-    core: SectorSteer,
-}
-
-impl UniformSectors {
-    pub fn new(
-        channel: usize,
-        config: SectorConfig,
-        seed: u64,
-    ) -> Result<Self, FollowerConfigError> {
-        Ok(Self {
-            core: SectorSteer::new(channel, config, seed)?,
-        })
-    }
-
-    pub fn last_sector(&self) -> Option<usize> {
-        self.core.last_sector
-    }
-
-    pub fn decisions(&self) -> u64 {
-        self.core.decisions
-    }
-
-    pub fn config(&self) -> &SectorConfig {
-        &self.core.config
-    }
-}
-
-impl Strategy for UniformSectors {
-    fn name(&self) -> &'static str {
-        StrategyKind::Uniform.name()
-    }
-
-    fn channel(&self) -> usize {
-        self.core.channel
-    }
-
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_secs: f64) -> Decision {
-        self.core.decide(SectorRule::Uniform, frame, pose, dt_secs)
+        self.core.decide(self.rule, frame, pose, dt_secs)
     }
 
     fn reset(&mut self) {
@@ -1072,12 +1044,16 @@ impl FollowerConfig {
         Ok(match self.strategy {
             StrategyKind::Gradient => Box::new(GradientFollower::new(ch, self.gradient.clone())?),
             StrategyKind::Antenna => Box::new(AntennaFollower::new(ch, self.antenna.clone())?),
-            StrategyKind::Inverse => {
-                Box::new(InverseAnt::new(ch, self.sectors.clone(), self.seed)?)
-            }
-            StrategyKind::Uniform => {
-                Box::new(UniformSectors::new(ch, self.sectors.clone(), self.seed)?)
-            }
+            StrategyKind::Inverse => Box::new(SectorStrategy::inverse(
+                ch,
+                self.sectors.clone(),
+                self.seed,
+            )?),
+            StrategyKind::Uniform => Box::new(SectorStrategy::uniform(
+                ch,
+                self.sectors.clone(),
+                self.seed,
+            )?),
         })
     }
 }
@@ -1782,8 +1758,8 @@ mod tests {
         );
 
         let n = 2000;
-        let mut inverse = InverseAnt::new(0, cfg.clone(), 42).unwrap();
-        let mut uniform = UniformSectors::new(0, cfg, 42).unwrap();
+        let mut inverse = SectorStrategy::inverse(0, cfg.clone(), 42).unwrap();
+        let mut uniform = SectorStrategy::uniform(0, cfg, 42).unwrap();
         let (mut k_inv, mut k_uni) = (0usize, 0usize);
         for _ in 0..n {
             inverse.decide(&frame, pose, 0.1);
@@ -1813,7 +1789,7 @@ mod tests {
             ..SectorConfig::default()
         };
         let n = cfg.sectors();
-        let mut s = InverseAnt::new(0, cfg.clone(), 1).unwrap();
+        let mut s = SectorStrategy::inverse(0, cfg.clone(), 1).unwrap();
         for _ in 0..20 {
             let d = s.decide(&frame, pose, 0.1);
             let a = sector_angle(s.last_sector().unwrap(), n);
@@ -1822,11 +1798,11 @@ mod tests {
             assert_eq!((d.v_mps, d.state), (0.3, FollowerState::Exploring));
         }
         // Clamped turn rate.
-        let mut c = InverseAnt::new(0, SectorConfig::default(), 1).unwrap();
+        let mut c = SectorStrategy::inverse(0, SectorConfig::default(), 1).unwrap();
         assert!(c.decide(&frame, pose, 0.01).omega_radps.abs() <= 1.5);
         // Same seed, same choices; another seed, other choices.
         let run = |seed| {
-            let mut s = InverseAnt::new(0, cfg.clone(), seed).unwrap();
+            let mut s = SectorStrategy::inverse(0, cfg.clone(), seed).unwrap();
             (0..50)
                 .map(|_| {
                     s.decide(&frame, pose, 0.1);
@@ -1846,7 +1822,7 @@ mod tests {
             decision_period_s: 1.0,
             ..SectorConfig::default()
         };
-        let mut s = UniformSectors::new(0, cfg, 9).unwrap();
+        let mut s = SectorStrategy::uniform(0, cfg, 9).unwrap();
         let mut r = Robot::new(5.0, 5.0, 0.0);
         let mut goal = None;
         for k in 0..40 {
