@@ -25,7 +25,7 @@ enum Command {
     /// Run a whole scenario as separate processes and report what happened.
     Sim(cmd::sim::SimArgs),
     /// Run a field process: owns the grid, ticks, publishes frames, applies deposits.
-    Field(cmd::field::FieldArgs),
+    Field(Box<cmd::field::FieldArgs>),
     /// Closed-form tuning of the evaporation rate (seed 000 eqs. 23 and 26).
     Tune(cmd::tune::TuneArgs),
     /// Run the simulator process (true poses, sensors, scripted deposits, the lockstep clock).
@@ -40,6 +40,11 @@ enum Command {
     Probe(cmd::probe::ProbeArgs),
     /// Send one deposit to a running field.
     Deposit(cmd::probe::DepositArgs),
+    /// Measure latency and throughput side by side with raw iceoryx2, a Unix socket and Zenoh.
+    Bench(cmd::bench::BenchArgs),
+    /// One peer process of `pheromone bench` (started by it).
+    #[command(hide = true)]
+    BenchPeer(cmd::bench::BenchPeerArgs),
 }
 
 fn main() -> ExitCode {
@@ -47,7 +52,7 @@ fn main() -> ExitCode {
     field::shm::set_verbose(cli.verbose);
     let result = match cli.command {
         Command::Sim(a) => cmd::sim::run(a),
-        Command::Field(a) => cmd::field::run(a),
+        Command::Field(a) => cmd::field::run(*a),
         Command::Tune(a) => cmd::tune::run(a),
         Command::World(a) => cmd::roles::run_world_cmd(a),
         Command::Localizer(a) => cmd::roles::run_localizer_cmd(a),
@@ -55,6 +60,8 @@ fn main() -> ExitCode {
         Command::Follower(a) => cmd::roles::run_follower_cmd(a),
         Command::Probe(a) => cmd::probe::run_probe(a),
         Command::Deposit(a) => cmd::probe::run_deposit(a),
+        Command::Bench(a) => cmd::bench::run(a),
+        Command::BenchPeer(a) => cmd::bench::run_peer(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,6 +1,10 @@
 //! Integration tests that run the real `pheromone` binary as separate processes.
 
+mod bench;
+mod crash;
 mod harness;
+mod reliability;
+mod soak;
 
 use std::time::Duration;
 
@@ -387,26 +391,115 @@ fn every_role_explains_itself_in_help() {
     assert!(stderr(&o).contains("sideways"), "{}", stderr(&o));
 }
 
+/// Names of the iceoryx2 services whose name contains `tag`.
+fn services_named(tag: &str) -> Vec<String> {
+    use iceoryx2::prelude::*;
+    field::shm::set_verbose(false);
+    let mut names = Vec::new();
+    <field::shm::Svc as iceoryx2::service::Service>::list(
+        iceoryx2::config::Config::global_config(),
+        |s| {
+            let n = s.static_details.name().to_string();
+            if n.contains(tag) {
+                names.push(n);
+            }
+            CallbackProgression::Continue
+        },
+    )
+    .expect("list the iceoryx2 services");
+    names
+}
+
 #[test]
-fn sim_runs_the_default_scenario_as_processes_and_reports_metrics() {
-    let o = run(&["sim", "--json"]);
+fn sim_runs_a_scenario_as_processes_writes_its_outputs_and_leaves_nothing_behind() {
+    let dir = std::env::temp_dir().join(unique("sim-out"));
+    let dir_s = dir.display().to_string();
+    let p = Proc::spawn(&["sim", "trail", "--json", "--out", &dir_s]);
+    // The run's services are named after the sim process (sim<PID>x<N>).
+    let tag = format!("sim{}x", p.pid());
+    let o = p.wait_exit(Duration::from_secs(300));
     assert!(o.status.success(), "{}", stderr(&o));
     let m = json(&o);
     assert_eq!(m["scenario"], "trail");
+    assert_eq!(m["mode"], "processes");
     assert_eq!(m["ticks"], 80);
     assert_eq!(m["sim_time_s"], 8.0);
-    assert_eq!(m["field"]["width"], 240);
+    for key in [
+        "width",
+        "height",
+        "cell_size_m",
+        "channels",
+        "total_mass",
+        "max",
+        "nan_cells",
+        "deposits_applied",
+        "deposits_rejected",
+    ] {
+        assert!(!m["field"][key].is_null(), "field.{key} missing: {m}");
+    }
+    assert_eq!(m["field"]["nan_cells"], 0);
     assert!(m["field"]["deposits_applied"].as_u64().unwrap() > 106);
     let robot = &m["robots"][0];
+    for key in [
+        "id",
+        "role",
+        "true_pose",
+        "estimated_pose",
+        "distance_travelled_m",
+        "trail_abandoned_at_s",
+    ] {
+        assert!(robot.get(key).is_some(), "robots[0].{key} missing: {robot}");
+    }
     assert!(robot["true_pose"][0].as_f64().unwrap() > 4.0, "{robot}");
+    let est = robot["estimated_pose"][0].as_f64().unwrap();
     assert!(
-        robot["distance_travelled_m"].as_f64().unwrap() > 3.0,
+        (est - robot["true_pose"][0].as_f64().unwrap()).abs() < 0.5,
         "{robot}"
     );
-    // Every role it started reported and ended.
-    assert_eq!(m["processes"].as_array().unwrap().len(), 4, "{m}");
+    // Field, localizer, depositor, follower and world reported.
+    assert_eq!(m["processes"].as_array().unwrap().len(), 5, "{m}");
+    // The outputs: metrics.json (the same object), a CSV per robot with a row per step the
+    // observer saw, and the pictures.
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(written["scenario"], "trail");
+    let csv = std::fs::read_to_string(dir.join("robot_0.csv")).unwrap();
+    assert!(csv.starts_with("t_s,true_x_m,true_y_m"), "{csv}");
+    assert!(csv.lines().count() > 40, "{} rows", csv.lines().count());
+    assert!(dir.join("field_final.png").is_file());
+    // Nothing of the run is left: no process (they were reaped by sim) and no service.
+    let left = services_named(&tag);
+    assert!(left.is_empty(), "services of the run left behind: {left:?}");
+    let _ = std::fs::remove_dir_all(&dir);
     // A scenario that does not exist is bad input.
-    let o = run(&["sim", "no-such-scenario"]);
+    let o = run(&["sim", "no-such-scenario", "--no-out"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("no-such-scenario"), "{}", stderr(&o));
+}
+
+#[test]
+fn sim_single_process_prints_the_metrics_of_the_default_scenario() {
+    let o = run(&[
+        "sim",
+        "--single-process",
+        "--json",
+        "--no-out",
+        "--duration",
+        "40",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m = json(&o);
+    assert_eq!(m["scenario"], "blind-leader");
+    assert_eq!(m["mode"], "single-process");
+    assert_eq!(m["seed"], 0);
+    assert_eq!(m["robots"].as_array().unwrap().len(), 2);
+    assert_eq!(m["robots"][0]["role"], "leader+depositor");
+    assert!(
+        m["metrics"]["blind_leader"]["follower_abandoned_at_s"].is_number(),
+        "{m}"
+    );
+    // Bad flags are bad input.
+    let o = run(&["sim", "ias-ss", "--robots", "99", "--single-process"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--robots 99"), "{}", stderr(&o));
 }

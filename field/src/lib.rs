@@ -4,6 +4,7 @@
 //! seed papers (MODELS.md M1–M4), the fused tick engine, sampling, the shared-memory message
 //! types and the iceoryx2 service (`shm`, the crate's only `unsafe`).
 
+pub mod checkpoint;
 pub mod deposit;
 pub mod engine;
 pub mod error;

@@ -30,7 +30,9 @@ impl Default for LinkOptions {
     fn default() -> Self {
         Self {
             max_publishers: 8,
-            max_subscribers: 16,
+            // The world's clock is watched by the field and by every role of every robot (three
+            // per robot): 16 admitted at most five robots.
+            max_subscribers: 64,
             buffer: 64,
             keep_latest: true,
         }
@@ -57,6 +59,7 @@ fn pubsub<T: Debug + ZeroCopySend>(
         .publish_subscribe::<T>()
         .max_publishers(o.max_publishers)
         .max_subscribers(o.max_subscribers)
+        .max_nodes(o.max_publishers + o.max_subscribers)
         .subscriber_max_buffer_size(o.buffer)
         .history_size(1)
         .enable_safe_overflow(o.keep_latest)
@@ -78,6 +81,7 @@ fn event(
         .event()
         .max_notifiers(256)
         .max_listeners(64)
+        .max_nodes(256)
         .open_or_create()
         .map_err(|e| err(service, "open or create", e))
 }

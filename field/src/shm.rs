@@ -13,8 +13,15 @@
 //! Shared-memory use of the frame service, in frames: `(max_readers + 1) × (1 buffered + 2
 //! borrowed) + 1 history + 1 loaned` (the `+ 1` reader is the field itself, holding the previous
 //! frame). `frame_pool_bytes` computes it; the field refuses to start when /dev/shm lacks it.
+//!
+//! Crashes (README "Reliability"): a process killed with SIGKILL leaves its ports behind;
+//! `cleanup_dead_nodes` (which the field calls once a second, and every process calls when it
+//! creates its node) removes them, which also returns the frames a dead reader held to the
+//! field's pool. Readers tell a dead field with `FieldReader::field_alive`, keep their last frame
+//! and receive the frames of a field restarted under the same name. A `Standby` mirrors a running
+//! field and becomes its publisher when the primary dies.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -72,6 +79,8 @@ pub enum ShmError {
     RestoreMismatch { got: usize, expected: usize },
     #[error("deposit not delivered: {0}")]
     NotDelivered(String),
+    #[error("the standby cannot mirror field '{field}': {detail}")]
+    StandbyMismatch { field: String, detail: String },
 }
 
 fn service_err(service: &str, action: &'static str, e: impl std::fmt::Debug) -> ShmError {
@@ -161,6 +170,105 @@ pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
     Ok(node)
 }
 
+/// Removes the ports and services that processes killed without cleaning up left behind (their
+/// readers' borrowed frames then return to the publisher's pool on its next send). Returns how
+/// many dead nodes were cleaned.
+pub fn cleanup_dead_nodes(node: &Node<Svc>) -> u64 {
+    node.try_cleanup_dead_nodes().cleanups
+}
+
+/// Publishers of the frame service whose process is alive. Publishers of dead processes are
+/// cleaned up on the way (so a restarted or standby field can take their place).
+fn live_frame_publishers(factory: &FrameFactory, config: &Config) -> usize {
+    use iceoryx2::node::NodeView;
+    let mut ids = Vec::new();
+    factory.dynamic_config().list_publishers(|p| {
+        ids.push(p.node_id);
+        CallbackProgression::Continue
+    });
+    if ids.is_empty() {
+        return 0;
+    }
+    let mut dead = 0;
+    let _ = Node::<Svc>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            if ids.contains(view.id()) {
+                dead += 1;
+                let _ = view.try_remove_stale_resources();
+            }
+        }
+        CallbackProgression::Continue
+    });
+    ids.len().saturating_sub(dead)
+}
+
+/// Whether a frame publisher of a live process is attached. Looks only at the nodes of the frame
+/// service and removes nothing (cheap enough to call every tick period while frames are late).
+fn primary_alive(factory: &FrameFactory, own_node: &iceoryx2::identifiers::UniqueNodeId) -> bool {
+    use iceoryx2::node::NodeView;
+    use iceoryx2::service::port_factory::PortFactory as _;
+    let mut ids = Vec::new();
+    factory.dynamic_config().list_publishers(|p| {
+        if p.node_id != *own_node {
+            ids.push(p.node_id);
+        }
+        CallbackProgression::Continue
+    });
+    let mut alive = false;
+    let listed = factory.nodes(|state| {
+        match &state {
+            NodeState::Dead(view) if ids.contains(view.id()) => {}
+            other if ids.contains(other.node_id()) => alive = true,
+            _ => {}
+        }
+        CallbackProgression::Continue
+    });
+    // A publisher whose node cannot be inspected counts as alive (never steal a live field).
+    alive || listed.is_err()
+}
+
+/// Ports attached to a field's services, as the services record them (ports of processes that
+/// died count until `cleanup_dead_nodes` removed them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FieldStatus {
+    /// Frame publishers (1 while a field runs).
+    pub publishers: usize,
+    /// Frame subscribers: readers, a standby, and the field's own subscription.
+    pub subscribers: usize,
+    /// Deposit publishers.
+    pub depositors: usize,
+    /// Deposit subscribers: the field, and a standby.
+    pub deposit_subscribers: usize,
+}
+
+/// Watches the ports attached to a field's services. Opening a service cleans up dead nodes
+/// that use it; watching does not, so the counts show what the field itself has cleaned.
+pub struct FieldWatch {
+    frames: FrameFactory,
+    deposits: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, DepositMsg, ()>,
+}
+
+impl FieldWatch {
+    /// Opens field `field`'s services; `ShmError::NoField` if they do not exist.
+    pub fn open(node: &Node<Svc>, field: &str) -> Result<Self, ShmError> {
+        let names = FieldServices::new(field)?;
+        Ok(Self {
+            frames: frame_service(node, &names, None)?,
+            deposits: deposit_service(node, &names, None)?,
+        })
+    }
+
+    pub fn status(&self) -> FieldStatus {
+        let (f, d) = (self.frames.dynamic_config(), self.deposits.dynamic_config());
+        FieldStatus {
+            publishers: f.number_of_publishers(),
+            subscribers: f.number_of_subscribers(),
+            depositors: d.number_of_publishers(),
+            deposit_subscribers: d.number_of_subscribers(),
+        }
+    }
+}
+
 /// Shared memory the frame service needs, in frames and bytes.
 pub fn frame_pool(config: &FieldConfig) -> (u64, u64) {
     let subscribers = config.max_readers as u64 + 1;
@@ -176,6 +284,10 @@ pub fn shm_available_bytes() -> Option<u64> {
 
 type FramePublisher = Publisher<Svc, [f32], FrameHeader>;
 type FrameSubscriber = Subscriber<Svc, [f32], FrameHeader>;
+type FrameFactory =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [f32], FrameHeader>;
+type DepositSubscriber = Subscriber<Svc, DepositMsg, ()>;
+type EventFactory = iceoryx2::service::port_factory::event::PortFactory<Svc>;
 /// A frame received from shared memory.
 pub type FrameSample = Sample<Svc, [f32], FrameHeader>;
 
@@ -183,10 +295,7 @@ fn frame_service(
     node: &Node<Svc>,
     names: &FieldServices,
     config: Option<&FieldConfig>,
-) -> Result<
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [f32], FrameHeader>,
-    ShmError,
-> {
+) -> Result<FrameFactory, ShmError> {
     let name = service_name(&names.frame)?;
     let builder = node
         .service_builder(&name)
@@ -306,8 +415,61 @@ pub struct FieldServer {
     /// The field's own subscription: holds the previous frame, read by the next tick.
     own: FrameSubscriber,
     previous: Option<FrameSample>,
-    deposits: Subscriber<Svc, DepositMsg, ()>,
+    deposits: DepositSubscriber,
     notifier: iceoryx2::port::notifier::Notifier<Svc>,
+}
+
+/// The ports of a running field.
+struct Ports {
+    publisher: FramePublisher,
+    own: FrameSubscriber,
+    deposits: DepositSubscriber,
+    notifier: iceoryx2::port::notifier::Notifier<Svc>,
+}
+
+fn check_shm_space(config: &FieldConfig) -> Result<(), ShmError> {
+    let (frames, needed) = frame_pool(config);
+    if let Some(available) = shm_available_bytes() {
+        if needed > available {
+            return Err(ShmError::NoMemory {
+                needed_bytes: needed,
+                available_bytes: available,
+                frames,
+                frame_bytes: config.frame_bytes(),
+            });
+        }
+    }
+    Ok(())
+}
+
+fn create_publisher(
+    names: &FieldServices,
+    config: &FieldConfig,
+    frame_service: &FrameFactory,
+    ready_service: &EventFactory,
+) -> Result<(FramePublisher, iceoryx2::port::notifier::Notifier<Svc>), ShmError> {
+    let publisher = frame_service
+        .publisher_builder()
+        .initial_max_slice_len(config.frame_len())
+        .allocation_strategy(AllocationStrategy::Static)
+        .max_loaned_samples(1)
+        .create()
+        .map_err(|e| service_err(&names.frame, "create publisher", e))?;
+    let notifier = ready_service
+        .notifier_builder()
+        .default_event_id(FRAME_READY)
+        .create()
+        .map_err(|e| service_err(&names.frame_ready, "create notifier", e))?;
+    Ok((publisher, notifier))
+}
+
+/// How a field's first frame is made.
+enum FirstFrame<'a> {
+    Zeros,
+    /// Publish these cells as they are, resuming the header's counters (restore).
+    Restore(FrameHeader, &'a [f32]),
+    /// Compute the next frame from these cells with the pending deposits (takeover).
+    Continue(FrameHeader, &'a [f32]),
 }
 
 impl FieldServer {
@@ -318,37 +480,34 @@ impl FieldServer {
         config: FieldConfig,
         restore: Option<(FrameHeader, &[f32])>,
     ) -> Result<Self, ShmError> {
+        let first = match restore {
+            Some((h, cells)) => FirstFrame::Restore(h, cells),
+            None => FirstFrame::Zeros,
+        };
+        Self::start_inner(node, field, config, first)
+    }
+
+    fn start_inner(
+        node: &Node<Svc>,
+        field: &str,
+        config: FieldConfig,
+        first_frame: FirstFrame<'_>,
+    ) -> Result<Self, ShmError> {
         let names = FieldServices::new(field)?;
-        let mut stepper = Stepper::new(config).map_err(|e| ShmError::Service {
+        let stepper = Stepper::new(config).map_err(|e| ShmError::Service {
             service: names.frame.clone(),
             action: "configure",
             detail: e.to_string(),
         })?;
         let config = stepper.config().clone();
-        let (frames, needed) = frame_pool(&config);
-        if let Some(available) = shm_available_bytes() {
-            if needed > available {
-                return Err(ShmError::NoMemory {
-                    needed_bytes: needed,
-                    available_bytes: available,
-                    frames,
-                    frame_bytes: config.frame_bytes(),
-                });
-            }
-        }
+        check_shm_space(&config)?;
         let frame_service = frame_service(node, &names, Some(&config))?;
         if frame_service.dynamic_config().number_of_publishers() > 0 {
             return Err(ShmError::AlreadyRunning {
                 field: field.into(),
             });
         }
-        let publisher = frame_service
-            .publisher_builder()
-            .initial_max_slice_len(config.frame_len())
-            .allocation_strategy(AllocationStrategy::Static)
-            .max_loaned_samples(1)
-            .create()
-            .map_err(|e| service_err(&names.frame, "create publisher", e))?;
+        let ready_service = frame_ready_service(node, &names, true)?;
         let own = frame_service
             .subscriber_builder()
             .buffer_size(1)
@@ -359,28 +518,74 @@ impl FieldServer {
             .buffer_size(config.deposit_buffer)
             .create()
             .map_err(|e| service_err(&names.deposit, "create subscriber", e))?;
-        let notifier = frame_ready_service(node, &names, true)?
-            .notifier_builder()
-            .default_event_id(FRAME_READY)
-            .create()
-            .map_err(|e| service_err(&names.frame_ready, "create notifier", e))?;
+        let (publisher, notifier) =
+            create_publisher(&names, &config, &frame_service, &ready_service)?;
+        Self::launch(
+            field,
+            names,
+            stepper,
+            Ports {
+                publisher,
+                own,
+                deposits,
+                notifier,
+            },
+            first_frame,
+            &[],
+        )
+    }
 
-        // First frame: zeros, or the restored cells.
+    /// Publishes the first frame with ports created beforehand (by `start_inner`, or by a standby
+    /// long before it takes over).
+    fn launch(
+        field: &str,
+        names: FieldServices,
+        mut stepper: Stepper,
+        ports: Ports,
+        first_frame: FirstFrame<'_>,
+        pending: &[DepositMsg],
+    ) -> Result<Self, ShmError> {
+        let Ports {
+            publisher,
+            own,
+            deposits,
+            notifier,
+        } = ports;
+        let config = stepper.config().clone();
+        // First frame: zeros, the restored cells, or the next frame computed from them.
         let len = config.frame_len();
         let mut first = publisher
             .loan_slice(len)
             .map_err(|e| service_err(&names.frame, "loan first frame", e))?;
-        if let Some((header, cells)) = restore {
+        if let FirstFrame::Restore(_, cells) | FirstFrame::Continue(_, cells) = &first_frame {
             if cells.len() != len {
                 return Err(ShmError::RestoreMismatch {
                     got: cells.len(),
                     expected: len,
                 });
             }
-            first.payload_mut().copy_from_slice(cells);
-            stepper.resume_from(&header);
         }
-        *first.user_header_mut() = stepper.header(now_ns(), 0, &TickReport::default());
+        match first_frame {
+            FirstFrame::Zeros => {
+                *first.user_header_mut() = stepper.header(now_ns(), 0, &TickReport::default());
+            }
+            FirstFrame::Restore(header, cells) => {
+                first.payload_mut().copy_from_slice(cells);
+                stepper.resume_from(&header);
+                *first.user_header_mut() = stepper.header(now_ns(), 0, &TickReport::default());
+            }
+            FirstFrame::Continue(header, cells) => {
+                stepper.resume_from(&header);
+                for d in pending {
+                    let _ = stepper.offer(d);
+                }
+                let started = now_ns();
+                let report = stepper.step(cells, first.payload_mut());
+                let done = now_ns();
+                *first.user_header_mut() =
+                    stepper.header(done, done.saturating_sub(started), &report);
+            }
+        }
         first
             .send()
             .map_err(|e| service_err(&names.frame, "send", e))?;
@@ -503,8 +708,14 @@ pub struct Frame<'a> {
 }
 
 /// A process's read access to a field: lends the newest frame without copying it.
+///
+/// When the field dies the reader keeps its last frame (`frame()` still lends it) and
+/// `field_alive` turns false; a field restarted under the same name (or a standby taking over)
+/// publishes to the same services, and the reader receives its frames without attaching again.
 pub struct FieldReader {
     names: FieldServices,
+    service: FrameFactory,
+    node_config: Config,
     subscriber: FrameSubscriber,
     listener: iceoryx2::port::listener::Listener<Svc>,
     latest: Option<FrameSample>,
@@ -514,7 +725,8 @@ impl FieldReader {
     /// Attaches to the running field `field`; fails with `ShmError::NoField` if there is none.
     pub fn attach(node: &Node<Svc>, field: &str) -> Result<Self, ShmError> {
         let names = FieldServices::new(field)?;
-        let subscriber = frame_service(node, &names, None)?
+        let service = frame_service(node, &names, None)?;
+        let subscriber = service
             .subscriber_builder()
             .buffer_size(1)
             .create()
@@ -525,6 +737,8 @@ impl FieldReader {
             .map_err(|e| service_err(&names.frame_ready, "create listener", e))?;
         let mut reader = Self {
             names,
+            service,
+            node_config: node.config().clone(),
             subscriber,
             listener,
             latest: None,
@@ -541,6 +755,14 @@ impl FieldReader {
         timeout: Duration,
     ) -> Result<Self, ShmError> {
         retry_attach(node, timeout, || Self::attach(node, field))
+    }
+
+    /// Whether a live field process publishes this field. False when no field is attached or
+    /// when the field's process died (its leftover ports are then removed, so a restarted field
+    /// can take over). Costs a scan of the host's iceoryx2 nodes: call it when frames stop
+    /// coming, not per frame.
+    pub fn field_alive(&self) -> bool {
+        live_frame_publishers(&self.service, &self.node_config) > 0
     }
 
     /// Takes the newest frame that has arrived (if any); returns whether it is new.
@@ -726,5 +948,317 @@ fn retry_attach<T>(
             }
             Err(e) => return Err(e),
         }
+    }
+}
+
+/// What `Standby::poll` saw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StandbyEvent {
+    /// A newer frame of the primary was mirrored.
+    Mirrored { sequence: u64 },
+    /// No newer frame; the primary is alive, or silent for less than the takeover threshold.
+    Waiting,
+    /// The primary is gone (no publisher, or its process died): call `Standby::take_over`.
+    PrimaryGone,
+}
+
+/// What a takeover started from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Takeover {
+    /// Sequence number of the last frame mirrored from the primary (0 if none came).
+    pub last_mirrored_sequence: u64,
+    /// Its monotonic stamp (ns).
+    pub last_mirrored_stamp_ns: u64,
+    /// When the standby found the primary gone (ns).
+    pub detected_stamp_ns: u64,
+    /// Stamp of the standby's first own frame (ns).
+    pub first_stamp_ns: u64,
+    /// Deposits received after the last mirrored frame, applied to the first own frame.
+    pub deposits_carried: usize,
+}
+
+/// A standby field: mirrors a running field (its frames and its deposit stream) and, when the
+/// primary dies, becomes the publisher of the same services, continuing from the last frame.
+///
+/// Frames are mirrored without a copy (the standby holds the newest sample, as a reader does);
+/// the one copy happens at takeover, when the first own frame is computed from it. The standby
+/// is hot: it creates its publisher and notifier when it attaches (the frame service admits two
+/// publishers; it sends nothing until it takes over), so a takeover costs about one tick. This
+/// doubles the field's frame pool in /dev/shm, and while a standby runs, readers count the field
+/// as alive even if the primary died (the standby is about to serve it). Run one standby per field.
+///
+/// Deposits: the standby subscribes to the deposit service beside the primary, so every deposit
+/// reaches both. When a frame of the primary arrives, the standby drops what it has queued (the
+/// primary took those deposits before publishing that frame, or takes them into the next one);
+/// deposits that arrive after that are kept and applied to the first frame after a takeover.
+/// Lost at a takeover are at most the deposits the primary took after its last published frame
+/// and those that reached the standby between the primary's drain and the standby's reception of
+/// that frame: less than one tick. None is applied twice.
+pub struct Standby {
+    field: String,
+    names: FieldServices,
+    config: FieldConfig,
+    service: FrameFactory,
+    own_node: iceoryx2::identifiers::UniqueNodeId,
+    /// Mirrors the primary's frames now; the field's own subscription after the takeover.
+    frames: FrameSubscriber,
+    listener: iceoryx2::port::listener::Listener<Svc>,
+    deposits: DepositSubscriber,
+    publisher: FramePublisher,
+    notifier: iceoryx2::port::notifier::Notifier<Svc>,
+    pending: Vec<DepositMsg>,
+    latest: Option<FrameSample>,
+    last_frame_at: Instant,
+    silence_limit: Duration,
+    /// Frames of the primary mirrored so far.
+    pub mirrored: u64,
+    /// Deposits kept for a takeover but dropped because more than `deposit_buffer` queued up.
+    pub dropped: u64,
+}
+
+impl Standby {
+    /// Attaches to the running field `field` as its standby. `config` must describe the same
+    /// grid (checked against every mirrored frame). The primary counts as gone once it sent no
+    /// frame for two tick periods and its process is dead or its publisher absent.
+    pub fn attach(node: &Node<Svc>, field: &str, config: FieldConfig) -> Result<Self, ShmError> {
+        let names = FieldServices::new(field)?;
+        config.validate().map_err(|e| ShmError::StandbyMismatch {
+            field: field.into(),
+            detail: e.to_string(),
+        })?;
+        let service = frame_service(node, &names, None)?;
+        let frames = service
+            .subscriber_builder()
+            .buffer_size(1)
+            .create()
+            .map_err(|e| service_err(&names.frame, "create standby subscriber", e))?;
+        let ready_service = frame_ready_service(node, &names, false)?;
+        let listener = ready_service
+            .listener_builder()
+            .create()
+            .map_err(|e| service_err(&names.frame_ready, "create listener", e))?;
+        let deposits = deposit_service(node, &names, None)?
+            .subscriber_builder()
+            .buffer_size(config.deposit_buffer)
+            .create()
+            .map_err(|e| service_err(&names.deposit, "create standby subscriber", e))?;
+        check_shm_space(&config)?;
+        let (publisher, notifier) = create_publisher(&names, &config, &service, &ready_service)?;
+        let silence_limit = Duration::from_secs_f64(2.0 / config.tick_hz as f64);
+        let mut standby = Self {
+            field: field.into(),
+            names,
+            pending: Vec::with_capacity(config.deposit_buffer),
+            config,
+            service,
+            own_node: *node.id(),
+            frames,
+            listener,
+            deposits,
+            publisher,
+            notifier,
+            latest: None,
+            last_frame_at: Instant::now(),
+            silence_limit,
+            mirrored: 0,
+            dropped: 0,
+        };
+        standby.receive_frames()?;
+        Ok(standby)
+    }
+
+    /// Attaches, retrying while the primary does not exist yet, for at most `timeout`.
+    pub fn attach_within(
+        node: &Node<Svc>,
+        field: &str,
+        config: FieldConfig,
+        timeout: Duration,
+    ) -> Result<Self, ShmError> {
+        retry_attach(node, timeout, || Self::attach(node, field, config.clone()))
+    }
+
+    pub fn field(&self) -> &str {
+        &self.field
+    }
+
+    /// The newest mirrored frame's header.
+    pub fn latest(&self) -> Option<&FrameHeader> {
+        self.latest.as_ref().map(|s| s.user_header())
+    }
+
+    /// Deposits kept for a takeover right now.
+    pub fn pending(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// Takes the newest frame that arrived, checks it fits the configuration; returns whether
+    /// one came.
+    fn receive_frames(&mut self) -> Result<bool, ShmError> {
+        let mut fresh = false;
+        loop {
+            match self.frames.receive() {
+                Ok(Some(s)) => {
+                    let h = s.user_header();
+                    let c = &self.config;
+                    if h.geometry() != c.geometry()
+                        || h.channels as usize != c.channels.len()
+                        || s.payload().len() != c.frame_len()
+                        || h.dt_secs != c.dt_secs()
+                    {
+                        return Err(ShmError::StandbyMismatch {
+                            field: self.field.clone(),
+                            detail: format!(
+                                "the primary publishes {}×{} cells × {} channel(s) of {} m at \
+                                 ({}, {}), dt {} s; this standby is configured for {}×{} × {} of \
+                                 {} m at ({}, {}), dt {} s (start it with the primary's \
+                                 configuration)",
+                                h.width,
+                                h.height,
+                                h.channels,
+                                h.cell_size_m,
+                                h.origin_x_m,
+                                h.origin_y_m,
+                                h.dt_secs,
+                                c.width,
+                                c.height,
+                                c.channels.len(),
+                                c.cell_size_m,
+                                c.origin_x_m,
+                                c.origin_y_m,
+                                c.dt_secs()
+                            ),
+                        });
+                    }
+                    self.latest = Some(s);
+                    fresh = true;
+                }
+                Ok(None) => break,
+                Err(e) => return Err(service_err(&self.names.frame, "receive", e)),
+            }
+        }
+        if fresh {
+            self.mirrored += 1;
+            self.last_frame_at = Instant::now();
+        }
+        Ok(fresh)
+    }
+
+    /// Takes the deposits queued for the standby: dropped when `keep` is false, else kept.
+    fn drain_deposits(&mut self, keep: bool) -> Result<(), ShmError> {
+        loop {
+            match self.deposits.receive() {
+                Ok(Some(d)) => {
+                    if !keep {
+                        continue;
+                    }
+                    if self.pending.len() < self.config.deposit_buffer {
+                        self.pending.push(*d.payload());
+                    } else {
+                        self.dropped += 1;
+                    }
+                }
+                Ok(None) => return Ok(()),
+                Err(e) => return Err(service_err(&self.names.deposit, "receive", e)),
+            }
+        }
+    }
+
+    /// Waits up to `timeout` for the primary's next frame and mirrors it; tells when the primary
+    /// is gone.
+    pub fn poll(&mut self, timeout: Duration) -> Result<StandbyEvent, ShmError> {
+        let mut fresh = self.receive_frames()?;
+        if !fresh {
+            // Wake up no later than when the silence reaches the takeover threshold.
+            let until_limit = self
+                .silence_limit
+                .saturating_sub(self.last_frame_at.elapsed());
+            let timeout = if until_limit.is_zero() {
+                timeout
+            } else {
+                timeout.min(until_limit)
+            };
+            self.listener
+                .timed_wait(|_| {}, timeout)
+                .map_err(|e| service_err(&self.names.frame_ready, "wait", e))?;
+            fresh = self.receive_frames()?;
+        }
+        if fresh {
+            self.pending.clear();
+            self.drain_deposits(false)?;
+            let sequence = self.latest().map(|h| h.sequence).unwrap_or(0);
+            return Ok(StandbyEvent::Mirrored { sequence });
+        }
+        self.drain_deposits(true)?;
+        if self.last_frame_at.elapsed() >= self.silence_limit
+            && !primary_alive(&self.service, &self.own_node)
+        {
+            return Ok(StandbyEvent::PrimaryGone);
+        }
+        Ok(StandbyEvent::Waiting)
+    }
+
+    /// Becomes the field: creates the publisher (after removing what the dead primary left) and
+    /// publishes the next frame, computed from the last mirrored one with the deposits kept
+    /// since. Call it after `poll` said `PrimaryGone`.
+    pub fn take_over(mut self, node: &Node<Svc>) -> Result<(FieldServer, Takeover), ShmError> {
+        let detected_stamp_ns = now_ns();
+        // Frames the primary sent just before it died are still queued: take them first.
+        if self.receive_frames()? {
+            self.pending.clear();
+            self.drain_deposits(false)?;
+        }
+        self.drain_deposits(true)?;
+        let Standby {
+            field,
+            names,
+            config,
+            frames,
+            deposits,
+            publisher,
+            notifier,
+            pending,
+            latest,
+            ..
+        } = self;
+        let (last_sequence, last_stamp) = latest
+            .as_ref()
+            .map(|s| (s.user_header().sequence, s.user_header().stamp_ns))
+            .unwrap_or((0, 0));
+        let first = match &latest {
+            Some(s) => FirstFrame::Continue(*s.user_header(), s.payload()),
+            None => FirstFrame::Zeros,
+        };
+        let stepper = Stepper::new(config).map_err(|e| ShmError::Service {
+            service: names.frame.clone(),
+            action: "configure",
+            detail: e.to_string(),
+        })?;
+        // The mirrored sample is released once the first own frame is computed from it; the
+        // mirroring subscription becomes the field's own (it receives only this publisher's
+        // frames from now on: the primary is dead and its last frames were taken above).
+        let ports = Ports {
+            publisher,
+            own: frames,
+            deposits,
+            notifier,
+        };
+        let server = FieldServer::launch(&field, names, stepper, ports, first, &pending)?;
+        drop(latest);
+        // Now free what the dead primary left (its ports, its frames, its reader slot).
+        cleanup_dead_nodes(node);
+        let first_stamp_ns = server
+            .latest()
+            .map(|(h, _)| h.stamp_ns)
+            .unwrap_or_else(now_ns);
+        Ok((
+            server,
+            Takeover {
+                last_mirrored_sequence: last_sequence,
+                last_mirrored_stamp_ns: last_stamp,
+                detected_stamp_ns,
+                first_stamp_ns,
+                deposits_carried: pending.len(),
+            },
+        ))
     }
 }

@@ -93,6 +93,10 @@ pub struct DepositorConfig {
     /// `saturating` mode: kernel width λ (m) of seed 001 eq. 3 (small: mostly the robot's own
     /// cell and its neighbours, eq. 5).
     pub lambda_m: f32,
+    /// `uncertainty-aware` mode: the variances of Σxy are raised to at least this σ² (m), so a
+    /// trail is never narrower than the robot that lays it (a well-localized EKF can report
+    /// σ of a few millimetres). 0 = off. While γ is capped at γmax this changes only the shape.
+    pub min_sigma_m: f32,
 }
 
 impl Default for DepositorConfig {
@@ -111,6 +115,7 @@ impl Default for DepositorConfig {
             rho_max: 1.0,
             rho_sigma0_m: 0.5,
             lambda_m: 0.05,
+            min_sigma_m: 0.0,
         }
     }
 }
@@ -147,6 +152,13 @@ impl DepositorConfig {
         }
         if !(self.rho_max.is_finite() && self.rho_max > 0.0 && self.rho_max <= 1.0) {
             return Err(bad("rho_max", &self.rho_max, "must be within (0, 1]"));
+        }
+        if !(self.min_sigma_m.is_finite() && self.min_sigma_m >= 0.0 && self.min_sigma_m < 1e3) {
+            return Err(bad(
+                "min_sigma_m",
+                &self.min_sigma_m,
+                "must be finite, ≥ 0 and < 1000 (0 = off)",
+            ));
         }
         for (name, v) in [
             ("interval_m", self.interval_m),
@@ -412,8 +424,9 @@ impl Depositor {
         let [xx, xy, yy] = pose.cov_xy();
         let mut msg = match c.mode {
             DepositMode::UncertaintyAware => {
-                let xx32 = to_f32("cov_xx", xx)?;
-                let yy32 = to_f32("cov_yy", yy)?;
+                let floor = (c.min_sigma_m as f64).powi(2);
+                let xx32 = to_f32("cov_xx", xx.max(floor))?;
+                let yy32 = to_f32("cov_yy", yy.max(floor))?;
                 // Keep Σxy PSD after rounding to f32: |xy| ≤ √(xx·yy).
                 let bound = (xx32 as f64 * yy32 as f64).max(0.0).sqrt();
                 let xy32 = xy.clamp(-bound, bound) as f32;

@@ -630,6 +630,127 @@ impl Strategy for AntennaFollower {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Route (a leader driven along waypoints)
+
+/// Settings of the `route` strategy: a leader that drives through waypoints, as the
+/// tele-operated or planned leader of seed 000 does. It ignores the field.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RouteConfig {
+    /// Waypoints [x, y] (m), driven in order.
+    pub waypoints: Vec<[f64; 2]>,
+    pub v_mps: f64,
+    /// A waypoint counts as reached within this distance (m).
+    pub reach_m: f64,
+    /// Proportional heading gain (1/s).
+    pub heading_gain_per_s: f64,
+    pub omega_max_radps: f64,
+    /// Start driving only after this much time (s).
+    pub start_after_s: f64,
+}
+
+impl Default for RouteConfig {
+    fn default() -> Self {
+        Self {
+            waypoints: Vec::new(),
+            v_mps: 0.3,
+            reach_m: 0.2,
+            heading_gain_per_s: 2.0,
+            omega_max_radps: 1.0,
+            start_after_s: 0.0,
+        }
+    }
+}
+
+impl RouteConfig {
+    pub fn validate(&self) -> Result<(), FollowerConfigError> {
+        for (i, w) in self.waypoints.iter().enumerate() {
+            if !(w[0].is_finite() && w[1].is_finite()) {
+                return Err(invalid(
+                    &format!("route.waypoints[{i}]"),
+                    format!("{w:?}"),
+                    "must be finite",
+                ));
+            }
+        }
+        check_nonneg("route.v_mps", self.v_mps)?;
+        check_positive("route.reach_m", self.reach_m)?;
+        check_nonneg("route.heading_gain_per_s", self.heading_gain_per_s)?;
+        check_positive("route.omega_max_radps", self.omega_max_radps)?;
+        check_nonneg("route.start_after_s", self.start_after_s)?;
+        Ok(())
+    }
+}
+
+/// Drives through the waypoints; stops at the last one. Turns on the spot when the next
+/// waypoint is more than 90° off.
+#[derive(Debug, Clone)]
+pub struct RouteFollower {
+    channel: usize,
+    config: RouteConfig,
+    next: usize,
+    elapsed_s: f64,
+}
+
+impl RouteFollower {
+    pub fn new(channel: usize, config: RouteConfig) -> Result<Self, FollowerConfigError> {
+        config.validate()?;
+        Ok(Self {
+            channel,
+            config,
+            next: 0,
+            elapsed_s: 0.0,
+        })
+    }
+
+    /// Index of the waypoint driven to (= the number of waypoints once the route is done).
+    pub fn next_waypoint(&self) -> usize {
+        self.next
+    }
+}
+
+impl Strategy for RouteFollower {
+    fn name(&self) -> &'static str {
+        StrategyKind::Route.name()
+    }
+
+    fn channel(&self) -> usize {
+        self.channel
+    }
+
+    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_secs: f64) -> Decision {
+        let level = frame.value(self.channel, pose.x_m, pose.y_m);
+        self.elapsed_s += dt_secs;
+        if self.elapsed_s < self.config.start_after_s - 1e-9 {
+            return Decision::stop(FollowerState::Following, level);
+        }
+        let (x, y) = (pose.x_m as f64, pose.y_m as f64);
+        while let Some(w) = self.config.waypoints.get(self.next) {
+            if (w[0] - x).hypot(w[1] - y) > self.config.reach_m {
+                break;
+            }
+            self.next += 1;
+        }
+        let Some(w) = self.config.waypoints.get(self.next) else {
+            return Decision::stop(FollowerState::Following, level);
+        };
+        let err = wrap_pi((w[1] - y).atan2(w[0] - x) - pose.theta_rad as f64);
+        let c = &self.config;
+        Decision {
+            v_mps: c.v_mps * err.cos().max(0.0),
+            omega_radps: (c.heading_gain_per_s * err).clamp(-c.omega_max_radps, c.omega_max_radps),
+            state: FollowerState::Following,
+            sensed_level: level,
+        }
+    }
+
+    fn reset(&mut self) {
+        self.next = 0;
+        self.elapsed_s = 0.0;
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Sector strategies (seed 004)
 
 /// Settings of the `inverse` and `uniform` strategies.
@@ -656,6 +777,12 @@ pub struct SectorConfig {
     /// τ_s = clamp(sector mean / this, 0, 1). 1 for a saturating channel; a negative value reads
     /// anti-pheromone (negative cells) as τ > 0.
     pub saturation_level: f32,
+    /// A channel that marks obstacles (e.g. the scenario's `mark_walls`): a sector whose mean on
+    /// it exceeds `obstacle_level` counts as saturated (τ_s = 1), so IAS-SS steers away from
+    /// walls the way seed 004's robots do where pheromone builds up along them.
+    pub obstacle_channel: Option<u32>,
+    /// See `obstacle_channel`.
+    pub obstacle_level: f32,
 }
 
 impl Default for SectorConfig {
@@ -670,6 +797,8 @@ impl Default for SectorConfig {
             omega_max_radps: 1.5,
             decision_period_s: 0.0,
             saturation_level: 1.0,
+            obstacle_channel: None,
+            obstacle_level: 0.05,
         }
     }
 }
@@ -709,6 +838,7 @@ impl SectorConfig {
         check_nonneg("sectors.v_mps", self.v_mps)?;
         check_positive("sectors.omega_max_radps", self.omega_max_radps)?;
         check_nonneg("sectors.decision_period_s", self.decision_period_s)?;
+        check_nonneg("sectors.obstacle_level", self.obstacle_level as f64)?;
         if !(self.saturation_level.is_finite() && self.saturation_level != 0.0) {
             return Err(invalid(
                 "sectors.saturation_level",
@@ -817,10 +947,11 @@ impl SectorSteer {
         })
     }
 
-    /// τ_s of every sector, normalized and clamped to [0, 1].
+    /// τ_s of every sector, normalized and clamped to [0, 1]; sectors blocked on the obstacle
+    /// channel (if any) count as saturated.
     fn taus(&self, frame: &FrameView<'_>, pose: Pose2) -> Vec<f32> {
         let c = &self.config;
-        frame
+        let mut taus: Vec<f32> = frame
             .sector_means(self.channel, pose, c.radius_m, c.half_sectors)
             .into_iter()
             .map(|m| {
@@ -831,7 +962,31 @@ impl SectorSteer {
                     1.0
                 }
             })
-            .collect()
+            .collect();
+        if let Some(oc) = c.obstacle_channel.map(|o| o as usize) {
+            if oc < frame.channels {
+                let blocked = frame.sector_means(oc, pose, c.radius_m, c.half_sectors);
+                for (t, b) in taus.iter_mut().zip(blocked) {
+                    if b.is_nan() || b > c.obstacle_level {
+                        *t = 1.0;
+                    }
+                }
+            }
+        }
+        taus
+    }
+
+    /// 1 for the sectors blocked on the obstacle channel, 0 for the others.
+    fn obstacle_taus(&self, frame: &FrameView<'_>, pose: Pose2) -> Vec<f32> {
+        let c = &self.config;
+        match c.obstacle_channel.map(|o| o as usize) {
+            Some(oc) if oc < frame.channels => frame
+                .sector_means(oc, pose, c.radius_m, c.half_sectors)
+                .into_iter()
+                .map(|b| if b <= c.obstacle_level { 0.0 } else { 1.0 })
+                .collect(),
+            _ => vec![0.0; c.sectors()],
+        }
     }
 
     fn decide(
@@ -855,7 +1010,21 @@ impl SectorSteer {
                     let taus = self.taus(frame, pose);
                     choose_inverse(&mut self.rng, &taus, c.u_count, c.v_count)
                 }
-                SectorRule::Uniform => self.rng.random_range(0..n),
+                SectorRule::Uniform => {
+                    // Uniform over the sectors not blocked by an obstacle (all if all are).
+                    let open: Vec<usize> = match c.obstacle_channel {
+                        Some(_) => {
+                            let taus = self.obstacle_taus(frame, pose);
+                            (0..n).filter(|&i| taus[i] < 1.0).collect()
+                        }
+                        None => Vec::new(),
+                    };
+                    if open.is_empty() {
+                        self.rng.random_range(0..n)
+                    } else {
+                        open[self.rng.random_range(0..open.len())]
+                    }
+                }
             };
             // Seed 004 eq. 2: θ(t) = θ(t−1) + γ·A_s*.
             self.goal_heading_rad = Some(theta + self.config.gamma * sector_angle(s, n));
@@ -973,14 +1142,16 @@ pub enum StrategyKind {
     Antenna,
     Inverse,
     Uniform,
+    Route,
 }
 
 impl StrategyKind {
-    pub const ALL: [StrategyKind; 4] = [
+    pub const ALL: [StrategyKind; 5] = [
         StrategyKind::Gradient,
         StrategyKind::Antenna,
         StrategyKind::Inverse,
         StrategyKind::Uniform,
+        StrategyKind::Route,
     ];
 
     pub fn name(self) -> &'static str {
@@ -989,6 +1160,7 @@ impl StrategyKind {
             StrategyKind::Antenna => "antenna",
             StrategyKind::Inverse => "inverse",
             StrategyKind::Uniform => "uniform",
+            StrategyKind::Route => "route",
         }
     }
 }
@@ -1001,7 +1173,9 @@ impl fmt::Display for StrategyKind {
 
 /// A strategy name that is not one of the four.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown follower strategy '{0}' (expected one of: gradient, antenna, inverse, uniform)")]
+#[error(
+    "unknown follower strategy '{0}' (expected one of: gradient, antenna, inverse, uniform, route)"
+)]
 pub struct UnknownStrategy(pub String);
 
 impl FromStr for StrategyKind {
@@ -1027,6 +1201,19 @@ pub struct FollowerConfig {
     pub antenna: AntennaConfig,
     /// Settings of `inverse` and `uniform`.
     pub sectors: SectorConfig,
+    pub route: RouteConfig,
+    /// Which pose the strategy steers by: the localizer's estimate (default) or, for a leader
+    /// driven by an operator who sees the robot, the world's true pose.
+    pub steer_by: PoseSource,
+}
+
+/// Where a follower takes its pose from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PoseSource {
+    #[default]
+    Estimate,
+    Truth,
 }
 
 impl FollowerConfig {
@@ -1034,7 +1221,8 @@ impl FollowerConfig {
     pub fn validate(&self) -> Result<(), FollowerConfigError> {
         self.gradient.validate()?;
         self.antenna.validate()?;
-        self.sectors.validate()
+        self.sectors.validate()?;
+        self.route.validate()
     }
 
     /// The selected strategy.
@@ -1054,6 +1242,7 @@ impl FollowerConfig {
                 self.sectors.clone(),
                 self.seed,
             )?),
+            StrategyKind::Route => Box::new(RouteFollower::new(ch, self.route.clone())?),
         })
     }
 }

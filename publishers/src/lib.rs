@@ -6,8 +6,14 @@
 
 pub mod depositor;
 pub mod follower;
+pub mod graph;
 pub mod localizer;
 pub mod messages;
+pub mod metrics;
+pub mod observer;
 pub mod process;
+pub mod record;
+pub mod report;
 pub mod scenario;
+pub mod simulation;
 pub mod world;

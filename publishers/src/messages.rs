@@ -116,7 +116,8 @@ pub struct CmdMsg {
 }
 
 /// What a follower is doing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 #[repr(u32)]
 pub enum FollowerState {
     /// Climbing a trail.

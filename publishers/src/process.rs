@@ -13,7 +13,7 @@ use iceoryx2::node::Node;
 use nalgebra::Matrix3;
 
 use crate::depositor::Depositor;
-use crate::follower::Follower;
+use crate::follower::{Follower, PoseSource};
 use crate::localizer::{Ekf, EkfSlam, EkfSlamConfig, LocalizerError};
 use crate::messages::{CmdMsg, FollowerStatusMsg, PoseMsg, SensorMsg, TruthMsg};
 use crate::scenario::Scenario;
@@ -173,15 +173,19 @@ pub fn run_world(
         let s = RobotServices::new(&o.world, id);
         sensors.push(sender::<SensorMsg>(node, &s.sensors)?);
         truths.push(sender::<TruthMsg>(node, &s.truth)?);
-        cmds.push(receiver::<CmdMsg>(node, &s.cmd)?);
+        // Only a robot with a follower sends commands; the others stand still.
+        let driven = scenario.roles(id).is_some_and(|r| r.follower.is_some());
+        cmds.push(if driven {
+            Some(receiver::<CmdMsg>(node, &s.cmd)?)
+        } else {
+            None
+        });
     }
-    let mut scripted: Vec<(f64, Vec<field::DepositMsg>)> = scenario
-        .deposits
-        .iter()
-        .map(|d| d.messages().map(|m| (d.t_s, m)))
-        .collect::<Result<_, _>>()
-        .map_err(ProcessError::Setup)?;
-    scripted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut scripted = std::collections::VecDeque::from(
+        scenario
+            .scripted(world.wall_segments())
+            .map_err(ProcessError::Setup)?,
+    );
     let mut depositor = if scripted.is_empty() {
         None
     } else {
@@ -235,16 +239,14 @@ pub fn run_world(
             }
             last_pose = world.poses().to_vec();
             // Scripted deposits due by now.
-            while let Some((t, _)) = scripted.first() {
+            while let Some((t, _)) = scripted.front() {
                 if *t > world.sim_time_s() + 1e-9 {
                     break;
                 }
-                let (_, msgs) = scripted.remove(0);
+                let (_, m) = scripted.pop_front().expect("checked above");
                 if let Some(d) = depositor.as_mut() {
-                    for m in msgs {
-                        d.send(m)?;
-                        deposits_sent += 1;
-                    }
+                    d.send(m)?;
+                    deposits_sent += 1;
                 }
             }
             let publish = |outputs: &[crate::world::StepOutput]| -> Result<(), ShmError> {
@@ -283,12 +285,14 @@ pub fn run_world(
                     break;
                 }
                 for (i, rx) in cmds.iter().enumerate() {
+                    let Some(rx) = rx else { continue };
                     if let Some(c) = rx.latest()? {
                         commands[i] = (c.v_mps, c.omega_radps);
                     }
                 }
             } else {
                 for (i, rx) in cmds.iter().enumerate() {
+                    let Some(rx) = rx else { continue };
                     let since = Instant::now();
                     let mut last_send = Instant::now();
                     loop {
@@ -413,39 +417,7 @@ pub fn run_localizer(
     world: &str,
     slam: bool,
 ) -> Result<RoleSummary, ProcessError> {
-    let roles = scenario
-        .roles(robot)
-        .ok_or_else(|| ProcessError::Setup(format!("robot {robot} has no [[robot]] entry")))?;
-    let start = scenario
-        .world
-        .robots
-        .iter()
-        .find(|r| r.id == robot)
-        .ok_or_else(|| ProcessError::Setup(format!("robot {robot} is not in the world")))?
-        .start;
-    let var = roles.initial_sigma_m.powi(2);
-    let cov0 = Matrix3::from_diagonal(&nalgebra::Vector3::new(var, var, (0.05f64).powi(2)));
-    let mut filter = if slam {
-        // EKF-SLAM: landmarks are not given, they join the state as they are seen.
-        let config = EkfSlamConfig {
-            noise: roles.localizer.noise,
-            limits: roles.localizer.limits,
-            ..EkfSlamConfig::default()
-        };
-        Filter::Slam(Box::new(
-            EkfSlam::new(config, start, cov0).map_err(|e| ProcessError::Setup(e.to_string()))?,
-        ))
-    } else {
-        Filter::Ekf(Box::new(
-            Ekf::new(
-                roles.localizer,
-                scenario.world.landmarks.clone(),
-                start,
-                cov0,
-            )
-            .map_err(|e| ProcessError::Setup(e.to_string()))?,
-        ))
-    };
+    let mut filter = Filter::for_robot(scenario, robot, slam)?;
     let s = RobotServices::new(world, robot);
     let sensors = receiver::<SensorMsg>(node, &s.sensors)?;
     let poses = sender::<PoseMsg>(node, &s.pose)?;
@@ -532,17 +504,61 @@ pub fn run_depositor(
     Ok(summary)
 }
 
-/// The follower process: pose + newest frame → command and status.
+/// The follower process: pose + newest frame → command and status. The pose is the
+/// localizer's estimate, or the world's truth for a follower configured to steer by it.
 pub fn run_follower(
+    node: &Node<Svc>,
+    robot: u32,
+    world: &str,
+    field_name: &str,
+    follower: Follower,
+    source: PoseSource,
+    dt_secs: f64,
+) -> Result<RoleSummary, ProcessError> {
+    let s = RobotServices::new(world, robot);
+    match source {
+        PoseSource::Estimate => follow(
+            node,
+            robot,
+            world,
+            field_name,
+            follower,
+            dt_secs,
+            receiver::<PoseMsg>(node, &s.pose)?,
+            |p: &PoseMsg| *p,
+        ),
+        PoseSource::Truth => follow(
+            node,
+            robot,
+            world,
+            field_name,
+            follower,
+            dt_secs,
+            receiver::<TruthMsg>(node, &s.truth)?,
+            |t: &TruthMsg| PoseMsg {
+                step: t.step,
+                robot_id: t.robot_id,
+                x_m: t.x_m,
+                y_m: t.y_m,
+                theta_rad: t.theta_rad,
+                ..PoseMsg::default()
+            },
+        ),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,
     robot: u32,
     world: &str,
     field_name: &str,
     mut follower: Follower,
     dt_secs: f64,
+    poses: Receiver<T>,
+    to_pose: impl Fn(&T) -> PoseMsg,
 ) -> Result<RoleSummary, ProcessError> {
     let s = RobotServices::new(world, robot);
-    let poses = receiver::<PoseMsg>(node, &s.pose)?;
     let cmds = sender::<CmdMsg>(node, &s.cmd)?;
     let statuses = sender::<FollowerStatusMsg>(node, &s.status)?;
     let mut reader = FieldReader::attach_within(node, field_name, Duration::from_secs(30))?;
@@ -558,9 +574,10 @@ pub fn run_follower(
         node,
         &end,
         &poses,
-        |m: &PoseMsg| m.step,
+        |m: &T| to_pose(m).step,
         &mut summary,
-        |p| {
+        |m| {
+            let p = to_pose(m);
             reader.update()?;
             if reader.frame().is_none() {
                 reader.wait_frame(Duration::from_secs(5))?;
@@ -571,7 +588,7 @@ pub fn run_follower(
                     service: format!("pheromone/{field_name}/frame"),
                 }));
             };
-            let (mut cmd, status) = match follower.step_pose(&frame.view, p, dt_secs) {
+            let (mut cmd, status) = match follower.step_pose(&frame.view, &p, dt_secs) {
                 Ok(out) => (out.cmd, Some(out.status)),
                 Err(e) => {
                     rejected += 1;
@@ -611,20 +628,59 @@ pub fn run_follower(
 }
 
 /// The localizer's filter: landmark-based EKF, or EKF-SLAM (faer) when the map is unknown.
-enum Filter {
+pub enum Filter {
     Ekf(Box<Ekf>),
     Slam(Box<EkfSlam>),
 }
 
 impl Filter {
-    fn step(&mut self, m: &SensorMsg) -> Result<(), LocalizerError> {
+    /// The filter of robot `robot` as the scenario configures it (start pose, initial σ,
+    /// noise, loss); EKF-SLAM if `slam`.
+    pub fn for_robot(scenario: &Scenario, robot: u32, slam: bool) -> Result<Self, ProcessError> {
+        let roles = scenario
+            .roles(robot)
+            .ok_or_else(|| ProcessError::Setup(format!("robot {robot} has no [[robot]] entry")))?;
+        let start = scenario
+            .world
+            .robots
+            .iter()
+            .find(|r| r.id == robot)
+            .ok_or_else(|| ProcessError::Setup(format!("robot {robot} is not in the world")))?
+            .start;
+        let var = roles.initial_sigma_m.powi(2);
+        let cov0 = Matrix3::from_diagonal(&nalgebra::Vector3::new(var, var, (0.05f64).powi(2)));
+        Ok(if slam {
+            // EKF-SLAM: landmarks are not given, they join the state as they are seen.
+            let config = EkfSlamConfig {
+                noise: roles.localizer.noise,
+                limits: roles.localizer.limits,
+                ..EkfSlamConfig::default()
+            };
+            Filter::Slam(Box::new(
+                EkfSlam::new(config, start, cov0)
+                    .map_err(|e| ProcessError::Setup(e.to_string()))?,
+            ))
+        } else {
+            Filter::Ekf(Box::new(
+                Ekf::new(
+                    roles.localizer,
+                    scenario.world.landmarks.clone(),
+                    start,
+                    cov0,
+                )
+                .map_err(|e| ProcessError::Setup(e.to_string()))?,
+            ))
+        })
+    }
+
+    pub fn step(&mut self, m: &SensorMsg) -> Result<(), LocalizerError> {
         match self {
             Filter::Ekf(f) => f.step(m).map(|_| ()),
             Filter::Slam(f) => f.step(m).map(|_| ()),
         }
     }
 
-    fn to_msg(&self, robot: u32, step: u64) -> PoseMsg {
+    pub fn to_msg(&self, robot: u32, step: u64) -> PoseMsg {
         match self {
             Filter::Ekf(f) => f.to_msg(robot, step),
             Filter::Slam(f) => f.to_msg(robot, step),

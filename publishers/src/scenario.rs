@@ -7,14 +7,34 @@ use std::path::Path;
 use field::{DepositMsg, FieldConfig, KernelKind};
 use serde::{Deserialize, Serialize};
 
-use crate::depositor::DepositorConfig;
-use crate::follower::FollowerConfig;
+use crate::depositor::{DepositMode, DepositorConfig};
+use crate::follower::{FollowerConfig, StrategyKind};
 use crate::localizer::EkfConfig;
 use crate::world::WorldConfig;
 
 /// Built-in scenarios: (name, TOML text).
-pub const BUILTIN: &[(&str, &str)] =
-    &[("trail", include_str!("../../examples/scenarios/trail.toml"))];
+pub const BUILTIN: &[(&str, &str)] = &[
+    (
+        "blind-leader",
+        include_str!("../../examples/scenarios/blind-leader.toml"),
+    ),
+    (
+        "trail-following",
+        include_str!("../../examples/scenarios/trail-following.toml"),
+    ),
+    (
+        "ias-ss",
+        include_str!("../../examples/scenarios/ias-ss.toml"),
+    ),
+    (
+        "evaporation",
+        include_str!("../../examples/scenarios/evaporation.toml"),
+    ),
+    ("trail", include_str!("../../examples/scenarios/trail.toml")),
+];
+
+/// The scenario `pheromone sim` runs when none is named.
+pub const DEFAULT_SCENARIO: &str = "blind-leader";
 
 /// Why a scenario could not be loaded. Names the file (or built-in) and what is wrong.
 #[derive(Debug, thiserror::Error)]
@@ -56,6 +76,120 @@ pub struct Scenario {
     /// Scripted deposits (`[[deposit]]`).
     #[serde(default, rename = "deposit")]
     pub deposits: Vec<ScriptedDeposit>,
+    /// Robots taking part: the first N of `[[world.robots]]` (all if unset); `--robots` sets it.
+    #[serde(default)]
+    pub active_robots: Option<usize>,
+    /// Mark every wall of the world on a channel at t = 0 (seed 004: pheromone builds up along
+    /// walls, so the sector strategies steer away from them).
+    #[serde(default)]
+    pub mark_walls: Option<MarkWalls>,
+    /// Points whose field values are recorded at given times (`[[probe]]`).
+    #[serde(default, rename = "probe")]
+    pub probes: Vec<ProbeSpec>,
+    /// Times (s) at which the field is pictured; the end of the run is always pictured.
+    #[serde(default)]
+    pub snapshots_s: Vec<f64>,
+    /// Scenario-specific metrics.
+    #[serde(default)]
+    pub metrics: MetricsConfig,
+}
+
+/// `mark_walls`: deposits every `spacing_m` along every wall segment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MarkWalls {
+    pub channel: u32,
+    #[serde(default = "default_wall_amount")]
+    pub amount: f32,
+    #[serde(default = "default_wall_spacing_m")]
+    pub spacing_m: f32,
+    /// Half-width of the mark's plateau (m).
+    #[serde(default = "default_wall_plateau_m")]
+    pub plateau_m: f32,
+}
+
+fn default_wall_amount() -> f32 {
+    1.0
+}
+fn default_wall_spacing_m() -> f32 {
+    0.1
+}
+fn default_wall_plateau_m() -> f32 {
+    0.1
+}
+
+/// A probe: the value of `channel` at (x, y) at each of `times_s`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeSpec {
+    pub x_m: f32,
+    pub y_m: f32,
+    #[serde(default)]
+    pub channel: u32,
+    pub times_s: Vec<f64>,
+}
+
+/// Scenario-specific metrics (`[metrics]`).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MetricsConfig {
+    /// Seed 002: mean distance between a robot and a target path (`[[metrics.paths]]`).
+    pub paths: Vec<PathMetric>,
+    /// Seed 004: share of the map's sectors each robot visited.
+    pub exploration: Option<ExplorationMetric>,
+    /// Seed 000: where the follower of a leader that got lost ends up.
+    pub blind_leader: Option<BlindLeaderMetric>,
+}
+
+/// `mean_path_error_m`: the distance from `robot`'s true position to the polyline `points`,
+/// sampled every `every_s` over [`from_s`, `from_s + over_s`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PathMetric {
+    /// Name of the path in the metrics (`mean_path_error_m.<name>`).
+    pub name: String,
+    #[serde(default)]
+    pub robot: u32,
+    pub points: Vec<[f64; 2]>,
+    #[serde(default = "default_every_s")]
+    pub every_s: f64,
+    #[serde(default)]
+    pub from_s: f64,
+    pub over_s: f64,
+}
+
+fn default_every_s() -> f64 {
+    0.2
+}
+
+/// `exploration`: the rectangle split into `cols` × `rows` sectors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExplorationMetric {
+    pub min_m: [f64; 2],
+    pub max_m: [f64; 2],
+    pub cols: u32,
+    pub rows: u32,
+}
+
+/// `blind_leader`: the leader's and the follower's ids.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BlindLeaderMetric {
+    pub leader: u32,
+    pub follower: u32,
+}
+
+/// Changes `pheromone sim` makes to a scenario from its flags.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Overrides {
+    pub seed: Option<u64>,
+    pub robots: Option<usize>,
+    pub duration_s: Option<f64>,
+    /// Every follower that is not a `route` leader uses this strategy.
+    pub strategy: Option<StrategyKind>,
+    /// Every depositor deposits with `constant` strength (seed 000's baseline).
+    pub constant: bool,
 }
 
 /// What runs for one robot: a localizer always, a depositor and a follower if configured.
@@ -240,7 +374,170 @@ impl Scenario {
                 .map_err(|e| format!("deposit {}: {e}", i + 1))?;
         }
         crate::world::World::new(self.world.clone(), self.seed).map_err(|e| e.to_string())?;
+        if let Some(n) = self.active_robots {
+            if n == 0 || n > self.world.robots.len() {
+                return Err(format!(
+                    "active_robots = {n}: the world has {} robot(s); choose 1 to {}",
+                    self.world.robots.len(),
+                    self.world.robots.len()
+                ));
+            }
+        }
+        let channels = self.field.channels.len() as u32;
+        if let Some(m) = &self.mark_walls {
+            if m.channel >= channels {
+                return Err(format!(
+                    "mark_walls.channel = {}: the field has {channels} channel(s)",
+                    m.channel
+                ));
+            }
+            if !(m.spacing_m.is_finite() && m.spacing_m > 0.0) {
+                return Err(format!(
+                    "mark_walls.spacing_m = {}: must be > 0",
+                    m.spacing_m
+                ));
+            }
+        }
+        for (i, p) in self.probes.iter().enumerate() {
+            if p.channel >= channels {
+                return Err(format!(
+                    "probe {}: channel = {}: the field has {channels} channel(s)",
+                    i + 1,
+                    p.channel
+                ));
+            }
+            if let Some(t) = p.times_s.iter().find(|t| !(t.is_finite() && **t >= 0.0)) {
+                return Err(format!("probe {}: times_s has {t}: must be ≥ 0", i + 1));
+            }
+        }
+        if let Some(t) = self
+            .snapshots_s
+            .iter()
+            .find(|t| !(t.is_finite() && **t >= 0.0))
+        {
+            return Err(format!("snapshots_s has {t}: must be ≥ 0"));
+        }
+        for p in &self.metrics.paths {
+            if p.points.len() < 2 {
+                return Err(format!(
+                    "metrics.paths '{}': needs at least 2 points",
+                    p.name
+                ));
+            }
+            if !(p.every_s > 0.0 && p.over_s > 0.0) {
+                return Err(format!(
+                    "metrics.paths '{}': every_s = {} and over_s = {} must be > 0",
+                    p.name, p.every_s, p.over_s
+                ));
+            }
+        }
+        if let Some(e) = &self.metrics.exploration {
+            if e.cols == 0 || e.rows == 0 || e.max_m[0] <= e.min_m[0] || e.max_m[1] <= e.min_m[1] {
+                return Err(format!(
+                    "metrics.exploration: {e:?} is an empty grid of sectors"
+                ));
+            }
+        }
         Ok(())
+    }
+
+    /// Applies `pheromone sim`'s flags and re-validates. Keeps only the active robots.
+    pub fn apply(&mut self, o: &Overrides) -> Result<(), String> {
+        if let Some(seed) = o.seed {
+            self.seed = seed;
+        }
+        if let Some(d) = o.duration_s {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(format!("--duration {d}: must be > 0"));
+            }
+            self.duration_s = d;
+        }
+        if let Some(n) = o.robots {
+            if n == 0 || n > self.world.robots.len() {
+                return Err(format!(
+                    "--robots {n}: scenario '{}' places {} robot(s); choose 1 to {}",
+                    self.name,
+                    self.world.robots.len(),
+                    self.world.robots.len()
+                ));
+            }
+            self.active_robots = Some(n);
+        }
+        if let Some(n) = self.active_robots.take() {
+            self.world.robots.truncate(n);
+            let ids: Vec<u32> = self.world.robots.iter().map(|r| r.id).collect();
+            self.robots.retain(|r| ids.contains(&r.id));
+        }
+        for r in &mut self.robots {
+            if let Some(f) = &mut r.follower {
+                if let Some(k) = o.strategy {
+                    if f.strategy != StrategyKind::Route {
+                        f.strategy = k;
+                    }
+                }
+            }
+            if o.constant {
+                if let Some(d) = &mut r.depositor {
+                    d.mode = DepositMode::Constant;
+                }
+            }
+        }
+        self.validate()
+    }
+
+    /// The follower settings of a robot, its RNG seed mixed with the scenario's seed so that
+    /// every seed of a run gives other random draws.
+    pub fn follower_config(&self, robot: u32) -> Option<FollowerConfig> {
+        let mut f = self.roles(robot)?.follower.clone()?;
+        f.seed = f
+            .seed
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .wrapping_add(self.seed.rotate_left(17))
+            .wrapping_add(robot as u64);
+        Some(f)
+    }
+
+    /// Every scripted deposit (walls first, at t = 0), sorted by time.
+    pub fn scripted(
+        &self,
+        walls: &[crate::world::Segment],
+    ) -> Result<Vec<(f64, DepositMsg)>, String> {
+        let mut out = Vec::new();
+        if let Some(m) = &self.mark_walls {
+            for w in walls {
+                let d = ScriptedDeposit {
+                    t_s: 0.0,
+                    kernel: "z-shape".into(),
+                    channel: m.channel,
+                    x_m: w.a_m[0] as f32,
+                    y_m: w.a_m[1] as f32,
+                    to_x_m: Some(w.b_m[0] as f32),
+                    to_y_m: Some(w.b_m[1] as f32),
+                    spacing_m: Some(m.spacing_m),
+                    amount: m.amount,
+                    cov: default_cov(),
+                    range_m: default_range_m(),
+                    gamma_max: default_gamma_max(),
+                    sigma_m: default_sigma_m(),
+                    plateau_m: m.plateau_m,
+                    slope_m: 0.0,
+                };
+                out.extend(d.messages()?.into_iter().map(|m| (0.0, m)));
+            }
+        }
+        for (i, d) in self.deposits.iter().enumerate() {
+            let msgs = d
+                .messages()
+                .map_err(|e| format!("deposit {}: {e}", i + 1))?;
+            out.extend(msgs.into_iter().map(|m| (d.t_s, m)));
+        }
+        out.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Ok(out)
+    }
+
+    /// The scenario as TOML (what `--print-config`-style dumps and sub-processes read).
+    pub fn to_toml(&self) -> Result<String, String> {
+        toml::to_string(self).map_err(|e| e.to_string())
     }
 
     /// Number of world steps the run lasts.

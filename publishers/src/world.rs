@@ -1141,13 +1141,16 @@ fn parse_pgm(bytes: &[u8]) -> Result<(usize, usize, u16, Vec<u16>), MapError> {
     let n = width
         .checked_mul(height)
         .ok_or_else(|| err("image too large"))?;
-    let mut pixels = Vec::with_capacity(n);
+    // Never reserve more than the file can hold: a header may claim any size.
+    let mut pixels = Vec::with_capacity(n.min(bytes.len()));
     match magic.as_str() {
         "P5" => {
             pos += 1; // single whitespace after maxval
             let bpp = if maxval < 256 { 1 } else { 2 };
-            let data = bytes
-                .get(pos..pos + n * bpp)
+            let data = n
+                .checked_mul(bpp)
+                .and_then(|len| pos.checked_add(len))
+                .and_then(|end| bytes.get(pos..end))
                 .ok_or_else(|| err("truncated pixel data"))?;
             if bpp == 1 {
                 pixels.extend(data.iter().map(|&b| u16::from(b)));

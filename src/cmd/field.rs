@@ -4,10 +4,14 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
+use field::checkpoint;
 use field::deposit::RejectReason;
 use field::link::{LinkOptions, Receiver};
 use field::messages::ClockMsg;
-use field::shm::{create_node, frame_pool, FieldServer};
+use field::shm::{
+    cleanup_dead_nodes, create_node, frame_pool, FieldServer, ShmError, Standby, StandbyEvent,
+    Takeover,
+};
 use field::{Evaporation, FieldConfig};
 
 use super::{bad, read_toml};
@@ -38,6 +42,11 @@ pub enum ModelArg {
 ///
 /// Without --config the field has one channel, 'trail', with the seed 000 ambient-aware model
 /// (K = 0.0057/s, α = 0.5, ambient radius 0.5 m). Flags override the file.
+///
+/// Reliability: --checkpoint FILE saves the frame every --checkpoint-every seconds and at exit
+/// (atomically); --restore FILE resumes from such a file (same grid required). --standby mirrors
+/// the running field of the same name and takes over publishing, from its last frame, when that
+/// field's process dies. Clients killed at any instant are cleaned up once a second.
 #[derive(Args, Debug)]
 pub struct FieldArgs {
     /// Field name: services are pheromone/<NAME>/frame, …/deposit, …/frame-ready.
@@ -116,6 +125,23 @@ pub struct FieldArgs {
     /// Print the configuration that would run, as TOML, and exit.
     #[arg(long)]
     pub print_config: bool,
+    /// Save the current frame to FILE (header, planes and checksum; written to FILE.tmp,
+    /// fsynced, then renamed) every --checkpoint-every seconds and when the field stops.
+    #[arg(long, value_name = "FILE")]
+    pub checkpoint: Option<PathBuf>,
+    /// Seconds between two checkpoints [default: 10].
+    #[arg(long, value_name = "SECS", requires = "checkpoint")]
+    pub checkpoint_every: Option<f64>,
+    /// Resume from a checkpoint file: its cells, sequence number, field time and counters. The
+    /// grid (size, cell size, origin, channels) must be the configuration's; a truncated or
+    /// corrupted file is refused (exit status 2).
+    #[arg(long, value_name = "FILE")]
+    pub restore: Option<PathBuf>,
+    /// Run as the standby of the field NAME: mirror its frames and deposits, and when its process
+    /// dies (no frame for two tick periods and its process gone) take over publishing from the
+    /// last frame, losing at most one tick of deposits. Give it the primary's configuration.
+    #[arg(long, conflicts_with_all = ["restore", "clock"])]
+    pub standby: bool,
     /// At exit, print one JSON summary object on stdout.
     #[arg(long)]
     pub json: bool,
@@ -229,6 +255,21 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         print!("{}", toml::to_string_pretty(&config)?);
         return Ok(());
     }
+    let every = a.checkpoint_every.unwrap_or(10.0);
+    if !(every.is_finite() && every > 0.0) {
+        return Err(bad(format!(
+            "--checkpoint-every {every}: must be a positive number of seconds"
+        )));
+    }
+    let restore = match &a.restore {
+        Some(path) => {
+            let cp = checkpoint::read(path).map_err(|e| bad(e.to_string()))?;
+            cp.check_against(path, &config)
+                .map_err(|e| bad(e.to_string()))?;
+            Some(cp)
+        }
+        None => None,
+    };
     let (frames, bytes) = frame_pool(&config);
     eprintln!(
         "field '{}': {}×{} cells × {} channel(s), {} m cells, {} Hz; shared memory {:.1} MiB ({} frames)",
@@ -258,14 +299,81 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let mut server = FieldServer::start(&node, &a.name, config.clone(), None)?;
-    let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
     let started = Instant::now();
-    let mut deadline = started + period;
-    let mut window = Window::new(started);
+    let mut standby_summary = serde_json::Value::Null;
+    let (mut server, mut longest_gap_ns) = if a.standby {
+        let Some((server, takeover, mirrored)) = run_standby(&a, &node, &config)? else {
+            // Stopped (Ctrl-C or --duration) while the primary was alive.
+            if a.json {
+                println!(
+                    "{}",
+                    serde_json::json!({ "field": a.name, "standby": { "took_over": false } })
+                );
+            }
+            return Ok(());
+        };
+        let gap_ns = takeover
+            .first_stamp_ns
+            .saturating_sub(takeover.last_mirrored_stamp_ns);
+        let ms = |ns: u64| ns as f64 / 1e6;
+        eprintln!(
+            "field '{}': the primary is gone; took over after frame {} ({:.1} ms without a frame: \
+             found gone after {:.1} ms, first own frame {:.1} ms later), {} deposit(s) carried over",
+            a.name,
+            takeover.last_mirrored_sequence,
+            ms(gap_ns),
+            ms(takeover
+                .detected_stamp_ns
+                .saturating_sub(takeover.last_mirrored_stamp_ns)),
+            ms(takeover
+                .first_stamp_ns
+                .saturating_sub(takeover.detected_stamp_ns)),
+            takeover.deposits_carried
+        );
+        standby_summary = serde_json::json!({
+            "took_over": true,
+            "mirrored_frames": mirrored,
+            "last_mirrored_sequence": takeover.last_mirrored_sequence,
+            "takeover_gap_ms": gap_ns as f64 / 1e6,
+            "deposits_carried": takeover.deposits_carried,
+        });
+        (server, gap_ns)
+    } else {
+        let restore = restore.as_ref().map(|c| (c.header, c.cells.as_slice()));
+        if let Some((h, _)) = &restore {
+            eprintln!(
+                "field '{}': restored frame {} (t = {:.3} s, {} deposits applied) from {}",
+                a.name,
+                h.sequence,
+                h.sim_time_s,
+                h.deposits_applied,
+                a.restore
+                    .as_ref()
+                    .map(|p| p.display().to_string())
+                    .unwrap_or_default()
+            );
+        }
+        (
+            FieldServer::start(&node, &a.name, config.clone(), restore)?,
+            0,
+        )
+    };
+    let mut checkpointer = a.checkpoint.as_ref().map(|path| Checkpointer {
+        path: path.clone(),
+        every: Duration::from_secs_f64(every),
+        last: Instant::now(),
+        writing: None,
+        written: 0,
+        failed: 0,
+    });
+    let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
+    let mut deadline = Instant::now() + period;
+    let mut window = Window::new(Instant::now());
     let mut max_compute_ns = 0u64;
     let mut ticks = 0u64;
+    let mut dead_nodes_cleaned = 0u64;
     let mut last_clock_step: Option<u64> = None;
+    let mut last_frame_at = Instant::now();
     loop {
         if let Some(clock) = &clock {
             // Lockstep: one tick per world step.
@@ -298,11 +406,21 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
             break;
         }
         let out = server.tick()?;
+        let now = Instant::now();
+        let gap_ns = now.duration_since(last_frame_at).as_nanos() as u64;
+        last_frame_at = now;
+        longest_gap_ns = longest_gap_ns.max(gap_ns);
         ticks += 1;
         max_compute_ns = max_compute_ns.max(out.compute_ns);
-        window.add(&out);
+        window.add(&out, gap_ns);
+        if let Some(c) = &mut checkpointer {
+            c.maybe_write(&server);
+        }
         if window.started.elapsed() >= Duration::from_secs(1) {
-            window.log(&a.name, server.stepper());
+            // Clients killed since the last second: free their ports and the frames they held.
+            let cleaned = cleanup_dead_nodes(&node);
+            dead_nodes_cleaned += cleaned;
+            window.log(&a.name, server.stepper(), cleaned);
             window = Window::new(Instant::now());
         }
         if a.ticks.is_some_and(|n| ticks >= n)
@@ -312,6 +430,14 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
             break;
         }
     }
+    let checkpoint_summary = match &mut checkpointer {
+        Some(c) => {
+            c.finish(&server)?;
+            serde_json::json!({ "file": c.path.display().to_string(), "written": c.written, "failed": c.failed })
+        }
+        None => serde_json::Value::Null,
+    };
+    let _ = &mut server;
     let stepper = server.stepper();
     let counters = stepper.counters;
     let rejected: serde_json::Map<String, serde_json::Value> = RejectReason::ALL
@@ -325,12 +451,13 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         None => (vec![], vec![]),
     };
     eprintln!(
-        "field '{}' stopped after {ticks} ticks ({:.1} s): {} deposits applied, {} rejected, longest tick {:.3} ms",
+        "field '{}' stopped after {ticks} ticks ({:.1} s): {} deposits applied, {} rejected, longest tick {:.3} ms, longest gap between frames {:.3} ms",
         a.name,
         started.elapsed().as_secs_f64(),
         counters.applied,
         counters.rejected_total(),
-        max_compute_ns as f64 / 1e6
+        max_compute_ns as f64 / 1e6,
+        longest_gap_ns as f64 / 1e6
     );
     if a.json {
         println!(
@@ -345,10 +472,117 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
                 "total_mass": mass,
                 "max": max,
                 "max_tick_compute_ms": max_compute_ns as f64 / 1e6,
+                "longest_tick_gap_ms": longest_gap_ns as f64 / 1e6,
+                "dead_nodes_cleaned": dead_nodes_cleaned,
+                "restored_sequence": restore.as_ref().map(|c| c.header.sequence),
+                "checkpoint": checkpoint_summary,
+                "standby": standby_summary,
             })
         );
     }
     Ok(())
+}
+
+/// The standby phase: mirror the primary until it dies, then take over. `None` when stopped
+/// first (Ctrl-C, --duration).
+fn run_standby(
+    a: &FieldArgs,
+    node: &iceoryx2::prelude::Node<field::shm::Svc>,
+    config: &FieldConfig,
+) -> anyhow::Result<Option<(FieldServer, Takeover, u64)>> {
+    let started = Instant::now();
+    let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
+    let mut standby =
+        Standby::attach_within(node, &a.name, config.clone(), Duration::from_secs(30)).map_err(
+            |e| match e {
+                ShmError::StandbyMismatch { .. } => bad(e.to_string()),
+                e => e.into(),
+            },
+        )?;
+    eprintln!(
+        "field '{}': standby, mirroring the primary (frame {})",
+        a.name,
+        standby.latest().map(|h| h.sequence).unwrap_or(0)
+    );
+    loop {
+        if node.wait(Duration::ZERO).is_err()
+            || a.duration
+                .is_some_and(|d| started.elapsed().as_secs_f64() >= d)
+        {
+            eprintln!(
+                "field '{}': standby stopped after mirroring {} frames",
+                a.name, standby.mirrored
+            );
+            return Ok(None);
+        }
+        let event = standby.poll(period).map_err(|e| match e {
+            ShmError::StandbyMismatch { .. } => bad(e.to_string()),
+            e => e.into(),
+        })?;
+        if event == StandbyEvent::PrimaryGone {
+            let mirrored = standby.mirrored;
+            let (server, takeover) = standby.take_over(node)?;
+            return Ok(Some((server, takeover, mirrored)));
+        }
+    }
+}
+
+/// Periodic checkpoints: the frame is copied on the tick thread (one memcpy) and written,
+/// fsynced and renamed on a background thread, so a slow disk does not stall the ticks.
+struct Checkpointer {
+    path: PathBuf,
+    every: Duration,
+    last: Instant,
+    writing: Option<std::thread::JoinHandle<Result<u64, checkpoint::CheckpointError>>>,
+    written: u64,
+    failed: u64,
+}
+
+impl Checkpointer {
+    fn collect(&mut self, wait: bool) {
+        if let Some(h) = self.writing.take() {
+            if !wait && !h.is_finished() {
+                self.writing = Some(h);
+                return;
+            }
+            match h.join() {
+                Ok(Ok(_)) => self.written += 1,
+                Ok(Err(e)) => {
+                    self.failed += 1;
+                    eprintln!("warning: {e}");
+                }
+                Err(_) => self.failed += 1,
+            }
+        }
+    }
+
+    fn maybe_write(&mut self, server: &FieldServer) {
+        if self.last.elapsed() < self.every {
+            return;
+        }
+        self.collect(false);
+        if self.writing.is_some() {
+            return; // the previous one is still being written
+        }
+        if let Some((header, view)) = server.latest() {
+            let (header, cells, config) = (*header, view.cells.to_vec(), server.config().clone());
+            let path = self.path.clone();
+            self.writing = Some(std::thread::spawn(move || {
+                checkpoint::write_atomic(&path, &header, &config, &cells)
+            }));
+            self.last = Instant::now();
+        }
+    }
+
+    /// Waits for a write in flight, then writes the last frame.
+    fn finish(&mut self, server: &FieldServer) -> anyhow::Result<()> {
+        self.collect(true);
+        if let Some((header, view)) = server.latest() {
+            checkpoint::write_atomic(&self.path, header, server.config(), view.cells)?;
+            self.written += 1;
+        }
+        Ok(())
+    }
 }
 
 /// Per-second statistics for the log line.
@@ -359,6 +593,7 @@ struct Window {
     max_compute_ns: u64,
     applied: u64,
     rejected: u64,
+    longest_gap_ns: u64,
 }
 
 impl Window {
@@ -370,18 +605,20 @@ impl Window {
             max_compute_ns: 0,
             applied: 0,
             rejected: 0,
+            longest_gap_ns: 0,
         }
     }
 
-    fn add(&mut self, out: &field::shm::TickOutcome) {
+    fn add(&mut self, out: &field::shm::TickOutcome, gap_ns: u64) {
         self.ticks += 1;
+        self.longest_gap_ns = self.longest_gap_ns.max(gap_ns);
         self.compute_ns += out.compute_ns;
         self.max_compute_ns = self.max_compute_ns.max(out.compute_ns);
         self.applied += out.report.deposits_applied as u64;
         self.rejected += out.rejected;
     }
 
-    fn log(&self, name: &str, stepper: &field::Stepper) {
+    fn log(&self, name: &str, stepper: &field::Stepper, dead_nodes_cleaned: u64) {
         let secs = self.started.elapsed().as_secs_f64();
         let c = stepper.counters;
         let reasons: Vec<String> = RejectReason::ALL
@@ -390,17 +627,23 @@ impl Window {
             .map(|r| format!("{} {}", r.name(), c.rejected[*r as usize]))
             .collect();
         eprintln!(
-            "field '{name}': {:.1} ticks/s, tick {:.3} ms mean / {:.3} ms max, deposits +{} applied +{} rejected \
-             (total {} applied, {} rejected{}{})",
+            "field '{name}': {:.1} ticks/s, tick {:.3} ms mean / {:.3} ms max, longest_tick_gap_ms {:.3}, \
+             deposits +{} applied +{} rejected (total {} applied, {} rejected{}{}){}",
             self.ticks as f64 / secs,
             self.compute_ns as f64 / self.ticks.max(1) as f64 / 1e6,
             self.max_compute_ns as f64 / 1e6,
+            self.longest_gap_ns as f64 / 1e6,
             self.applied,
             self.rejected,
             c.applied,
             c.rejected_total(),
             if reasons.is_empty() { "" } else { ": " },
-            reasons.join(", ")
+            reasons.join(", "),
+            if dead_nodes_cleaned > 0 {
+                format!("; cleaned {dead_nodes_cleaned} dead node(s)")
+            } else {
+                String::new()
+            }
         );
     }
 }

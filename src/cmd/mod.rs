@@ -1,5 +1,6 @@
 //! One module per subcommand: argument parsing and a short loop over library types.
 
+pub mod bench;
 pub mod field;
 pub mod probe;
 pub mod roles;

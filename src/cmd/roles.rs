@@ -15,8 +15,9 @@ use super::bad;
 /// Options every robot process shares.
 #[derive(Args, Debug, Clone)]
 pub struct Common {
-    /// Scenario: a built-in name (trail) or a TOML file.
-    #[arg(long, default_value = "trail")]
+    /// Scenario: a built-in name (blind-leader, trail-following, ias-ss, evaporation, trail) or
+    /// a TOML file.
+    #[arg(long, default_value = publishers::scenario::DEFAULT_SCENARIO)]
     pub scenario: String,
     /// Name of the simulated world (its clock is sim/<WORLD>/clock).
     #[arg(long, default_value = "sim")]
@@ -217,7 +218,7 @@ pub struct FollowerArgs {
     /// Robot id.
     #[arg(long, default_value_t = 0)]
     pub robot: u32,
-    /// Strategy: gradient, antenna, inverse or uniform.
+    /// Strategy: gradient, antenna, inverse, uniform or route.
     #[arg(long)]
     pub strategy: Option<StrategyKind>,
     /// Field channel to read.
@@ -231,10 +232,7 @@ pub struct FollowerArgs {
 pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
     check_names(&a.common)?;
     let scenario = load_scenario(&a.common.scenario)?;
-    let mut config: FollowerConfig = scenario
-        .roles(a.robot)
-        .and_then(|r| r.follower.clone())
-        .unwrap_or_default();
+    let mut config: FollowerConfig = scenario.follower_config(a.robot).unwrap_or_default();
     if let Some(s) = a.strategy {
         config.strategy = s;
     }
@@ -253,6 +251,7 @@ pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
         &a.common.world,
         &a.common.field,
         follower,
+        config.steer_by,
         scenario.world.dt_secs,
     )?;
     eprintln!(

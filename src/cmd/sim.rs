@@ -1,36 +1,340 @@
-//! `pheromone sim`: starts a whole scenario as separate processes (field, world, and each
-//! robot's localizer, depositor and follower), waits for the end, collects their summaries and
-//! stops every process it started — also on Ctrl-C or when one of them fails.
+//! `pheromone sim`: runs a whole scenario — by default as separate processes (field, world, and
+//! each robot's localizer, depositor and follower), or in one process (`--single-process`) —
+//! and reports what happened: a summary on stderr, `--json` metrics on stdout, and with
+//! `--out DIR` pictures of the field, a CSV per robot and `metrics.json`.
 
 use std::io::Read;
+use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use clap::Args;
+use field::shm::create_node;
+use publishers::follower::StrategyKind;
+use publishers::metrics::scenario_metrics;
+use publishers::observer::Observer;
+use publishers::record::Recording;
+use publishers::scenario::{Overrides, Scenario, DEFAULT_SCENARIO};
+use publishers::simulation::{
+    rejected_by_reason, role_name, run_single_process, FieldSummary, RobotResult, RunSummary,
+    SingleProcessOptions,
+};
+use publishers::world::World;
 use serde_json::{json, Value};
 
+use super::bad;
 use super::roles::load_scenario;
 
-/// Run a scenario as real processes on this host and report what happened.
+/// Run a scenario and report what happened.
 ///
-/// Starts `pheromone field --clock`, then for every robot of the scenario a localizer, and a
-/// depositor and a follower where the scenario gives them, then the world (lockstep clock: as
-/// fast as the processes answer). At the end it prints a summary on stderr, and with --json one
-/// metrics object on stdout.
+/// By default every role runs as its own process on this host: `pheromone field --clock`, the
+/// world, and for every robot a localizer, a depositor and a follower where the scenario gives
+/// them, in lockstep (as fast as the processes answer). Every process is stopped at the end, on
+/// Ctrl-C, or when one of them fails. `--single-process` runs the same role types in this
+/// process, deterministic bit for bit for a seed.
+///
+/// Built-in scenarios: blind-leader (seed 000, the default), trail-following (seed 002), ias-ss
+/// (seed 004), evaporation (seed 000 Figs. 6–8) and trail; or a TOML file of your own
+/// (examples/scenarios/*.toml show every key).
 #[derive(Args, Debug)]
 pub struct SimArgs {
-    /// Scenario: a built-in name (trail) or a TOML file.
-    #[arg(default_value = "trail")]
+    /// Scenario: a built-in name or a TOML file.
+    #[arg(default_value = DEFAULT_SCENARIO)]
     pub scenario: String,
+    /// Number of robots (the first N the scenario places).
+    #[arg(long, value_name = "N")]
+    pub robots: Option<usize>,
+    /// Seed of the run (world noise, the followers' random draws).
+    #[arg(long, value_name = "S")]
+    pub seed: Option<u64>,
+    /// Simulated seconds (default: the scenario's duration_s).
+    #[arg(long, value_name = "SECS")]
+    pub duration: Option<f64>,
+    /// Write heat maps (PNG, with the robots' true and estimated trajectories), a CSV per robot
+    /// and metrics.json into this directory [default: pheromone-out/<SCENARIO>].
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Write no files.
+    #[arg(long, conflicts_with = "out")]
+    pub no_out: bool,
     /// Print one JSON metrics object on stdout.
     #[arg(long)]
     pub json: bool,
-    /// Seconds the whole run may take before it is stopped as failed.
-    #[arg(long, default_value_t = 600.0, value_name = "SECS")]
+    /// Run every role in this process, in lockstep: deterministic for a seed.
+    #[arg(long)]
+    pub single_process: bool,
+    /// Step the world on wall time (dt per step) instead of lockstep (separate processes only).
+    #[arg(long, conflicts_with = "single_process")]
+    pub realtime: bool,
+    /// Every depositor deposits a constant amount, whatever its localization (the traditional
+    /// scheme seed 000 argues against).
+    #[arg(long)]
+    pub constant: bool,
+    /// Strategy of every follower that is not a route-driven leader: gradient, antenna,
+    /// inverse, uniform.
+    #[arg(long)]
+    pub strategy: Option<StrategyKind>,
+    /// Run T trials (seeds S, S+1, …) with the strategy and with the other sector strategy
+    /// (inverse vs uniform) and report mean, standard deviation and Welch's t of the
+    /// exploration (scenarios with an exploration metric).
+    #[arg(long, value_name = "T")]
+    pub trials: Option<u32>,
+    /// EKF-SLAM localizers (the map of landmarks is not given to them).
+    #[arg(long)]
+    pub slam: bool,
+    /// Seconds the whole run may take before it is stopped as failed (separate processes).
+    #[arg(long, default_value_t = 900.0, value_name = "SECS")]
     pub timeout: f64,
 }
+
+pub fn run(a: SimArgs) -> anyhow::Result<()> {
+    let mut scenario = load_scenario(&a.scenario)?;
+    scenario
+        .apply(&Overrides {
+            seed: a.seed,
+            robots: a.robots,
+            duration_s: a.duration,
+            strategy: a.strategy,
+            constant: a.constant,
+        })
+        .map_err(|e| bad(format!("{}: {e}", a.scenario)))?;
+    if let Some(t) = a.trials {
+        return run_trials(&a, &scenario, t);
+    }
+    eprintln!(
+        "sim '{}' (seed {}): {} robot(s), {:.1} s simulated, field {}×{} cells, {}",
+        scenario.name,
+        scenario.seed,
+        scenario.world.robots.len(),
+        scenario.duration_s,
+        scenario.field.width,
+        scenario.field.height,
+        if a.single_process {
+            "one process"
+        } else {
+            "separate processes"
+        }
+    );
+    let started = Instant::now();
+    let (summary, rec, processes) = if a.single_process {
+        let bar = progress_bar(scenario.steps());
+        let mut tick = |k: u64, _n: u64| bar.set_position(k);
+        let out = run_single_process(
+            &scenario,
+            SingleProcessOptions {
+                slam: a.slam,
+                progress: Some(&mut tick),
+            },
+        )?;
+        bar.finish_and_clear();
+        (out.0, out.1, Value::Null)
+    } else {
+        run_processes(&a, &scenario)?
+    };
+    let wall_s = started.elapsed().as_secs_f64();
+    let mut metrics = metrics_json(&scenario, &summary, &rec);
+    metrics["mode"] = json!(if a.single_process {
+        "single-process"
+    } else {
+        "processes"
+    });
+    metrics["wall_time_s"] = json!(wall_s);
+    metrics["sim_time_per_wall_time"] = json!(summary.sim_time_s / wall_s.max(1e-9));
+    if !processes.is_null() {
+        metrics["processes"] = processes;
+    }
+    print_summary(&metrics);
+    if let Some(dir) = out_dir(&a, &scenario) {
+        let files = publishers::report::write_outputs(&dir, &rec, &metrics)?;
+        eprintln!(
+            "wrote {} file(s) to {} (the picture: {})",
+            files.len(),
+            dir.display(),
+            dir.join("field_final.png").display()
+        );
+    }
+    if a.json {
+        println!("{metrics}");
+    }
+    Ok(())
+}
+
+fn out_dir(a: &SimArgs, scenario: &Scenario) -> Option<PathBuf> {
+    if a.no_out {
+        return None;
+    }
+    Some(
+        a.out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("pheromone-out").join(&scenario.name)),
+    )
+}
+
+/// The metrics object of a run: the keys every scenario has, then the scenario's own.
+pub fn metrics_json(scenario: &Scenario, s: &RunSummary, rec: &Recording) -> Value {
+    json!({
+        "scenario": scenario.name,
+        "seed": scenario.seed,
+        "sim_time_s": s.sim_time_s,
+        "steps": s.steps,
+        "ticks": s.ticks,
+        "field": s.field,
+        "robots": s.robots,
+        "probes": rec.probes,
+        "metrics": scenario_metrics(scenario, rec),
+    })
+}
+
+fn print_summary(m: &Value) {
+    eprintln!(
+        "sim '{}' done: {} s simulated ({} ticks) in {:.2} s wall time ({:.1}× real time); {} deposits applied, {} NaN cells",
+        m["scenario"].as_str().unwrap_or(""),
+        m["sim_time_s"],
+        m["ticks"],
+        m["wall_time_s"].as_f64().unwrap_or(0.0),
+        m["sim_time_per_wall_time"].as_f64().unwrap_or(0.0),
+        m["field"]["deposits_applied"],
+        m["field"]["nan_cells"],
+    );
+    for r in m["robots"].as_array().into_iter().flatten() {
+        let abandoned = match r["trail_abandoned_at_s"].as_f64() {
+            Some(t) => format!(", gave the trail up at {t:.1} s"),
+            None => String::new(),
+        };
+        eprintln!(
+            "  robot {} ({}): travelled {:.2} m, ends at ({:.2}, {:.2}){abandoned}",
+            r["id"],
+            r["role"].as_str().unwrap_or(""),
+            r["distance_travelled_m"].as_f64().unwrap_or(0.0),
+            r["true_pose"][0].as_f64().unwrap_or(f64::NAN),
+            r["true_pose"][1].as_f64().unwrap_or(f64::NAN),
+        );
+    }
+    if let Some(o) = m["metrics"].as_object() {
+        for (k, v) in o {
+            eprintln!("  {k}: {v}");
+        }
+    }
+}
+
+fn progress_bar(steps: u64) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(steps);
+    if let Ok(style) =
+        indicatif::ProgressStyle::with_template("{spinner} [{bar:40}] {pos}/{len} steps ({eta})")
+    {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}
+
+// ---------------------------------------------------------------------------------------------
+// Trials (seed 004's comparison)
+
+fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<()> {
+    if trials < 2 {
+        return Err(bad(format!("--trials {trials}: needs at least 2")));
+    }
+    if scenario.metrics.exploration.is_none() {
+        return Err(bad(format!(
+            "--trials: scenario '{}' has no exploration metric (try ias-ss)",
+            scenario.name
+        )));
+    }
+    let ours = a.strategy.unwrap_or(StrategyKind::Inverse);
+    let other = match ours {
+        StrategyKind::Uniform => StrategyKind::Inverse,
+        _ => StrategyKind::Uniform,
+    };
+    let base_seed = scenario.seed;
+    let bar = progress_bar(2 * trials as u64);
+    let mut results = Vec::new();
+    for kind in [ours, other] {
+        let mut values = Vec::new();
+        for t in 0..trials {
+            let mut s = scenario.clone();
+            s.apply(&Overrides {
+                seed: Some(base_seed + t as u64),
+                strategy: Some(kind),
+                ..Overrides::default()
+            })
+            .map_err(bad)?;
+            let rec = if a.single_process {
+                run_single_process(
+                    &s,
+                    SingleProcessOptions {
+                        slam: a.slam,
+                        progress: None,
+                    },
+                )?
+                .1
+            } else {
+                run_processes(a, &s)?.1
+            };
+            let m = scenario_metrics(&s, &rec);
+            values.push(m["exploration"]["mean"].as_f64().unwrap_or(f64::NAN));
+            bar.inc(1);
+        }
+        results.push((kind, values));
+    }
+    bar.finish_and_clear();
+    let stats = |v: &[f64]| {
+        let n = v.len() as f64;
+        let mean = v.iter().sum::<f64>() / n;
+        let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        (mean, var.sqrt())
+    };
+    let (m1, s1) = stats(&results[0].1);
+    let (m2, s2) = stats(&results[1].1);
+    let (t, df) = welch_t(m1, s1, m2, s2, trials as f64);
+    let out = json!({
+        "scenario": scenario.name,
+        "trials": trials,
+        "seeds": [base_seed, base_seed + trials as u64 - 1],
+        "robots": scenario.world.robots.len(),
+        "sim_time_s": scenario.duration_s,
+        "exploration": {
+            results[0].0.name(): {"mean": m1, "sd": s1, "per_trial": results[0].1},
+            results[1].0.name(): {"mean": m2, "sd": s2, "per_trial": results[1].1},
+        },
+        "welch_t": t,
+        "welch_df": df,
+    });
+    eprintln!(
+        "{} trials of '{}' with {} robot(s), {:.0} s each: exploration {} {:.3} ± {:.3}, {} {:.3} ± {:.3}; Welch t = {t:.2} (df {df:.1})",
+        trials,
+        scenario.name,
+        scenario.world.robots.len(),
+        scenario.duration_s,
+        results[0].0,
+        m1,
+        s1,
+        results[1].0,
+        m2,
+        s2
+    );
+    if let Some(dir) = out_dir(a, scenario) {
+        std::fs::create_dir_all(&dir)?;
+        let path = dir.join("trials.json");
+        std::fs::write(&path, serde_json::to_string_pretty(&out)?)?;
+        eprintln!("wrote {}", path.display());
+    }
+    if a.json {
+        println!("{out}");
+    }
+    Ok(())
+}
+
+/// Welch's t statistic and its Welch–Satterthwaite degrees of freedom for two samples of `n`.
+pub fn welch_t(m1: f64, s1: f64, m2: f64, s2: f64, n: f64) -> (f64, f64) {
+    let (v1, v2) = (s1 * s1 / n, s2 * s2 / n);
+    let t = (m1 - m2) / (v1 + v2).sqrt();
+    let df = (v1 + v2).powi(2) / (v1 * v1 / (n - 1.0) + v2 * v2 / (n - 1.0));
+    (t, df)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Separate processes
 
 /// A started role; killed and reaped if still running when dropped.
 struct Role {
@@ -79,21 +383,59 @@ impl Drop for Role {
     }
 }
 
-pub fn run(a: SimArgs) -> anyhow::Result<()> {
-    let scenario = load_scenario(&a.scenario)?;
-    let tag = format!("sim{}", std::process::id());
-    let (field_name, world_name) = (tag.clone(), tag.clone());
-    let interrupted = Arc::new(AtomicBool::new(false));
-    {
-        let flag = interrupted.clone();
-        let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
+/// The effective scenario (after the flags) as a file every process reads; removed on drop.
+struct ScenarioFile(PathBuf);
+
+impl ScenarioFile {
+    fn write(scenario: &Scenario, tag: &str) -> anyhow::Result<Self> {
+        let dir = std::env::temp_dir().join(format!("pheromone-{tag}"));
+        std::fs::create_dir_all(&dir)?;
+        let path = dir.join("scenario.toml");
+        let text = scenario.to_toml().map_err(|e| anyhow::anyhow!(e))?;
+        std::fs::write(&path, text)?;
+        Ok(Self(path))
     }
+}
+
+impl Drop for ScenarioFile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+        if let Some(d) = self.0.parent() {
+            let _ = std::fs::remove_dir(d);
+        }
+    }
+}
+
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+fn run_processes(
+    a: &SimArgs,
+    scenario: &Scenario,
+) -> anyhow::Result<(RunSummary, Recording, Value)> {
+    static RUN: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let tag = format!(
+        "sim{}x{}",
+        std::process::id(),
+        RUN.fetch_add(1, Ordering::Relaxed)
+    );
+    let (field_name, world_name) = (tag.clone(), tag.clone());
+    {
+        let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst));
+    }
+    let file = ScenarioFile::write(scenario, &tag)?;
+    let path = file.0.display().to_string();
+    let node = create_node(&format!("{tag}-observer"))?;
+    let mut observer = Observer::new(&node, scenario, &world_name, &field_name)?;
+    let walls = World::new(scenario.world.clone(), scenario.seed)
+        .map(|w| w.wall_segments().iter().map(|s| (s.a_m, s.b_m)).collect())
+        .unwrap_or_default();
+    observer.set_walls(walls);
     let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
     let common = |role: &str, robot: Option<u32>| {
         let mut v = s(&[
             role,
             "--scenario",
-            &a.scenario,
+            &path,
             "--world",
             &world_name,
             "--field",
@@ -105,14 +447,6 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         }
         v
     };
-    eprintln!(
-        "sim '{}': {} robot(s), {:.1} s simulated, field {}×{} cells; processes:",
-        scenario.name,
-        scenario.robots.len(),
-        scenario.duration_s,
-        scenario.field.width,
-        scenario.field.height
-    );
     let mut roles = vec![Role::spawn(
         "field".into(),
         &s(&[
@@ -120,17 +454,18 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             "--name",
             &field_name,
             "--scenario",
-            &a.scenario,
+            &path,
             "--clock",
             &world_name,
             "--json",
         ]),
     )?];
     for r in &scenario.robots {
-        roles.push(Role::spawn(
-            format!("localizer r{}", r.id),
-            &common("localizer", Some(r.id)),
-        )?);
+        let mut loc = common("localizer", Some(r.id));
+        if a.slam {
+            loc.push("--slam".into());
+        }
+        roles.push(Role::spawn(format!("localizer r{}", r.id), &loc)?);
         if r.depositor.is_some() {
             roles.push(Role::spawn(
                 format!("depositor r{}", r.id),
@@ -144,16 +479,21 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             )?);
         }
     }
-    roles.push(Role::spawn("world".into(), &common("world", None))?);
+    let mut world_args = common("world", None);
+    if a.realtime {
+        world_args.push("--realtime".into());
+    }
+    roles.push(Role::spawn("world".into(), &world_args)?);
     for r in &roles {
         eprintln!("  {:<14} pid {}", r.name, r.child.id());
     }
-    // Wait until the world ends (or a role fails, or Ctrl-C, or the timeout).
-    let started = Instant::now();
-    let deadline = started + Duration::from_secs_f64(a.timeout);
+    let bar = progress_bar(scenario.steps());
+    // Wait until the world ends (or a role fails, or Ctrl-C, or the timeout), watching the run.
+    let deadline = Instant::now() + Duration::from_secs_f64(a.timeout);
     let world_index = roles.len() - 1;
+    let dt = scenario.world.dt_secs;
     loop {
-        if interrupted.load(Ordering::SeqCst) {
+        if INTERRUPTED.load(Ordering::SeqCst) {
             anyhow::bail!("interrupted: stopped every process of the run");
         }
         if let Ok(Some(_)) = roles[world_index].child.try_wait() {
@@ -173,9 +513,13 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
                 a.timeout
             );
         }
-        // Child exits have no iceoryx2 event; check them every 20 ms.
-        std::thread::park_timeout(Duration::from_millis(20));
+        // Child exits have no iceoryx2 event; the observer's wait for a frame bounds the round.
+        observer.poll(&node, Duration::from_millis(20))?;
+        if let Some(t) = observer.sim_time_s() {
+            bar.set_position((t / dt).round() as u64);
+        }
     }
+    bar.finish_and_clear();
     let (ok, world, err) = roles[world_index].collect();
     if !ok {
         anyhow::bail!("world failed: {}", err.trim());
@@ -192,7 +536,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
                     r.name
                 );
             }
-            std::thread::park_timeout(Duration::from_millis(20));
+            observer.poll(&node, Duration::from_millis(20))?;
         }
         let (ok, out, err) = r.collect();
         if !ok {
@@ -200,64 +544,75 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         }
         summaries.push((r.name.clone(), out.unwrap_or(Value::Null)));
     }
+    let rec = observer.finish(&node);
     let field = &summaries[0].1;
-    let wall_s = started.elapsed().as_secs_f64();
-    let robots: Vec<Value> = world["robots"]
+    let mut fs = match rec.snapshots.last() {
+        Some(snap) => {
+            let view = field::FrameView::new(
+                scenario.field.geometry(),
+                scenario.field.channels.len(),
+                &snap.planes,
+            );
+            FieldSummary::of(&scenario.field, &view, 0, &[])
+        }
+        None => FieldSummary::default(),
+    };
+    // The field's own counters are authoritative.
+    fs.deposits_applied = field["deposits_applied"].as_u64().unwrap_or(0);
+    if let Some(m) = field["deposits_rejected"].as_object() {
+        fs.deposits_rejected = m
+            .iter()
+            .map(|(k, v)| (k.clone(), v.as_u64().unwrap_or(0)))
+            .collect();
+    } else {
+        fs.deposits_rejected = rejected_by_reason(&[]);
+    }
+    if let Some(v) = field["total_mass"].as_array() {
+        fs.total_mass = v.iter().filter_map(Value::as_f64).collect();
+    }
+    if let Some(v) = field["max"].as_array() {
+        fs.max = v
+            .iter()
+            .filter_map(|x| x.as_f64().map(|f| f as f32))
+            .collect();
+    }
+    let est = |id: u32| {
+        rec.robots
+            .get(&id)
+            .and_then(|rows| rows.iter().rev().find_map(|r| r.est_pose))
+    };
+    let robots = world["robots"]
         .as_array()
         .cloned()
         .unwrap_or_default()
         .into_iter()
         .map(|r| {
-            let id = r["id"].as_u64().unwrap_or(0);
-            let role = match scenario.roles(id as u32) {
-                Some(x) if x.follower.is_some() && x.depositor.is_some() => "follower+depositor",
-                Some(x) if x.follower.is_some() => "follower",
-                Some(x) if x.depositor.is_some() => "depositor",
-                _ => "idle",
-            };
-            json!({
-                "id": id,
-                "role": role,
-                "true_pose": r["true_pose"],
-                "distance_travelled_m": r["distance_travelled_m"],
-                "collisions": r["collisions"],
-            })
+            let id = r["id"].as_u64().unwrap_or(0) as u32;
+            let pose = |i: usize| r["true_pose"][i].as_f64().unwrap_or(f64::NAN);
+            RobotResult {
+                id,
+                role: role_name(scenario, id),
+                true_pose: [pose(0), pose(1), pose(2)],
+                estimated_pose: est(id),
+                distance_travelled_m: r["distance_travelled_m"].as_f64().unwrap_or(0.0),
+                trail_abandoned_at_s: rec.trail_abandoned_at_s(id),
+                collisions: r["collisions"].as_u64().unwrap_or(0),
+            }
         })
         .collect();
-    let metrics = json!({
-        "scenario": scenario.name,
-        "seed": scenario.seed,
-        "sim_time_s": world["sim_time_s"],
-        "ticks": field["ticks"],
-        "wall_time_s": wall_s,
-        "field": {
-            "width": scenario.field.width,
-            "height": scenario.field.height,
-            "cell_size_m": scenario.field.cell_size_m,
-            "channels": scenario.field.channels.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
-            "total_mass": field["total_mass"],
-            "max": field["max"],
-            "deposits_applied": field["deposits_applied"],
-            "deposits_rejected": field["deposits_rejected"],
-        },
-        "robots": robots,
-        "processes": summaries.iter().map(|(n, v)| json!({"role": n, "summary": v})).collect::<Vec<_>>(),
-    });
-    eprintln!(
-        "sim '{}' done: {} steps ({} s simulated) in {:.2} s wall time; field: {} deposits applied",
-        scenario.name, world["steps"], world["sim_time_s"], wall_s, field["deposits_applied"]
-    );
-    for r in metrics["robots"].as_array().into_iter().flatten() {
-        eprintln!(
-            "  robot {} ({}): ended at {}, travelled {:.2} m",
-            r["id"],
-            r["role"].as_str().unwrap_or(""),
-            r["true_pose"],
-            r["distance_travelled_m"].as_f64().unwrap_or(0.0)
-        );
-    }
-    if a.json {
-        println!("{metrics}");
-    }
-    Ok(())
+    let summary = RunSummary {
+        steps: world["steps"].as_u64().unwrap_or(0),
+        sim_time_s: world["sim_time_s"].as_f64().unwrap_or(0.0),
+        ticks: field["ticks"].as_u64().unwrap_or(0),
+        field: fs,
+        robots,
+        scripted_deposits: world["deposits_sent"].as_u64().unwrap_or(0),
+    };
+    let processes = summaries
+        .iter()
+        .chain(std::iter::once(&("world".to_string(), world.clone())))
+        .map(|(n, v)| json!({"role": n, "summary": v}))
+        .collect::<Vec<_>>();
+    drop(file);
+    Ok((summary, rec, Value::Array(processes)))
 }

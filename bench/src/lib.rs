@@ -1,0 +1,523 @@
+//! `pheromone bench`: the field's figures measured side by side with the alternatives, in one run,
+//! with separate processes.
+//!
+//! - `tick_vs_memcpy`: one tick of the plain (exponential) and ambient models against a same-size
+//!   memcpy, in this process;
+//! - `hop_ns`: a small message between two processes, ping-pong / 2: ours (`field::link`,
+//!   a 128-byte `PoseMsg`) against raw iceoryx2 publish-subscribe of a `u64`; wait and busy-poll;
+//! - `frame_ns`: a 1 MiB (512²) and a 16 MiB (2048²) frame from publish to "a reader holds it",
+//!   to 1 and to 8 reader processes: ours against a Unix socket with serde (postcard) and Zenoh
+//!   on loopback (feature `zenoh`);
+//! - `deposit_to_visible_us`: a deposit published → a follower holds a frame containing it, with
+//!   the field ticking as its own process.
+//!
+//! Percentiles come from HdrHistogram. Performance is measured and reported, never asserted.
+//! The processes are started through a [`peer::Launcher`] (the `pheromone` binary passes itself
+//! and its hidden `bench-peer` subcommand); [`run_peer`] is what that subcommand runs.
+
+pub mod frames;
+pub mod hop;
+pub mod machine;
+pub mod peer;
+pub mod stats;
+pub mod tick;
+pub mod visible;
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+
+pub use machine::Machine;
+pub use peer::{FrameTransport, Launcher, PeerSpec};
+pub use stats::Latency;
+pub use tick::TickRow;
+
+/// Everything that can stop a bench run.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error(transparent)]
+    Shm(#[from] field::shm::ShmError),
+    #[error("{what}: {source}")]
+    Io {
+        what: String,
+        source: std::io::Error,
+    },
+    /// A peer process failed, answered something unexpected or did not answer in time.
+    #[error("{0}")]
+    Peer(String),
+    /// The peer specification given to `bench-peer` is not valid.
+    #[error("invalid peer spec '{spec}': {reason}")]
+    Spec { spec: String, reason: String },
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    #[error("this build has no Zenoh baseline (build with --features zenoh)")]
+    NoZenoh,
+    #[error("interrupted")]
+    Interrupted,
+}
+
+/// How much to measure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// A few minutes: the figures for the README.
+    Full,
+    /// Well under a minute.
+    Quick,
+    /// A few samples of everything (tests): checks that each measurement runs, nothing more.
+    Smoke,
+}
+
+/// Samples and sizes of a mode.
+#[derive(Debug, Clone, Copy)]
+struct Plan {
+    tick_widths: &'static [u32],
+    tick_reps: usize,
+    hop_warmup: usize,
+    hop_count: usize,
+    /// (frames recorded, frames skipped) at 1 MiB and 16 MiB.
+    frames_1mib: (usize, usize),
+    frames_16mib: (usize, usize),
+    visible_count: usize,
+}
+
+impl Mode {
+    fn plan(self) -> Plan {
+        match self {
+            Mode::Full => Plan {
+                tick_widths: &[512, 1024, 2048, 4096],
+                tick_reps: 31,
+                hop_warmup: 2_000,
+                hop_count: 50_000,
+                frames_1mib: (300, 5),
+                frames_16mib: (100, 3),
+                visible_count: 1_000,
+            },
+            Mode::Quick => Plan {
+                tick_widths: &[512, 1024, 2048, 4096],
+                tick_reps: 7,
+                hop_warmup: 500,
+                hop_count: 5_000,
+                frames_1mib: (60, 3),
+                frames_16mib: (15, 2),
+                visible_count: 200,
+            },
+            Mode::Smoke => Plan {
+                tick_widths: &[512],
+                tick_reps: 3,
+                hop_warmup: 20,
+                hop_count: 200,
+                frames_1mib: (4, 1),
+                frames_16mib: (3, 1),
+                visible_count: 20,
+            },
+        }
+    }
+}
+
+/// Options of one run.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub mode: Mode,
+    /// Pin this process to core 0 and single peers to core 1 (when there are 2 cores or more).
+    pub pin: bool,
+    /// Tick rate of the field in the deposit-to-visible measurement.
+    pub tick_hz: f32,
+    /// Cells per side of the field in the deposit-to-visible measurement.
+    pub visible_width: u32,
+    /// Progress lines on stderr.
+    pub progress: bool,
+    pub launcher: Launcher,
+}
+
+/// Hop latency, ns.
+#[derive(Debug, Clone, Serialize)]
+pub struct HopReport {
+    /// Wait mode (the receiver sleeps until notified).
+    pub ours: Latency,
+    pub raw_iceoryx2: Latency,
+    pub busy_poll: HopPair,
+    pub message_bytes: HopBytes,
+    pub method: &'static str,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct HopPair {
+    pub ours: Latency,
+    pub raw_iceoryx2: Latency,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct HopBytes {
+    pub ours: usize,
+    pub raw_iceoryx2: usize,
+}
+
+/// Frame delivery to a number of readers, ns; `zenoh` is `None` in a build without it.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameSet {
+    pub ours: Latency,
+    pub uds_serde: Latency,
+    pub zenoh: Option<Latency>,
+}
+
+/// Frame delivery at one frame size, ns. The top-level figures are one reader, wait mode.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameReport {
+    pub width: u32,
+    pub frame_bytes: u64,
+    pub ours: Latency,
+    pub uds_serde: Latency,
+    pub zenoh: Option<Latency>,
+    pub readers_8: FrameSet,
+    /// Ours with the reader busy-polling instead of waiting for the frame event.
+    pub ours_busy_poll: Latency,
+    pub period_ms: f64,
+}
+
+/// Deposit-to-visible latency, µs.
+#[derive(Debug, Clone, Serialize)]
+pub struct VisibleReport {
+    #[serde(flatten)]
+    pub latency: Latency,
+    pub tick_hz: f32,
+    pub width: u32,
+    /// The field's tick compute time, µs.
+    pub tick_compute_us: Latency,
+    /// The target for p99: one tick period + 1.2 × the tick compute (p99) + 50 µs.
+    pub target_p99_us: f64,
+}
+
+/// One target of issue 6, with what was measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct Target {
+    pub name: String,
+    /// `"<="` or `">="`.
+    pub op: &'static str,
+    pub limit: f64,
+    pub measured: f64,
+    pub met: bool,
+}
+
+/// The whole run: what `--json` prints.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    pub machine: Machine,
+    pub mode: Mode,
+    pub pinned: bool,
+    pub zenoh_built: bool,
+    /// Keyed by the grid size, e.g. `"1024x1024"`.
+    pub tick_vs_memcpy: BTreeMap<String, TickRow>,
+    pub hop_ns: HopReport,
+    /// Keyed `"1MiB"` and `"16MiB"`.
+    pub frame_ns: BTreeMap<String, FrameReport>,
+    pub deposit_to_visible_us: VisibleReport,
+    pub targets: Vec<Target>,
+    pub elapsed_s: f64,
+}
+
+/// Whether this build has the Zenoh baseline.
+pub const ZENOH_BUILT: bool = cfg!(feature = "zenoh");
+
+fn latency(samples: &[u64], what: &str) -> Result<Latency, BenchError> {
+    Latency::from_ns(samples).ok_or_else(|| BenchError::Peer(format!("{what}: no samples")))
+}
+
+/// Runs every measurement and returns the report.
+pub fn run(opts: &Options) -> Result<Report, BenchError> {
+    let started = Instant::now();
+    let plan = opts.mode.plan();
+    let machine = Machine::detect();
+    let pin = opts.pin && machine.cores >= 2 && machine::pin_to_core(0);
+    let say = |msg: &str| {
+        if opts.progress {
+            eprintln!("[{:>6.1}s] {msg}", started.elapsed().as_secs_f64());
+        }
+    };
+    let mut serial = 0u32;
+    let mut tag = || {
+        serial += 1;
+        format!("{}-{serial}", std::process::id())
+    };
+    say(&format!(
+        "machine: {} ({} cores){}",
+        machine.cpu_model,
+        machine.cores,
+        if pin { ", pinned" } else { "" }
+    ));
+
+    let mut tick_vs_memcpy = BTreeMap::new();
+    for &w in plan.tick_widths {
+        say(&format!("tick vs memcpy at {w}x{w}"));
+        tick_vs_memcpy.insert(format!("{w}x{w}"), tick::measure(w, plan.tick_reps)?);
+    }
+
+    let mut hop = |raw: bool, busy: bool| -> Result<Latency, BenchError> {
+        say(&format!(
+            "hop: {} {} ({} ping-pongs)",
+            if raw {
+                "raw iceoryx2 u64"
+            } else {
+                "ours (PoseMsg link)"
+            },
+            if busy { "busy-poll" } else { "wait" },
+            plan.hop_count
+        ));
+        let s = hop::measure(
+            &opts.launcher,
+            &tag(),
+            hop::HopRun {
+                raw,
+                busy,
+                warmup: plan.hop_warmup,
+                count: plan.hop_count,
+                pin,
+            },
+        )?;
+        latency(&s, "hop")
+    };
+    let hop_ns = HopReport {
+        ours: hop(false, false)?,
+        raw_iceoryx2: hop(true, false)?,
+        busy_poll: HopPair {
+            ours: hop(false, true)?,
+            raw_iceoryx2: hop(true, true)?,
+        },
+        message_bytes: HopBytes {
+            ours: std::mem::size_of::<publishers::messages::PoseMsg>(),
+            raw_iceoryx2: std::mem::size_of::<u64>(),
+        },
+        method: "ping-pong between two processes, one-way = round trip / 2",
+    };
+
+    let mut frame_ns = BTreeMap::new();
+    for (key, width, (count, skip), period_ms) in [
+        ("1MiB", 512u32, plan.frames_1mib, 20u64),
+        ("16MiB", 2048u32, plan.frames_16mib, 100u64),
+    ] {
+        let period = Duration::from_millis(period_ms);
+        let mut frames = |transport: FrameTransport,
+                          readers: usize,
+                          busy: bool|
+         -> Result<Option<Latency>, BenchError> {
+            if transport == FrameTransport::Zenoh && !ZENOH_BUILT {
+                return Ok(None);
+            }
+            say(&format!(
+                "frames {key}: {transport:?} to {readers} reader(s){} ({count} frames)",
+                if busy { ", busy-poll" } else { "" }
+            ));
+            let s = frames::measure(
+                &opts.launcher,
+                &tag(),
+                frames::FrameRun {
+                    transport,
+                    width,
+                    readers,
+                    busy,
+                    count,
+                    skip,
+                    period,
+                    pin,
+                },
+            )?;
+            latency(&s, "frames").map(Some)
+        };
+        let need = |l: Option<Latency>| l.ok_or(BenchError::NoZenoh);
+        let report = FrameReport {
+            width,
+            frame_bytes: width as u64 * width as u64 * 4,
+            ours: need(frames(FrameTransport::Ours, 1, false)?)?,
+            uds_serde: need(frames(FrameTransport::UdsSerde, 1, false)?)?,
+            zenoh: frames(FrameTransport::Zenoh, 1, false)?,
+            readers_8: FrameSet {
+                ours: need(frames(FrameTransport::Ours, 8, false)?)?,
+                uds_serde: need(frames(FrameTransport::UdsSerde, 8, false)?)?,
+                zenoh: frames(FrameTransport::Zenoh, 8, false)?,
+            },
+            ours_busy_poll: need(frames(FrameTransport::Ours, 1, true)?)?,
+            period_ms: period_ms as f64,
+        };
+        frame_ns.insert(key.to_string(), report);
+    }
+
+    say(&format!(
+        "deposit to visible: {w}x{w} field at {} Hz ({} deposits)",
+        opts.tick_hz,
+        plan.visible_count,
+        w = opts.visible_width
+    ));
+    let v = visible::measure(
+        &opts.launcher,
+        &tag(),
+        visible::VisibleRun {
+            width: opts.visible_width,
+            tick_hz: opts.tick_hz,
+            warmup: (plan.visible_count / 20).max(2),
+            count: plan.visible_count,
+            pin,
+        },
+    )?;
+    let compute = Latency::from_ns_as_us(&v.compute_ns)
+        .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?;
+    let deposit_to_visible_us = VisibleReport {
+        latency: Latency::from_ns_as_us(&v.samples_ns)
+            .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?,
+        tick_hz: opts.tick_hz,
+        width: opts.visible_width,
+        target_p99_us: 1e6 / opts.tick_hz as f64 + 1.2 * compute.p99 + 50.0,
+        tick_compute_us: compute,
+    };
+    if pin {
+        machine::unpin();
+    }
+
+    let mut report = Report {
+        machine,
+        mode: opts.mode,
+        pinned: pin,
+        zenoh_built: ZENOH_BUILT,
+        tick_vs_memcpy,
+        hop_ns,
+        frame_ns,
+        deposit_to_visible_us,
+        targets: Vec::new(),
+        elapsed_s: 0.0,
+    };
+    report.targets = targets(&report);
+    report.elapsed_s = (started.elapsed().as_secs_f64() * 10.0).round() / 10.0;
+    say("done");
+    Ok(report)
+}
+
+fn target(name: &str, op: &'static str, limit: f64, measured: f64) -> Target {
+    let round = |v: f64| (v * 100.0).round() / 100.0;
+    Target {
+        name: name.into(),
+        op,
+        limit: round(limit),
+        measured: round(measured),
+        met: if op == ">=" {
+            measured >= limit
+        } else {
+            measured <= limit
+        },
+    }
+}
+
+/// The targets of issue 6, each with the measured value and whether it is met.
+pub fn targets(r: &Report) -> Vec<Target> {
+    let mut t = Vec::new();
+    for (size, row) in &r.tick_vs_memcpy {
+        t.push(target(
+            &format!("plain tick / memcpy at {size}"),
+            "<=",
+            1.2,
+            row.exponential_ratio,
+        ));
+        t.push(target(
+            &format!("ambient tick / memcpy at {size}"),
+            "<=",
+            2.0,
+            row.ambient_ratio,
+        ));
+    }
+    t.push(target(
+        "hop p50 ours / raw iceoryx2 (wait)",
+        "<=",
+        1.5,
+        r.hop_ns.ours.p50 / r.hop_ns.raw_iceoryx2.p50,
+    ));
+    t.push(target(
+        "hop p50 ours / raw iceoryx2 (busy-poll)",
+        "<=",
+        1.5,
+        r.hop_ns.busy_poll.ours.p50 / r.hop_ns.busy_poll.raw_iceoryx2.p50,
+    ));
+    if let (Some(small), Some(big)) = (r.frame_ns.get("1MiB"), r.frame_ns.get("16MiB")) {
+        t.push(target(
+            "frame p50 16 MiB / 1 MiB (ours, 1 reader)",
+            "<=",
+            2.0,
+            big.ours.p50 / small.ours.p50,
+        ));
+        t.push(target(
+            "frame p50 16 MiB / 1 MiB (ours, 8 readers)",
+            "<=",
+            2.0,
+            big.readers_8.ours.p50 / small.readers_8.ours.p50,
+        ));
+        t.push(target(
+            "16 MiB frame p50: UDS+serde / ours (1 reader)",
+            ">=",
+            100.0,
+            big.uds_serde.p50 / big.ours.p50,
+        ));
+        if let Some(z) = big.zenoh {
+            t.push(target(
+                "16 MiB frame p50: Zenoh / ours (1 reader)",
+                ">=",
+                20.0,
+                z.p50 / big.ours.p50,
+            ));
+        }
+    }
+    let v = &r.deposit_to_visible_us;
+    t.push(target(
+        "deposit-to-visible p99 µs (limit: period + 1.2 x tick compute p99 + 50 µs)",
+        "<=",
+        v.target_p99_us,
+        v.latency.p99,
+    ));
+    t
+}
+
+/// What the hidden `bench-peer` subcommand runs: one peer process of a measurement.
+pub fn run_peer(spec_json: &str) -> Result<(), BenchError> {
+    let spec: PeerSpec = serde_json::from_str(spec_json).map_err(|e| BenchError::Spec {
+        spec: spec_json.to_string(),
+        reason: e.to_string(),
+    })?;
+    let place = |core: Option<usize>| match core {
+        Some(c) => {
+            machine::pin_to_core(c);
+        }
+        None => {
+            machine::unpin();
+        }
+    };
+    match spec {
+        PeerSpec::HopEcho {
+            raw,
+            busy,
+            ping,
+            pong,
+            count,
+            core,
+        } => {
+            place(core);
+            hop::echo(raw, busy, &ping, &pong, count)
+        }
+        PeerSpec::FrameReader {
+            transport,
+            source,
+            busy,
+            skip,
+            count,
+            core,
+        } => {
+            place(core);
+            frames::read(transport, &source, busy, skip, count)
+        }
+        PeerSpec::Field {
+            name,
+            width,
+            tick_hz,
+            core,
+        } => {
+            place(core);
+            visible::field(&name, width, tick_hz)
+        }
+    }
+}

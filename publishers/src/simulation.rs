@@ -1,0 +1,335 @@
+//! A whole scenario in one process, in lockstep, bit-for-bit deterministic for a seed
+//! (`pheromone sim --single-process`). It runs the same role types as the separate processes —
+//! [`World`], the localizer [`Filter`], [`Depositor`], [`Follower`] and the field's
+//! [`OwnedField`] — in the order the lockstep processes follow within one step:
+//!
+//! 1. the world applies the commands of step k−1 and produces sensors and truth of step k;
+//! 2. scripted deposits due by then are offered to the field;
+//! 3. each localizer turns its sensors into a pose, each depositor the pose into a deposit;
+//! 4. the field ticks once (evaporation, then every deposit offered);
+//! 5. each follower reads the new frame and decides its command.
+//!
+//! The run also records what [`crate::report`] draws and what the metrics need.
+
+use std::collections::BTreeMap;
+
+use field::{FieldConfig, FrameView, OwnedField, RejectReason};
+use serde::Serialize;
+
+use crate::depositor::Depositor;
+use crate::follower::{Follower, PoseSource};
+use crate::messages::{PoseMsg, TruthMsg};
+use crate::process::{Filter, ProcessError};
+use crate::record::{ProbeReading, Recording, RobotSample, Snapshot};
+use crate::scenario::Scenario;
+use crate::world::World;
+
+/// What a run ends with, whichever way it ran.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunSummary {
+    pub steps: u64,
+    pub sim_time_s: f64,
+    pub ticks: u64,
+    pub field: FieldSummary,
+    pub robots: Vec<RobotResult>,
+    /// Scripted deposits sent by the world.
+    pub scripted_deposits: u64,
+}
+
+/// The field at the end of a run.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct FieldSummary {
+    pub width: u32,
+    pub height: u32,
+    pub cell_size_m: f32,
+    pub channels: Vec<String>,
+    /// Sum of the cells of each channel.
+    pub total_mass: Vec<f64>,
+    /// Largest cell of each channel.
+    pub max: Vec<f32>,
+    pub nan_cells: u64,
+    pub deposits_applied: u64,
+    /// Rejected deposits by reason.
+    pub deposits_rejected: BTreeMap<String, u64>,
+}
+
+impl FieldSummary {
+    /// Summarizes a frame and the field's counters.
+    pub fn of(config: &FieldConfig, view: &FrameView<'_>, applied: u64, rejected: &[u64]) -> Self {
+        let g = config.geometry();
+        Self {
+            width: g.width,
+            height: g.height,
+            cell_size_m: g.cell_size_m,
+            channels: config.channels.iter().map(|c| c.name.clone()).collect(),
+            total_mass: (0..view.channels).map(|c| view.total(c)).collect(),
+            max: (0..view.channels).map(|c| view.max(c)).collect(),
+            nan_cells: view.non_finite_cells() as u64,
+            deposits_applied: applied,
+            deposits_rejected: rejected_by_reason(rejected),
+        }
+    }
+}
+
+/// Named rejection counters (`FrameHeader::deposits_rejected` order).
+pub fn rejected_by_reason(counts: &[u64]) -> BTreeMap<String, u64> {
+    RejectReason::ALL
+        .iter()
+        .zip(counts)
+        .map(|(r, n)| (r.name().to_string(), *n))
+        .collect()
+}
+
+/// One robot at the end of a run.
+#[derive(Debug, Clone, Serialize)]
+pub struct RobotResult {
+    pub id: u32,
+    pub role: String,
+    pub true_pose: [f64; 3],
+    pub estimated_pose: Option<[f64; 3]>,
+    pub distance_travelled_m: f64,
+    pub trail_abandoned_at_s: Option<f64>,
+    pub collisions: u64,
+}
+
+/// The role a robot plays, as reported: `leader`, `follower`, `depositor`, `explorer`…
+pub fn role_name(scenario: &Scenario, id: u32) -> String {
+    use crate::follower::StrategyKind as K;
+    let Some(r) = scenario.roles(id) else {
+        return "idle".into();
+    };
+    let mut parts = Vec::new();
+    match r.follower.as_ref().map(|f| f.strategy) {
+        Some(K::Route) => parts.push("leader"),
+        Some(K::Inverse | K::Uniform) => parts.push("explorer"),
+        Some(K::Gradient | K::Antenna) => parts.push("follower"),
+        None => {}
+    }
+    if r.depositor.is_some() {
+        parts.push("depositor");
+    }
+    if parts.is_empty() {
+        "localizer".into()
+    } else {
+        parts.join("+")
+    }
+}
+
+/// Options of a single-process run.
+#[derive(Default)]
+pub struct SingleProcessOptions<'a> {
+    /// EKF-SLAM localizers instead of the landmark EKF.
+    pub slam: bool,
+    /// Called after every step with (step, steps).
+    pub progress: Option<&'a mut dyn FnMut(u64, u64)>,
+}
+
+struct Robot {
+    id: u32,
+    filter: Filter,
+    depositor: Option<Depositor>,
+    follower: Option<(Follower, PoseSource)>,
+    pose: Option<PoseMsg>,
+    collisions: u64,
+}
+
+/// Runs the scenario in this process and returns its summary and recording.
+pub fn run_single_process(
+    scenario: &Scenario,
+    mut options: SingleProcessOptions<'_>,
+) -> Result<(RunSummary, Recording), ProcessError> {
+    let setup = |e: String| ProcessError::Setup(e);
+    let mut world =
+        World::new(scenario.world.clone(), scenario.seed).map_err(|e| setup(e.to_string()))?;
+    let mut field = OwnedField::new(scenario.field.clone()).map_err(|e| setup(e.to_string()))?;
+    let mut scripted =
+        std::collections::VecDeque::from(scenario.scripted(world.wall_segments()).map_err(setup)?);
+    let scripted_total = scripted.len() as u64;
+    let mut robots = Vec::new();
+    for r in &scenario.world.robots {
+        let roles = scenario.roles(r.id);
+        let depositor = match roles.and_then(|x| x.depositor.clone()) {
+            Some(c) => Some(Depositor::new(c).map_err(|e| setup(format!("robot {}: {e}", r.id)))?),
+            None => None,
+        };
+        let follower = match scenario.follower_config(r.id) {
+            Some(c) => Some((
+                Follower::from_config(r.id, &c)
+                    .map_err(|e| setup(format!("robot {}: {e}", r.id)))?,
+                c.steer_by,
+            )),
+            None => None,
+        };
+        robots.push(Robot {
+            id: r.id,
+            filter: Filter::for_robot(scenario, r.id, options.slam)?,
+            depositor,
+            follower,
+            pose: None,
+            collisions: 0,
+        });
+    }
+    let mut rec = Recording {
+        walls: world
+            .wall_segments()
+            .iter()
+            .map(|s| (s.a_m, s.b_m))
+            .collect(),
+        ..Recording::default()
+    };
+    let dt = scenario.world.dt_secs;
+    let steps = scenario.steps();
+    let mut snapshot_times: Vec<f64> = scenario.snapshots_s.clone();
+    snapshot_times.sort_by(f64::total_cmp);
+    let mut probes: Vec<(f64, usize)> = scenario
+        .probes
+        .iter()
+        .enumerate()
+        .flat_map(|(i, p)| p.times_s.iter().map(move |t| (*t, i)))
+        .collect();
+    probes.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut probes = std::collections::VecDeque::from(probes);
+    let mut next_snapshot = 0;
+    let mut commands = vec![(0.0, 0.0); robots.len()];
+    for k in 0..steps {
+        let outputs = world.step(&commands);
+        let t = world.sim_time_s();
+        while scripted.front().is_some_and(|(ts, _)| *ts <= t + 1e-9) {
+            let (_, m) = scripted.pop_front().expect("checked");
+            let _ = field.offer(&m); // a rejection is counted by the field
+        }
+        for (r, out) in robots.iter_mut().zip(&outputs) {
+            r.collisions += out.truth.collided as u64;
+            if let Err(e) = r.filter.step(&out.sensor) {
+                // The localizer keeps its previous estimate, as the process does.
+                let _ = e;
+            }
+            let mut p = r.filter.to_msg(r.id, k);
+            // Simulated time as the stamp: deterministic, and what interval_s measures.
+            p.stamp_ns = (t * 1e9).round() as u64;
+            r.pose = Some(p);
+            if let Some(d) = r.depositor.as_mut() {
+                if let Ok(Some(m)) = d.process(&p) {
+                    let _ = field.offer(&m);
+                }
+            }
+        }
+        field.tick();
+        let ft = field.stepper.sim_time_s;
+        let view = field.view();
+        while probes.front().is_some_and(|(pt, _)| *pt <= ft + 1e-9) {
+            let (_, i) = probes.pop_front().expect("checked");
+            let p = &scenario.probes[i];
+            rec.probes.push(ProbeReading {
+                t_s: ft,
+                x: p.x_m,
+                y: p.y_m,
+                channel: p.channel,
+                value: view.value(p.channel as usize, p.x_m, p.y_m),
+            });
+        }
+        while next_snapshot < snapshot_times.len() && snapshot_times[next_snapshot] <= ft + 0.5 * dt
+        {
+            rec.snapshots
+                .push(snapshot(&scenario.field, ft, field.cells()));
+            next_snapshot += 1;
+        }
+        for ((r, out), cmd) in robots.iter_mut().zip(&outputs).zip(commands.iter_mut()) {
+            let pose = r.pose.expect("set above");
+            let mut state = None;
+            let mut level = None;
+            if let Some((f, source)) = r.follower.as_mut() {
+                let steer = match source {
+                    PoseSource::Estimate => pose,
+                    PoseSource::Truth => truth_as_pose(&out.truth),
+                };
+                match f.step_pose(&view, &steer, dt) {
+                    Ok(o) => {
+                        *cmd = (o.cmd.v_mps, o.cmd.omega_radps);
+                        state = Some(o.decision.state);
+                        level = Some(o.decision.sensed_level);
+                    }
+                    Err(_) => *cmd = (0.0, 0.0),
+                }
+            }
+            rec.robots.entry(r.id).or_default().push(RobotSample {
+                t_s: t,
+                true_pose: [out.truth.x_m, out.truth.y_m, out.truth.theta_rad],
+                est_pose: Some([pose.x_m, pose.y_m, pose.theta_rad]),
+                est_sigma_m: Some(sigma_max_m(&pose)),
+                v_mps: cmd.0,
+                omega_radps: cmd.1,
+                state,
+                sensed_level: level,
+            });
+        }
+        if let Some(p) = options.progress.as_mut() {
+            p(k + 1, steps);
+        }
+    }
+    let end = field.stepper.sim_time_s;
+    if rec.snapshots.last().is_none_or(|s| s.t_s < end) {
+        rec.snapshots
+            .push(snapshot(&scenario.field, end, field.cells()));
+    }
+    let counters = &field.stepper.counters;
+    let summary = RunSummary {
+        steps: world.step_count(),
+        sim_time_s: world.sim_time_s(),
+        ticks: field.stepper.sequence,
+        field: FieldSummary::of(
+            &scenario.field,
+            &field.view(),
+            counters.applied,
+            &counters.rejected,
+        ),
+        robots: robots
+            .iter()
+            .zip(world.poses())
+            .map(|(r, p)| RobotResult {
+                id: r.id,
+                role: role_name(scenario, r.id),
+                true_pose: [p.x_m, p.y_m, p.theta_rad],
+                estimated_pose: r.pose.map(|e| [e.x_m, e.y_m, e.theta_rad]),
+                distance_travelled_m: rec.distance_travelled_m(r.id),
+                trail_abandoned_at_s: rec.trail_abandoned_at_s(r.id),
+                collisions: r.collisions,
+            })
+            .collect(),
+        scripted_deposits: scripted_total,
+    };
+    Ok((summary, rec))
+}
+
+/// A copy of the frame for the pictures.
+pub fn snapshot(config: &FieldConfig, t_s: f64, cells: &[f32]) -> Snapshot {
+    let g = config.geometry();
+    Snapshot {
+        t_s,
+        width: g.width,
+        height: g.height,
+        cell_size_m: g.cell_size_m,
+        channels: config.channels.iter().map(|c| c.name.clone()).collect(),
+        planes: cells.to_vec(),
+    }
+}
+
+/// A true pose as a pose message with zero covariance (a leader steered by its operator).
+pub fn truth_as_pose(t: &TruthMsg) -> PoseMsg {
+    PoseMsg {
+        step: t.step,
+        robot_id: t.robot_id,
+        x_m: t.x_m,
+        y_m: t.y_m,
+        theta_rad: t.theta_rad,
+        ..PoseMsg::default()
+    }
+}
+
+/// √λmax of the position covariance (m): the long half-axis of the 1σ error ellipse.
+pub fn sigma_max_m(p: &PoseMsg) -> f64 {
+    let [a, b, c] = p.cov_xy();
+    let half = 0.5 * (a + c);
+    let d = (0.25 * (a - c).powi(2) + b * b).sqrt();
+    (half + d).max(0.0).sqrt()
+}

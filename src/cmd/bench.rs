@@ -1,0 +1,172 @@
+//! `pheromone bench`: glue over the `pheromone-bench` crate. The measured parties run as separate
+//! processes: this binary again, through the hidden `bench-peer` subcommand.
+
+use anyhow::Context;
+use clap::Args;
+use pheromone_bench::{Latency, Mode, Options, Report};
+
+use super::bad;
+
+/// Measure the field side by side with the alternatives, on this machine, in one run.
+///
+/// Hop latency (ours vs raw iceoryx2), frame delivery of 1 MiB and 16 MiB fields to 1 and 8
+/// reader processes (ours vs a Unix socket with serde, and Zenoh on loopback in a build with
+/// `--features zenoh`), deposit-to-visible latency, and the tick/memcpy ratio at each size.
+/// Progress goes to stderr. The default run takes a few minutes; `--quick` under a minute.
+#[derive(Args)]
+pub struct BenchArgs {
+    /// Print one JSON object on stdout instead of tables.
+    #[arg(long)]
+    json: bool,
+    /// Fewer samples: well under a minute.
+    #[arg(long, conflicts_with = "smoke")]
+    quick: bool,
+    /// A few samples of everything (for tests): checks that each measurement runs.
+    #[arg(long, hide = true)]
+    smoke: bool,
+    /// Tick rate (Hz) of the field in the deposit-to-visible measurement.
+    #[arg(long, default_value_t = 100.0)]
+    tick_hz: f32,
+    /// Cells per side of the field in the deposit-to-visible measurement.
+    #[arg(long, default_value_t = 1024)]
+    visible_width: u32,
+    /// Do not pin processes to cores.
+    #[arg(long)]
+    no_pin: bool,
+}
+
+/// One peer process of a measurement (started by `pheromone bench`).
+#[derive(Args)]
+pub struct BenchPeerArgs {
+    /// The peer's specification, JSON.
+    spec: String,
+}
+
+pub fn run(a: BenchArgs) -> anyhow::Result<()> {
+    if !(a.tick_hz.is_finite() && a.tick_hz > 0.0 && a.tick_hz <= 10_000.0) {
+        return Err(bad(format!(
+            "--tick-hz {}: expected a rate in (0, 10000] Hz",
+            a.tick_hz
+        )));
+    }
+    if !(16..=4096).contains(&a.visible_width) {
+        return Err(bad(format!(
+            "--visible-width {}: expected 16 to 4096 cells",
+            a.visible_width
+        )));
+    }
+    let program = std::env::current_exe().context("find this executable to start the peers")?;
+    let opts = Options {
+        mode: if a.smoke {
+            Mode::Smoke
+        } else if a.quick {
+            Mode::Quick
+        } else {
+            Mode::Full
+        },
+        pin: !a.no_pin,
+        tick_hz: a.tick_hz,
+        visible_width: a.visible_width,
+        progress: true,
+        launcher: pheromone_bench::Launcher {
+            program,
+            args: vec!["bench-peer".into()],
+        },
+    };
+    let report = pheromone_bench::run(&opts)?;
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_tables(&report);
+    }
+    Ok(())
+}
+
+pub fn run_peer(a: BenchPeerArgs) -> anyhow::Result<()> {
+    pheromone_bench::run_peer(&a.spec).map_err(|e| match e {
+        pheromone_bench::BenchError::Spec { .. } => bad(e.to_string()),
+        e => e.into(),
+    })
+}
+
+fn lat(l: &Latency, scale: f64, unit: &str) -> String {
+    format!(
+        "{:>9.1} {:>9.1} {:>9.1} {:>9.1} {unit}",
+        l.p50 * scale,
+        l.p99 * scale,
+        l.p999 * scale,
+        l.max * scale
+    )
+}
+
+fn print_tables(r: &Report) {
+    println!(
+        "machine: {} ({} cores, {} {}), {} run{}",
+        r.machine.cpu_model,
+        r.machine.cores,
+        r.machine.os,
+        r.machine.kernel,
+        serde_json::to_string(&r.mode)
+            .unwrap_or_default()
+            .trim_matches('"'),
+        if r.pinned { ", pinned" } else { "" }
+    );
+    println!("\ntick / memcpy            memcpy µs   plain µs  ratio   ambient µs  ratio");
+    for (size, t) in &r.tick_vs_memcpy {
+        println!(
+            "{size:<22} {:>10.1} {:>10.1} {:>6.2} {:>12.1} {:>6.2}",
+            t.memcpy_us, t.exponential_us, t.exponential_ratio, t.ambient_us, t.ambient_ratio
+        );
+    }
+    let h = &r.hop_ns;
+    println!("\nhop (one way)                    p50       p99     p99.9       max");
+    println!("ours, wait             {}", lat(&h.ours, 1e-3, "µs"));
+    println!(
+        "raw iceoryx2, wait     {}",
+        lat(&h.raw_iceoryx2, 1e-3, "µs")
+    );
+    println!(
+        "ours, busy-poll        {}",
+        lat(&h.busy_poll.ours, 1e-3, "µs")
+    );
+    println!(
+        "raw iceoryx2, busy     {}",
+        lat(&h.busy_poll.raw_iceoryx2, 1e-3, "µs")
+    );
+    println!("\nframe delivery                   p50       p99     p99.9       max");
+    for (size, f) in &r.frame_ns {
+        let rows: [(&str, Option<&Latency>); 7] = [
+            ("ours, 1 reader", Some(&f.ours)),
+            ("UDS+serde, 1 reader", Some(&f.uds_serde)),
+            ("Zenoh, 1 reader", f.zenoh.as_ref()),
+            ("ours, 8 readers", Some(&f.readers_8.ours)),
+            ("UDS+serde, 8 readers", Some(&f.readers_8.uds_serde)),
+            ("Zenoh, 8 readers", f.readers_8.zenoh.as_ref()),
+            ("ours, busy-poll", Some(&f.ours_busy_poll)),
+        ];
+        for (what, l) in rows {
+            match l {
+                Some(l) => println!("{size:>5} {what:<16} {}", lat(l, 1e-6, "ms")),
+                None => println!("{size:>5} {what:<16} (not built: --features zenoh)"),
+            }
+        }
+    }
+    let v = &r.deposit_to_visible_us;
+    println!(
+        "\ndeposit to visible, {w}x{w} at {} Hz  {}",
+        v.tick_hz,
+        lat(&v.latency, 1e-3, "ms"),
+        w = v.width
+    );
+    println!("\ntargets");
+    for t in &r.targets {
+        println!(
+            "  {:<4} {} {} {}: measured {}",
+            if t.met { "met" } else { "MISS" },
+            t.name,
+            t.op,
+            t.limit,
+            t.measured
+        );
+    }
+}

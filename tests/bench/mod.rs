@@ -1,0 +1,117 @@
+//! `pheromone bench`: a run with a few samples of everything prints one JSON object with every
+//! figure, each latency ordered (p50 ≤ p99 ≤ p99.9 ≤ max) and positive. Speed is never asserted.
+
+use std::time::Duration;
+
+use serde_json::Value;
+
+use crate::harness::*;
+
+fn check_latency(v: &Value, what: &str) {
+    let get = |k: &str| {
+        v.get(k)
+            .and_then(Value::as_f64)
+            .unwrap_or_else(|| panic!("{what}.{k} missing or not a number: {v}"))
+    };
+    let (p50, p99, p999, max) = (get("p50"), get("p99"), get("p999"), get("max"));
+    assert!(p50 > 0.0, "{what}: p50 {p50} is not positive");
+    assert!(
+        p50 <= p99 && p99 <= p999 && p999 <= max,
+        "{what}: percentiles out of order: {v}"
+    );
+    assert!(get("samples") >= 1.0, "{what}: no samples");
+}
+
+#[test]
+fn bench_smoke_run_reports_every_figure_as_one_json_object() {
+    let out = Proc::spawn(&[
+        "bench",
+        "--smoke",
+        "--json",
+        "--tick-hz",
+        "200",
+        "--visible-width",
+        "256",
+    ])
+    .wait_exit(Duration::from_secs(300));
+    assert!(out.status.success(), "bench failed: {}", stderr(&out));
+    let r = json(&out);
+
+    let machine = &r["machine"];
+    assert!(
+        machine["cpu_model"].as_str().is_some_and(|s| !s.is_empty()),
+        "{machine}"
+    );
+    assert!(
+        machine["cores"].as_u64().is_some_and(|c| c >= 1),
+        "{machine}"
+    );
+
+    let ticks = r["tick_vs_memcpy"].as_object().expect("tick_vs_memcpy");
+    assert!(!ticks.is_empty());
+    for (size, row) in ticks {
+        for k in ["memcpy_us", "exponential_us", "ambient_us"] {
+            assert!(
+                row[k].as_f64().is_some_and(|v| v > 0.0),
+                "tick_vs_memcpy.{size}.{k}: {row}"
+            );
+        }
+        for k in ["exponential_ratio", "ambient_ratio"] {
+            assert!(
+                row[k].as_f64().is_some_and(|v| v > 0.0),
+                "tick_vs_memcpy.{size}.{k}: {row}"
+            );
+        }
+    }
+
+    let hop = &r["hop_ns"];
+    check_latency(&hop["ours"], "hop_ns.ours");
+    check_latency(&hop["raw_iceoryx2"], "hop_ns.raw_iceoryx2");
+    check_latency(&hop["busy_poll"]["ours"], "hop_ns.busy_poll.ours");
+    check_latency(
+        &hop["busy_poll"]["raw_iceoryx2"],
+        "hop_ns.busy_poll.raw_iceoryx2",
+    );
+
+    let zenoh_built = r["zenoh_built"].as_bool().expect("zenoh_built");
+    assert_eq!(zenoh_built, cfg!(feature = "zenoh"));
+    for size in ["1MiB", "16MiB"] {
+        let f = &r["frame_ns"][size];
+        for k in ["ours", "uds_serde", "ours_busy_poll"] {
+            check_latency(&f[k], &format!("frame_ns.{size}.{k}"));
+        }
+        for k in ["ours", "uds_serde"] {
+            check_latency(
+                &f["readers_8"][k],
+                &format!("frame_ns.{size}.readers_8.{k}"),
+            );
+        }
+        for z in [&f["zenoh"], &f["readers_8"]["zenoh"]] {
+            if zenoh_built {
+                check_latency(z, &format!("frame_ns.{size}.zenoh"));
+            } else {
+                assert!(z.is_null(), "zenoh figures without zenoh: {z}");
+            }
+        }
+    }
+
+    let v = &r["deposit_to_visible_us"];
+    check_latency(v, "deposit_to_visible_us");
+    check_latency(
+        &v["tick_compute_us"],
+        "deposit_to_visible_us.tick_compute_us",
+    );
+    assert_eq!(v["tick_hz"].as_f64(), Some(200.0));
+
+    let targets = r["targets"].as_array().expect("targets");
+    assert!(targets.len() >= 6, "{targets:?}");
+    assert!(targets.iter().all(|t| t["met"].is_boolean()));
+}
+
+#[test]
+fn bench_rejects_a_bad_tick_rate_with_status_2() {
+    let out = run(&["bench", "--tick-hz=0", "--json"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--tick-hz"), "{}", stderr(&out));
+    assert!(out.stdout.is_empty());
+}

@@ -1,0 +1,192 @@
+//! Soak (issue 7, part 6): one field and eight robots — a world on wall time and, per robot, a
+//! localizer, a depositor and a follower: 25 client processes — with random SIGKILLs (seeded)
+//! and restarts for a bounded time. Asserts that the field stayed alive (a newer frame after every
+//! kill), that frame sequence numbers only grew, that no cell went non-finite, that every killed
+//! client's node was cleaned and its restart attached again (the field's services have exactly as
+//! many reader and depositor slots as clients), and that none of the run's nodes nor /dev/shm
+//! entries remain after shutdown.
+//!
+//! `PHEROMONE_SOAK_SECS` (default 60; CI runs the default) sets how long clients are killed,
+//! `PHEROMONE_SOAK_SEED` the seed. Figures are printed (`--nocapture`), never asserted.
+
+use std::time::{Duration, Instant};
+
+use field::shm::FieldWatch;
+
+use crate::crash::{
+    env_u64, exited, interrupt_all, kill, wait_attached, FrameWatch, Rng, Run, LIVENESS, WAIT,
+};
+use crate::harness::*;
+
+const ROBOTS: u32 = 8;
+
+#[test]
+fn a_field_and_eight_robots_survive_random_kills_and_leave_nothing_behind() {
+    let run = Run::new("s");
+    let field = unique("sf");
+    let world = unique("sw");
+    let scenario = run.scenario(ROBOTS);
+    let soak = Duration::from_secs(env_u64("PHEROMONE_SOAK_SECS", 60));
+    let seed = env_u64("PHEROMONE_SOAK_SEED", 11);
+    let mut rng = Rng(seed);
+    let readers = ROBOTS + 1; // the followers and this test
+    let depositors = ROBOTS + 1; // the depositors and the world (scripted trail)
+    let mut field_proc = run.spawn(
+        &[
+            "field",
+            "--name",
+            &field,
+            "--scenario",
+            &scenario,
+            "--tick-hz",
+            "50",
+            "--max-readers",
+            &readers.to_string(),
+            "--max-depositors",
+            &depositors.to_string(),
+            "--json",
+        ],
+        "field",
+    );
+    let watch = FrameWatch::start(&run, &field);
+    watch.wait_newer(0, WAIT, "the field's first frame");
+    let node = run.node(&format!("soak-test-{}", std::process::id()));
+    let status = eventually(WAIT, "the field's services", || {
+        FieldWatch::open(&node, &field).ok()
+    });
+
+    // Client k: 0 = the world, then localizer, depositor, follower of robot (k − 1) / 3.
+    let clients = 1 + 3 * ROBOTS as usize;
+    let spawn = |k: usize| -> Proc {
+        let (mut args, name): (Vec<String>, String) = if k == 0 {
+            (vec!["world".into(), "--realtime".into()], "world".into())
+        } else {
+            let robot = ((k - 1) / 3).to_string();
+            let role = ["localizer", "depositor", "follower"][(k - 1) % 3];
+            (
+                vec![role.into(), "--robot".into(), robot.clone()],
+                format!("{role}-r{robot}"),
+            )
+        };
+        args.extend(
+            [
+                "--scenario",
+                &scenario,
+                "--world",
+                &world,
+                "--field",
+                &field,
+            ]
+            .map(String::from),
+        );
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        run.spawn(&args, &name)
+    };
+    let mut procs: Vec<Proc> = (0..clients).map(spawn).collect();
+    let attached = |s: &field::shm::FieldStatus| {
+        s.publishers == 1
+            && s.subscribers == readers as usize + 1
+            && s.depositors == depositors as usize
+    };
+    wait_attached(
+        &run,
+        &status,
+        attached,
+        "every client to attach",
+        Duration::from_secs(120),
+        || {},
+    );
+
+    let started = Instant::now();
+    let (mut kills, mut self_exits, mut rounds) = (0u64, 0u64, 0u64);
+    while started.elapsed() < soak {
+        rounds += 1;
+        let k = rng.below(clients as u64) as usize;
+        // The instant: after 0–50 more frames (up to a second at 50 Hz).
+        let frames = rng.below(51);
+        watch.wait_newer(watch.sequence() + frames, WAIT, "frames before the kill");
+        let at = watch.sequence();
+        kills += kill(&mut procs[k]) as u64;
+        watch.wait_newer(
+            at,
+            LIVENESS,
+            &format!("a frame after killing client {k} (round {rounds})"),
+        );
+        procs[k] = spawn(k);
+        // Roles stop by themselves when the world is gone: restart whatever exited.
+        wait_attached(
+            &run,
+            &status,
+            attached,
+            &format!("the clients to attach again after killing client {k} (round {rounds})"),
+            WAIT,
+            || {
+                for (i, p) in procs.iter_mut().enumerate() {
+                    if exited(p) {
+                        self_exits += 1;
+                        *p = spawn(i);
+                    }
+                }
+            },
+        );
+        assert!(
+            !exited(&mut field_proc),
+            "round {rounds}: the field died: {}",
+            run.log("field")
+        );
+    }
+    let elapsed = started.elapsed();
+
+    interrupt_all(procs);
+    drop(status);
+    let report = watch.finish();
+    field_proc.interrupt();
+    let out = field_proc.wait_exit(WAIT);
+    assert!(
+        out.status.success(),
+        "field: {:?} {}",
+        out.status,
+        run.log("field")
+    );
+    let summary = json(&out);
+    drop(node);
+    eventually(
+        Duration::from_secs(10),
+        "the run's nodes to be gone",
+        || {
+            let (alive, dead) = run.nodes();
+            (alive.is_empty() && dead.is_empty()).then_some(())
+        },
+    );
+    let shm_left = run.shm_entries();
+    eprintln!(
+        "soak: {kills} kills in {rounds} rounds over {:.1} s (seed {seed}), {self_exits} roles \
+         stopped by themselves and were restarted; frames seen {} (sequence {}..{}, {} missed by \
+         the reader), longest tick gap {:.1} ms at frame {}, field ticks {}, deposits applied {} \
+         rejected {}; /dev/shm entries left: {}",
+        elapsed.as_secs_f64(),
+        report.frames,
+        report.first_sequence,
+        report.last_sequence,
+        report.missed_frames,
+        report.longest_gap_ns as f64 / 1e6,
+        report.longest_gap_at,
+        summary["ticks"],
+        summary["deposits_applied"],
+        report.deposits_rejected,
+        shm_left.len()
+    );
+    eprintln!(
+        "soak: reader errors (attached again): {:?}",
+        report.reader_errors
+    );
+    assert!(report.error.is_none(), "{:?}", report.error);
+    assert!(
+        report.regressions.is_empty(),
+        "sequence went back: {:?}",
+        report.regressions
+    );
+    assert_eq!(report.non_finite_frames, 0, "frames with non-finite cells");
+    assert!(kills > 0);
+    assert!(shm_left.is_empty(), "left in /dev/shm: {shm_left:?}");
+}
