@@ -19,6 +19,9 @@ use crate::messages::{CmdMsg, FollowerStatusMsg, PoseMsg, SensorMsg, TruthMsg};
 use crate::scenario::Scenario;
 use crate::world::World;
 
+/// Steps without a new frame after which a follower checks whether its field is still alive.
+const STALE_STEPS: u32 = 10;
+
 /// How often the world re-sends a step nobody has answered yet.
 const RESEND: Duration = Duration::from_millis(200);
 
@@ -570,6 +573,7 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
     };
     let last = std::cell::Cell::new(None::<CmdMsg>);
     let mut rejected = 0u64;
+    let (mut stale_steps, mut field_gone) = (0u32, false);
     role_loop(
         node,
         &end,
@@ -578,7 +582,23 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
         &mut summary,
         |m| {
             let p = to_pose(m);
-            reader.update()?;
+            // A field that died leaves its last frame with the reader: steer on it, say so
+            // once, and say when a field of that name publishes again.
+            if reader.update()? {
+                stale_steps = 0;
+                if field_gone {
+                    field_gone = false;
+                    eprintln!("follower r{robot}: field '{field_name}' is publishing again");
+                }
+            } else {
+                stale_steps += 1;
+                if stale_steps >= STALE_STEPS && !field_gone && !reader.field_alive() {
+                    field_gone = true;
+                    eprintln!(
+                        "follower r{robot}: field '{field_name}' is gone; steering on its last frame until it returns"
+                    );
+                }
+            }
             if reader.frame().is_none() {
                 reader.wait_frame(Duration::from_secs(5))?;
             }
