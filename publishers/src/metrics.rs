@@ -40,19 +40,7 @@ pub fn scenario_metrics(scenario: &Scenario, rec: &Recording) -> serde_json::Val
 
 /// Distance from a point to a polyline (m).
 pub fn distance_to_polyline_m(p: [f64; 2], line: &[[f64; 2]]) -> f64 {
-    line.windows(2)
-        .map(|w| {
-            let (a, b) = (w[0], w[1]);
-            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-            let len2 = dx * dx + dy * dy;
-            let t = if len2 > 0.0 {
-                (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
-        })
-        .fold(f64::INFINITY, f64::min)
+    project_on_polyline(p, line).0
 }
 
 /// Nearest point of a polyline: (distance to it, arc length from the polyline's start) (m).

@@ -70,13 +70,7 @@ impl Observer {
                 rows: BTreeMap::new(),
             });
         }
-        let mut probes: Vec<(f64, usize)> = scenario
-            .probes
-            .iter()
-            .enumerate()
-            .flat_map(|(i, p)| p.times_s.iter().map(move |t| (*t, i)))
-            .collect();
-        probes.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let probes = scenario.probe_schedule();
         let mut snapshots = scenario.snapshots_s.clone();
         snapshots.sort_by(f64::total_cmp);
         Ok(Self {

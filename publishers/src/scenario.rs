@@ -535,6 +535,18 @@ impl Scenario {
         Ok(out)
     }
 
+    /// Every probe reading to take, as (time, index into `probes`), sorted by time.
+    pub fn probe_schedule(&self) -> Vec<(f64, usize)> {
+        let mut probes: Vec<(f64, usize)> = self
+            .probes
+            .iter()
+            .enumerate()
+            .flat_map(|(i, p)| p.times_s.iter().map(move |t| (*t, i)))
+            .collect();
+        probes.sort_by(|a, b| a.0.total_cmp(&b.0));
+        probes
+    }
+
     /// The scenario as TOML (what `--print-config`-style dumps and sub-processes read).
     pub fn to_toml(&self) -> Result<String, String> {
         toml::to_string(self).map_err(|e| e.to_string())

@@ -181,14 +181,7 @@ pub fn run_single_process(
     let steps = scenario.steps();
     let mut snapshot_times: Vec<f64> = scenario.snapshots_s.clone();
     snapshot_times.sort_by(f64::total_cmp);
-    let mut probes: Vec<(f64, usize)> = scenario
-        .probes
-        .iter()
-        .enumerate()
-        .flat_map(|(i, p)| p.times_s.iter().map(move |t| (*t, i)))
-        .collect();
-    probes.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut probes = std::collections::VecDeque::from(probes);
+    let mut probes = std::collections::VecDeque::from(scenario.probe_schedule());
     let mut next_snapshot = 0;
     let mut commands = vec![(0.0, 0.0); robots.len()];
     for k in 0..steps {
