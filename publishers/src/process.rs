@@ -85,13 +85,19 @@ fn receiver<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'stati
 /// Watches the world's clock for the end of the run: its `finished` message, or the world's
 /// clock publisher disappearing after it was seen (a world that ended, or died, before this
 /// subscriber connected to it).
-struct EndWatch(Receiver<ClockMsg>, std::cell::Cell<bool>);
+struct EndWatch {
+    clock: Receiver<ClockMsg>,
+    /// The world has been seen attached (so its absence later means it is gone).
+    seen: std::cell::Cell<bool>,
+    /// The world's step count when it announced the end.
+    final_steps: std::cell::Cell<Option<u64>>,
+}
 
 impl EndWatch {
     fn new(node: &Node<Svc>, world: &str) -> Result<Self, ShmError> {
         let (service, wake) = clock_services(world);
-        Ok(Self(
-            Receiver::create(
+        Ok(Self {
+            clock: Receiver::create(
                 node,
                 &service,
                 &wake,
@@ -101,20 +107,29 @@ impl EndWatch {
                     ..LinkOptions::default()
                 },
             )?,
-            std::cell::Cell::new(false),
-        ))
+            seen: std::cell::Cell::new(false),
+            final_steps: std::cell::Cell::new(None),
+        })
     }
 
     /// True once the world has announced the end (drains the clock queue).
     fn finished(&self) -> Result<bool, ShmError> {
         let mut done = false;
-        while let Some(m) = self.0.try_recv()? {
-            done |= m.finished != 0;
+        while let Some(m) = self.clock.try_recv()? {
+            if m.finished != 0 {
+                done = true;
+                self.final_steps.set(Some(m.step));
+            }
         }
-        let world_attached = self.0.senders() > 0;
-        let world_gone = self.1.get() && !world_attached;
-        self.1.set(self.1.get() | world_attached);
+        let world_attached = self.clock.senders() > 0;
+        let world_gone = self.seen.get() && !world_attached;
+        self.seen.set(self.seen.get() | world_attached);
         Ok(done || world_gone)
+    }
+
+    /// The world's step count at its announced end (None when it vanished without one).
+    fn final_steps(&self) -> Option<u64> {
+        self.final_steps.get()
     }
 }
 
@@ -388,29 +403,59 @@ fn role_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'stat
     mut on_step: impl FnMut(&T) -> Result<(), ProcessError>,
     mut on_repeat: impl FnMut() -> Result<(), ProcessError>,
 ) -> Result<(), ProcessError> {
+    let mut handle = |m: &T, summary: &mut RoleSummary| -> Result<(), ProcessError> {
+        let step = step_of(m);
+        if summary.last_step.is_some_and(|l| step <= l) {
+            summary.repeats += 1;
+            on_repeat()
+        } else {
+            on_step(m)?;
+            summary.steps += 1;
+            summary.last_step = Some(step);
+            Ok(())
+        }
+    };
     loop {
         if let Some(m) = rx.recv_timeout(Duration::from_millis(100))? {
-            let step = step_of(&m);
-            if summary.last_step.is_some_and(|l| step <= l) {
-                summary.repeats += 1;
-                on_repeat()?;
-            } else {
-                on_step(&m)?;
-                summary.steps += 1;
-                summary.last_step = Some(step);
-            }
+            handle(&m, summary)?;
         }
         // Read the clock every round, not only when idle: a subscriber connects to the world's
         // publisher when it receives, and a world that ends before that connection exists
         // takes its last message with it.
         if end.finished()? {
-            return Ok(());
+            break;
         }
         if node.wait(Duration::ZERO).is_err() {
             return Ok(());
         }
     }
+    // The world has ended, but a role that nobody waits on in lockstep (a depositor, a localizer
+    // behind a truth-steered follower) may still have the last steps queued or on their way
+    // from its upstream role: handle them before leaving. Stop when the last step is in, when
+    // the upstream is gone and its queue is empty, or after a bounded wait.
+    let want_last = end.final_steps().and_then(|n| n.checked_sub(1));
+    let deadline = Instant::now() + END_DRAIN;
+    loop {
+        if let Some(m) = rx.try_recv()? {
+            handle(&m, summary)?;
+            continue;
+        }
+        let complete = match (want_last, summary.last_step) {
+            (Some(want), Some(last)) => last >= want,
+            (None, _) => true,
+            (Some(_), None) => false,
+        };
+        if complete || rx.senders() == 0 || Instant::now() >= deadline {
+            return Ok(());
+        }
+        if node.wait(Duration::from_millis(2)).is_err() {
+            return Ok(());
+        }
+    }
 }
+
+/// How long a role keeps handling its queue after the world announced the end.
+const END_DRAIN: Duration = Duration::from_secs(3);
 
 /// The localizer process: sensors → EKF → pose with covariance.
 pub fn run_localizer(
