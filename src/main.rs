@@ -36,6 +36,10 @@ enum Command {
     Depositor(cmd::roles::DepositorArgs),
     /// Run the follower of one robot.
     Follower(cmd::roles::FollowerArgs),
+    /// Run the graph writer of a node-graph (regions) run: graph, regions and lockstep clock.
+    Graph(cmd::graph::GraphArgs),
+    /// Run one robot of a node-graph (regions) run.
+    GraphRobot(cmd::graph::GraphRobotArgs),
     /// Read a running field: print its header and the value at a point (a minimal reader).
     Probe(cmd::probe::ProbeArgs),
     /// Send one deposit to a running field.
@@ -58,6 +62,8 @@ fn main() -> ExitCode {
         Command::Localizer(a) => cmd::roles::run_localizer_cmd(a),
         Command::Depositor(a) => cmd::roles::run_depositor_cmd(a),
         Command::Follower(a) => cmd::roles::run_follower_cmd(a),
+        Command::Graph(a) => cmd::graph::run_writer(a),
+        Command::GraphRobot(a) => cmd::graph::run_robot(a),
         Command::Probe(a) => cmd::probe::run_probe(a),
         Command::Deposit(a) => cmd::probe::run_deposit(a),
         Command::Bench(a) => cmd::bench::run(a),

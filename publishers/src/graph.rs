@@ -10,7 +10,9 @@
 //! and [`sim`] the robot agents and a single-process simulation of the paper's corridor.
 
 pub mod conflict;
+pub mod process;
 pub mod region;
+pub mod run;
 pub mod shm;
 pub mod sim;
 pub mod skeleton;

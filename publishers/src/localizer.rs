@@ -98,6 +98,16 @@ pub struct EkfConfig {
     pub gate_chi2: f64,
     pub limits: InputLimits,
     pub loss: LossConfig,
+    /// `landmark_region_m = [min_x, min_y, max_x, max_y]` (m, world frame): the captured area
+    /// of seed 001 Algorithm 1 lines 10–14. When set, [`Ekf::new`] restricts association to the
+    /// map landmarks inside this axis-aligned box (edges included), so an observation is
+    /// compared only with l(A_c) instead of the whole map; an observation of a landmark outside
+    /// finds no candidate and counts as `observations_unmatched`. A box holding no landmark is
+    /// allowed (every observation is then unmatched). Unset (the default) = the whole map.
+    /// Must be finite with min < max. `pheromone localizer --landmark-region` overrides it; the
+    /// filter can be changed later with [`Ekf::set_landmark_filter`]. EKF with a known map
+    /// only: EKF-SLAM refuses it.
+    pub landmark_region_m: Option<[f64; 4]>,
 }
 
 impl Default for EkfConfig {
@@ -107,8 +117,88 @@ impl Default for EkfConfig {
             gate_chi2: 9.21,
             limits: InputLimits::default(),
             loss: LossConfig::default(),
+            landmark_region_m: None,
         }
     }
+}
+
+impl EkfConfig {
+    /// Checks every setting (what [`Ekf::new`] checks besides the map and the initial state).
+    pub fn validate(&self) -> Result<(), LocalizerError> {
+        validate_common(&self.noise, &self.limits, self.gate_chi2)?;
+        let loss = &self.loss;
+        if let Some(t) = loss.after_s {
+            if !t.is_finite() {
+                return Err(invalid("loss.after_s", t, "finite"));
+            }
+        }
+        if !(0.0..=1.0).contains(&loss.landmark_dropout) {
+            return Err(invalid(
+                "loss.landmark_dropout",
+                loss.landmark_dropout,
+                "in [0, 1]",
+            ));
+        }
+        if !(loss.noise_inflation.is_finite() && loss.noise_inflation >= 1.0) {
+            return Err(invalid(
+                "loss.noise_inflation",
+                loss.noise_inflation,
+                "finite and >= 1",
+            ));
+        }
+        if let Some(region) = self.landmark_region_m {
+            check_landmark_region(region, LANDMARK_REGION_KEY)?;
+        }
+        Ok(())
+    }
+}
+
+/// The [`EkfConfig`] key of the captured area.
+pub const LANDMARK_REGION_KEY: &str = "landmark_region_m";
+/// The `pheromone localizer` flag that overrides [`LANDMARK_REGION_KEY`].
+pub const LANDMARK_REGION_FLAG: &str = "--landmark-region";
+
+/// Checks a landmark region `[min_x, min_y, max_x, max_y]` (m): finite, min_x < max_x and
+/// min_y < max_y. `key` names the setting in the error.
+pub fn check_landmark_region(
+    region: [f64; 4],
+    key: &'static str,
+) -> Result<[f64; 4], LocalizerError> {
+    let bad = |expected| LocalizerError::InvalidRegion {
+        key,
+        value: format!("{region:?}"),
+        expected,
+    };
+    if !region.iter().all(|v| v.is_finite()) {
+        return Err(bad("four finite numbers [min_x, min_y, max_x, max_y]"));
+    }
+    let [min_x, min_y, max_x, max_y] = region;
+    if !(min_x < max_x && min_y < max_y) {
+        return Err(bad("min_x < max_x and min_y < max_y"));
+    }
+    Ok(region)
+}
+
+/// Parses the `--landmark-region XMIN,YMIN,XMAX,YMAX` flag (m) and checks it like
+/// [`check_landmark_region`]; the error names the flag and the text given.
+pub fn parse_landmark_region(text: &str) -> Result<[f64; 4], LocalizerError> {
+    let bad = |expected| LocalizerError::InvalidRegion {
+        key: LANDMARK_REGION_FLAG,
+        value: format!("{text:?}"),
+        expected,
+    };
+    let numbers: Vec<f64> = text
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| bad("four comma-separated numbers XMIN,YMIN,XMAX,YMAX in metres"))?;
+    let region: [f64; 4] = numbers
+        .try_into()
+        .map_err(|_| bad("four comma-separated numbers XMIN,YMIN,XMAX,YMAX in metres"))?;
+    check_landmark_region(region, LANDMARK_REGION_FLAG).map_err(|e| match e {
+        LocalizerError::InvalidRegion { expected, .. } => bad(expected),
+        other => other,
+    })
 }
 
 /// Why an input or a setting was rejected.
@@ -146,6 +236,14 @@ pub enum LocalizerError {
     /// The initial mean is not finite or the covariance not symmetric positive semi-definite.
     #[error("initial state: mean not finite or covariance not symmetric positive semi-definite")]
     InvalidInitialState,
+    /// A landmark region (`landmark_region_m`, `--landmark-region`) is not four finite numbers
+    /// with min < max.
+    #[error("`{key}` = {value} is invalid ({expected})")]
+    InvalidRegion {
+        key: &'static str,
+        value: String,
+        expected: &'static str,
+    },
     /// A landmark filter names a landmark the map does not have.
     #[error("landmark index {index} is out of range (the map has {len})")]
     LandmarkIndexOutOfRange { index: usize, len: usize },
@@ -195,6 +293,7 @@ impl EkfCounters {
             LocalizerError::BadRange { .. } => self.rejected_bad_range += 1,
             LocalizerError::BadObservationCount { .. } => self.rejected_bad_count += 1,
             LocalizerError::InvalidConfig { .. }
+            | LocalizerError::InvalidRegion { .. }
             | LocalizerError::InvalidInitialState
             | LocalizerError::LandmarkIndexOutOfRange { .. } => {}
         }
@@ -470,27 +569,7 @@ impl Ekf {
         initial_pose: Pose2,
         initial_cov: Matrix3<f64>,
     ) -> Result<Self, LocalizerError> {
-        validate_common(&config.noise, &config.limits, config.gate_chi2)?;
-        let loss = &config.loss;
-        if let Some(t) = loss.after_s {
-            if !t.is_finite() {
-                return Err(invalid("loss.after_s", t, "finite"));
-            }
-        }
-        if !(0.0..=1.0).contains(&loss.landmark_dropout) {
-            return Err(invalid(
-                "loss.landmark_dropout",
-                loss.landmark_dropout,
-                "in [0, 1]",
-            ));
-        }
-        if !(loss.noise_inflation.is_finite() && loss.noise_inflation >= 1.0) {
-            return Err(invalid(
-                "loss.noise_inflation",
-                loss.noise_inflation,
-                "finite and >= 1",
-            ));
-        }
+        config.validate()?;
         for (i, lm) in map.iter().enumerate() {
             if !(lm.x_m.is_finite() && lm.y_m.is_finite()) {
                 return Err(invalid(format!("map[{i}]"), f64::NAN, "finite coordinates"));
@@ -504,7 +583,7 @@ impl Ekf {
         if !mean.iter().all(|v| v.is_finite()) || !valid_covariance3(&initial_cov) {
             return Err(LocalizerError::InvalidInitialState);
         }
-        Ok(Self {
+        let mut ekf = Self {
             config,
             map,
             filter: None,
@@ -514,7 +593,17 @@ impl Ekf {
             dropout_acc: 0.0,
             last_used: 0,
             counters: EkfCounters::default(),
-        })
+        };
+        if let Some([min_x, min_y, max_x, max_y]) = config.landmark_region_m {
+            // Algorithm 1 lines 10–11: only the landmarks of the captured area, l(A_c, m).
+            ekf.filter = Some(ekf.landmarks_in_region(min_x, min_y, max_x, max_y));
+        }
+        Ok(ekf)
+    }
+
+    /// The landmark filter in effect: map indices association runs over, `None` = all.
+    pub fn landmark_filter(&self) -> Option<&[usize]> {
+        self.filter.as_deref()
     }
 
     /// Prediction with the velocity motion model (seed 001 Algorithm 1 lines 2–7). While lost
@@ -1652,6 +1741,211 @@ mod tests {
         ekf.set_landmark_filter(None).unwrap();
         let out = world.step(&[(V_MPS, OMEGA_RADPS)]);
         assert!(ekf.step(&out[0].sensor).unwrap().used > 0);
+    }
+
+    /// A 40 m × 4 m walled corridor with two rows of landmarks every 2 m (signatures 1..=40);
+    /// the robot starts at (10, 2) facing +x.
+    fn corridor() -> WorldConfig {
+        let landmarks = (0..40)
+            .map(|k| Landmark {
+                x_m: 1.0 + 2.0 * (k / 2) as f64,
+                y_m: if k % 2 == 0 { 0.5 } else { 3.5 },
+                signature: k as u32 + 1,
+            })
+            .collect();
+        WorldConfig {
+            robots: vec![RobotConfig {
+                id: 1,
+                start: Pose2::new(10.0, 2.0, 0.0),
+                noise: None,
+            }],
+            walls: vec![WallConfig::Polyline {
+                points_m: vec![[0.0, 0.0], [40.0, 0.0], [40.0, 4.0], [0.0, 4.0]],
+                closed: true,
+            }],
+            landmarks,
+            ..WorldConfig::default()
+        }
+    }
+
+    /// The captured area of the corridor: x in [8, 24] m, 16 of the 40 landmarks (40 %, as in
+    /// seed 001 Fig. 6).
+    const CAPTURED: [f64; 4] = [8.0, 0.0, 24.0, 4.0];
+
+    #[test]
+    fn landmark_region_m_restricts_association_to_the_captured_area() {
+        let world_cfg = corridor();
+        let map = world_cfg.landmarks.clone();
+        let inside_sigs: Vec<u32> = map
+            .iter()
+            .filter(|l| (CAPTURED[0]..=CAPTURED[2]).contains(&l.x_m))
+            .map(|l| l.signature)
+            .collect();
+        assert_eq!(inside_sigs.len(), 16);
+        let cfg = EkfConfig {
+            landmark_region_m: Some(CAPTURED),
+            ..EkfConfig::default()
+        };
+        let mut world = World::new(world_cfg, 7).unwrap();
+        let start = world.poses()[0];
+        let mut ekf = Ekf::new(cfg, map.clone(), start, initial_cov()).unwrap();
+        let mut whole = Ekf::new(EkfConfig::default(), map, start, initial_cov()).unwrap();
+        let filter = ekf.landmark_filter().unwrap().to_vec();
+        let filter_sigs: Vec<u32> = filter.iter().map(|&i| ekf.map()[i].signature).collect();
+        assert_eq!(filter_sigs, inside_sigs);
+        assert_eq!(whole.landmark_filter(), None);
+
+        // 20 s at 0.5 m/s: from x = 10 to x = 20, inside the area, seeing landmarks on both
+        // sides of it (5 m sensor range).
+        let (mut inside, mut outside, mut max_err_m) = (0u64, 0u64, 0.0f64);
+        for _ in 0..200 {
+            let out = world.step(&[(0.5, 0.0)]);
+            assert_eq!(out[0].truth.collided, 0);
+            let sensor = &out[0].sensor;
+            let seen_inside = sensor
+                .observations()
+                .iter()
+                .filter(|o| inside_sigs.contains(&o.signature))
+                .count() as u32;
+            inside += u64::from(seen_inside);
+            outside += u64::from(sensor.count - seen_inside);
+            let stats = ekf.step(sensor).unwrap();
+            // Per step: exactly the observations of landmarks outside the area find no
+            // candidate; the others are associated (or gated) among the area's landmarks.
+            assert_eq!(stats.unmatched, sensor.count - seen_inside);
+            assert_eq!(stats.used + stats.gated, seen_inside);
+            whole.step(sensor).unwrap();
+            let t = world.poses()[0];
+            assert!(
+                (CAPTURED[0]..=CAPTURED[2]).contains(&t.x_m),
+                "left the area"
+            );
+            max_err_m = max_err_m.max((ekf.mean().x - t.x_m).hypot(ekf.mean().y - t.y_m));
+        }
+        let c = *ekf.counters();
+        assert!(outside > 50, "only {outside} observations outside the area");
+        assert_eq!(c.observations_unmatched, outside);
+        assert_eq!(c.observations_used + c.observations_gated, inside);
+        assert!(c.observations_used * 10 > inside * 9, "{c:?}");
+        // The whole-map filter uses the outside landmarks too.
+        let w = *whole.counters();
+        assert_eq!(w.observations_unmatched, 0);
+        assert!(w.observations_used > c.observations_used);
+        // Still localized on the area's landmarks alone.
+        assert!(max_err_m < 0.2, "position error reached {max_err_m} m");
+        assert_spd(&ekf.covariance());
+    }
+
+    #[test]
+    fn landmark_region_m_without_landmarks_is_allowed_and_matches_nothing() {
+        let world_cfg = corridor();
+        let map = world_cfg.landmarks.clone();
+        let cfg = EkfConfig {
+            // Between the two rows: no landmark inside.
+            landmark_region_m: Some([8.0, 1.0, 24.0, 3.0]),
+            ..EkfConfig::default()
+        };
+        let mut world = World::new(world_cfg, 3).unwrap();
+        let mut ekf = Ekf::new(cfg, map, world.poses()[0], initial_cov()).unwrap();
+        assert_eq!(ekf.landmark_filter(), Some(&[][..]));
+        let out = world.step(&[(0.5, 0.0)]);
+        assert!(out[0].sensor.count > 0);
+        let stats = ekf.step(&out[0].sensor).unwrap();
+        assert_eq!((stats.used, stats.gated), (0, 0));
+        assert_eq!(stats.unmatched, out[0].sensor.count);
+        assert_eq!(
+            ekf.counters().observations_unmatched,
+            u64::from(out[0].sensor.count)
+        );
+    }
+
+    #[test]
+    fn malformed_landmark_region_is_rejected_naming_the_key() {
+        let map = corridor().landmarks;
+        let start = Pose2::new(10.0, 2.0, 0.0);
+        let bad_regions = [
+            [f64::NAN, 0.0, 24.0, 4.0],
+            [8.0, f64::NEG_INFINITY, 24.0, 4.0],
+            [8.0, 0.0, f64::INFINITY, 4.0],
+            [24.0, 0.0, 8.0, 4.0],
+            [8.0, 0.0, 8.0, 4.0],
+            [8.0, 4.0, 24.0, 0.0],
+            [8.0, 2.0, 24.0, 2.0],
+        ];
+        for region in bad_regions {
+            let cfg = EkfConfig {
+                landmark_region_m: Some(region),
+                ..EkfConfig::default()
+            };
+            let e = Ekf::new(cfg, map.clone(), start, initial_cov()).unwrap_err();
+            assert!(
+                matches!(
+                    e,
+                    LocalizerError::InvalidRegion {
+                        key: LANDMARK_REGION_KEY,
+                        ..
+                    }
+                ),
+                "{region:?}: {e:?}"
+            );
+            let text = e.to_string();
+            assert!(
+                text.contains("`landmark_region_m`") && text.contains(&format!("{region:?}")),
+                "{text}"
+            );
+        }
+        // The key parses from TOML; a misspelt key is still refused.
+        let cfg: EkfConfig = toml::from_str("landmark_region_m = [8.0, 0.0, 24, 4]").unwrap();
+        assert_eq!(cfg.landmark_region_m, Some(CAPTURED));
+        assert!(toml::from_str::<EkfConfig>("landmark_region = [8.0, 0.0, 24, 4]").is_err());
+        assert!(toml::from_str::<EkfConfig>("landmark_region_m = [8.0, 0.0, 24]").is_err());
+        // A scenario with a bad region fails validation naming the robot and the key.
+        let mut scenario = crate::scenario::Scenario::load("trail").unwrap();
+        scenario.robots[0].localizer.landmark_region_m = Some([1.0, 1.0, 0.0, 2.0]);
+        let e = scenario.validate().unwrap_err();
+        assert!(
+            e.contains("localizer") && e.contains("`landmark_region_m`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn landmark_region_flag_parses_four_numbers_or_names_the_flag() {
+        assert_eq!(parse_landmark_region("8,0,24,4"), Ok(CAPTURED));
+        assert_eq!(
+            parse_landmark_region("-5.5, -1 ,1e1,2"),
+            Ok([-5.5, -1.0, 10.0, 2.0])
+        );
+        for text in [
+            "",
+            "1,2,3",
+            "1,2,3,4,5",
+            "a,0,1,1",
+            "0;0;1;1",
+            "nan,0,1,1",
+            "0,0,inf,1",
+            "5,0,1,3",
+            "0,3,1,3",
+        ] {
+            let e = parse_landmark_region(text).unwrap_err();
+            let msg = e.to_string();
+            assert!(
+                msg.contains("--landmark-region") && msg.contains(&format!("{text:?}")),
+                "{text}: {msg}"
+            );
+        }
+    }
+
+    #[test]
+    fn ekf_slam_refuses_landmark_region_m() {
+        let mut scenario = crate::scenario::Scenario::load("trail").unwrap();
+        let id = scenario.robots[0].id;
+        scenario.robots[0].localizer.landmark_region_m = Some(CAPTURED);
+        assert!(crate::process::Filter::for_robot(&scenario, id, false).is_ok());
+        let e = crate::process::Filter::for_robot(&scenario, id, true)
+            .err()
+            .expect("EKF-SLAM accepted a landmark region");
+        assert!(e.to_string().contains("landmark_region_m"), "{e}");
     }
 
     #[test]

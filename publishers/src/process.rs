@@ -436,16 +436,18 @@ fn role_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'stat
     let want_last = end.final_steps().and_then(|n| n.checked_sub(1));
     let deadline = Instant::now() + END_DRAIN;
     loop {
-        if let Some(m) = rx.try_recv()? {
+        // Read the upstream's presence before draining: what it sent before leaving stays
+        // receivable (iceoryx2 keeps a connection that still holds samples).
+        let upstream_gone = rx.senders() == 0;
+        while let Some(m) = rx.try_recv()? {
             handle(&m, summary)?;
-            continue;
         }
         let complete = match (want_last, summary.last_step) {
             (Some(want), Some(last)) => last >= want,
             (None, _) => true,
             (Some(_), None) => false,
         };
-        if complete || rx.senders() == 0 || Instant::now() >= deadline {
+        if complete || upstream_gone || Instant::now() >= deadline {
             return Ok(());
         }
         if node.wait(Duration::from_millis(2)).is_err() {
@@ -716,6 +718,12 @@ impl Filter {
         let cov0 = Matrix3::from_diagonal(&nalgebra::Vector3::new(var, var, (0.05f64).powi(2)));
         Ok(if slam {
             // EKF-SLAM: landmarks are not given, they join the state as they are seen.
+            if let Some(region) = roles.localizer.landmark_region_m {
+                return Err(ProcessError::Setup(format!(
+                    "robot {robot}: `{}` = {region:?} restricts the known map of the EKF; EKF-SLAM (--slam) has no map to restrict",
+                    crate::localizer::LANDMARK_REGION_KEY
+                )));
+            }
             let config = EkfSlamConfig {
                 noise: roles.localizer.noise,
                 limits: roles.localizer.limits,

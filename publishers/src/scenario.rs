@@ -360,6 +360,9 @@ impl Scenario {
                     r.id
                 ));
             }
+            r.localizer
+                .validate()
+                .map_err(|e| format!("robot {} localizer: {e}", r.id))?;
             if let Some(d) = &r.depositor {
                 d.validate()
                     .map_err(|e| format!("robot {} depositor: {e}", r.id))?;

@@ -519,6 +519,7 @@ fn region_table_refuses_beyond_max_r_with_names() {
     let cfg = [RegionConfig {
         name: "hall".into(),
         node: "x".into(),
+        at_m: None,
         shape: RegionShape::Polygon {
             vertices_m: vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]],
         },

@@ -90,8 +90,8 @@ pub fn run_world_cmd(a: WorldArgs) -> anyhow::Result<()> {
 /// Run the localizer of one robot: the EKF of seed 001 Algorithm 1 (velocity motion model,
 /// maximum-likelihood landmark association) over the world's sensor messages; publishes pose +
 /// covariance (pheromone/<WORLD>/r<ID>/pose) for every step. Settings come from the scenario's
-/// `[robot.localizer]` (noise α1..α4, gate, and the `loss` knob that makes a robot lose its
-/// localization).
+/// `[robot.localizer]` (noise α1..α4, gate, the `loss` knob that makes a robot lose its
+/// localization, and `landmark_region_m`, the captured area association is restricted to).
 #[derive(Args, Debug)]
 pub struct LocalizerArgs {
     #[command(flatten)]
@@ -102,11 +102,27 @@ pub struct LocalizerArgs {
     /// EKF-SLAM: ignore the scenario's landmark map; landmarks join the state as they are seen.
     #[arg(long)]
     pub slam: bool,
+    /// Associate observations only with the map landmarks inside this box (m): the captured
+    /// area of seed 001 Algorithm 1 lines 10–14. Overrides the scenario's
+    /// `[robot.localizer] landmark_region_m`.
+    #[arg(
+        long,
+        value_name = "XMIN,YMIN,XMAX,YMAX",
+        value_parser = publishers::localizer::parse_landmark_region,
+        allow_hyphen_values = true,
+        conflicts_with = "slam"
+    )]
+    pub landmark_region: Option<[f64; 4]>,
 }
 
 pub fn run_localizer_cmd(a: LocalizerArgs) -> anyhow::Result<()> {
     check_names(&a.common)?;
-    let scenario = load_scenario(&a.common.scenario)?;
+    let mut scenario = load_scenario(&a.common.scenario)?;
+    if let Some(region) = a.landmark_region {
+        if let Some(r) = scenario.robots.iter_mut().find(|r| r.id == a.robot) {
+            r.localizer.landmark_region_m = Some(region);
+        }
+    }
     let node = create_node(&format!("localizer-r{}-{}", a.robot, std::process::id()))?;
     let summary = run_localizer(&node, &scenario, a.robot, &a.common.world, a.slam)?;
     eprintln!(

@@ -37,6 +37,12 @@ use super::roles::load_scenario;
 /// Built-in scenarios: blind-leader (seed 000, the default), trail-following (seed 002), ias-ss
 /// (seed 004), evaporation (seed 000 Figs. 6–8) and trail; or a TOML file of your own
 /// (examples/scenarios/*.toml show every key).
+///
+/// Node-graph scenarios (seed 001): regions (a corridor with regions A–E; 2, 3 and 4 robots,
+/// region capture against the shortest-path baseline) and regions-skeleton (8 robots on a
+/// skeletonized map, 7 regions, one with Max-R 2). They run a `graph` writer and one
+/// `graph-robot` process per robot and print the paper's tables (captures, final link values,
+/// area capture matrix) and the time to the goal of each strategy.
 #[derive(Args, Debug)]
 pub struct SimArgs {
     /// Scenario: a built-in name or a TOML file.
@@ -72,9 +78,9 @@ pub struct SimArgs {
     #[arg(long)]
     pub constant: bool,
     /// Strategy of every follower that is not a route-driven leader: gradient, antenna,
-    /// inverse, uniform.
+    /// inverse, uniform. Regions scenarios: pheromone or shortest-path (default: both).
     #[arg(long)]
-    pub strategy: Option<StrategyKind>,
+    pub strategy: Option<String>,
     /// Run T trials (seeds S, S+1, …) with the strategy and with the other sector strategy
     /// (inverse vs uniform) and report mean, standard deviation and Welch's t of the
     /// exploration (scenarios with an exploration metric).
@@ -88,14 +94,25 @@ pub struct SimArgs {
     pub timeout: f64,
 }
 
+/// The follower strategy of --strategy (grid scenarios).
+fn follower_strategy(a: &SimArgs) -> anyhow::Result<Option<StrategyKind>> {
+    a.strategy
+        .as_deref()
+        .map(|s| s.parse::<StrategyKind>().map_err(|e| bad(e.to_string())))
+        .transpose()
+}
+
 pub fn run(a: SimArgs) -> anyhow::Result<()> {
+    if super::graph::is_regions(&a.scenario) {
+        return super::graph::run_sim(&a);
+    }
     let mut scenario = load_scenario(&a.scenario)?;
     scenario
         .apply(&Overrides {
             seed: a.seed,
             robots: a.robots,
             duration_s: a.duration,
-            strategy: a.strategy,
+            strategy: follower_strategy(&a)?,
             constant: a.constant,
         })
         .map_err(|e| bad(format!("{}: {e}", a.scenario)))?;
@@ -241,7 +258,7 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
             scenario.name
         )));
     }
-    let ours = a.strategy.unwrap_or(StrategyKind::Inverse);
+    let ours = follower_strategy(a)?.unwrap_or(StrategyKind::Inverse);
     let other = match ours {
         StrategyKind::Uniform => StrategyKind::Inverse,
         _ => StrategyKind::Uniform,
@@ -337,13 +354,13 @@ pub fn welch_t(m1: f64, s1: f64, m2: f64, s2: f64, n: f64) -> (f64, f64) {
 // Separate processes
 
 /// A started role; killed and reaped if still running when dropped.
-struct Role {
-    name: String,
-    child: Child,
+pub(super) struct Role {
+    pub(super) name: String,
+    pub(super) child: Child,
 }
 
 impl Role {
-    fn spawn(name: String, args: &[String]) -> anyhow::Result<Self> {
+    pub(super) fn spawn(name: String, args: &[String]) -> anyhow::Result<Self> {
         let exe = std::env::current_exe()?;
         let child = Command::new(exe)
             .args(args)
@@ -356,7 +373,7 @@ impl Role {
     }
 
     /// Output of a finished role: (success, stdout JSON, stderr text).
-    fn collect(&mut self) -> (bool, Option<Value>, String) {
+    pub(super) fn collect(&mut self) -> (bool, Option<Value>, String) {
         let status = self.child.wait().ok();
         let mut out = String::new();
         let mut err = String::new();

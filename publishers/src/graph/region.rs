@@ -136,8 +136,12 @@ impl RegionShape {
 #[serde(deny_unknown_fields)]
 pub struct RegionConfig {
     pub name: String,
-    /// The graph node a robot stands on to serve the region.
+    /// The graph node a robot stands on to serve the region (by name) …
+    #[serde(default, skip_serializing_if = "String::is_empty")]
     pub node: String,
+    /// … or the node nearest this point (graphs extracted from a map).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at_m: Option<[f32; 2]>,
     pub shape: RegionShape,
     /// Max-R: most robots that may hold the region at once.
     #[serde(default = "one")]
@@ -374,6 +378,7 @@ mod tests {
         let cfg = [RegionConfig {
             name: "A".into(),
             node: "n".into(),
+            at_m: None,
             shape: RegionShape::Polygon {
                 vertices_m: vec![[0.0, 0.0], [4.0, 0.0], [4.0, 5.0], [0.0, 5.0]],
             },
@@ -424,6 +429,7 @@ mod tests {
         let bad = [RegionConfig {
             name: "Z".into(),
             node: "n".into(),
+            at_m: None,
             shape: c,
             max_r: 0,
         }];

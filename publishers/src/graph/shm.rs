@@ -28,6 +28,10 @@ pub const MAX_CAPTURERS: usize = 8;
 pub const NO_LINK: u32 = u32::MAX;
 /// Bytes of JSON a contention message may carry.
 pub const CONTEND_BYTES: usize = 504;
+/// Most robots a lockstep graph run may have (claims of one step per region).
+pub const MAX_GRAPH_ROBOTS: usize = 16;
+/// `GraphUpdateMsg::region` of a step-done message without a claim.
+pub const NO_CLAIM: u32 = u32::MAX;
 
 /// One node of a snapshot; links indexed by [`Dir`].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -63,6 +67,9 @@ pub struct RegionSlot {
     pub n_captured: u32,
     pub value: f32,
     pub captured_by: [u32; MAX_CAPTURERS],
+    /// Lockstep runs: robots that claimed the region in the previous step.
+    pub n_claims: u32,
+    pub claims: [u32; MAX_GRAPH_ROBOTS],
 }
 
 impl RegionSlot {
@@ -72,6 +79,8 @@ impl RegionSlot {
         n_captured: 0,
         value: 0.0,
         captured_by: [0; MAX_CAPTURERS],
+        n_claims: 0,
+        claims: [0; MAX_GRAPH_ROBOTS],
     };
 }
 
@@ -87,8 +96,14 @@ pub struct GraphSnapshot {
     pub updates_rejected: u64,
     /// Capture attempts refused because the region held Max-R robots.
     pub captures_refused: u64,
+    /// Lockstep runs: the step this snapshot opens and its simulated time.
+    pub step: u64,
+    pub sim_time_s: f64,
+    /// Lockstep runs: 1 when the run has ended and robots should stop.
+    pub finished: u32,
     pub n_nodes: u32,
     pub n_regions: u32,
+    pub _pad: u32,
     pub nodes: [NodeSlot; MAX_NODES],
     pub regions: [RegionSlot; MAX_REGIONS],
 }
@@ -100,8 +115,12 @@ impl GraphSnapshot {
         updates_applied: 0,
         updates_rejected: 0,
         captures_refused: 0,
+        step: 0,
+        sim_time_s: 0.0,
+        finished: 0,
         n_nodes: 0,
         n_regions: 0,
+        _pad: 0,
         nodes: [NodeSlot::EMPTY; MAX_NODES],
         regions: [RegionSlot::EMPTY; MAX_REGIONS],
     };
@@ -130,6 +149,23 @@ impl GraphSnapshot {
             slot.captured_by[..r.captured_by.len()].copy_from_slice(&r.captured_by);
         }
         Ok(snap)
+    }
+
+    /// Lockstep runs: per region, the robots that claimed it in the previous step.
+    pub fn claims(&self) -> Vec<Vec<u32>> {
+        self.regions[..(self.n_regions as usize).min(MAX_REGIONS)]
+            .iter()
+            .map(|r| r.claims[..(r.n_claims as usize).min(MAX_GRAPH_ROBOTS)].to_vec())
+            .collect()
+    }
+
+    /// Lockstep runs: records the claims of a step (at most [`MAX_GRAPH_ROBOTS`] per region).
+    pub fn set_claims(&mut self, claims: &[Vec<u32>]) {
+        for (slot, c) in self.regions.iter_mut().zip(claims) {
+            let n = c.len().min(MAX_GRAPH_ROBOTS);
+            slot.n_claims = n as u32;
+            slot.claims[..n].copy_from_slice(&c[..n]);
+        }
     }
 
     /// `base` (the same graph and regions, from the same scenario) with this snapshot's link
@@ -202,6 +238,9 @@ pub mod kind {
     pub const DEAD_END: u32 = 1;
     pub const CAPTURE: u32 = 2;
     pub const RELEASE: u32 = 3;
+    /// Lockstep runs: the robot has sent every update of `step`; `region` is its claim or
+    /// [`super::NO_CLAIM`].
+    pub const STEP_DONE: u32 = 4;
 }
 
 /// A robot's update to the graph.
@@ -210,6 +249,8 @@ pub mod kind {
 #[repr(C)]
 pub struct GraphUpdateMsg {
     pub stamp_ns: u64,
+    /// Lockstep runs: the step the update belongs to (0 otherwise).
+    pub step: u64,
     pub robot_id: u32,
     /// One of [`kind`].
     pub kind: u32,
@@ -218,6 +259,7 @@ pub struct GraphUpdateMsg {
     pub dir: u32,
     pub region: u32,
     pub amount: f32,
+    pub _pad: u32,
 }
 
 impl GraphUpdateMsg {
@@ -277,6 +319,7 @@ impl GraphUpdateMsg {
                 region: self.region as usize,
                 robot: self.robot_id,
             },
+            kind::STEP_DONE => return Err("a step-done message is not an update".into()),
             k => return Err(format!("unknown update kind {k}")),
         })
     }
@@ -363,14 +406,14 @@ pub fn graph_services(name: &str) -> [(String, String); 3] {
     })
 }
 
-const SNAPSHOT_LINK: LinkOptions = LinkOptions {
+pub(crate) const SNAPSHOT_LINK: LinkOptions = LinkOptions {
     max_publishers: 1,
     max_subscribers: 32,
     buffer: 2,
     keep_latest: true,
 };
 
-const UPDATE_LINK: LinkOptions = LinkOptions {
+pub(crate) const UPDATE_LINK: LinkOptions = LinkOptions {
     max_publishers: 32,
     max_subscribers: 1,
     buffer: 256,
@@ -502,6 +545,11 @@ impl GraphReader {
     }
 
     /// Waits (on the server's event) until a snapshot with `seq > after` arrives or `timeout`.
+    /// Writers publishing the graph (0 once the writer is gone).
+    pub fn writers(&self) -> usize {
+        self.snapshots.senders()
+    }
+
     pub fn wait_newer(
         &mut self,
         after: u64,
@@ -548,12 +596,41 @@ impl GraphUpdater {
             _ => Ok(()),
         }
     }
+
+    /// Lockstep runs: an update belonging to `step`.
+    pub fn send_at(&self, step: u64, u: GraphUpdate) -> Result<(), GraphShmError> {
+        let mut m = GraphUpdateMsg::new(self.robot_id, u);
+        m.step = step;
+        self.deliver(m)
+    }
+
+    /// Lockstep runs: every update of `step` has been sent; `claim` is the region this robot
+    /// wants to capture (resolved with the other claimants in the next step).
+    pub fn step_done(&self, step: u64, claim: Option<usize>) -> Result<(), GraphShmError> {
+        self.deliver(GraphUpdateMsg {
+            stamp_ns: now_ns(),
+            step,
+            robot_id: self.robot_id,
+            kind: kind::STEP_DONE,
+            region: claim.map_or(NO_CLAIM, |r| r as u32),
+            ..Default::default()
+        })
+    }
+
+    fn deliver(&self, m: GraphUpdateMsg) -> Result<(), GraphShmError> {
+        match self.updates.send(m)? {
+            0 => Err(GraphShmError::NotDelivered(self.service.clone())),
+            _ => Ok(()),
+        }
+    }
 }
 
 /// The contention channel every robot of a graph shares.
 pub struct Contention {
     tx: Sender<ContendWire>,
     rx: Receiver<ContendWire>,
+    /// Received messages not asked for yet (another region, or a later step).
+    pending: Vec<ContendMsg>,
     /// Messages that could not be read (counted, skipped).
     pub malformed: u64,
 }
@@ -564,6 +641,7 @@ impl Contention {
         Ok(Self {
             tx: Sender::create(node, &c, &c_wake, CONTEND_LINK)?,
             rx: Receiver::create(node, &c, &c_wake, CONTEND_LINK)?,
+            pending: Vec::new(),
             malformed: 0,
         })
     }
@@ -595,33 +673,39 @@ impl Contention {
         Ok(self.tx.send(ContendWire::encode(m)?)?)
     }
 
-    /// Collects claims for `region` until `expected` distinct robots have claimed it or the
-    /// deadline passes; returns what it got (the caller decides with [`ContendMsg::winners`]).
+    /// The messages for `region` stamped `time_stamp_s` (one per robot), waiting until
+    /// `expected` have arrived or `timeout` has passed. Messages for other regions or later
+    /// stamps are kept for later calls; older ones are dropped.
     pub fn collect(
         &mut self,
         region: u32,
+        time_stamp_s: u64,
         expected: usize,
         timeout: Duration,
     ) -> Result<Vec<ContendMsg>, GraphShmError> {
         let deadline = Instant::now() + timeout;
-        let mut got: Vec<ContendMsg> = Vec::new();
         loop {
             while let Some(w) = self.rx.try_recv()? {
                 match w.decode() {
-                    Ok(m) if m.region == region => {
-                        if !got.iter().any(|g| g.robot_id == m.robot_id) {
-                            got.push(m);
-                        }
-                    }
-                    Ok(_) => {}
+                    Ok(m) => self.pending.push(m),
                     Err(_) => self.malformed += 1,
                 }
             }
-            if got.len() >= expected {
-                return Ok(got);
+            let mut got: Vec<ContendMsg> = Vec::new();
+            for m in &self.pending {
+                if m.region == region
+                    && m.time_stamp_s == time_stamp_s
+                    && !got.iter().any(|g| g.robot_id == m.robot_id)
+                {
+                    got.push(*m);
+                }
             }
             let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
+            if got.len() >= expected || left.is_zero() {
+                self.pending.retain(|m| {
+                    m.time_stamp_s > time_stamp_s
+                        || (m.time_stamp_s == time_stamp_s && m.region != region)
+                });
                 return Ok(got);
             }
             self.rx.wait(left)?;
@@ -657,6 +741,7 @@ mod tests {
             &[RegionConfig {
                 name: "R".into(),
                 node: "b".into(),
+                at_m: None,
                 shape: RegionShape::Polygon {
                     vertices_m: vec![[2.0, -1.0], [4.0, -1.0], [4.0, 1.0], [2.0, 1.0]],
                 },

@@ -1,18 +1,18 @@
 //! Robots on the node graph: [`GraphAgent`] with the paper's anti-pheromone strategy
 //! ([`Strategy::Pheromone`]: eq. 8 link choice towards regions with room, eq. 9 targets, region
-//! capture) or the baseline ([`Strategy::ShortestPath`]: A* to the nearest region the robot
-//! does not know to be taken, no signalling, conflicts resolved on arrival), and [`simulate`], a
-//! single-process lockstep run of the paper's corridor (Sec. 6, regions A–E and a dock) that
-//! reports the time until every region has been served.
+//! capture, dead ends marked −∞) or the baseline ([`Strategy::ShortestPath`]: A* to the nearest
+//! region the robot does not know to be taken, no signalling, conflicts resolved on arrival),
+//! and the `regions` scenario format ([`RegionsScenario`]: an explicit graph or a map to
+//! skeletonize, regions, a dock, timing). Runs are in [`super::run`].
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::conflict::{ContendMsg, RgbRes};
+use super::skeleton::{graph_from_mask, FreeMask, SkeletonOptions};
 use super::{
-    CaptureOutcome, Dir, Graph, GraphConfig, GraphError, GraphState, GraphUpdate, RegionConfig,
-    RegionTable,
+    Dir, Graph, GraphConfig, GraphError, GraphState, GraphUpdate, RegionConfig, RegionTable,
 };
 
 /// How a robot moves on the graph.
@@ -26,11 +26,25 @@ pub enum Strategy {
 }
 
 impl Strategy {
+    pub const ALL: [Strategy; 2] = [Strategy::Pheromone, Strategy::ShortestPath];
+
     pub fn name(self) -> &'static str {
         match self {
             Strategy::Pheromone => "pheromone",
             Strategy::ShortestPath => "shortest-path",
         }
+    }
+}
+
+impl std::str::FromStr for Strategy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Strategy::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| {
+                format!("unknown graph strategy '{s}' (expected one of: pheromone, shortest-path)")
+            })
     }
 }
 
@@ -120,8 +134,9 @@ impl GraphAgent {
         let admitted: Vec<usize> = (0..regions.len())
             .filter(|&i| {
                 let r = &regions[i];
+                // Never served, or held with room left (a sub-region, Max-R > 1).
                 r.has_room()
-                    && (self.patrol || r.value >= 0.0)
+                    && (self.patrol || r.value >= 0.0 || !r.captured_by.is_empty())
                     && !r.captured_by.contains(&self.profile.id)
             })
             .collect();
@@ -166,15 +181,27 @@ impl GraphAgent {
                 .fold(f32::INFINITY, f32::min);
             best.is_finite().then_some(l.length_m + best)
         };
+        // A link into a terminal node that serves no region is a dead end: mark it −∞ for
+        // everyone (the robot's range sensor sees the end of the passage).
+        let mut updates: Vec<GraphUpdate> = g
+            .node(node)?
+            .links()
+            .filter(|(_, l)| {
+                l.value != super::DEAD_END
+                    && g.nodes()[l.to].terminal
+                    && s.regions.at_node(l.to).next().is_none()
+            })
+            .map(|(dir, _)| GraphUpdate::DeadEnd { node, dir })
+            .collect();
         match g.choose_link_among(node, cost, &mut self.rng)? {
-            Some(dir) => Ok(Action::Move {
-                dir,
-                updates: vec![GraphUpdate::AddToLink {
+            Some(dir) => {
+                updates.push(GraphUpdate::AddToLink {
                     node,
                     dir,
                     amount: self.link_deposit,
-                }],
-            }),
+                });
+                Ok(Action::Move { dir, updates })
+            }
             None => Ok(Action::Idle),
         }
     }
@@ -224,6 +251,18 @@ pub struct SimParams {
     pub max_time_s: f32,
     /// Battery used per metre driven (%).
     pub battery_pct_per_m: f32,
+    /// When the run is over: every region served once, or every region holding Max-R robots.
+    pub until: Until,
+}
+
+/// The goal of a `regions` run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Until {
+    /// Every region has been captured, served for its work time and released (Fig. 4c).
+    Served,
+    /// Every region holds Max-R robots (Fig. 7d, Table 4).
+    Captured,
 }
 
 impl Default for SimParams {
@@ -236,339 +275,186 @@ impl Default for SimParams {
             dt_s: 0.05,
             max_time_s: 3600.0,
             battery_pct_per_m: 0.1,
+            until: Until::Served,
         }
     }
 }
 
-/// The `regions` scenario: a graph, its regions, the dock and the timing.
+/// A node of the graph by name, or the node nearest a point (for graphs extracted from a map,
+/// whose node names are generated).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum NodeRef {
+    Name(String),
+    At([f32; 2]),
+}
+
+impl NodeRef {
+    pub fn resolve(&self, g: &Graph) -> Result<usize, GraphError> {
+        match self {
+            NodeRef::Name(n) => g.find(n),
+            NodeRef::At([x, y]) => g.nearest_node(*x, *y).ok_or_else(|| {
+                GraphError::UnknownNode(format!("nearest to ({x}, {y}): the graph is empty"))
+            }),
+        }
+    }
+}
+
+/// `[map]` of a `regions` scenario: an occupancy map as text rows, skeletonized into the graph
+/// (seed 001 Fig. 7). The first row is the top (largest y); `#` is a wall, anything else free.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapConfig {
+    pub cell_size_m: f32,
+    #[serde(default)]
+    pub origin_m: [f32; 2],
+    pub rows: Vec<String>,
+    /// Spurs of the skeleton up to this long are pruned.
+    #[serde(default = "default_min_branch_m")]
+    pub min_branch_m: f32,
+}
+
+fn default_min_branch_m() -> f32 {
+    SkeletonOptions::default().min_branch_m
+}
+
+impl MapConfig {
+    pub fn mask(&self) -> Result<FreeMask, GraphError> {
+        let bad = |detail: String| GraphError::Node {
+            node: "[map]".into(),
+            detail,
+        };
+        let height = self.rows.len();
+        let width = self.rows.first().map_or(0, |r| r.chars().count());
+        if height == 0 || width == 0 {
+            return Err(bad("rows: the map is empty".into()));
+        }
+        if let Some((i, r)) = self
+            .rows
+            .iter()
+            .enumerate()
+            .find(|(_, r)| r.chars().count() != width)
+        {
+            return Err(bad(format!(
+                "rows[{i}] has {} characters, rows[0] has {width}",
+                r.chars().count()
+            )));
+        }
+        let mut free = vec![false; width * height];
+        for (i, row) in self.rows.iter().enumerate() {
+            let y = height - 1 - i;
+            for (x, c) in row.chars().enumerate() {
+                free[y * width + x] = c != '#';
+            }
+        }
+        Ok(FreeMask {
+            width,
+            height,
+            cell_size_m: self.cell_size_m,
+            origin_m: self.origin_m,
+            free,
+        })
+    }
+}
+
+/// The `regions` scenario: a graph (explicit or from a map), its regions, the dock and the
+/// timing.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RegionsScenario {
     pub name: String,
     #[serde(default)]
     pub seed: u64,
-    pub graph: GraphConfig,
+    /// Robots of a run unless the command line says otherwise.
+    #[serde(default = "default_robots")]
+    pub robots: Vec<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub graph: Option<GraphConfig>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub map: Option<MapConfig>,
     #[serde(rename = "region")]
     pub regions: Vec<RegionConfig>,
-    /// The node the robots start from.
-    pub dock: String,
+    /// The node the robots start from: a name, or `[x, y]` for the nearest node.
+    pub dock: NodeRef,
     #[serde(default)]
     pub regions_sim: SimParams,
+}
+
+fn default_robots() -> Vec<usize> {
+    vec![2, 3, 4]
 }
 
 /// Seed 001 Fig. 4: a 25 m corridor, regions B, C, A, D, E in increasing distance from the dock
 /// (A twice the area of the others), two dead-end side passages.
 pub const PAPER_CORRIDOR: &str = include_str!("../../../examples/scenarios/regions.toml");
 
+/// Seed 001 Fig. 7: a map skeletonized into the graph, 8 robots, 7 regions, C with Max-R 2.
+pub const PAPER_SKELETON: &str = include_str!("../../../examples/scenarios/regions-skeleton.toml");
+
+/// Built-in `regions` scenarios by name.
+pub const BUILTIN_REGIONS: [(&str, &str); 2] = [
+    ("regions", PAPER_CORRIDOR),
+    ("regions-skeleton", PAPER_SKELETON),
+];
+
 impl RegionsScenario {
     pub fn paper_corridor() -> Self {
         toml::from_str(PAPER_CORRIDOR).expect("the built-in corridor parses")
     }
 
+    pub fn paper_skeleton() -> Self {
+        toml::from_str(PAPER_SKELETON).expect("the built-in skeleton map parses")
+    }
+
+    /// A built-in scenario by name.
+    pub fn builtin(name: &str) -> Option<Self> {
+        BUILTIN_REGIONS
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, text)| toml::from_str(text).expect("built-in regions scenarios parse"))
+    }
+
+    /// Whether a TOML text is a `regions` scenario (it has a `dock`).
+    pub fn looks_like(text: &str) -> bool {
+        toml::from_str::<toml::Table>(text).is_ok_and(|t| t.contains_key("dock"))
+    }
+
+    /// The graph: explicit, or skeletonized from the map.
+    pub fn graph(&self) -> Result<Graph, GraphError> {
+        match (&self.graph, &self.map) {
+            (Some(g), None) => Graph::explicit(g),
+            (None, Some(m)) => graph_from_mask(
+                &m.mask()?,
+                SkeletonOptions {
+                    min_branch_m: m.min_branch_m,
+                },
+            )
+            .map_err(|e| GraphError::Node {
+                node: "[map]".into(),
+                detail: e.to_string(),
+            }),
+            _ => Err(GraphError::Node {
+                node: self.name.clone(),
+                detail: "a regions scenario needs exactly one of [graph] and [map]".into(),
+            }),
+        }
+    }
+
     /// The graph state the scenario starts from.
     pub fn state(&self) -> Result<GraphState, GraphError> {
-        let graph = Graph::explicit(&self.graph)?;
-        let regions = RegionTable::new(&self.regions, |n| graph.find(n).ok())?;
+        let graph = self.graph()?;
+        let mut configs = self.regions.clone();
+        for c in &mut configs {
+            if let Some(at) = c.at_m.take() {
+                let n = NodeRef::At(at).resolve(&graph)?;
+                c.node = graph.nodes()[n].name.clone();
+            }
+        }
+        let regions = RegionTable::new(&configs, |n| graph.find(n).ok())?;
         Ok(GraphState { graph, regions })
     }
-}
 
-/// One service of a region.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Service {
-    pub region: String,
-    pub robot: u32,
-    pub start_s: f32,
-    pub end_s: f32,
-}
-
-/// What a corridor run did.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct SimReport {
-    pub strategy: Strategy,
-    pub robots: usize,
-    /// Time until every region had been served once (`None`: not within `max_time_s`).
-    pub finish_s: Option<f32>,
-    pub services: Vec<Service>,
-    /// Contention exchanges (two or more robots, or a robot meeting a holder).
-    pub conflicts: u32,
-    pub distance_m: Vec<f32>,
-    /// Most robots any region held at once (never above its Max-R).
-    pub max_holders: Vec<u32>,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Phase {
-    Waiting {
-        until_s: f32,
-    },
-    AtNode {
-        node: usize,
-    },
-    Moving {
-        to: usize,
-        left_m: f32,
-    },
-    Serving {
-        node: usize,
-        region: usize,
-        until_s: f32,
-    },
-    Resolving {
-        node: usize,
-        until_s: f32,
-    },
-    Idle {
-        node: usize,
-    },
-}
-
-/// Runs `robots` robots with `strategy` on `scenario` until every region has been served.
-pub fn simulate(
-    scenario: &RegionsScenario,
-    strategy: Strategy,
-    robots: usize,
-    seed: u64,
-) -> Result<SimReport, GraphError> {
-    let p = scenario.regions_sim;
-    let mut state = scenario.state()?;
-    let dock = state.graph.find(&scenario.dock)?;
-    let n_regions = state.regions.len();
-    let mut agents: Vec<GraphAgent> = (0..robots)
-        .map(|i| {
-            GraphAgent::new(
-                RobotProfile {
-                    id: i as u32 + 1,
-                    task_id: 1,
-                    task_priority: 1,
-                    lrf_range_m: 4.0,
-                    rgb_res: RgbRes::Vga,
-                },
-                strategy,
-                seed,
-            )
-        })
-        .collect();
-    let mut phases: Vec<Phase> = (0..robots)
-        .map(|i| Phase::Waiting {
-            until_s: i as f32 * p.start_interval_s,
-        })
-        .collect();
-    let mut report = SimReport {
-        strategy,
-        robots,
-        finish_s: None,
-        services: Vec::new(),
-        conflicts: 0,
-        distance_m: vec![0.0; robots],
-        max_holders: vec![0; n_regions],
-    };
-    let mut served = vec![false; n_regions];
-    let mut t = 0.0f32;
-    let mut step: u64 = 0;
-    while t <= p.max_time_s {
-        // Advance movement, work and waiting.
-        for i in 0..robots {
-            phases[i] = match phases[i] {
-                Phase::Waiting { until_s } if until_s <= t => Phase::AtNode { node: dock },
-                Phase::Moving { to, left_m } => {
-                    let d = p.speed_m_per_s * p.dt_s;
-                    report.distance_m[i] += d.min(left_m);
-                    agents[i].battery_pct -= d.min(left_m) * p.battery_pct_per_m;
-                    if left_m <= d {
-                        Phase::AtNode { node: to }
-                    } else {
-                        Phase::Moving {
-                            to,
-                            left_m: left_m - d,
-                        }
-                    }
-                }
-                Phase::Serving {
-                    node,
-                    region,
-                    until_s,
-                } if until_s <= t => {
-                    state.apply(GraphUpdate::Release {
-                        region,
-                        robot: agents[i].profile.id,
-                    })?;
-                    agents[i].capture_count += 1;
-                    agents[i].learn_done(region);
-                    if !served[region] {
-                        served[region] = true;
-                        report.services.push(Service {
-                            region: state.regions.regions()[region].name.clone(),
-                            robot: agents[i].profile.id,
-                            start_s: until_s - work_s(&state, region, &p),
-                            end_s: until_s,
-                        });
-                    }
-                    Phase::AtNode { node }
-                }
-                Phase::Resolving { node, until_s } if until_s <= t => Phase::AtNode { node },
-                other => other,
-            };
-        }
-        if served.iter().all(|&s| s) {
-            report.finish_s = Some(t);
-            return Ok(report);
-        }
-        // Decisions, in robot order (the one writer applies updates in arrival order).
-        let mut claims: Vec<Vec<usize>> = vec![Vec::new(); n_regions];
-        for i in 0..robots {
-            let Phase::AtNode { node } = phases[i] else {
-                continue;
-            };
-            match agents[i].decide(&state, node)? {
-                Action::Move { dir, updates } => {
-                    for u in updates {
-                        state.apply(u)?;
-                    }
-                    let l = *state.graph.link(node, dir)?;
-                    phases[i] = Phase::Moving {
-                        to: l.to,
-                        left_m: l.length_m,
-                    };
-                }
-                Action::Capture { region } => claims[region].push(i),
-                Action::Idle => phases[i] = Phase::Idle { node },
-            }
-        }
-        // Captures, with conflict resolution.
-        for (region, claimants) in claims.iter().enumerate() {
-            if claimants.is_empty() {
-                continue;
-            }
-            let r = state.regions.get(region)?.clone();
-            let room = (r.max_r as usize).saturating_sub(r.captured_by.len());
-            let node = r.node;
-            let already_served = r.value < 0.0 && !agents[claimants[0]].patrol;
-            if already_served && r.captured_by.is_empty() {
-                // Seen on arrival: it has been served; nothing to negotiate.
-                for &i in claimants {
-                    agents[i].learn_done(region);
-                    phases[i] = Phase::AtNode { node };
-                }
-                continue;
-            }
-            let conflict = claimants.len() > room || !r.captured_by.is_empty();
-            let msgs: Vec<ContendMsg> = claimants
-                .iter()
-                .map(|&i| agents[i].contend_msg(region, step))
-                .collect();
-            let winners = if already_served {
-                Vec::new()
-            } else {
-                ContendMsg::winners(&msgs, room)
-            };
-            if conflict {
-                report.conflicts += 1;
-            }
-            let delay = if conflict { p.conflict_s } else { 0.0 };
-            for &i in claimants {
-                let id = agents[i].profile.id;
-                if winners.contains(&id) {
-                    let out = state.apply(GraphUpdate::Capture { region, robot: id })?;
-                    debug_assert_eq!(out, Some(CaptureOutcome::Captured));
-                    phases[i] = Phase::Serving {
-                        node,
-                        region,
-                        until_s: t + delay + work_s(&state, region, &p),
-                    };
-                } else {
-                    agents[i].learn_done(region);
-                    phases[i] = Phase::Resolving {
-                        node,
-                        until_s: t + delay,
-                    };
-                }
-            }
-            let holders = state.regions.get(region)?.captured_by.len() as u32;
-            report.max_holders[region] = report.max_holders[region].max(holders);
-        }
-        step += 1;
-        t = step as f32 * p.dt_s;
-    }
-    Ok(report)
-}
-
-fn work_s(s: &GraphState, region: usize, p: &SimParams) -> f32 {
-    s.regions.regions()[region].shape.area_m2() * p.work_s_per_m2
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn corridor_distances_follow_the_paper_order() {
-        let sc = RegionsScenario::paper_corridor();
-        let s = sc.state().unwrap();
-        let dock = s.graph.find("dock").unwrap();
-        let d = s.graph.distances_from(dock, None);
-        let mut names: Vec<(f32, &str)> = s
-            .regions
-            .regions()
-            .iter()
-            .map(|r| (d[r.node], r.name.as_str()))
-            .collect();
-        names.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let order: Vec<&str> = names.iter().map(|x| x.1).collect();
-        assert_eq!(order, ["B", "C", "A", "D", "E"]);
-    }
-
-    #[test]
-    fn two_robots_split_like_table_2() {
-        let sc = RegionsScenario::paper_corridor();
-        let r = simulate(&sc, Strategy::Pheromone, 2, 1).unwrap();
-        let who = |name: &str| r.services.iter().find(|s| s.region == name).unwrap().robot;
-        // Table 2, two robots: R1 serves B then A; R2 serves C, D, E.
-        assert_eq!(
-            [who("A"), who("B"), who("C"), who("D"), who("E")],
-            [1, 1, 2, 2, 2],
-            "{:?}",
-            r.services
-        );
-        assert!(r.finish_s.is_some());
-        assert!(r.max_holders.iter().all(|&h| h <= 1));
-    }
-
-    #[test]
-    fn four_robots_first_round_like_table_2() {
-        let sc = RegionsScenario::paper_corridor();
-        let r = simulate(&sc, Strategy::Pheromone, 4, 1).unwrap();
-        let who = |name: &str| r.services.iter().find(|s| s.region == name).unwrap().robot;
-        // Table 2, four robots, Tw1: A R3, B R1, C R2, D R4.
-        assert_eq!([who("A"), who("B"), who("C"), who("D")], [3, 1, 2, 4]);
-    }
-
-    /// Fig. 4c in simulated time: region capture finishes before shortest path with conflict
-    /// resolution, which spends time in conflicts the capture avoids.
-    #[test]
-    fn capture_beats_shortest_path_in_simulated_time() {
-        let sc = RegionsScenario::paper_corridor();
-        for n in 2..=4 {
-            let ph = simulate(&sc, Strategy::Pheromone, n, 1).unwrap();
-            let sp = simulate(&sc, Strategy::ShortestPath, n, 1).unwrap();
-            assert!(
-                ph.finish_s.unwrap() < sp.finish_s.unwrap(),
-                "{n}: {ph:?} {sp:?}"
-            );
-            assert!(ph.conflicts < sp.conflicts, "{n}: {ph:?} {sp:?}");
-        }
-    }
-
-    #[test]
-    fn every_run_finishes_within_max_r() {
-        let sc = RegionsScenario::paper_corridor();
-        for strategy in [Strategy::Pheromone, Strategy::ShortestPath] {
-            for n in 1..=4 {
-                let r = simulate(&sc, strategy, n, 1).unwrap();
-                assert!(r.finish_s.is_some(), "{strategy:?} {n}: {r:?}");
-                assert_eq!(r.services.len(), 5);
-                assert!(r.max_holders.iter().all(|&h| h <= 1), "{r:?}");
-            }
-        }
+    pub fn dock_node(&self, g: &Graph) -> Result<usize, GraphError> {
+        self.dock.resolve(g)
     }
 }

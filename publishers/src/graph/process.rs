@@ -1,0 +1,235 @@
+//! A `regions` run as processes, in lockstep: one graph writer ([`run_graph_writer`], the
+//! `pheromone graph` process) owns the [`GraphWorld`] and the clock; every robot is its own
+//! process ([`run_graph_robot`], `pheromone graph-robot`).
+//!
+//! Each step the writer publishes a [`GraphSnapshot`] (state, step, time, the claims of the
+//! previous step). Every robot reads it without a copy, runs [`GraphRobot::step`], sends its
+//! updates and, for a claim, its contention message to every robot, then a step-done message.
+//! When all robots are done the writer applies the updates in robot order and opens the next
+//! step. Claimants exchange their messages over the contention service and decide alike.
+
+use std::time::{Duration, Instant};
+
+use field::link::{Receiver, Sender};
+use field::shm::{now_ns, Svc};
+use iceoryx2::node::Node;
+
+use super::run::{GraphRobot, GraphWorld, RobotReport, RunReport, StepView};
+use super::shm::{
+    graph_services, kind, Contention, GraphReader, GraphShmError, GraphSnapshot, GraphUpdateMsg,
+    GraphUpdater, MAX_GRAPH_ROBOTS, NO_CLAIM, SNAPSHOT_LINK, UPDATE_LINK,
+};
+use super::sim::{RegionsScenario, Strategy};
+use super::GraphUpdate;
+
+/// Options of the graph writer.
+#[derive(Debug, Clone)]
+pub struct WriterOptions {
+    /// Name of the graph (its services are `pheromone/<NAME>/…`).
+    pub name: String,
+    pub robots: usize,
+    pub strategy: Strategy,
+    pub seed: u64,
+    /// How long to wait for every robot to attach.
+    pub attach_timeout: Duration,
+    /// How long one step may wait for the robots before the run fails.
+    pub stall_timeout: Duration,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum GraphRunError {
+    #[error(transparent)]
+    Shm(#[from] GraphShmError),
+    #[error("{0}")]
+    Setup(String),
+    #[error("graph '{name}': robot(s) {missing:?} did not finish step {step} within {secs:.1} s")]
+    Stalled {
+        name: String,
+        missing: Vec<u32>,
+        step: u64,
+        secs: f64,
+    },
+    #[error("graph '{name}': the writer is gone (last step seen: {step})")]
+    WriterGone { name: String, step: u64 },
+    #[error("graph '{0}': interrupted")]
+    Interrupted(String),
+}
+
+impl From<field::shm::ShmError> for GraphRunError {
+    fn from(e: field::shm::ShmError) -> Self {
+        GraphRunError::Shm(e.into())
+    }
+}
+
+impl From<super::GraphError> for GraphRunError {
+    fn from(e: super::GraphError) -> Self {
+        GraphRunError::Shm(e.into())
+    }
+}
+
+/// The graph writer: runs the clock until the goal is reached or the time is up, and reports
+/// what the run did.
+pub fn run_graph_writer(
+    node: &Node<Svc>,
+    scenario: &RegionsScenario,
+    o: &WriterOptions,
+) -> Result<RunReport, GraphRunError> {
+    if o.robots == 0 || o.robots > MAX_GRAPH_ROBOTS {
+        return Err(GraphRunError::Setup(format!(
+            "robots {}: a graph run takes 1 to {MAX_GRAPH_ROBOTS}",
+            o.robots
+        )));
+    }
+    let mut world = GraphWorld::new(scenario, o.strategy, o.robots, o.seed)?;
+    let [(snap, snap_wake), (upd, upd_wake), _] = graph_services(&o.name);
+    let snapshots: Sender<GraphSnapshot> = Sender::create(node, &snap, &snap_wake, SNAPSHOT_LINK)?;
+    let updates: Receiver<GraphUpdateMsg> = Receiver::create(node, &upd, &upd_wake, UPDATE_LINK)?;
+    // Every robot reads the first snapshot: wait until all are attached.
+    let deadline = Instant::now() + o.attach_timeout;
+    while snapshots.receivers() < o.robots || updates.senders() < o.robots {
+        if Instant::now() >= deadline {
+            return Err(GraphRunError::Setup(format!(
+                "graph '{}': {} of {} robots attached within {:.1} s",
+                o.name,
+                snapshots.receivers().min(updates.senders()),
+                o.robots,
+                o.attach_timeout.as_secs_f64()
+            )));
+        }
+        if node.wait(Duration::from_millis(5)).is_err() {
+            return Err(GraphRunError::Interrupted(o.name.clone()));
+        }
+    }
+    let publish = |world: &GraphWorld, finished: bool| -> Result<(), GraphShmError> {
+        let mut s = GraphSnapshot::from_state(&world.state)?;
+        s.seq = world.step() + 1;
+        s.stamp_ns = now_ns();
+        s.step = world.step();
+        s.sim_time_s = world.time_s() as f64;
+        s.finished = finished as u32;
+        s.updates_applied = world.applied;
+        s.updates_rejected = world.rejected;
+        s.captures_refused = world.refused;
+        s.set_claims(world.claims());
+        snapshots.send(s)?;
+        Ok(())
+    };
+    let result = (|| -> Result<(), GraphRunError> {
+        while !world.finished() {
+            publish(&world, false)?;
+            let step = world.step();
+            let mut outputs: Vec<(u32, Vec<GraphUpdate>, Option<usize>)> = (1..=o.robots as u32)
+                .map(|id| (id, Vec::new(), None))
+                .collect();
+            let mut done = vec![false; o.robots];
+            let deadline = Instant::now() + o.stall_timeout;
+            while done.iter().any(|d| !d) {
+                let left = deadline.saturating_duration_since(Instant::now());
+                if left.is_zero() {
+                    return Err(GraphRunError::Stalled {
+                        name: o.name.clone(),
+                        missing: (1..=o.robots as u32)
+                            .filter(|id| !done[*id as usize - 1])
+                            .collect(),
+                        step,
+                        secs: o.stall_timeout.as_secs_f64(),
+                    });
+                }
+                let Some(m) = updates.recv_timeout(left.min(Duration::from_millis(100)))? else {
+                    if node.wait(Duration::ZERO).is_err() {
+                        return Err(GraphRunError::Interrupted(o.name.clone()));
+                    }
+                    continue;
+                };
+                let i = m.robot_id.wrapping_sub(1) as usize;
+                if i >= o.robots || m.step != step {
+                    // Not one of this run's robots, or a stale step: counted, never applied.
+                    world.rejected += 1;
+                    continue;
+                }
+                if m.kind == kind::STEP_DONE {
+                    done[i] = true;
+                    outputs[i].2 = (m.region != NO_CLAIM).then_some(m.region as usize);
+                } else {
+                    match m.update() {
+                        Ok(u) => outputs[i].1.push(u),
+                        Err(_) => world.rejected += 1,
+                    }
+                }
+            }
+            world.end_step(outputs);
+        }
+        Ok(())
+    })();
+    // Announce the end also after a failure, so every robot stops.
+    let _ = publish(&world, true);
+    result?;
+    Ok(world.report())
+}
+
+/// One robot process: index `index` (id = index + 1) of `robots`.
+#[allow(clippy::too_many_arguments)]
+pub fn run_graph_robot(
+    node: &Node<Svc>,
+    scenario: &RegionsScenario,
+    name: &str,
+    index: usize,
+    robots: usize,
+    strategy: Strategy,
+    seed: u64,
+    timeout: Duration,
+) -> Result<RobotReport, GraphRunError> {
+    let base = scenario.state()?;
+    let mut robot = GraphRobot::new(scenario, &base, index, strategy, seed)?;
+    let mut reader = GraphReader::attach(node, name)?;
+    let updater = GraphUpdater::attach(node, name, robot.id())?;
+    let mut contention = Contention::attach(node, name)?;
+    if !contention.wait_listeners(robots, timeout)? {
+        return Err(GraphRunError::Setup(format!(
+            "graph '{name}': {} of {robots} robots listen for contention messages after {:.1} s",
+            contention.listeners(),
+            timeout.as_secs_f64()
+        )));
+    }
+    let mut seq = 0u64;
+    let mut last_step = None;
+    loop {
+        let snap = loop {
+            if let Some(s) = reader.wait_newer(seq, Duration::from_millis(100))? {
+                break *s;
+            }
+            if node.wait(Duration::ZERO).is_err() {
+                return Err(GraphRunError::Interrupted(name.to_string()));
+            }
+            if reader.writers() == 0 && seq > 0 {
+                return Err(GraphRunError::WriterGone {
+                    name: name.to_string(),
+                    step: last_step.unwrap_or(0),
+                });
+            }
+        };
+        seq = snap.seq;
+        if snap.finished != 0 {
+            return Ok(robot.report());
+        }
+        let state = snap.apply_to(&base)?;
+        let claims = snap.claims();
+        let view = StepView {
+            step: snap.step,
+            time_s: snap.sim_time_s as f32,
+            state: &state,
+            claims: &claims,
+        };
+        let out = robot.step(&view, |region, step, expected| {
+            contention.collect(region as u32, step, expected, timeout)
+        })?;
+        for u in out.updates {
+            updater.send_at(snap.step, u)?;
+        }
+        if let Some(m) = &out.announce {
+            contention.announce(m)?;
+        }
+        updater.step_done(snap.step, out.claim)?;
+        last_step = Some(snap.step);
+    }
+}

@@ -1,0 +1,402 @@
+//! `pheromone graph | graph-robot`, and `pheromone sim regions | regions-skeleton`: seed 001's
+//! node-graph signalling with area capture and conflict resolution, as processes (or in one
+//! process with `--single-process`).
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use field::shm::create_node;
+use publishers::graph::process::{run_graph_robot, run_graph_writer, WriterOptions};
+use publishers::graph::run::{simulate, tables_text, RobotReport, RunReport};
+use publishers::graph::sim::{RegionsScenario, Strategy, BUILTIN_REGIONS};
+use serde_json::{json, Value};
+
+use super::bad;
+use super::sim::{Role, SimArgs};
+
+/// Whether `name` is a `regions` scenario: a built-in one, or a TOML file with a `dock`.
+pub fn is_regions(name: &str) -> bool {
+    if BUILTIN_REGIONS.iter().any(|(n, _)| *n == name) {
+        return true;
+    }
+    let p = Path::new(name);
+    p.is_file() && std::fs::read_to_string(p).is_ok_and(|text| RegionsScenario::looks_like(&text))
+}
+
+/// A built-in `regions` scenario or a TOML file; every problem is bad input (exit status 2).
+pub fn load_regions(name: &str) -> anyhow::Result<RegionsScenario> {
+    let sc = match RegionsScenario::builtin(name) {
+        Some(sc) => sc,
+        None => {
+            let text = std::fs::read_to_string(name).map_err(|e| {
+                let names: Vec<&str> = BUILTIN_REGIONS.iter().map(|(n, _)| *n).collect();
+                bad(format!(
+                    "regions scenario '{name}': not a built-in one ({}) and cannot read it as a file: {e}",
+                    names.join(", ")
+                ))
+            })?;
+            toml::from_str(&text).map_err(|e| bad(format!("{name}: {e}")))?
+        }
+    };
+    sc.state().map_err(|e| bad(format!("{name}: {e}")))?;
+    Ok(sc)
+}
+
+fn parse_strategy(s: &str) -> anyhow::Result<Strategy> {
+    s.parse::<Strategy>().map_err(bad)
+}
+
+/// Run the graph writer of a `regions` run: owns the node graph and its regions in shared
+/// memory, runs the lockstep clock, applies the robots' updates (link deposits, dead ends,
+/// captures, releases) in robot order and publishes an immutable snapshot per step.
+///
+/// Start it with N `pheromone graph-robot` processes of the same --name; it waits for all of
+/// them, runs until the scenario's goal (every region served, or captured) or its max_time_s,
+/// and prints the run's tables (captures, final link values, area capture matrix).
+#[derive(Args, Debug)]
+pub struct GraphArgs {
+    /// Scenario: regions, regions-skeleton, or a TOML file (examples/scenarios/regions*.toml).
+    #[arg(long, default_value = "regions")]
+    pub scenario: String,
+    /// Name of the graph (its services are pheromone/<NAME>/graph, …/graph-update, …/contend).
+    #[arg(long, default_value = "graph")]
+    pub name: String,
+    /// Number of robot processes that take part (ids 1..=N).
+    #[arg(long, value_name = "N")]
+    pub robots: usize,
+    /// Strategy the robots use (recorded in the report): pheromone or shortest-path.
+    #[arg(long, default_value = "pheromone")]
+    pub strategy: String,
+    /// Seed of the run (recorded in the report).
+    #[arg(long, value_name = "S")]
+    pub seed: Option<u64>,
+    /// Seconds to wait for every robot to attach.
+    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    pub attach_timeout: f64,
+    /// Seconds one step may wait for the robots before the run fails.
+    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    pub stall_timeout: f64,
+    /// Print the report as one JSON object on stdout (the tables go to stderr either way).
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn secs(what: &str, v: f64) -> anyhow::Result<Duration> {
+    Duration::try_from_secs_f64(v)
+        .ok()
+        .filter(|d| !d.is_zero())
+        .ok_or_else(|| bad(format!("{what} {v}: must be a positive number of seconds")))
+}
+
+pub fn run_writer(a: GraphArgs) -> anyhow::Result<()> {
+    field::shm::check_name(&a.name).map_err(|e| bad(e.to_string()))?;
+    let scenario = load_regions(&a.scenario)?;
+    let o = WriterOptions {
+        name: a.name.clone(),
+        robots: a.robots,
+        strategy: parse_strategy(&a.strategy)?,
+        seed: a.seed.unwrap_or(scenario.seed),
+        attach_timeout: secs("--attach-timeout", a.attach_timeout)?,
+        stall_timeout: secs("--stall-timeout", a.stall_timeout)?,
+    };
+    if a.robots == 0 {
+        return Err(bad("--robots 0: a run needs at least one robot"));
+    }
+    let node = create_node(&format!("graph-{}", a.name))?;
+    let report = run_graph_writer(&node, &scenario, &o)?;
+    eprint!("{}", tables_text(&report));
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    }
+    Ok(())
+}
+
+/// Run one robot of a `regions` run: reads each step's graph snapshot without a copy, moves
+/// along the links (eq. 8: the largest value, ties broken by a seeded draw; −1 on a link it
+/// takes, −∞ on a dead end), claims the nearest region with room (eq. 9), resolves contention
+/// with the other claimants by exchanging the paper's JSON message (Listing 1) over iceoryx2,
+/// serves the region it won and releases it.
+#[derive(Args, Debug)]
+pub struct GraphRobotArgs {
+    /// Scenario: regions, regions-skeleton, or a TOML file.
+    #[arg(long, default_value = "regions")]
+    pub scenario: String,
+    /// Name of the graph to attach to.
+    #[arg(long, default_value = "graph")]
+    pub name: String,
+    /// This robot's id (1..=N); robot k leaves the dock after (k − 1) × start_interval_s.
+    #[arg(long, value_name = "ID")]
+    pub robot: u32,
+    /// Number of robots of the run.
+    #[arg(long, value_name = "N")]
+    pub robots: usize,
+    /// pheromone (seed 001: anti-pheromone on links and region capture) or shortest-path
+    /// (A* to the nearest region, conflicts resolved on arrival).
+    #[arg(long, default_value = "pheromone")]
+    pub strategy: String,
+    /// Seed of the tie-breaking draws.
+    #[arg(long, value_name = "S")]
+    pub seed: Option<u64>,
+    /// Seconds to wait for the other robots and for each step.
+    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    pub timeout: f64,
+    /// Print this robot's summary as one JSON object on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run_robot(a: GraphRobotArgs) -> anyhow::Result<()> {
+    field::shm::check_name(&a.name).map_err(|e| bad(e.to_string()))?;
+    if a.robot == 0 || a.robot as usize > a.robots {
+        return Err(bad(format!(
+            "--robot {}: ids run from 1 to --robots ({})",
+            a.robot, a.robots
+        )));
+    }
+    let scenario = load_regions(&a.scenario)?;
+    let strategy = parse_strategy(&a.strategy)?;
+    let node = create_node(&format!("graph-{}-r{}", a.name, a.robot))?;
+    let report = run_graph_robot(
+        &node,
+        &scenario,
+        &a.name,
+        a.robot as usize - 1,
+        a.robots,
+        strategy,
+        a.seed.unwrap_or(scenario.seed),
+        secs("--timeout", a.timeout)?,
+    )?;
+    eprintln!(
+        "graph-robot R{}: {:.1} m driven, {} capture(s), {} conflict(s)",
+        report.robot, report.distance_m, report.capture_count, report.conflicts
+    );
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    }
+    Ok(())
+}
+
+/// `pheromone sim` on a `regions` scenario: every robot count of the scenario (or --robots)
+/// with both strategies (or --strategy), then the comparison of the time to the goal.
+pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
+    for (set, flag) in [
+        (a.duration.is_some(), "--duration"),
+        (a.realtime, "--realtime"),
+        (a.constant, "--constant"),
+        (a.trials.is_some(), "--trials"),
+        (a.slam, "--slam"),
+    ] {
+        if set {
+            return Err(bad(format!(
+                "{flag} does not apply to the regions scenario '{}' (it has no grid robots)",
+                a.scenario
+            )));
+        }
+    }
+    let scenario = load_regions(&a.scenario)?;
+    let seed = a.seed.unwrap_or(scenario.seed);
+    let counts = match a.robots {
+        Some(n) => vec![n],
+        None => scenario.robots.clone(),
+    };
+    if let Some(&n) = counts
+        .iter()
+        .find(|&&n| n == 0 || n > publishers::graph::shm::MAX_GRAPH_ROBOTS)
+    {
+        return Err(bad(format!(
+            "robots {n}: a regions run takes 1 to {}",
+            publishers::graph::shm::MAX_GRAPH_ROBOTS
+        )));
+    }
+    let strategies = match &a.strategy {
+        Some(s) => vec![parse_strategy(s)?],
+        None => Strategy::ALL.to_vec(),
+    };
+    let started = Instant::now();
+    let mut runs: Vec<RunReport> = Vec::new();
+    let mut text = String::new();
+    for &n in &counts {
+        for &strategy in &strategies {
+            let run_started = Instant::now();
+            let report = if a.single_process {
+                simulate(&scenario, strategy, n, seed)?
+            } else {
+                run_as_processes(a, strategy, n, seed)?
+            };
+            let t = tables_text(&report);
+            eprintln!(
+                "{t}  ({:.2} s wall time)\n",
+                run_started.elapsed().as_secs_f64()
+            );
+            text += &t;
+            text += "\n";
+            runs.push(report);
+        }
+    }
+    let comparison = compare(&runs);
+    let cmp_text = comparison_text(&comparison);
+    eprint!("{cmp_text}");
+    text += &cmp_text;
+    let metrics = json!({
+        "scenario": scenario.name,
+        "seed": seed,
+        "mode": if a.single_process { "single-process" } else { "processes" },
+        "wall_time_s": started.elapsed().as_secs_f64(),
+        "comparison": comparison,
+        "runs": runs,
+    });
+    if !a.no_out {
+        let dir = a
+            .out
+            .clone()
+            .unwrap_or_else(|| Path::new("pheromone-out").join(&scenario.name));
+        std::fs::create_dir_all(&dir)
+            .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+        std::fs::write(
+            dir.join("metrics.json"),
+            serde_json::to_string_pretty(&metrics)?,
+        )?;
+        std::fs::write(dir.join("tables.txt"), &text)?;
+        eprintln!("wrote metrics.json and tables.txt to {}", dir.display());
+    }
+    if a.json {
+        println!("{metrics}");
+    }
+    Ok(())
+}
+
+/// Per robot count: the time to the goal with each strategy and their ratio (Fig. 4c).
+fn compare(runs: &[RunReport]) -> Vec<Value> {
+    let mut counts: Vec<usize> = runs.iter().map(|r| r.robots).collect();
+    counts.dedup();
+    counts
+        .into_iter()
+        .map(|n| {
+            let of = |s: Strategy| runs.iter().find(|r| r.robots == n && r.strategy == s);
+            let ph = of(Strategy::Pheromone);
+            let sp = of(Strategy::ShortestPath);
+            let ratio = match (ph.and_then(|r| r.finish_s), sp.and_then(|r| r.finish_s)) {
+                (Some(a), Some(b)) if a > 0.0 => Some(b / a),
+                _ => None,
+            };
+            json!({
+                "robots": n,
+                "pheromone_finish_s": ph.and_then(|r| r.finish_s),
+                "pheromone_conflicts": ph.map(|r| r.conflicts),
+                "shortest_path_finish_s": sp.and_then(|r| r.finish_s),
+                "shortest_path_conflicts": sp.map(|r| r.conflicts),
+                "shortest_path_over_pheromone": ratio,
+            })
+        })
+        .collect()
+}
+
+fn comparison_text(rows: &[Value]) -> String {
+    use std::fmt::Write;
+    let mut s = String::from(
+        "Time to the goal (cf. Fig. 4c):\n  robots   pheromone (conflicts)   shortest-path (conflicts)   ratio\n",
+    );
+    let f = |v: &Value| v.as_f64().map_or("-".to_string(), |x| format!("{x:.1} s"));
+    let c = |v: &Value| v.as_u64().map_or("-".to_string(), |x| x.to_string());
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "  {:>6}   {:>9} ({:>3})         {:>9} ({:>3})             {}",
+            c(&r["robots"]),
+            f(&r["pheromone_finish_s"]),
+            c(&r["pheromone_conflicts"]),
+            f(&r["shortest_path_finish_s"]),
+            c(&r["shortest_path_conflicts"]),
+            r["shortest_path_over_pheromone"]
+                .as_f64()
+                .map_or("-".to_string(), |x| format!("{x:.2}×")),
+        );
+    }
+    s
+}
+
+/// One run as processes: the graph writer and one `graph-robot` per robot.
+fn run_as_processes(
+    a: &SimArgs,
+    strategy: Strategy,
+    robots: usize,
+    seed: u64,
+) -> anyhow::Result<RunReport> {
+    static RUN: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let tag = format!(
+        "sim{}g{}",
+        std::process::id(),
+        RUN.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+    );
+    let node = create_node(&format!("{tag}-sim"))?;
+    let common = |role: &str| -> Vec<String> {
+        [
+            role,
+            "--scenario",
+            &a.scenario,
+            "--name",
+            &tag,
+            "--robots",
+            &robots.to_string(),
+            "--strategy",
+            strategy.name(),
+            "--seed",
+            &seed.to_string(),
+            "--json",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    let mut roles = vec![Role::spawn("graph".into(), &common("graph"))?];
+    for id in 1..=robots {
+        let mut args = common("graph-robot");
+        args.extend(["--robot".to_string(), id.to_string()]);
+        roles.push(Role::spawn(format!("graph-robot R{id}"), &args)?);
+    }
+    let deadline = Instant::now() + Duration::from_secs_f64(a.timeout);
+    // Child exits have no iceoryx2 event; the node's wait bounds each round and sees Ctrl-C.
+    while roles[0].child.try_wait().ok().flatten().is_none() {
+        for r in roles.iter_mut().skip(1) {
+            if let Ok(Some(status)) = r.child.try_wait() {
+                if !status.success() {
+                    let (_, _, err) = r.collect();
+                    anyhow::bail!("{} failed ({status}): {}", r.name, err.trim());
+                }
+            }
+        }
+        if Instant::now() > deadline {
+            anyhow::bail!(
+                "the run took longer than {} s: stopped every process",
+                a.timeout
+            );
+        }
+        if node.wait(Duration::from_millis(10)).is_err() {
+            anyhow::bail!("interrupted: stopped every process of the run");
+        }
+    }
+    let (ok, out, err) = roles[0].collect();
+    if !ok {
+        anyhow::bail!("graph writer failed: {}", err.trim());
+    }
+    let mut report: RunReport = serde_json::from_value(out.unwrap_or(Value::Null))
+        .map_err(|e| anyhow::anyhow!("graph writer printed no report: {e}"))?;
+    let end = Instant::now() + Duration::from_secs(15);
+    for r in roles.iter_mut().skip(1) {
+        while r.child.try_wait().ok().flatten().is_none() {
+            if Instant::now() > end {
+                anyhow::bail!("{} did not stop within 15 s of the end of the run", r.name);
+            }
+            let _ = node.wait(Duration::from_millis(10));
+        }
+        let (ok, out, err) = r.collect();
+        if !ok {
+            anyhow::bail!("{} failed: {}", r.name, err.trim());
+        }
+        let rr: RobotReport = serde_json::from_value(out.unwrap_or(Value::Null))
+            .map_err(|e| anyhow::anyhow!("{} printed no summary: {e}", r.name))?;
+        report.robot_reports.push(rr);
+    }
+    Ok(report)
+}
