@@ -2,6 +2,7 @@
 
 mod bench;
 mod crash;
+mod graph;
 mod harness;
 mod reliability;
 mod soak;

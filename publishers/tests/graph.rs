@@ -2,11 +2,10 @@
 //! capture attempts, and three robot processes contending for one region over iceoryx2.
 
 use std::cmp::Ordering;
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use proptest::prelude::*;
-use publishers::graph::shm::{Contention, GraphReader, GraphServer, GraphUpdater};
+use publishers::graph::shm::{GraphReader, GraphServer, GraphUpdater};
 use publishers::graph::sim::RegionsScenario;
 use publishers::graph::{
     CaptureOutcome, ContendMsg, Dir, Graph, GraphState, GraphUpdate, RegionConfig, RegionShape,
@@ -377,141 +376,6 @@ fn threads_capturing_at_once_never_exceed_max_r() {
         .unwrap()
         .captured_by
         .is_empty());
-}
-
-/// Kills and reaps its child on drop.
-struct Proc(Child);
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-const CHILD_ENV: &str = "PHEROMONE_GRAPH_CHILD";
-
-/// Three robot processes contend for one region (Max-R 1): each announces Listing 1's JSON
-/// over iceoryx2, collects the others', decides; all name the same winner (the paper's order:
-/// equal priority; robots 2 and 3 have more battery than 1; 3 has served fewer areas than 2),
-/// only the winner captures, and the server's table shows exactly it.
-#[test]
-fn three_robot_processes_contend_for_one_region() {
-    let name = unique("contend");
-    let node = field::shm::create_node(&unique("srv")).unwrap();
-    let mut server = GraphServer::create(&node, &name, one_region_state(1)).unwrap();
-    let exe = std::env::current_exe().unwrap();
-    let profiles = [(1, 60, 0), (2, 90, 1), (3, 90, 0)]; // (id, battery, capture count)
-    let mut kids: Vec<Proc> = profiles
-        .iter()
-        .map(|&(id, battery, cc)| {
-            Proc(
-                Command::new(&exe)
-                    .args([
-                        "--exact",
-                        "contending_robot_child",
-                        "--ignored",
-                        "--nocapture",
-                        "--test-threads=1",
-                    ])
-                    .env(CHILD_ENV, format!("{name} {id} {battery} {cc}"))
-                    .stdout(Stdio::piped())
-                    .stderr(Stdio::inherit())
-                    .spawn()
-                    .unwrap(),
-            )
-        })
-        .collect();
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while kids.iter_mut().any(|k| k.0.try_wait().unwrap().is_none()) {
-        assert!(Instant::now() < deadline, "robot processes did not finish");
-        server.serve_once(Duration::from_millis(50)).unwrap();
-    }
-    let mut winners = Vec::new();
-    for k in &mut kids {
-        let mut out = String::new();
-        use std::io::Read;
-        k.0.stdout.take().unwrap().read_to_string(&mut out).unwrap();
-        assert!(k.0.wait().unwrap().success(), "child failed: {out}");
-        // libtest prints "test contending_robot_child ... " on the same line.
-        let line = out
-            .lines()
-            .find_map(|l| l.find("WINNER ").map(|k| &l[k..]))
-            .unwrap_or_else(|| panic!("no decision in: {out}"));
-        winners.push(line.trim().to_string());
-    }
-    assert_eq!(winners, vec!["WINNER 3 CONTENDERS 3"; 3]);
-    server.serve_once(Duration::from_millis(1)).unwrap();
-    let r = server.state().regions.get(0).unwrap();
-    assert_eq!(r.captured_by, vec![3]);
-    assert_eq!(server.counters().captures_refused, 0);
-}
-
-/// The robot process of the test above (runs only when started by it).
-#[test]
-#[ignore = "started as a child process by three_robot_processes_contend_for_one_region"]
-fn contending_robot_child() {
-    let Ok(spec) = std::env::var(CHILD_ENV) else {
-        return;
-    };
-    let f: Vec<&str> = spec.split(' ').collect();
-    let (name, id, battery, cc): (&str, u32, u8, u32) = (
-        f[0],
-        f[1].parse().unwrap(),
-        f[2].parse().unwrap(),
-        f[3].parse().unwrap(),
-    );
-    let node = field::shm::create_node(&unique(&format!("robot{id}"))).unwrap();
-    let mut contention = Contention::attach(&node, name).unwrap();
-    let mut reader = GraphReader::attach(&node, name).unwrap();
-    let updater = GraphUpdater::attach(&node, name, id).unwrap();
-    let snap = *reader
-        .wait_newer(0, Duration::from_secs(10))
-        .unwrap()
-        .expect("the server's snapshot");
-    let room = (snap.regions[0].max_r - snap.regions[0].n_captured) as usize;
-    // Every contender must be listening before anyone announces.
-    assert!(
-        contention
-            .wait_listeners(3, Duration::from_secs(10))
-            .unwrap(),
-        "contenders never all attached"
-    );
-    let me = ContendMsg {
-        robot_id: id,
-        time_stamp_s: 1_440_233_786,
-        battery_pct: battery,
-        capture_count: cc,
-        task_id: 8,
-        task_priority: 1,
-        lrf_range_m: 4.0,
-        rgb_res: RgbRes::Vga,
-        region: 0,
-    };
-    contention.announce(&me).unwrap();
-    let msgs = contention.collect(0, 3, Duration::from_secs(10)).unwrap();
-    let winners = ContendMsg::winners(&msgs, room);
-    println!("WINNER {} CONTENDERS {}", winners[0], msgs.len());
-    if winners.contains(&id) {
-        updater
-            .send(GraphUpdate::Capture {
-                region: 0,
-                robot: id,
-            })
-            .unwrap();
-        let deadline = Instant::now() + Duration::from_secs(10);
-        let mut seq = snap.seq;
-        loop {
-            let s = *reader
-                .wait_newer(seq, Duration::from_secs(1))
-                .unwrap()
-                .unwrap_or(&snap);
-            seq = s.seq;
-            if s.regions[0].n_captured == 1 && s.regions[0].captured_by[0] == id {
-                break;
-            }
-            assert!(Instant::now() < deadline, "capture never confirmed");
-        }
-    }
 }
 
 #[test]

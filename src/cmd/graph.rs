@@ -39,7 +39,9 @@ pub fn load_regions(name: &str) -> anyhow::Result<RegionsScenario> {
             toml::from_str(&text).map_err(|e| bad(format!("{name}: {e}")))?
         }
     };
-    sc.state().map_err(|e| bad(format!("{name}: {e}")))?;
+    let state = sc.state().map_err(|e| bad(format!("{name}: {e}")))?;
+    sc.dock_node(&state.graph)
+        .map_err(|e| bad(format!("{name}: dock: {e}")))?;
     Ok(sc)
 }
 

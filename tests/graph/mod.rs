@@ -1,0 +1,221 @@
+//! Node-graph runs (seed 001) as real processes: `pheromone graph`, `pheromone graph-robot`
+//! and `pheromone sim regions…`.
+
+use std::time::Duration;
+
+use super::harness::*;
+
+/// One region at the dock, three robots leaving at once: all claim it in the same step.
+fn one_region_scenario(max_r: u32) -> std::path::PathBuf {
+    let path = std::env::temp_dir().join(format!("{}.toml", unique("one-region")));
+    std::fs::write(
+        &path,
+        format!(
+            r#"
+name = "one-region"
+seed = 3
+robots = [3]
+dock = "dock"
+
+[graph]
+node = [{{ name = "dock", x_m = 0.0, y_m = 0.0 }}, {{ name = "far", x_m = 3.0, y_m = 0.0 }}]
+link = [{{ from = "dock", to = "far" }}]
+
+[[region]]
+name = "R"
+node = "dock"
+max_r = {max_r}
+shape = {{ polygon = {{ vertices_m = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]] }} }}
+
+[regions_sim]
+start_interval_s = 0.0
+work_s_per_m2 = 1000.0
+max_time_s = 60.0
+until = "captured"
+"#
+        ),
+    )
+    .unwrap();
+    path
+}
+
+/// Three robot processes contend for one region: each announces the paper's JSON message over
+/// iceoryx2, collects the others' and decides. Equal priority, battery and capture count: the
+/// smaller id wins. The writer's table shows exactly the winners, never more than Max-R.
+#[test]
+fn three_robot_processes_contend_for_one_region() {
+    for (max_r, winners) in [(1u32, vec![1u64]), (2, vec![1, 2])] {
+        let file = one_region_scenario(max_r);
+        let f = file.display().to_string();
+        let name = unique("contend");
+        let writer = Proc::spawn(&[
+            "graph",
+            "--scenario",
+            &f,
+            "--name",
+            &name,
+            "--robots",
+            "3",
+            "--json",
+        ]);
+        let robots: Vec<Proc> = (1..=3)
+            .map(|id| {
+                Proc::spawn(&[
+                    "graph-robot",
+                    "--scenario",
+                    &f,
+                    "--name",
+                    &name,
+                    "--robot",
+                    &id.to_string(),
+                    "--robots",
+                    "3",
+                    "--json",
+                ])
+            })
+            .collect();
+        let o = writer.wait_exit(Duration::from_secs(60));
+        assert!(o.status.success(), "writer: {}", stderr(&o));
+        let r = json(&o);
+        let area = &r["areas"][0];
+        let held: Vec<u64> = area["held_by"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        assert_eq!(held, winners, "max_r {max_r}: {r}");
+        assert_eq!(r["captures"].as_array().unwrap().len(), winners.len());
+        assert_eq!(r["conflicts"], 1, "three claimants, room {max_r}: {r}");
+        assert_eq!(r["captures_refused"], 0);
+        assert_eq!(r["updates_rejected"], 0);
+        for p in robots {
+            let what = p.what.clone();
+            let o = p.wait_exit(Duration::from_secs(30));
+            assert!(o.status.success(), "{what}: {}", stderr(&o));
+            let s = json(&o);
+            // Every claimant saw the same three messages and the same conflict.
+            assert_eq!(s["conflicts"], 1, "{what}: {s}");
+            assert_eq!(s["refused"], 0, "{what}: {s}");
+        }
+        std::fs::remove_file(&file).unwrap();
+    }
+}
+
+fn runs(v: &serde_json::Value) -> Vec<serde_json::Value> {
+    let mut runs = v["runs"].as_array().unwrap().clone();
+    for r in &mut runs {
+        let mut rr = r["robot_reports"].as_array().unwrap().clone();
+        rr.sort_by_key(|x| x["robot"].as_u64());
+        r["robot_reports"] = serde_json::Value::Array(rr);
+    }
+    runs
+}
+
+/// `sim regions` as processes gives the same runs as in one process, region capture beats the
+/// shortest-path baseline, and nothing of the run is left behind.
+#[test]
+fn sim_regions_as_processes_matches_one_process_and_beats_shortest_path() {
+    let p = Proc::spawn(&["sim", "regions", "--robots", "3", "--json", "--no-out"]);
+    let tag = format!("sim{}g", p.pid());
+    let o = p.wait_exit(Duration::from_secs(300));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let procs = json(&o);
+    assert_eq!(procs["mode"], "processes");
+    let o = run(&[
+        "sim",
+        "regions",
+        "--robots",
+        "3",
+        "--json",
+        "--no-out",
+        "--single-process",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let single = json(&o);
+    assert_eq!(runs(&procs), runs(&single));
+    let c = &procs["comparison"][0];
+    assert_eq!(c["robots"], 3);
+    let ph = c["pheromone_finish_s"].as_f64().unwrap();
+    let sp = c["shortest_path_finish_s"].as_f64().unwrap();
+    assert!(ph < sp, "capture {ph} s, shortest path {sp} s: {c}");
+    assert_eq!(c["pheromone_conflicts"], 0, "{c}");
+    let text = stderr(&o);
+    assert!(
+        text.contains("Table 2") && text.contains("Table 3") && text.contains("Table 4"),
+        "{text}"
+    );
+    let left = super::services_named(&tag);
+    assert!(left.is_empty(), "services left behind: {left:?}");
+}
+
+/// Fig. 7 / Table 4 as nine processes: 8 robots fill the 7 regions of the skeletonized map,
+/// C (Max-R 2) with two.
+#[test]
+fn eight_robot_processes_capture_the_skeleton_map() {
+    let dir = std::env::temp_dir().join(unique("skeleton-out"));
+    let o = Proc::spawn(&[
+        "sim",
+        "regions-skeleton",
+        "--strategy",
+        "pheromone",
+        "--json",
+        "--out",
+        &dir.display().to_string(),
+    ])
+    .wait_exit(Duration::from_secs(600));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m = json(&o);
+    let r = &m["runs"][0];
+    assert_eq!(r["robots"], 8);
+    assert!(r["finish_s"].as_f64().is_some(), "{r}");
+    for a in r["areas"].as_array().unwrap() {
+        assert_eq!(
+            a["held_by"].as_array().unwrap().len() as u64,
+            a["max_r"].as_u64().unwrap(),
+            "{a}"
+        );
+    }
+    let c = r["areas"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|a| a["region"] == "C")
+        .unwrap();
+    assert_eq!(c["max_r"], 2);
+    let tables = std::fs::read_to_string(dir.join("tables.txt")).unwrap();
+    assert!(tables.contains("-inf"), "dead ends marked: {tables}");
+    assert!(dir.join("metrics.json").is_file());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bad_regions_input_exits_with_status_2_and_names_it() {
+    let o = run(&["sim", "regions", "--robots", "0", "--no-out"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("robots 0"), "{}", stderr(&o));
+    let o = run(&["sim", "regions", "--strategy", "random", "--no-out"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("'random'"), "{}", stderr(&o));
+    let o = run(&["sim", "regions", "--slam", "--no-out"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--slam"), "{}", stderr(&o));
+    let o = run(&["graph-robot", "--robot", "5", "--robots", "3"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--robot 5"), "{}", stderr(&o));
+    let path = std::env::temp_dir().join(format!("{}.toml", unique("bad-regions")));
+    std::fs::write(
+        &path,
+        "name = \"x\"\ndock = \"nowhere\"\n[graph]\nnode = [{ name = \"a\", x_m = 0.0, y_m = 0.0 }]\n[[region]]\nname = \"R\"\nnode = \"a\"\nshape = { polygon = { vertices_m = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]] } }\n",
+    )
+    .unwrap();
+    let p = path.display().to_string();
+    let o = run(&["sim", &p, "--no-out"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("nowhere"), "{}", stderr(&o));
+    std::fs::write(&path, "name = \"x\"\ndock = \"a\"\n[graph]\nnode = 3\n").unwrap();
+    let o = run(&["sim", &p, "--no-out"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains(&p), "{}", stderr(&o));
+    std::fs::remove_file(&path).unwrap();
+}
