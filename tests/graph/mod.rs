@@ -200,6 +200,14 @@ fn bad_regions_input_exits_with_status_2_and_names_it() {
     let o = run(&["sim", "regions", "--slam", "--no-out"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--slam"), "{}", stderr(&o));
+    // The localizer's captured-area option (Algorithm 1 lines 10–14).
+    let o = run(&["localizer", "--landmark-region", "5,0,1,3"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("--landmark-region") && stderr(&o).contains("5,0,1,3"),
+        "{}",
+        stderr(&o)
+    );
     let o = run(&["graph-robot", "--robot", "5", "--robots", "3"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--robot 5"), "{}", stderr(&o));
