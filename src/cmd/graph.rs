@@ -39,9 +39,7 @@ pub fn load_regions(name: &str) -> anyhow::Result<RegionsScenario> {
             toml::from_str(&text).map_err(|e| bad(format!("{name}: {e}")))?
         }
     };
-    let state = sc.state().map_err(|e| bad(format!("{name}: {e}")))?;
-    sc.dock_node(&state.graph)
-        .map_err(|e| bad(format!("{name}: dock: {e}")))?;
+    sc.validate().map_err(|e| bad(format!("{name}: {e}")))?;
     Ok(sc)
 }
 
@@ -213,7 +211,7 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
     }
     let strategies = match &a.strategy {
         Some(s) => vec![parse_strategy(s)?],
-        None => Strategy::ALL.to_vec(),
+        None => scenario.strategies.clone(),
     };
     let started = Instant::now();
     let mut runs: Vec<RunReport> = Vec::new();

@@ -227,3 +227,21 @@ fn bad_regions_input_exits_with_status_2_and_names_it() {
     assert!(stderr(&o).contains(&p), "{}", stderr(&o));
     std::fs::remove_file(&path).unwrap();
 }
+
+/// Sec. 6.2 as processes: R2, told nothing, follows R1's positive pheromone to E.
+#[test]
+fn a_robot_process_follows_the_pheromone_of_another_to_its_goal() {
+    let o = Proc::spawn(&["sim", "regions-backup", "--json", "--no-out"])
+        .wait_exit(Duration::from_secs(300));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m = json(&o);
+    let rr = m["runs"][0]["robot_reports"].as_array().unwrap().clone();
+    let path = |id: u64| {
+        rr.iter()
+            .find(|r| r["robot"] == id)
+            .unwrap_or_else(|| panic!("robot {id} missing: {m}"))["path"]
+            .clone()
+    };
+    assert_eq!(path(1).as_array().unwrap().last().unwrap(), "E", "{m}");
+    assert_eq!(path(2), path(1), "{m}");
+}

@@ -210,7 +210,7 @@ pub fn run_graph_robot(
         };
         seq = snap.seq;
         if snap.finished != 0 {
-            return Ok(robot.report());
+            return Ok(robot.report(&base.graph));
         }
         let state = snap.apply_to(&base)?;
         let claims = snap.claims();

@@ -49,6 +49,7 @@ enum Phase {
         node: usize,
     },
     Moving {
+        from: usize,
         to: usize,
         left_m: f32,
     },
@@ -85,6 +86,8 @@ pub struct GraphRobot {
     pub conflicts: u32,
     /// Captures the writer refused (the region was full after all).
     pub refused: u32,
+    /// Nodes reached, in order (the dock first).
+    pub path: Vec<usize>,
 }
 
 /// What a robot reports at the end of a run.
@@ -97,6 +100,8 @@ pub struct RobotReport {
     pub conflicts: u32,
     pub refused: u32,
     pub battery_pct: f32,
+    /// Nodes reached, in order (the dock first).
+    pub path: Vec<String>,
 }
 
 impl GraphRobot {
@@ -110,7 +115,7 @@ impl GraphRobot {
         seed: u64,
     ) -> Result<Self, GraphError> {
         let dock = scenario.dock_node(&state.graph)?;
-        let agent = GraphAgent::new(
+        let mut agent = GraphAgent::new(
             RobotProfile {
                 id: index as u32 + 1,
                 task_id: 1,
@@ -121,6 +126,7 @@ impl GraphRobot {
             strategy,
             seed,
         );
+        scenario.apply_role(&state.graph, &mut agent)?;
         let p = scenario.regions_sim;
         Ok(Self {
             agent,
@@ -132,6 +138,7 @@ impl GraphRobot {
             distance_m: 0.0,
             conflicts: 0,
             refused: 0,
+            path: Vec::new(),
         })
     }
 
@@ -139,7 +146,7 @@ impl GraphRobot {
         self.agent.profile.id
     }
 
-    pub fn report(&self) -> RobotReport {
+    pub fn report(&self, g: &super::Graph) -> RobotReport {
         RobotReport {
             robot: self.id(),
             strategy: self.agent.strategy,
@@ -148,6 +155,11 @@ impl GraphRobot {
             conflicts: self.conflicts,
             refused: self.refused,
             battery_pct: self.agent.battery_pct,
+            path: self
+                .path
+                .iter()
+                .filter_map(|&n| g.nodes().get(n).map(|n| n.name.clone()))
+                .collect(),
         }
     }
 
@@ -162,15 +174,21 @@ impl GraphRobot {
         let id = self.id();
         let mut out = RobotOutput::default();
         self.phase = match self.phase {
-            Phase::Waiting { until_s } if until_s <= t => Phase::AtNode { node: self.dock },
-            Phase::Moving { to, left_m } => {
+            Phase::Waiting { until_s } if until_s <= t => {
+                self.path.push(self.dock);
+                Phase::AtNode { node: self.dock }
+            }
+            Phase::Moving { from, to, left_m } => {
                 let d = (p.speed_m_per_s * p.dt_s).min(left_m);
                 self.distance_m += d;
                 self.agent.battery_pct -= d * p.battery_pct_per_m;
                 if left_m <= p.speed_m_per_s * p.dt_s {
+                    self.agent.came_from = Some(from);
+                    self.path.push(to);
                     Phase::AtNode { node: to }
                 } else {
                     Phase::Moving {
+                        from,
                         to,
                         left_m: left_m - d,
                     }
@@ -217,6 +235,7 @@ impl GraphRobot {
                     out.updates.extend(updates);
                     let l = *v.state.graph.link(node, dir)?;
                     Phase::Moving {
+                        from: node,
                         to: l.to,
                         left_m: l.length_m,
                     }
@@ -500,6 +519,7 @@ impl GraphWorld {
                 .regions()
                 .iter()
                 .all(|r| r.captured_by.len() as u32 >= r.max_r),
+            Until::Time => false,
         }
     }
 
@@ -604,7 +624,7 @@ pub fn simulate(
         world.end_step(outputs);
     }
     let mut report = world.report();
-    report.robot_reports = fleet.iter().map(GraphRobot::report).collect();
+    report.robot_reports = fleet.iter().map(|r| r.report(&world.state.graph)).collect();
     Ok(report)
 }
 
@@ -626,6 +646,7 @@ pub fn tables_text(r: &RunReport) -> String {
         match r.until {
             Until::Served => "every region served",
             Until::Captured => "every region captured",
+            Until::Time => "the end of max_time_s",
         },
         if r.finish_s.is_some() {
             "reached"
@@ -665,6 +686,20 @@ pub fn tables_text(r: &RunReport) -> String {
             "  {:<8} {:>7} {:>7} {:>7} {:>7}",
             l.node, l.up, l.down, l.left, l.right
         );
+    }
+    if !r.robot_reports.is_empty() {
+        let _ = writeln!(s, "\nRobots:");
+        for rr in &r.robot_reports {
+            let _ = writeln!(
+                s,
+                "  R{:<3} {:>6.1} m, {} capture(s), {} conflict(s), path {}",
+                rr.robot,
+                rr.distance_m,
+                rr.capture_count,
+                rr.conflicts,
+                rr.path.join(" → ")
+            );
+        }
     }
     let _ = writeln!(s, "\nArea capture matrix (cf. Table 4):");
     let _ = writeln!(
@@ -787,6 +822,27 @@ mod tests {
         let a = simulate(&sc, Strategy::Pheromone, 3, 7).unwrap();
         let b = simulate(&sc, Strategy::Pheromone, 3, 7).unwrap();
         assert_eq!(a, b);
+    }
+}
+
+#[cfg(test)]
+mod backup_tests {
+    use super::*;
+
+    /// Sec. 6.2: R2, told nothing, follows R1's positive pheromone to E node by node; with
+    /// anti-pheromone instead it finds nothing to follow and stays at the dock.
+    #[test]
+    fn a_robot_follows_positive_pheromone_to_the_leaders_goal() {
+        let mut sc = RegionsScenario::builtin("regions-backup").unwrap();
+        let r = simulate(&sc, Strategy::Pheromone, 2, 1).unwrap();
+        let (r1, r2) = (&r.robot_reports[0], &r.robot_reports[1]);
+        assert_eq!(r1.path.last().map(String::as_str), Some("E"), "{r1:?}");
+        assert_eq!(r2.path, r1.path, "{}", tables_text(&r));
+        let e = r.links.iter().find(|l| l.node == "D").unwrap();
+        assert_eq!(e.right, "1", "R1 deposited +1, R2 nothing: {e:?}");
+        sc.robot_roles[0].link_deposit = Some(-1.0);
+        let r = simulate(&sc, Strategy::Pheromone, 2, 1).unwrap();
+        assert_eq!(r.robot_reports[1].path, ["dock"], "{}", tables_text(&r));
     }
 }
 

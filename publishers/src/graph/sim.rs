@@ -82,6 +82,14 @@ pub struct GraphAgent {
     pub patrol: bool,
     pub capture_count: u32,
     pub battery_pct: f32,
+    /// Sec. 6.2: a robot told where to go drives there by the shortest path (depositing
+    /// `link_deposit` on every link it takes) instead of looking for regions.
+    pub goal: Option<usize>,
+    /// Sec. 4.3 / 6.2: a robot that follows positive pheromone: at each node it takes the
+    /// link with the largest positive value (not the one it came by); none: it stays.
+    pub follow: bool,
+    /// The node this robot came from (set on arrival).
+    pub came_from: Option<usize>,
     rng: ChaCha8Rng,
     /// Regions this robot knows to be taken or served (the baseline's only knowledge).
     known_done: Vec<bool>,
@@ -96,6 +104,9 @@ impl GraphAgent {
             patrol: false,
             capture_count: 0,
             battery_pct: 100.0,
+            goal: None,
+            follow: false,
+            came_from: None,
             rng: ChaCha8Rng::seed_from_u64(seed ^ (profile.id as u64).wrapping_mul(0x9E37_79B9)),
             known_done: Vec::new(),
         }
@@ -155,10 +166,56 @@ impl GraphAgent {
 
     /// The next action at `node`, given the latest state.
     pub fn decide(&mut self, s: &GraphState, node: usize) -> Result<Action, GraphError> {
+        if let Some(goal) = self.goal {
+            return self.decide_goal(s, node, goal);
+        }
+        if self.follow {
+            return self.decide_follow(s, node);
+        }
         match self.strategy {
             Strategy::Pheromone => self.decide_pheromone(s, node),
             Strategy::ShortestPath => self.decide_shortest(s, node),
         }
+    }
+
+    fn decide_goal(
+        &mut self,
+        s: &GraphState,
+        node: usize,
+        goal: usize,
+    ) -> Result<Action, GraphError> {
+        let g = &s.graph;
+        if node == goal {
+            return Ok(Action::Idle);
+        }
+        let Some((path, _)) = g.astar(node, goal) else {
+            return Ok(Action::Idle);
+        };
+        let (dir, _) = g
+            .edge_dirs(node, path[1])
+            .expect("consecutive path nodes are linked");
+        Ok(Action::Move {
+            dir,
+            updates: vec![GraphUpdate::AddToLink {
+                node,
+                dir,
+                amount: self.link_deposit,
+            }],
+        })
+    }
+
+    fn decide_follow(&mut self, s: &GraphState, node: usize) -> Result<Action, GraphError> {
+        let back = self.came_from;
+        let cost = |_: Dir, l: &super::Link| (l.value > 0.0 && Some(l.to) != back).then_some(0.0);
+        Ok(
+            match s.graph.choose_link_among(node, cost, &mut self.rng)? {
+                Some(dir) => Action::Move {
+                    dir,
+                    updates: Vec::new(),
+                },
+                None => Action::Idle,
+            },
+        )
     }
 
     fn decide_pheromone(&mut self, s: &GraphState, node: usize) -> Result<Action, GraphError> {
@@ -263,6 +320,8 @@ pub enum Until {
     Served,
     /// Every region holds Max-R robots (Fig. 7d, Table 4).
     Captured,
+    /// Run until `max_time_s` (the pheromone experiment of Sec. 6.2 has no regions to serve).
+    Time,
 }
 
 impl Default for SimParams {
@@ -372,12 +431,40 @@ pub struct RegionsScenario {
     pub graph: Option<GraphConfig>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub map: Option<MapConfig>,
-    #[serde(rename = "region")]
+    #[serde(default, rename = "region")]
     pub regions: Vec<RegionConfig>,
     /// The node the robots start from: a name, or `[x, y]` for the nearest node.
     pub dock: NodeRef,
+    /// Strategies `pheromone sim` compares unless the command line says otherwise.
+    #[serde(default = "all_strategies")]
+    pub strategies: Vec<Strategy>,
+    /// Robots given a role of their own (Sec. 6.2: one told where to go, one following).
+    #[serde(default, rename = "robot", skip_serializing_if = "Vec::is_empty")]
+    pub robot_roles: Vec<RobotRole>,
     #[serde(default)]
     pub regions_sim: SimParams,
+}
+
+fn all_strategies() -> Vec<Strategy> {
+    Strategy::ALL.to_vec()
+}
+
+/// `[[robot]]` of a `regions` scenario: a robot with a role of its own.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotRole {
+    /// Robot id (1-based).
+    pub id: u32,
+    /// Drive to this node by the shortest path instead of looking for regions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal: Option<NodeRef>,
+    /// Added to every link the robot takes (default −1: anti-pheromone; positive to make
+    /// others follow).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link_deposit: Option<f32>,
+    /// Follow positive pheromone on the links instead of looking for regions.
+    #[serde(default)]
+    pub follow: bool,
 }
 
 fn default_robots() -> Vec<usize> {
@@ -391,10 +478,14 @@ pub const PAPER_CORRIDOR: &str = include_str!("../../../examples/scenarios/regio
 /// Seed 001 Fig. 7: a map skeletonized into the graph, 8 robots, 7 regions, C with Max-R 2.
 pub const PAPER_SKELETON: &str = include_str!("../../../examples/scenarios/regions-skeleton.toml");
 
+/// Seed 001 Sec. 6.2: R1 is sent to region E depositing pheromone; R2 follows it.
+pub const PAPER_BACKUP: &str = include_str!("../../../examples/scenarios/regions-backup.toml");
+
 /// Built-in `regions` scenarios by name.
-pub const BUILTIN_REGIONS: [(&str, &str); 2] = [
+pub const BUILTIN_REGIONS: [(&str, &str); 3] = [
     ("regions", PAPER_CORRIDOR),
     ("regions-skeleton", PAPER_SKELETON),
+    ("regions-backup", PAPER_BACKUP),
 ];
 
 impl RegionsScenario {
@@ -456,5 +547,50 @@ impl RegionsScenario {
 
     pub fn dock_node(&self, g: &Graph) -> Result<usize, GraphError> {
         self.dock.resolve(g)
+    }
+
+    /// Applies the scenario's `[[robot]]` role for this agent's id, if any.
+    pub fn apply_role(&self, g: &Graph, agent: &mut GraphAgent) -> Result<(), GraphError> {
+        let Some(role) = self.robot_roles.iter().find(|r| r.id == agent.profile.id) else {
+            return Ok(());
+        };
+        if let Some(goal) = &role.goal {
+            agent.goal = Some(goal.resolve(g)?);
+        }
+        if let Some(d) = role.link_deposit {
+            if !d.is_finite() {
+                return Err(GraphError::Amount(d));
+            }
+            agent.link_deposit = d;
+        }
+        agent.follow = role.follow;
+        Ok(())
+    }
+
+    /// Checks what [`RegionsScenario::state`] does not: the dock and the robot roles.
+    pub fn validate(&self) -> Result<GraphState, GraphError> {
+        let state = self.state()?;
+        self.dock_node(&state.graph)?;
+        for r in &self.robot_roles {
+            let mut probe = GraphAgent::new(
+                RobotProfile {
+                    id: r.id,
+                    task_id: 1,
+                    task_priority: 1,
+                    lrf_range_m: 4.0,
+                    rgb_res: RgbRes::Vga,
+                },
+                Strategy::Pheromone,
+                0,
+            );
+            self.apply_role(&state.graph, &mut probe)?;
+        }
+        if self.strategies.is_empty() || self.robots.is_empty() {
+            return Err(GraphError::Node {
+                node: self.name.clone(),
+                detail: "`strategies` and `robots` must not be empty".into(),
+            });
+        }
+        Ok(state)
     }
 }
