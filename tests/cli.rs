@@ -381,6 +381,8 @@ fn every_role_explains_itself_in_help() {
         "probe",
         "deposit",
         "tune",
+        "graph",
+        "graph-robot",
     ] {
         let o = run(&[role, "--help"]);
         assert!(o.status.success(), "{role} --help");
