@@ -212,6 +212,8 @@ pub fn run_graph_robot(
         if snap.finished != 0 {
             return Ok(robot.report(&base.graph));
         }
+        // Claims of the previous step are resolved in this one; anything older is stale.
+        contention.drain(snap.step.saturating_sub(1))?;
         let state = snap.apply_to(&base)?;
         let claims = snap.claims();
         let view = StepView {

@@ -673,6 +673,20 @@ impl Contention {
         Ok(self.tx.send(ContendWire::encode(m)?)?)
     }
 
+    /// Moves what has arrived into the pending list and drops messages stamped before
+    /// `oldest_wanted`: a robot that claims nothing for a long time must not let its receive
+    /// buffer fill up, or later messages would be discarded for it.
+    pub fn drain(&mut self, oldest_wanted: u64) -> Result<(), GraphShmError> {
+        while let Some(w) = self.rx.try_recv()? {
+            match w.decode() {
+                Ok(m) => self.pending.push(m),
+                Err(_) => self.malformed += 1,
+            }
+        }
+        self.pending.retain(|m| m.time_stamp_s >= oldest_wanted);
+        Ok(())
+    }
+
     /// The messages for `region` stamped `time_stamp_s` (one per robot), waiting until
     /// `expected` have arrived or `timeout` has passed. Messages for other regions or later
     /// stamps are kept for later calls; older ones are dropped.
