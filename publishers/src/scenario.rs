@@ -49,9 +49,11 @@ pub enum ScenarioError {
     Unknown(String),
 }
 
+/// Every built-in scenario name: the grid ones, then the node-graph (`regions`) ones.
 fn builtin_names() -> String {
     BUILTIN
         .iter()
+        .chain(crate::graph::sim::BUILTIN_REGIONS.iter())
         .map(|(n, _)| *n)
         .collect::<Vec<_>>()
         .join(", ")

@@ -9,7 +9,7 @@ use clap::Args;
 use field::shm::create_node;
 use publishers::graph::process::{run_graph_robot, run_graph_writer, WriterOptions};
 use publishers::graph::run::{simulate, tables_text, RobotReport, RunReport};
-use publishers::graph::sim::{RegionsScenario, Strategy, BUILTIN_REGIONS};
+use publishers::graph::sim::{RegionsScenario, Strategy, Until, BUILTIN_REGIONS};
 use serde_json::{json, Value};
 
 use super::bad;
@@ -235,7 +235,12 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
         }
     }
     let comparison = compare(&runs);
-    let cmp_text = comparison_text(&comparison);
+    // A run for a fixed time (Sec. 6.2) has no goal to reach: nothing to compare.
+    let cmp_text = if scenario.regions_sim.until == Until::Time {
+        String::new()
+    } else {
+        comparison_text(&comparison)
+    };
     eprint!("{cmp_text}");
     text += &cmp_text;
     let metrics = json!({
