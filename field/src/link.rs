@@ -205,10 +205,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
 
     /// Blocks until a sender notifies (or `timeout`), consuming the notifications.
     pub fn wait(&self, timeout: Duration) -> Result<(), ShmError> {
-        self.listener
-            .timed_wait(|_| {}, timeout)
-            .map(|_| ())
-            .map_err(|e| err(&self.service, "wait", e))
+        crate::shm::wait_interruptible(&self.listener, timeout, &self.service)
     }
 
     /// Senders currently attached to the service (0 once the other side has gone).

@@ -83,6 +83,20 @@ pub enum ShmError {
     StandbyMismatch { field: String, detail: String },
 }
 
+/// Waits on a listener; a signal that interrupts the wait (any caught one, not only Ctrl-C) is
+/// a spurious wake-up, since callers loop on their own deadline and see Ctrl-C through
+/// `node.wait`.
+pub(crate) fn wait_interruptible(
+    listener: &iceoryx2::port::listener::Listener<Svc>,
+    timeout: Duration,
+    service: &str,
+) -> Result<(), ShmError> {
+    match listener.timed_wait(|_| {}, timeout) {
+        Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => Ok(()),
+        Err(e) => Err(service_err(service, "wait", e)),
+    }
+}
+
 fn service_err(service: &str, action: &'static str, e: impl std::fmt::Debug) -> ShmError {
     ShmError::Service {
         service: service.to_string(),
@@ -791,9 +805,7 @@ impl FieldReader {
         if self.update()? {
             return Ok(true);
         }
-        self.listener
-            .timed_wait(|_| {}, timeout)
-            .map_err(|e| service_err(&self.names.frame_ready, "wait", e))?;
+        wait_interruptible(&self.listener, timeout, &self.names.frame_ready)?;
         self.update()
     }
 
@@ -1177,9 +1189,7 @@ impl Standby {
             } else {
                 timeout.min(until_limit)
             };
-            self.listener
-                .timed_wait(|_| {}, timeout)
-                .map_err(|e| service_err(&self.names.frame_ready, "wait", e))?;
+            wait_interruptible(&self.listener, timeout, &self.names.frame_ready)?;
             fresh = self.receive_frames()?;
         }
         if fresh {

@@ -154,6 +154,38 @@ impl Run {
         (alive, dead)
     }
 
+    /// After shutdown: waits until no process of the run is alive, then removes the stale
+    /// resources of dead nodes (as any process of the run would: a client that a SIGINT caught
+    /// before it installed its handler dies without cleaning up). Returns how many dead nodes it
+    /// cleaned; panics naming the nodes still there after `timeout`.
+    pub fn wait_nodes_gone(&self, timeout: Duration) -> u64 {
+        let deadline = Instant::now() + timeout;
+        let mut cleaned = 0;
+        loop {
+            let (alive, _) = self.nodes();
+            if alive.is_empty() {
+                Node::<Svc>::list(&self.config, |state| {
+                    if let NodeState::Dead(v) = state {
+                        if v.try_remove_stale_resources().is_ok() {
+                            cleaned += 1;
+                        }
+                    }
+                    CallbackProgression::Continue
+                })
+                .unwrap();
+            }
+            let (alive, dead) = self.nodes();
+            if alive.is_empty() && dead.is_empty() {
+                return cleaned;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "after {timeout:?} the run still has nodes: alive {alive:?}, dead {dead:?}"
+            );
+            std::thread::park_timeout(Duration::from_millis(20));
+        }
+    }
+
     /// The run's entries in /dev/shm, except iceoryx2's host-wide management segment
     /// (`….global_mgmt`, one per prefix, kept by design: with the default prefix every run on the
     /// host shares it).
@@ -597,21 +629,14 @@ fn clients_killed_at_any_instant_leave_the_field_ticking_and_attach_again() {
     );
     let summary = json(&out);
     drop(node);
-    eventually(
-        Duration::from_secs(10),
-        "the run's nodes to be gone",
-        || {
-            let (alive, dead) = run.nodes();
-            (alive.is_empty() && dead.is_empty()).then_some(())
-        },
-    );
+    let cleaned_after = run.wait_nodes_gone(Duration::from_secs(10));
     let shm_left = run.shm_entries();
     eprintln!(
         "crash: {kills} clients killed over {rounds} rounds in {:.1} s (seed {seed}), {self_exits} \
          roles stopped by themselves and were restarted, {one_shots_completed} one-shot deposits \
          after a kill; frames seen {} (sequence {}..{}, {} missed by the reader), longest tick \
-         gap {:.1} ms at frame {}, field ticks {}, deposits applied {} rejected {}; /dev/shm \
-         entries left: {}",
+         gap {:.1} ms at frame {}, field ticks {}, deposits applied {} rejected {}; dead nodes \
+         cleaned after shutdown {cleaned_after}; /dev/shm entries left: {}",
         elapsed.as_secs_f64(),
         report.frames,
         report.first_sequence,

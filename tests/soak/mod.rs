@@ -150,20 +150,14 @@ fn a_field_and_eight_robots_survive_random_kills_and_leave_nothing_behind() {
     );
     let summary = json(&out);
     drop(node);
-    eventually(
-        Duration::from_secs(10),
-        "the run's nodes to be gone",
-        || {
-            let (alive, dead) = run.nodes();
-            (alive.is_empty() && dead.is_empty()).then_some(())
-        },
-    );
+    let cleaned_after = run.wait_nodes_gone(Duration::from_secs(10));
     let shm_left = run.shm_entries();
     eprintln!(
         "soak: {kills} kills in {rounds} rounds over {:.1} s (seed {seed}), {self_exits} roles \
          stopped by themselves and were restarted; frames seen {} (sequence {}..{}, {} missed by \
          the reader), longest tick gap {:.1} ms at frame {}, field ticks {}, deposits applied {} \
-         rejected {}; /dev/shm entries left: {}",
+         rejected {}; dead nodes cleaned after shutdown {cleaned_after}; /dev/shm entries \
+         left: {}",
         elapsed.as_secs_f64(),
         report.frames,
         report.first_sequence,
