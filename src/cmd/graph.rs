@@ -263,7 +263,21 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
             serde_json::to_string_pretty(&metrics)?,
         )?;
         std::fs::write(dir.join("tables.txt"), &text)?;
-        eprintln!("wrote metrics.json and tables.txt to {}", dir.display());
+        let state = scenario.validate()?;
+        let dock = scenario.dock_node(&state.graph)?;
+        for r in &runs {
+            let png = dir.join(format!(
+                "graph_{}_{}robots.png",
+                r.strategy.name(),
+                r.robots
+            ));
+            publishers::report::write_graph_png(&png, &state, r, dock)?;
+        }
+        eprintln!(
+            "wrote metrics.json, tables.txt and {} picture(s) of the graph to {}",
+            runs.len(),
+            dir.display()
+        );
     }
     if a.json {
         println!("{metrics}");

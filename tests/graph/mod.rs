@@ -186,6 +186,8 @@ fn eight_robot_processes_capture_the_skeleton_map() {
     let tables = std::fs::read_to_string(dir.join("tables.txt")).unwrap();
     assert!(tables.contains("-inf"), "dead ends marked: {tables}");
     assert!(dir.join("metrics.json").is_file());
+    let png = std::fs::read(dir.join("graph_pheromone_8robots.png")).unwrap();
+    assert!(png.starts_with(b"\x89PNG"), "a PNG picture of the graph");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
