@@ -13,7 +13,7 @@ use publishers::graph::sim::{RegionsScenario, Strategy, Until, BUILTIN_REGIONS};
 use serde_json::{json, Value};
 
 use super::bad;
-use super::sim::{Role, SimArgs};
+use super::sim::{fail_if_any_failed, Role, SimArgs};
 
 /// Whether `name` is a `regions` scenario: a built-in one, or a TOML file with a `dock`.
 pub fn is_regions(name: &str) -> bool {
@@ -377,14 +377,7 @@ fn run_as_processes(
     let deadline = Instant::now() + Duration::from_secs_f64(a.timeout);
     // Child exits have no iceoryx2 event; the node's wait bounds each round and sees Ctrl-C.
     while roles[0].child.try_wait().ok().flatten().is_none() {
-        for r in roles.iter_mut().skip(1) {
-            if let Ok(Some(status)) = r.child.try_wait() {
-                if !status.success() {
-                    let (_, _, err) = r.collect();
-                    anyhow::bail!("{} failed ({status}): {}", r.name, err.trim());
-                }
-            }
-        }
+        fail_if_any_failed(&mut roles[1..])?;
         if Instant::now() > deadline {
             anyhow::bail!(
                 "the run took longer than {} s: stopped every process",

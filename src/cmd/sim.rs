@@ -400,6 +400,19 @@ impl Drop for Role {
     }
 }
 
+/// An error naming the first of `roles` that has exited unsuccessfully, with its stderr.
+pub(super) fn fail_if_any_failed(roles: &mut [Role]) -> anyhow::Result<()> {
+    for r in roles {
+        if let Ok(Some(status)) = r.child.try_wait() {
+            if !status.success() {
+                let (_, _, err) = r.collect();
+                anyhow::bail!("{} failed ({status}): {}", r.name, err.trim());
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The effective scenario (after the flags) as a file every process reads; removed on drop.
 struct ScenarioFile(PathBuf);
 
@@ -516,14 +529,7 @@ fn run_processes(
         if let Ok(Some(_)) = roles[world_index].child.try_wait() {
             break;
         }
-        for r in roles.iter_mut().take(world_index) {
-            if let Ok(Some(status)) = r.child.try_wait() {
-                if !status.success() {
-                    let (_, _, err) = r.collect();
-                    anyhow::bail!("{} failed ({status}): {}", r.name, err.trim());
-                }
-            }
-        }
+        fail_if_any_failed(&mut roles[..world_index])?;
         if Instant::now() > deadline {
             anyhow::bail!(
                 "the run took longer than {} s: stopped every process",

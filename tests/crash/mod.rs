@@ -154,6 +154,27 @@ impl Run {
         (alive, dead)
     }
 
+    /// Stops the field with SIGINT (it must exit successfully), drops the test's own node, then
+    /// waits for the run's nodes to be gone: the field's summary, the dead nodes cleaned and the
+    /// run's /dev/shm entries left.
+    pub fn stop_field(
+        &self,
+        field: Proc,
+        node: Node<Svc>,
+    ) -> (serde_json::Value, u64, Vec<String>) {
+        field.interrupt();
+        let out = field.wait_exit(WAIT);
+        assert!(
+            out.status.success(),
+            "field: {:?} {}",
+            out.status,
+            self.log("field")
+        );
+        drop(node);
+        let cleaned = self.wait_nodes_gone(Duration::from_secs(10));
+        (json(&out), cleaned, self.shm_entries())
+    }
+
     /// After shutdown: waits until no process of the run is alive, then removes the stale
     /// resources of dead nodes (as any process of the run would: a client that a SIGINT caught
     /// before it installed its handler dies without cleaning up). Returns how many dead nodes it
@@ -619,18 +640,7 @@ fn clients_killed_at_any_instant_leave_the_field_ticking_and_attach_again() {
     interrupt_all(procs.into_iter().map(|(_, p)| p).collect());
     drop(status);
     let report = watch.finish();
-    field_proc.interrupt();
-    let out = field_proc.wait_exit(WAIT);
-    assert!(
-        out.status.success(),
-        "field: {:?} {}",
-        out.status,
-        run.log("field")
-    );
-    let summary = json(&out);
-    drop(node);
-    let cleaned_after = run.wait_nodes_gone(Duration::from_secs(10));
-    let shm_left = run.shm_entries();
+    let (summary, cleaned_after, shm_left) = run.stop_field(field_proc, node);
     eprintln!(
         "crash: {kills} clients killed over {rounds} rounds in {:.1} s (seed {seed}), {self_exits} \
          roles stopped by themselves and were restarted, {one_shots_completed} one-shot deposits \

@@ -140,18 +140,7 @@ fn a_field_and_eight_robots_survive_random_kills_and_leave_nothing_behind() {
     interrupt_all(procs);
     drop(status);
     let report = watch.finish();
-    field_proc.interrupt();
-    let out = field_proc.wait_exit(WAIT);
-    assert!(
-        out.status.success(),
-        "field: {:?} {}",
-        out.status,
-        run.log("field")
-    );
-    let summary = json(&out);
-    drop(node);
-    let cleaned_after = run.wait_nodes_gone(Duration::from_secs(10));
-    let shm_left = run.shm_entries();
+    let (summary, cleaned_after, shm_left) = run.stop_field(field_proc, node);
     eprintln!(
         "soak: {kills} kills in {rounds} rounds over {:.1} s (seed {seed}), {self_exits} roles \
          stopped by themselves and were restarted; frames seen {} (sequence {}..{}, {} missed by \
