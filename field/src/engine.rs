@@ -227,13 +227,21 @@ pub struct TickReport {
     pub mass_added: f64,
 }
 
+/// A deposit's place in its tick: deposits of robot id `u32::MAX` (a simulated world's scripted
+/// ones) first, then each robot's by id, each robot's in the order offered. The key is unique,
+/// so an unstable (allocation-free) sort keeps each robot's order.
+fn deposit_order(robot_id: u32, arrival: usize) -> u64 {
+    ((robot_id.wrapping_add(1) as u64) << 32) | (arrival as u64 & 0xffff_ffff)
+}
+
 /// Validates deposits and advances frames. Holds no frame itself.
 #[derive(Debug, Clone)]
 pub struct Stepper {
     config: FieldConfig,
     geometry: GridGeometry,
     scratch: Scratch,
-    pending: Vec<PreparedDeposit>,
+    /// Validated deposits of the next tick, each with its place in the tick's canonical order.
+    pending: Vec<(u64, PreparedDeposit)>,
     pub counters: DepositCounters,
     /// Field time of the last computed frame (s).
     pub sim_time_s: f64,
@@ -281,7 +289,8 @@ impl Stepper {
             &self.config.limits,
         ) {
             Ok(d) => {
-                self.pending.push(d);
+                let order = deposit_order(msg.robot_id, self.pending.len());
+                self.pending.push((order, d));
                 Ok(())
             }
             Err(r) => {
@@ -322,7 +331,10 @@ impl Stepper {
             );
         }
         let mut report = TickReport::default();
-        for d in self.pending.drain(..) {
+        // Deposits onto one cell do not commute (saturation, rounding): apply them in one
+        // canonical order, whatever order the publishers' messages arrived in.
+        self.pending.sort_unstable_by_key(|(order, _)| *order);
+        for (_, d) in self.pending.drain(..) {
             let (lo, hi) = self.config.channels[d.channel].value_range();
             let range = d.channel * n..(d.channel + 1) * n;
             report.mass_added += d.apply(

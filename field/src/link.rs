@@ -73,15 +73,20 @@ fn pubsub<T: Debug + ZeroCopySend>(
         })
 }
 
+/// The wake-up event of a link: at least as many notifiers and listeners as the link has senders
+/// and receivers (the defaults admit 256 senders and 64 receivers).
 fn event(
     node: &Node<Svc>,
     service: &str,
+    o: LinkOptions,
 ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ShmError> {
+    let notifiers = o.max_publishers.max(256);
+    let listeners = o.max_subscribers.max(64);
     node.service_builder(&service_name(service)?)
         .event()
-        .max_notifiers(256)
-        .max_listeners(64)
-        .max_nodes(256)
+        .max_notifiers(notifiers)
+        .max_listeners(listeners)
+        .max_nodes(notifiers + listeners)
         .open_or_create()
         .map_err(|e| err(service, "open or create", e))
 }
@@ -109,7 +114,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sender<T> {
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
             .map_err(|e| err(service, "create publisher", e))?;
-        let notifier = event(node, wake)?
+        let notifier = event(node, wake, options)?
             .notifier_builder()
             .create()
             .map_err(|e| err(wake, "create notifier", e))?;
@@ -159,7 +164,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
             .buffer_size(options.buffer)
             .create()
             .map_err(|e| err(service, "create subscriber", e))?;
-        let listener = event(node, wake)?
+        let listener = event(node, wake, options)?
             .listener_builder()
             .create()
             .map_err(|e| err(wake, "create listener", e))?;

@@ -1,27 +1,24 @@
-//! Watches a multi-process run from outside, without taking part in the lockstep: subscribes to
-//! every robot's truth, pose, command and status, reads the field's frames (no copy, except for
-//! the snapshots it keeps), and builds the same [`Recording`] a single-process run does.
+//! Watches a multi-process run: subscribes to every robot's truth, pose, command and status,
+//! reads the field's frames (no copy, except for the snapshots it keeps), and builds the same
+//! [`Recording`] a single-process run does.
 //!
-//! It must attach before the world starts (it creates the robots' services if they are not there
-//! yet, with buffers large enough for the steps between two of its polls). Probes and snapshots
-//! are taken from the first frame it sees at or after the requested time, and carry that frame's
-//! time.
+//! It takes part in the lockstep (`field::lockstep`): it joins the run, and acknowledges each
+//! frame once it has recorded it, so it sees every frame, and takes probes and snapshots from
+//! the same frames a single-process run does ([`FrameSchedule`]).
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::BTreeMap;
 use std::time::Duration;
 
 use field::link::{LinkOptions, Receiver};
+use field::lockstep::{self, Participant};
 use field::shm::{FieldReader, ShmError, Svc};
 use iceoryx2::node::Node;
 
 use crate::messages::{CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, TruthMsg};
 use crate::process::RobotServices;
-use crate::record::{ProbeReading, Recording, RobotSample};
+use crate::record::{Recording, RobotSample};
 use crate::scenario::Scenario;
-use crate::simulation::{sigma_max_m, snapshot};
-
-/// Messages buffered per robot service between two polls.
-const BUFFER: usize = 4096;
+use crate::simulation::{sigma_max_m, FrameSchedule};
 
 struct RobotLinks {
     id: u32,
@@ -36,27 +33,28 @@ struct RobotLinks {
 /// The observer of one run.
 pub struct Observer {
     robots: Vec<RobotLinks>,
-    field: Option<FieldReader>,
-    field_name: String,
-    scenario: Scenario,
-    probes: VecDeque<(f64, usize)>,
-    snapshots: VecDeque<f64>,
+    field: FieldReader,
+    lockstep: Participant,
+    frames: FrameSchedule,
     rec: Recording,
+    /// Sequence of the newest frame recorded.
+    last_sequence: Option<u64>,
     last_frame_time_s: f64,
 }
 
 impl Observer {
-    /// Attaches to the robots' services of world `world`; the field is attached when it appears.
+    /// Attaches to the robots' services of world `world` and to field `field` (waiting up to
+    /// `timeout` for it), then joins the run.
     pub fn new(
         node: &Node<Svc>,
         scenario: &Scenario,
         world: &str,
         field: &str,
+        timeout: Duration,
     ) -> Result<Self, ShmError> {
-        let options = LinkOptions {
-            buffer: BUFFER,
-            ..LinkOptions::default()
-        };
+        // The robots' links as the roles create them: in lockstep the observer is at most a
+        // step behind, far less than a link's buffer.
+        let options = LinkOptions::default();
         let mut robots = Vec::new();
         for r in &scenario.world.robots {
             let s = RobotServices::new(world, r.id);
@@ -70,37 +68,25 @@ impl Observer {
                 rows: BTreeMap::new(),
             });
         }
-        let probes = scenario.probe_schedule();
-        let mut snapshots = scenario.snapshots_s.clone();
-        snapshots.sort_by(f64::total_cmp);
+        let field = FieldReader::attach_within(node, field, timeout)?;
+        let lockstep = Participant::join(node, world)?;
         Ok(Self {
             robots,
-            field: None,
-            field_name: field.to_string(),
-            scenario: scenario.clone(),
-            probes: probes.into(),
-            snapshots: snapshots.into(),
+            field,
+            lockstep,
+            frames: FrameSchedule::new(scenario),
             rec: Recording::default(),
+            last_sequence: None,
             last_frame_time_s: -1.0,
         })
     }
 
-    /// Drains every queue and looks at the newest frame; waits up to `timeout` for a frame.
-    pub fn poll(&mut self, node: &Node<Svc>, timeout: Duration) -> Result<(), ShmError> {
-        if self.field.is_none() {
-            self.field = FieldReader::attach(node, &self.field_name).ok();
-        }
-        match self.field.as_mut() {
-            Some(reader) => {
-                reader.wait_frame(timeout)?;
-            }
-            None => {
-                let _ = node.wait(timeout);
-            }
-        }
+    /// Waits up to `timeout` for a frame, records it and acknowledges its step; drains every
+    /// robot queue.
+    pub fn poll(&mut self, timeout: Duration) -> Result<(), ShmError> {
+        self.field.wait_frame(timeout)?;
         self.drain()?;
-        self.look_at_frame();
-        Ok(())
+        self.look_at_frame()
     }
 
     fn drain(&mut self) -> Result<(), ShmError> {
@@ -132,46 +118,31 @@ impl Observer {
         Ok(())
     }
 
-    fn look_at_frame(&mut self) {
-        let Some(frame) = self.field.as_ref().and_then(|r| r.frame()) else {
-            return;
+    fn look_at_frame(&mut self) -> Result<(), ShmError> {
+        let Some(frame) = self.field.frame() else {
+            return Ok(());
         };
-        let t = frame.header.sim_time_s;
-        if t <= self.last_frame_time_s {
-            return;
+        let sequence = frame.header.sequence;
+        if self.last_sequence.is_some_and(|s| sequence <= s) {
+            return Ok(());
         }
-        self.last_frame_time_s = t;
-        while self.probes.front().is_some_and(|(pt, _)| *pt <= t + 1e-9) {
-            let (_, i) = self.probes.pop_front().expect("checked");
-            let p = &self.scenario.probes[i];
-            self.rec.probes.push(ProbeReading {
-                t_s: t,
-                x: p.x_m,
-                y: p.y_m,
-                channel: p.channel,
-                value: frame.view.value(p.channel as usize, p.x_m, p.y_m),
-            });
-        }
-        let half_dt = 0.5 * self.scenario.world.dt_secs;
-        let mut due = false;
-        while self.snapshots.front().is_some_and(|s| *s <= t + half_dt) {
-            self.snapshots.pop_front();
-            due = true;
-        }
-        if due || t + half_dt >= self.scenario.duration_s {
-            let cells = frame.view.cells;
-            if self.rec.snapshots.last().is_none_or(|s| s.t_s < t) {
-                self.rec
-                    .snapshots
-                    .push(snapshot(&self.scenario.field, t, cells));
-            }
-        }
+        self.last_sequence = Some(sequence);
+        self.last_frame_time_s = frame.header.sim_time_s;
+        // Frame k + 1 is the field's tick for step k; the first frame (0) is no step's, and a
+        // single-process run never looks at it.
+        let Some(step) = sequence.checked_sub(1) else {
+            return Ok(());
+        };
+        self.frames
+            .on_frame(&mut self.rec, frame.header.sim_time_s, &frame.view);
+        self.lockstep.ack(step, lockstep::role::OBSERVER, 0)
     }
 
-    /// The recording; the last frame seen is pictured if the end was not.
-    pub fn finish(mut self, node: &Node<Svc>) -> Recording {
-        let _ = self.drain();
-        let _ = node;
+    /// The recording; the last frame seen is pictured if it was not.
+    pub fn finish(mut self) -> Recording {
+        if let Err(e) = self.drain() {
+            eprintln!("observer: the last robot messages could not be read: {e}");
+        }
         for r in &mut self.robots {
             let rows: Vec<RobotSample> = std::mem::take(&mut r.rows)
                 .into_values()
@@ -179,16 +150,9 @@ impl Observer {
                 .collect();
             self.rec.robots.insert(r.id, rows);
         }
-        if self.rec.snapshots.is_empty()
-            || self.last_frame_time_s > self.rec.snapshots.last().map_or(-1.0, |s| s.t_s)
-        {
-            if let Some(frame) = self.field.as_ref().and_then(|r| r.frame()) {
-                self.rec.snapshots.push(snapshot(
-                    &self.scenario.field,
-                    frame.header.sim_time_s,
-                    frame.view.cells,
-                ));
-            }
+        if let Some(frame) = self.field.frame() {
+            self.frames
+                .finish(&mut self.rec, frame.header.sim_time_s, frame.view.cells);
         }
         self.rec
     }

@@ -1,13 +1,13 @@
 //! The process loops: each role is a library type driven by a short loop that waits on iceoryx2
-//! events (never sleeps). Lockstep: the world publishes step k (sensors, truth, clock), waits
-//! for every robot's command for step k, then advances. While it waits it re-sends step k every
-//! `RESEND` so a role that attached late still gets it; the roles answer a repeated step by
-//! repeating their last output instead of computing it twice.
+//! events (never sleeps). In lockstep (the default) the world conducts every step as
+//! `field::lockstep` describes: each role joins the run after creating its ports, a depositor
+//! acknowledges each step once its deposit is sent, and a follower steers on the frame the field
+//! computed for the step, so a run as processes gives the single-process answer.
 
 use std::time::{Duration, Instant};
 
 use field::link::{LinkOptions, Receiver, Sender};
-use field::messages::{clock_services, ClockMsg};
+use field::lockstep::{self, Conductor, LockstepError, Participant};
 use field::shm::{now_ns, DepositPublisher, FieldReader, ShmError, Svc};
 use iceoryx2::node::Node;
 use nalgebra::Matrix3;
@@ -22,9 +22,6 @@ use crate::world::World;
 /// Steps without a new frame after which a follower checks whether its field is still alive.
 const STALE_STEPS: u32 = 10;
 
-/// How often the world re-sends a step nobody has answered yet.
-const RESEND: Duration = Duration::from_millis(200);
-
 /// Why a role's loop stopped with an error.
 #[derive(Debug, thiserror::Error)]
 pub enum ProcessError {
@@ -32,6 +29,8 @@ pub enum ProcessError {
     Shm(#[from] ShmError),
     #[error("scenario: {0}")]
     Setup(String),
+    #[error(transparent)]
+    Lockstep(#[from] LockstepError),
     #[error("robot {robot} sent no command for step {step} within {timeout_s} s (is its follower running?)")]
     Stalled {
         robot: u32,
@@ -82,57 +81,6 @@ fn receiver<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'stati
     Receiver::create(node, service, &wake(service), LinkOptions::default())
 }
 
-/// Watches the world's clock for the end of the run: its `finished` message, or the world's
-/// clock publisher disappearing after it was seen (a world that ended, or died, before this
-/// subscriber connected to it).
-struct EndWatch {
-    clock: Receiver<ClockMsg>,
-    /// The world has been seen attached (so its absence later means it is gone).
-    seen: std::cell::Cell<bool>,
-    /// The world's step count when it announced the end.
-    final_steps: std::cell::Cell<Option<u64>>,
-}
-
-impl EndWatch {
-    fn new(node: &Node<Svc>, world: &str) -> Result<Self, ShmError> {
-        let (service, wake) = clock_services(world);
-        Ok(Self {
-            clock: Receiver::create(
-                node,
-                &service,
-                &wake,
-                LinkOptions {
-                    keep_latest: false,
-                    buffer: 1024,
-                    ..LinkOptions::default()
-                },
-            )?,
-            seen: std::cell::Cell::new(false),
-            final_steps: std::cell::Cell::new(None),
-        })
-    }
-
-    /// True once the world has announced the end (drains the clock queue).
-    fn finished(&self) -> Result<bool, ShmError> {
-        let mut done = false;
-        while let Some(m) = self.clock.try_recv()? {
-            if m.finished != 0 {
-                done = true;
-                self.final_steps.set(Some(m.step));
-            }
-        }
-        let world_attached = self.clock.senders() > 0;
-        let world_gone = self.seen.get() && !world_attached;
-        self.seen.set(self.seen.get() | world_attached);
-        Ok(done || world_gone)
-    }
-
-    /// The world's step count at its announced end (None when it vanished without one).
-    fn final_steps(&self) -> Option<u64> {
-        self.final_steps.get()
-    }
-}
-
 /// Options of the world process.
 #[derive(Debug, Clone)]
 pub struct WorldOptions {
@@ -140,12 +88,26 @@ pub struct WorldOptions {
     pub field: String,
     /// Step on wall time (dt per step) instead of lockstep.
     pub realtime: bool,
-    /// Lockstep: give up when a robot has not answered a step for this long.
+    /// Lockstep: give up when a step has made no progress for this long.
     pub stall_timeout: Duration,
+    /// Lockstep: how long every process of the run may take to join (None: 10 s + 0.5 s per
+    /// process).
+    pub attach_timeout: Option<Duration>,
+    /// An observer (`pheromone sim`) takes part in the lockstep: the world waits for it to
+    /// record each frame.
+    pub observed: bool,
+}
+
+impl WorldOptions {
+    /// The default attach timeout for `processes` processes: it grows with the run.
+    pub fn default_attach_timeout(processes: usize) -> Duration {
+        Duration::from_secs_f64(10.0 + 0.5 * processes as f64)
+    }
 }
 
 /// What the world reports at the end.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct WorldSummary {
     pub steps: u64,
     pub sim_time_s: f64,
@@ -153,9 +115,14 @@ pub struct WorldSummary {
     pub deposits_sent: u64,
     /// Stopped early by SIGINT/SIGTERM.
     pub interrupted: bool,
+    /// Lockstep: seconds from the world's start until every process of the run had joined.
+    pub startup_s: f64,
+    /// Processes the world waited for (lockstep).
+    pub participants: usize,
 }
 
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct RobotSummary {
     pub id: u32,
     pub true_pose: [f64; 3],
@@ -163,27 +130,30 @@ pub struct RobotSummary {
     pub collisions: u64,
 }
 
-/// The world process: simulates, publishes sensors/truth/clock, applies commands, and makes the
-/// scenario's scripted deposits.
+/// The processes a lockstep run of `scenario` has besides the world: the field, and each
+/// robot's localizer, depositor and follower where the scenario gives them (plus an observer
+/// when `observed`).
+pub fn lockstep_participants(scenario: &Scenario, observed: bool) -> usize {
+    1 + observed as usize
+        + scenario
+            .robots
+            .iter()
+            .map(|r| 1 + r.depositor.is_some() as usize + r.follower.is_some() as usize)
+            .sum::<usize>()
+}
+
+/// The world process: simulates, publishes sensors and truth, applies commands, makes the
+/// scenario's scripted deposits and conducts the lockstep (`field::lockstep`).
 pub fn run_world(
     node: &Node<Svc>,
     scenario: &Scenario,
     o: &WorldOptions,
 ) -> Result<WorldSummary, ProcessError> {
+    let started = Instant::now();
     let mut world = World::new(scenario.world.clone(), scenario.seed)
         .map_err(|e| ProcessError::Setup(e.to_string()))?;
     let ids: Vec<u32> = scenario.world.robots.iter().map(|r| r.id).collect();
-    let (clock_service, clock_wake) = clock_services(&o.world);
-    let clock = Sender::<ClockMsg>::create(
-        node,
-        &clock_service,
-        &clock_wake,
-        LinkOptions {
-            keep_latest: false,
-            buffer: 1024,
-            ..LinkOptions::default()
-        },
-    )?;
+    let mut conductor = Conductor::create(node, &o.world)?;
     let mut sensors = Vec::new();
     let mut truths = Vec::new();
     let mut cmds = Vec::new();
@@ -199,6 +169,39 @@ pub fn run_world(
             None
         });
     }
+    // Who acknowledges a step before the field ticks (depositors), and after (the field, the
+    // observer); followers answer with their command.
+    let depositors: Vec<(u32, u32)> = scenario
+        .robots
+        .iter()
+        .filter(|r| r.depositor.is_some())
+        .map(|r| (lockstep::role::DEPOSITOR, r.id))
+        .collect();
+    let mut after_tick = vec![(lockstep::role::FIELD, 0)];
+    if o.observed {
+        after_tick.push((lockstep::role::OBSERVER, 0));
+    }
+    let participants = lockstep_participants(scenario, o.observed);
+    let mut startup = Duration::ZERO;
+    if !o.realtime {
+        let timeout = o
+            .attach_timeout
+            .unwrap_or_else(|| WorldOptions::default_attach_timeout(participants));
+        startup = match conductor.wait_for_participants(
+            node,
+            participants,
+            "field, localizers, depositors, followers, observer",
+            timeout,
+        ) {
+            Ok(_) => started.elapsed(),
+            Err(LockstepError::Interrupted { .. }) => {
+                return Err(ProcessError::Setup(
+                    "interrupted while waiting for the robot processes".into(),
+                ))
+            }
+            Err(e) => return Err(e.into()),
+        };
+    }
     let mut scripted = std::collections::VecDeque::from(
         scenario
             .scripted(world.wall_segments())
@@ -207,12 +210,18 @@ pub fn run_world(
     let mut depositor = if scripted.is_empty() {
         None
     } else {
-        Some(DepositPublisher::attach_within(
+        let mut d = DepositPublisher::attach_within(
             node,
             &o.field,
-            u32::MAX,
-            Duration::from_secs(30),
-        )?)
+            WORLD_DEPOSITOR_ID,
+            o.attach_timeout
+                .unwrap_or_else(|| WorldOptions::default_attach_timeout(participants)),
+        )?;
+        // In lockstep the field acknowledges every tick: nothing is left to flush at the end.
+        if !o.realtime {
+            d.flush_timeout = Duration::ZERO;
+        }
+        Some(d)
     };
     let mut deposits_sent = 0u64;
     let mut distance = vec![0.0f64; ids.len()];
@@ -221,30 +230,6 @@ pub fn run_world(
     let mut commands = vec![(0.0, 0.0); ids.len()];
     let steps = scenario.steps();
     let dt = scenario.world.dt_secs;
-    // Lockstep: wait until the field and every robot role of the scenario watch the clock, so
-    // none misses the start (or the end) of the run.
-    if !o.realtime {
-        let expected = 1 + scenario
-            .robots
-            .iter()
-            .map(|r| 1 + r.depositor.is_some() as usize + r.follower.is_some() as usize)
-            .sum::<usize>();
-        let since = Instant::now();
-        while clock.receivers() < expected {
-            if since.elapsed() > o.stall_timeout {
-                return Err(ProcessError::Setup(format!(
-                    "only {} of the {expected} processes of the scenario (field, localizers, depositors, followers) attached within {} s",
-                    clock.receivers(),
-                    o.stall_timeout.as_secs_f64()
-                )));
-            }
-            if node.wait(Duration::from_millis(5)).is_err() {
-                return Err(ProcessError::Setup(
-                    "interrupted while waiting for the robot processes".into(),
-                ));
-            }
-        }
-    }
     let mut next_wall = Instant::now();
     let mut stopped = false;
     let mut run = || -> Result<(), ProcessError> {
@@ -256,7 +241,7 @@ pub fn run_world(
                 .sqrt();
             }
             last_pose = world.poses().to_vec();
-            // Scripted deposits due by now.
+            // Scripted deposits due by now: in the field's queue before its tick for step k.
             while let Some((t, _)) = scripted.front() {
                 if *t > world.sim_time_s() + 1e-9 {
                     break;
@@ -267,33 +252,20 @@ pub fn run_world(
                     deposits_sent += 1;
                 }
             }
-            let publish = |outputs: &[crate::world::StepOutput]| -> Result<(), ShmError> {
-                let stamp = now_ns();
-                clock.send(ClockMsg {
-                    stamp_ns: stamp,
-                    step: k,
-                    sim_time_s: world.sim_time_s(),
-                    dt_secs: dt,
-                    finished: 0,
-                    _pad: 0,
-                })?;
-                for (i, out) in outputs.iter().enumerate() {
-                    let mut s = out.sensor;
-                    s.stamp_ns = stamp;
-                    s.step = k;
-                    sensors[i].send(s)?;
-                    let mut t = out.truth;
-                    t.stamp_ns = stamp;
-                    t.step = k;
-                    truths[i].send(t)?;
-                }
-                Ok(())
-            };
+            let stamp = now_ns();
             for (i, out) in outputs.iter().enumerate() {
                 collisions[i] += out.truth.collided as u64;
+                let mut s = out.sensor;
+                s.stamp_ns = stamp;
+                s.step = k;
+                sensors[i].send(s)?;
+                let mut t = out.truth;
+                t.stamp_ns = stamp;
+                t.step = k;
+                truths[i].send(t)?;
             }
-            publish(&outputs)?;
             if o.realtime {
+                conductor.tick(k, world.sim_time_s(), dt)?;
                 next_wall += Duration::from_secs_f64(dt);
                 if node
                     .wait(next_wall.saturating_duration_since(Instant::now()))
@@ -308,63 +280,67 @@ pub fn run_world(
                         commands[i] = (c.v_mps, c.omega_radps);
                     }
                 }
-            } else {
-                for (i, rx) in cmds.iter().enumerate() {
-                    let Some(rx) = rx else { continue };
-                    let since = Instant::now();
-                    let mut last_send = Instant::now();
-                    loop {
-                        match rx.recv_timeout(RESEND)? {
-                            Some(c) if c.step == k => {
-                                commands[i] = (c.v_mps, c.omega_radps);
-                                break;
-                            }
-                            Some(_) => continue, // an answer to an older step
-                            None => {}
-                        }
-                        if node.wait(Duration::ZERO).is_err() {
-                            stopped = true;
+                continue;
+            }
+            let collected = conductor
+                .collect(node, k, &depositors, o.stall_timeout)
+                .and_then(|()| Ok(conductor.tick(k, world.sim_time_s(), dt)?))
+                .and_then(|()| conductor.collect(node, k, &after_tick, o.stall_timeout));
+            match collected {
+                Ok(()) => {}
+                Err(LockstepError::Interrupted { .. }) => {
+                    stopped = true;
+                    break;
+                }
+                Err(e) => return Err(e.into()),
+            }
+            for (i, rx) in cmds.iter().enumerate() {
+                let Some(rx) = rx else { continue };
+                let mut deadline = Instant::now() + o.stall_timeout;
+                loop {
+                    match rx.recv_timeout(Duration::from_millis(100))? {
+                        Some(c) if c.step == k => {
+                            commands[i] = (c.v_mps, c.omega_radps);
                             break;
                         }
-                        if since.elapsed() > o.stall_timeout {
-                            return Err(ProcessError::Stalled {
-                                robot: ids[i],
-                                step: k,
-                                timeout_s: o.stall_timeout.as_secs_f64(),
-                            });
-                        }
-                        if last_send.elapsed() >= RESEND {
-                            publish(&outputs)?;
-                            last_send = Instant::now();
-                        }
+                        Some(_) => deadline = Instant::now() + o.stall_timeout,
+                        None => {}
                     }
-                    if stopped {
+                    if node.wait(Duration::ZERO).is_err() {
+                        stopped = true;
                         break;
+                    }
+                    if Instant::now() > deadline {
+                        return Err(ProcessError::Stalled {
+                            robot: ids[i],
+                            step: k,
+                            timeout_s: o.stall_timeout.as_secs_f64(),
+                        });
                     }
                 }
                 if stopped {
                     break;
                 }
             }
+            if stopped {
+                break;
+            }
         }
         Ok(())
     };
     let result = run();
     // Announce the end also after a failure, so every role stops.
-    let _ = clock.send(ClockMsg {
-        stamp_ns: now_ns(),
-        step: world.step_count(),
-        sim_time_s: world.sim_time_s(),
-        dt_secs: dt,
-        finished: 1,
-        _pad: 0,
-    });
+    if let Err(e) = conductor.finish(world.step_count(), world.sim_time_s(), dt) {
+        eprintln!("world '{}': could not announce the end: {e}", o.world);
+    }
     result?;
     Ok(WorldSummary {
         steps: world.step_count(),
         sim_time_s: world.sim_time_s(),
         deposits_sent,
         interrupted: stopped,
+        startup_s: startup.as_secs_f64(),
+        participants: if o.realtime { 0 } else { participants },
         robots: ids
             .iter()
             .enumerate()
@@ -381,22 +357,38 @@ pub fn run_world(
     })
 }
 
+/// The robot id the world's scripted deposits carry: after every robot's in a tick's
+/// canonical order (`field::shm::FieldServer::tick`).
+pub const WORLD_DEPOSITOR_ID: u32 = u32::MAX;
+
 /// Counters a robot role reports at the end.
-#[derive(Debug, Clone, Default, serde::Serialize)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct RoleSummary {
     pub robot: u32,
-    pub role: &'static str,
+    pub role: String,
     pub steps: u64,
     pub rejected: u64,
     pub repeats: u64,
     pub last_step: Option<u64>,
 }
 
+/// How a robot role takes part in a run.
+#[derive(Debug, Clone)]
+pub struct RoleOptions {
+    pub robot: u32,
+    pub world: String,
+    pub field: String,
+    /// Lockstep (the default): a depositor acknowledges each step, a follower waits for the
+    /// frame of its step. `false`: the world steps on wall time and nobody waits.
+    pub lockstep: bool,
+}
+
 /// Runs `on_step` for every new message on `rx` until the world ends or a termination request.
 /// A message with a step already handled calls `on_repeat` instead.
 fn role_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,
-    end: &EndWatch,
+    end: &Participant,
     rx: &Receiver<T>,
     step_of: impl Fn(&T) -> u64,
     summary: &mut RoleSummary,
@@ -429,10 +421,10 @@ fn role_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'stat
             return Ok(());
         }
     }
-    // The world has ended, but a role that nobody waits on in lockstep (a depositor, a localizer
-    // behind a truth-steered follower) may still have the last steps queued or on their way
-    // from its upstream role: handle them before leaving. Stop when the last step is in, when
-    // the upstream is gone and its queue is empty, or after a bounded wait.
+    // The world has ended, but a role that nobody waits on in lockstep (a localizer behind a
+    // truth-steered follower) may still have the last steps queued or on their way from its
+    // upstream role: handle them before leaving. Stop when the last step is in, when the
+    // upstream is gone and its queue is empty, or after a bounded wait.
     let want_last = end.final_steps().and_then(|n| n.checked_sub(1));
     let deadline = Instant::now() + END_DRAIN;
     loop {
@@ -450,7 +442,9 @@ fn role_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'stat
         if complete || upstream_gone || Instant::now() >= deadline {
             return Ok(());
         }
-        if node.wait(Duration::from_millis(2)).is_err() {
+        // Woken by the upstream's next message (or the bound).
+        rx.wait(Duration::from_millis(50))?;
+        if node.wait(Duration::ZERO).is_err() {
             return Ok(());
         }
     }
@@ -459,24 +453,30 @@ fn role_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'stat
 /// How long a role keeps handling its queue after the world announced the end.
 const END_DRAIN: Duration = Duration::from_secs(3);
 
-/// The localizer process: sensors → EKF → pose with covariance.
+/// A role's summary before its first step.
+fn summary_of(robot: u32, role: &str) -> RoleSummary {
+    RoleSummary {
+        robot,
+        role: role.to_string(),
+        ..Default::default()
+    }
+}
+
+/// The localizer process: sensors → EKF → pose with covariance. The pose is stamped with the
+/// step's simulated time: the robot's clock, which the depositor's interval rule reads.
 pub fn run_localizer(
     node: &Node<Svc>,
     scenario: &Scenario,
-    robot: u32,
-    world: &str,
+    o: &RoleOptions,
     slam: bool,
 ) -> Result<RoleSummary, ProcessError> {
+    let robot = o.robot;
     let mut filter = Filter::for_robot(scenario, robot, slam)?;
-    let s = RobotServices::new(world, robot);
+    let s = RobotServices::new(&o.world, robot);
     let sensors = receiver::<SensorMsg>(node, &s.sensors)?;
     let poses = sender::<PoseMsg>(node, &s.pose)?;
-    let end = EndWatch::new(node, world)?;
-    let mut summary = RoleSummary {
-        robot,
-        role: "localizer",
-        ..Default::default()
-    };
+    let end = Participant::join(node, &o.world)?;
+    let mut summary = summary_of(robot, "localizer");
     let last = std::cell::Cell::new(None::<PoseMsg>);
     let mut rejected = 0u64;
     role_loop(
@@ -491,7 +491,7 @@ pub fn run_localizer(
                 eprintln!("localizer r{robot}: step {} rejected: {e}", m.step);
             }
             let mut p = filter.to_msg(robot, m.step);
-            p.stamp_ns = now_ns();
+            p.stamp_ns = sim_stamp_ns(m.sim_time_s);
             poses.send(p)?;
             last.set(Some(p));
             Ok(())
@@ -507,26 +507,33 @@ pub fn run_localizer(
     Ok(summary)
 }
 
-/// The depositor process: pose → deposits into the field.
+/// A simulated time as a message stamp (ns), the same in every mode.
+pub fn sim_stamp_ns(sim_time_s: f64) -> u64 {
+    (sim_time_s * 1e9).round() as u64
+}
+
+/// The depositor process: pose → deposits into the field. In lockstep it acknowledges each
+/// step once its deposit is in the field's queue; a deposit the field did not take ends the run
+/// (the field's answer would differ from a single-process run's).
 pub fn run_depositor(
     node: &Node<Svc>,
-    robot: u32,
-    world: &str,
-    field_name: &str,
+    o: &RoleOptions,
     config: crate::depositor::DepositorConfig,
 ) -> Result<RoleSummary, ProcessError> {
+    let robot = o.robot;
     let mut depositor = Depositor::new(config).map_err(|e| ProcessError::Setup(e.to_string()))?;
-    let s = RobotServices::new(world, robot);
+    let s = RobotServices::new(&o.world, robot);
     let poses = receiver::<PoseMsg>(node, &s.pose)?;
     let mut publisher =
-        DepositPublisher::attach_within(node, field_name, robot, Duration::from_secs(30))?;
-    let end = EndWatch::new(node, world)?;
-    let mut summary = RoleSummary {
-        robot,
-        role: "depositor",
-        ..Default::default()
-    };
+        DepositPublisher::attach_within(node, &o.field, robot, Duration::from_secs(30))?;
+    if o.lockstep {
+        // The field acknowledges every tick: nothing is left to flush at the end.
+        publisher.flush_timeout = Duration::ZERO;
+    }
+    let end = Participant::join(node, &o.world)?;
+    let mut summary = summary_of(robot, "depositor");
     let mut rejected = 0u64;
+    let lockstep = o.lockstep;
     role_loop(
         node,
         &end,
@@ -535,16 +542,19 @@ pub fn run_depositor(
         &mut summary,
         |p| {
             match depositor.process(p) {
-                Ok(Some(d)) => {
-                    if let Err(e) = publisher.send(d) {
-                        eprintln!("depositor r{robot}: {e}");
-                    }
-                }
+                Ok(Some(d)) => match publisher.send(d) {
+                    Ok(()) => {}
+                    Err(e) if lockstep => return Err(e.into()),
+                    Err(e) => eprintln!("depositor r{robot}: {e}"),
+                },
                 Ok(None) => {}
                 Err(e) => {
                     rejected += 1;
                     eprintln!("depositor r{robot}: pose of step {} rejected: {e}", p.step);
                 }
+            }
+            if lockstep {
+                end.ack(p.step, lockstep::role::DEPOSITOR, robot)?;
             }
             Ok(())
         },
@@ -554,70 +564,51 @@ pub fn run_depositor(
     Ok(summary)
 }
 
-/// The follower process: pose + newest frame → command and status. The pose is the
+/// The follower process: pose + the frame of its step → command and status. The pose is the
 /// localizer's estimate, or the world's truth for a follower configured to steer by it.
 pub fn run_follower(
     node: &Node<Svc>,
-    robot: u32,
-    world: &str,
-    field_name: &str,
+    o: &RoleOptions,
     follower: Follower,
     source: PoseSource,
-    dt_secs: f64,
+    dt_s: f64,
 ) -> Result<RoleSummary, ProcessError> {
-    let s = RobotServices::new(world, robot);
+    let s = RobotServices::new(&o.world, o.robot);
     match source {
         PoseSource::Estimate => follow(
             node,
-            robot,
-            world,
-            field_name,
+            o,
             follower,
-            dt_secs,
+            dt_s,
             receiver::<PoseMsg>(node, &s.pose)?,
             |p: &PoseMsg| *p,
         ),
         PoseSource::Truth => follow(
             node,
-            robot,
-            world,
-            field_name,
+            o,
             follower,
-            dt_secs,
+            dt_s,
             receiver::<TruthMsg>(node, &s.truth)?,
-            |t: &TruthMsg| PoseMsg {
-                step: t.step,
-                robot_id: t.robot_id,
-                x_m: t.x_m,
-                y_m: t.y_m,
-                theta_rad: t.theta_rad,
-                ..PoseMsg::default()
-            },
+            crate::simulation::truth_as_pose,
         ),
     }
 }
 
-#[allow(clippy::too_many_arguments)]
 fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,
-    robot: u32,
-    world: &str,
-    field_name: &str,
+    o: &RoleOptions,
     mut follower: Follower,
-    dt_secs: f64,
+    dt_s: f64,
     poses: Receiver<T>,
     to_pose: impl Fn(&T) -> PoseMsg,
 ) -> Result<RoleSummary, ProcessError> {
-    let s = RobotServices::new(world, robot);
+    let (robot, field_name) = (o.robot, o.field.as_str());
+    let s = RobotServices::new(&o.world, robot);
     let cmds = sender::<CmdMsg>(node, &s.cmd)?;
     let statuses = sender::<FollowerStatusMsg>(node, &s.status)?;
     let mut reader = FieldReader::attach_within(node, field_name, Duration::from_secs(30))?;
-    let end = EndWatch::new(node, world)?;
-    let mut summary = RoleSummary {
-        robot,
-        role: "follower",
-        ..Default::default()
-    };
+    let end = Participant::join(node, &o.world)?;
+    let mut summary = summary_of(robot, "follower");
     let last = std::cell::Cell::new(None::<CmdMsg>);
     let mut rejected = 0u64;
     let (mut stale_steps, mut field_gone) = (0u32, false);
@@ -629,9 +620,22 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
         &mut summary,
         |m| {
             let p = to_pose(m);
-            // A field that died leaves its last frame with the reader: steer on it, say so
-            // once, and say when a field of that name publishes again.
-            if reader.update()? {
+            if o.lockstep {
+                // The frame the field computed for this step (sequence step + 1), and no other.
+                let want = p.step + 1;
+                loop {
+                    reader.update()?;
+                    if reader.frame().is_some_and(|f| f.header.sequence >= want) {
+                        break;
+                    }
+                    if end.conductor_gone() || node.wait(Duration::ZERO).is_err() {
+                        return Ok(());
+                    }
+                    reader.wait_frame(Duration::from_millis(100))?;
+                }
+            } else if reader.update()? {
+                // A field that died leaves its last frame with the reader: steer on it, say
+                // so once, and say when a field of that name publishes again.
                 stale_steps = 0;
                 if field_gone {
                     field_gone = false;
@@ -655,7 +659,7 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
                     service: format!("pheromone/{field_name}/frame"),
                 }));
             };
-            let (mut cmd, status) = match follower.step_pose(&frame.view, &p, dt_secs) {
+            let (mut cmd, status) = match follower.step_pose(&frame.view, &p, dt_s) {
                 Ok(out) => (out.cmd, Some(out.status)),
                 Err(e) => {
                     rejected += 1;

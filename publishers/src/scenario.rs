@@ -537,7 +537,37 @@ impl Scenario {
             out.extend(msgs.into_iter().map(|m| (d.t_s, m)));
         }
         out.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // The world sends them: its id orders them in a tick, in both modes.
+        for (_, m) in &mut out {
+            m.robot_id = crate::process::WORLD_DEPOSITOR_ID;
+        }
         Ok(out)
+    }
+
+    /// The field configuration of a run of this scenario as processes: the scenario's, with
+    /// the limits that are only defaults raised to fit the run, so no process is refused and no
+    /// deposit is dropped. Readers: every follower, the observer and two spare. Deposit queue:
+    /// the largest number of deposits one step can bring (the scripted ones due at that step,
+    /// one per depositor) and 64 spare.
+    pub fn field_config_for_processes(&self) -> Result<FieldConfig, String> {
+        let mut c = self.field.clone();
+        let followers = self.robots.iter().filter(|r| r.follower.is_some()).count();
+        let depositors = self.robots.iter().filter(|r| r.depositor.is_some()).count();
+        c.max_readers = c.max_readers.max(followers + 3);
+        c.max_depositors = c.max_depositors.max(depositors + 2);
+        let world =
+            crate::world::World::new(self.world.clone(), self.seed).map_err(|e| e.to_string())?;
+        let dt = self.world.dt_secs;
+        let mut per_step = std::collections::BTreeMap::<u64, usize>::new();
+        for (t, _) in self.scripted(world.wall_segments())? {
+            // The world sends a deposit of time t at the first step whose end reaches it.
+            let step = ((t - 1e-9) / dt).ceil().max(1.0) as u64 - 1;
+            *per_step.entry(step).or_default() += 1;
+        }
+        let burst = per_step.values().copied().max().unwrap_or(0);
+        c.deposit_buffer = c.deposit_buffer.max(burst + depositors + 64);
+        c.validate().map_err(|e| e.to_string())?;
+        Ok(c)
     }
 
     /// Every probe reading to take, as (time, index into `probes`), sorted by time.

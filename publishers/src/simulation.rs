@@ -21,7 +21,7 @@ use crate::follower::{Follower, PoseSource};
 use crate::messages::{PoseMsg, TruthMsg};
 use crate::process::{Filter, ProcessError};
 use crate::record::{ProbeReading, Recording, RobotSample, Snapshot};
-use crate::scenario::Scenario;
+use crate::scenario::{ProbeSpec, Scenario};
 use crate::world::World;
 
 /// What a run ends with, whichever way it ran.
@@ -179,10 +179,7 @@ pub fn run_single_process(
     };
     let dt = scenario.world.dt_secs;
     let steps = scenario.steps();
-    let mut snapshot_times: Vec<f64> = scenario.snapshots_s.clone();
-    snapshot_times.sort_by(f64::total_cmp);
-    let mut probes = std::collections::VecDeque::from(scenario.probe_schedule());
-    let mut next_snapshot = 0;
+    let mut frames = FrameSchedule::new(scenario);
     let mut commands = vec![(0.0, 0.0); robots.len()];
     for k in 0..steps {
         let outputs = world.step(&commands);
@@ -210,23 +207,7 @@ pub fn run_single_process(
         field.tick();
         let ft = field.stepper.sim_time_s;
         let view = field.view();
-        while probes.front().is_some_and(|(pt, _)| *pt <= ft + 1e-9) {
-            let (_, i) = probes.pop_front().expect("checked");
-            let p = &scenario.probes[i];
-            rec.probes.push(ProbeReading {
-                t_s: ft,
-                x: p.x_m,
-                y: p.y_m,
-                channel: p.channel,
-                value: view.value(p.channel as usize, p.x_m, p.y_m),
-            });
-        }
-        while next_snapshot < snapshot_times.len() && snapshot_times[next_snapshot] <= ft + 0.5 * dt
-        {
-            rec.snapshots
-                .push(snapshot(&scenario.field, ft, field.cells()));
-            next_snapshot += 1;
-        }
+        frames.on_frame(&mut rec, ft, &view);
         for ((r, out), cmd) in robots.iter_mut().zip(&outputs).zip(commands.iter_mut()) {
             let pose = r.pose.expect("set above");
             let mut state = None;
@@ -260,11 +241,7 @@ pub fn run_single_process(
             p(k + 1, steps);
         }
     }
-    let end = field.stepper.sim_time_s;
-    if rec.snapshots.last().is_none_or(|s| s.t_s < end) {
-        rec.snapshots
-            .push(snapshot(&scenario.field, end, field.cells()));
-    }
+    frames.finish(&mut rec, field.stepper.sim_time_s, field.cells());
     let counters = &field.stepper.counters;
     let summary = RunSummary {
         steps: world.step_count(),
@@ -292,6 +269,61 @@ pub fn run_single_process(
         scripted_deposits: scripted_total,
     };
     Ok((summary, rec))
+}
+
+/// What a run records of its frames, the same in both modes: the probes' readings and the
+/// snapshots at the scenario's times, and the last frame.
+pub struct FrameSchedule {
+    field: FieldConfig,
+    probes: std::collections::VecDeque<(f64, ProbeSpec)>,
+    snapshot_times_s: std::collections::VecDeque<f64>,
+    half_dt_s: f64,
+}
+
+impl FrameSchedule {
+    pub fn new(scenario: &Scenario) -> Self {
+        let mut times = scenario.snapshots_s.clone();
+        times.sort_by(f64::total_cmp);
+        Self {
+            field: scenario.field.clone(),
+            probes: scenario
+                .probe_schedule()
+                .into_iter()
+                .map(|(t, i)| (t, scenario.probes[i].clone()))
+                .collect(),
+            snapshot_times_s: times.into(),
+            half_dt_s: 0.5 * scenario.world.dt_secs,
+        }
+    }
+
+    /// Records what is due at the frame of field time `t_s`.
+    pub fn on_frame(&mut self, rec: &mut Recording, t_s: f64, view: &FrameView<'_>) {
+        while self.probes.front().is_some_and(|(pt, _)| *pt <= t_s + 1e-9) {
+            let (_, p) = self.probes.pop_front().expect("checked");
+            rec.probes.push(ProbeReading {
+                t_s,
+                x: p.x_m,
+                y: p.y_m,
+                channel: p.channel,
+                value: view.value(p.channel as usize, p.x_m, p.y_m),
+            });
+        }
+        while self
+            .snapshot_times_s
+            .front()
+            .is_some_and(|s| *s <= t_s + self.half_dt_s)
+        {
+            self.snapshot_times_s.pop_front();
+            rec.snapshots.push(snapshot(&self.field, t_s, view.cells));
+        }
+    }
+
+    /// Pictures the last frame (field time `t_s`) unless it already was.
+    pub fn finish(&self, rec: &mut Recording, t_s: f64, cells: &[f32]) {
+        if rec.snapshots.last().is_none_or(|s| s.t_s < t_s) {
+            rec.snapshots.push(snapshot(&self.field, t_s, cells));
+        }
+    }
 }
 
 /// A copy of the frame for the pictures.

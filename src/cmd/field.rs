@@ -1,17 +1,12 @@
 //! `pheromone field`: the field process loop.
 
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use clap::{Args, ValueEnum};
 use field::checkpoint;
-use field::deposit::RejectReason;
-use field::link::{LinkOptions, Receiver};
-use field::messages::ClockMsg;
-use field::shm::{
-    cleanup_dead_nodes, create_node, frame_pool, FieldServer, ShmError, Standby, StandbyEvent,
-    Takeover,
-};
+use field::run::{run_field, FieldRunOptions};
+use field::shm::{create_node, frame_pool};
 use field::{Evaporation, FieldConfig};
 
 use super::{bad, read_toml};
@@ -151,7 +146,9 @@ pub struct FieldArgs {
 pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
     let mut c: FieldConfig = match (&a.config, &a.scenario) {
         (Some(p), _) => read_toml(p)?,
-        (None, Some(s)) => super::roles::load_scenario(s)?.field,
+        (None, Some(s)) => super::roles::load_scenario(s)?
+            .field_config_for_processes()
+            .map_err(|e| bad(format!("{s}: {e}")))?,
         (None, None) => FieldConfig::default(),
     };
     macro_rules! set {
@@ -261,12 +258,20 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
             "--checkpoint-every {every}: must be a positive number of seconds"
         )));
     }
+    let duration = match a.duration {
+        Some(d) if !(d.is_finite() && d >= 0.0) => {
+            return Err(bad(format!(
+                "--duration {d}: must be a non-negative number of seconds"
+            )))
+        }
+        d => d.map(Duration::from_secs_f64),
+    };
     let restore = match &a.restore {
         Some(path) => {
             let cp = checkpoint::read(path).map_err(|e| bad(e.to_string()))?;
             cp.check_against(path, &config)
                 .map_err(|e| bad(e.to_string()))?;
-            Some(cp)
+            Some((path.clone(), cp))
         }
         None => None,
     };
@@ -283,367 +288,31 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         frames
     );
     let node = create_node(&format!("field-{}", a.name))?;
-    let clock = match &a.clock {
-        Some(world) => {
-            let (service, wake) = field::messages::clock_services(world);
-            Some(Receiver::<ClockMsg>::create(
-                &node,
-                &service,
-                &wake,
-                LinkOptions {
-                    keep_latest: false,
-                    buffer: 1024,
-                    ..LinkOptions::default()
-                },
-            )?)
-        }
-        None => None,
+    let options = FieldRunOptions {
+        name: a.name.clone(),
+        config,
+        clock: a.clock.clone(),
+        ticks: a.ticks,
+        duration,
+        checkpoint: a.checkpoint.clone(),
+        checkpoint_every: Duration::from_secs_f64(every),
+        restore,
+        standby: a.standby,
     };
-    let started = Instant::now();
-    let mut standby_summary = serde_json::Value::Null;
-    let (mut server, mut longest_gap_ns) = if a.standby {
-        let Some((server, takeover, mirrored)) = run_standby(&a, &node, &config)? else {
-            // Stopped (Ctrl-C or --duration) while the primary was alive.
-            if a.json {
-                println!(
-                    "{}",
-                    serde_json::json!({ "field": a.name, "standby": { "took_over": false } })
-                );
-            }
-            return Ok(());
-        };
-        let gap_ns = takeover
-            .first_stamp_ns
-            .saturating_sub(takeover.last_mirrored_stamp_ns);
-        let ms = |ns: u64| ns as f64 / 1e6;
-        eprintln!(
-            "field '{}': the primary is gone; took over after frame {} ({:.1} ms without a frame: \
-             found gone after {:.1} ms, first own frame {:.1} ms later), {} deposit(s) carried over",
-            a.name,
-            takeover.last_mirrored_sequence,
-            ms(gap_ns),
-            ms(takeover
-                .detected_stamp_ns
-                .saturating_sub(takeover.last_mirrored_stamp_ns)),
-            ms(takeover
-                .first_stamp_ns
-                .saturating_sub(takeover.detected_stamp_ns)),
-            takeover.deposits_carried
-        );
-        standby_summary = serde_json::json!({
-            "took_over": true,
-            "mirrored_frames": mirrored,
-            "last_mirrored_sequence": takeover.last_mirrored_sequence,
-            "takeover_gap_ms": gap_ns as f64 / 1e6,
-            "deposits_carried": takeover.deposits_carried,
-        });
-        (server, gap_ns)
-    } else {
-        let restore = restore.as_ref().map(|c| (c.header, c.cells.as_slice()));
-        if let Some((h, _)) = &restore {
-            eprintln!(
-                "field '{}': restored frame {} (t = {:.3} s, {} deposits applied) from {}",
-                a.name,
-                h.sequence,
-                h.sim_time_s,
-                h.deposits_applied,
-                a.restore
-                    .as_ref()
-                    .map(|p| p.display().to_string())
-                    .unwrap_or_default()
-            );
-        }
-        (
-            FieldServer::start(&node, &a.name, config.clone(), restore)?,
-            0,
-        )
+    let summary = match run_field(&node, &options) {
+        Ok(s) => s,
+        Err(e) if e.is_bad_input() => return Err(bad(e.to_string())),
+        Err(e) => return Err(e.into()),
     };
-    let mut checkpointer = a.checkpoint.as_ref().map(|path| Checkpointer {
-        path: path.clone(),
-        every: Duration::from_secs_f64(every),
-        last: Instant::now(),
-        writing: None,
-        written: 0,
-        failed: 0,
-    });
-    let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
-    let mut deadline = Instant::now() + period;
-    let mut window = Window::new(Instant::now());
-    let mut max_compute_ns = 0u64;
-    let mut ticks = 0u64;
-    let mut dead_nodes_cleaned = 0u64;
-    let mut last_clock_step: Option<u64> = None;
-    let mut last_frame_at = Instant::now();
-    loop {
-        if let Some(clock) = &clock {
-            // Lockstep: one tick per world step.
-            match clock.recv_timeout(Duration::from_millis(20))? {
-                Some(msg) if msg.finished != 0 => break,
-                // The world re-sends a step nobody answered yet: tick once per step.
-                Some(msg) if last_clock_step.is_some_and(|s| msg.step <= s) => continue,
-                Some(msg) => last_clock_step = Some(msg.step),
-                None => {
-                    if node.wait(Duration::ZERO).is_err() {
-                        break;
-                    }
-                    // Idle between steps: late readers still get the current frame.
-                    server.serve_new_readers()?;
-                    continue;
-                }
-            }
-        } else {
-            let now = Instant::now();
-            let wait = deadline.saturating_duration_since(now);
-            if node.wait(wait).is_err() {
-                break; // SIGINT / SIGTERM
-            }
-            deadline += period;
-            if deadline + period < Instant::now() {
-                deadline = Instant::now() + period; // fell behind: don't burst to catch up
-            }
-        }
-        if clock.is_some() && node.wait(Duration::ZERO).is_err() {
-            break;
-        }
-        let out = server.tick()?;
-        let now = Instant::now();
-        let gap_ns = now.duration_since(last_frame_at).as_nanos() as u64;
-        last_frame_at = now;
-        longest_gap_ns = longest_gap_ns.max(gap_ns);
-        ticks += 1;
-        max_compute_ns = max_compute_ns.max(out.compute_ns);
-        window.add(&out, gap_ns);
-        if let Some(c) = &mut checkpointer {
-            c.maybe_write(&server);
-        }
-        if window.started.elapsed() >= Duration::from_secs(1) {
-            // Clients killed since the last second: free their ports and the frames they held.
-            let cleaned = cleanup_dead_nodes(&node);
-            dead_nodes_cleaned += cleaned;
-            window.log(&a.name, server.stepper(), cleaned);
-            window = Window::new(Instant::now());
-        }
-        if a.ticks.is_some_and(|n| ticks >= n)
-            || a.duration
-                .is_some_and(|d| started.elapsed().as_secs_f64() >= d)
-        {
-            break;
-        }
-    }
-    let checkpoint_summary = match &mut checkpointer {
-        Some(c) => {
-            c.finish(&server)?;
-            serde_json::json!({ "file": c.path.display().to_string(), "written": c.written, "failed": c.failed })
-        }
-        None => serde_json::Value::Null,
-    };
-    let _ = &mut server;
-    let stepper = server.stepper();
-    let counters = stepper.counters;
-    let rejected: serde_json::Map<String, serde_json::Value> = RejectReason::ALL
-        .iter()
-        .map(|r| (r.name().to_string(), counters.rejected[*r as usize].into()))
-        .collect();
-    let (mass, max): (Vec<f64>, Vec<f32>) = match server.latest() {
-        Some((_, view)) => (0..view.channels)
-            .map(|c| (view.total(c), view.max(c)))
-            .unzip(),
-        None => (vec![], vec![]),
-    };
-    eprintln!(
-        "field '{}' stopped after {ticks} ticks ({:.1} s): {} deposits applied, {} rejected, longest tick {:.3} ms, longest gap between frames {:.3} ms",
-        a.name,
-        started.elapsed().as_secs_f64(),
-        counters.applied,
-        counters.rejected_total(),
-        max_compute_ns as f64 / 1e6,
-        longest_gap_ns as f64 / 1e6
-    );
     if a.json {
-        println!(
-            "{}",
-            serde_json::json!({
-                "field": a.name,
-                "ticks": ticks,
-                "sequence": stepper.sequence,
-                "sim_time_s": stepper.sim_time_s,
-                "deposits_applied": counters.applied,
-                "deposits_rejected": rejected,
-                "total_mass": mass,
-                "max": max,
-                "max_tick_compute_ms": max_compute_ns as f64 / 1e6,
-                "longest_tick_gap_ms": longest_gap_ns as f64 / 1e6,
-                "dead_nodes_cleaned": dead_nodes_cleaned,
-                "restored_sequence": restore.as_ref().map(|c| c.header.sequence),
-                "checkpoint": checkpoint_summary,
-                "standby": standby_summary,
-            })
-        );
+        match summary {
+            Some(s) => println!("{}", serde_json::to_string(&s)?),
+            // A standby stopped (Ctrl-C or --duration) while the primary was alive.
+            None => println!(
+                "{}",
+                serde_json::json!({ "field": a.name, "standby": { "took_over": false } })
+            ),
+        }
     }
     Ok(())
-}
-
-/// The standby phase: mirror the primary until it dies, then take over. `None` when stopped
-/// first (Ctrl-C, --duration).
-fn run_standby(
-    a: &FieldArgs,
-    node: &iceoryx2::prelude::Node<field::shm::Svc>,
-    config: &FieldConfig,
-) -> anyhow::Result<Option<(FieldServer, Takeover, u64)>> {
-    let started = Instant::now();
-    let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
-    let mut standby =
-        Standby::attach_within(node, &a.name, config.clone(), Duration::from_secs(30)).map_err(
-            |e| match e {
-                ShmError::StandbyMismatch { .. } => bad(e.to_string()),
-                e => e.into(),
-            },
-        )?;
-    eprintln!(
-        "field '{}': standby, mirroring the primary (frame {})",
-        a.name,
-        standby.latest().map(|h| h.sequence).unwrap_or(0)
-    );
-    loop {
-        if node.wait(Duration::ZERO).is_err()
-            || a.duration
-                .is_some_and(|d| started.elapsed().as_secs_f64() >= d)
-        {
-            eprintln!(
-                "field '{}': standby stopped after mirroring {} frames",
-                a.name, standby.mirrored
-            );
-            return Ok(None);
-        }
-        let event = standby.poll(period).map_err(|e| match e {
-            ShmError::StandbyMismatch { .. } => bad(e.to_string()),
-            e => e.into(),
-        })?;
-        if event == StandbyEvent::PrimaryGone {
-            let mirrored = standby.mirrored;
-            let (server, takeover) = standby.take_over(node)?;
-            return Ok(Some((server, takeover, mirrored)));
-        }
-    }
-}
-
-/// Periodic checkpoints: the frame is copied on the tick thread (one memcpy) and written,
-/// fsynced and renamed on a background thread, so a slow disk does not stall the ticks.
-struct Checkpointer {
-    path: PathBuf,
-    every: Duration,
-    last: Instant,
-    writing: Option<std::thread::JoinHandle<Result<u64, checkpoint::CheckpointError>>>,
-    written: u64,
-    failed: u64,
-}
-
-impl Checkpointer {
-    fn collect(&mut self, wait: bool) {
-        if let Some(h) = self.writing.take() {
-            if !wait && !h.is_finished() {
-                self.writing = Some(h);
-                return;
-            }
-            match h.join() {
-                Ok(Ok(_)) => self.written += 1,
-                Ok(Err(e)) => {
-                    self.failed += 1;
-                    eprintln!("warning: {e}");
-                }
-                Err(_) => self.failed += 1,
-            }
-        }
-    }
-
-    fn maybe_write(&mut self, server: &FieldServer) {
-        if self.last.elapsed() < self.every {
-            return;
-        }
-        self.collect(false);
-        if self.writing.is_some() {
-            return; // the previous one is still being written
-        }
-        if let Some((header, view)) = server.latest() {
-            let (header, cells, config) = (*header, view.cells.to_vec(), server.config().clone());
-            let path = self.path.clone();
-            self.writing = Some(std::thread::spawn(move || {
-                checkpoint::write_atomic(&path, &header, &config, &cells)
-            }));
-            self.last = Instant::now();
-        }
-    }
-
-    /// Waits for a write in flight, then writes the last frame.
-    fn finish(&mut self, server: &FieldServer) -> anyhow::Result<()> {
-        self.collect(true);
-        if let Some((header, view)) = server.latest() {
-            checkpoint::write_atomic(&self.path, header, server.config(), view.cells)?;
-            self.written += 1;
-        }
-        Ok(())
-    }
-}
-
-/// Per-second statistics for the log line.
-struct Window {
-    started: Instant,
-    ticks: u64,
-    compute_ns: u64,
-    max_compute_ns: u64,
-    applied: u64,
-    rejected: u64,
-    longest_gap_ns: u64,
-}
-
-impl Window {
-    fn new(started: Instant) -> Self {
-        Self {
-            started,
-            ticks: 0,
-            compute_ns: 0,
-            max_compute_ns: 0,
-            applied: 0,
-            rejected: 0,
-            longest_gap_ns: 0,
-        }
-    }
-
-    fn add(&mut self, out: &field::shm::TickOutcome, gap_ns: u64) {
-        self.ticks += 1;
-        self.longest_gap_ns = self.longest_gap_ns.max(gap_ns);
-        self.compute_ns += out.compute_ns;
-        self.max_compute_ns = self.max_compute_ns.max(out.compute_ns);
-        self.applied += out.report.deposits_applied as u64;
-        self.rejected += out.rejected;
-    }
-
-    fn log(&self, name: &str, stepper: &field::Stepper, dead_nodes_cleaned: u64) {
-        let secs = self.started.elapsed().as_secs_f64();
-        let c = stepper.counters;
-        let reasons: Vec<String> = RejectReason::ALL
-            .iter()
-            .filter(|r| c.rejected[**r as usize] > 0)
-            .map(|r| format!("{} {}", r.name(), c.rejected[*r as usize]))
-            .collect();
-        eprintln!(
-            "field '{name}': {:.1} ticks/s, tick {:.3} ms mean / {:.3} ms max, longest_tick_gap_ms {:.3}, \
-             deposits +{} applied +{} rejected (total {} applied, {} rejected{}{}){}",
-            self.ticks as f64 / secs,
-            self.compute_ns as f64 / self.ticks.max(1) as f64 / 1e6,
-            self.max_compute_ns as f64 / 1e6,
-            self.longest_gap_ns as f64 / 1e6,
-            self.applied,
-            self.rejected,
-            c.applied,
-            c.rejected_total(),
-            if reasons.is_empty() { "" } else { ": " },
-            reasons.join(", "),
-            if dead_nodes_cleaned > 0 {
-                format!("; cleaned {dead_nodes_cleaned} dead node(s)")
-            } else {
-                String::new()
-            }
-        );
-    }
 }

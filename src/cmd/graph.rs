@@ -8,12 +8,12 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use field::shm::create_node;
 use publishers::graph::process::{run_graph_robot, run_graph_writer, WriterOptions};
-use publishers::graph::run::{simulate, tables_text, RobotReport, RunReport};
+use publishers::graph::run::{simulate, tables_text, RunReport};
 use publishers::graph::sim::{RegionsScenario, Strategy, Until, BUILTIN_REGIONS};
 use serde_json::{json, Value};
 
 use super::bad;
-use super::sim::{fail_if_any_failed, Role, SimArgs};
+use super::sim::SimArgs;
 
 /// Whether `name` is a `regions` scenario: a built-in one, or a TOML file with a `dock`.
 pub fn is_regions(name: &str) -> bool {
@@ -342,73 +342,12 @@ fn run_as_processes(
     robots: usize,
     seed: u64,
 ) -> anyhow::Result<RunReport> {
-    static RUN: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
-    let tag = format!(
-        "sim{}g{}",
-        std::process::id(),
-        RUN.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-    );
-    let node = create_node(&format!("{tag}-sim"))?;
-    let common = |role: &str| -> Vec<String> {
-        [
-            role,
-            "--scenario",
-            &a.scenario,
-            "--name",
-            &tag,
-            "--robots",
-            &robots.to_string(),
-            "--strategy",
-            strategy.name(),
-            "--seed",
-            &seed.to_string(),
-            "--json",
-        ]
-        .iter()
-        .map(|s| s.to_string())
-        .collect()
-    };
-    let mut roles = vec![Role::spawn("graph".into(), &common("graph"))?];
-    for id in 1..=robots {
-        let mut args = common("graph-robot");
-        args.extend(["--robot".to_string(), id.to_string()]);
-        roles.push(Role::spawn(format!("graph-robot R{id}"), &args)?);
-    }
-    let deadline = Instant::now() + Duration::from_secs_f64(a.timeout);
-    // Child exits have no iceoryx2 event; the node's wait bounds each round and sees Ctrl-C.
-    while roles[0].child.try_wait().ok().flatten().is_none() {
-        fail_if_any_failed(&mut roles[1..])?;
-        if Instant::now() > deadline {
-            anyhow::bail!(
-                "the run took longer than {} s: stopped every process",
-                a.timeout
-            );
-        }
-        if node.wait(Duration::from_millis(10)).is_err() {
-            anyhow::bail!("interrupted: stopped every process of the run");
-        }
-    }
-    let (ok, out, err) = roles[0].collect();
-    if !ok {
-        anyhow::bail!("graph writer failed: {}", err.trim());
-    }
-    let mut report: RunReport = serde_json::from_value(out.unwrap_or(Value::Null))
-        .map_err(|e| anyhow::anyhow!("graph writer printed no report: {e}"))?;
-    let end = Instant::now() + Duration::from_secs(15);
-    for r in roles.iter_mut().skip(1) {
-        while r.child.try_wait().ok().flatten().is_none() {
-            if Instant::now() > end {
-                anyhow::bail!("{} did not stop within 15 s of the end of the run", r.name);
-            }
-            let _ = node.wait(Duration::from_millis(10));
-        }
-        let (ok, out, err) = r.collect();
-        if !ok {
-            anyhow::bail!("{} failed: {}", r.name, err.trim());
-        }
-        let rr: RobotReport = serde_json::from_value(out.unwrap_or(Value::Null))
-            .map_err(|e| anyhow::anyhow!("{} printed no summary: {e}", r.name))?;
-        report.robot_reports.push(rr);
-    }
-    Ok(report)
+    Ok(publishers::process_run::run_graph_as_processes(
+        &std::env::current_exe()?,
+        &a.scenario,
+        strategy,
+        robots,
+        seed,
+        super::seconds("timeout", a.timeout)?,
+    )?)
 }

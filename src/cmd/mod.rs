@@ -34,3 +34,14 @@ pub fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<
         .map_err(|e| bad(format!("{}: cannot read: {e}", path.display())))?;
     toml::from_str(&text).map_err(|e| bad(format!("{}: {e}", path.display())))
 }
+
+/// A positive number of seconds from a flag, or a `BadInput` naming the flag and the value.
+pub fn seconds(flag: &str, v: f64) -> anyhow::Result<std::time::Duration> {
+    if v.is_finite() && v > 0.0 {
+        Ok(std::time::Duration::from_secs_f64(v))
+    } else {
+        Err(bad(format!(
+            "--{flag} {v}: must be a positive number of seconds"
+        )))
+    }
+}

@@ -1,16 +1,16 @@
 //! `pheromone world | localizer | depositor | follower`: the robot processes. Each reads the
 //! same scenario (a built-in name or a TOML file) and runs its part of it.
 
-use std::time::Duration;
-
 use clap::{Args, ValueEnum};
 use field::shm::create_node;
 use publishers::depositor::{DepositMode, DepositorConfig};
 use publishers::follower::{Follower, FollowerConfig, StrategyKind};
-use publishers::process::{run_depositor, run_follower, run_localizer, run_world, WorldOptions};
+use publishers::process::{
+    run_depositor, run_follower, run_localizer, run_world, RoleOptions, WorldOptions,
+};
 use publishers::scenario::Scenario;
 
-use super::bad;
+use super::{bad, seconds};
 
 /// Options every robot process shares.
 #[derive(Args, Debug, Clone)]
@@ -28,6 +28,21 @@ pub struct Common {
     /// Print one JSON summary object on stdout at exit.
     #[arg(long)]
     pub json: bool,
+    /// The world steps on wall time: nobody waits for anybody (give it to every process of the
+    /// run). Default: lockstep, as fast as the slowest process, and deterministic for a seed.
+    #[arg(long)]
+    pub realtime: bool,
+}
+
+impl Common {
+    fn role_options(&self, robot: u32) -> RoleOptions {
+        RoleOptions {
+            robot,
+            world: self.world.clone(),
+            field: self.field.clone(),
+            lockstep: !self.realtime,
+        }
+    }
 }
 
 pub fn load_scenario(name: &str) -> anyhow::Result<Scenario> {
@@ -58,12 +73,17 @@ fn print_json(json: bool, value: impl serde::Serialize) -> anyhow::Result<()> {
 pub struct WorldArgs {
     #[command(flatten)]
     pub common: Common,
-    /// Step on wall time instead of lockstep.
-    #[arg(long)]
-    pub realtime: bool,
-    /// Lockstep: fail when a robot has not answered a step within this many seconds.
-    #[arg(long, default_value_t = 10.0, value_name = "SECS")]
+    /// Lockstep: fail when a step has made no progress (no acknowledgement, no command) for
+    /// this many seconds.
+    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
     pub stall_timeout: f64,
+    /// Lockstep: how long every process of the run (field, localizers, depositors, followers,
+    /// observer) may take to join [default: 10 s + 0.5 s per process].
+    #[arg(long, value_name = "SECS")]
+    pub attach_timeout: Option<f64>,
+    /// An observer (`pheromone sim`) takes part in the lockstep: wait for it too.
+    #[arg(long)]
+    pub observed: bool,
 }
 
 pub fn run_world_cmd(a: WorldArgs) -> anyhow::Result<()> {
@@ -76,8 +96,13 @@ pub fn run_world_cmd(a: WorldArgs) -> anyhow::Result<()> {
         &WorldOptions {
             world: a.common.world.clone(),
             field: a.common.field.clone(),
-            realtime: a.realtime,
-            stall_timeout: Duration::from_secs_f64(a.stall_timeout),
+            realtime: a.common.realtime,
+            stall_timeout: seconds("stall-timeout", a.stall_timeout)?,
+            attach_timeout: a
+                .attach_timeout
+                .map(|v| seconds("attach-timeout", v))
+                .transpose()?,
+            observed: a.observed,
         },
     )?;
     eprintln!(
@@ -124,7 +149,7 @@ pub fn run_localizer_cmd(a: LocalizerArgs) -> anyhow::Result<()> {
         }
     }
     let node = create_node(&format!("localizer-r{}-{}", a.robot, std::process::id()))?;
-    let summary = run_localizer(&node, &scenario, a.robot, &a.common.world, a.slam)?;
+    let summary = run_localizer(&node, &scenario, &a.common.role_options(a.robot), a.slam)?;
     eprintln!(
         "localizer r{}: {} steps, {} rejected",
         a.robot, summary.steps, summary.rejected
@@ -214,7 +239,7 @@ pub fn run_depositor_cmd(a: DepositorArgs) -> anyhow::Result<()> {
     }
     config.validate().map_err(|e| bad(e.to_string()))?;
     let node = create_node(&format!("depositor-r{}-{}", a.robot, std::process::id()))?;
-    let summary = run_depositor(&node, a.robot, &a.common.world, &a.common.field, config)?;
+    let summary = run_depositor(&node, &a.common.role_options(a.robot), config)?;
     eprintln!(
         "depositor r{}: {} poses, {} rejected",
         a.robot, summary.steps, summary.rejected
@@ -263,9 +288,7 @@ pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
     let node = create_node(&format!("follower-r{}-{}", a.robot, std::process::id()))?;
     let summary = run_follower(
         &node,
-        a.robot,
-        &a.common.world,
-        &a.common.field,
+        &a.common.role_options(a.robot),
         follower,
         config.steer_by,
         scenario.world.dt_secs,

@@ -3,24 +3,16 @@
 //! and reports what happened: a summary on stderr, `--json` metrics on stdout, and with
 //! `--out DIR` pictures of the field, a CSV per robot and `metrics.json`.
 
-use std::io::Read;
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use clap::Args;
-use field::shm::create_node;
 use publishers::follower::StrategyKind;
 use publishers::metrics::scenario_metrics;
-use publishers::observer::Observer;
+use publishers::process_run::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
 use publishers::record::Recording;
 use publishers::scenario::{Overrides, Scenario, DEFAULT_SCENARIO};
-use publishers::simulation::{
-    rejected_by_reason, role_name, run_single_process, FieldSummary, RobotResult, RunSummary,
-    SingleProcessOptions,
-};
-use publishers::world::World;
+use publishers::simulation::{run_single_process, RunSummary, SingleProcessOptions};
 use serde_json::{json, Value};
 
 use super::bad;
@@ -92,6 +84,13 @@ pub struct SimArgs {
     /// Seconds the whole run may take before it is stopped as failed (separate processes).
     #[arg(long, default_value_t = 900.0, value_name = "SECS")]
     pub timeout: f64,
+    /// Seconds every process may take to start and join the run (separate processes)
+    /// [default: 10 s + 0.5 s per process].
+    #[arg(long, value_name = "SECS")]
+    pub attach_timeout: Option<f64>,
+    /// Seconds a lockstep step may make no progress before the run fails (separate processes).
+    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    pub stall_timeout: f64,
 }
 
 /// The follower strategy of --strategy (grid scenarios).
@@ -134,8 +133,8 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         }
     );
     let started = Instant::now();
+    let bar = progress_bar(scenario.steps());
     let (summary, rec, processes) = if a.single_process {
-        let bar = progress_bar(scenario.steps());
         let mut tick = |k: u64, _n: u64| bar.set_position(k);
         let out = run_single_process(
             &scenario,
@@ -144,11 +143,14 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
                 progress: Some(&mut tick),
             },
         )?;
-        bar.finish_and_clear();
-        (out.0, out.1, Value::Null)
+        (out.0, out.1, None)
     } else {
-        run_processes(&a, &scenario)?
+        let dt = scenario.world.dt_secs;
+        let mut tick = |t: f64| bar.set_position((t / dt).round() as u64);
+        let (summary, rec, info) = run_processes(&a, &scenario, Some(&mut tick))?;
+        (summary, rec, Some(info))
     };
+    bar.finish_and_clear();
     let wall_s = started.elapsed().as_secs_f64();
     let mut metrics = metrics_json(&scenario, &summary, &rec);
     metrics["mode"] = json!(if a.single_process {
@@ -158,8 +160,9 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     });
     metrics["wall_time_s"] = json!(wall_s);
     metrics["sim_time_per_wall_time"] = json!(summary.sim_time_s / wall_s.max(1e-9));
-    if !processes.is_null() {
-        metrics["processes"] = processes;
+    if let Some(info) = processes {
+        metrics["startup_s"] = json!(info.startup_s);
+        metrics["processes"] = serde_json::to_value(&info.reports)?;
     }
     print_summary(&metrics);
     if let Some(dir) = out_dir(&a, &scenario) {
@@ -286,7 +289,7 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
                 )?
                 .1
             } else {
-                run_processes(a, &s)?.1
+                run_processes(a, &s, None)?.1
             };
             let m = scenario_metrics(&s, &rec);
             values.push(m["exploration"]["mean"].as_f64().unwrap_or(f64::NAN));
@@ -353,289 +356,26 @@ pub fn welch_t(m1: f64, s1: f64, m2: f64, s2: f64, n: f64) -> (f64, f64) {
 // ---------------------------------------------------------------------------------------------
 // Separate processes
 
-/// A started role; killed and reaped if still running when dropped.
-pub(super) struct Role {
-    pub(super) name: String,
-    pub(super) child: Child,
-}
-
-impl Role {
-    pub(super) fn spawn(name: String, args: &[String]) -> anyhow::Result<Self> {
-        let exe = std::env::current_exe()?;
-        let child = Command::new(exe)
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .map_err(|e| anyhow::anyhow!("cannot start {name}: {e}"))?;
-        Ok(Self { name, child })
-    }
-
-    /// Output of a finished role: (success, stdout JSON, stderr text).
-    pub(super) fn collect(&mut self) -> (bool, Option<Value>, String) {
-        let status = self.child.wait().ok();
-        let mut out = String::new();
-        let mut err = String::new();
-        if let Some(mut o) = self.child.stdout.take() {
-            let _ = o.read_to_string(&mut out);
-        }
-        if let Some(mut e) = self.child.stderr.take() {
-            let _ = e.read_to_string(&mut err);
-        }
-        (
-            status.is_some_and(|s| s.success()),
-            serde_json::from_str(out.trim()).ok(),
-            err,
-        )
-    }
-}
-
-impl Drop for Role {
-    fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            let _ = self.child.kill();
-        }
-        let _ = self.child.wait();
-    }
-}
-
-/// An error naming the first of `roles` that has exited unsuccessfully, with its stderr.
-pub(super) fn fail_if_any_failed(roles: &mut [Role]) -> anyhow::Result<()> {
-    for r in roles {
-        if let Ok(Some(status)) = r.child.try_wait() {
-            if !status.success() {
-                let (_, _, err) = r.collect();
-                anyhow::bail!("{} failed ({status}): {}", r.name, err.trim());
-            }
-        }
-    }
-    Ok(())
-}
-
-/// The effective scenario (after the flags) as a file every process reads; removed on drop.
-struct ScenarioFile(PathBuf);
-
-impl ScenarioFile {
-    fn write(scenario: &Scenario, tag: &str) -> anyhow::Result<Self> {
-        let dir = std::env::temp_dir().join(format!("pheromone-{tag}"));
-        std::fs::create_dir_all(&dir)?;
-        let path = dir.join("scenario.toml");
-        let text = scenario.to_toml().map_err(|e| anyhow::anyhow!(e))?;
-        std::fs::write(&path, text)?;
-        Ok(Self(path))
-    }
-}
-
-impl Drop for ScenarioFile {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.0);
-        if let Some(d) = self.0.parent() {
-            let _ = std::fs::remove_dir(d);
-        }
-    }
-}
-
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-
 fn run_processes(
     a: &SimArgs,
     scenario: &Scenario,
-) -> anyhow::Result<(RunSummary, Recording, Value)> {
-    static RUN: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
-    let tag = format!(
-        "sim{}x{}",
-        std::process::id(),
-        RUN.fetch_add(1, Ordering::Relaxed)
-    );
-    let (field_name, world_name) = (tag.clone(), tag.clone());
-    {
-        let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst));
-    }
-    let file = ScenarioFile::write(scenario, &tag)?;
-    let path = file.0.display().to_string();
-    let node = create_node(&format!("{tag}-observer"))?;
-    let mut observer = Observer::new(&node, scenario, &world_name, &field_name)?;
-    let walls = World::new(scenario.world.clone(), scenario.seed)
-        .map(|w| w.wall_segments().iter().map(|s| (s.a_m, s.b_m)).collect())
-        .unwrap_or_default();
-    observer.set_walls(walls);
-    let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
-    let common = |role: &str, robot: Option<u32>| {
-        let mut v = s(&[
-            role,
-            "--scenario",
-            &path,
-            "--world",
-            &world_name,
-            "--field",
-            &field_name,
-            "--json",
-        ]);
-        if let Some(r) = robot {
-            v.extend(s(&["--robot", &r.to_string()]));
-        }
-        v
-    };
-    let mut roles = vec![Role::spawn(
-        "field".into(),
-        &s(&[
-            "field",
-            "--name",
-            &field_name,
-            "--scenario",
-            &path,
-            "--clock",
-            &world_name,
-            "--json",
-        ]),
-    )?];
-    for r in &scenario.robots {
-        let mut loc = common("localizer", Some(r.id));
-        if a.slam {
-            loc.push("--slam".into());
-        }
-        roles.push(Role::spawn(format!("localizer r{}", r.id), &loc)?);
-        if r.depositor.is_some() {
-            roles.push(Role::spawn(
-                format!("depositor r{}", r.id),
-                &common("depositor", Some(r.id)),
-            )?);
-        }
-        if r.follower.is_some() {
-            roles.push(Role::spawn(
-                format!("follower r{}", r.id),
-                &common("follower", Some(r.id)),
-            )?);
-        }
-    }
-    let mut world_args = common("world", None);
-    if a.realtime {
-        world_args.push("--realtime".into());
-    }
-    roles.push(Role::spawn("world".into(), &world_args)?);
-    for r in &roles {
-        eprintln!("  {:<14} pid {}", r.name, r.child.id());
-    }
-    let bar = progress_bar(scenario.steps());
-    // Wait until the world ends (or a role fails, or Ctrl-C, or the timeout), watching the run.
-    let deadline = Instant::now() + Duration::from_secs_f64(a.timeout);
-    let world_index = roles.len() - 1;
-    let dt = scenario.world.dt_secs;
-    loop {
-        if INTERRUPTED.load(Ordering::SeqCst) {
-            anyhow::bail!("interrupted: stopped every process of the run");
-        }
-        if let Ok(Some(_)) = roles[world_index].child.try_wait() {
-            break;
-        }
-        fail_if_any_failed(&mut roles[..world_index])?;
-        if Instant::now() > deadline {
-            anyhow::bail!(
-                "the run took longer than {} s: stopped every process",
-                a.timeout
-            );
-        }
-        // Child exits have no iceoryx2 event; the observer's wait for a frame bounds the round.
-        observer.poll(&node, Duration::from_millis(20))?;
-        if let Some(t) = observer.sim_time_s() {
-            bar.set_position((t / dt).round() as u64);
-        }
-    }
-    bar.finish_and_clear();
-    let (ok, world, err) = roles[world_index].collect();
-    if !ok {
-        anyhow::bail!("world failed: {}", err.trim());
-    }
-    let world = world.unwrap_or(Value::Null);
-    // The other roles stop by themselves when the world announces the end.
-    let mut summaries = Vec::new();
-    let end_deadline = Instant::now() + Duration::from_secs(15);
-    for r in roles.iter_mut().take(world_index) {
-        while r.child.try_wait().ok().flatten().is_none() {
-            if Instant::now() > end_deadline {
-                anyhow::bail!(
-                    "{} did not stop within 15 s of the end of the run: stopped every process",
-                    r.name
-                );
-            }
-            observer.poll(&node, Duration::from_millis(20))?;
-        }
-        let (ok, out, err) = r.collect();
-        if !ok {
-            anyhow::bail!("{} failed: {}", r.name, err.trim());
-        }
-        summaries.push((r.name.clone(), out.unwrap_or(Value::Null)));
-    }
-    let rec = observer.finish(&node);
-    let field = &summaries[0].1;
-    let mut fs = match rec.snapshots.last() {
-        Some(snap) => {
-            let view = field::FrameView::new(
-                scenario.field.geometry(),
-                scenario.field.channels.len(),
-                &snap.planes,
-            );
-            FieldSummary::of(&scenario.field, &view, 0, &[])
-        }
-        None => FieldSummary::default(),
-    };
-    // The field's own counters are authoritative.
-    fs.deposits_applied = field["deposits_applied"].as_u64().unwrap_or(0);
-    if let Some(m) = field["deposits_rejected"].as_object() {
-        fs.deposits_rejected = m
-            .iter()
-            .map(|(k, v)| (k.clone(), v.as_u64().unwrap_or(0)))
-            .collect();
-    } else {
-        fs.deposits_rejected = rejected_by_reason(&[]);
-    }
-    if let Some(v) = field["total_mass"].as_array() {
-        fs.total_mass = v.iter().filter_map(Value::as_f64).collect();
-    }
-    if let Some(v) = field["max"].as_array() {
-        fs.max = v
-            .iter()
-            .filter_map(|x| x.as_f64().map(|f| f as f32))
-            .collect();
-    }
-    let est = |id: u32| {
-        rec.robots
-            .get(&id)
-            .and_then(|rows| rows.iter().rev().find_map(|r| r.est_pose))
-    };
-    let robots = world["robots"]
-        .as_array()
-        .cloned()
-        .unwrap_or_default()
-        .into_iter()
-        .map(|r| {
-            let id = r["id"].as_u64().unwrap_or(0) as u32;
-            let pose = |i: usize| r["true_pose"][i].as_f64().unwrap_or(f64::NAN);
-            RobotResult {
-                id,
-                role: role_name(scenario, id),
-                true_pose: [pose(0), pose(1), pose(2)],
-                estimated_pose: est(id),
-                distance_travelled_m: r["distance_travelled_m"].as_f64().unwrap_or(0.0),
-                trail_abandoned_at_s: rec.trail_abandoned_at_s(id),
-                collisions: r["collisions"].as_u64().unwrap_or(0),
-            }
-        })
-        .collect();
-    let summary = RunSummary {
-        steps: world["steps"].as_u64().unwrap_or(0),
-        sim_time_s: world["sim_time_s"].as_f64().unwrap_or(0.0),
-        ticks: field["ticks"].as_u64().unwrap_or(0),
-        field: fs,
-        robots,
-        scripted_deposits: world["deposits_sent"].as_u64().unwrap_or(0),
-    };
-    let processes = summaries
-        .iter()
-        .chain(std::iter::once(&("world".to_string(), world.clone())))
-        .map(|(n, v)| json!({"role": n, "summary": v}))
-        .collect::<Vec<_>>();
-    drop(file);
-    Ok((summary, rec, Value::Array(processes)))
+    progress: Option<&mut dyn FnMut(f64)>,
+) -> anyhow::Result<(RunSummary, Recording, ProcessRunInfo)> {
+    let stall = super::seconds("stall-timeout", a.stall_timeout)?;
+    let attach = a
+        .attach_timeout
+        .map(|v| super::seconds("attach-timeout", v))
+        .transpose()?;
+    Ok(run_as_processes(
+        scenario,
+        ProcessRunOptions {
+            exe: std::env::current_exe()?,
+            slam: a.slam,
+            realtime: a.realtime,
+            timeout: super::seconds("timeout", a.timeout)?,
+            attach_timeout: attach,
+            stall_timeout: stall,
+            progress,
+        },
+    )?)
 }

@@ -1,0 +1,429 @@
+//! The lockstep protocol of a simulated world `W`: what makes a run as separate processes give
+//! the same answer as the same run in one process.
+//!
+//! One *conductor* (the world, or the graph writer) owns the clock `sim/W/clock`. Every other
+//! process of the run is a *participant*: the field, each robot's localizer, depositor and
+//! follower, and the observer of `pheromone sim`. A participant creates every other port it
+//! needs first and joins last ([`Participant::join`]): it subscribes to the clock, opens the
+//! step-done service `sim/W/step-done` and wakes the conductor on `sim/W/attached`. So once the
+//! conductor counts all participants on its clock ([`Conductor::wait_for_participants`], woken
+//! by each join, no fixed deadline per process), every port of the run exists, and every message
+//! sent from then on is delivered.
+//!
+//! One step `k`, as the world runs it (`publishers::process::run_world`):
+//! 1. the world publishes step `k`'s sensors and truth and sends the scripted deposits due;
+//! 2. each localizer turns its sensors into a pose; each depositor turns the pose into a deposit
+//!    (or none), sends it to the field and then acknowledges step `k` ([`StepAck`]);
+//! 3. once every depositor has acknowledged, the world sends clock `k` ([`Conductor::tick`]):
+//!    every deposit of step `k` is in the field's queue by then;
+//! 4. the field ticks once, publishing frame `k + 1`, and acknowledges; every follower waits for
+//!    that frame and answers with its command; the observer records the frame and acknowledges;
+//! 5. once every acknowledgement and command of step `k` is in, the world advances.
+//!
+//! The end is announced with a clock message whose `finished` is 1, also after a failure, so
+//! every participant stops.
+
+use std::time::{Duration, Instant};
+
+use iceoryx2::node::Node;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+
+use crate::link::{LinkOptions, Receiver, Sender};
+use crate::messages::{clock_services, ClockMsg};
+use crate::shm::{now_ns, service_name, ShmError, Svc};
+
+/// Who acknowledges a step (`StepAck::role`).
+pub mod role {
+    /// The field ticked for the step (its frame is published).
+    pub const FIELD: u32 = 1;
+    /// A depositor sent everything it deposits for the step.
+    pub const DEPOSITOR: u32 = 2;
+    /// The observer of `pheromone sim` recorded the step's frame.
+    pub const OBSERVER: u32 = 3;
+
+    /// A role's name in messages.
+    pub fn name(role: u32) -> &'static str {
+        match role {
+            FIELD => "field",
+            DEPOSITOR => "depositor",
+            OBSERVER => "observer",
+            _ => "unknown role",
+        }
+    }
+}
+
+/// "Done with step `step`", from one participant to the conductor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[type_name("pheromone::StepAck/v1")]
+#[repr(C)]
+pub struct StepAck {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// One of [`role`].
+    pub role: u32,
+}
+
+/// Most processes one run may have: the limit of the clock, step-done and attach services.
+pub const MAX_PARTICIPANTS: usize = 512;
+
+/// The clock: one sender, every participant a receiver; nothing is overwritten.
+pub const CLOCK_LINK: LinkOptions = LinkOptions {
+    max_publishers: 2,
+    max_subscribers: MAX_PARTICIPANTS,
+    buffer: 1024,
+    keep_latest: false,
+};
+
+/// Step acknowledgements: every participant a sender, the conductor the receiver. One step's
+/// acknowledgements of every participant fit in the buffer.
+pub const ACK_LINK: LinkOptions = LinkOptions {
+    max_publishers: MAX_PARTICIPANTS,
+    max_subscribers: 2,
+    buffer: MAX_PARTICIPANTS,
+    keep_latest: false,
+};
+
+/// Service names of world `W`'s step acknowledgements and their wake-up event.
+pub fn step_done_services(world: &str) -> (String, String) {
+    (
+        format!("sim/{world}/step-done"),
+        format!("sim/{world}/step-done-ready"),
+    )
+}
+
+/// The event a participant notifies when it has joined world `W`.
+pub fn attached_service(world: &str) -> String {
+    format!("sim/{world}/attached")
+}
+
+fn attached_event(
+    node: &Node<Svc>,
+    world: &str,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ShmError> {
+    let service = attached_service(world);
+    node.service_builder(&service_name(&service)?)
+        .event()
+        .max_notifiers(MAX_PARTICIPANTS)
+        .max_listeners(4)
+        .max_nodes(MAX_PARTICIPANTS + 4)
+        .open_or_create()
+        .map_err(|e| ShmError::Service {
+            service,
+            action: "open or create",
+            detail: format!("{e:?}"),
+        })
+}
+
+/// Why the conductor gave up.
+#[derive(Debug, thiserror::Error)]
+pub enum LockstepError {
+    #[error(transparent)]
+    Shm(#[from] ShmError),
+    #[error(
+        "only {attached} of the {expected} processes of the run ({what}) joined world '{world}' \
+         within {timeout_s:.1} s (raise --attach-timeout on a slow host)"
+    )]
+    Attach {
+        world: String,
+        attached: usize,
+        expected: usize,
+        what: String,
+        timeout_s: f64,
+    },
+    #[error(
+        "world '{world}': step {step} was not acknowledged by {missing} within {timeout_s:.1} s \
+         (raise --stall-timeout on a slow host)"
+    )]
+    Stalled {
+        world: String,
+        step: u64,
+        missing: String,
+        timeout_s: f64,
+    },
+    #[error("world '{world}': interrupted")]
+    Interrupted { world: String },
+}
+
+/// The conductor's end of the protocol: the clock, the acknowledgements, the joins.
+pub struct Conductor {
+    world: String,
+    clock: Sender<ClockMsg>,
+    acks: Receiver<StepAck>,
+    attached: Listener<Svc>,
+    /// Acknowledgements of a later step that arrived early.
+    early: Vec<StepAck>,
+}
+
+impl Conductor {
+    pub fn create(node: &Node<Svc>, world: &str) -> Result<Self, ShmError> {
+        let attached = attached_event(node, world)?
+            .listener_builder()
+            .create()
+            .map_err(|e| ShmError::Service {
+                service: attached_service(world),
+                action: "create listener",
+                detail: format!("{e:?}"),
+            })?;
+        let (clock_service, clock_wake) = clock_services(world);
+        let (ack_service, ack_wake) = step_done_services(world);
+        Ok(Self {
+            world: world.to_string(),
+            clock: Sender::create(node, &clock_service, &clock_wake, CLOCK_LINK)?,
+            acks: Receiver::create(node, &ack_service, &ack_wake, ACK_LINK)?,
+            attached,
+            early: Vec::new(),
+        })
+    }
+
+    /// Participants subscribed to the clock now.
+    pub fn participants(&self) -> usize {
+        self.clock.receivers()
+    }
+
+    /// Waits until `expected` participants have joined, woken by each join; returns how long
+    /// it took. `what` names them for the error.
+    pub fn wait_for_participants(
+        &self,
+        node: &Node<Svc>,
+        expected: usize,
+        what: &str,
+        timeout: Duration,
+    ) -> Result<Duration, LockstepError> {
+        let started = Instant::now();
+        let deadline = started + timeout;
+        loop {
+            if self.participants() >= expected {
+                return Ok(started.elapsed());
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(LockstepError::Attach {
+                    world: self.world.clone(),
+                    attached: self.participants(),
+                    expected,
+                    what: what.to_string(),
+                    timeout_s: timeout.as_secs_f64(),
+                });
+            }
+            if node.wait(Duration::ZERO).is_err() {
+                return Err(LockstepError::Interrupted {
+                    world: self.world.clone(),
+                });
+            }
+            // A join notifies; a participant that left again does not, so the wait is bounded.
+            match self
+                .attached
+                .timed_wait(|_| {}, left.min(Duration::from_millis(500)))
+            {
+                Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
+                Err(e) => {
+                    return Err(ShmError::Service {
+                        service: attached_service(&self.world),
+                        action: "wait",
+                        detail: format!("{e:?}"),
+                    }
+                    .into())
+                }
+            }
+        }
+    }
+
+    /// Sends clock message `step` (the field ticks once for it).
+    pub fn tick(&self, step: u64, sim_time_s: f64, dt_s: f64) -> Result<(), ShmError> {
+        self.clock.send(ClockMsg {
+            stamp_ns: now_ns(),
+            step,
+            sim_time_s,
+            dt_secs: dt_s,
+            finished: 0,
+            _pad: 0,
+        })?;
+        Ok(())
+    }
+
+    /// Announces the end of the run: every participant stops.
+    pub fn finish(&self, steps: u64, sim_time_s: f64, dt_s: f64) -> Result<(), ShmError> {
+        self.clock.send(ClockMsg {
+            stamp_ns: now_ns(),
+            step: steps,
+            sim_time_s,
+            dt_secs: dt_s,
+            finished: 1,
+            _pad: 0,
+        })?;
+        Ok(())
+    }
+
+    /// Waits until every `(role, robot)` of `expected` has acknowledged `step`, for at most
+    /// `stall` without progress.
+    pub fn collect(
+        &mut self,
+        node: &Node<Svc>,
+        step: u64,
+        expected: &[(u32, u32)],
+        stall: Duration,
+    ) -> Result<(), LockstepError> {
+        let mut missing: Vec<(u32, u32)> = expected.to_vec();
+        let take = |a: &StepAck, missing: &mut Vec<(u32, u32)>| {
+            if let Some(i) = missing.iter().position(|m| *m == (a.role, a.robot_id)) {
+                missing.swap_remove(i);
+            }
+        };
+        let early = std::mem::take(&mut self.early);
+        for a in early {
+            if a.step == step {
+                take(&a, &mut missing);
+            } else if a.step > step {
+                self.early.push(a);
+            }
+        }
+        let mut deadline = Instant::now() + stall;
+        while !missing.is_empty() {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                let mut names: Vec<String> = missing
+                    .iter()
+                    .map(|(r, id)| match *r {
+                        role::DEPOSITOR => format!("depositor r{id}"),
+                        r => role::name(r).to_string(),
+                    })
+                    .collect();
+                names.sort();
+                return Err(LockstepError::Stalled {
+                    world: self.world.clone(),
+                    step,
+                    missing: names.join(", "),
+                    timeout_s: stall.as_secs_f64(),
+                });
+            }
+            if node.wait(Duration::ZERO).is_err() {
+                return Err(LockstepError::Interrupted {
+                    world: self.world.clone(),
+                });
+            }
+            match self
+                .acks
+                .recv_timeout(left.min(Duration::from_millis(100)))?
+            {
+                Some(a) if a.step == step => {
+                    take(&a, &mut missing);
+                    deadline = Instant::now() + stall;
+                }
+                Some(a) if a.step > step => self.early.push(a),
+                Some(_) => {} // a repeated acknowledgement of an earlier step
+                None => {}
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A participant's end: the clock (its steps and its end) and the acknowledgements.
+pub struct Participant {
+    clock: Receiver<ClockMsg>,
+    acks: Sender<StepAck>,
+    /// Kept so the conductor's listener stays connected to a live notifier.
+    _attached: Notifier<Svc>,
+    /// The conductor has been seen on the clock (so its absence later means it is gone).
+    seen: std::cell::Cell<bool>,
+    /// The conductor's step count when it announced the end.
+    final_steps: std::cell::Cell<Option<u64>>,
+}
+
+impl Participant {
+    /// Joins world `world`. Create every other port first: the conductor starts the run once all
+    /// participants have joined, and sends to whatever exists by then.
+    pub fn join(node: &Node<Svc>, world: &str) -> Result<Self, ShmError> {
+        let (ack_service, ack_wake) = step_done_services(world);
+        let acks = Sender::create(node, &ack_service, &ack_wake, ACK_LINK)?;
+        let (clock_service, clock_wake) = clock_services(world);
+        let clock = Receiver::create(node, &clock_service, &clock_wake, CLOCK_LINK)?;
+        let attached = attached_event(node, world)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| ShmError::Service {
+                service: attached_service(world),
+                action: "create notifier",
+                detail: format!("{e:?}"),
+            })?;
+        // No listener yet (the world starts later) is fine: the world counts the clock's
+        // subscribers when it starts waiting.
+        if let Err(e) = attached.notify() {
+            return Err(ShmError::Service {
+                service: attached_service(world),
+                action: "notify",
+                detail: format!("{e:?}"),
+            });
+        }
+        Ok(Self {
+            clock,
+            acks,
+            _attached: attached,
+            seen: std::cell::Cell::new(false),
+            final_steps: std::cell::Cell::new(None),
+        })
+    }
+
+    /// Acknowledges `step` as `role` (robot `robot_id`).
+    pub fn ack(&self, step: u64, role: u32, robot_id: u32) -> Result<(), ShmError> {
+        let n = self.acks.send(StepAck {
+            stamp_ns: now_ns(),
+            step,
+            robot_id,
+            role,
+        })?;
+        if n == 0 {
+            return Err(ShmError::NotDelivered(format!(
+                "acknowledgement of step {step} by {} r{robot_id}: no world listens",
+                role::name(role)
+            )));
+        }
+        Ok(())
+    }
+
+    /// The next clock message, waiting up to `timeout`.
+    pub fn next_clock(&self, timeout: Duration) -> Result<Option<ClockMsg>, ShmError> {
+        let m = self.clock.recv_timeout(timeout)?;
+        if let Some(m) = m {
+            if m.finished != 0 {
+                self.final_steps.set(Some(m.step));
+            }
+        }
+        self.seen.set(self.seen.get() | (self.clock.senders() > 0));
+        Ok(m)
+    }
+
+    /// True once the conductor has announced the end, or has gone after it was seen (drains
+    /// the clock queue: for roles that only watch for the end).
+    pub fn finished(&self) -> Result<bool, ShmError> {
+        let mut done = false;
+        while let Some(m) = self.clock.try_recv()? {
+            if m.finished != 0 {
+                done = true;
+                self.final_steps.set(Some(m.step));
+            }
+        }
+        Ok(done || self.conductor_gone())
+    }
+
+    /// The conductor was seen on the clock and is gone now (ended or died).
+    pub fn conductor_gone(&self) -> bool {
+        let attached = self.clock.senders() > 0;
+        let gone = self.seen.get() && !attached;
+        self.seen.set(self.seen.get() | attached);
+        gone
+    }
+
+    /// The conductor's step count at its announced end (None when it vanished without one).
+    pub fn final_steps(&self) -> Option<u64> {
+        self.final_steps.get()
+    }
+
+    /// The clock's listener, to wait on together with other ports.
+    pub fn clock_listener(&self) -> &Listener<Svc> {
+        self.clock.listener()
+    }
+}

@@ -1,0 +1,447 @@
+//! The field process's loop (`pheromone field`): ticks on wall time, or once per clock message
+//! of a simulated world (lockstep), with periodic checkpoints, a standby phase and the
+//! once-a-second statistics line. The binary only parses arguments and calls [`run_field`].
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+
+use crate::checkpoint::{self, Checkpoint, CheckpointError};
+use crate::deposit::RejectReason;
+use crate::lockstep::{self, Participant};
+use crate::shm::{
+    cleanup_dead_nodes, FieldServer, ShmError, Standby, StandbyEvent, Svc, Takeover, TickOutcome,
+};
+use crate::{FieldConfig, Stepper};
+use iceoryx2::node::Node;
+
+/// How a field process runs.
+#[derive(Debug, Clone)]
+pub struct FieldRunOptions {
+    pub name: String,
+    pub config: FieldConfig,
+    /// Tick once per clock message of this simulated world (lockstep) instead of on wall time.
+    pub clock: Option<String>,
+    /// Stop after this many ticks.
+    pub ticks: Option<u64>,
+    /// Stop after this much wall time.
+    pub duration: Option<Duration>,
+    /// Save the frame to this file every `checkpoint_every` and at exit.
+    pub checkpoint: Option<PathBuf>,
+    pub checkpoint_every: Duration,
+    /// Resume from this checkpoint (already read and checked against the configuration).
+    pub restore: Option<(PathBuf, Checkpoint)>,
+    /// Mirror the running field of this name and take over when its process dies.
+    pub standby: bool,
+}
+
+/// Why a field process stopped with an error.
+#[derive(Debug, thiserror::Error)]
+pub enum FieldRunError {
+    #[error(transparent)]
+    Shm(#[from] ShmError),
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+}
+
+impl FieldRunError {
+    /// The error is the user's input (a standby whose configuration is not the primary's).
+    pub fn is_bad_input(&self) -> bool {
+        matches!(self, FieldRunError::Shm(ShmError::StandbyMismatch { .. }))
+    }
+}
+
+/// The checkpoints written during a run.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CheckpointSummary {
+    pub file: String,
+    pub written: u64,
+    pub failed: u64,
+}
+
+/// What a standby did.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct StandbySummary {
+    pub took_over: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mirrored_frames: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last_mirrored_sequence: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub takeover_gap_ms: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub deposits_carried: Option<u64>,
+}
+
+/// What a field process reports at exit (`pheromone field --json`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FieldRunSummary {
+    pub field: String,
+    pub ticks: u64,
+    pub sequence: u64,
+    pub sim_time_s: f64,
+    pub deposits_applied: u64,
+    /// Rejected deposits by reason name.
+    pub deposits_rejected: std::collections::BTreeMap<String, u64>,
+    /// Sum of the cells of each channel in the last frame.
+    pub total_mass: Vec<f64>,
+    /// Largest cell of each channel in the last frame.
+    pub max: Vec<f32>,
+    pub max_tick_compute_ms: f64,
+    pub longest_tick_gap_ms: f64,
+    pub dead_nodes_cleaned: u64,
+    pub restored_sequence: Option<u64>,
+    pub checkpoint: Option<CheckpointSummary>,
+    pub standby: Option<StandbySummary>,
+    /// Wall time from the start to the stop (s).
+    pub wall_time_s: f64,
+}
+
+/// Runs a field until its end (ticks, duration, the world's end, Ctrl-C/SIGTERM); `Ok(None)`
+/// for a standby stopped before it took over.
+pub fn run_field(
+    node: &Node<Svc>,
+    o: &FieldRunOptions,
+) -> Result<Option<FieldRunSummary>, FieldRunError> {
+    let started = Instant::now();
+    let config = &o.config;
+    let mut standby = None;
+    let (mut server, mut longest_gap_ns) = if o.standby {
+        let Some((server, takeover, mirrored)) = run_standby(node, o)? else {
+            return Ok(None);
+        };
+        let gap_ns = takeover
+            .first_stamp_ns
+            .saturating_sub(takeover.last_mirrored_stamp_ns);
+        let ms = |ns: u64| ns as f64 / 1e6;
+        eprintln!(
+            "field '{}': the primary is gone; took over after frame {} ({:.1} ms without a frame: \
+             found gone after {:.1} ms, first own frame {:.1} ms later), {} deposit(s) carried over",
+            o.name,
+            takeover.last_mirrored_sequence,
+            ms(gap_ns),
+            ms(takeover
+                .detected_stamp_ns
+                .saturating_sub(takeover.last_mirrored_stamp_ns)),
+            ms(takeover
+                .first_stamp_ns
+                .saturating_sub(takeover.detected_stamp_ns)),
+            takeover.deposits_carried
+        );
+        standby = Some(StandbySummary {
+            took_over: true,
+            mirrored_frames: Some(mirrored),
+            last_mirrored_sequence: Some(takeover.last_mirrored_sequence),
+            takeover_gap_ms: Some(ms(gap_ns)),
+            deposits_carried: Some(takeover.deposits_carried as u64),
+        });
+        (server, gap_ns)
+    } else {
+        let restore = o
+            .restore
+            .as_ref()
+            .map(|(_, c)| (c.header, c.cells.as_slice()));
+        if let Some((path, c)) = &o.restore {
+            eprintln!(
+                "field '{}': restored frame {} (t = {:.3} s, {} deposits applied) from {}",
+                o.name,
+                c.header.sequence,
+                c.header.sim_time_s,
+                c.header.deposits_applied,
+                path.display()
+            );
+        }
+        (
+            FieldServer::start(node, &o.name, config.clone(), restore)?,
+            0,
+        )
+    };
+    // Lockstep: join the world's run once every port exists.
+    let clock = match &o.clock {
+        Some(world) => Some(Participant::join(node, world)?),
+        None => None,
+    };
+    let mut checkpointer = o.checkpoint.as_ref().map(|path| Checkpointer {
+        path: path.clone(),
+        every: o.checkpoint_every,
+        last: Instant::now(),
+        writing: None,
+        written: 0,
+        failed: 0,
+    });
+    let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
+    let mut deadline = Instant::now() + period;
+    let mut window = Window::new(Instant::now());
+    let mut max_compute_ns = 0u64;
+    let mut ticks = 0u64;
+    let mut dead_nodes_cleaned = 0u64;
+    let mut last_clock_step: Option<u64> = None;
+    let mut last_frame_at = Instant::now();
+    loop {
+        if let Some(clock) = &clock {
+            // Lockstep: one tick per world step, acknowledged once published.
+            match clock.next_clock(Duration::from_millis(20))? {
+                Some(msg) if msg.finished != 0 => break,
+                Some(msg) if last_clock_step.is_some_and(|s| msg.step <= s) => continue,
+                Some(msg) => last_clock_step = Some(msg.step),
+                None => {
+                    if node.wait(Duration::ZERO).is_err() {
+                        break;
+                    }
+                    if clock.conductor_gone() {
+                        eprintln!(
+                            "field '{}': the world's clock is gone without announcing the end; stopping",
+                            o.name
+                        );
+                        break;
+                    }
+                    // Idle between steps: late readers still get the current frame.
+                    server.serve_new_readers()?;
+                    continue;
+                }
+            }
+        } else {
+            let wait = deadline.saturating_duration_since(Instant::now());
+            if node.wait(wait).is_err() {
+                break; // SIGINT / SIGTERM
+            }
+            deadline += period;
+            if deadline + period < Instant::now() {
+                deadline = Instant::now() + period; // fell behind: don't burst to catch up
+            }
+        }
+        if clock.is_some() && node.wait(Duration::ZERO).is_err() {
+            break;
+        }
+        let out = server.tick()?;
+        if let (Some(clock), Some(step)) = (&clock, last_clock_step) {
+            clock.ack(step, lockstep::role::FIELD, 0)?;
+        }
+        let now = Instant::now();
+        let gap_ns = now.duration_since(last_frame_at).as_nanos() as u64;
+        last_frame_at = now;
+        longest_gap_ns = longest_gap_ns.max(gap_ns);
+        ticks += 1;
+        max_compute_ns = max_compute_ns.max(out.compute_ns);
+        window.add(&out, gap_ns);
+        if let Some(c) = &mut checkpointer {
+            c.maybe_write(&server);
+        }
+        if window.started.elapsed() >= Duration::from_secs(1) {
+            // Clients killed since the last second: free their ports and the frames they held.
+            let cleaned = cleanup_dead_nodes(node);
+            dead_nodes_cleaned += cleaned;
+            window.log(&o.name, server.stepper(), cleaned);
+            window = Window::new(Instant::now());
+        }
+        if o.ticks.is_some_and(|n| ticks >= n) || o.duration.is_some_and(|d| started.elapsed() >= d)
+        {
+            break;
+        }
+    }
+    let checkpoint = match &mut checkpointer {
+        Some(c) => {
+            c.finish(&server)?;
+            Some(CheckpointSummary {
+                file: c.path.display().to_string(),
+                written: c.written,
+                failed: c.failed,
+            })
+        }
+        None => None,
+    };
+    let stepper = server.stepper();
+    let counters = stepper.counters;
+    let (total_mass, max): (Vec<f64>, Vec<f32>) = match server.latest() {
+        Some((_, view)) => (0..view.channels)
+            .map(|c| (view.total(c), view.max(c)))
+            .unzip(),
+        None => (vec![], vec![]),
+    };
+    eprintln!(
+        "field '{}' stopped after {ticks} ticks ({:.1} s): {} deposits applied, {} rejected, longest tick {:.3} ms, longest gap between frames {:.3} ms",
+        o.name,
+        started.elapsed().as_secs_f64(),
+        counters.applied,
+        counters.rejected_total(),
+        max_compute_ns as f64 / 1e6,
+        longest_gap_ns as f64 / 1e6
+    );
+    Ok(Some(FieldRunSummary {
+        field: o.name.clone(),
+        ticks,
+        sequence: stepper.sequence,
+        sim_time_s: stepper.sim_time_s,
+        deposits_applied: counters.applied,
+        deposits_rejected: RejectReason::ALL
+            .iter()
+            .map(|r| (r.name().to_string(), counters.rejected[*r as usize]))
+            .collect(),
+        total_mass,
+        max,
+        max_tick_compute_ms: max_compute_ns as f64 / 1e6,
+        longest_tick_gap_ms: longest_gap_ns as f64 / 1e6,
+        dead_nodes_cleaned,
+        restored_sequence: o.restore.as_ref().map(|(_, c)| c.header.sequence),
+        checkpoint,
+        standby,
+        wall_time_s: started.elapsed().as_secs_f64(),
+    }))
+}
+
+/// The standby phase: mirror the primary until it dies, then take over. `None` when stopped
+/// first (Ctrl-C, the duration).
+fn run_standby(
+    node: &Node<Svc>,
+    o: &FieldRunOptions,
+) -> Result<Option<(FieldServer, Takeover, u64)>, FieldRunError> {
+    let started = Instant::now();
+    let period = Duration::from_secs_f64(1.0 / o.config.tick_hz as f64);
+    let mut standby =
+        Standby::attach_within(node, &o.name, o.config.clone(), Duration::from_secs(30))?;
+    eprintln!(
+        "field '{}': standby, mirroring the primary (frame {})",
+        o.name,
+        standby.latest().map(|h| h.sequence).unwrap_or(0)
+    );
+    loop {
+        if node.wait(Duration::ZERO).is_err() || o.duration.is_some_and(|d| started.elapsed() >= d)
+        {
+            eprintln!(
+                "field '{}': standby stopped after mirroring {} frames",
+                o.name, standby.mirrored
+            );
+            return Ok(None);
+        }
+        if standby.poll(period)? == StandbyEvent::PrimaryGone {
+            let mirrored = standby.mirrored;
+            let (server, takeover) = standby.take_over(node)?;
+            return Ok(Some((server, takeover, mirrored)));
+        }
+    }
+}
+
+/// Periodic checkpoints: the frame is copied on the tick thread (one memcpy) and written,
+/// fsynced and renamed on a background thread, so a slow disk does not stall the ticks.
+struct Checkpointer {
+    path: PathBuf,
+    every: Duration,
+    last: Instant,
+    writing: Option<std::thread::JoinHandle<Result<u64, CheckpointError>>>,
+    written: u64,
+    failed: u64,
+}
+
+impl Checkpointer {
+    fn collect(&mut self, wait: bool) {
+        if let Some(h) = self.writing.take() {
+            if !wait && !h.is_finished() {
+                self.writing = Some(h);
+                return;
+            }
+            match h.join() {
+                Ok(Ok(_)) => self.written += 1,
+                Ok(Err(e)) => {
+                    self.failed += 1;
+                    eprintln!("warning: {e}");
+                }
+                Err(_) => self.failed += 1,
+            }
+        }
+    }
+
+    fn maybe_write(&mut self, server: &FieldServer) {
+        if self.last.elapsed() < self.every {
+            return;
+        }
+        self.collect(false);
+        if self.writing.is_some() {
+            return; // the previous one is still being written
+        }
+        if let Some((header, view)) = server.latest() {
+            let (header, cells, config) = (*header, view.cells.to_vec(), server.config().clone());
+            let path = self.path.clone();
+            self.writing = Some(std::thread::spawn(move || {
+                checkpoint::write_atomic(&path, &header, &config, &cells)
+            }));
+            self.last = Instant::now();
+        }
+    }
+
+    /// Waits for a write in flight, then writes the last frame.
+    fn finish(&mut self, server: &FieldServer) -> Result<(), CheckpointError> {
+        self.collect(true);
+        if let Some((header, view)) = server.latest() {
+            checkpoint::write_atomic(&self.path, header, server.config(), view.cells)?;
+            self.written += 1;
+        }
+        Ok(())
+    }
+}
+
+/// Per-second statistics for the log line.
+struct Window {
+    started: Instant,
+    ticks: u64,
+    compute_ns: u64,
+    max_compute_ns: u64,
+    applied: u64,
+    rejected: u64,
+    longest_gap_ns: u64,
+}
+
+impl Window {
+    fn new(started: Instant) -> Self {
+        Self {
+            started,
+            ticks: 0,
+            compute_ns: 0,
+            max_compute_ns: 0,
+            applied: 0,
+            rejected: 0,
+            longest_gap_ns: 0,
+        }
+    }
+
+    fn add(&mut self, out: &TickOutcome, gap_ns: u64) {
+        self.ticks += 1;
+        self.longest_gap_ns = self.longest_gap_ns.max(gap_ns);
+        self.compute_ns += out.compute_ns;
+        self.max_compute_ns = self.max_compute_ns.max(out.compute_ns);
+        self.applied += out.report.deposits_applied as u64;
+        self.rejected += out.rejected;
+    }
+
+    fn log(&self, name: &str, stepper: &Stepper, dead_nodes_cleaned: u64) {
+        let secs = self.started.elapsed().as_secs_f64();
+        let c = stepper.counters;
+        let reasons: Vec<String> = RejectReason::ALL
+            .iter()
+            .filter(|r| c.rejected[**r as usize] > 0)
+            .map(|r| format!("{} {}", r.name(), c.rejected[*r as usize]))
+            .collect();
+        eprintln!(
+            "field '{name}': {:.1} ticks/s, tick {:.3} ms mean / {:.3} ms max, longest_tick_gap_ms {:.3}, \
+             deposits +{} applied +{} rejected (total {} applied, {} rejected{}{}){}",
+            self.ticks as f64 / secs,
+            self.compute_ns as f64 / self.ticks.max(1) as f64 / 1e6,
+            self.max_compute_ns as f64 / 1e6,
+            self.longest_gap_ns as f64 / 1e6,
+            self.applied,
+            self.rejected,
+            c.applied,
+            c.rejected_total(),
+            if reasons.is_empty() { "" } else { ": " },
+            reasons.join(", "),
+            if dead_nodes_cleaned > 0 {
+                format!("; cleaned {dead_nodes_cleaned} dead node(s)")
+            } else {
+                String::new()
+            }
+        );
+    }
+}
