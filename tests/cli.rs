@@ -4,6 +4,7 @@ mod bench;
 mod crash;
 mod graph;
 mod harness;
+mod processes;
 mod reliability;
 mod soak;
 

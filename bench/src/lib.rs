@@ -55,6 +55,8 @@ pub enum BenchError {
     NoZenoh,
     #[error("interrupted")]
     Interrupted,
+    #[error(transparent)]
+    Child(#[from] publishers::supervisor::SupervisorError),
 }
 
 /// How much to measure.

@@ -2,12 +2,10 @@
 //! a hidden subcommand), hands it a `PeerSpec` as JSON, and reads two lines from its stdout:
 //! `ready` once its ports exist, then one JSON `PeerResult` when it is done.
 
-use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
+use publishers::supervisor::{ChildId, ChildSpec, Supervisor};
 use serde::{Deserialize, Serialize};
 
 use crate::BenchError;
@@ -64,102 +62,71 @@ pub enum PeerSpec {
 }
 
 /// What a peer reports when done.
+impl PeerSpec {
+    /// The kind of peer, to name it in messages.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            PeerSpec::HopEcho { .. } => "hop-echo",
+            PeerSpec::FrameReader { .. } => "frame-reader",
+            PeerSpec::Field { .. } => "field",
+        }
+    }
+}
+
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct PeerResult {
     pub samples_ns: Vec<u64>,
 }
 
-enum Line {
-    Text(String),
-    Eof,
-}
-
-/// A running peer process: terminated (SIGTERM, then SIGKILL) and reaped when dropped.
+/// One peer process, under the project's supervisor (`publishers::supervisor`): stopped with
+/// SIGTERM (then SIGKILL) when dropped, its stderr passed through.
 pub struct Peer {
-    child: Child,
-    what: String,
-    lines: mpsc::Receiver<Line>,
-    exited: bool,
+    sup: Supervisor,
+    id: ChildId,
 }
 
 impl Peer {
+    /// Starts `launcher` with `spec` as its last argument.
     pub fn spawn(launcher: &Launcher, spec: &PeerSpec) -> Result<Self, BenchError> {
         let json = serde_json::to_string(spec).map_err(|e| BenchError::Peer(e.to_string()))?;
-        let mut child = Command::new(&launcher.program)
-            .args(&launcher.args)
-            .arg(&json)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .map_err(|e| BenchError::Io {
-                what: format!("start peer {}", launcher.program.display()),
-                source: e,
-            })?;
-        let stdout = child.stdout.take().expect("stdout is piped");
-        let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines() {
-                match line {
-                    Ok(l) => {
-                        if tx.send(Line::Text(l)).is_err() {
-                            return;
-                        }
-                    }
-                    Err(_) => break,
-                }
-            }
-            let _ = tx.send(Line::Eof);
-        });
-        Ok(Self {
-            child,
-            what: format!("{spec:?}"),
-            lines,
-            exited: false,
-        })
+        let mut sup = Supervisor::new(&launcher.program);
+        sup.echo_stderr = true;
+        let mut args = launcher.args.clone();
+        args.push(json);
+        let id = sup.spawn(ChildSpec::new(&format!("peer {}", spec.kind()), None, args))?;
+        Ok(Self { sup, id })
     }
 
+    /// The peer's next stdout line, waiting until `deadline`.
     fn next_line(&mut self, deadline: Instant) -> Result<String, BenchError> {
-        if self.exited {
-            return Err(BenchError::Peer(format!("peer {} has exited", self.what)));
-        }
         let left = deadline.saturating_duration_since(Instant::now());
-        match self.lines.recv_timeout(left) {
-            Ok(Line::Text(l)) => Ok(l),
-            Ok(Line::Eof) | Err(mpsc::RecvTimeoutError::Disconnected) => {
-                self.exited = true;
-                let status = self.child.wait().ok();
-                Err(BenchError::Peer(format!(
-                    "peer {} exited early ({status:?})",
-                    self.what
-                )))
-            }
-            Err(mpsc::RecvTimeoutError::Timeout) => Err(BenchError::Peer(format!(
-                "peer {} did not answer in time",
-                self.what
+        match self.sup.next_line(self.id, left)? {
+            Some(l) => Ok(l),
+            None => Err(BenchError::Peer(format!(
+                "{} did not answer in time",
+                self.sup.spec(self.id).who()
             ))),
         }
     }
 
-    /// Waits until the peer says `ready`.
+    /// Waits for the peer's `ready` line.
     pub fn wait_ready(&mut self, timeout: Duration) -> Result<(), BenchError> {
         let line = self.next_line(Instant::now() + timeout)?;
         if line.trim() == "ready" {
             Ok(())
         } else {
             Err(BenchError::Peer(format!(
-                "peer {} said '{line}' instead of 'ready'",
-                self.what
+                "{} said '{line}' instead of 'ready'",
+                self.sup.spec(self.id).who()
             )))
         }
     }
 
     /// The peer's result, if it has printed it (does not wait).
     pub fn try_result(&mut self) -> Result<Option<PeerResult>, BenchError> {
-        match self.next_line(Instant::now()) {
-            Ok(l) => parse_result(&l).map(Some),
-            Err(e) if self.exited => Err(e),
-            Err(_) => Ok(None),
+        match self.sup.next_line(self.id, Duration::ZERO)? {
+            Some(l) => parse_result(&l).map(Some),
+            None => Ok(None),
         }
     }
 
@@ -173,34 +140,6 @@ impl Peer {
 fn parse_result(line: &str) -> Result<PeerResult, BenchError> {
     serde_json::from_str(line)
         .map_err(|e| BenchError::Peer(format!("peer printed '{line}' instead of a result: {e}")))
-}
-
-impl Drop for Peer {
-    fn drop(&mut self) {
-        if self.exited {
-            return;
-        }
-        use nix::sys::signal::{kill, Signal};
-        use nix::unistd::Pid;
-        let pid = Pid::from_raw(self.child.id() as i32);
-        // A peer handles SIGTERM (its iceoryx2 node stops waiting) and removes its services.
-        let _ = kill(pid, Signal::SIGTERM);
-        let deadline = Instant::now() + Duration::from_secs(2);
-        loop {
-            match self
-                .lines
-                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-            {
-                Ok(Line::Text(_)) => continue,
-                Ok(Line::Eof) | Err(mpsc::RecvTimeoutError::Disconnected) => break,
-                Err(mpsc::RecvTimeoutError::Timeout) => {
-                    let _ = self.child.kill();
-                    break;
-                }
-            }
-        }
-        let _ = self.child.wait();
-    }
 }
 
 /// Tells the parent this peer is ready.

@@ -151,14 +151,17 @@ pub enum LockstepError {
 pub struct Conductor {
     world: String,
     clock: Sender<ClockMsg>,
-    acks: Receiver<StepAck>,
+    /// None for a world on wall time: nobody waits, and acknowledgements go nowhere.
+    acks: Option<Receiver<StepAck>>,
     attached: Listener<Svc>,
     /// Acknowledgements of a later step that arrived early.
     early: Vec<StepAck>,
 }
 
 impl Conductor {
-    pub fn create(node: &Node<Svc>, world: &str) -> Result<Self, ShmError> {
+    /// The conductor of world `world`; `lockstep` false for a world on wall time, which
+    /// collects no acknowledgements.
+    pub fn create(node: &Node<Svc>, world: &str, lockstep: bool) -> Result<Self, ShmError> {
         let attached = attached_event(node, world)?
             .listener_builder()
             .create()
@@ -172,7 +175,11 @@ impl Conductor {
         Ok(Self {
             world: world.to_string(),
             clock: Sender::create(node, &clock_service, &clock_wake, CLOCK_LINK)?,
-            acks: Receiver::create(node, &ack_service, &ack_wake, ACK_LINK)?,
+            acks: if lockstep {
+                Some(Receiver::create(node, &ack_service, &ack_wake, ACK_LINK)?)
+            } else {
+                None
+            },
             attached,
             early: Vec::new(),
         })
@@ -266,18 +273,22 @@ impl Conductor {
         expected: &[(u32, u32)],
         stall: Duration,
     ) -> Result<(), LockstepError> {
+        let Some(acks) = self.acks.as_ref() else {
+            return Ok(()); // on wall time nobody waits
+        };
+        let early_store = &mut self.early;
         let mut missing: Vec<(u32, u32)> = expected.to_vec();
         let take = |a: &StepAck, missing: &mut Vec<(u32, u32)>| {
             if let Some(i) = missing.iter().position(|m| *m == (a.role, a.robot_id)) {
                 missing.swap_remove(i);
             }
         };
-        let early = std::mem::take(&mut self.early);
+        let early = std::mem::take(early_store);
         for a in early {
             if a.step == step {
                 take(&a, &mut missing);
             } else if a.step > step {
-                self.early.push(a);
+                early_store.push(a);
             }
         }
         let mut deadline = Instant::now() + stall;
@@ -304,15 +315,12 @@ impl Conductor {
                     world: self.world.clone(),
                 });
             }
-            match self
-                .acks
-                .recv_timeout(left.min(Duration::from_millis(100)))?
-            {
+            match acks.recv_timeout(left.min(Duration::from_millis(100)))? {
                 Some(a) if a.step == step => {
                     take(&a, &mut missing);
                     deadline = Instant::now() + stall;
                 }
-                Some(a) if a.step > step => self.early.push(a),
+                Some(a) if a.step > step => early_store.push(a),
                 Some(_) => {} // a repeated acknowledgement of an earlier step
                 None => {}
             }
@@ -367,21 +375,17 @@ impl Participant {
         })
     }
 
-    /// Acknowledges `step` as `role` (robot `robot_id`).
-    pub fn ack(&self, step: u64, role: u32, robot_id: u32) -> Result<(), ShmError> {
+    /// Acknowledges `step` as `role` (robot `robot_id`); returns whether a conductor got it.
+    /// Nobody does for a world on wall time; a lockstep world that misses one reports the
+    /// stall itself, naming who did not acknowledge.
+    pub fn ack(&self, step: u64, role: u32, robot_id: u32) -> Result<bool, ShmError> {
         let n = self.acks.send(StepAck {
             stamp_ns: now_ns(),
             step,
             robot_id,
             role,
         })?;
-        if n == 0 {
-            return Err(ShmError::NotDelivered(format!(
-                "acknowledgement of step {step} by {} r{robot_id}: no world listens",
-                role::name(role)
-            )));
-        }
-        Ok(())
+        Ok(n > 0)
     }
 
     /// The next clock message, waiting up to `timeout`.

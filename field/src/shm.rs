@@ -172,6 +172,21 @@ pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
         name: name.to_string(),
         reason: format!("{e:?}"),
     })?;
+    // SIGINT and SIGTERM wait (blocked, pending) until the node exists and iceoryx2's handler
+    // is installed: a process stopped while its node is half-created leaves an entry that no
+    // cleanup can remove. A signal that came meanwhile is handled at the unblock, and the
+    // node's next `wait` reports it.
+    use nix::sys::signal::{pthread_sigmask, SigSet, SigmaskHow, Signal};
+    let mut termination = SigSet::empty();
+    termination.add(Signal::SIGINT);
+    termination.add(Signal::SIGTERM);
+    let mut previous = SigSet::empty();
+    let blocked = pthread_sigmask(
+        SigmaskHow::SIG_BLOCK,
+        Some(&termination),
+        Some(&mut previous),
+    )
+    .is_ok();
     let node = NodeBuilder::new()
         .name(&node_name)
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
@@ -179,7 +194,19 @@ pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
         .map_err(|e| ShmError::Node {
             name: name.to_string(),
             detail: format!("{e:?}"),
-        })?;
+        });
+    // Installs iceoryx2's signal handler (installed on first use). A wait that fails took a
+    // termination request an earlier node of this process had not yet seen: raised again below.
+    let seen_before = node.as_ref().is_ok_and(|n| n.wait(Duration::ZERO).is_err());
+    if blocked {
+        // Restoring the mask the thread had cannot fail with a valid `how`.
+        let _ = pthread_sigmask(SigmaskHow::SIG_SETMASK, Some(&previous), None);
+    }
+    if seen_before {
+        // Raising a signal the process handles cannot fail.
+        let _ = nix::sys::signal::raise(Signal::SIGTERM);
+    }
+    let node = node?;
     node.try_cleanup_dead_nodes();
     Ok(node)
 }
@@ -322,6 +349,9 @@ fn frame_service(
             .subscriber_max_borrowed_samples(READER_BORROWED_FRAMES)
             .max_subscribers(c.max_readers + 1)
             .max_publishers(2)
+            // Every reader's process, the field, a standby and a spare (iceoryx2's default
+            // admits 20 nodes whatever the readers).
+            .max_nodes(c.max_readers + 4)
             .open_or_create()
             .map_err(|e| match e {
                 iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
@@ -357,8 +387,10 @@ fn frame_ready_service(
     let name = service_name(&names.frame_ready)?;
     let b = node.service_builder(&name).event();
     if create {
+        // Listeners: every reader and every deposit publisher (which waits for frames to flush).
         b.max_listeners(1024)
             .max_notifiers(4)
+            .max_nodes(1028)
             .open_or_create()
             .map_err(|e| service_err(&names.frame_ready, "open or create", e))
     } else {
@@ -383,6 +415,7 @@ fn deposit_service(
         Some(c) => builder
             .max_publishers(c.max_depositors)
             .max_subscribers(2)
+            .max_nodes(c.max_depositors + 2)
             .subscriber_max_buffer_size(c.deposit_buffer)
             .history_size(0)
             .enable_safe_overflow(false)

@@ -135,7 +135,8 @@ impl Observer {
         };
         self.frames
             .on_frame(&mut self.rec, frame.header.sim_time_s, &frame.view);
-        self.lockstep.ack(step, lockstep::role::OBSERVER, 0)
+        self.lockstep.ack(step, lockstep::role::OBSERVER, 0)?;
+        Ok(())
     }
 
     /// The recording; the last frame seen is pictured if it was not.

@@ -153,7 +153,7 @@ pub fn run_world(
     let mut world = World::new(scenario.world.clone(), scenario.seed)
         .map_err(|e| ProcessError::Setup(e.to_string()))?;
     let ids: Vec<u32> = scenario.world.robots.iter().map(|r| r.id).collect();
-    let mut conductor = Conductor::create(node, &o.world)?;
+    let mut conductor = Conductor::create(node, &o.world, !o.realtime)?;
     let mut sensors = Vec::new();
     let mut truths = Vec::new();
     let mut cmds = Vec::new();

@@ -176,6 +176,8 @@ fn supervise(
         }
         v
     };
+    // The node first: from here on Ctrl-C is iceoryx2's, whatever thread it reaches.
+    let node = create_node(&format!("{tag}-observer"))?;
     let started = Instant::now();
     let field = sup.spawn(ChildSpec::new(
         "field",
@@ -224,7 +226,6 @@ fn supervise(
         ]));
     }
     let world = sup.spawn(ChildSpec::new("world", None, world_args))?;
-    let node = create_node(&format!("{tag}-observer"))?;
     // The observer joins once the field is up; a child that fails meanwhile ends the run.
     let field_deadline = started + attach_timeout;
     let mut observer = loop {

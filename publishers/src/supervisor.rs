@@ -9,7 +9,7 @@
 //! of its pipes, so a chatty child never blocks on a full pipe.
 
 use std::collections::VecDeque;
-use std::io::{BufRead, BufReader, Read};
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus, Stdio};
 use std::sync::mpsc;
@@ -19,8 +19,11 @@ use std::time::{Duration, Instant};
 
 use serde::de::DeserializeOwned;
 
-/// Lines of a child's stderr kept for its error report.
+/// Lines of a child's stderr shown in its error report.
 const STDERR_TAIL_LINES: usize = 12;
+
+/// Lines of a child's stderr kept in all (the oldest go first).
+const STDERR_KEPT_LINES: usize = 10_000;
 
 /// One child to start: `pheromone ARGS`, known as `role` (of `robot`).
 #[derive(Debug, Clone)]
@@ -28,6 +31,10 @@ pub struct ChildSpec {
     pub role: String,
     pub robot: Option<u32>,
     pub args: Vec<String>,
+    /// Working directory (default: ours).
+    pub cwd: Option<PathBuf>,
+    /// Also write every stderr line to this file (created anew).
+    pub log_file: Option<PathBuf>,
 }
 
 impl ChildSpec {
@@ -36,6 +43,8 @@ impl ChildSpec {
             role: role.to_string(),
             robot,
             args,
+            cwd: None,
+            log_file: None,
         }
     }
 
@@ -73,8 +82,12 @@ pub enum SupervisorError {
         detail: String,
         stderr_tail: String,
     },
-    #[error("{who} did not stop within {timeout_s:.1} s")]
-    NotStopped { who: String, timeout_s: f64 },
+    #[error("{who} closed its output ({status}) before printing what was expected{}", tail_text(.stderr_tail))]
+    EndedEarly {
+        who: String,
+        status: String,
+        stderr_tail: String,
+    },
 }
 
 impl SupervisorError {
@@ -103,7 +116,10 @@ struct Child {
     spec: ChildSpec,
     pid: u32,
     exit: Option<ExitStatus>,
-    stdout: Option<JoinHandle<Vec<u8>>>,
+    /// The child's stdout, line by line; closed when the child closes it.
+    stdout: mpsc::Receiver<String>,
+    /// Every stdout line taken from the channel so far.
+    stdout_lines: Vec<String>,
     stderr: Option<JoinHandle<()>>,
     stderr_tail: Arc<Mutex<VecDeque<String>>>,
 }
@@ -133,7 +149,23 @@ impl Supervisor {
 
     /// Starts `pheromone ARGS` (stdin closed, stdout and stderr captured).
     pub fn spawn(&mut self, spec: ChildSpec) -> Result<ChildId, SupervisorError> {
-        let mut child = Command::new(&self.exe)
+        let mut log = match &spec.log_file {
+            Some(path) => {
+                Some(
+                    std::fs::File::create(path).map_err(|source| SupervisorError::Spawn {
+                        who: format!("{} (log file {})", spec.who(), path.display()),
+                        exe: self.exe.display().to_string(),
+                        source,
+                    })?,
+                )
+            }
+            None => None,
+        };
+        let mut command = Command::new(&self.exe);
+        if let Some(dir) = &spec.cwd {
+            command.current_dir(dir);
+        }
+        let mut child = command
             .args(&spec.args)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
@@ -146,18 +178,21 @@ impl Supervisor {
             })?;
         let index = self.children.len();
         let pid = child.id();
-        let stdout = child.stdout.take().map(|mut o| {
+        let (lines_tx, stdout) = mpsc::channel();
+        if let Some(o) = child.stdout.take() {
             std::thread::spawn(move || {
-                let mut buf = Vec::new();
-                // A read error leaves what was read: the summary check reports it as malformed.
-                if o.read_to_end(&mut buf).is_err() {
-                    buf.clear();
+                // A read error ends the stream: the summary check reports what is missing.
+                for line in BufReader::new(o).lines() {
+                    let Ok(line) = line else { break };
+                    if lines_tx.send(line).is_err() {
+                        break;
+                    }
                 }
-                buf
-            })
-        });
+            });
+        }
         let stderr_tail = Arc::new(Mutex::new(VecDeque::new()));
         let stderr = child.stderr.take().map(|e| {
+            let mut log = log.take();
             let tail = Arc::clone(&stderr_tail);
             let (who, echo) = (spec.who(), self.echo_stderr);
             std::thread::spawn(move || {
@@ -166,8 +201,13 @@ impl Supervisor {
                     if echo {
                         eprintln!("[{who}] {line}");
                     }
+                    if let Some(f) = log.as_mut() {
+                        use std::io::Write;
+                        // A log that cannot be written loses lines, not the child's output.
+                        let _ = writeln!(f, "{line}");
+                    }
                     if let Ok(mut t) = tail.lock() {
-                        if t.len() == STDERR_TAIL_LINES {
+                        if t.len() == STDERR_KEPT_LINES {
                             t.pop_front();
                         }
                         t.push_back(line);
@@ -186,6 +226,7 @@ impl Supervisor {
             pid,
             exit: None,
             stdout,
+            stdout_lines: Vec::new(),
             stderr,
             stderr_tail,
         });
@@ -268,8 +309,58 @@ impl Supervisor {
         }
         c.stderr_tail
             .lock()
-            .map(|t| t.iter().cloned().collect::<Vec<_>>().join("\n"))
+            .map(|t| {
+                let skip = t.len().saturating_sub(STDERR_TAIL_LINES);
+                t.iter().skip(skip).cloned().collect::<Vec<_>>().join("\n")
+            })
             .unwrap_or_default()
+    }
+
+    /// Takes what the child has printed on stdout so far into its kept lines (all of it once
+    /// it has exited: the pipe is closed by then).
+    fn drain_stdout(&mut self, id: ChildId) {
+        let c = &mut self.children[id.0];
+        while let Ok(l) = c.stdout.try_recv() {
+            c.stdout_lines.push(l);
+        }
+    }
+
+    /// Everything the child printed: its stdout and its stderr (the last lines kept), each
+    /// line ending in a newline.
+    pub fn output(&mut self, id: ChildId) -> (String, String) {
+        if self.children[id.0].exit.is_some() {
+            if let Some(h) = self.children[id.0].stderr.take() {
+                // The pipe closes when the child exits; a reader that panicked left what it had.
+                let _ = h.join();
+            }
+        }
+        self.drain_stdout(id);
+        let c = &self.children[id.0];
+        let join = |lines: &mut dyn Iterator<Item = &String>| {
+            lines.fold(String::new(), |mut acc, l| {
+                acc.push_str(l);
+                acc.push('\n');
+                acc
+            })
+        };
+        let stdout = join(&mut c.stdout_lines.iter());
+        let stderr = c
+            .stderr_tail
+            .lock()
+            .map(|t| join(&mut t.iter()))
+            .unwrap_or_default();
+        (stdout, stderr)
+    }
+
+    /// Sends `signal` to the child unless it is known to have exited.
+    pub fn signal(&self, id: ChildId, signal: nix::sys::signal::Signal) {
+        if self.children[id.0].exit.is_none() {
+            // A child that exited between the check and the signal is not an error.
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(self.children[id.0].pid as i32),
+                signal,
+            );
+        }
     }
 
     /// Waits until `id` exits (woken by its exit), at most `timeout`. Returns whether it
@@ -293,15 +384,15 @@ impl Supervisor {
             Some(s) if s.success() => {}
             _ => return Err(self.failure(id)),
         }
-        let out = self.children[id.0]
-            .stdout
-            .take()
-            .and_then(|h| h.join().ok())
-            .unwrap_or_default();
-        let text = String::from_utf8_lossy(&out);
+        self.drain_stdout(id);
         let who = self.children[id.0].spec.who();
-        let line = text.lines().rev().find(|l| !l.trim().is_empty());
-        let Some(line) = line else {
+        let last = self.children[id.0]
+            .stdout_lines
+            .iter()
+            .rev()
+            .find(|l| !l.trim().is_empty())
+            .cloned();
+        let Some(line) = last else {
             return Err(SupervisorError::Summary {
                 who,
                 problem: "missing",
@@ -309,12 +400,40 @@ impl Supervisor {
                 stderr_tail: self.stderr_tail(id),
             });
         };
+        let line = line.as_str();
         serde_json::from_str(line).map_err(|e| SupervisorError::Summary {
             who,
             problem: "malformed",
             detail: format!("{e} in {line:?}"),
             stderr_tail: self.stderr_tail(id),
         })
+    }
+
+    /// The next line the child prints on stdout, waiting up to `timeout`; `None` on timeout.
+    /// A child that closed its stdout (exited) before printing one is an error naming it.
+    pub fn next_line(
+        &mut self,
+        id: ChildId,
+        timeout: Duration,
+    ) -> Result<Option<String>, SupervisorError> {
+        match self.children[id.0].stdout.recv_timeout(timeout) {
+            Ok(l) => {
+                self.children[id.0].stdout_lines.push(l.clone());
+                Ok(Some(l))
+            }
+            Err(mpsc::RecvTimeoutError::Timeout) => Ok(None),
+            Err(mpsc::RecvTimeoutError::Disconnected) => {
+                self.wait_exit(id, Duration::from_secs(5));
+                match self.children[id.0].exit {
+                    Some(s) if s.success() => Err(SupervisorError::EndedEarly {
+                        who: self.children[id.0].spec.who(),
+                        status: describe(s),
+                        stderr_tail: self.stderr_tail(id),
+                    }),
+                    _ => Err(self.failure(id)),
+                }
+            }
+        }
     }
 
     /// Sends `signal` to every child still running.

@@ -14,7 +14,7 @@
 //! `PHEROMONE_CRASH_ROUNDS` (default 12) sets the number of kills, `PHEROMONE_CRASH_SEED` the seed.
 
 use std::path::PathBuf;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -24,6 +24,7 @@ use field::shm::{FieldReader, FieldWatch, Svc};
 use iceoryx2::config::Config;
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
+use publishers::supervisor::ChildSpec;
 
 use crate::harness::*;
 
@@ -88,19 +89,10 @@ impl Run {
 
     /// Starts `pheromone ARGS` in the run's directory; stderr goes to `<name>.log` there.
     pub fn spawn(&self, args: &[&str], name: &str) -> Proc {
-        let log = std::fs::File::create(self.dir.join(format!("{name}.log"))).unwrap();
-        let child = Command::new(bin())
-            .args(args)
-            .current_dir(&self.dir)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::from(log))
-            .spawn()
-            .expect("spawn pheromone");
-        Proc {
-            child,
-            what: args.join(" "),
-        }
+        let mut spec = ChildSpec::new(name, None, args.iter().map(|a| a.to_string()).collect());
+        spec.cwd = Some(self.dir.clone());
+        spec.log_file = Some(self.dir.join(format!("{name}.log")));
+        Proc::spawn_spec(spec)
     }
 
     /// Runs `pheromone ARGS` to completion in the run's directory.
@@ -402,15 +394,19 @@ impl Drop for FrameWatch {
 
 /// SIGKILLs a process and reaps it; returns whether it was still running.
 pub fn kill(p: &mut Proc) -> bool {
-    let running = p.child.try_wait().ok().flatten().is_none();
-    let _ = p.child.kill();
-    let _ = p.child.wait();
+    let running = p.is_running();
+    p.kill();
+    eventually(
+        Duration::from_secs(10),
+        "the killed process to be reaped",
+        || (!p.is_running()).then_some(()),
+    );
     running
 }
 
 /// Whether a process has exited (by itself or killed).
 pub fn exited(p: &mut Proc) -> bool {
-    p.child.try_wait().ok().flatten().is_some()
+    !p.is_running()
 }
 
 /// Stops every process with SIGINT (as Ctrl-C would), then waits for each.

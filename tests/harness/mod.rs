@@ -3,10 +3,12 @@
 
 #![allow(dead_code)]
 
-use std::io::Read;
 use std::path::PathBuf;
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Output};
 use std::time::{Duration, Instant};
+
+use nix::sys::signal::Signal;
+use publishers::supervisor::{ChildId, ChildSpec, Supervisor};
 
 /// Path of the `pheromone` binary under test.
 pub fn bin() -> PathBuf {
@@ -36,72 +38,66 @@ pub fn run(args: &[&str]) -> Output {
         .expect("run pheromone")
 }
 
-/// A background `pheromone` process; killed (SIGKILL) and reaped on drop.
+/// A background `pheromone` process under the project's supervisor
+/// (`publishers::supervisor`); stopped (SIGTERM, then SIGKILL) and reaped on drop.
 pub struct Proc {
-    pub child: Child,
+    sup: Supervisor,
+    id: ChildId,
     pub what: String,
 }
 
 impl Proc {
     pub fn spawn(args: &[&str]) -> Self {
-        let child = Command::new(bin())
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("spawn pheromone");
-        Self {
-            child,
-            what: args.join(" "),
-        }
+        Self::spawn_spec(ChildSpec::new(
+            args.first().copied().unwrap_or("pheromone"),
+            None,
+            args.iter().map(|a| a.to_string()).collect(),
+        ))
+    }
+
+    /// Starts `pheromone` as `spec` says (working directory, log file).
+    pub fn spawn_spec(spec: ChildSpec) -> Self {
+        let what = spec.args.join(" ");
+        let mut sup = Supervisor::new(&bin());
+        let id = sup.spawn(spec).expect("spawn pheromone");
+        Self { sup, id, what }
     }
 
     pub fn pid(&self) -> u32 {
-        self.child.id()
+        self.sup.pid(self.id)
     }
 
     /// Sends SIGINT (as Ctrl-C would).
     pub fn interrupt(&self) {
-        let _ = Command::new("kill")
-            .args(["-INT", &self.pid().to_string()])
-            .status();
+        self.sup.signal(self.id, Signal::SIGINT);
     }
 
-    /// Waits for the process to exit by itself, at most `timeout`; returns its output.
+    /// Kills the process (SIGKILL), as a crash would.
+    pub fn kill(&self) {
+        self.sup.signal(self.id, Signal::SIGKILL);
+    }
+
+    /// Whether the process is still running.
+    pub fn is_running(&mut self) -> bool {
+        self.sup.poll(Duration::ZERO);
+        self.sup.exit_status(self.id).is_none()
+    }
+
+    /// Waits for the process to exit by itself (woken by its exit), at most `timeout`; returns
+    /// its output.
     pub fn wait_exit(mut self, timeout: Duration) -> Output {
-        let deadline = Instant::now() + timeout;
-        loop {
-            if let Some(status) = self.child.try_wait().expect("try_wait") {
-                let mut stdout = Vec::new();
-                let mut stderr = Vec::new();
-                if let Some(mut o) = self.child.stdout.take() {
-                    let _ = o.read_to_end(&mut stdout);
-                }
-                if let Some(mut e) = self.child.stderr.take() {
-                    let _ = e.read_to_end(&mut stderr);
-                }
-                return Output {
-                    status,
-                    stdout,
-                    stderr,
-                };
-            }
-            assert!(
-                Instant::now() < deadline,
-                "'pheromone {}' did not exit within {timeout:?}",
-                self.what
-            );
-            // Polling a child's exit status has no event to wait on; 10 ms steps bound the wait.
-            std::thread::park_timeout(Duration::from_millis(10));
+        assert!(
+            self.sup.wait_exit(self.id, timeout),
+            "'pheromone {}' did not exit within {timeout:?}",
+            self.what
+        );
+        let status = self.sup.exit_status(self.id).expect("exited");
+        let (stdout, stderr) = self.sup.output(self.id);
+        Output {
+            status,
+            stdout: stdout.into_bytes(),
+            stderr: stderr.into_bytes(),
         }
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }
 

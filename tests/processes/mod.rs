@@ -1,0 +1,243 @@
+//! Scenarios as separate processes, the default mode of `pheromone sim`: the same metrics as
+//! `--single-process` for a seed, key by key, for every built-in scenario and every file in
+//! `examples/scenarios/`; eight robots; a child that fails, and one that is killed, stop the
+//! whole run with an error naming it, and leave nothing behind.
+
+use std::path::Path;
+use std::time::Duration;
+
+use serde_json::Value;
+
+use crate::crash::{Run, WAIT};
+use crate::harness::*;
+
+/// Keys whose values are wall-time measurements, or describe the mode: everything else must
+/// be equal.
+const WALL_KEYS: [&str; 5] = [
+    "wall_time_s",
+    "sim_time_per_wall_time",
+    "mode",
+    "processes",
+    "startup_s",
+];
+
+/// The paths where two metrics objects differ (wall-time keys at the top level left out).
+fn differences(a: &Value, b: &Value, path: &str, out: &mut Vec<String>) {
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            let mut keys: Vec<&String> = x.keys().chain(y.keys()).collect();
+            keys.sort();
+            keys.dedup();
+            for k in keys {
+                if path.is_empty() && WALL_KEYS.contains(&k.as_str()) {
+                    continue;
+                }
+                match (x.get(k), y.get(k)) {
+                    (Some(p), Some(q)) => differences(p, q, &format!("{path}/{k}"), out),
+                    _ => out.push(format!("{path}/{k}: only in one")),
+                }
+            }
+        }
+        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => {
+            for (i, (p, q)) in x.iter().zip(y).enumerate() {
+                differences(p, q, &format!("{path}[{i}]"), out);
+            }
+        }
+        _ if a != b => out.push(format!("{path}: {a} vs {b}")),
+        _ => {}
+    }
+}
+
+fn sim_json(args: &[&str]) -> Value {
+    let o = run(args);
+    assert!(
+        o.status.success(),
+        "pheromone {}: {:?}\n{}",
+        args.join(" "),
+        o.status,
+        stderr(&o)
+    );
+    json(&o)
+}
+
+/// Runs `scenario` both ways and asserts the metrics agree key by key.
+fn assert_same_in_both_modes(scenario: &str, extra: &[&str]) -> Value {
+    let mut args = vec!["sim", scenario, "--no-out", "--json"];
+    args.extend_from_slice(extra);
+    let processes = sim_json(&args);
+    args.push("--single-process");
+    let single = sim_json(&args);
+    assert_eq!(processes["mode"], "processes", "{processes}");
+    let mut diffs = Vec::new();
+    differences(&processes, &single, "", &mut diffs);
+    assert!(
+        diffs.is_empty(),
+        "{scenario} {extra:?}: processes and --single-process differ at {} key(s): {diffs:#?}",
+        diffs.len()
+    );
+    processes
+}
+
+/// Short enough to keep the suite quick, long enough that robots meet the field.
+fn duration_for(name: &str) -> &'static str {
+    match name {
+        "ias-ss" => "30",
+        "evaporation" => "60",
+        _ => "12",
+    }
+}
+
+#[test]
+fn every_built_in_scenario_as_processes_gives_the_single_process_metrics() {
+    for name in [
+        "blind-leader",
+        "trail-following",
+        "ias-ss",
+        "evaporation",
+        "trail",
+    ] {
+        let m = assert_same_in_both_modes(name, &["--duration", duration_for(name), "--seed", "5"]);
+        assert!(m["startup_s"].as_f64().is_some_and(|s| s > 0.0), "{m}");
+        assert!(m["steps"].as_u64().unwrap() > 0, "{m}");
+        assert_eq!(m["ticks"], m["steps"], "one tick per step: {m}");
+    }
+}
+
+#[test]
+fn every_example_scenario_file_as_processes_gives_the_single_process_metrics() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenarios");
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 8, "{files:?}");
+    for f in files {
+        let name = f.file_stem().unwrap().to_string_lossy().to_string();
+        let path = f.to_string_lossy().to_string();
+        if name.starts_with("regions") {
+            // Node-graph runs have no --duration: they end when every robot is done.
+            assert_same_in_both_modes(&path, &[]);
+        } else {
+            assert_same_in_both_modes(&path, &["--duration", duration_for(&name)]);
+        }
+    }
+}
+
+#[test]
+fn ias_ss_with_eight_robots_runs_as_25_processes_with_the_single_process_answer() {
+    let m = assert_same_in_both_modes("ias-ss", &["--robots", "8", "--duration", "20"]);
+    assert_eq!(m["robots"].as_array().unwrap().len(), 8, "{m}");
+    // field + 8 × (localizer, depositor, follower) + world
+    assert_eq!(m["processes"].as_array().unwrap().len(), 26, "{m}");
+    let explored = m["metrics"]["exploration"]["per_robot"].as_array();
+    assert!(explored.is_some_and(|v| v.len() == 8), "{m}");
+}
+
+/// A scenario file whose robot 0 localizer is refused by `--slam` (a landmark region restricts
+/// a map that EKF-SLAM does not have): that process exits with an error at once.
+fn failing_scenario(run: &Run) -> String {
+    let trail = include_str!("../../examples/scenarios/trail.toml");
+    let text = trail.replacen(
+        "[[robot]]\nid = 0\n",
+        "[[robot]]\nid = 0\n[robot.localizer]\nlandmark_region_m = [0.0, 0.0, 5.0, 5.0]\n",
+        1,
+    );
+    assert_ne!(text, trail, "trail.toml's first [[robot]] moved");
+    let path = run.dir.join("trail-failing.toml");
+    std::fs::write(&path, text).unwrap();
+    path.to_string_lossy().into_owned()
+}
+
+#[test]
+fn a_child_that_exits_with_an_error_is_reported_by_role_and_robot_and_nothing_is_left() {
+    let run = Run::new("f");
+    let scenario = failing_scenario(&run);
+    let out = run.run(&["sim", &scenario, "--slam", "--no-out"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("localizer r0 failed (exit status") && err.contains("no map to restrict"),
+        "the error names the role, the robot and its cause: {err}"
+    );
+    run.wait_nodes_gone(WAIT);
+    assert_eq!(run.shm_entries(), Vec::<String>::new(), "{err}");
+}
+
+/// Pids of the children of `parent` whose command line has `needle`.
+fn children_with(parent: u32, needle: &str) -> Vec<u32> {
+    let mut found = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+        // "pid (comm) state ppid …": the comm may hold spaces, so split after its ')'.
+        let ppid = stat
+            .rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().nth(1))
+            .and_then(|p| p.parse::<u32>().ok());
+        let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+        let cmdline = String::from_utf8_lossy(&cmdline).replace('\0', " ");
+        if ppid == Some(parent) && cmdline.contains(needle) {
+            found.push(pid);
+        }
+    }
+    found
+}
+
+#[test]
+fn a_sigkilled_child_stops_the_whole_run_with_a_clear_error_and_no_leftovers() {
+    let run = Run::new("k");
+    let sim = run.spawn(
+        &[
+            "sim",
+            "ias-ss",
+            "--robots",
+            "3",
+            "--duration",
+            "100000",
+            "--no-out",
+        ],
+        "sim",
+    );
+    let sim_pid = sim.pid();
+    // Once the run is under way (its followers steer), kill robot 1's follower.
+    let follower = eventually(WAIT, "robot 1's follower process", || {
+        children_with(sim_pid, "follower").into_iter().find(|&p| {
+            let cmd = std::fs::read(format!("/proc/{p}/cmdline")).unwrap_or_default();
+            String::from_utf8_lossy(&cmd).contains("--robot\u{0}1")
+        })
+    });
+    eventually(WAIT, "the run to step", || {
+        run.log("sim").contains("separate processes").then_some(())
+    });
+    let children = children_with(sim_pid, "");
+    assert!(
+        children.len() >= 10,
+        "field, world, 3 × 3 roles: {children:?}"
+    );
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(follower as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .unwrap();
+    let out = sim.wait_exit(Duration::from_secs(60));
+    let err = run.log("sim");
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("follower r1 failed (killed by SIGKILL)"),
+        "the error names the killed process: {err}"
+    );
+    let alive: Vec<u32> = children
+        .into_iter()
+        .filter(|p| Path::new(&format!("/proc/{p}")).exists())
+        .collect();
+    assert!(
+        alive.is_empty(),
+        "processes of the run still there: {alive:?}"
+    );
+    run.wait_nodes_gone(WAIT);
+    assert_eq!(run.shm_entries(), Vec::<String>::new(), "{err}");
+}
