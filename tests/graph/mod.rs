@@ -183,7 +183,14 @@ fn eight_robot_processes_capture_the_skeleton_map() {
         .find(|a| a["region"] == "C")
         .unwrap();
     assert_eq!(c["max_r"], 2);
+    // Held regions are never released: each robot still counts the one it captured.
+    let reports = r["robot_reports"].as_array().unwrap();
+    assert_eq!(reports.len(), 8, "{r}");
+    for rr in reports {
+        assert_eq!(rr["capture_count"], 1, "{rr}");
+    }
     let tables = std::fs::read_to_string(dir.join("tables.txt")).unwrap();
+    assert!(!tables.contains("0 capture(s)"), "{tables}");
     assert!(tables.contains("-inf"), "dead ends marked: {tables}");
     assert!(dir.join("metrics.json").is_file());
     let png = std::fs::read(dir.join("graph_pheromone_8robots.png")).unwrap();

@@ -86,6 +86,11 @@ pub struct GraphRobot {
     pub conflicts: u32,
     /// Captures the writer refused (the region was full after all).
     pub refused: u32,
+    /// Captures the writer accepted, held or released (the agent's `capture_count`, which the
+    /// contention messages carry, counts released ones only).
+    pub captured: u32,
+    /// The capture counted last, as (region, step it was claimed): each is counted once.
+    counted: Option<(usize, u64)>,
     /// Nodes reached, in order (the dock first).
     pub path: Vec<usize>,
 }
@@ -96,6 +101,7 @@ pub struct RobotReport {
     pub robot: u32,
     pub strategy: Strategy,
     pub distance_m: f32,
+    /// Regions the writer let this robot capture (held to the end or released).
     pub capture_count: u32,
     pub conflicts: u32,
     pub refused: u32,
@@ -138,6 +144,8 @@ impl GraphRobot {
             distance_m: 0.0,
             conflicts: 0,
             refused: 0,
+            captured: 0,
+            counted: None,
             path: Vec::new(),
         })
     }
@@ -151,7 +159,7 @@ impl GraphRobot {
             robot: self.id(),
             strategy: self.agent.strategy,
             distance_m: self.distance_m,
-            capture_count: self.agent.capture_count,
+            capture_count: self.captured,
             conflicts: self.conflicts,
             refused: self.refused,
             battery_pct: self.agent.battery_pct,
@@ -212,6 +220,10 @@ impl GraphRobot {
                     .map_err(GraphError::from)?
                     .captured_by
                     .contains(&id);
+                if held && self.counted != Some((region, since_step)) {
+                    self.captured += 1;
+                    self.counted = Some((region, since_step));
+                }
                 if v.step > since_step + 1 && !held {
                     // The writer refused the capture: the region filled up after all.
                     self.refused += 1;
