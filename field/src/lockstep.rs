@@ -117,6 +117,138 @@ fn attached_event(
         })
 }
 
+/// The conductor's side of the joins: woken by each participant that joins.
+pub struct JoinWatch {
+    world: String,
+    listener: Listener<Svc>,
+}
+
+impl JoinWatch {
+    /// Listens for the joins of world `world`'s participants. Create it before counting them.
+    pub fn create(node: &Node<Svc>, world: &str) -> Result<Self, ShmError> {
+        let listener = attached_event(node, world)?
+            .listener_builder()
+            .create()
+            .map_err(|e| ShmError::Service {
+                service: attached_service(world),
+                action: "create listener",
+                detail: format!("{e:?}"),
+            })?;
+        Ok(Self {
+            world: world.to_string(),
+            listener,
+        })
+    }
+
+    /// Waits until `count()` (the participants attached, as the conductor's ports see them)
+    /// reaches `expected`, woken by each join; returns how long it took. `what` names the
+    /// participants for the error.
+    pub fn wait(
+        &self,
+        node: &Node<Svc>,
+        expected: usize,
+        what: &str,
+        timeout: Duration,
+        count: impl Fn() -> usize,
+    ) -> Result<Duration, LockstepError> {
+        let started = Instant::now();
+        let deadline = started + timeout;
+        loop {
+            if count() >= expected {
+                return Ok(started.elapsed());
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(LockstepError::Attach {
+                    world: self.world.clone(),
+                    attached: count(),
+                    expected,
+                    what: what.to_string(),
+                    timeout_s: timeout.as_secs_f64(),
+                });
+            }
+            if node.wait(Duration::ZERO).is_err() {
+                return Err(LockstepError::Interrupted {
+                    world: self.world.clone(),
+                });
+            }
+            // A join notifies; a participant that left again does not, so the wait is bounded.
+            match self
+                .listener
+                .timed_wait(|_| {}, left.min(Duration::from_millis(500)))
+            {
+                Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
+                Err(e) => {
+                    return Err(ShmError::Service {
+                        service: attached_service(&self.world),
+                        action: "wait",
+                        detail: format!("{e:?}"),
+                    }
+                    .into())
+                }
+            }
+        }
+    }
+}
+
+/// Tells world `world`'s conductor that this process has joined (call it once every port of
+/// the process exists). Keep the notifier for as long as the process takes part.
+pub fn announce_join(node: &Node<Svc>, world: &str) -> Result<Notifier<Svc>, ShmError> {
+    let err = |action: &'static str, e: &dyn std::fmt::Debug| ShmError::Service {
+        service: attached_service(world),
+        action,
+        detail: format!("{e:?}"),
+    };
+    let notifier = attached_event(node, world)?
+        .notifier_builder()
+        .create()
+        .map_err(|e| err("create notifier", &e))?;
+    // No listener yet (the conductor starts later) is fine: it counts the participants when it
+    // starts waiting.
+    notifier.notify().map_err(|e| err("notify", &e))?;
+    Ok(notifier)
+}
+
+/// Waits until every key of `missing` has arrived, for at most `stall` without progress:
+/// `next(timeout)` waits up to `timeout` for the next arrival and returns its key, or `None`
+/// (a timeout, or a message that completes nothing). `name` names a missing key for the error.
+pub fn collect_step<K: PartialEq>(
+    node: &Node<Svc>,
+    world: &str,
+    step: u64,
+    missing: &mut Vec<K>,
+    stall: Duration,
+    name: impl Fn(&K) -> String,
+    mut next: impl FnMut(Duration) -> Result<Option<K>, ShmError>,
+) -> Result<(), LockstepError> {
+    let mut deadline = Instant::now() + stall;
+    while !missing.is_empty() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            let mut names: Vec<String> = missing.iter().map(&name).collect();
+            names.sort();
+            return Err(LockstepError::Stalled {
+                world: world.to_string(),
+                step,
+                missing: names.join(", "),
+                timeout_s: stall.as_secs_f64(),
+            });
+        }
+        if node.wait(Duration::ZERO).is_err() {
+            return Err(LockstepError::Interrupted {
+                world: world.to_string(),
+            });
+        }
+        if let Some(k) = next(left.min(Duration::from_millis(100)))? {
+            if let Some(i) = missing.iter().position(|m| *m == k) {
+                missing.swap_remove(i);
+                deadline = Instant::now() + stall;
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Why the conductor gave up.
 #[derive(Debug, thiserror::Error)]
 pub enum LockstepError {
@@ -153,7 +285,7 @@ pub struct Conductor {
     clock: Sender<ClockMsg>,
     /// None for a world on wall time: nobody waits, and acknowledgements go nowhere.
     acks: Option<Receiver<StepAck>>,
-    attached: Listener<Svc>,
+    joins: JoinWatch,
     /// Acknowledgements of a later step that arrived early.
     early: Vec<StepAck>,
 }
@@ -162,14 +294,7 @@ impl Conductor {
     /// The conductor of world `world`; `lockstep` false for a world on wall time, which
     /// collects no acknowledgements.
     pub fn create(node: &Node<Svc>, world: &str, lockstep: bool) -> Result<Self, ShmError> {
-        let attached = attached_event(node, world)?
-            .listener_builder()
-            .create()
-            .map_err(|e| ShmError::Service {
-                service: attached_service(world),
-                action: "create listener",
-                detail: format!("{e:?}"),
-            })?;
+        let joins = JoinWatch::create(node, world)?;
         let (clock_service, clock_wake) = clock_services(world);
         let (ack_service, ack_wake) = step_done_services(world);
         Ok(Self {
@@ -180,7 +305,7 @@ impl Conductor {
             } else {
                 None
             },
-            attached,
+            joins,
             early: Vec::new(),
         })
     }
@@ -199,43 +324,8 @@ impl Conductor {
         what: &str,
         timeout: Duration,
     ) -> Result<Duration, LockstepError> {
-        let started = Instant::now();
-        let deadline = started + timeout;
-        loop {
-            if self.participants() >= expected {
-                return Ok(started.elapsed());
-            }
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return Err(LockstepError::Attach {
-                    world: self.world.clone(),
-                    attached: self.participants(),
-                    expected,
-                    what: what.to_string(),
-                    timeout_s: timeout.as_secs_f64(),
-                });
-            }
-            if node.wait(Duration::ZERO).is_err() {
-                return Err(LockstepError::Interrupted {
-                    world: self.world.clone(),
-                });
-            }
-            // A join notifies; a participant that left again does not, so the wait is bounded.
-            match self
-                .attached
-                .timed_wait(|_| {}, left.min(Duration::from_millis(500)))
-            {
-                Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
-                Err(e) => {
-                    return Err(ShmError::Service {
-                        service: attached_service(&self.world),
-                        action: "wait",
-                        detail: format!("{e:?}"),
-                    }
-                    .into())
-                }
-            }
-        }
+        self.joins
+            .wait(node, expected, what, timeout, || self.participants())
     }
 
     /// Sends clock message `step` (the field ticks once for it).
@@ -291,41 +381,27 @@ impl Conductor {
                 early_store.push(a);
             }
         }
-        let mut deadline = Instant::now() + stall;
-        while !missing.is_empty() {
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                let mut names: Vec<String> = missing
-                    .iter()
-                    .map(|(r, id)| match *r {
-                        role::DEPOSITOR => format!("depositor r{id}"),
-                        r => role::name(r).to_string(),
-                    })
-                    .collect();
-                names.sort();
-                return Err(LockstepError::Stalled {
-                    world: self.world.clone(),
-                    step,
-                    missing: names.join(", "),
-                    timeout_s: stall.as_secs_f64(),
-                });
-            }
-            if node.wait(Duration::ZERO).is_err() {
-                return Err(LockstepError::Interrupted {
-                    world: self.world.clone(),
-                });
-            }
-            match acks.recv_timeout(left.min(Duration::from_millis(100)))? {
-                Some(a) if a.step == step => {
-                    take(&a, &mut missing);
-                    deadline = Instant::now() + stall;
-                }
-                Some(a) if a.step > step => early_store.push(a),
-                Some(_) => {} // a repeated acknowledgement of an earlier step
-                None => {}
-            }
-        }
-        Ok(())
+        collect_step(
+            node,
+            &self.world,
+            step,
+            &mut missing,
+            stall,
+            |(r, id)| match *r {
+                role::DEPOSITOR => format!("depositor r{id}"),
+                r => role::name(r).to_string(),
+            },
+            |timeout| {
+                Ok(match acks.recv_timeout(timeout)? {
+                    Some(a) if a.step == step => Some((a.role, a.robot_id)),
+                    Some(a) if a.step > step => {
+                        early_store.push(a);
+                        None
+                    }
+                    _ => None, // a repeated acknowledgement of an earlier step, or nothing yet
+                })
+            },
+        )
     }
 }
 
@@ -349,23 +425,7 @@ impl Participant {
         let acks = Sender::create(node, &ack_service, &ack_wake, ACK_LINK)?;
         let (clock_service, clock_wake) = clock_services(world);
         let clock = Receiver::create(node, &clock_service, &clock_wake, CLOCK_LINK)?;
-        let attached = attached_event(node, world)?
-            .notifier_builder()
-            .create()
-            .map_err(|e| ShmError::Service {
-                service: attached_service(world),
-                action: "create notifier",
-                detail: format!("{e:?}"),
-            })?;
-        // No listener yet (the world starts later) is fine: the world counts the clock's
-        // subscribers when it starts waiting.
-        if let Err(e) = attached.notify() {
-            return Err(ShmError::Service {
-                service: attached_service(world),
-                action: "notify",
-                detail: format!("{e:?}"),
-            });
-        }
+        let attached = announce_join(node, world)?;
         Ok(Self {
             clock,
             acks,

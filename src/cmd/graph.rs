@@ -13,7 +13,7 @@ use publishers::graph::sim::{RegionsScenario, Strategy, Until, BUILTIN_REGIONS};
 use serde_json::{json, Value};
 
 use super::bad;
-use super::sim::SimArgs;
+use super::sim_args::SimArgs;
 
 /// Whether `name` is a `regions` scenario: a built-in one, or a TOML file with a `dock`.
 pub fn is_regions(name: &str) -> bool {

@@ -6,6 +6,7 @@ pub mod graph;
 pub mod probe;
 pub mod roles;
 pub mod sim;
+pub mod sim_args;
 pub mod tune;
 
 use std::fmt;

@@ -6,92 +6,17 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use clap::Args;
 use publishers::follower::StrategyKind;
 use publishers::metrics::scenario_metrics;
 use publishers::process_run::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
 use publishers::record::Recording;
-use publishers::scenario::{Overrides, Scenario, DEFAULT_SCENARIO};
+use publishers::scenario::{Overrides, Scenario};
 use publishers::simulation::{run_single_process, RunSummary, SingleProcessOptions};
 use serde_json::{json, Value};
 
 use super::bad;
 use super::roles::load_scenario;
-
-/// Run a scenario and report what happened.
-///
-/// By default every role runs as its own process on this host: `pheromone field --clock`, the
-/// world, and for every robot a localizer, a depositor and a follower where the scenario gives
-/// them, in lockstep (as fast as the processes answer). Every process is stopped at the end, on
-/// Ctrl-C, or when one of them fails. `--single-process` runs the same role types in this
-/// process, deterministic bit for bit for a seed.
-///
-/// Built-in scenarios: blind-leader (seed 000, the default), trail-following (seed 002), ias-ss
-/// (seed 004), evaporation (seed 000 Figs. 6–8) and trail; or a TOML file of your own
-/// (examples/scenarios/*.toml show every key).
-///
-/// Node-graph scenarios (seed 001): regions (a corridor with regions A–E; 2, 3 and 4 robots,
-/// region capture against the shortest-path baseline) and regions-skeleton (8 robots on a
-/// skeletonized map, 7 regions, one with Max-R 2). They run a `graph` writer and one
-/// `graph-robot` process per robot and print the paper's tables (captures, final link values,
-/// area capture matrix) and the time to the goal of each strategy.
-#[derive(Args, Debug)]
-pub struct SimArgs {
-    /// Scenario: a built-in name or a TOML file.
-    #[arg(default_value = DEFAULT_SCENARIO)]
-    pub scenario: String,
-    /// Number of robots (the first N the scenario places).
-    #[arg(long, value_name = "N")]
-    pub robots: Option<usize>,
-    /// Seed of the run (world noise, the followers' random draws).
-    #[arg(long, value_name = "S")]
-    pub seed: Option<u64>,
-    /// Simulated seconds (default: the scenario's duration_s).
-    #[arg(long, value_name = "SECS")]
-    pub duration: Option<f64>,
-    /// Write heat maps (PNG, with the robots' true and estimated trajectories), a CSV per robot
-    /// and metrics.json into this directory [default: pheromone-out/<SCENARIO>].
-    #[arg(long, value_name = "DIR")]
-    pub out: Option<PathBuf>,
-    /// Write no files.
-    #[arg(long, conflicts_with = "out")]
-    pub no_out: bool,
-    /// Print one JSON metrics object on stdout.
-    #[arg(long)]
-    pub json: bool,
-    /// Run every role in this process, in lockstep: deterministic for a seed.
-    #[arg(long)]
-    pub single_process: bool,
-    /// Step the world on wall time (dt per step) instead of lockstep (separate processes only).
-    #[arg(long, conflicts_with = "single_process")]
-    pub realtime: bool,
-    /// Every depositor deposits a constant amount, whatever its localization (the traditional
-    /// scheme seed 000 argues against).
-    #[arg(long)]
-    pub constant: bool,
-    /// Strategy of every follower that is not a route-driven leader: gradient, antenna,
-    /// inverse, uniform. Regions scenarios: pheromone or shortest-path (default: both).
-    #[arg(long)]
-    pub strategy: Option<String>,
-    /// Run T trials (seeds S, S+1, …) with the strategy and with the other sector strategy
-    /// (inverse vs uniform) and report mean, standard deviation and Welch's t of the
-    /// exploration (scenarios with an exploration metric).
-    #[arg(long, value_name = "T")]
-    pub trials: Option<u32>,
-    /// EKF-SLAM localizers (the map of landmarks is not given to them).
-    #[arg(long)]
-    pub slam: bool,
-    /// Seconds the whole run may take before it is stopped as failed (separate processes).
-    #[arg(long, default_value_t = 900.0, value_name = "SECS")]
-    pub timeout: f64,
-    /// Seconds every process may take to start and join the run (separate processes)
-    /// [default: 10 s + 0.5 s per process].
-    #[arg(long, value_name = "SECS")]
-    pub attach_timeout: Option<f64>,
-    /// Seconds a lockstep step may make no progress before the run fails (separate processes).
-    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
-    pub stall_timeout: f64,
-}
+pub use super::sim_args::SimArgs;
 
 /// The follower strategy of --strategy (grid scenarios).
 fn follower_strategy(a: &SimArgs) -> anyhow::Result<Option<StrategyKind>> {

@@ -8,9 +8,10 @@
 //! When all robots are done the writer applies the updates in robot order and opens the next
 //! step. Claimants exchange their messages over the contention service and decide alike.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use field::link::{Receiver, Sender};
+use field::lockstep::{self, JoinWatch};
 use field::shm::{now_ns, Svc};
 use iceoryx2::node::Node;
 
@@ -42,13 +43,8 @@ pub enum GraphRunError {
     Shm(#[from] GraphShmError),
     #[error("{0}")]
     Setup(String),
-    #[error("graph '{name}': robot(s) {missing:?} did not finish step {step} within {secs:.1} s")]
-    Stalled {
-        name: String,
-        missing: Vec<u32>,
-        step: u64,
-        secs: f64,
-    },
+    #[error(transparent)]
+    Lockstep(#[from] field::lockstep::LockstepError),
     #[error("graph '{name}': the writer is gone (last step seen: {step})")]
     WriterGone { name: String, step: u64 },
     #[error("graph '{0}': interrupted")]
@@ -84,22 +80,12 @@ pub fn run_graph_writer(
     let [(snap, snap_wake), (upd, upd_wake), _] = graph_services(&o.name);
     let snapshots: Sender<GraphSnapshot> = Sender::create(node, &snap, &snap_wake, SNAPSHOT_LINK)?;
     let updates: Receiver<GraphUpdateMsg> = Receiver::create(node, &upd, &upd_wake, UPDATE_LINK)?;
+    let joins = JoinWatch::create(node, &o.name)?;
     // Every robot reads the first snapshot: wait until all are attached.
-    let deadline = Instant::now() + o.attach_timeout;
-    while snapshots.receivers() < o.robots || updates.senders() < o.robots {
-        if Instant::now() >= deadline {
-            return Err(GraphRunError::Setup(format!(
-                "graph '{}': {} of {} robots attached within {:.1} s",
-                o.name,
-                snapshots.receivers().min(updates.senders()),
-                o.robots,
-                o.attach_timeout.as_secs_f64()
-            )));
-        }
-        if node.wait(Duration::from_millis(5)).is_err() {
-            return Err(GraphRunError::Interrupted(o.name.clone()));
-        }
-    }
+    // The lockstep of `field::lockstep`: every robot joins once its ports exist.
+    joins.wait(node, o.robots, "graph robots", o.attach_timeout, || {
+        snapshots.receivers().min(updates.senders())
+    })?;
     let publish = |world: &GraphWorld, finished: bool| -> Result<(), GraphShmError> {
         let mut s = GraphSnapshot::from_state(&world.state)?;
         s.seq = world.step() + 1;
@@ -121,42 +107,35 @@ pub fn run_graph_writer(
             let mut outputs: Vec<(u32, Vec<GraphUpdate>, Option<usize>)> = (1..=o.robots as u32)
                 .map(|id| (id, Vec::new(), None))
                 .collect();
-            let mut done = vec![false; o.robots];
-            let deadline = Instant::now() + o.stall_timeout;
-            while done.iter().any(|d| !d) {
-                let left = deadline.saturating_duration_since(Instant::now());
-                if left.is_zero() {
-                    return Err(GraphRunError::Stalled {
-                        name: o.name.clone(),
-                        missing: (1..=o.robots as u32)
-                            .filter(|id| !done[*id as usize - 1])
-                            .collect(),
-                        step,
-                        secs: o.stall_timeout.as_secs_f64(),
-                    });
-                }
-                let Some(m) = updates.recv_timeout(left.min(Duration::from_millis(100)))? else {
-                    if node.wait(Duration::ZERO).is_err() {
-                        return Err(GraphRunError::Interrupted(o.name.clone()));
+            let mut missing: Vec<u32> = (1..=o.robots as u32).collect();
+            let rejected = &mut world.rejected;
+            lockstep::collect_step(
+                node,
+                &o.name,
+                step,
+                &mut missing,
+                o.stall_timeout,
+                |id| format!("graph-robot R{id}"),
+                |timeout| {
+                    let Some(m) = updates.recv_timeout(timeout)? else {
+                        return Ok(None);
+                    };
+                    let i = m.robot_id.wrapping_sub(1) as usize;
+                    if i >= o.robots || m.step != step {
+                        *rejected += 1;
+                        return Ok(None);
                     }
-                    continue;
-                };
-                let i = m.robot_id.wrapping_sub(1) as usize;
-                if i >= o.robots || m.step != step {
-                    // Not one of this run's robots, or a stale step: counted, never applied.
-                    world.rejected += 1;
-                    continue;
-                }
-                if m.kind == kind::STEP_DONE {
-                    done[i] = true;
-                    outputs[i].2 = (m.region != NO_CLAIM).then_some(m.region as usize);
-                } else {
+                    if m.kind == kind::STEP_DONE {
+                        outputs[i].2 = (m.region != NO_CLAIM).then_some(m.region as usize);
+                        return Ok(Some(m.robot_id));
+                    }
                     match m.update() {
                         Ok(u) => outputs[i].1.push(u),
-                        Err(_) => world.rejected += 1,
+                        Err(_) => *rejected += 1,
                     }
-                }
-            }
+                    Ok(None)
+                },
+            )?;
             world.end_step(outputs);
         }
         Ok(())
@@ -184,6 +163,8 @@ pub fn run_graph_robot(
     let mut reader = GraphReader::attach(node, name)?;
     let updater = GraphUpdater::attach(node, name, robot.id())?;
     let mut contention = Contention::attach(node, name)?;
+    // Every port of this robot exists: tell the writer (`field::lockstep`).
+    let _joined = lockstep::announce_join(node, name)?;
     if !contention.wait_listeners(robots, timeout)? {
         return Err(GraphRunError::Setup(format!(
             "graph '{name}': {} of {robots} robots listen for contention messages after {:.1} s",
