@@ -56,7 +56,7 @@ pub enum BenchError {
     #[error("interrupted")]
     Interrupted,
     #[error(transparent)]
-    Child(#[from] publishers::supervisor::SupervisorError),
+    Child(#[from] publishers::sim::supervisor::SupervisorError),
 }
 
 /// How much to measure.

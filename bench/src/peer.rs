@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use publishers::supervisor::{ChildId, ChildSpec, Supervisor};
+use publishers::sim::supervisor::{ChildId, ChildSpec, Supervisor};
 use serde::{Deserialize, Serialize};
 
 use crate::BenchError;
@@ -78,7 +78,7 @@ pub struct PeerResult {
     pub samples_ns: Vec<u64>,
 }
 
-/// One peer process, under the project's supervisor (`publishers::supervisor`): stopped with
+/// One peer process, under the project's supervisor (`publishers::sim::supervisor`): stopped with
 /// SIGTERM (then SIGKILL) when dropped, its stderr passed through.
 pub struct Peer {
     sup: Supervisor,

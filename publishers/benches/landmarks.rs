@@ -20,9 +20,9 @@ use std::path::PathBuf;
 
 use criterion::{BatchSize, BenchmarkId, Criterion, Throughput};
 use nalgebra::Matrix3;
-use publishers::localizer::{Ekf, EkfConfig};
 use publishers::messages::LandmarkObs;
-use publishers::world::{Landmark, Pose2};
+use publishers::roles::localizer::{Ekf, EkfConfig};
+use publishers::roles::world::{Landmark, Pose2};
 
 const MAP_SIZES: &[usize] = &[50, 200, 1000];
 /// Observations per update (what a 5 m sensor sees in the corridor).

@@ -14,12 +14,12 @@ use nalgebra::Matrix3;
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
 use proptest::test_runner::{Config, TestRunner};
-use publishers::depositor::{msg_is_finite, DepositMode, Depositor, DepositorConfig};
-use publishers::follower::{Follower, FollowerConfig, StrategyKind};
-use publishers::localizer::{Ekf, EkfConfig, EkfSlam, EkfSlamConfig};
 use publishers::messages::{LandmarkObs, PoseMsg, SensorMsg, MAX_OBSERVATIONS};
-use publishers::scenario::Scenario;
-use publishers::world::{Landmark, OccupancyMap, Pose2, RobotConfig, World, WorldConfig};
+use publishers::roles::depositor::{msg_is_finite, DepositMode, Depositor, DepositorConfig};
+use publishers::roles::follower::{Follower, FollowerConfig, StrategyKind};
+use publishers::roles::localizer::{Ekf, EkfConfig, EkfSlam, EkfSlamConfig};
+use publishers::roles::world::{Landmark, OccupancyMap, Pose2, RobotConfig, World, WorldConfig};
+use publishers::sim::scenario::Scenario;
 
 fn cases(default: u32) -> u32 {
     match std::env::var("PHEROMONE_FUZZ_CASES") {
@@ -375,7 +375,7 @@ fn the_world_survives_any_command() {
             })
             .collect(),
         landmarks: landmarks(),
-        walls: vec![publishers::world::WallConfig::Rect {
+        walls: vec![publishers::roles::world::WallConfig::Rect {
             min_x_m: 0.0,
             min_y_m: 4.9,
             max_x_m: 12.0,
@@ -424,7 +424,7 @@ fn the_world_survives_any_command() {
 /// origin (file) and, for syntax errors, the line.
 #[test]
 fn mutated_scenarios_are_refused_with_file_and_reason() {
-    let text = publishers::scenario::BUILTIN[0].1;
+    let text = publishers::sim::scenario::BUILTIN[0].1;
     let lines: Vec<&str> = text.lines().collect();
     let stats = std::cell::RefCell::new([0u64; 2]);
     run(

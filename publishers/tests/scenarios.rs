@@ -2,11 +2,11 @@
 //! with assertions on the metrics a user relies on. Durations are shortened where the claim
 //! holds earlier, to keep the suite quick.
 
-use publishers::follower::StrategyKind;
-use publishers::metrics::scenario_metrics;
-use publishers::record::Recording;
-use publishers::scenario::{Overrides, Scenario, BUILTIN};
-use publishers::simulation::{run_single_process, RunSummary, SingleProcessOptions};
+use publishers::roles::follower::StrategyKind;
+use publishers::sim::metrics::scenario_metrics;
+use publishers::sim::record::Recording;
+use publishers::sim::scenario::{Overrides, Scenario, BUILTIN};
+use publishers::sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 
 fn run(name: &str, o: Overrides) -> (Scenario, RunSummary, Recording, serde_json::Value) {
     let mut s = Scenario::load(name).unwrap();

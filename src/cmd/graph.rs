@@ -342,7 +342,7 @@ fn run_as_processes(
     robots: usize,
     seed: u64,
 ) -> anyhow::Result<RunReport> {
-    Ok(publishers::process_run::run_graph_as_processes(
+    Ok(publishers::sim::processes::run_graph_as_processes(
         &std::env::current_exe()?,
         &a.scenario,
         strategy,

@@ -51,9 +51,29 @@ pub fn run_probe(a: ProbeArgs) -> anyhow::Result<()> {
         (_, Some(l)) => v < l,
         _ => true,
     };
-    let frame = reader.wait_until(timeout, |f| {
-        ch < f.view.channels && pred(f.view.value(ch, x, y))
-    })?;
+    // Wait in slices so Ctrl-C (or SIGTERM) is seen between them.
+    let deadline = std::time::Instant::now() + timeout;
+    let met = loop {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        let slice = left.min(Duration::from_millis(200));
+        if reader
+            .wait_until(slice, |f| {
+                ch < f.view.channels && pred(f.view.value(ch, x, y))
+            })?
+            .is_some()
+        {
+            break true;
+        }
+        if left.is_zero() {
+            break false;
+        }
+        if node.wait(Duration::ZERO).is_err() {
+            anyhow::bail!(
+                "interrupted before the value at ({x}, {y}) channel {ch} reached the condition"
+            );
+        }
+    };
+    let frame = if met { reader.frame() } else { None };
     let Some(frame) = frame else {
         let last = reader.frame().map(|f| {
             f.view

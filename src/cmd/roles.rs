@@ -3,12 +3,12 @@
 
 use clap::{Args, ValueEnum};
 use field::shm::create_node;
-use publishers::depositor::{DepositMode, DepositorConfig};
-use publishers::follower::{Follower, FollowerConfig, StrategyKind};
-use publishers::process::{
+use publishers::roles::depositor::{DepositMode, DepositorConfig};
+use publishers::roles::follower::{Follower, FollowerConfig, StrategyKind};
+use publishers::roles::{
     run_depositor, run_follower, run_localizer, run_world, RoleOptions, WorldOptions,
 };
-use publishers::scenario::Scenario;
+use publishers::sim::scenario::Scenario;
 
 use super::{bad, seconds};
 
@@ -17,7 +17,7 @@ use super::{bad, seconds};
 pub struct Common {
     /// Scenario: a built-in name (blind-leader, trail-following, ias-ss, evaporation, trail) or
     /// a TOML file.
-    #[arg(long, default_value = publishers::scenario::DEFAULT_SCENARIO)]
+    #[arg(long, default_value = publishers::sim::scenario::DEFAULT_SCENARIO)]
     pub scenario: String,
     /// Name of the simulated world (its clock is sim/<WORLD>/clock).
     #[arg(long, default_value = "sim")]
@@ -133,7 +133,7 @@ pub struct LocalizerArgs {
     #[arg(
         long,
         value_name = "XMIN,YMIN,XMAX,YMAX",
-        value_parser = publishers::localizer::parse_landmark_region,
+        value_parser = publishers::roles::localizer::parse_landmark_region,
         allow_hyphen_values = true,
         conflicts_with = "slam"
     )]

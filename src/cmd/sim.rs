@@ -6,12 +6,12 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use publishers::follower::StrategyKind;
-use publishers::metrics::scenario_metrics;
-use publishers::process_run::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
-use publishers::record::Recording;
-use publishers::scenario::{Overrides, Scenario};
-use publishers::simulation::{run_single_process, RunSummary, SingleProcessOptions};
+use publishers::roles::follower::StrategyKind;
+use publishers::sim::metrics::scenario_metrics;
+use publishers::sim::processes::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
+use publishers::sim::record::Recording;
+use publishers::sim::scenario::{Overrides, Scenario};
+use publishers::sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 use serde_json::{json, Value};
 
 use super::bad;

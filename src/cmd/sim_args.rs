@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use publishers::scenario::DEFAULT_SCENARIO;
+use publishers::sim::scenario::DEFAULT_SCENARIO;
 
 /// Run a scenario and report what happened.
 ///

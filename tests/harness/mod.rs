@@ -8,7 +8,7 @@ use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
-use publishers::supervisor::{ChildId, ChildSpec, Supervisor};
+use publishers::sim::supervisor::{ChildId, ChildSpec, Supervisor};
 
 /// Path of the `pheromone` binary under test.
 pub fn bin() -> PathBuf {
@@ -39,7 +39,7 @@ pub fn run(args: &[&str]) -> Output {
 }
 
 /// A background `pheromone` process under the project's supervisor
-/// (`publishers::supervisor`); stopped (SIGTERM, then SIGKILL) and reaped on drop.
+/// (`publishers::sim::supervisor`); stopped (SIGTERM, then SIGKILL) and reaped on drop.
 pub struct Proc {
     sup: Supervisor,
     id: ChildId,

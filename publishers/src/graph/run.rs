@@ -86,11 +86,9 @@ pub struct GraphRobot {
     pub conflicts: u32,
     /// Captures the writer refused (the region was full after all).
     pub refused: u32,
-    /// Captures the writer accepted, held or released (the agent's `capture_count`, which the
-    /// contention messages carry, counts released ones only).
+    /// Captures this robot won and the writer did not refuse, held or released (the agent's
+    /// `capture_count`, which the contention messages carry, counts released ones only).
     pub captured: u32,
-    /// The capture counted last, as (region, step it was claimed): each is counted once.
-    counted: Option<(usize, u64)>,
     /// Nodes reached, in order (the dock first).
     pub path: Vec<usize>,
 }
@@ -145,7 +143,6 @@ impl GraphRobot {
             conflicts: 0,
             refused: 0,
             captured: 0,
-            counted: None,
             path: Vec::new(),
         })
     }
@@ -220,13 +217,10 @@ impl GraphRobot {
                     .map_err(GraphError::from)?
                     .captured_by
                     .contains(&id);
-                if held && self.counted != Some((region, since_step)) {
-                    self.captured += 1;
-                    self.counted = Some((region, since_step));
-                }
                 if v.step > since_step + 1 && !held {
                     // The writer refused the capture: the region filled up after all.
                     self.refused += 1;
+                    self.captured -= 1;
                     self.agent.learn_done(region);
                     Phase::AtNode { node }
                 } else if until_s <= t {
@@ -296,6 +290,9 @@ impl GraphRobot {
         };
         if winners.contains(&id) {
             out.updates.push(GraphUpdate::Capture { region, robot: id });
+            // Counted now (a region held to the end is never released); taken back if the
+            // writer refuses it.
+            self.captured += 1;
             Ok(Phase::Serving {
                 node,
                 region,

@@ -16,13 +16,13 @@ use std::collections::BTreeMap;
 use field::{FieldConfig, FrameView, OwnedField, RejectReason};
 use serde::Serialize;
 
-use crate::depositor::Depositor;
-use crate::follower::{Follower, PoseSource};
 use crate::messages::{PoseMsg, TruthMsg};
-use crate::process::{Filter, ProcessError};
-use crate::record::{ProbeReading, Recording, RobotSample, Snapshot};
-use crate::scenario::{ProbeSpec, Scenario};
-use crate::world::World;
+use crate::roles::depositor::Depositor;
+use crate::roles::follower::{Follower, PoseSource};
+use crate::roles::world::World;
+use crate::roles::{Filter, ProcessError};
+use crate::sim::record::{ProbeReading, Recording, RobotSample, Snapshot};
+use crate::sim::scenario::{ProbeSpec, Scenario};
 
 /// What a run ends with, whichever way it ran.
 #[derive(Debug, Clone, Serialize)]
@@ -94,7 +94,7 @@ pub struct RobotResult {
 
 /// The role a robot plays, as reported: `leader`, `follower`, `depositor`, `explorer`…
 pub fn role_name(scenario: &Scenario, id: u32) -> String {
-    use crate::follower::StrategyKind as K;
+    use crate::roles::follower::StrategyKind as K;
     let Some(r) = scenario.roles(id) else {
         return "idle".into();
     };

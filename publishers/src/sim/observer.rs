@@ -15,10 +15,10 @@ use field::shm::{FieldReader, ShmError, Svc};
 use iceoryx2::node::Node;
 
 use crate::messages::{CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, TruthMsg};
-use crate::process::RobotServices;
-use crate::record::{Recording, RobotSample};
-use crate::scenario::Scenario;
-use crate::simulation::{sigma_max_m, FrameSchedule};
+use crate::roles::RobotServices;
+use crate::sim::record::{Recording, RobotSample};
+use crate::sim::scenario::Scenario;
+use crate::sim::single::{sigma_max_m, FrameSchedule};
 
 struct RobotLinks {
     id: u32,

@@ -16,6 +16,8 @@
 //! [`Follower`] wraps a strategy and produces the `CmdMsg` and `FollowerStatusMsg` a process
 //! loop publishes.
 
+pub mod run;
+
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::fmt;
 use std::str::FromStr;
@@ -1729,8 +1731,8 @@ mod tests {
     /// abandons it once it has faded below the threshold.
     #[test]
     fn gradient_follows_a_deposited_trail_until_it_fades() {
-        use crate::depositor::{Depositor, DepositorConfig};
         use crate::messages::PoseMsg;
+        use crate::roles::depositor::{Depositor, DepositorConfig};
         let mut f = OwnedField::new(FieldConfig {
             width: 200,
             height: 200,

@@ -25,6 +25,8 @@
 //!   gate means the observation is not used.
 //! - Line 24 is replaced by the Joseph form (I − KH)Σ(I − KH)ᵀ + KQKᵀ, then symmetrized.
 
+pub mod run;
+
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatRef, Par, Side};
 use nalgebra::{Matrix2, Matrix2x3, Matrix3, Matrix3x2, Vector2, Vector3};
@@ -32,7 +34,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::messages::{LandmarkObs, PoseMsg, SensorMsg, MAX_OBSERVATIONS};
-use crate::world::{sinc, sinc_derivative, wrap_angle, Landmark, NoiseConfig, Pose2};
+use crate::roles::world::{sinc, sinc_derivative, wrap_angle, Landmark, NoiseConfig, Pose2};
 
 /// Inputs beyond these limits are rejected as absurd.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -1295,7 +1297,7 @@ fn symmetrize(cov: &mut Mat<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::{RobotConfig, WallConfig, World, WorldConfig};
+    use crate::roles::world::{RobotConfig, WallConfig, World, WorldConfig};
     use approx::assert_relative_eq;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -1900,7 +1902,7 @@ mod tests {
         assert!(toml::from_str::<EkfConfig>("landmark_region = [8.0, 0.0, 24, 4]").is_err());
         assert!(toml::from_str::<EkfConfig>("landmark_region_m = [8.0, 0.0, 24]").is_err());
         // A scenario with a bad region fails validation naming the robot and the key.
-        let mut scenario = crate::scenario::Scenario::load("trail").unwrap();
+        let mut scenario = crate::sim::scenario::Scenario::load("trail").unwrap();
         scenario.robots[0].localizer.landmark_region_m = Some([1.0, 1.0, 0.0, 2.0]);
         let e = scenario.validate().unwrap_err();
         assert!(
@@ -1938,11 +1940,11 @@ mod tests {
 
     #[test]
     fn ekf_slam_refuses_landmark_region_m() {
-        let mut scenario = crate::scenario::Scenario::load("trail").unwrap();
+        let mut scenario = crate::sim::scenario::Scenario::load("trail").unwrap();
         let id = scenario.robots[0].id;
         scenario.robots[0].localizer.landmark_region_m = Some(CAPTURED);
-        assert!(crate::process::Filter::for_robot(&scenario, id, false).is_ok());
-        let e = crate::process::Filter::for_robot(&scenario, id, true)
+        assert!(crate::roles::Filter::for_robot(&scenario, id, false).is_ok());
+        let e = crate::roles::Filter::for_robot(&scenario, id, true)
             .err()
             .expect("EKF-SLAM accepted a landmark region");
         assert!(e.to_string().contains("landmark_region_m"), "{e}");

@@ -7,30 +7,33 @@ use std::path::Path;
 use field::{DepositMsg, FieldConfig, KernelKind};
 use serde::{Deserialize, Serialize};
 
-use crate::depositor::{DepositMode, DepositorConfig};
-use crate::follower::{FollowerConfig, StrategyKind};
-use crate::localizer::EkfConfig;
-use crate::world::WorldConfig;
+use crate::roles::depositor::{DepositMode, DepositorConfig};
+use crate::roles::follower::{FollowerConfig, StrategyKind};
+use crate::roles::localizer::EkfConfig;
+use crate::roles::world::WorldConfig;
 
 /// Built-in scenarios: (name, TOML text).
 pub const BUILTIN: &[(&str, &str)] = &[
     (
         "blind-leader",
-        include_str!("../../examples/scenarios/blind-leader.toml"),
+        include_str!("../../../examples/scenarios/blind-leader.toml"),
     ),
     (
         "trail-following",
-        include_str!("../../examples/scenarios/trail-following.toml"),
+        include_str!("../../../examples/scenarios/trail-following.toml"),
     ),
     (
         "ias-ss",
-        include_str!("../../examples/scenarios/ias-ss.toml"),
+        include_str!("../../../examples/scenarios/ias-ss.toml"),
     ),
     (
         "evaporation",
-        include_str!("../../examples/scenarios/evaporation.toml"),
+        include_str!("../../../examples/scenarios/evaporation.toml"),
     ),
-    ("trail", include_str!("../../examples/scenarios/trail.toml")),
+    (
+        "trail",
+        include_str!("../../../examples/scenarios/trail.toml"),
+    ),
 ];
 
 /// The scenario `pheromone sim` runs when none is named.
@@ -378,7 +381,8 @@ impl Scenario {
             d.messages()
                 .map_err(|e| format!("deposit {}: {e}", i + 1))?;
         }
-        crate::world::World::new(self.world.clone(), self.seed).map_err(|e| e.to_string())?;
+        crate::roles::world::World::new(self.world.clone(), self.seed)
+            .map_err(|e| e.to_string())?;
         if let Some(n) = self.active_robots {
             if n == 0 || n > self.world.robots.len() {
                 return Err(format!(
@@ -505,7 +509,7 @@ impl Scenario {
     /// Every scripted deposit (walls first, at t = 0), sorted by time.
     pub fn scripted(
         &self,
-        walls: &[crate::world::Segment],
+        walls: &[crate::roles::world::Segment],
     ) -> Result<Vec<(f64, DepositMsg)>, String> {
         let mut out = Vec::new();
         if let Some(m) = &self.mark_walls {
@@ -539,7 +543,7 @@ impl Scenario {
         out.sort_by(|a, b| a.0.total_cmp(&b.0));
         // The world sends them: its id orders them in a tick, in both modes.
         for (_, m) in &mut out {
-            m.robot_id = crate::process::WORLD_DEPOSITOR_ID;
+            m.robot_id = crate::roles::WORLD_DEPOSITOR_ID;
         }
         Ok(out)
     }
@@ -555,8 +559,8 @@ impl Scenario {
         let depositors = self.robots.iter().filter(|r| r.depositor.is_some()).count();
         c.max_readers = c.max_readers.max(followers + 3);
         c.max_depositors = c.max_depositors.max(depositors + 2);
-        let world =
-            crate::world::World::new(self.world.clone(), self.seed).map_err(|e| e.to_string())?;
+        let world = crate::roles::world::World::new(self.world.clone(), self.seed)
+            .map_err(|e| e.to_string())?;
         let dt = self.world.dt_secs;
         let mut per_step = std::collections::BTreeMap::<u64, usize>::new();
         for (t, _) in self.scripted(world.wall_segments())? {

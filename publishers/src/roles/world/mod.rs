@@ -14,6 +14,8 @@
 //!
 //! Everything is deterministic for a seed (`ChaCha8Rng`).
 
+pub mod run;
+
 use std::f64::consts::{PI, TAU};
 use std::path::{Path, PathBuf};
 

@@ -16,7 +16,7 @@ use std::fs::{self, File};
 use std::io::{BufWriter, Write as _};
 use std::path::{Path, PathBuf};
 
-use crate::record::{Recording, RobotSample, Snapshot};
+use crate::sim::record::{Recording, RobotSample, Snapshot};
 
 /// Writing the outputs of a run failed.
 #[derive(Debug, thiserror::Error)]
@@ -1072,7 +1072,7 @@ mod tests {
 
     use super::*;
     use crate::messages::FollowerState;
-    use crate::record::ProbeReading;
+    use crate::sim::record::ProbeReading;
 
     /// A directory under the system temp dir, unique per test and process, removed on drop.
     struct TempDir(PathBuf);

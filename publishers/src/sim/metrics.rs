@@ -8,8 +8,8 @@
 
 use serde::Serialize;
 
-use crate::record::Recording;
-use crate::scenario::{BlindLeaderMetric, ExplorationMetric, PathMetric, Scenario};
+use crate::sim::record::Recording;
+use crate::sim::scenario::{BlindLeaderMetric, ExplorationMetric, PathMetric, Scenario};
 
 /// Every metric the scenario asks for, as one JSON object.
 pub fn scenario_metrics(scenario: &Scenario, rec: &Recording) -> serde_json::Value {

@@ -11,13 +11,13 @@ use field::run::FieldRunSummary;
 use field::shm::{cleanup_dead_nodes, create_node, ShmError};
 use serde::Serialize;
 
-use crate::observer::Observer;
-use crate::process::{lockstep_participants, RoleSummary, WorldOptions, WorldSummary};
-use crate::record::Recording;
-use crate::scenario::Scenario;
-use crate::simulation::{role_name, FieldSummary, RobotResult, RunSummary};
-use crate::supervisor::{ChildId, ChildSpec, Supervisor, SupervisorError};
-use crate::world::World;
+use crate::roles::world::World;
+use crate::roles::{lockstep_participants, RoleSummary, WorldOptions, WorldSummary};
+use crate::sim::observer::Observer;
+use crate::sim::record::Recording;
+use crate::sim::scenario::Scenario;
+use crate::sim::single::{role_name, FieldSummary, RobotResult, RunSummary};
+use crate::sim::supervisor::{ChildId, ChildSpec, Supervisor, SupervisorError};
 
 /// How to run the processes.
 pub struct ProcessRunOptions<'a> {

@@ -1,0 +1,11 @@
+//! Running a scenario: its file format ([`scenario`]), the single-process runner ([`single`]),
+//! the run as separate processes ([`processes`]) with its [`supervisor`] and [`observer`],
+//! what a run records ([`record`]) and the metrics computed from it ([`metrics`]).
+
+pub mod metrics;
+pub mod observer;
+pub mod processes;
+pub mod record;
+pub mod scenario;
+pub mod single;
+pub mod supervisor;
