@@ -66,9 +66,13 @@ fn print_json(json: bool, value: impl serde::Serialize) -> anyhow::Result<()> {
 /// Run the simulator: true poses of every robot of the scenario (differential drive, walls),
 /// noisy odometry and landmark observations, scripted deposits, and the simulation clock.
 ///
-/// Lockstep (default): step k is published, then the world waits for every robot's command for
-/// step k and advances — as fast as the robots answer. --realtime steps every dt of wall time
-/// with the newest commands instead. Start the field with `--clock WORLD` so it ticks per step.
+/// Lockstep (default): the world waits until every process of the scenario has joined (the
+/// field, each robot's localizer, depositor and follower; with --observed also `pheromone sim`),
+/// then per step publishes sensors and truth, waits for every depositor's acknowledgement, sends
+/// the clock tick, and waits for the field's tick and every follower's command before it
+/// advances — as fast as the processes answer, and with the single-process answer. --realtime
+/// steps every dt of wall time with the newest commands instead (give it to every role too).
+/// Start the field with `--clock WORLD` so it ticks once per step.
 #[derive(Args, Debug)]
 pub struct WorldArgs {
     #[command(flatten)]
