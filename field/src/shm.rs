@@ -215,7 +215,67 @@ pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
 /// readers' borrowed frames then return to the publisher's pool on its next send). Returns how
 /// many dead nodes were cleaned.
 pub fn cleanup_dead_nodes(node: &Node<Svc>) -> u64 {
-    node.try_cleanup_dead_nodes().cleanups
+    node.try_cleanup_dead_nodes().cleanups + remove_leftover_tags(node.config())
+}
+
+/// Removes what dead nodes of `config` left behind (the cleanup of [`cleanup_dead_nodes`], for
+/// a process without a node of its own, e.g. a test after a run); returns how many it removed.
+pub fn cleanup_dead_nodes_of(config: &Config) -> u64 {
+    let mut cleaned = 0;
+    let mut dead = Vec::new();
+    // Listing fails only on an unreadable node directory: then there is nothing to clean.
+    let _ = Node::<Svc>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    });
+    for view in dead {
+        if view.try_remove_stale_resources().is_ok() {
+            cleaned += 1;
+        }
+    }
+    cleaned + remove_leftover_tags(config)
+}
+
+/// iceoryx2 0.10 leaves the port and service tag files of a node killed while it was creating
+/// its node or ports (upstream issue #1967; its cleanup then also looks under the default
+/// prefix), so the node's directory is never removed and the node shows as dead forever. The
+/// regular cleanup has removed what those ports held by then: remove the tags of nodes still
+/// dead, and clean them up again. Returns how many nodes this removed.
+fn remove_leftover_tags(config: &Config) -> u64 {
+    use iceoryx2::node::NodeView;
+    let mut dead = Vec::new();
+    // Listing fails only on an unreadable node directory: then there is nothing to clean.
+    let _ = Node::<Svc>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    });
+    let node_dir = std::path::PathBuf::from(config.global.node_dir().to_string());
+    let suffixes = [
+        config.global.node.port_tag_suffix.to_string(),
+        config.global.node.service_tag_suffix.to_string(),
+    ];
+    let mut removed = 0;
+    for view in dead {
+        let dir = node_dir.join(view.id().value().to_string());
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if suffixes.iter().any(|s| name.ends_with(s.as_str())) {
+                // A tag another cleaner removed first is gone either way.
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+        if view.try_remove_stale_resources().is_ok() {
+            removed += 1;
+        }
+    }
+    removed
 }
 
 /// Publishers of the frame service whose process is alive. Publishers of dead processes are

@@ -16,6 +16,7 @@ use field::deposit::{RejectReason, REJECT_REASONS};
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, OwnedField};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
+use testkit::toml_fuzz;
 
 /// Deposits offered per case: 16 ticks of 256.
 const DEPOSITS_PER_CASE: usize = 4096;
@@ -405,59 +406,10 @@ fn mutated_config_files_are_refused_with_a_reason_never_a_panic() {
     let good = toml::to_string_pretty(&fuzz_field(0.05, (0.0, 0.0))).unwrap();
     assert!(FieldConfig::from_toml(&good).unwrap().validate().is_ok());
     let lines: Vec<String> = good.lines().map(str::to_string).collect();
-    let mutation = (
-        0..lines.len(),
-        prop_oneof![
-            // Replace a value with something wild.
-            prop::sample::select(vec![
-                "nan",
-                "inf",
-                "-inf",
-                "-1",
-                "0",
-                "1e39",
-                "-1e-45",
-                "99999999999",
-                "\"x\"",
-                "[]",
-                "{}",
-                "true",
-                "1.5",
-                "4294967296",
-                "-0.0",
-            ])
-            .prop_map(|v| (0u8, v.to_string())),
-            // Truncate the file at a byte.
-            (0usize..4000).prop_map(|n| (1u8, n.to_string())),
-            // Insert an arbitrary line.
-            "[ -~]{0,40}".prop_map(|s| (2u8, s)),
-        ],
-    );
     let refused = std::cell::Cell::new(0u64);
     let accepted = std::cell::Cell::new(0u64);
-    let result = runner(cases(256) * 4).run(&prop::collection::vec(mutation, 1..4), |muts| {
-        let mut lines = lines.clone();
-        let mut text = None;
-        for (at, (kind, arg)) in muts {
-            let at = at.min(lines.len().saturating_sub(1));
-            match kind {
-                0 => {
-                    if let Some((key, _)) = lines[at].split_once(" = ") {
-                        lines[at] = format!("{key} = {arg}");
-                    }
-                }
-                1 => {
-                    let joined = lines.join("\n");
-                    let mut n = arg.parse::<usize>().unwrap().min(joined.len());
-                    while !joined.is_char_boundary(n) {
-                        n -= 1;
-                    }
-                    text = Some(joined[..n].to_string());
-                }
-                _ => lines.insert(at, arg),
-            }
-        }
-        let text = text.unwrap_or_else(|| lines.join("\n"));
+    let result = runner(cases(256) * 4).run(&toml_fuzz::mutations(lines.len()), |muts| {
+        let text = toml_fuzz::apply(&lines, &muts);
         match FieldConfig::from_toml(&text) {
             Ok(c) => match c.validate() {
                 Ok(()) => accepted.set(accepted.get() + 1),

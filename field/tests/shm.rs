@@ -5,13 +5,7 @@ use std::time::Duration;
 use field::shm::{create_node, DepositPublisher, FieldReader, FieldServer, ShmError};
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
 
-fn unique(tag: &str) -> String {
-    format!(
-        "{tag}-{}-{}",
-        std::process::id(),
-        field::shm::now_ns() % 1_000_000_007
-    )
-}
+use testkit::unique;
 
 fn small_config(evaporation: Evaporation) -> FieldConfig {
     FieldConfig {

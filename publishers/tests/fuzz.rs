@@ -20,6 +20,7 @@ use publishers::roles::follower::{Follower, FollowerConfig, StrategyKind};
 use publishers::roles::localizer::{Ekf, EkfConfig, EkfSlam, EkfSlamConfig};
 use publishers::roles::world::{Landmark, OccupancyMap, Pose2, RobotConfig, World, WorldConfig};
 use publishers::sim::scenario::Scenario;
+use testkit::toml_fuzz;
 
 fn cases(default: u32) -> u32 {
     match std::env::var("PHEROMONE_FUZZ_CASES") {
@@ -425,82 +426,30 @@ fn the_world_survives_any_command() {
 #[test]
 fn mutated_scenarios_are_refused_with_file_and_reason() {
     let text = publishers::sim::scenario::BUILTIN[0].1;
-    let lines: Vec<&str> = text.lines().collect();
+    let lines: Vec<String> = text.lines().map(str::to_string).collect();
     let stats = std::cell::RefCell::new([0u64; 2]);
-    run(
-        cases(256),
-        &prop::collection::vec(
-            (
-                0..lines.len(),
-                prop_oneof![
-                    prop::sample::select(vec![
-                        "nan",
-                        "inf",
-                        "-inf",
-                        "-1",
-                        "0",
-                        "1e39",
-                        "1e308",
-                        "-1e-45",
-                        "99999999999",
-                        "\"x\"",
-                        "[]",
-                        "{}",
-                        "true",
-                        "18446744073709551616",
-                        "[1, 2]",
-                    ])
-                    .prop_map(|v| (0u8, v.to_string())),
-                    (0usize..4000).prop_map(|n| (1u8, n.to_string())),
-                    "[ -~]{0,40}".prop_map(|s| (2u8, s)),
-                ],
-            ),
-            1..4,
-        ),
-        |muts| {
-            let mut lines: Vec<String> = lines.iter().map(|s| s.to_string()).collect();
-            let mut truncated = None;
-            for (at, (kind, arg)) in muts {
-                let at = at.min(lines.len() - 1);
-                match kind {
-                    0 => {
-                        if let Some((key, _)) = lines[at].split_once(" = ") {
-                            lines[at] = format!("{key} = {arg}");
-                        }
-                    }
-                    1 => {
-                        let joined = lines.join("\n");
-                        let mut n = arg.parse::<usize>().unwrap().min(joined.len());
-                        while !joined.is_char_boundary(n) {
-                            n -= 1;
-                        }
-                        truncated = Some(joined[..n].to_string());
-                    }
-                    _ => lines.insert(at, arg),
-                }
+    run(cases(256), &toml_fuzz::mutations(lines.len()), |muts| {
+        let text = toml_fuzz::apply(&lines, &muts);
+        let mut s = stats.borrow_mut();
+        match Scenario::parse(&text, "fuzzed.toml") {
+            Ok(_) => s[0] += 1,
+            Err(e) => {
+                s[1] += 1;
+                let e = e.to_string();
+                prop_assert!(
+                    e.starts_with("fuzzed.toml: "),
+                    "error does not name the file: {}",
+                    e
+                );
+                prop_assert!(
+                    e.len() > "fuzzed.toml: ".len() + 5,
+                    "error without a reason: {}",
+                    e
+                );
             }
-            let text = truncated.unwrap_or_else(|| lines.join("\n"));
-            let mut s = stats.borrow_mut();
-            match Scenario::parse(&text, "fuzzed.toml") {
-                Ok(_) => s[0] += 1,
-                Err(e) => {
-                    s[1] += 1;
-                    let e = e.to_string();
-                    prop_assert!(
-                        e.starts_with("fuzzed.toml: "),
-                        "error does not name the file: {}",
-                        e
-                    );
-                    prop_assert!(
-                        e.len() > "fuzzed.toml: ".len() + 5,
-                        "error without a reason: {}",
-                        e
-                    );
-                }
-            }
-            Ok(())
-        },
-    );
+        }
+        Ok(())
+    });
     let [ok, refused] = stats.into_inner();
     eprintln!("scenario fuzz: {ok} accepted, {refused} refused");
     assert!(ok > 0 && refused > 0);

@@ -293,19 +293,7 @@ proptest! {
     }
 }
 
-fn unique(tag: &str) -> String {
-    use std::sync::atomic::{AtomicU32, Ordering};
-    static N: AtomicU32 = AtomicU32::new(0);
-    let t = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .subsec_nanos();
-    format!(
-        "g{}-{}-{t}-{tag}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
-    )
-}
+use testkit::unique;
 
 /// Six threads, each its own iceoryx2 node, fire capture attempts at one server at once; every
 /// published snapshot shows at most Max-R holders.

@@ -177,15 +177,7 @@ impl Run {
         loop {
             let (alive, _) = self.nodes();
             if alive.is_empty() {
-                Node::<Svc>::list(&self.config, |state| {
-                    if let NodeState::Dead(v) = state {
-                        if v.try_remove_stale_resources().is_ok() {
-                            cleaned += 1;
-                        }
-                    }
-                    CallbackProgression::Continue
-                })
-                .unwrap();
+                cleaned += field::shm::cleanup_dead_nodes_of(&self.config);
             }
             let (alive, dead) = self.nodes();
             if alive.is_empty() && dead.is_empty() {

@@ -4,50 +4,34 @@
 #![allow(dead_code)]
 
 use std::path::PathBuf;
-use std::process::{Command, Output};
+use std::process::Output;
 use std::time::{Duration, Instant};
 
-use nix::sys::signal::Signal;
-use publishers::sim::supervisor::{ChildId, ChildSpec, Supervisor};
+use publishers::sim::supervisor::ChildSpec;
 
 /// Path of the `pheromone` binary under test.
 pub fn bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_pheromone"))
 }
 
-/// A name no other test (or test run) uses.
-pub fn unique(tag: &str) -> String {
-    use std::sync::atomic::{AtomicU32, Ordering};
-    static N: AtomicU32 = AtomicU32::new(0);
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .subsec_nanos();
-    format!(
-        "{tag}-{}-{}-{nanos}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
-    )
-}
+pub use testkit::unique;
 
 /// Runs `pheromone ARGS` to completion.
 pub fn run(args: &[&str]) -> Output {
-    Command::new(bin())
-        .args(args)
-        .output()
-        .expect("run pheromone")
+    testkit::Cli::new(&bin()).args(args).output()
 }
 
-/// A background `pheromone` process under the project's supervisor
-/// (`publishers::sim::supervisor`); stopped (SIGTERM, then SIGKILL) and reaped on drop.
-pub struct Proc {
-    sup: Supervisor,
-    id: ChildId,
-    pub what: String,
+pub use testkit::Proc;
+
+/// `Proc::spawn(args)`: the `pheromone` binary under test, started under the supervisor.
+pub trait SpawnExt {
+    fn spawn(args: &[&str]) -> Self;
+    /// Starts it as `spec` says (working directory, log file).
+    fn spawn_spec(spec: ChildSpec) -> Self;
 }
 
-impl Proc {
-    pub fn spawn(args: &[&str]) -> Self {
+impl SpawnExt for Proc {
+    fn spawn(args: &[&str]) -> Self {
         Self::spawn_spec(ChildSpec::new(
             args.first().copied().unwrap_or("pheromone"),
             None,
@@ -55,49 +39,8 @@ impl Proc {
         ))
     }
 
-    /// Starts `pheromone` as `spec` says (working directory, log file).
-    pub fn spawn_spec(spec: ChildSpec) -> Self {
-        let what = spec.args.join(" ");
-        let mut sup = Supervisor::new(&bin());
-        let id = sup.spawn(spec).expect("spawn pheromone");
-        Self { sup, id, what }
-    }
-
-    pub fn pid(&self) -> u32 {
-        self.sup.pid(self.id)
-    }
-
-    /// Sends SIGINT (as Ctrl-C would).
-    pub fn interrupt(&self) {
-        self.sup.signal(self.id, Signal::SIGINT);
-    }
-
-    /// Kills the process (SIGKILL), as a crash would.
-    pub fn kill(&self) {
-        self.sup.signal(self.id, Signal::SIGKILL);
-    }
-
-    /// Whether the process is still running.
-    pub fn is_running(&mut self) -> bool {
-        self.sup.poll(Duration::ZERO);
-        self.sup.exit_status(self.id).is_none()
-    }
-
-    /// Waits for the process to exit by itself (woken by its exit), at most `timeout`; returns
-    /// its output.
-    pub fn wait_exit(mut self, timeout: Duration) -> Output {
-        assert!(
-            self.sup.wait_exit(self.id, timeout),
-            "'pheromone {}' did not exit within {timeout:?}",
-            self.what
-        );
-        let status = self.sup.exit_status(self.id).expect("exited");
-        let (stdout, stderr) = self.sup.output(self.id);
-        Output {
-            status,
-            stdout: stdout.into_bytes(),
-            stderr: stderr.into_bytes(),
-        }
+    fn spawn_spec(spec: ChildSpec) -> Self {
+        Proc::start(&bin(), spec)
     }
 }
 

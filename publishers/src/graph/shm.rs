@@ -732,15 +732,7 @@ mod tests {
     use super::*;
     use crate::graph::{Graph, GraphConfig, RegionConfig, RegionShape, RegionTable};
 
-    fn unique(tag: &str) -> String {
-        use std::sync::atomic::{AtomicU32, Ordering};
-        static N: AtomicU32 = AtomicU32::new(0);
-        format!(
-            "gt{}-{}-{tag}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::Relaxed)
-        )
-    }
+    use testkit::unique;
 
     fn state() -> GraphState {
         let cfg: GraphConfig = toml::from_str(

@@ -320,8 +320,23 @@ impl Supervisor {
     /// it has exited: the pipe is closed by then).
     fn drain_stdout(&mut self, id: ChildId) {
         let c = &mut self.children[id.0];
-        while let Ok(l) = c.stdout.try_recv() {
-            c.stdout_lines.push(l);
+        if c.exit.is_none() {
+            while let Ok(l) = c.stdout.try_recv() {
+                c.stdout_lines.push(l);
+            }
+            return;
+        }
+        // Exited: the reader thread may still be passing on the last lines; it ends at the
+        // pipe's end (bounded: a grandchild could hold the pipe open).
+        let deadline = Instant::now() + Duration::from_secs(5);
+        loop {
+            match c
+                .stdout
+                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+            {
+                Ok(l) => c.stdout_lines.push(l),
+                Err(_) => break,
+            }
         }
     }
 
