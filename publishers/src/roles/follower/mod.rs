@@ -1,7 +1,7 @@
 //! The follower role: reads a field frame and the robot's pose and decides a motion command.
 //! Pure library code (deterministic for a seed); the iceoryx2 loop lives elsewhere.
 //!
-//! One [`Strategy`] trait, four strategies:
+//! One [`Strategy`] trait, five strategies:
 //! - [`GradientFollower`] (`gradient`) — seed 000: climb ∇P (eqs. 15–16) with a ridge-aware
 //!   look-ahead, speed adaptation from the Table 2 speed table, and trail rejection below an
 //!   absolute level or δ·P0 (MODELS.md M1).
@@ -165,7 +165,7 @@ impl fmt::Display for StrategyKind {
     }
 }
 
-/// A strategy name that is not one of the four.
+/// A strategy name that is not one of the five.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
     "unknown follower strategy '{0}' (expected one of: gradient, antenna, inverse, uniform, route)"
