@@ -124,3 +124,20 @@ impl Filter {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::roles::localizer::test_support::CAPTURED;
+
+    #[test]
+    fn ekf_slam_refuses_landmark_region_m() {
+        let mut scenario = crate::sim::scenario::Scenario::load("trail").unwrap();
+        let id = scenario.robots[0].id;
+        scenario.robots[0].localizer.landmark_region_m = Some(CAPTURED);
+        assert!(crate::roles::Filter::for_robot(&scenario, id, false).is_ok());
+        let e = crate::roles::Filter::for_robot(&scenario, id, true)
+            .err()
+            .expect("EKF-SLAM accepted a landmark region");
+        assert!(e.to_string().contains("landmark_region_m"), "{e}");
+    }
+}
