@@ -1,0 +1,111 @@
+//! Deposits into a field: `DepositPublisher` sends `DepositMsg`s to the field's deposit service
+//! and, before it goes away, waits until the field has taken them.
+
+use std::time::Duration;
+
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::*;
+
+use super::{
+    deposit_service, frame_ready_service, now_ns, retry_attach, service_err, FieldServices,
+    ShmError, Svc,
+};
+use crate::messages::DepositMsg;
+
+/// Publishes deposits to a field.
+///
+/// iceoryx2 drops samples whose publisher disappears before the subscriber first connected to
+/// it, so a publisher that sent deposits waits, when dropped (or on `flush`), until the field has
+/// published two more frames — by then its drain loop has taken everything that was sent.
+pub struct DepositPublisher {
+    names: FieldServices,
+    publisher: Publisher<Svc, DepositMsg, ()>,
+    frame_ready: iceoryx2::port::listener::Listener<Svc>,
+    robot_id: u32,
+    unflushed: bool,
+    /// Longest wait in `Drop` for the field to take what was sent.
+    pub flush_timeout: Duration,
+}
+
+impl DepositPublisher {
+    pub fn attach(node: &Node<Svc>, field: &str, robot_id: u32) -> Result<Self, ShmError> {
+        let names = FieldServices::new(field)?;
+        let publisher = deposit_service(node, &names, None)?
+            .publisher_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .create()
+            .map_err(|e| service_err(&names.deposit, "create publisher", e))?;
+        let frame_ready = frame_ready_service(node, &names, false)?
+            .listener_builder()
+            .create()
+            .map_err(|e| service_err(&names.frame_ready, "create listener", e))?;
+        Ok(Self {
+            names,
+            publisher,
+            frame_ready,
+            robot_id,
+            unflushed: false,
+            flush_timeout: Duration::from_secs(1),
+        })
+    }
+
+    /// Waits (at most `timeout`) until the field has taken every deposit sent so far; returns
+    /// whether it has.
+    pub fn flush(&mut self, timeout: Duration) -> bool {
+        if !self.unflushed {
+            return true;
+        }
+        let deadline = std::time::Instant::now() + timeout;
+        let mut frames = 0u64;
+        while frames < 2 {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            match self.frame_ready.timed_wait(|_| {}, left) {
+                Ok(n) => frames += n,
+                Err(_) => return false,
+            }
+        }
+        self.unflushed = false;
+        true
+    }
+
+    pub fn attach_within(
+        node: &Node<Svc>,
+        field: &str,
+        robot_id: u32,
+        timeout: Duration,
+    ) -> Result<Self, ShmError> {
+        retry_attach(node, timeout, || Self::attach(node, field, robot_id))
+    }
+
+    /// Sends a deposit, stamped with this publisher's robot id and the monotonic clock. Fails
+    /// with `NotDelivered` if no field took it (none running, or its buffer is full).
+    pub fn send(&mut self, mut msg: DepositMsg) -> Result<(), ShmError> {
+        msg.robot_id = self.robot_id;
+        if msg.stamp_ns == 0 {
+            msg.stamp_ns = now_ns();
+        }
+        // Frame events from before this send say nothing about it.
+        let _ = self.frame_ready.try_wait(|_| {});
+        match self.publisher.send_copy(msg) {
+            Ok(0) => Err(ShmError::NotDelivered(format!(
+                "no field is subscribed to '{}' or its deposit buffer is full",
+                self.names.deposit
+            ))),
+            Ok(_) => {
+                self.unflushed = true;
+                Ok(())
+            }
+            Err(e) => Err(ShmError::NotDelivered(format!("{e:?}"))),
+        }
+    }
+}
+
+impl Drop for DepositPublisher {
+    fn drop(&mut self) {
+        let timeout = self.flush_timeout;
+        self.flush(timeout);
+    }
+}

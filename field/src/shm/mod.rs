@@ -1,0 +1,502 @@
+//! The field in iceoryx2 shared memory: the field process (`FieldServer`), readers
+//! (`FieldReader`) and deposit publishers (`DepositPublisher`). This is the crate's only module
+//! with `unsafe`.
+//!
+//! Services for a field called `F` (DESIGN.md):
+//! - `pheromone/F/frame`: publish-subscribe of `[f32]` with a `FrameHeader` user header, one
+//!   publisher (the field), `history_size(1)` so a late joiner gets the current frame at once;
+//! - `pheromone/F/frame-ready`: event, notified after each frame is sent, so readers wait on it;
+//! - `pheromone/F/deposit`: publish-subscribe of `DepositMsg`, many publishers, no overflow: a
+//!   deposit that does not fit in the field's buffer is refused to its sender, never dropped
+//!   silently.
+//!
+//! Shared-memory use of the frame service, in frames: `(max_readers + 1) × (1 buffered + 2
+//! borrowed) + 1 history + 1 loaned` (the `+ 1` reader is the field itself, holding the previous
+//! frame). `frame_pool` computes it; the field refuses to start when /dev/shm lacks it.
+//!
+//! Crashes (README "Reliability"): a process killed with SIGKILL leaves its ports behind;
+//! `cleanup_dead_nodes` (which the field calls once a second, and every process calls when it
+//! creates its node) removes them, which also returns the frames a dead reader held to the
+//! field's pool. Readers tell a dead field with `FieldReader::field_alive`, keep their last frame
+//! and receive the frames of a field restarted under the same name. A `Standby` mirrors a running
+//! field and becomes its publisher when the primary dies.
+//!
+//! Submodules: `server` (`FieldServer`), `reader` (`FieldReader`), `deposit`
+//! (`DepositPublisher`) and `standby` (`Standby`), all re-exported here; this file holds what
+//! they share (errors, names, nodes, service builders, frame pool sizing).
+
+mod deposit;
+mod reader;
+mod server;
+mod standby;
+
+use std::time::Duration;
+
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
+
+use crate::engine::FieldConfig;
+use crate::messages::{DepositMsg, FrameHeader, LAYOUT_VERSION};
+
+pub use deposit::DepositPublisher;
+pub use reader::{FieldReader, Frame};
+pub use server::{FieldServer, TickOutcome};
+pub use standby::{Standby, StandbyEvent, Takeover};
+
+/// iceoryx2 service flavour used everywhere: inter-process.
+pub type Svc = ipc::Service;
+
+/// Frames a reader may hold at once.
+pub const READER_BORROWED_FRAMES: usize = 2;
+/// Deposit publishers' and readers' event id for "frame ready".
+const FRAME_READY: EventId = EventId::new(0);
+
+/// Everything that can go wrong with the field's shared memory, each naming what it was doing.
+#[derive(Debug, thiserror::Error)]
+pub enum ShmError {
+    #[error("invalid name '{name}': {reason}")]
+    Name { name: String, reason: String },
+    #[error("cannot create the iceoryx2 node '{name}': {detail}")]
+    Node { name: String, detail: String },
+    #[error("no field called '{field}' is running (service '{service}' does not exist)")]
+    NoField { field: String, service: String },
+    #[error(
+        "service '{service}' was created with another message layout: this build speaks \
+         {ours} (layout v{LAYOUT_VERSION}); rebuild the client and the field from the same version"
+    )]
+    Layout { service: String, ours: &'static str },
+    #[error("service '{service}': {action} failed: {detail}")]
+    Service {
+        service: String,
+        action: &'static str,
+        detail: String,
+    },
+    #[error("another field process already publishes '{field}'")]
+    AlreadyRunning { field: String },
+    #[error(
+        "the field needs {needed_bytes} bytes of shared memory ({frames} frames of {frame_bytes} \
+         bytes) but /dev/shm has {available_bytes} free; shrink the grid or --max-readers, or \
+         enlarge /dev/shm"
+    )]
+    NoMemory {
+        needed_bytes: u64,
+        available_bytes: u64,
+        frames: u64,
+        frame_bytes: u64,
+    },
+    #[error("the frame received has {got} cells but its header says {expected}")]
+    BadFrame { got: usize, expected: usize },
+    #[error("the restored frame has {got} cells, the configuration needs {expected}")]
+    RestoreMismatch { got: usize, expected: usize },
+    #[error("deposit not delivered: {0}")]
+    NotDelivered(String),
+    #[error("the standby cannot mirror field '{field}': {detail}")]
+    StandbyMismatch { field: String, detail: String },
+}
+
+/// Waits on a listener; a signal that interrupts the wait (any caught one, not only Ctrl-C) is
+/// a spurious wake-up, since callers loop on their own deadline and see Ctrl-C through
+/// `node.wait`.
+pub(crate) fn wait_interruptible(
+    listener: &iceoryx2::port::listener::Listener<Svc>,
+    timeout: Duration,
+    service: &str,
+) -> Result<(), ShmError> {
+    match listener.timed_wait(|_| {}, timeout) {
+        Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => Ok(()),
+        Err(e) => Err(service_err(service, "wait", e)),
+    }
+}
+
+fn service_err(service: &str, action: &'static str, e: impl std::fmt::Debug) -> ShmError {
+    ShmError::Service {
+        service: service.to_string(),
+        action,
+        detail: format!("{e:?}"),
+    }
+}
+
+/// CLOCK_MONOTONIC in nanoseconds: comparable between processes on one host.
+pub fn now_ns() -> u64 {
+    use iceoryx2_bb_posix::clock::{ClockType, Time};
+    Time::now_with_clock(ClockType::Monotonic)
+        .map(|t| t.as_duration().as_nanos() as u64)
+        .unwrap_or(0)
+}
+
+/// Silences iceoryx2's own log output (e.g. "no config file was loaded") unless `verbose`.
+pub fn set_verbose(verbose: bool) {
+    set_log_level(if verbose {
+        LogLevel::Info
+    } else {
+        LogLevel::Fatal
+    });
+}
+
+/// Service names of one field.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FieldServices {
+    pub frame: String,
+    pub frame_ready: String,
+    pub deposit: String,
+}
+
+impl FieldServices {
+    pub fn new(field: &str) -> Result<Self, ShmError> {
+        check_name(field)?;
+        Ok(Self {
+            frame: format!("pheromone/{field}/frame"),
+            frame_ready: format!("pheromone/{field}/frame-ready"),
+            deposit: format!("pheromone/{field}/deposit"),
+        })
+    }
+}
+
+/// Field and robot names: 1–64 characters of `[A-Za-z0-9_-]`.
+pub fn check_name(name: &str) -> Result<(), ShmError> {
+    let ok = !name.is_empty()
+        && name.len() <= 64
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    if ok {
+        Ok(())
+    } else {
+        Err(ShmError::Name {
+            name: name.to_string(),
+            reason: "use 1–64 characters from A–Z, a–z, 0–9, '_' and '-'".into(),
+        })
+    }
+}
+
+pub(crate) fn service_name(name: &str) -> Result<ServiceName, ShmError> {
+    ServiceName::new(name).map_err(|e| ShmError::Name {
+        name: name.to_string(),
+        reason: format!("{e:?}"),
+    })
+}
+
+/// Creates an iceoryx2 node that stops on SIGINT/SIGTERM (`node.wait` then returns an error) and
+/// first removes what dead nodes left behind.
+pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
+    let node_name = NodeName::new(name).map_err(|e| ShmError::Name {
+        name: name.to_string(),
+        reason: format!("{e:?}"),
+    })?;
+    // SIGINT and SIGTERM wait (blocked, pending) until the node exists and iceoryx2's handler
+    // is installed: a process stopped while its node is half-created leaves an entry that no
+    // cleanup can remove. A signal that came meanwhile is handled at the unblock, and the
+    // node's next `wait` reports it.
+    use nix::sys::signal::{pthread_sigmask, SigSet, SigmaskHow, Signal};
+    let mut termination = SigSet::empty();
+    termination.add(Signal::SIGINT);
+    termination.add(Signal::SIGTERM);
+    let mut previous = SigSet::empty();
+    let blocked = pthread_sigmask(
+        SigmaskHow::SIG_BLOCK,
+        Some(&termination),
+        Some(&mut previous),
+    )
+    .is_ok();
+    let node = NodeBuilder::new()
+        .name(&node_name)
+        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+        .create::<Svc>()
+        .map_err(|e| ShmError::Node {
+            name: name.to_string(),
+            detail: format!("{e:?}"),
+        });
+    // Installs iceoryx2's signal handler (installed on first use). A wait that fails took a
+    // termination request an earlier node of this process had not yet seen: raised again below.
+    let seen_before = node.as_ref().is_ok_and(|n| n.wait(Duration::ZERO).is_err());
+    if blocked {
+        // Restoring the mask the thread had cannot fail with a valid `how`.
+        let _ = pthread_sigmask(SigmaskHow::SIG_SETMASK, Some(&previous), None);
+    }
+    if seen_before {
+        // Raising a signal the process handles cannot fail.
+        let _ = nix::sys::signal::raise(Signal::SIGTERM);
+    }
+    let node = node?;
+    node.try_cleanup_dead_nodes();
+    Ok(node)
+}
+
+/// Removes the ports and services that processes killed without cleaning up left behind (their
+/// readers' borrowed frames then return to the publisher's pool on its next send). Returns how
+/// many dead nodes were cleaned.
+pub fn cleanup_dead_nodes(node: &Node<Svc>) -> u64 {
+    node.try_cleanup_dead_nodes().cleanups + remove_leftover_tags(node.config())
+}
+
+/// Removes what dead nodes of `config` left behind (the cleanup of [`cleanup_dead_nodes`], for
+/// a process without a node of its own, e.g. a test after a run); returns how many it removed.
+pub fn cleanup_dead_nodes_of(config: &Config) -> u64 {
+    let mut cleaned = 0;
+    let mut dead = Vec::new();
+    // Listing fails only on an unreadable node directory: then there is nothing to clean.
+    let _ = Node::<Svc>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    });
+    for view in dead {
+        if view.try_remove_stale_resources().is_ok() {
+            cleaned += 1;
+        }
+    }
+    cleaned + remove_leftover_tags(config)
+}
+
+/// iceoryx2 0.10 leaves the port and service tag files of a node killed while it was creating
+/// its node or ports (upstream issue #1967; its cleanup then also looks under the default
+/// prefix), so the node's directory is never removed and the node shows as dead forever. The
+/// regular cleanup has removed what those ports held by then: remove the tags of nodes still
+/// dead, and clean them up again. Returns how many nodes this removed.
+fn remove_leftover_tags(config: &Config) -> u64 {
+    use iceoryx2::node::NodeView;
+    let mut dead = Vec::new();
+    // Listing fails only on an unreadable node directory: then there is nothing to clean.
+    let _ = Node::<Svc>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    });
+    let node_dir = std::path::PathBuf::from(config.global.node_dir().to_string());
+    let suffixes = [
+        config.global.node.port_tag_suffix.to_string(),
+        config.global.node.service_tag_suffix.to_string(),
+    ];
+    let mut removed = 0;
+    for view in dead {
+        let dir = node_dir.join(view.id().value().to_string());
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if suffixes.iter().any(|s| name.ends_with(s.as_str())) {
+                // A tag another cleaner removed first is gone either way.
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+        if view.try_remove_stale_resources().is_ok() {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// Ports attached to a field's services, as the services record them (ports of processes that
+/// died count until `cleanup_dead_nodes` removed them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FieldStatus {
+    /// Frame publishers (1 while a field runs).
+    pub publishers: usize,
+    /// Frame subscribers: readers, a standby, and the field's own subscription.
+    pub subscribers: usize,
+    /// Deposit publishers.
+    pub depositors: usize,
+    /// Deposit subscribers: the field, and a standby.
+    pub deposit_subscribers: usize,
+}
+
+/// Watches the ports attached to a field's services. Opening a service cleans up dead nodes
+/// that use it; watching does not, so the counts show what the field itself has cleaned.
+pub struct FieldWatch {
+    frames: FrameFactory,
+    deposits: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, DepositMsg, ()>,
+}
+
+impl FieldWatch {
+    /// Opens field `field`'s services; `ShmError::NoField` if they do not exist.
+    pub fn open(node: &Node<Svc>, field: &str) -> Result<Self, ShmError> {
+        let names = FieldServices::new(field)?;
+        Ok(Self {
+            frames: frame_service(node, &names, None)?,
+            deposits: deposit_service(node, &names, None)?,
+        })
+    }
+
+    pub fn status(&self) -> FieldStatus {
+        let (f, d) = (self.frames.dynamic_config(), self.deposits.dynamic_config());
+        FieldStatus {
+            publishers: f.number_of_publishers(),
+            subscribers: f.number_of_subscribers(),
+            depositors: d.number_of_publishers(),
+            deposit_subscribers: d.number_of_subscribers(),
+        }
+    }
+}
+
+/// Shared memory the frame service needs, in frames and bytes.
+pub fn frame_pool(config: &FieldConfig) -> (u64, u64) {
+    let subscribers = config.max_readers as u64 + 1;
+    let frames = subscribers * (1 + READER_BORROWED_FRAMES as u64) + 1 + 1;
+    (frames, frames * config.frame_bytes())
+}
+
+/// Free bytes in /dev/shm, if it can be read.
+pub fn shm_available_bytes() -> Option<u64> {
+    let s = nix::sys::statvfs::statvfs("/dev/shm").ok()?;
+    Some(s.blocks_available() as u64 * s.fragment_size() as u64)
+}
+
+type FramePublisher = Publisher<Svc, [f32], FrameHeader>;
+type FrameSubscriber = Subscriber<Svc, [f32], FrameHeader>;
+type FrameFactory =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [f32], FrameHeader>;
+type DepositSubscriber = Subscriber<Svc, DepositMsg, ()>;
+type EventFactory = iceoryx2::service::port_factory::event::PortFactory<Svc>;
+/// A frame received from shared memory.
+pub type FrameSample = Sample<Svc, [f32], FrameHeader>;
+
+fn frame_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+    config: Option<&FieldConfig>,
+) -> Result<FrameFactory, ShmError> {
+    let name = service_name(&names.frame)?;
+    let builder = node
+        .service_builder(&name)
+        .publish_subscribe::<[f32]>()
+        .user_header::<FrameHeader>();
+    match config {
+        Some(c) => builder
+            .history_size(1)
+            .subscriber_max_buffer_size(1)
+            .subscriber_max_borrowed_samples(READER_BORROWED_FRAMES)
+            .max_subscribers(c.max_readers + 1)
+            .max_publishers(2)
+            // Every reader's process, the field, a standby and a spare (iceoryx2's default
+            // admits 20 nodes whatever the readers).
+            .max_nodes(c.max_readers + 4)
+            .open_or_create()
+            .map_err(|e| match e {
+                iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                    iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError::IncompatibleTypes,
+                ) => ShmError::Layout {
+                    service: names.frame.clone(),
+                    ours: "pheromone::FrameHeader/v1 + [f32]",
+                },
+                e => service_err(&names.frame, "open or create", e),
+            }),
+        None => builder.open().map_err(|e| {
+            use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as E;
+            match e {
+                E::DoesNotExist => ShmError::NoField {
+                    field: names.frame.split('/').nth(1).unwrap_or_default().to_string(),
+                    service: names.frame.clone(),
+                },
+                E::IncompatibleTypes => ShmError::Layout {
+                    service: names.frame.clone(),
+                    ours: "pheromone::FrameHeader/v1 + [f32]",
+                },
+                e => service_err(&names.frame, "open", e),
+            }
+        }),
+    }
+}
+
+fn frame_ready_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+    create: bool,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ShmError> {
+    let name = service_name(&names.frame_ready)?;
+    let b = node.service_builder(&name).event();
+    if create {
+        // Listeners: every reader and every deposit publisher (which waits for frames to flush).
+        b.max_listeners(1024)
+            .max_notifiers(4)
+            .max_nodes(1028)
+            .open_or_create()
+            .map_err(|e| service_err(&names.frame_ready, "open or create", e))
+    } else {
+        b.open()
+            .map_err(|e| service_err(&names.frame_ready, "open", e))
+    }
+}
+
+fn deposit_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+    config: Option<&FieldConfig>,
+) -> Result<
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, DepositMsg, ()>,
+    ShmError,
+> {
+    let name = service_name(&names.deposit)?;
+    let builder = node
+        .service_builder(&name)
+        .publish_subscribe::<DepositMsg>();
+    match config {
+        Some(c) => builder
+            .max_publishers(c.max_depositors)
+            .max_subscribers(2)
+            .max_nodes(c.max_depositors + 2)
+            .subscriber_max_buffer_size(c.deposit_buffer)
+            .history_size(0)
+            .enable_safe_overflow(false)
+            .open_or_create()
+            .map_err(|e| service_err(&names.deposit, "open or create", e)),
+        None => builder.open().map_err(|e| {
+            use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as E;
+            match e {
+                E::DoesNotExist => ShmError::NoField {
+                    field: names
+                        .deposit
+                        .split('/')
+                        .nth(1)
+                        .unwrap_or_default()
+                        .to_string(),
+                    service: names.deposit.clone(),
+                },
+                E::IncompatibleTypes => ShmError::Layout {
+                    service: names.deposit.clone(),
+                    ours: "pheromone::DepositMsg/v1",
+                },
+                e => service_err(&names.deposit, "open", e),
+            }
+        }),
+    }
+}
+
+fn check_shm_space(config: &FieldConfig) -> Result<(), ShmError> {
+    let (frames, needed) = frame_pool(config);
+    if let Some(available) = shm_available_bytes() {
+        if needed > available {
+            return Err(ShmError::NoMemory {
+                needed_bytes: needed,
+                available_bytes: available,
+                frames,
+                frame_bytes: config.frame_bytes(),
+            });
+        }
+    }
+    Ok(())
+}
+
+fn retry_attach<T>(
+    node: &Node<Svc>,
+    timeout: Duration,
+    mut attach: impl FnMut() -> Result<T, ShmError>,
+) -> Result<T, ShmError> {
+    let deadline = std::time::Instant::now() + timeout;
+    loop {
+        match attach() {
+            Ok(t) => return Ok(t),
+            Err(e @ ShmError::NoField { .. }) | Err(e @ ShmError::Service { .. }) => {
+                let left = deadline.saturating_duration_since(std::time::Instant::now());
+                if left.is_zero() || node.wait(left.min(Duration::from_millis(20))).is_err() {
+                    return Err(e);
+                }
+            }
+            Err(e) => return Err(e),
+        }
+    }
+}

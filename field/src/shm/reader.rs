@@ -1,0 +1,168 @@
+//! Read access to a field: `FieldReader` lends the newest frame (`Frame`) without copying it
+//! and tells whether a live field process still publishes it.
+
+use std::time::Duration;
+
+use iceoryx2::prelude::*;
+
+use super::{
+    frame_ready_service, frame_service, retry_attach, service_err, wait_interruptible,
+    FieldServices, FrameFactory, FrameSample, FrameSubscriber, ShmError, Svc,
+};
+use crate::messages::FrameHeader;
+use crate::sample::FrameView;
+
+/// Publishers of the frame service whose process is alive. Publishers of dead processes are
+/// cleaned up on the way (so a restarted or standby field can take their place).
+fn live_frame_publishers(factory: &FrameFactory, config: &Config) -> usize {
+    use iceoryx2::node::NodeView;
+    let mut ids = Vec::new();
+    factory.dynamic_config().list_publishers(|p| {
+        ids.push(p.node_id);
+        CallbackProgression::Continue
+    });
+    if ids.is_empty() {
+        return 0;
+    }
+    let mut dead = 0;
+    let _ = Node::<Svc>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            if ids.contains(view.id()) {
+                dead += 1;
+                let _ = view.try_remove_stale_resources();
+            }
+        }
+        CallbackProgression::Continue
+    });
+    ids.len().saturating_sub(dead)
+}
+
+/// A frame lent by a `FieldReader`: the header and a sampling view of the cells.
+pub struct Frame<'a> {
+    pub header: &'a FrameHeader,
+    pub view: FrameView<'a>,
+}
+
+/// A process's read access to a field: lends the newest frame without copying it.
+///
+/// When the field dies the reader keeps its last frame (`frame()` still lends it) and
+/// `field_alive` turns false; a field restarted under the same name (or a standby taking over)
+/// publishes to the same services, and the reader receives its frames without attaching again.
+pub struct FieldReader {
+    names: FieldServices,
+    service: FrameFactory,
+    node_config: Config,
+    subscriber: FrameSubscriber,
+    listener: iceoryx2::port::listener::Listener<Svc>,
+    latest: Option<FrameSample>,
+}
+
+impl FieldReader {
+    /// Attaches to the running field `field`; fails with `ShmError::NoField` if there is none.
+    pub fn attach(node: &Node<Svc>, field: &str) -> Result<Self, ShmError> {
+        let names = FieldServices::new(field)?;
+        let service = frame_service(node, &names, None)?;
+        let subscriber = service
+            .subscriber_builder()
+            .buffer_size(1)
+            .create()
+            .map_err(|e| service_err(&names.frame, "create subscriber", e))?;
+        let listener = frame_ready_service(node, &names, false)?
+            .listener_builder()
+            .create()
+            .map_err(|e| service_err(&names.frame_ready, "create listener", e))?;
+        let mut reader = Self {
+            names,
+            service,
+            node_config: node.config().clone(),
+            subscriber,
+            listener,
+            latest: None,
+        };
+        reader.update()?;
+        Ok(reader)
+    }
+
+    /// Attaches, retrying while the field does not exist yet, for at most `timeout`. Waits with
+    /// `node.wait` between tries (returns early on a termination request).
+    pub fn attach_within(
+        node: &Node<Svc>,
+        field: &str,
+        timeout: Duration,
+    ) -> Result<Self, ShmError> {
+        retry_attach(node, timeout, || Self::attach(node, field))
+    }
+
+    /// Whether a live field process publishes this field. False when no field is attached or
+    /// when the field's process died (its leftover ports are then removed, so a restarted field
+    /// can take over). Costs a scan of the host's iceoryx2 nodes: call it when frames stop
+    /// coming, not per frame.
+    pub fn field_alive(&self) -> bool {
+        live_frame_publishers(&self.service, &self.node_config) > 0
+    }
+
+    /// Takes the newest frame that has arrived (if any); returns whether it is new.
+    pub fn update(&mut self) -> Result<bool, ShmError> {
+        let mut fresh = false;
+        loop {
+            match self.subscriber.receive() {
+                Ok(Some(s)) => {
+                    if s.payload().len() != s.user_header().len() {
+                        return Err(ShmError::BadFrame {
+                            got: s.payload().len(),
+                            expected: s.user_header().len(),
+                        });
+                    }
+                    self.latest = Some(s);
+                    fresh = true;
+                }
+                Ok(None) => return Ok(fresh),
+                Err(e) => return Err(service_err(&self.names.frame, "receive", e)),
+            }
+        }
+    }
+
+    /// Waits up to `timeout` for a frame newer than the one held; returns whether one came.
+    pub fn wait_frame(&mut self, timeout: Duration) -> Result<bool, ShmError> {
+        if self.update()? {
+            return Ok(true);
+        }
+        wait_interruptible(&self.listener, timeout, &self.names.frame_ready)?;
+        self.update()
+    }
+
+    /// Waits (up to `timeout`) until a frame satisfies `pred`; returns it, or `None` on timeout.
+    pub fn wait_until(
+        &mut self,
+        timeout: Duration,
+        mut pred: impl FnMut(&Frame<'_>) -> bool,
+    ) -> Result<Option<Frame<'_>>, ShmError> {
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            if self.frame().as_ref().is_some_and(&mut pred) {
+                return Ok(self.frame());
+            }
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            if left.is_zero() {
+                return Ok(None);
+            }
+            self.wait_frame(left.min(Duration::from_millis(100)))?;
+        }
+    }
+
+    /// The newest frame held, if any.
+    pub fn frame(&self) -> Option<Frame<'_>> {
+        self.latest.as_ref().map(|s| {
+            let h = s.user_header();
+            Frame {
+                header: h,
+                view: FrameView::new(h.geometry(), h.channels as usize, s.payload()),
+            }
+        })
+    }
+
+    /// The raw sample (e.g. to keep holding it past the next update).
+    pub fn sample(&self) -> Option<&FrameSample> {
+        self.latest.as_ref()
+    }
+}

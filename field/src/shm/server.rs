@@ -1,0 +1,303 @@
+//! The field process: `FieldServer` creates the field's services, publishes the first frame
+//! and then one frame per `tick`, computed straight into a loaned shared-memory sample.
+
+use iceoryx2::prelude::*;
+
+use super::{
+    check_shm_space, deposit_service, frame_ready_service, frame_service, now_ns, service_err,
+    DepositSubscriber, EventFactory, FieldServices, FrameFactory, FramePublisher, FrameSample,
+    FrameSubscriber, ShmError, Svc, FRAME_READY,
+};
+use crate::engine::{FieldConfig, Stepper, TickReport};
+use crate::messages::{DepositMsg, FrameHeader};
+use crate::sample::FrameView;
+
+/// What one `FieldServer::tick` did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TickOutcome {
+    pub report: TickReport,
+    pub sequence: u64,
+    pub compute_ns: u64,
+    /// Deposits refused this tick (validation), counted by reason in the header.
+    pub rejected: u64,
+}
+
+/// The field process: the only writer of the grid.
+pub struct FieldServer {
+    field: String,
+    names: FieldServices,
+    stepper: Stepper,
+    publisher: FramePublisher,
+    /// The field's own subscription: holds the previous frame, read by the next tick.
+    own: FrameSubscriber,
+    previous: Option<FrameSample>,
+    deposits: DepositSubscriber,
+    notifier: iceoryx2::port::notifier::Notifier<Svc>,
+}
+
+/// The ports of a running field.
+pub(super) struct Ports {
+    pub(super) publisher: FramePublisher,
+    pub(super) own: FrameSubscriber,
+    pub(super) deposits: DepositSubscriber,
+    pub(super) notifier: iceoryx2::port::notifier::Notifier<Svc>,
+}
+
+pub(super) fn create_publisher(
+    names: &FieldServices,
+    config: &FieldConfig,
+    frame_service: &FrameFactory,
+    ready_service: &EventFactory,
+) -> Result<(FramePublisher, iceoryx2::port::notifier::Notifier<Svc>), ShmError> {
+    let publisher = frame_service
+        .publisher_builder()
+        .initial_max_slice_len(config.frame_len())
+        .allocation_strategy(AllocationStrategy::Static)
+        .max_loaned_samples(1)
+        .create()
+        .map_err(|e| service_err(&names.frame, "create publisher", e))?;
+    let notifier = ready_service
+        .notifier_builder()
+        .default_event_id(FRAME_READY)
+        .create()
+        .map_err(|e| service_err(&names.frame_ready, "create notifier", e))?;
+    Ok((publisher, notifier))
+}
+
+/// How a field's first frame is made.
+pub(super) enum FirstFrame<'a> {
+    Zeros,
+    /// Publish these cells as they are, resuming the header's counters (restore).
+    Restore(FrameHeader, &'a [f32]),
+    /// Compute the next frame from these cells with the pending deposits (takeover).
+    Continue(FrameHeader, &'a [f32]),
+}
+
+impl FieldServer {
+    /// Creates the services and publishes the first frame (zeros, or `restore` = header + cells).
+    pub fn start(
+        node: &Node<Svc>,
+        field: &str,
+        config: FieldConfig,
+        restore: Option<(FrameHeader, &[f32])>,
+    ) -> Result<Self, ShmError> {
+        let first = match restore {
+            Some((h, cells)) => FirstFrame::Restore(h, cells),
+            None => FirstFrame::Zeros,
+        };
+        Self::start_inner(node, field, config, first)
+    }
+
+    fn start_inner(
+        node: &Node<Svc>,
+        field: &str,
+        config: FieldConfig,
+        first_frame: FirstFrame<'_>,
+    ) -> Result<Self, ShmError> {
+        let names = FieldServices::new(field)?;
+        let stepper = Stepper::new(config).map_err(|e| ShmError::Service {
+            service: names.frame.clone(),
+            action: "configure",
+            detail: e.to_string(),
+        })?;
+        let config = stepper.config().clone();
+        check_shm_space(&config)?;
+        let frame_service = frame_service(node, &names, Some(&config))?;
+        if frame_service.dynamic_config().number_of_publishers() > 0 {
+            return Err(ShmError::AlreadyRunning {
+                field: field.into(),
+            });
+        }
+        let ready_service = frame_ready_service(node, &names, true)?;
+        let own = frame_service
+            .subscriber_builder()
+            .buffer_size(1)
+            .create()
+            .map_err(|e| service_err(&names.frame, "create own subscriber", e))?;
+        let deposits = deposit_service(node, &names, Some(&config))?
+            .subscriber_builder()
+            .buffer_size(config.deposit_buffer)
+            .create()
+            .map_err(|e| service_err(&names.deposit, "create subscriber", e))?;
+        let (publisher, notifier) =
+            create_publisher(&names, &config, &frame_service, &ready_service)?;
+        Self::launch(
+            field,
+            names,
+            stepper,
+            Ports {
+                publisher,
+                own,
+                deposits,
+                notifier,
+            },
+            first_frame,
+            &[],
+        )
+    }
+
+    /// Publishes the first frame with ports created beforehand (by `start_inner`, or by a standby
+    /// long before it takes over).
+    pub(super) fn launch(
+        field: &str,
+        names: FieldServices,
+        mut stepper: Stepper,
+        ports: Ports,
+        first_frame: FirstFrame<'_>,
+        pending: &[DepositMsg],
+    ) -> Result<Self, ShmError> {
+        let Ports {
+            publisher,
+            own,
+            deposits,
+            notifier,
+        } = ports;
+        let config = stepper.config().clone();
+        // First frame: zeros, the restored cells, or the next frame computed from them.
+        let len = config.frame_len();
+        let mut first = publisher
+            .loan_slice(len)
+            .map_err(|e| service_err(&names.frame, "loan first frame", e))?;
+        if let FirstFrame::Restore(_, cells) | FirstFrame::Continue(_, cells) = &first_frame {
+            if cells.len() != len {
+                return Err(ShmError::RestoreMismatch {
+                    got: cells.len(),
+                    expected: len,
+                });
+            }
+        }
+        match first_frame {
+            FirstFrame::Zeros => {
+                *first.user_header_mut() = stepper.header(now_ns(), 0, &TickReport::default());
+            }
+            FirstFrame::Restore(header, cells) => {
+                first.payload_mut().copy_from_slice(cells);
+                stepper.resume_from(&header);
+                *first.user_header_mut() = stepper.header(now_ns(), 0, &TickReport::default());
+            }
+            FirstFrame::Continue(header, cells) => {
+                stepper.resume_from(&header);
+                for d in pending {
+                    let _ = stepper.offer(d);
+                }
+                let started = now_ns();
+                let report = stepper.step(cells, first.payload_mut());
+                let done = now_ns();
+                *first.user_header_mut() =
+                    stepper.header(done, done.saturating_sub(started), &report);
+            }
+        }
+        first
+            .send()
+            .map_err(|e| service_err(&names.frame, "send", e))?;
+        let _ = notifier.notify();
+        let previous = own
+            .receive()
+            .map_err(|e| service_err(&names.frame, "receive own frame", e))?;
+        Ok(Self {
+            field: field.into(),
+            names,
+            stepper,
+            publisher,
+            own,
+            previous,
+            deposits,
+            notifier,
+        })
+    }
+
+    pub fn field(&self) -> &str {
+        &self.field
+    }
+
+    pub fn config(&self) -> &FieldConfig {
+        self.stepper.config()
+    }
+
+    pub fn stepper(&self) -> &Stepper {
+        &self.stepper
+    }
+
+    /// Connects readers that attached since the last frame and hands them the current frame
+    /// (the history). Call it while idle (e.g. a lockstep field waiting for its clock), so a late
+    /// reader does not wait for the next tick.
+    pub fn serve_new_readers(&self) -> Result<(), ShmError> {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        self.publisher
+            .update_connections()
+            .map_err(|e| service_err(&self.names.frame, "update connections", e))
+    }
+
+    /// The last published frame.
+    pub fn latest(&self) -> Option<(&FrameHeader, FrameView<'_>)> {
+        self.previous.as_ref().map(|s| {
+            let c = self.stepper.config();
+            (
+                s.user_header(),
+                FrameView::new(c.geometry(), c.channels.len(), s.payload()),
+            )
+        })
+    }
+
+    /// Drains the deposit queue (validating each), computes the next frame from the previous one
+    /// straight into a loaned sample, publishes it and wakes the readers.
+    pub fn tick(&mut self) -> Result<TickOutcome, ShmError> {
+        let mut rejected = 0;
+        loop {
+            match self.deposits.receive() {
+                Ok(Some(sample)) => {
+                    if self.stepper.offer(sample.payload()).is_err() {
+                        rejected += 1;
+                    }
+                }
+                Ok(None) => break,
+                Err(e) => return Err(service_err(&self.names.deposit, "receive", e)),
+            }
+        }
+        let started = now_ns();
+        let len = self.stepper.config().frame_len();
+        let previous = match self.previous.take() {
+            Some(p) => p,
+            None => {
+                return Err(service_err(
+                    &self.names.frame,
+                    "tick",
+                    "the previous frame was lost",
+                ))
+            }
+        };
+        if previous.payload().len() != len {
+            return Err(ShmError::BadFrame {
+                got: previous.payload().len(),
+                expected: len,
+            });
+        }
+        let uninit = self
+            .publisher
+            .loan_slice_uninit(len)
+            .map_err(|e| service_err(&self.names.frame, "loan frame", e))?;
+        // SAFETY: the payload lies in an iceoryx2 shared-memory segment: memory the OS handed out
+        // zero-filled and that only ever held `f32` frames of this service, so every element is
+        // initialized bytes, and every bit pattern is a valid `f32`. `Stepper::step` then
+        // overwrites every element before the sample is sent.
+        let mut next = unsafe { uninit.assume_init() };
+        let report = self.stepper.step(previous.payload(), next.payload_mut());
+        drop(previous);
+        let done = now_ns();
+        let compute_ns = done.saturating_sub(started);
+        *next.user_header_mut() = self.stepper.header(done, compute_ns, &report);
+        next.send()
+            .map_err(|e| service_err(&self.names.frame, "send", e))?;
+        let _ = self.notifier.notify();
+        self.previous = self
+            .own
+            .receive()
+            .map_err(|e| service_err(&self.names.frame, "receive own frame", e))?;
+        Ok(TickOutcome {
+            report,
+            sequence: self.stepper.sequence,
+            compute_ns,
+            rejected,
+        })
+    }
+}
