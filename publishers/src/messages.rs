@@ -1,8 +1,8 @@
 //! Messages between the robot roles: fixed-size `#[repr(C)]`, `ZeroCopySend`, each with a robot id
 //! and a monotonic stamp (ns, CLOCK_MONOTONIC). Type names carry the layout version.
 //!
-//! Services (DESIGN.md): `pheromone/<robot>/pose`, `pheromone/<robot>/cmd`,
-//! `pheromone/<robot>/status`, `sim/<robot>/sensors`, `sim/<robot>/truth`.
+//! Services (robot `r<ID>` of world `W`): `pheromone/W/r<ID>/pose`, `pheromone/W/r<ID>/cmd`,
+//! `pheromone/W/r<ID>/status`, `sim/W/r<ID>/sensors`, `sim/W/r<ID>/truth` (`roles::RobotServices`).
 
 use iceoryx2::prelude::ZeroCopySend;
 

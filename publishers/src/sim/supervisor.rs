@@ -329,14 +329,11 @@ impl Supervisor {
         // Exited: the reader thread may still be passing on the last lines; it ends at the
         // pipe's end (bounded: a grandchild could hold the pipe open).
         let deadline = Instant::now() + Duration::from_secs(5);
-        loop {
-            match c
-                .stdout
-                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-            {
-                Ok(l) => c.stdout_lines.push(l),
-                Err(_) => break,
-            }
+        while let Ok(l) = c
+            .stdout
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+        {
+            c.stdout_lines.push(l);
         }
     }
 

@@ -6,7 +6,7 @@ use field::{FrameView, Pose2};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    check_nonneg, check_positive, invalid, wrap_pi, Decision, FollowerConfigError, Strategy,
+    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError, Strategy,
     StrategyKind,
 };
 use crate::messages::FollowerState;
@@ -342,7 +342,7 @@ impl GradientFollower {
             let sg = self.ray_score(frame, pose, phi_g);
             lo = lo.min(sg);
             hi = hi.max(sg);
-            let in_fan = wrap_pi(phi_g - th).abs() <= half + 1e-9;
+            let in_fan = wrap_angle(phi_g - th).abs() <= half + 1e-9;
             let here = frame.value(self.channel, pose.x_m, pose.y_m);
             let ahead_is_lower = best_score < here - self.config.turn_back_margin * here.abs();
             if sg > best_score && (in_fan || ahead_is_lower) {
@@ -378,7 +378,7 @@ impl Strategy for GradientFollower {
         let c = &self.config;
         let err = self
             .desired_heading(frame, pose)
-            .map_or(0.0, |phi| wrap_pi(phi - pose.theta_rad as f64));
+            .map_or(0.0, |phi| wrap_angle(phi - pose.theta_rad as f64));
         let omega = (c.heading_gain_per_s * err).clamp(-c.omega_max_radps, c.omega_max_radps);
         let v_base = match self.state {
             FollowerState::Following => {

@@ -27,7 +27,6 @@ mod sector;
 #[cfg(test)]
 mod test_support;
 
-use std::f64::consts::PI;
 use std::fmt;
 use std::str::FromStr;
 
@@ -81,15 +80,8 @@ pub trait Strategy: Send {
     fn reset(&mut self) {}
 }
 
-/// Angle wrapped into (−π, π].
-pub fn wrap_pi(a: f64) -> f64 {
-    let w = (a + PI).rem_euclid(2.0 * PI) - PI;
-    if w <= -PI {
-        w + 2.0 * PI
-    } else {
-        w
-    }
-}
+/// Angle wrapped into (−π, π]: the world's, one function for the whole crate.
+pub use crate::roles::world::wrap_angle;
 
 /// A follower setting that is out of range.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -387,6 +379,7 @@ impl Follower {
 mod tests {
     use super::*;
     use crate::roles::follower::test_support::half_field;
+    use std::f64::consts::PI;
 
     // ---- wrapper ----
 
@@ -516,7 +509,7 @@ mod tests {
     #[test]
     fn wrap_pi_stays_in_range() {
         for a in [-10.0, -PI, -3.0, 0.0, 3.0, PI, 7.0, 100.0] {
-            let w = wrap_pi(a);
+            let w = wrap_angle(a);
             assert!(w > -PI - 1e-12 && w <= PI + 1e-12, "{a} → {w}");
             assert!(
                 ((a - w) / (2.0 * PI)).fract().abs() < 1e-9

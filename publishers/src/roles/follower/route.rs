@@ -5,7 +5,7 @@ use field::{FrameView, Pose2};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    check_nonneg, check_positive, invalid, wrap_pi, Decision, FollowerConfigError, Strategy,
+    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError, Strategy,
     StrategyKind,
 };
 use crate::messages::FollowerState;
@@ -112,7 +112,7 @@ impl Strategy for RouteFollower {
         let Some(w) = self.config.waypoints.get(self.next) else {
             return Decision::stop(FollowerState::Following, level);
         };
-        let err = wrap_pi((w[1] - y).atan2(w[0] - x) - pose.theta_rad as f64);
+        let err = wrap_angle((w[1] - y).atan2(w[0] - x) - pose.theta_rad as f64);
         let c = &self.config;
         Decision {
             v_mps: c.v_mps * err.cos().max(0.0),

@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    check_nonneg, check_positive, invalid, wrap_pi, Decision, FollowerConfigError, Strategy,
+    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError, Strategy,
     StrategyKind,
 };
 use crate::messages::FollowerState;
@@ -301,7 +301,7 @@ impl SectorSteer {
             f64::INFINITY
         };
         let c = &self.config;
-        let err = wrap_pi(self.goal_heading_rad.unwrap_or(theta) - theta);
+        let err = wrap_angle(self.goal_heading_rad.unwrap_or(theta) - theta);
         Decision {
             v_mps: c.v_mps,
             omega_radps: (err / dt).clamp(-c.omega_max_radps, c.omega_max_radps),
@@ -527,7 +527,7 @@ mod tests {
             r.advance(&d, 0.1);
             if k % 10 == 9 {
                 assert!(
-                    wrap_pi(goal.unwrap() - r.th).abs() < 1e-5,
+                    wrap_angle(goal.unwrap() - r.th).abs() < 1e-5,
                     "goal not reached by step {k}"
                 );
             }

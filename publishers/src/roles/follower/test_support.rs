@@ -3,7 +3,7 @@
 
 use field::{FrameView, GridGeometry, Pose2};
 
-use super::{wrap_pi, Decision, Strategy};
+use super::{wrap_angle, Decision, Strategy};
 
 /// A one-channel synthetic field sampled at cell centres.
 pub(super) fn synth(
@@ -47,7 +47,7 @@ impl Robot {
         let mid = self.th + 0.5 * d.omega_radps * dt;
         self.x += d.v_mps * mid.cos() * dt;
         self.y += d.v_mps * mid.sin() * dt;
-        self.th = wrap_pi(self.th + d.omega_radps * dt);
+        self.th = wrap_angle(self.th + d.omega_radps * dt);
     }
 }
 
@@ -76,7 +76,7 @@ pub(super) fn swept_rad(trace: &[(Robot, Decision)], centre: (f64, f64)) -> f64 
     let polar = |r: &Robot| (r.y - centre.1).atan2(r.x - centre.0);
     trace
         .windows(2)
-        .map(|w| wrap_pi(polar(&w[1].0) - polar(&w[0].0)))
+        .map(|w| wrap_angle(polar(&w[1].0) - polar(&w[0].0)))
         .sum()
 }
 
