@@ -9,6 +9,7 @@
 //! [`skeleton`] graph extraction from an occupancy grid, [`shm`] the one-writer iceoryx2 service
 //! and [`sim`] the robot agents and a single-process simulation of the paper's corridor.
 
+pub mod compare;
 pub mod conflict;
 pub mod process;
 pub mod region;

@@ -7,10 +7,11 @@ use std::time::{Duration, Instant};
 
 use clap::Args;
 use field::shm::create_node;
+use publishers::graph::compare::{compare, comparison_text};
 use publishers::graph::process::{run_graph_robot, run_graph_writer, WriterOptions};
 use publishers::graph::run::{simulate, tables_text, RunReport};
 use publishers::graph::sim::{RegionsScenario, Strategy, Until, BUILTIN_REGIONS};
-use serde_json::{json, Value};
+use serde_json::json;
 
 use super::bad;
 use super::sim_args::SimArgs;
@@ -283,56 +284,6 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
         println!("{metrics}");
     }
     Ok(())
-}
-
-/// Per robot count: the time to the goal with each strategy and their ratio (Fig. 4c).
-fn compare(runs: &[RunReport]) -> Vec<Value> {
-    let mut counts: Vec<usize> = runs.iter().map(|r| r.robots).collect();
-    counts.dedup();
-    counts
-        .into_iter()
-        .map(|n| {
-            let of = |s: Strategy| runs.iter().find(|r| r.robots == n && r.strategy == s);
-            let ph = of(Strategy::Pheromone);
-            let sp = of(Strategy::ShortestPath);
-            let ratio = match (ph.and_then(|r| r.finish_s), sp.and_then(|r| r.finish_s)) {
-                (Some(a), Some(b)) if a > 0.0 => Some(b / a),
-                _ => None,
-            };
-            json!({
-                "robots": n,
-                "pheromone_finish_s": ph.and_then(|r| r.finish_s),
-                "pheromone_conflicts": ph.map(|r| r.conflicts),
-                "shortest_path_finish_s": sp.and_then(|r| r.finish_s),
-                "shortest_path_conflicts": sp.map(|r| r.conflicts),
-                "shortest_path_over_pheromone": ratio,
-            })
-        })
-        .collect()
-}
-
-fn comparison_text(rows: &[Value]) -> String {
-    use std::fmt::Write;
-    let mut s = String::from(
-        "Time to the goal (cf. Fig. 4c):\n  robots   pheromone (conflicts)   shortest-path (conflicts)   ratio\n",
-    );
-    let f = |v: &Value| v.as_f64().map_or("-".to_string(), |x| format!("{x:.1} s"));
-    let c = |v: &Value| v.as_u64().map_or("-".to_string(), |x| x.to_string());
-    for r in rows {
-        let _ = writeln!(
-            s,
-            "  {:>6}   {:>9} ({:>3})         {:>9} ({:>3})             {}",
-            c(&r["robots"]),
-            f(&r["pheromone_finish_s"]),
-            c(&r["pheromone_conflicts"]),
-            f(&r["shortest_path_finish_s"]),
-            c(&r["shortest_path_conflicts"]),
-            r["shortest_path_over_pheromone"]
-                .as_f64()
-                .map_or("-".to_string(), |x| format!("{x:.2}×")),
-        );
-    }
-    s
 }
 
 /// One run as processes: the graph writer and one `graph-robot` per robot.

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use publishers::roles::follower::StrategyKind;
-use publishers::sim::metrics::scenario_metrics;
+use publishers::sim::metrics::{mean_sd, metrics_json, scenario_metrics, welch_t};
 use publishers::sim::processes::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
 use publishers::sim::record::Recording;
 use publishers::sim::scenario::{Overrides, Scenario};
@@ -116,21 +116,6 @@ fn out_dir(a: &SimArgs, scenario: &Scenario) -> Option<PathBuf> {
     )
 }
 
-/// The metrics object of a run: the keys every scenario has, then the scenario's own.
-pub fn metrics_json(scenario: &Scenario, s: &RunSummary, rec: &Recording) -> Value {
-    json!({
-        "scenario": scenario.name,
-        "seed": scenario.seed,
-        "sim_time_s": s.sim_time_s,
-        "steps": s.steps,
-        "ticks": s.ticks,
-        "field": s.field,
-        "robots": s.robots,
-        "probes": rec.probes,
-        "metrics": scenario_metrics(scenario, rec),
-    })
-}
-
 fn print_summary(m: &Value) {
     eprintln!(
         "sim '{}' done: {} s simulated ({} ticks) in {:.2} s wall time ({:.1}× real time); {} deposits applied, {} NaN cells",
@@ -223,14 +208,8 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
         results.push((kind, values));
     }
     bar.finish_and_clear();
-    let stats = |v: &[f64]| {
-        let n = v.len() as f64;
-        let mean = v.iter().sum::<f64>() / n;
-        let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
-        (mean, var.sqrt())
-    };
-    let (m1, s1) = stats(&results[0].1);
-    let (m2, s2) = stats(&results[1].1);
+    let (m1, s1) = mean_sd(&results[0].1);
+    let (m2, s2) = mean_sd(&results[1].1);
     let (t, df) = welch_t(m1, s1, m2, s2, trials as f64);
     let out = json!({
         "scenario": scenario.name,
@@ -268,14 +247,6 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
         println!("{out}");
     }
     Ok(())
-}
-
-/// Welch's t statistic and its Welch–Satterthwaite degrees of freedom for two samples of `n`.
-pub fn welch_t(m1: f64, s1: f64, m2: f64, s2: f64, n: f64) -> (f64, f64) {
-    let (v1, v2) = (s1 * s1 / n, s2 * s2 / n);
-    let t = (m1 - m2) / (v1 + v2).sqrt();
-    let df = (v1 + v2).powi(2) / (v1 * v1 / (n - 1.0) + v2 * v2 / (n - 1.0));
-    (t, df)
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -217,9 +217,55 @@ pub fn blind_leader(scenario: &Scenario, m: &BlindLeaderMetric, rec: &Recording)
     }
 }
 
+/// The metrics object of a run: the keys every scenario has, then the scenario's own.
+pub fn metrics_json(
+    scenario: &Scenario,
+    s: &crate::sim::single::RunSummary,
+    rec: &Recording,
+) -> serde_json::Value {
+    serde_json::json!({
+        "scenario": scenario.name,
+        "seed": scenario.seed,
+        "sim_time_s": s.sim_time_s,
+        "steps": s.steps,
+        "ticks": s.ticks,
+        "field": s.field,
+        "robots": s.robots,
+        "probes": rec.probes,
+        "metrics": scenario_metrics(scenario, rec),
+    })
+}
+
+/// Mean and sample standard deviation of `v` (n − 1 in the denominator).
+pub fn mean_sd(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, var.sqrt())
+}
+
+/// Welch's t statistic and its Welch–Satterthwaite degrees of freedom for two samples of `n`.
+pub fn welch_t(m1: f64, s1: f64, m2: f64, s2: f64, n: f64) -> (f64, f64) {
+    let (v1, v2) = (s1 * s1 / n, s2 * s2 / n);
+    let t = (m1 - m2) / (v1 + v2).sqrt();
+    let df = (v1 + v2).powi(2) / (v1 * v1 / (n - 1.0) + v2 * v2 / (n - 1.0));
+    (t, df)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn trial_statistics_are_the_sample_mean_sd_and_welch_t() {
+        let (m, sd) = mean_sd(&[1.0, 2.0, 3.0, 4.0]);
+        assert!((m - 2.5).abs() < 1e-12 && (sd - 1.290_994_448_735_805_6).abs() < 1e-12);
+        // Two samples of 10 with means 0.815 and 0.599 (sd 0.108, 0.093): t ≈ 4.79, df ≈ 17.6.
+        let (t, df) = welch_t(0.815, 0.108, 0.599, 0.093, 10.0);
+        assert!((t - 4.792).abs() < 0.01, "{t}");
+        assert!((df - 17.6).abs() < 0.1, "{df}");
+        assert_eq!(welch_t(0.5, 0.1, 0.5, 0.1, 10.0).0, 0.0);
+    }
 
     #[test]
     fn distance_to_a_polyline_is_to_its_nearest_segment() {
