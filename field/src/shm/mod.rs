@@ -235,6 +235,17 @@ pub fn cleanup_dead_nodes(node: &Node<Svc>) -> u64 {
 /// a process without a node of its own, e.g. a test after a run); returns how many it removed.
 pub fn cleanup_dead_nodes_of(config: &Config) -> u64 {
     let mut cleaned = 0;
+    let dead = dead_nodes(config);
+    for view in dead {
+        if view.try_remove_stale_resources().is_ok() {
+            cleaned += 1;
+        }
+    }
+    cleaned + remove_leftover_tags(config)
+}
+
+/// The nodes of `config` whose process is gone.
+fn dead_nodes(config: &Config) -> Vec<iceoryx2::node::DeadNodeView<Svc>> {
     let mut dead = Vec::new();
     // Listing fails only on an unreadable node directory: then there is nothing to clean.
     let _ = Node::<Svc>::list(config, |state| {
@@ -243,12 +254,7 @@ pub fn cleanup_dead_nodes_of(config: &Config) -> u64 {
         }
         CallbackProgression::Continue
     });
-    for view in dead {
-        if view.try_remove_stale_resources().is_ok() {
-            cleaned += 1;
-        }
-    }
-    cleaned + remove_leftover_tags(config)
+    dead
 }
 
 /// iceoryx2 0.10 leaves the port and service tag files of a node killed while it was creating
@@ -258,14 +264,7 @@ pub fn cleanup_dead_nodes_of(config: &Config) -> u64 {
 /// dead, and clean them up again. Returns how many nodes this removed.
 fn remove_leftover_tags(config: &Config) -> u64 {
     use iceoryx2::node::NodeView;
-    let mut dead = Vec::new();
-    // Listing fails only on an unreadable node directory: then there is nothing to clean.
-    let _ = Node::<Svc>::list(config, |state| {
-        if let NodeState::Dead(view) = state {
-            dead.push(view);
-        }
-        CallbackProgression::Continue
-    });
+    let dead = dead_nodes(config);
     let node_dir = std::path::PathBuf::from(config.global.node_dir().to_string());
     let suffixes = [
         config.global.node.port_tag_suffix.to_string(),
