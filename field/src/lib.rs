@@ -17,6 +17,7 @@ pub mod run;
 pub mod sample;
 pub mod shm;
 pub mod tune;
+pub mod wire;
 
 pub use deposit::{DepositLimits, RejectReason, Rejection};
 pub use engine::{FieldConfig, OwnedField, Stepper, TickReport};

@@ -27,15 +27,9 @@ pub struct LinkOptions {
 }
 
 impl Default for LinkOptions {
+    /// The options of every robot link ([`crate::wire::ROBOT_LINK`]).
     fn default() -> Self {
-        Self {
-            max_publishers: 8,
-            // The world's clock is watched by the field and by every role of every robot (three
-            // per robot): 16 admitted at most five robots.
-            max_subscribers: 64,
-            buffer: 64,
-            keep_latest: true,
-        }
+        crate::wire::ROBOT_LINK
     }
 }
 

@@ -28,10 +28,9 @@ use std::time::{Duration, Instant};
 use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
-use iceoryx2::prelude::*;
 
-use crate::link::{LinkOptions, Receiver, Sender};
-use crate::messages::{clock_services, ClockMsg};
+use crate::link::{Receiver, Sender};
+use crate::messages::ClockMsg;
 use crate::shm::{now_ns, service_name, ShmError, Svc};
 
 /// Who acknowledges a step (`StepAck::role`).
@@ -55,8 +54,7 @@ pub mod role {
 }
 
 /// "Done with step `step`", from one participant to the conductor.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("pheromone::StepAck/v1")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[repr(C)]
 pub struct StepAck {
     pub stamp_ns: u64,
@@ -66,38 +64,12 @@ pub struct StepAck {
     pub role: u32,
 }
 
-/// Most processes one run may have: the limit of the clock, step-done and attach services.
-pub const MAX_PARTICIPANTS: usize = 512;
+// repr(C): numbers and arrays of numbers only.
+crate::wire_type!(StepAck, "StepAck", size = 24, align = 8);
 
-/// The clock: one sender, every participant a receiver; nothing is overwritten.
-pub const CLOCK_LINK: LinkOptions = LinkOptions {
-    max_publishers: 2,
-    max_subscribers: MAX_PARTICIPANTS,
-    buffer: 1024,
-    keep_latest: false,
+use crate::wire::{
+    attached_service, clock_services, step_done_services, ACK_LINK, CLOCK_LINK, MAX_PARTICIPANTS,
 };
-
-/// Step acknowledgements: every participant a sender, the conductor the receiver. One step's
-/// acknowledgements of every participant fit in the buffer.
-pub const ACK_LINK: LinkOptions = LinkOptions {
-    max_publishers: MAX_PARTICIPANTS,
-    max_subscribers: 2,
-    buffer: MAX_PARTICIPANTS,
-    keep_latest: false,
-};
-
-/// Service names of world `W`'s step acknowledgements and their wake-up event.
-pub fn step_done_services(world: &str) -> (String, String) {
-    (
-        format!("sim/{world}/step-done"),
-        format!("sim/{world}/step-done-ready"),
-    )
-}
-
-/// The event a participant notifies when it has joined world `W`.
-pub fn attached_service(world: &str) -> String {
-    format!("sim/{world}/attached")
-}
 
 fn attached_event(
     node: &Node<Svc>,

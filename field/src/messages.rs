@@ -2,12 +2,9 @@
 //! pointers. Their iceoryx2 type names carry a layout version, so a client built against another
 //! layout is refused when it opens the service instead of reading garbage.
 
-use iceoryx2::prelude::ZeroCopySend;
-
 use crate::deposit::REJECT_REASONS;
 
-/// Layout version of every message in this module; bump on any change.
-pub const LAYOUT_VERSION: u32 = 1;
+pub use crate::wire::LAYOUT_VERSION;
 
 /// Deposit kernel codes on the wire.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -62,8 +59,7 @@ impl std::str::FromStr for KernelKind {
 }
 
 /// One deposit request. Unused parameters of a kernel are ignored but must be finite.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("pheromone::DepositMsg/v1")]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct DepositMsg {
     /// Monotonic stamp (ns, CLOCK_MONOTONIC) when the deposit was made.
@@ -92,6 +88,9 @@ pub struct DepositMsg {
     pub plateau_m: f32,
     pub slope_m: f32,
 }
+
+// repr(C): numbers and arrays of numbers only.
+crate::wire_type!(DepositMsg, "DepositMsg", size = 64, align = 8);
 
 impl DepositMsg {
     /// A seed 000 deposit: amount τ, pose covariance block Σxy, sensor range z_rng, cap γmax.
@@ -165,8 +164,7 @@ impl DepositMsg {
 
 /// Header of every published frame. Counters are cumulative since the field started (or was
 /// restored).
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("pheromone::FrameHeader/v1")]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct FrameHeader {
     pub layout_version: u32,
@@ -192,6 +190,14 @@ pub struct FrameHeader {
     pub deposits_this_tick: u32,
     pub _reserved: u32,
 }
+
+// repr(C): numbers and arrays of numbers only.
+crate::wire_type!(
+    FrameHeader,
+    "FrameHeader",
+    size = 80 + 8 * REJECT_REASONS,
+    align = 8
+);
 
 impl FrameHeader {
     pub fn deposits_rejected_total(&self) -> u64 {
@@ -220,8 +226,7 @@ impl FrameHeader {
 
 /// A simulation clock tick: the world publishes one per step; a field run with `--clock` ticks
 /// once per message instead of on wall time (lockstep simulation).
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("pheromone::ClockMsg/v1")]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct ClockMsg {
     pub stamp_ns: u64,
@@ -233,10 +238,5 @@ pub struct ClockMsg {
     pub _pad: u32,
 }
 
-/// Service names of a simulation clock `W`: messages and their wake-up event.
-pub fn clock_services(world: &str) -> (String, String) {
-    (
-        format!("sim/{world}/clock"),
-        format!("sim/{world}/clock-ready"),
-    )
-}
+// repr(C): numbers and arrays of numbers only.
+crate::wire_type!(ClockMsg, "ClockMsg", size = 40, align = 8);

@@ -141,20 +141,67 @@ fn a_second_field_with_the_same_name_is_refused() {
     assert!(matches!(err, ShmError::AlreadyRunning { .. }), "{err}");
 }
 
+/// `DepositMsg` as a build with the next layout version would declare it: the same bytes, the
+/// type name of another layout.
+#[derive(Debug, Clone, Copy)]
+#[repr(C)]
+struct OtherLayoutDeposit(field::DepositMsg);
+
+fn other_layout_name(name: &str) -> &'static str {
+    let v = field::wire::LAYOUT_VERSION + 1;
+    Box::leak(format!("pheromone::{name}/v{v}").into_boxed_str())
+}
+
+// SAFETY: a `#[repr(C)]` wrapper of a wire type (plain numbers); only its type name differs.
+unsafe impl iceoryx2::prelude::ZeroCopySend for OtherLayoutDeposit {
+    unsafe fn type_name() -> &'static str {
+        static NAME: std::sync::OnceLock<&'static str> = std::sync::OnceLock::new();
+        NAME.get_or_init(|| other_layout_name("DepositMsg"))
+    }
+}
+
+#[test]
+fn a_client_built_with_another_layout_is_refused_by_a_running_field() {
+    use iceoryx2::prelude::*;
+    field::shm::set_verbose(false);
+    let name = unique("layout-new");
+    let node = create_node(&name).unwrap();
+    let _field = FieldServer::start(&node, &name, small_config(Evaporation::None), None).unwrap();
+    // This build's depositor attaches; one of the next layout, byte for byte the same message
+    // but named for its layout, is refused.
+    DepositPublisher::attach(&node, &name, 1).unwrap();
+    let service_name = ServiceName::new(&format!("pheromone/{name}/deposit")).unwrap();
+    let Err(err) = node
+        .service_builder(&service_name)
+        .publish_subscribe::<OtherLayoutDeposit>()
+        .open()
+    else {
+        panic!("a client of another layout must be refused");
+    };
+    assert_eq!(
+        err,
+        iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError::IncompatibleTypes
+    );
+}
+
 #[test]
 fn a_client_with_another_message_layout_gets_a_clear_error() {
     use iceoryx2::prelude::*;
     field::shm::set_verbose(false);
     let name = unique("layout");
     let node = create_node(&name).unwrap();
-    // Someone created the deposit service with another payload type (an older layout, say).
+    // A field of the next layout created the deposit service.
     let service_name = ServiceName::new(&format!("pheromone/{name}/deposit")).unwrap();
     let _other = node
         .service_builder(&service_name)
-        .publish_subscribe::<[u64; 4]>()
+        .publish_subscribe::<OtherLayoutDeposit>()
         .open_or_create()
         .unwrap();
     let err = DepositPublisher::attach(&node, &name, 1).err().unwrap();
     assert!(matches!(err, ShmError::Layout { .. }), "{err}");
-    assert!(err.to_string().contains("DepositMsg/v1"), "{err}");
+    assert!(
+        err.to_string()
+            .contains(field::wire_type_name!("DepositMsg")),
+        "{err}"
+    );
 }

@@ -4,14 +4,11 @@
 //! Services (robot `r<ID>` of world `W`): `pheromone/W/r<ID>/pose`, `pheromone/W/r<ID>/cmd`,
 //! `pheromone/W/r<ID>/status`, `sim/W/r<ID>/sensors`, `sim/W/r<ID>/truth` (`roles::RobotServices`).
 
-use iceoryx2::prelude::ZeroCopySend;
-
 /// Most landmark observations one sensor message carries; the world reports the nearest ones.
 pub const MAX_OBSERVATIONS: usize = 32;
 
 /// Pose estimate with its 3×3 covariance (row-major over x, y, θ).
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("pheromone::PoseMsg/v1")]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct PoseMsg {
     pub stamp_ns: u64,
@@ -26,6 +23,9 @@ pub struct PoseMsg {
     pub cov: [f64; 9],
 }
 
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(PoseMsg, "PoseMsg", size = 120, align = 8);
+
 impl PoseMsg {
     /// The position block Σxy as `[xx, xy, yy]`.
     pub fn cov_xy(&self) -> [f64; 3] {
@@ -34,8 +34,7 @@ impl PoseMsg {
 }
 
 /// One landmark seen by a robot: range (m), bearing (rad, relative to the heading), signature.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("pheromone::LandmarkObs/v1")]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct LandmarkObs {
     pub range_m: f32,
@@ -44,10 +43,12 @@ pub struct LandmarkObs {
     pub _pad: u32,
 }
 
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(LandmarkObs, "LandmarkObs", size = 16, align = 4);
+
 /// What the world tells one robot after a step: the (noisy) velocity it executed — the control
 /// input of the velocity motion model — and the landmarks in sensor range.
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("pheromone::SensorMsg/v1")]
+#[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C)]
 pub struct SensorMsg {
     pub stamp_ns: u64,
@@ -62,6 +63,14 @@ pub struct SensorMsg {
     pub omega_radps: f64,
     pub observations: [LandmarkObs; MAX_OBSERVATIONS],
 }
+
+// repr(C): numbers and an array of `LandmarkObs` only.
+field::wire_type!(
+    SensorMsg,
+    "SensorMsg",
+    size = 56 + 16 * MAX_OBSERVATIONS,
+    align = 8
+);
 
 impl Default for SensorMsg {
     fn default() -> Self {
@@ -86,8 +95,7 @@ impl SensorMsg {
 }
 
 /// The true pose of a robot (for metrics and pictures; robots' own roles never read it).
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("pheromone::TruthMsg/v1")]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct TruthMsg {
     pub stamp_ns: u64,
@@ -101,9 +109,11 @@ pub struct TruthMsg {
     pub theta_rad: f64,
 }
 
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(TruthMsg, "TruthMsg", size = 56, align = 8);
+
 /// Motion command for one robot: linear and angular velocity.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("pheromone::CmdMsg/v1")]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct CmdMsg {
     pub stamp_ns: u64,
@@ -114,6 +124,9 @@ pub struct CmdMsg {
     pub v_mps: f64,
     pub omega_radps: f64,
 }
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(CmdMsg, "CmdMsg", size = 40, align = 8);
 
 /// What a follower is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
@@ -148,8 +161,7 @@ impl FollowerState {
 }
 
 /// A follower's status, published with every command.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("pheromone::FollowerStatusMsg/v1")]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct FollowerStatusMsg {
     pub stamp_ns: u64,
@@ -161,3 +173,6 @@ pub struct FollowerStatusMsg {
     pub sensed_level: f32,
     pub _pad: u32,
 }
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(FollowerStatusMsg, "FollowerStatusMsg", size = 32, align = 8);

@@ -38,7 +38,8 @@ use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
 
 use crate::engine::FieldConfig;
-use crate::messages::{DepositMsg, FrameHeader, LAYOUT_VERSION};
+use crate::messages::{DepositMsg, FrameHeader};
+use crate::wire::{self, LAYOUT_VERSION};
 
 pub use deposit::DepositPublisher;
 pub use reader::{FieldReader, Frame};
@@ -48,8 +49,7 @@ pub use standby::{Standby, StandbyEvent, Takeover};
 /// iceoryx2 service flavour used everywhere: inter-process.
 pub type Svc = ipc::Service;
 
-/// Frames a reader may hold at once.
-pub const READER_BORROWED_FRAMES: usize = 2;
+pub use crate::wire::READER_BORROWED_FRAMES;
 /// Deposit publishers' and readers' event id for "frame ready".
 const FRAME_READY: EventId = EventId::new(0);
 
@@ -135,22 +135,13 @@ pub fn set_verbose(verbose: bool) {
     });
 }
 
-/// Service names of one field.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct FieldServices {
-    pub frame: String,
-    pub frame_ready: String,
-    pub deposit: String,
-}
+pub use crate::wire::FieldServices;
 
 impl FieldServices {
+    /// The service names of field `field`, once its name is checked.
     pub fn new(field: &str) -> Result<Self, ShmError> {
         check_name(field)?;
-        Ok(Self {
-            frame: format!("pheromone/{field}/frame"),
-            frame_ready: format!("pheromone/{field}/frame-ready"),
-            deposit: format!("pheromone/{field}/deposit"),
-        })
+        Ok(Self::of(field))
     }
 }
 
@@ -220,7 +211,7 @@ pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
         let _ = nix::sys::signal::raise(Signal::SIGTERM);
     }
     let node = node?;
-    node.try_cleanup_dead_nodes();
+    cleanup_dead_nodes(&node);
     Ok(node)
 }
 
@@ -228,20 +219,68 @@ pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
 /// readers' borrowed frames then return to the publisher's pool on its next send). Returns how
 /// many dead nodes were cleaned.
 pub fn cleanup_dead_nodes(node: &Node<Svc>) -> u64 {
-    node.try_cleanup_dead_nodes().cleanups + remove_leftover_tags(node.config())
+    cleanup_dead_nodes_of(node.config())
 }
 
-/// Removes what dead nodes of `config` left behind (the cleanup of [`cleanup_dead_nodes`], for
-/// a process without a node of its own, e.g. a test after a run); returns how many it removed.
+/// Removes what dead nodes of `config` left behind (the cleanup of [`cleanup_dead_nodes`], also
+/// for a process without a node of its own, e.g. a test after a run); returns how many it
+/// removed.
+///
+/// iceoryx2 0.10 leaves the port tag files of a dead node that had no service of its own
+/// (upstream issue #1967): its cleanup has removed the ports' resources by then, but the node's
+/// directory is not empty, the removal of the node fails and it shows as dead forever. Only for
+/// such a node — one whose cleanup *this* call ran and saw fail — are the tags removed and the
+/// cleanup run again. A node another process is cleaning, or one that died since the listing,
+/// keeps its tags: they are what its cleanup needs to find its services and ports, and removing
+/// them would leave those in /dev/shm for good.
 pub fn cleanup_dead_nodes_of(config: &Config) -> u64 {
+    use iceoryx2::node::{NodeCleanupFailure, NodeView};
     let mut cleaned = 0;
-    let dead = dead_nodes(config);
-    for view in dead {
-        if view.try_remove_stale_resources().is_ok() {
-            cleaned += 1;
+    let mut failed = Vec::new();
+    for view in dead_nodes(config) {
+        let id = *view.id();
+        match view.try_remove_stale_resources() {
+            Ok(()) => cleaned += 1,
+            Err(
+                NodeCleanupFailure::ResourcesAlreadyCleanedUp
+                | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode
+                | NodeCleanupFailure::Interrupt,
+            ) => {}
+            Err(_) => failed.push(id),
         }
     }
-    cleaned + remove_leftover_tags(config)
+    // A node whose cleanup failed: its port tags go first (#1967); its service tags only if
+    // that was not enough (a service it was creating when it was killed cannot be read).
+    let node_dir = std::path::PathBuf::from(config.global.node_dir().to_string());
+    for suffix in [
+        &config.global.node.port_tag_suffix,
+        &config.global.node.service_tag_suffix,
+    ] {
+        if failed.is_empty() {
+            break;
+        }
+        let suffix = suffix.to_string();
+        for view in dead_nodes(config) {
+            let id = *view.id();
+            if !failed.contains(&id) {
+                continue;
+            }
+            let dir = node_dir.join(id.value().to_string());
+            if let Ok(entries) = std::fs::read_dir(&dir) {
+                for e in entries.flatten() {
+                    if e.file_name().to_string_lossy().ends_with(suffix.as_str()) {
+                        // A tag that is gone already is what this wants.
+                        let _ = std::fs::remove_file(e.path());
+                    }
+                }
+            }
+            if view.try_remove_stale_resources().is_ok() {
+                cleaned += 1;
+                failed.retain(|f| *f != id);
+            }
+        }
+    }
+    cleaned
 }
 
 /// The nodes of `config` whose process is gone.
@@ -255,39 +294,6 @@ fn dead_nodes(config: &Config) -> Vec<iceoryx2::node::DeadNodeView<Svc>> {
         CallbackProgression::Continue
     });
     dead
-}
-
-/// iceoryx2 0.10 leaves the port and service tag files of a node killed while it was creating
-/// its node or ports (upstream issue #1967; its cleanup then also looks under the default
-/// prefix), so the node's directory is never removed and the node shows as dead forever. The
-/// regular cleanup has removed what those ports held by then: remove the tags of nodes still
-/// dead, and clean them up again. Returns how many nodes this removed.
-fn remove_leftover_tags(config: &Config) -> u64 {
-    use iceoryx2::node::NodeView;
-    let dead = dead_nodes(config);
-    let node_dir = std::path::PathBuf::from(config.global.node_dir().to_string());
-    let suffixes = [
-        config.global.node.port_tag_suffix.to_string(),
-        config.global.node.service_tag_suffix.to_string(),
-    ];
-    let mut removed = 0;
-    for view in dead {
-        let dir = node_dir.join(view.id().value().to_string());
-        let Ok(entries) = std::fs::read_dir(&dir) else {
-            continue;
-        };
-        for e in entries.flatten() {
-            let name = e.file_name().to_string_lossy().into_owned();
-            if suffixes.iter().any(|s| name.ends_with(s.as_str())) {
-                // A tag another cleaner removed first is gone either way.
-                let _ = std::fs::remove_file(e.path());
-            }
-        }
-        if view.try_remove_stale_resources().is_ok() {
-            removed += 1;
-        }
-    }
-    removed
 }
 
 /// Ports attached to a field's services, as the services record them (ports of processes that
@@ -366,21 +372,20 @@ fn frame_service(
         .user_header::<FrameHeader>();
     match config {
         Some(c) => builder
-            .history_size(1)
-            .subscriber_max_buffer_size(1)
+            .history_size(wire::FRAME_HISTORY)
+            .subscriber_max_buffer_size(wire::FRAME_SUBSCRIBER_BUFFER)
             .subscriber_max_borrowed_samples(READER_BORROWED_FRAMES)
+            // The readers and the field's own subscription.
             .max_subscribers(c.max_readers + 1)
-            .max_publishers(2)
-            // Every reader's process, the field, a standby and a spare (iceoryx2's default
-            // admits 20 nodes whatever the readers).
-            .max_nodes(c.max_readers + 4)
+            .max_publishers(wire::FRAME_PUBLISHERS)
+            .max_nodes(c.max_readers + wire::FRAME_EXTRA_NODES)
             .open_or_create()
             .map_err(|e| match e {
                 iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
                     iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError::IncompatibleTypes,
                 ) => ShmError::Layout {
                     service: names.frame.clone(),
-                    ours: "pheromone::FrameHeader/v1 + [f32]",
+                    ours: wire::type_name_of::<FrameHeader>(),
                 },
                 e => service_err(&names.frame, "open or create", e),
             }),
@@ -393,7 +398,7 @@ fn frame_service(
                 },
                 E::IncompatibleTypes => ShmError::Layout {
                     service: names.frame.clone(),
-                    ours: "pheromone::FrameHeader/v1 + [f32]",
+                    ours: wire::type_name_of::<FrameHeader>(),
                 },
                 e => service_err(&names.frame, "open", e),
             }
@@ -409,10 +414,9 @@ fn frame_ready_service(
     let name = service_name(&names.frame_ready)?;
     let b = node.service_builder(&name).event();
     if create {
-        // Listeners: every reader and every deposit publisher (which waits for frames to flush).
-        b.max_listeners(1024)
-            .max_notifiers(4)
-            .max_nodes(1028)
+        b.max_listeners(wire::FRAME_READY_LISTENERS)
+            .max_notifiers(wire::FRAME_READY_NOTIFIERS)
+            .max_nodes(wire::FRAME_READY_LISTENERS + wire::FRAME_READY_NOTIFIERS)
             .open_or_create()
             .map_err(|e| service_err(&names.frame_ready, "open or create", e))
     } else {
@@ -436,10 +440,10 @@ fn deposit_service(
     match config {
         Some(c) => builder
             .max_publishers(c.max_depositors)
-            .max_subscribers(2)
-            .max_nodes(c.max_depositors + 2)
+            .max_subscribers(wire::DEPOSIT_SUBSCRIBERS)
+            .max_nodes(c.max_depositors + wire::DEPOSIT_SUBSCRIBERS)
             .subscriber_max_buffer_size(c.deposit_buffer)
-            .history_size(0)
+            .history_size(wire::DEPOSIT_HISTORY)
             .enable_safe_overflow(false)
             .open_or_create()
             .map_err(|e| service_err(&names.deposit, "open or create", e)),
@@ -457,7 +461,7 @@ fn deposit_service(
                 },
                 E::IncompatibleTypes => ShmError::Layout {
                     service: names.deposit.clone(),
-                    ours: "pheromone::DepositMsg/v1",
+                    ours: wire::type_name_of::<DepositMsg>(),
                 },
                 e => service_err(&names.deposit, "open", e),
             }

@@ -10,10 +10,9 @@
 use std::fmt;
 use std::time::{Duration, Instant};
 
-use field::link::{LinkOptions, Receiver, Sender};
+use field::link::{Receiver, Sender};
 use field::shm::{now_ns, ShmError, Svc};
 use iceoryx2::node::Node;
-use iceoryx2::prelude::ZeroCopySend;
 
 use super::conflict::{ConflictError, ContendMsg};
 use super::{CaptureOutcome, Dir, GraphError, GraphState, GraphUpdate, MAX_LINKS};
@@ -34,8 +33,7 @@ pub const MAX_GRAPH_ROBOTS: usize = 16;
 pub const NO_CLAIM: u32 = u32::MAX;
 
 /// One node of a snapshot; links indexed by [`Dir`].
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("pheromone::GraphNodeSlot/v1")]
+#[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C)]
 pub struct NodeSlot {
     pub x_m: f32,
@@ -45,6 +43,14 @@ pub struct NodeSlot {
     pub link_value: [f32; MAX_LINKS],
     pub link_length_m: [f32; MAX_LINKS],
 }
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(
+    NodeSlot,
+    "GraphNodeSlot",
+    size = 12 + 12 * MAX_LINKS,
+    align = 4
+);
 
 impl NodeSlot {
     pub const EMPTY: NodeSlot = NodeSlot {
@@ -58,8 +64,7 @@ impl NodeSlot {
 }
 
 /// One region of a snapshot.
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("pheromone::GraphRegionSlot/v1")]
+#[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C)]
 pub struct RegionSlot {
     pub node: u32,
@@ -71,6 +76,14 @@ pub struct RegionSlot {
     pub n_claims: u32,
     pub claims: [u32; MAX_GRAPH_ROBOTS],
 }
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(
+    RegionSlot,
+    "GraphRegionSlot",
+    size = 20 + 4 * (MAX_CAPTURERS + MAX_GRAPH_ROBOTS),
+    align = 4
+);
 
 impl RegionSlot {
     pub const EMPTY: RegionSlot = RegionSlot {
@@ -85,8 +98,7 @@ impl RegionSlot {
 }
 
 /// An immutable published state of the graph and its regions (≈5 KiB).
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("pheromone::GraphSnapshot/v1")]
+#[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C)]
 pub struct GraphSnapshot {
     pub seq: u64,
@@ -107,6 +119,14 @@ pub struct GraphSnapshot {
     pub nodes: [NodeSlot; MAX_NODES],
     pub regions: [RegionSlot; MAX_REGIONS],
 }
+
+// repr(C): numbers and arrays of `NodeSlot` and `RegionSlot` only.
+field::wire_type!(
+    GraphSnapshot,
+    "GraphSnapshot",
+    size = 72 + 60 * MAX_NODES + 116 * MAX_REGIONS,
+    align = 8
+);
 
 impl GraphSnapshot {
     pub const EMPTY: GraphSnapshot = GraphSnapshot {
@@ -244,8 +264,7 @@ pub mod kind {
 }
 
 /// A robot's update to the graph.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("pheromone::GraphUpdateMsg/v1")]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct GraphUpdateMsg {
     pub stamp_ns: u64,
@@ -261,6 +280,9 @@ pub struct GraphUpdateMsg {
     pub amount: f32,
     pub _pad: u32,
 }
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(GraphUpdateMsg, "GraphUpdateMsg", size = 48, align = 8);
 
 impl GraphUpdateMsg {
     pub fn new(robot_id: u32, u: GraphUpdate) -> Self {
@@ -326,13 +348,20 @@ impl GraphUpdateMsg {
 }
 
 /// Listing 1's JSON text in a fixed-size buffer.
-#[derive(Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("pheromone::ContendWire/v1")]
+#[derive(Clone, Copy, PartialEq)]
 #[repr(C)]
 pub struct ContendWire {
     pub len: u32,
     pub text: [u8; CONTEND_BYTES],
 }
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(
+    ContendWire,
+    "ContendWire",
+    size = 4 + CONTEND_BYTES,
+    align = 4
+);
 
 impl fmt::Debug for ContendWire {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -396,35 +425,10 @@ pub enum GraphShmError {
     Conflict(#[from] ConflictError),
 }
 
-/// Service names of graph `name`: (snapshots, updates, contention), each with its `-ready`.
-pub fn graph_services(name: &str) -> [(String, String); 3] {
-    ["graph", "graph-update", "contend"].map(|s| {
-        (
-            format!("pheromone/{name}/{s}"),
-            format!("pheromone/{name}/{s}-ready"),
-        )
-    })
-}
-
-pub(crate) const SNAPSHOT_LINK: LinkOptions = LinkOptions {
-    max_publishers: 1,
-    max_subscribers: 32,
-    buffer: 2,
-    keep_latest: true,
-};
-
-pub(crate) const UPDATE_LINK: LinkOptions = LinkOptions {
-    max_publishers: 32,
-    max_subscribers: 1,
-    buffer: 256,
-    keep_latest: false,
-};
-
-const CONTEND_LINK: LinkOptions = LinkOptions {
-    max_publishers: 32,
-    max_subscribers: 32,
-    buffer: 64,
-    keep_latest: false,
+pub use field::wire::graph_services;
+pub(crate) use field::wire::{
+    GRAPH_CONTEND_LINK as CONTEND_LINK, GRAPH_SNAPSHOT_LINK as SNAPSHOT_LINK,
+    GRAPH_UPDATE_LINK as UPDATE_LINK,
 };
 
 /// Counters of the server.

@@ -6,7 +6,7 @@
 
 use std::time::{Duration, Instant};
 
-use field::link::{LinkOptions, Receiver, Sender};
+use field::link::{Receiver, Sender};
 use field::lockstep::{LockstepError, Participant};
 use field::shm::{ShmError, Svc};
 use iceoryx2::node::Node;
@@ -28,46 +28,21 @@ pub enum ProcessError {
     },
 }
 
-/// Service names of one robot.
-#[derive(Debug, Clone)]
-pub struct RobotServices {
-    pub sensors: String,
-    pub truth: String,
-    pub pose: String,
-    pub cmd: String,
-    pub status: String,
-}
-
-impl RobotServices {
-    /// Robots are named `r<ID>` within their world, so several simulations (or test runs) on one
-    /// host never share a service.
-    pub fn new(world: &str, robot: u32) -> Self {
-        Self {
-            sensors: format!("sim/{world}/r{robot}/sensors"),
-            truth: format!("sim/{world}/r{robot}/truth"),
-            pose: format!("pheromone/{world}/r{robot}/pose"),
-            cmd: format!("pheromone/{world}/r{robot}/cmd"),
-            status: format!("pheromone/{world}/r{robot}/status"),
-        }
-    }
-}
-
-fn wake(service: &str) -> String {
-    format!("{service}-ready")
-}
+pub use field::wire::RobotServices;
+use field::wire::{ready_service as wake, ROBOT_LINK};
 
 pub(crate) fn sender<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,
     service: &str,
 ) -> Result<Sender<T>, ShmError> {
-    Sender::create(node, service, &wake(service), LinkOptions::default())
+    Sender::create(node, service, &wake(service), ROBOT_LINK)
 }
 
 pub(crate) fn receiver<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,
     service: &str,
 ) -> Result<Receiver<T>, ShmError> {
-    Receiver::create(node, service, &wake(service), LinkOptions::default())
+    Receiver::create(node, service, &wake(service), ROBOT_LINK)
 }
 
 /// Counters a robot role reports at the end.

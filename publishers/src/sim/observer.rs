@@ -9,9 +9,10 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use field::link::{LinkOptions, Receiver};
+use field::link::Receiver;
 use field::lockstep::{self, Participant};
 use field::shm::{FieldReader, ShmError, Svc};
+use field::wire::{ready_service as wake, ROBOT_LINK};
 use iceoryx2::node::Node;
 
 use crate::messages::{CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, TruthMsg};
@@ -54,11 +55,10 @@ impl Observer {
     ) -> Result<Self, ShmError> {
         // The robots' links as the roles create them: in lockstep the observer is at most a
         // step behind, far less than a link's buffer.
-        let options = LinkOptions::default();
+        let options = ROBOT_LINK;
         let mut robots = Vec::new();
         for r in &scenario.world.robots {
             let s = RobotServices::new(world, r.id);
-            let wake = |x: &str| format!("{x}-ready");
             robots.push(RobotLinks {
                 id: r.id,
                 truth: Receiver::create(node, &s.truth, &wake(&s.truth), options)?,

@@ -1,0 +1,324 @@
+//! Every shared-memory contract in one place: the layout version (from which every wire type's
+//! iceoryx2 type name is generated), the name of every service and of its `-ready` wake-up
+//! companion, and every option that is part of a service's identity (two processes that disagree
+//! on one of them cannot share the service).
+//!
+//! The wire types themselves live beside the code that gives them meaning — the field's in
+//! [`crate::messages`] and [`crate::lockstep`], the robots' in `publishers::messages`, the graph's
+//! in `publishers::graph::shm` — and each is declared with [`wire_type!`](crate::wire_type),
+//! which names it `pheromone::<Name>/v<LAYOUT_VERSION>` and pins its size and alignment at
+//! compile time: a change to a wire type does not build until its size is restated here, and the
+//! layout version bumped below. A client built with another layout is then refused by iceoryx2
+//! when it opens the service (the type names differ), instead of reading garbage.
+//!
+//! Services of field `F`, world `W`, robot `r<ID>` and graph `G`:
+//!
+//! | service | type | who sends → who receives |
+//! | --- | --- | --- |
+//! | `pheromone/F/frame` (+ event `pheromone/F/frame-ready`) | `[f32]` + `FrameHeader` | field → readers |
+//! | `pheromone/F/deposit` | `DepositMsg` | depositors → field |
+//! | `sim/W/clock` (+ `-ready`) | `ClockMsg` | world → every role and the field |
+//! | `sim/W/step-done` (+ `-ready`) | `StepAck` | every participant → world |
+//! | `sim/W/attached` (event) | — | every participant → world |
+//! | `sim/W/r<ID>/sensors`, `sim/W/r<ID>/truth` (+ `-ready`) | `SensorMsg`, `TruthMsg` | world → localizer, depositor |
+//! | `pheromone/W/r<ID>/pose` (+ `-ready`) | `PoseMsg` | localizer → depositor, follower |
+//! | `pheromone/W/r<ID>/cmd`, `…/status` (+ `-ready`) | `CmdMsg`, `FollowerStatusMsg` | follower → world, observers |
+//! | `pheromone/G/graph`, `…/graph-update`, `…/contend` (+ `-ready`) | `GraphSnapshot`, `GraphUpdateMsg`, `ContendWire` | graph writer ↔ robots |
+
+use crate::link::LinkOptions;
+
+pub use iceoryx2::prelude::ZeroCopySend;
+
+/// The layout version as a literal (for `concat!`): **the one place to bump** on any change to
+/// any wire type. Everything else derives from it.
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __pheromone_layout_version {
+    () => {
+        "1"
+    };
+}
+
+/// Layout version of every wire type; written into frames and checkpoints.
+pub const LAYOUT_VERSION: u32 = parse_version(__pheromone_layout_version!());
+
+const fn parse_version(s: &str) -> u32 {
+    let b = s.as_bytes();
+    assert!(!b.is_empty(), "the layout version is empty");
+    let mut i = 0;
+    let mut v = 0u32;
+    while i < b.len() {
+        assert!(b[i].is_ascii_digit(), "the layout version is not a number");
+        v = v * 10 + (b[i] - b'0') as u32;
+        i += 1;
+    }
+    v
+}
+
+/// The iceoryx2 type name of wire type `Name` in this build's layout:
+/// `"pheromone::Name/v<LAYOUT_VERSION>"`.
+#[macro_export]
+macro_rules! wire_type_name {
+    ($name:literal) => {
+        concat!(
+            "pheromone::",
+            $name,
+            "/v",
+            $crate::__pheromone_layout_version!()
+        )
+    };
+}
+
+/// Declares `$t` a wire type: implements iceoryx2's `ZeroCopySend` with the versioned type name
+/// `pheromone::$name/v<LAYOUT_VERSION>`, and asserts at compile time that `$t` is plain data
+/// (`Copy + Send + 'static`) of exactly `size` bytes with alignment `align`.
+///
+/// The caller guarantees that `$t` is `#[repr(C)]` and holds only numbers, arrays of numbers and
+/// other wire types (no pointers, no references): every type in this crate and in `publishers`
+/// that uses it does, and says so where it is defined.
+#[macro_export]
+macro_rules! wire_type {
+    ($t:ty, $name:literal, size = $size:expr, align = $align:expr) => {
+        // SAFETY: the caller guarantees `$t` is `#[repr(C)]` plain data (numbers and arrays of
+        // them, no pointers or references), so its bytes mean the same in every process that maps
+        // them; the asserts below pin its size and alignment, and the type name carries the
+        // layout version, so a process built with another layout is refused by iceoryx2.
+        unsafe impl $crate::wire::ZeroCopySend for $t {
+            unsafe fn type_name() -> &'static str {
+                $crate::wire_type_name!($name)
+            }
+        }
+        const _: () = {
+            assert!(
+                ::core::mem::size_of::<$t>() == $size,
+                concat!(
+                    "the size of ",
+                    stringify!($t),
+                    " changed: bump the layout version"
+                )
+            );
+            assert!(
+                ::core::mem::align_of::<$t>() == $align,
+                concat!(
+                    "the alignment of ",
+                    stringify!($t),
+                    " changed: bump the layout version"
+                )
+            );
+        };
+        const _: fn() = || {
+            fn plain_data<T: Copy + Send + 'static>() {}
+            plain_data::<$t>();
+        };
+    };
+}
+
+/// The type name a wire type is registered under (for error messages).
+pub fn type_name_of<T: ZeroCopySend + ?Sized>() -> &'static str {
+    // SAFETY: `type_name` only returns a constant string; iceoryx2 marks it unsafe because a
+    // wrong name would let incompatible types share a service, which reading it cannot do.
+    unsafe { <T as ZeroCopySend>::type_name() }
+}
+
+// ---- field `F` ------------------------------------------------------------------------------
+
+/// Service names of one field.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FieldServices {
+    pub frame: String,
+    pub frame_ready: String,
+    pub deposit: String,
+}
+
+impl FieldServices {
+    /// The names of field `field` (not checked: see `shm::FieldServices::new`).
+    pub fn of(field: &str) -> Self {
+        Self {
+            frame: format!("pheromone/{field}/frame"),
+            frame_ready: format!("pheromone/{field}/frame-ready"),
+            deposit: format!("pheromone/{field}/deposit"),
+        }
+    }
+}
+
+/// Frames each subscriber buffers (a reader only ever wants the newest).
+pub const FRAME_SUBSCRIBER_BUFFER: usize = 1;
+/// Frames a late subscriber receives on connect.
+pub const FRAME_HISTORY: usize = 1;
+/// Frames one reader may hold at once (the newest and the one it is still reading).
+pub const READER_BORROWED_FRAMES: usize = 2;
+/// Frame publishers: the field and a standby taking over.
+pub const FRAME_PUBLISHERS: usize = 2;
+/// Nodes of the frame service beyond the readers': the field, a standby and a spare, plus one
+/// (iceoryx2's default admits 20 nodes whatever the readers).
+pub const FRAME_EXTRA_NODES: usize = 4;
+/// Listeners of `frame-ready`: every reader and every deposit publisher (which waits for frames
+/// to flush).
+pub const FRAME_READY_LISTENERS: usize = 1024;
+/// Notifiers of `frame-ready`: the field and a standby, with spares.
+pub const FRAME_READY_NOTIFIERS: usize = 4;
+/// Deposit subscribers: the field and a standby.
+pub const DEPOSIT_SUBSCRIBERS: usize = 2;
+/// Deposits a subscriber (the field, a standby) receives from before it connected: none (a
+/// deposit counts once).
+pub const DEPOSIT_HISTORY: usize = 0;
+
+// ---- world `W` (lockstep runs) --------------------------------------------------------------
+
+/// Most processes one run may have: the limit of the clock, step-done and attach services.
+pub const MAX_PARTICIPANTS: usize = 512;
+
+/// The clock: one sender (and a spare), every participant a receiver; nothing is overwritten.
+pub const CLOCK_LINK: LinkOptions = LinkOptions {
+    max_publishers: 2,
+    max_subscribers: MAX_PARTICIPANTS,
+    buffer: 1024,
+    keep_latest: false,
+};
+
+/// Step acknowledgements: every participant a sender, the conductor the receiver. One step's
+/// acknowledgements of every participant fit in the buffer.
+pub const ACK_LINK: LinkOptions = LinkOptions {
+    max_publishers: MAX_PARTICIPANTS,
+    max_subscribers: 2,
+    buffer: MAX_PARTICIPANTS,
+    keep_latest: false,
+};
+
+/// Service names of a simulation clock `W`: messages and their wake-up event.
+pub fn clock_services(world: &str) -> (String, String) {
+    (
+        format!("sim/{world}/clock"),
+        format!("sim/{world}/clock-ready"),
+    )
+}
+
+/// Service names of world `W`'s step acknowledgements and their wake-up event.
+pub fn step_done_services(world: &str) -> (String, String) {
+    (
+        format!("sim/{world}/step-done"),
+        format!("sim/{world}/step-done-ready"),
+    )
+}
+
+/// The event a participant notifies when it has joined world `W`.
+pub fn attached_service(world: &str) -> String {
+    format!("sim/{world}/attached")
+}
+
+// ---- robot `r<ID>` of world `W` -------------------------------------------------------------
+
+/// Every robot link (sensors, truth, pose, command, status): a few senders, every role and
+/// observer of the robot a receiver, the newest message wins.
+pub const ROBOT_LINK: LinkOptions = LinkOptions {
+    max_publishers: 8,
+    // The world's clock is watched by the field and by every role of every robot (three
+    // per robot): 16 admitted at most five robots.
+    max_subscribers: 64,
+    buffer: 64,
+    keep_latest: true,
+};
+
+/// Service names of one robot. Robots are named `r<ID>` within their world, so several
+/// simulations (or test runs) on one host never share a service.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RobotServices {
+    pub sensors: String,
+    pub truth: String,
+    pub pose: String,
+    pub cmd: String,
+    pub status: String,
+}
+
+impl RobotServices {
+    pub fn new(world: &str, robot: u32) -> Self {
+        Self {
+            sensors: format!("sim/{world}/r{robot}/sensors"),
+            truth: format!("sim/{world}/r{robot}/truth"),
+            pose: format!("pheromone/{world}/r{robot}/pose"),
+            cmd: format!("pheromone/{world}/r{robot}/cmd"),
+            status: format!("pheromone/{world}/r{robot}/status"),
+        }
+    }
+}
+
+/// The wake-up event of the link `service`.
+pub fn ready_service(service: &str) -> String {
+    format!("{service}-ready")
+}
+
+// ---- graph `G` ------------------------------------------------------------------------------
+
+/// Service names of graph `name`: (snapshots, updates, contention), each with its `-ready`.
+pub fn graph_services(name: &str) -> [(String, String); 3] {
+    ["graph", "graph-update", "contend"].map(|s| {
+        let service = format!("pheromone/{name}/{s}");
+        let ready = ready_service(&service);
+        (service, ready)
+    })
+}
+
+/// Graph snapshots: one writer, every robot a reader, the newest wins.
+pub const GRAPH_SNAPSHOT_LINK: LinkOptions = LinkOptions {
+    max_publishers: 1,
+    max_subscribers: 32,
+    buffer: 2,
+    keep_latest: true,
+};
+
+/// Graph updates: every robot a sender, the writer the receiver; nothing is overwritten.
+pub const GRAPH_UPDATE_LINK: LinkOptions = LinkOptions {
+    max_publishers: 32,
+    max_subscribers: 1,
+    buffer: 256,
+    keep_latest: false,
+};
+
+/// Contention messages between robots (seed 001, Listing 1): everyone to everyone.
+pub const GRAPH_CONTEND_LINK: LinkOptions = LinkOptions {
+    max_publishers: 32,
+    max_subscribers: 32,
+    buffer: 64,
+    keep_latest: false,
+};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::messages::{ClockMsg, DepositMsg, FrameHeader};
+
+    #[test]
+    fn type_names_carry_the_layout_version() {
+        let v = format!("/v{LAYOUT_VERSION}");
+        for name in [
+            type_name_of::<DepositMsg>(),
+            type_name_of::<FrameHeader>(),
+            type_name_of::<ClockMsg>(),
+            type_name_of::<crate::lockstep::StepAck>(),
+        ] {
+            assert!(name.starts_with("pheromone::"), "{name}");
+            assert!(name.ends_with(&v), "{name} does not end with {v}");
+        }
+        assert_eq!(type_name_of::<DepositMsg>(), wire_type_name!("DepositMsg"));
+    }
+
+    #[test]
+    fn every_service_has_its_ready_companion_and_names_differ_per_robot_and_world() {
+        let a = RobotServices::new("w", 0);
+        let b = RobotServices::new("w", 1);
+        let c = RobotServices::new("v", 0);
+        assert_ne!(a, b);
+        assert_ne!(a, c);
+        assert_eq!(ready_service(&a.pose), "pheromone/w/r0/pose-ready");
+        let f = FieldServices::of("f");
+        assert_eq!(f.frame_ready, ready_service(&f.frame));
+        for (s, r) in graph_services("g") {
+            assert_eq!(r, ready_service(&s));
+        }
+        assert_eq!(clock_services("w").1, ready_service(&clock_services("w").0));
+        assert_eq!(
+            step_done_services("w").1,
+            ready_service(&step_done_services("w").0)
+        );
+    }
+}
