@@ -12,7 +12,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
-use crate::shm::{service_name, ShmError, Svc};
+use crate::shm::{service_name, Cause, ShmError, Svc};
 
 /// Limits every side of a link agrees on (they are part of the service's identity).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -33,11 +33,11 @@ impl Default for LinkOptions {
     }
 }
 
-fn err(service: &str, action: &'static str, e: impl Debug) -> ShmError {
+fn err(service: &str, action: &'static str, e: impl Into<Cause>) -> ShmError {
     ShmError::Service {
         service: service.to_string(),
         action,
-        detail: format!("{e:?}"),
+        source: e.into(),
     }
 }
 

@@ -31,7 +31,7 @@ use iceoryx2::port::notifier::Notifier;
 
 use crate::link::{Receiver, Sender};
 use crate::messages::ClockMsg;
-use crate::shm::{now_ns, service_name, ShmError, Svc};
+use crate::shm::{now_ns, service_name, Cause, ShmError, Svc};
 
 /// Who acknowledges a step (`StepAck::role`).
 pub mod role {
@@ -85,7 +85,7 @@ fn attached_event(
         .map_err(|e| ShmError::Service {
             service,
             action: "open or create",
-            detail: format!("{e:?}"),
+            source: e.into(),
         })
 }
 
@@ -104,7 +104,7 @@ impl JoinWatch {
             .map_err(|e| ShmError::Service {
                 service: attached_service(world),
                 action: "create listener",
-                detail: format!("{e:?}"),
+                source: e.into(),
             })?;
         Ok(Self {
             world: world.to_string(),
@@ -154,7 +154,7 @@ impl JoinWatch {
                     return Err(ShmError::Service {
                         service: attached_service(&self.world),
                         action: "wait",
-                        detail: format!("{e:?}"),
+                        source: e.into(),
                     }
                     .into())
                 }
@@ -166,18 +166,18 @@ impl JoinWatch {
 /// Tells world `world`'s conductor that this process has joined (call it once every port of
 /// the process exists). Keep the notifier for as long as the process takes part.
 pub fn announce_join(node: &Node<Svc>, world: &str) -> Result<Notifier<Svc>, ShmError> {
-    let err = |action: &'static str, e: &dyn std::fmt::Debug| ShmError::Service {
+    let err = |action: &'static str, e: Cause| ShmError::Service {
         service: attached_service(world),
         action,
-        detail: format!("{e:?}"),
+        source: e,
     };
     let notifier = attached_event(node, world)?
         .notifier_builder()
         .create()
-        .map_err(|e| err("create notifier", &e))?;
+        .map_err(|e| err("create notifier", e.into()))?;
     // No listener yet (the conductor starts later) is fine: it counts the participants when it
     // starts waiting.
-    notifier.notify().map_err(|e| err("notify", &e))?;
+    notifier.notify().map_err(|e| err("notify", e.into()))?;
     Ok(notifier)
 }
 

@@ -90,15 +90,17 @@ impl DepositPublisher {
         // Frame events from before this send say nothing about it.
         let _ = self.frame_ready.try_wait(|_| {});
         match self.publisher.send_copy(msg) {
-            Ok(0) => Err(ShmError::NotDelivered(format!(
-                "no field is subscribed to '{}' or its deposit buffer is full",
-                self.names.deposit
-            ))),
+            Ok(0) => Err(ShmError::NoSubscriber {
+                service: self.names.deposit.clone(),
+            }),
             Ok(_) => {
                 self.unflushed = true;
                 Ok(())
             }
-            Err(e) => Err(ShmError::NotDelivered(format!("{e:?}"))),
+            Err(e) => Err(ShmError::NotDelivered {
+                service: self.names.deposit.clone(),
+                source: e.into(),
+            }),
         }
     }
 }

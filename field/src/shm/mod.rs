@@ -53,13 +53,41 @@ pub use crate::wire::READER_BORROWED_FRAMES;
 /// Deposit publishers' and readers' event id for "frame ready".
 const FRAME_READY: EventId = EventId::new(0);
 
-/// Everything that can go wrong with the field's shared memory, each naming what it was doing.
+/// The cause of a failed iceoryx2 operation: iceoryx2's own error, kept as the source of a
+/// [`ShmError`] (`{:#}` or the source chain shows it).
+pub type Cause = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// An iceoryx2 error type that does not implement `std::error::Error` (e.g. a listener's wait
+/// error), kept as it is; it displays as its debug form.
+#[derive(Debug)]
+pub struct Iceoryx<E: std::fmt::Debug>(pub E);
+
+impl<E: std::fmt::Debug> std::fmt::Display for Iceoryx<E> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:?}", self.0)
+    }
+}
+
+impl<E: std::fmt::Debug> std::error::Error for Iceoryx<E> {}
+
+/// Everything that can go wrong with the field's shared memory, each naming what it was doing
+/// and keeping iceoryx2's error as its source.
 #[derive(Debug, thiserror::Error)]
 pub enum ShmError {
     #[error("invalid name '{name}': {reason}")]
     Name { name: String, reason: String },
-    #[error("cannot create the iceoryx2 node '{name}': {detail}")]
-    Node { name: String, detail: String },
+    #[error("invalid iceoryx2 name '{name}'")]
+    IceoryxName {
+        name: String,
+        #[source]
+        source: Cause,
+    },
+    #[error("cannot create the iceoryx2 node '{name}'")]
+    Node {
+        name: String,
+        #[source]
+        source: iceoryx2::node::NodeCreationFailure,
+    },
     #[error("no field called '{field}' is running (service '{service}' does not exist)")]
     NoField { field: String, service: String },
     #[error(
@@ -67,11 +95,18 @@ pub enum ShmError {
          {ours} (layout v{LAYOUT_VERSION}); rebuild the client and the field from the same version"
     )]
     Layout { service: String, ours: &'static str },
-    #[error("service '{service}': {action} failed: {detail}")]
+    #[error("service '{service}': {action} failed")]
     Service {
         service: String,
         action: &'static str,
-        detail: String,
+        #[source]
+        source: Cause,
+    },
+    #[error("field '{field}': the configuration is invalid")]
+    Config {
+        field: String,
+        #[source]
+        source: crate::ConfigError,
     },
     #[error("another field process already publishes '{field}'")]
     AlreadyRunning { field: String },
@@ -90,8 +125,16 @@ pub enum ShmError {
     BadFrame { got: usize, expected: usize },
     #[error("the restored frame has {got} cells, the configuration needs {expected}")]
     RestoreMismatch { got: usize, expected: usize },
-    #[error("deposit not delivered: {0}")]
-    NotDelivered(String),
+    #[error(
+        "deposit not delivered: no field is subscribed to '{service}' or its deposit buffer is full"
+    )]
+    NoSubscriber { service: String },
+    #[error("deposit on '{service}' not delivered")]
+    NotDelivered {
+        service: String,
+        #[source]
+        source: Cause,
+    },
     #[error("the standby cannot mirror field '{field}': {detail}")]
     StandbyMismatch { field: String, detail: String },
 }
@@ -106,15 +149,16 @@ pub(crate) fn wait_interruptible(
 ) -> Result<(), ShmError> {
     match listener.timed_wait(|_| {}, timeout) {
         Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => Ok(()),
-        Err(e) => Err(service_err(service, "wait", e)),
+        Err(e) => Err(service_err(service, "wait", Iceoryx(e))),
     }
 }
 
-fn service_err(service: &str, action: &'static str, e: impl std::fmt::Debug) -> ShmError {
+/// A failed iceoryx2 operation `action` on `service`, keeping iceoryx2's error.
+pub(crate) fn service_err(service: &str, action: &'static str, e: impl Into<Cause>) -> ShmError {
     ShmError::Service {
         service: service.to_string(),
         action,
-        detail: format!("{e:?}"),
+        source: e.into(),
     }
 }
 
@@ -163,18 +207,18 @@ pub fn check_name(name: &str) -> Result<(), ShmError> {
 }
 
 pub(crate) fn service_name(name: &str) -> Result<ServiceName, ShmError> {
-    ServiceName::new(name).map_err(|e| ShmError::Name {
+    ServiceName::new(name).map_err(|e| ShmError::IceoryxName {
         name: name.to_string(),
-        reason: format!("{e:?}"),
+        source: e.into(),
     })
 }
 
 /// Creates an iceoryx2 node that stops on SIGINT/SIGTERM (`node.wait` then returns an error) and
 /// first removes what dead nodes left behind.
 pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
-    let node_name = NodeName::new(name).map_err(|e| ShmError::Name {
+    let node_name = NodeName::new(name).map_err(|e| ShmError::IceoryxName {
         name: name.to_string(),
-        reason: format!("{e:?}"),
+        source: Box::new(Iceoryx(e)),
     })?;
     // SIGINT and SIGTERM wait (blocked, pending) until the node exists and iceoryx2's handler
     // is installed: a process stopped while its node is half-created leaves an entry that no
@@ -197,7 +241,7 @@ pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
         .create::<Svc>()
         .map_err(|e| ShmError::Node {
             name: name.to_string(),
-            detail: format!("{e:?}"),
+            source: e,
         });
     // Installs iceoryx2's signal handler (installed on first use). A wait that fails took a
     // termination request an earlier node of this process had not yet seen: raised again below.

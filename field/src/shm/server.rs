@@ -95,10 +95,9 @@ impl FieldServer {
         first_frame: FirstFrame<'_>,
     ) -> Result<Self, ShmError> {
         let names = FieldServices::new(field)?;
-        let stepper = Stepper::new(config).map_err(|e| ShmError::Service {
-            service: names.frame.clone(),
-            action: "configure",
-            detail: e.to_string(),
+        let stepper = Stepper::new(config).map_err(|source| ShmError::Config {
+            field: field.to_string(),
+            source,
         })?;
         let config = stepper.config().clone();
         check_shm_space(&config)?;

@@ -314,10 +314,9 @@ impl Standby {
             Some(s) => FirstFrame::Continue(*s.user_header(), s.payload()),
             None => FirstFrame::Zeros,
         };
-        let stepper = Stepper::new(config).map_err(|e| ShmError::Service {
-            service: names.frame.clone(),
-            action: "configure",
-            detail: e.to_string(),
+        let stepper = Stepper::new(config).map_err(|source| ShmError::Config {
+            field: field.to_string(),
+            source,
         })?;
         // The mirrored sample is released once the first own frame is computed from it; the
         // mirroring subscription becomes the field's own (it receives only this publisher's
