@@ -165,6 +165,7 @@ pub fn measure(launcher: &Launcher, tag: &str, run: FrameRun) -> Result<Vec<u64>
         }
         FrameTransport::UdsSerde => {
             let path = SocketPath(std::env::temp_dir().join(format!("pheromone-bench-{tag}.sock")));
+            // A socket left by an earlier run; none is the usual case.
             let _ = std::fs::remove_file(&path.0);
             let listener =
                 UnixListener::bind(&path.0).map_err(io(format!("bind {}", path.0.display())))?;
@@ -214,6 +215,7 @@ struct SocketPath(PathBuf);
 
 impl Drop for SocketPath {
     fn drop(&mut self) {
+        // Already gone is what this wants; a drop cannot report anyway.
         let _ = std::fs::remove_file(&self.0);
     }
 }
@@ -396,6 +398,7 @@ mod zenoh_side {
             publisher.put(bytes).wait().map_err(|e| zerr("put", e))
         });
         drop(publisher);
+        // The samples are in; a session that fails to close ends with the process.
         let _ = session.close().wait();
         samples
     }

@@ -63,6 +63,7 @@ pub fn unpin() -> bool {
     use nix::unistd::Pid;
     let mut set = CpuSet::new();
     for c in 0..cores().min(CpuSet::count()) {
+        // `c` is below `CpuSet::count()`, the only way `set` fails.
         let _ = set.set(c);
     }
     sched_setaffinity(Pid::from_raw(0), &set).is_ok()

@@ -132,6 +132,8 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sender<T> {
             .publisher
             .send_copy(msg)
             .map_err(|e| err(&self.service, "send", e))?;
+        // A failed wake-up only delays receivers to their own wait deadline; the message is
+        // delivered (`n` says to how many).
         let _ = self.notifier.notify();
         Ok(n)
     }

@@ -88,6 +88,7 @@ impl DepositPublisher {
             msg.stamp_ns = now_ns();
         }
         // Frame events from before this send say nothing about it.
+        // Draining can only fail on a broken listener, which the flush's own wait reports.
         let _ = self.frame_ready.try_wait(|_| {});
         match self.publisher.send_copy(msg) {
             Ok(0) => Err(ShmError::NoSubscriber {

@@ -25,10 +25,12 @@ fn live_frame_publishers(factory: &FrameFactory, config: &Config) -> usize {
         return 0;
     }
     let mut dead = 0;
+    // Listing fails only on an unreadable node directory: then no dead publisher is known.
     let _ = Node::<Svc>::list(config, |state| {
         if let NodeState::Dead(view) = state {
             if ids.contains(view.id()) {
                 dead += 1;
+                // Another process may be cleaning it already; it counts as dead either way.
                 let _ = view.try_remove_stale_resources();
             }
         }

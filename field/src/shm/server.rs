@@ -177,6 +177,7 @@ impl FieldServer {
             FirstFrame::Continue(header, cells) => {
                 stepper.resume_from(&header);
                 for d in pending {
+                    // A rejection is counted in the stepper (and so in the next header).
                     let _ = stepper.offer(d);
                 }
                 let started = now_ns();
@@ -189,6 +190,7 @@ impl FieldServer {
         first
             .send()
             .map_err(|e| service_err(&names.frame, "send", e))?;
+        // A failed wake-up only delays readers to their own wait deadline; the frame is out.
         let _ = notifier.notify();
         let previous = own
             .receive()
@@ -287,6 +289,7 @@ impl FieldServer {
         *next.user_header_mut() = self.stepper.header(done, compute_ns, &report);
         next.send()
             .map_err(|e| service_err(&self.names.frame, "send", e))?;
+        // A failed wake-up only delays readers to their own wait deadline; the frame is out.
         let _ = self.notifier.notify();
         self.previous = self
             .own
