@@ -44,6 +44,8 @@ enum Command {
     Probe(cmd::probe::ProbeArgs),
     /// Send one deposit to a running field.
     Deposit(cmd::probe::DepositArgs),
+    /// Serve a field to thin radio clients (seed 002's DLE/CRC frames over UDP).
+    Gateway(cmd::gateway::GatewayArgs),
     /// Measure latency and throughput side by side with raw iceoryx2, a Unix socket and Zenoh.
     Bench(cmd::bench::BenchArgs),
     /// One peer process of `pheromone bench` (started by it).
@@ -66,6 +68,7 @@ fn main() -> ExitCode {
         Command::GraphRobot(a) => cmd::graph::run_robot(a),
         Command::Probe(a) => cmd::probe::run_probe(a),
         Command::Deposit(a) => cmd::probe::run_deposit(a),
+        Command::Gateway(a) => cmd::gateway::run(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::BenchPeer(a) => cmd::bench::run_peer(a),
     };

@@ -2,6 +2,7 @@
 
 mod bench;
 mod crash;
+mod gateway;
 mod graph;
 mod harness;
 mod processes;

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod field;
+pub mod gateway;
 pub mod graph;
 pub mod probe;
 pub mod roles;

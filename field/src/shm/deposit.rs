@@ -81,9 +81,15 @@ impl DepositPublisher {
     }
 
     /// Sends a deposit, stamped with this publisher's robot id and the monotonic clock. Fails
-    /// with `NotDelivered` if no field took it (none running, or its buffer is full).
+    /// with `NoSubscriber` if no field took it (none running, or its buffer is full).
     pub fn send(&mut self, mut msg: DepositMsg) -> Result<(), ShmError> {
         msg.robot_id = self.robot_id;
+        self.send_as(msg)
+    }
+
+    /// Sends a deposit with the robot ID it carries (a gateway that deposits for its clients);
+    /// otherwise as [`send`](Self::send).
+    pub fn send_as(&mut self, mut msg: DepositMsg) -> Result<(), ShmError> {
         if msg.stamp_ns == 0 {
             msg.stamp_ns = now_ns();
         }

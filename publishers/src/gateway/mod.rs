@@ -1,0 +1,434 @@
+//! Seed 002's pheromone server for thin clients (MODELS.md M3): robots with only a
+//! microcontroller and a radio send DLE/CRC frames (`gateway_codec`, wire contract in
+//! `docs/gateway-wire.md`) and get back what they would read from shared memory.
+//!
+//! [`Gateway`] holds the I/O-free logic: it answers one decoded frame at a time from the newest
+//! frame of a field it reads ([`FieldReader`]) and forwards deposits to the field
+//! ([`DepositPublisher`]). [`udp`] serves it on a UDP socket (one frame per datagram).
+//!
+//! - **PIR:** the two antenna readings at the M3 antenna points, half a wheel base (as the client
+//!   sends it) to each side of the pose ([`field::FrameView::antennas`]), with the sequence of
+//!   the frame they were read from.
+//! - **DEPOSIT:** a Z-shape reinforcement (seed 002 eq. 1) at (x, y) with the gateway's plateau
+//!   and slope, sent to the field with the client ID as robot ID. Its 1-byte `seq` makes a
+//!   retried deposit apply at most once: the last [`SEQ_MEMORY`] seqs of each client are kept.
+//! - **PING:** the newest frame's sequence, field time and channel count.
+//! - **Errors:** a frame with a valid CRC that is malformed, names an unknown channel, a value out
+//!   of range, comes from a client not on the allow-list or over its rate gets an error reply
+//!   with M3's reason and is never applied; a frame with a bad CRC (or broken framing) is counted
+//!   and dropped, since its client ID cannot be trusted.
+
+pub mod udp;
+
+use std::time::Duration;
+
+use field::shm::{DepositPublisher, FieldReader, ShmError, Svc};
+use field::{DepositMsg, Pose2};
+use gateway_codec::{
+    DecodeError, DepositReply, DepositRequest, DepositStatus, ErrorReason, Frame, Message,
+    PirReply, PirRequest, StatusReply,
+};
+use iceoryx2::node::Node;
+use serde::Serialize;
+
+/// Deposit seqs remembered per client (M3: the last 16).
+pub const SEQ_MEMORY: usize = 16;
+/// The widest half wheel base a PIR may name (m); a larger one is out of range (reason 3).
+pub const MAX_HALF_WHEEL_BASE_M: f32 = 10.0;
+
+/// What the gateway serves and to whom.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GatewayConfig {
+    /// Client IDs served; the others get reason 6. Default: 1–255 (ID 0 is left out: CRC-16/ARC
+    /// does not protect a leading 0x00, see `docs/gateway-wire.md`).
+    pub allow: Vec<u8>,
+    /// Requests per second each client may send (a bucket of as many, refilled continuously);
+    /// 0 = unlimited. Over it: reason 5.
+    pub rate_per_s: f64,
+    /// Plateau c of the Z-shape deposit (m).
+    pub plateau_m: f32,
+    /// Slope width σ of the Z-shape deposit (m).
+    pub slope_m: f32,
+}
+
+impl Default for GatewayConfig {
+    fn default() -> Self {
+        Self {
+            allow: (1..=255).collect(),
+            rate_per_s: 100.0,
+            plateau_m: 0.2,
+            slope_m: 0.3,
+        }
+    }
+}
+
+/// Why a gateway could not start or serve.
+#[derive(Debug, thiserror::Error)]
+pub enum GatewayError {
+    #[error(transparent)]
+    Shm(#[from] ShmError),
+    #[error("gateway setting {name} = {value}: {reason}")]
+    Config {
+        name: &'static str,
+        value: String,
+        reason: &'static str,
+    },
+    #[error("no frame from field '{field}' within {timeout_s} s")]
+    NoFrame { field: String, timeout_s: f64 },
+    #[error("UDP socket {address}: {action} failed")]
+    Socket {
+        address: String,
+        action: &'static str,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Counters of one gateway, logged once a second and printed at the end.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct GatewayCounters {
+    /// Frames decoded (valid CRC and framing).
+    pub frames: u64,
+    pub pirs: u64,
+    /// Deposits forwarded to the field.
+    pub deposits: u64,
+    /// Retried deposits whose seq was already applied (answered, not applied again).
+    pub deposits_repeated: u64,
+    /// Deposits the field did not take (none subscribed or its buffer full): not answered, so
+    /// the client retries.
+    pub deposits_undelivered: u64,
+    pub pings: u64,
+    /// Error replies sent, by M3 reason code (index 1–6).
+    pub errors_sent: [u64; 7],
+    /// Frames dropped without a reply (bad CRC, broken framing), by the codec's reason.
+    pub dropped: u64,
+    /// Rejections by the codec's reason name (bad_crc, too_long, …).
+    pub rejected: std::collections::BTreeMap<&'static str, u64>,
+}
+
+/// What one client has used of its rate and which deposit seqs it has applied.
+#[derive(Debug, Clone, Copy)]
+struct Client {
+    tokens: f64,
+    last_ns: u64,
+    seqs: [u8; SEQ_MEMORY],
+    seq_count: usize,
+    seq_next: usize,
+}
+
+impl Client {
+    const NEW: Client = Client {
+        tokens: f64::NAN,
+        last_ns: 0,
+        seqs: [0; SEQ_MEMORY],
+        seq_count: 0,
+        seq_next: 0,
+    };
+
+    /// Takes one request from the bucket; false when the client is over its rate.
+    fn admit(&mut self, rate_per_s: f64, now_ns: u64) -> bool {
+        if rate_per_s <= 0.0 {
+            return true;
+        }
+        let burst = rate_per_s.max(1.0);
+        if self.tokens.is_nan() {
+            self.tokens = burst;
+        } else {
+            let dt_s = now_ns.saturating_sub(self.last_ns) as f64 * 1e-9;
+            self.tokens = (self.tokens + dt_s * rate_per_s).min(burst);
+        }
+        self.last_ns = now_ns;
+        if self.tokens >= 1.0 {
+            self.tokens -= 1.0;
+            true
+        } else {
+            false
+        }
+    }
+
+    fn applied(&self, seq: u8) -> bool {
+        self.seqs[..self.seq_count].contains(&seq)
+    }
+
+    fn remember(&mut self, seq: u8) {
+        self.seqs[self.seq_next] = seq;
+        self.seq_next = (self.seq_next + 1) % SEQ_MEMORY;
+        self.seq_count = (self.seq_count + 1).min(SEQ_MEMORY);
+    }
+}
+
+/// The pheromone server of seed 002 over one field.
+pub struct Gateway {
+    field: String,
+    reader: FieldReader,
+    depositor: DepositPublisher,
+    config: GatewayConfig,
+    allowed: [bool; 256],
+    clients: Box<[Client; 256]>,
+    counters: GatewayCounters,
+}
+
+impl Gateway {
+    /// Attaches to field `field` (waiting up to `timeout` for it and its first frame).
+    pub fn attach(
+        node: &Node<Svc>,
+        field: &str,
+        config: GatewayConfig,
+        timeout: Duration,
+    ) -> Result<Self, GatewayError> {
+        check_config(&config)?;
+        let mut reader = FieldReader::attach_within(node, field, timeout)?;
+        if reader.frame().is_none() && !reader.wait_frame(timeout)? {
+            return Err(GatewayError::NoFrame {
+                field: field.to_string(),
+                timeout_s: timeout.as_secs_f64(),
+            });
+        }
+        // Robot IDs of the gateway's deposits are the client IDs; the publisher's own is unused.
+        let depositor = DepositPublisher::attach_within(node, field, 0, timeout)?;
+        let mut allowed = [false; 256];
+        for &id in &config.allow {
+            allowed[id as usize] = true;
+        }
+        Ok(Self {
+            field: field.to_string(),
+            reader,
+            depositor,
+            config,
+            allowed,
+            clients: Box::new([Client::NEW; 256]),
+            counters: GatewayCounters::default(),
+        })
+    }
+
+    pub fn field(&self) -> &str {
+        &self.field
+    }
+
+    pub fn counters(&self) -> &GatewayCounters {
+        &self.counters
+    }
+
+    /// Counts a frame the codec rejected; returns the error reply it gets, if any.
+    pub fn rejected(&mut self, e: &DecodeError) -> Option<Frame> {
+        *self
+            .counters
+            .rejected
+            .entry(e.rejection().name())
+            .or_default() += 1;
+        match e.reply() {
+            Some((client_id, reason)) => Some(self.error(client_id, reason)),
+            None => {
+                self.counters.dropped += 1;
+                None
+            }
+        }
+    }
+
+    /// Answers one decoded frame received at `now_ns` (CLOCK_MONOTONIC); `None` = no reply
+    /// (a deposit the field did not take: the client retries).
+    pub fn handle(&mut self, frame: Frame, now_ns: u64) -> Result<Option<Frame>, GatewayError> {
+        self.counters.frames += 1;
+        let id = frame.client_id;
+        if !self.allowed[id as usize] {
+            return Ok(Some(self.error(id, ErrorReason::ClientNotAllowed)));
+        }
+        if !self.clients[id as usize].admit(self.config.rate_per_s, now_ns) {
+            return Ok(Some(self.error(id, ErrorReason::RateLimited)));
+        }
+        // Take whatever frame has arrived since the last request.
+        self.reader.update()?;
+        let reply = match frame.message {
+            Message::Pir(p) => self.pir(id, p),
+            Message::Deposit(d) => return self.deposit(id, d),
+            Message::Ping => self.ping(id),
+            // A reply sent to the server is no request.
+            _ => self.error(id, ErrorReason::UnknownOpcode),
+        };
+        Ok(Some(reply))
+    }
+
+    fn pir(&mut self, id: u8, p: PirRequest) -> Frame {
+        let Some(f) = self.reader.frame() else {
+            return self.error(id, ErrorReason::BadValue);
+        };
+        if p.channel as usize >= f.view.channels {
+            return self.error(id, ErrorReason::UnknownChannel);
+        }
+        if !(p.half_wheel_base_m > 0.0 && p.half_wheel_base_m <= MAX_HALF_WHEEL_BASE_M) {
+            return self.error(id, ErrorReason::BadValue);
+        }
+        let pose = Pose2::new(p.x_m, p.y_m, p.theta_rad);
+        let (p_left, p_right) =
+            f.view
+                .antennas(p.channel as usize, pose, 2.0 * p.half_wheel_base_m);
+        let frame_seq = f.header.sequence as u32;
+        self.counters.pirs += 1;
+        Frame {
+            client_id: id,
+            message: Message::PirReply(PirReply {
+                p_left,
+                p_right,
+                frame_seq,
+            }),
+        }
+    }
+
+    fn deposit(&mut self, id: u8, d: DepositRequest) -> Result<Option<Frame>, GatewayError> {
+        let reply = |status| Frame {
+            client_id: id,
+            message: Message::DepositReply(DepositReply { seq: d.seq, status }),
+        };
+        let Some(f) = self.reader.frame() else {
+            return Ok(Some(self.error(id, ErrorReason::BadValue)));
+        };
+        if d.channel as usize >= f.view.channels {
+            self.counters.errors_sent[ErrorReason::UnknownChannel as usize] += 1;
+            return Ok(Some(reply(DepositStatus::Rejected(
+                ErrorReason::UnknownChannel,
+            ))));
+        }
+        // The deposit's reach must touch the grid (the field would reject it otherwise).
+        let g = f.header.geometry();
+        let reach_m = self.config.plateau_m + self.config.slope_m;
+        let (x0, y0) = (g.origin_x_m - reach_m, g.origin_y_m - reach_m);
+        let x1 = g.origin_x_m + g.width as f32 * g.cell_size_m + reach_m;
+        let y1 = g.origin_y_m + g.height as f32 * g.cell_size_m + reach_m;
+        if !(d.x_m > x0 && d.x_m < x1 && d.y_m > y0 && d.y_m < y1) {
+            self.counters.errors_sent[ErrorReason::BadValue as usize] += 1;
+            return Ok(Some(reply(DepositStatus::Rejected(ErrorReason::BadValue))));
+        }
+        if self.clients[id as usize].applied(d.seq) {
+            self.counters.deposits_repeated += 1;
+            return Ok(Some(reply(DepositStatus::Applied)));
+        }
+        let mut msg = DepositMsg::z_shape(
+            d.channel as u32,
+            d.x_m,
+            d.y_m,
+            d.amount,
+            self.config.plateau_m,
+            self.config.slope_m,
+        );
+        msg.robot_id = id as u32;
+        match self.depositor.send_as(msg) {
+            Ok(()) => {
+                self.clients[id as usize].remember(d.seq);
+                self.counters.deposits += 1;
+                Ok(Some(reply(DepositStatus::Applied)))
+            }
+            Err(ShmError::NoSubscriber { .. }) => {
+                self.counters.deposits_undelivered += 1;
+                Ok(None)
+            }
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    fn ping(&mut self, id: u8) -> Frame {
+        let Some(f) = self.reader.frame() else {
+            return self.error(id, ErrorReason::BadValue);
+        };
+        let status = StatusReply {
+            frame_seq: f.header.sequence as u32,
+            field_time_s: f.header.sim_time_s as f32,
+            channels: f.header.channels.min(255) as u8,
+        };
+        self.counters.pings += 1;
+        Frame {
+            client_id: id,
+            message: Message::Status(status),
+        }
+    }
+
+    fn error(&mut self, client_id: u8, reason: ErrorReason) -> Frame {
+        self.counters.errors_sent[reason as usize] += 1;
+        Frame {
+            client_id,
+            message: Message::Error(reason),
+        }
+    }
+}
+
+fn check_config(c: &GatewayConfig) -> Result<(), GatewayError> {
+    let bad = |name, value: f64, reason| GatewayError::Config {
+        name,
+        value: value.to_string(),
+        reason,
+    };
+    if !(c.rate_per_s.is_finite() && c.rate_per_s >= 0.0) {
+        return Err(bad(
+            "rate_per_s",
+            c.rate_per_s,
+            "must be a finite number ≥ 0",
+        ));
+    }
+    if !(c.plateau_m.is_finite() && c.plateau_m >= 0.0) {
+        return Err(bad(
+            "plateau_m",
+            c.plateau_m as f64,
+            "must be finite and ≥ 0",
+        ));
+    }
+    if !(c.slope_m.is_finite() && c.slope_m >= 0.0) {
+        return Err(bad("slope_m", c.slope_m as f64, "must be finite and ≥ 0"));
+    }
+    if c.plateau_m + c.slope_m <= 0.0 {
+        return Err(bad(
+            "plateau_m + slope_m",
+            (c.plateau_m + c.slope_m) as f64,
+            "a deposit must reach somewhere",
+        ));
+    }
+    if c.allow.is_empty() {
+        return Err(GatewayError::Config {
+            name: "allow",
+            value: "[]".into(),
+            reason: "no client would be served",
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_rate_bucket_admits_its_burst_then_refills_at_the_rate() {
+        let mut c = Client::NEW;
+        let t0 = 1_000_000_000;
+        let admitted = (0..15).filter(|_| c.admit(10.0, t0)).count();
+        assert_eq!(admitted, 10, "a burst of one second's worth");
+        assert!(!c.admit(10.0, t0 + 50_000_000), "half a token after 50 ms");
+        assert!(c.admit(10.0, t0 + 100_000_000), "one token after 100 ms");
+        let mut unlimited = Client::NEW;
+        assert!((0..1000).all(|_| unlimited.admit(0.0, t0)), "0 = unlimited");
+    }
+
+    #[test]
+    fn the_last_sixteen_seqs_are_remembered() {
+        let mut c = Client::NEW;
+        for s in 0..20u8 {
+            c.remember(s);
+        }
+        assert!((4..20).all(|s| c.applied(s)));
+        assert!((0..4).all(|s| !c.applied(s)));
+    }
+
+    #[test]
+    fn bad_settings_are_refused_naming_the_setting() {
+        let e = check_config(&GatewayConfig {
+            rate_per_s: f64::NAN,
+            ..Default::default()
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("rate_per_s"), "{e}");
+        let e = check_config(&GatewayConfig {
+            allow: vec![],
+            ..Default::default()
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("allow"), "{e}");
+    }
+}

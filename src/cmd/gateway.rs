@@ -1,0 +1,138 @@
+//! `pheromone gateway`: seed 002's pheromone server for thin radio clients (DLE/CRC frames over
+//! UDP), in front of a running field.
+
+use std::time::Duration;
+
+use clap::Args;
+use field::shm::create_node;
+use publishers::gateway::{udp, Gateway, GatewayConfig};
+
+use super::bad;
+
+/// Serve a field to thin clients (seed 002): robots send DLE/CRC frames (docs/gateway-wire.md)
+/// with their pose and get back the two virtual-antenna readings (PIR), send deposits, or ping.
+///
+/// Binds loopback unless told otherwise. Bad CRCs are dropped and counted; malformed frames,
+/// unknown channels, out-of-range values, clients not on --allow and clients over --rate-hz
+/// get an error reply and are never applied. Counters go to stderr once a second; --json prints
+/// them as one JSON object at the end (Ctrl-C or SIGTERM stops the gateway).
+#[derive(Args, Debug)]
+pub struct GatewayArgs {
+    /// Field name.
+    #[arg(long, default_value = "main")]
+    pub field: String,
+    /// UDP address to serve on.
+    #[arg(long, default_value = "127.0.0.1:7402")]
+    pub udp: String,
+    /// Client IDs served, e.g. `1,2,7` or `1-20`; default 1–255 (ID 0 is not protected by the
+    /// CRC's zero start value, see docs/gateway-wire.md).
+    #[arg(long, value_delimiter = ',')]
+    pub allow: Vec<String>,
+    /// Requests per second each client may send (0 = unlimited).
+    #[arg(long, default_value_t = 100.0)]
+    pub rate_hz: f64,
+    /// Plateau c of the Z-shape deposit (m).
+    #[arg(long, default_value_t = 0.2)]
+    pub plateau_m: f32,
+    /// Slope width σ of the Z-shape deposit (m).
+    #[arg(long, default_value_t = 0.3)]
+    pub slope_m: f32,
+    /// Seconds to wait for the field and its first frame.
+    #[arg(long, default_value_t = 10.0)]
+    pub attach_timeout: f64,
+    /// Print the final counters as one JSON object on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `1,2,7` and ranges `1-20`; every ID 0–255.
+fn parse_allow(items: &[String]) -> anyhow::Result<Vec<u8>> {
+    if items.is_empty() {
+        return Ok(GatewayConfig::default().allow);
+    }
+    let id = |s: &str| {
+        s.trim()
+            .parse::<u8>()
+            .map_err(|e| bad(format!("--allow: '{s}' is not a client ID 0–255: {e}")))
+    };
+    let mut ids = Vec::new();
+    for item in items {
+        match item.split_once('-') {
+            Some((a, b)) => {
+                let (a, b) = (id(a)?, id(b)?);
+                if a > b {
+                    return Err(bad(format!("--allow: range '{item}' is empty")));
+                }
+                ids.extend(a..=b);
+            }
+            None => ids.push(id(item)?),
+        }
+    }
+    ids.sort_unstable();
+    ids.dedup();
+    Ok(ids)
+}
+
+pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
+    let config = GatewayConfig {
+        allow: parse_allow(&a.allow)?,
+        rate_per_s: a.rate_hz,
+        plateau_m: a.plateau_m,
+        slope_m: a.slope_m,
+    };
+    if !(a.attach_timeout.is_finite() && a.attach_timeout >= 0.0) {
+        return Err(bad(format!(
+            "--attach-timeout {}: expected seconds ≥ 0",
+            a.attach_timeout
+        )));
+    }
+    let socket = udp::bind(&a.udp)?;
+    let node = create_node(&format!("gateway-{}", std::process::id()))?;
+    let mut gateway = match Gateway::attach(
+        &node,
+        &a.field,
+        config,
+        Duration::from_secs_f64(a.attach_timeout),
+    ) {
+        Ok(g) => g,
+        Err(e @ publishers::gateway::GatewayError::Config { .. }) => {
+            return Err(bad(e.to_string()))
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let local = socket.local_addr()?;
+    eprintln!("gateway: serving field '{}' on udp://{local}", a.field);
+    udp::serve(&node, &mut gateway, &socket, |c| {
+        eprintln!(
+            "gateway: frames {} pir {} deposits {} (repeated {}, undelivered {}) pings {} \
+             errors sent {:?} dropped {} rejected {:?}",
+            c.frames,
+            c.pirs,
+            c.deposits,
+            c.deposits_repeated,
+            c.deposits_undelivered,
+            c.pings,
+            &c.errors_sent[1..],
+            c.dropped,
+            c.rejected
+        )
+    })?;
+    if a.json {
+        println!("{}", serde_json::to_string(gateway.counters())?);
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn allow_lists_take_ids_and_ranges_and_refuse_the_rest() {
+        let s = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(parse_allow(&s(&["3", "1-2", "2"])).unwrap(), vec![1, 2, 3]);
+        assert_eq!(parse_allow(&[]).unwrap().len(), 255);
+        assert!(parse_allow(&s(&["256"])).is_err());
+        assert!(parse_allow(&s(&["5-1"])).is_err());
+    }
+}
