@@ -33,25 +33,25 @@ const DEFAULT_SIZES: &[usize] = &[512, 1024, 2048, 4096];
 /// The evaporation models benchmarked, by bench id.
 fn models() -> Vec<(&'static str, ChannelSpec)> {
     let ambient = |radius_m: f32| Evaporation::Ambient {
-        decay_per_sec: 0.0057,
+        decay_per_s: 0.0057,
         alpha: 0.5,
         radius_m,
     };
     let mut diffusing = ChannelSpec::new(
         "trail",
         Evaporation::Exponential {
-            decay_per_sec: 0.0057,
+            decay_per_s: 0.0057,
         },
     );
     // κ = D·dt/h² = 0.1.
-    diffusing.diffusion_m2_per_sec = 0.1 * CELL_SIZE_M * CELL_SIZE_M * TICK_HZ;
+    diffusing.diffusion_m2_per_s = 0.1 * CELL_SIZE_M * CELL_SIZE_M * TICK_HZ;
     let mut saturating = ChannelSpec::new("anti", Evaporation::Saturating { rho_per_tick: 0.01 });
     saturating.signed = true;
     let mut quantum = ChannelSpec::new(
         "counter",
         Evaporation::Quantum {
             quantum: 1.0,
-            tau_secs: 1.0,
+            tau_s: 1.0,
         },
     );
     quantum.signed = true;
@@ -61,7 +61,7 @@ fn models() -> Vec<(&'static str, ChannelSpec)> {
             ChannelSpec::new(
                 "trail",
                 Evaporation::Exponential {
-                    decay_per_sec: 0.0057,
+                    decay_per_s: 0.0057,
                 },
             ),
         ),
@@ -184,7 +184,7 @@ fn bench_deposits(c: &mut Criterion) {
     let trail = ChannelSpec::new(
         "trail",
         Evaporation::Exponential {
-            decay_per_sec: 0.0057,
+            decay_per_s: 0.0057,
         },
     );
     let mut anti = ChannelSpec::new("anti", Evaporation::Saturating { rho_per_tick: 0.01 });

@@ -334,7 +334,7 @@ impl Conductor {
             stamp_ns: now_ns(),
             step,
             sim_time_s,
-            dt_secs: dt_s,
+            dt_s,
             finished: 0,
             _pad: 0,
         })?;
@@ -347,7 +347,7 @@ impl Conductor {
             stamp_ns: now_ns(),
             step: steps,
             sim_time_s,
-            dt_secs: dt_s,
+            dt_s,
             finished: 1,
             _pad: 0,
         })?;

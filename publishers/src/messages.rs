@@ -56,10 +56,10 @@ pub struct SensorMsg {
     /// Valid entries of `observations`.
     pub count: u32,
     pub sim_time_s: f64,
-    pub dt_secs: f64,
+    pub dt_s: f64,
     /// Odometry: linear and angular velocity measured over the last step.
-    pub v_mps: f64,
-    pub omega_radps: f64,
+    pub v_m_per_s: f64,
+    pub omega_rad_per_s: f64,
     pub observations: [LandmarkObs; MAX_OBSERVATIONS],
 }
 
@@ -71,9 +71,9 @@ impl Default for SensorMsg {
             robot_id: 0,
             count: 0,
             sim_time_s: 0.0,
-            dt_secs: 0.0,
-            v_mps: 0.0,
-            omega_radps: 0.0,
+            dt_s: 0.0,
+            v_m_per_s: 0.0,
+            omega_rad_per_s: 0.0,
             observations: [LandmarkObs::default(); MAX_OBSERVATIONS],
         }
     }
@@ -111,8 +111,8 @@ pub struct CmdMsg {
     pub step: u64,
     pub robot_id: u32,
     pub _pad: u32,
-    pub v_mps: f64,
-    pub omega_radps: f64,
+    pub v_m_per_s: f64,
+    pub omega_rad_per_s: f64,
 }
 
 /// What a follower is doing.

@@ -104,7 +104,7 @@ fn wild_sensor() -> impl Strategy<Value = SensorMsg> {
         prop::collection::vec(wild_obs(), MAX_OBSERVATIONS),
     )
         .prop_map(
-            |(step, count, (v_mps, omega_radps, sim_time_s), dt_secs, obs)| {
+            |(step, count, (v_m_per_s, omega_rad_per_s, sim_time_s), dt_s, obs)| {
                 let mut observations = [LandmarkObs::default(); MAX_OBSERVATIONS];
                 observations.copy_from_slice(&obs);
                 SensorMsg {
@@ -113,9 +113,9 @@ fn wild_sensor() -> impl Strategy<Value = SensorMsg> {
                     robot_id: 0,
                     count,
                     sim_time_s,
-                    dt_secs,
-                    v_mps,
-                    omega_radps,
+                    dt_s,
+                    v_m_per_s,
+                    omega_rad_per_s,
                     observations,
                 }
             },
@@ -234,7 +234,7 @@ fn the_depositor_never_turns_a_bad_pose_into_a_bad_deposit() {
         cell_size_m: 0.05,
         tick_hz: 10.0,
         channels: vec![{
-            let mut c = ChannelSpec::new("trail", Evaporation::Exponential { decay_per_sec: 0.1 });
+            let mut c = ChannelSpec::new("trail", Evaporation::Exponential { decay_per_s: 0.1 });
             c.signed = true;
             c
         }],
@@ -341,8 +341,8 @@ fn followers_never_command_a_non_finite_velocity() {
                 match follower.step_pose(&frame, pose, dt) {
                     Ok(out) => {
                         prop_assert!(
-                            out.cmd.v_mps.is_finite()
-                                && out.cmd.omega_radps.is_finite()
+                            out.cmd.v_m_per_s.is_finite()
+                                && out.cmd.omega_rad_per_s.is_finite()
                                 && out.status.sensed_level.is_finite(),
                             "{:?} from {:?}",
                             out,
@@ -401,7 +401,7 @@ fn the_world_survives_any_command() {
                     .count() as u64;
                 for out in world.step(cmds) {
                     let s = &out.sensor;
-                    prop_assert!(s.v_mps.is_finite() && s.omega_radps.is_finite());
+                    prop_assert!(s.v_m_per_s.is_finite() && s.omega_rad_per_s.is_finite());
                     prop_assert!(s
                         .observations()
                         .iter()

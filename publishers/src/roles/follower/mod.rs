@@ -48,9 +48,9 @@ pub use sector::{
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Decision {
     /// Forward speed (m/s).
-    pub v_mps: f64,
+    pub v_m_per_s: f64,
     /// Turn rate (rad/s, counter-clockwise positive).
-    pub omega_radps: f64,
+    pub omega_rad_per_s: f64,
     pub state: FollowerState,
     /// Pheromone level the strategy sensed (at the pose, or the antennas' mean).
     pub sensed_level: f32,
@@ -60,8 +60,8 @@ impl Decision {
     /// Standing still.
     pub fn stop(state: FollowerState, sensed_level: f32) -> Self {
         Self {
-            v_mps: 0.0,
-            omega_radps: 0.0,
+            v_m_per_s: 0.0,
+            omega_rad_per_s: 0.0,
             state,
             sensed_level,
         }
@@ -74,8 +74,8 @@ pub trait Strategy: Send {
     fn name(&self) -> &'static str;
     /// The field channel this strategy reads.
     fn channel(&self) -> usize;
-    /// Decides the command for the next `dt_secs`. The frame must have `channel()`.
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_secs: f64) -> Decision;
+    /// Decides the command for the next `dt_s`. The frame must have `channel()`.
+    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_s: f64) -> Decision;
     /// Back to the initial state (keeps the configuration; the RNG is not reseeded).
     fn reset(&mut self) {}
 }
@@ -240,7 +240,7 @@ pub enum FollowError {
     ChannelMissing { channel: usize, channels: usize },
     #[error("pose {name} = {value} is not a finite f32")]
     BadPose { name: &'static str, value: f64 },
-    #[error("dt_secs = {0} must be finite and > 0")]
+    #[error("dt_s = {0} must be finite and > 0")]
     BadDt(f64),
 }
 
@@ -297,7 +297,7 @@ impl Follower {
         &mut self,
         frame: &FrameView<'_>,
         pose: Pose2,
-        dt_secs: f64,
+        dt_s: f64,
         step: u64,
     ) -> Result<FollowOutput, FollowError> {
         let channel = self.strategy.channel();
@@ -319,13 +319,13 @@ impl Follower {
                 });
             }
         }
-        if !(dt_secs.is_finite() && dt_secs > 0.0) {
-            return Err(FollowError::BadDt(dt_secs));
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return Err(FollowError::BadDt(dt_s));
         }
-        let mut d = self.strategy.decide(frame, pose, dt_secs);
+        let mut d = self.strategy.decide(frame, pose, dt_s);
         let finite_or_zero = |v: f64| if v.is_finite() { v } else { 0.0 };
-        d.v_mps = finite_or_zero(d.v_mps);
-        d.omega_radps = finite_or_zero(d.omega_radps);
+        d.v_m_per_s = finite_or_zero(d.v_m_per_s);
+        d.omega_rad_per_s = finite_or_zero(d.omega_rad_per_s);
         if !d.sensed_level.is_finite() {
             d.sensed_level = 0.0;
         }
@@ -334,8 +334,8 @@ impl Follower {
             step,
             robot_id: self.robot_id,
             _pad: 0,
-            v_mps: d.v_mps,
-            omega_radps: d.omega_radps,
+            v_m_per_s: d.v_m_per_s,
+            omega_rad_per_s: d.omega_rad_per_s,
         };
         let status = FollowerStatusMsg {
             stamp_ns: 0,
@@ -357,7 +357,7 @@ impl Follower {
         &mut self,
         frame: &FrameView<'_>,
         pose: &PoseMsg,
-        dt_secs: f64,
+        dt_s: f64,
     ) -> Result<FollowOutput, FollowError> {
         let mut p = Pose2::default();
         for (name, v, out) in [
@@ -371,7 +371,7 @@ impl Follower {
             }
             *out = f;
         }
-        self.step(frame, p, dt_secs, pose.step)
+        self.step(frame, p, dt_s, pose.step)
     }
 }
 
@@ -423,14 +423,14 @@ mod tests {
                 (out.status.robot_id, out.status.step, out.status.stamp_ns),
                 (7, 12, 0)
             );
-            assert_eq!(out.cmd.v_mps, out.decision.v_mps);
-            assert_eq!(out.cmd.omega_radps, out.decision.omega_radps);
+            assert_eq!(out.cmd.v_m_per_s, out.decision.v_m_per_s);
+            assert_eq!(out.cmd.omega_rad_per_s, out.decision.omega_rad_per_s);
             assert_eq!(
                 FollowerState::from_code(out.status.state),
                 Some(out.decision.state)
             );
             assert_eq!(out.status.sensed_level, out.decision.sensed_level);
-            assert!(out.cmd.v_mps.is_finite() && out.cmd.omega_radps.is_finite());
+            assert!(out.cmd.v_m_per_s.is_finite() && out.cmd.omega_rad_per_s.is_finite());
         }
     }
 

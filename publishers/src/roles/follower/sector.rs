@@ -30,11 +30,13 @@ pub struct SectorConfig {
     /// γ ∈ [0, 1] of eq. 2: θ(t) = θ(t−1) + γ·A_s*.
     pub gamma: f64,
     /// Constant forward speed (m/s).
-    pub v_mps: f64,
+    #[serde(alias = "v_mps")]
+    pub v_m_per_s: f64,
     /// Turn-rate limit (rad/s).
-    pub omega_max_radps: f64,
+    #[serde(alias = "omega_max_radps")]
+    pub omega_max_rad_per_s: f64,
     /// A new sector is drawn every this many seconds (one seed 004 iteration); 0 = every step.
-    /// In between the robot turns toward the heading of eq. 2 at up to `omega_max_radps`.
+    /// In between the robot turns toward the heading of eq. 2 at up to `omega_max_rad_per_s`.
     pub decision_period_s: f64,
     /// τ_s = clamp(sector mean / this, 0, 1). 1 for a saturating channel; a negative value reads
     /// anti-pheromone (negative cells) as τ > 0.
@@ -55,8 +57,8 @@ impl Default for SectorConfig {
             u_count: 2,
             v_count: 2,
             gamma: 0.5,
-            v_mps: 0.3,
-            omega_max_radps: 1.5,
+            v_m_per_s: 0.3,
+            omega_max_rad_per_s: 1.5,
             decision_period_s: 0.0,
             saturation_level: 1.0,
             obstacle_channel: None,
@@ -97,8 +99,8 @@ impl SectorConfig {
                 "must be within [0, 1]",
             ));
         }
-        check_nonneg("sectors.v_mps", self.v_mps)?;
-        check_positive("sectors.omega_max_radps", self.omega_max_radps)?;
+        check_nonneg("sectors.v_m_per_s", self.v_m_per_s)?;
+        check_positive("sectors.omega_max_rad_per_s", self.omega_max_rad_per_s)?;
         check_nonneg("sectors.decision_period_s", self.decision_period_s)?;
         check_nonneg("sectors.obstacle_level", self.obstacle_level as f64)?;
         if !(self.saturation_level.is_finite() && self.saturation_level != 0.0) {
@@ -256,7 +258,7 @@ impl SectorSteer {
         rule: SectorRule,
         frame: &FrameView<'_>,
         pose: Pose2,
-        dt_secs: f64,
+        dt_s: f64,
     ) -> Decision {
         let c = &self.config;
         let level = frame.value(self.channel, pose.x_m, pose.y_m);
@@ -294,17 +296,17 @@ impl SectorSteer {
             self.last_sector = Some(s);
             self.decisions += 1;
         }
-        let dt = if dt_secs.is_finite() && dt_secs > 0.0 {
-            self.since_decision_s += dt_secs;
-            dt_secs
+        let dt = if dt_s.is_finite() && dt_s > 0.0 {
+            self.since_decision_s += dt_s;
+            dt_s
         } else {
             f64::INFINITY
         };
         let c = &self.config;
         let err = wrap_angle(self.goal_heading_rad.unwrap_or(theta) - theta);
         Decision {
-            v_mps: c.v_mps,
-            omega_radps: (err / dt).clamp(-c.omega_max_radps, c.omega_max_radps),
+            v_m_per_s: c.v_m_per_s,
+            omega_rad_per_s: (err / dt).clamp(-c.omega_max_rad_per_s, c.omega_max_rad_per_s),
             state: FollowerState::Exploring,
             sensed_level: level,
         }
@@ -322,8 +324,8 @@ impl SectorSteer {
 ///   U ∪ V with p(s) ∝ 1 − τ_s (eq. 1) and sets the heading goal θ(t−1) + γ·A_s* (eq. 2);
 /// - `uniform` (the paper's baseline): the sector is drawn uniformly from all 2S + 1.
 ///
-/// The command is ω = wrap(goal − θ)/dt clamped to ±`omega_max_radps` (= γ·A_s*/dt when a sector
-/// is drawn every step and the clamp is not reached), at the constant speed `v_mps`. State is
+/// The command is ω = wrap(goal − θ)/dt clamped to ±`omega_max_rad_per_s` (= γ·A_s*/dt when a sector
+/// is drawn every step and the clamp is not reached), at the constant speed `v_m_per_s`. State is
 /// always `Exploring`.
 #[derive(Debug, Clone)]
 pub struct SectorStrategy {
@@ -383,8 +385,8 @@ impl Strategy for SectorStrategy {
         self.core.channel
     }
 
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_secs: f64) -> Decision {
-        self.core.decide(self.rule, frame, pose, dt_secs)
+    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_s: f64) -> Decision {
+        self.core.decide(self.rule, frame, pose, dt_s)
     }
 
     fn reset(&mut self) {
@@ -477,7 +479,7 @@ mod tests {
         let frame = FrameView::new(g, 1, &cells);
         let pose = Pose2::new(5.0, 5.0, 0.4);
         let cfg = SectorConfig {
-            omega_max_radps: 100.0,
+            omega_max_rad_per_s: 100.0,
             ..SectorConfig::default()
         };
         let n = cfg.sectors();
@@ -486,12 +488,12 @@ mod tests {
             let d = s.decide(&frame, pose, 0.1);
             let a = sector_angle(s.last_sector().unwrap(), n);
             // ω = γ·A_s*/dt (eq. 2 over one step).
-            assert!((d.omega_radps - 0.5 * a / 0.1).abs() < 1e-5, "{d:?}");
-            assert_eq!((d.v_mps, d.state), (0.3, FollowerState::Exploring));
+            assert!((d.omega_rad_per_s - 0.5 * a / 0.1).abs() < 1e-5, "{d:?}");
+            assert_eq!((d.v_m_per_s, d.state), (0.3, FollowerState::Exploring));
         }
         // Clamped turn rate.
         let mut c = SectorStrategy::inverse(0, SectorConfig::default(), 1).unwrap();
-        assert!(c.decide(&frame, pose, 0.01).omega_radps.abs() <= 1.5);
+        assert!(c.decide(&frame, pose, 0.01).omega_rad_per_s.abs() <= 1.5);
         // Same seed, same choices; another seed, other choices.
         let run = |seed| {
             let mut s = SectorStrategy::inverse(0, cfg.clone(), seed).unwrap();
@@ -523,7 +525,7 @@ mod tests {
                 let a = sector_angle(s.last_sector().unwrap(), 9);
                 goal = Some(r.th + 0.5 * a);
             }
-            assert!(d.omega_radps.abs() <= 1.5 + 1e-12);
+            assert!(d.omega_rad_per_s.abs() <= 1.5 + 1e-12);
             r.advance(&d, 0.1);
             if k % 10 == 9 {
                 assert!(

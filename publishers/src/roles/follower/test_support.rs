@@ -44,10 +44,10 @@ impl Robot {
         Pose2::new(self.x as f32, self.y as f32, self.th as f32)
     }
     pub(super) fn advance(&mut self, d: &Decision, dt: f64) {
-        let mid = self.th + 0.5 * d.omega_radps * dt;
-        self.x += d.v_mps * mid.cos() * dt;
-        self.y += d.v_mps * mid.sin() * dt;
-        self.th = wrap_angle(self.th + d.omega_radps * dt);
+        let mid = self.th + 0.5 * d.omega_rad_per_s * dt;
+        self.x += d.v_m_per_s * mid.cos() * dt;
+        self.y += d.v_m_per_s * mid.sin() * dt;
+        self.th = wrap_angle(self.th + d.omega_rad_per_s * dt);
     }
 }
 

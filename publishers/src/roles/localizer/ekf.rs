@@ -81,17 +81,17 @@ impl Ekf {
     /// (see [`LossConfig`](super::LossConfig)) M_t is multiplied by `noise_inflation`.
     pub fn predict(
         &mut self,
-        v_mps: f64,
-        omega_radps: f64,
-        dt_secs: f64,
+        v_m_per_s: f64,
+        omega_rad_per_s: f64,
+        dt_s: f64,
     ) -> Result<(), LocalizerError> {
         self.counters.counted(check_odometry(
             &self.config.limits,
-            v_mps,
-            omega_radps,
-            dt_secs,
+            v_m_per_s,
+            omega_rad_per_s,
+            dt_s,
         ))?;
-        self.predict_unchecked(v_mps, omega_radps, dt_secs);
+        self.predict_unchecked(v_m_per_s, omega_rad_per_s, dt_s);
         Ok(())
     }
 
@@ -121,12 +121,12 @@ impl Ekf {
         Ok(self.update_unchecked(observations))
     }
 
-    /// One world step: prediction with the message's odometry and `dt_secs`, then correction
+    /// One world step: prediction with the message's odometry and `dt_s`, then correction
     /// with its observations. The whole message is checked before either is applied.
     pub fn step(&mut self, msg: &SensorMsg) -> Result<UpdateStats, LocalizerError> {
         self.counters
             .counted(check_message(&self.config.limits, msg))?;
-        self.predict_unchecked(msg.v_mps, msg.omega_radps, msg.dt_secs);
+        self.predict_unchecked(msg.v_m_per_s, msg.omega_rad_per_s, msg.dt_s);
         Ok(self.update_unchecked(msg.observations()))
     }
 
@@ -460,17 +460,17 @@ mod tests {
         ));
         // A message with good odometry but a NaN observation: prediction is not applied either.
         let mut msg = SensorMsg {
-            dt_secs: 0.1,
-            v_mps: 0.5,
+            dt_s: 0.1,
+            v_m_per_s: 0.5,
             count: 2,
             ..SensorMsg::default()
         };
         msg.observations[0] = some_obs()[0];
         msg.observations[1].bearing_rad = f32::NAN;
         assert_eq!(ekf.step(&msg), Err(E::NonFiniteObservation { index: 1 }));
-        msg.dt_secs = f64::NAN;
+        msg.dt_s = f64::NAN;
         assert!(matches!(ekf.step(&msg), Err(E::BadDt { .. })));
-        msg.dt_secs = 0.1;
+        msg.dt_s = 0.1;
         msg.count = 33;
         assert!(matches!(
             ekf.step(&msg),

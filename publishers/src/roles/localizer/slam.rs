@@ -79,17 +79,17 @@ impl EkfSlam {
     /// cross-covariances change.
     pub fn predict(
         &mut self,
-        v_mps: f64,
-        omega_radps: f64,
-        dt_secs: f64,
+        v_m_per_s: f64,
+        omega_rad_per_s: f64,
+        dt_s: f64,
     ) -> Result<(), LocalizerError> {
         self.counters.counted(check_odometry(
             &self.config.limits,
-            v_mps,
-            omega_radps,
-            dt_secs,
+            v_m_per_s,
+            omega_rad_per_s,
+            dt_s,
         ))?;
-        self.predict_unchecked(v_mps, omega_radps, dt_secs);
+        self.predict_unchecked(v_m_per_s, omega_rad_per_s, dt_s);
         Ok(())
     }
 
@@ -137,7 +137,7 @@ impl EkfSlam {
     pub fn step(&mut self, msg: &SensorMsg) -> Result<UpdateStats, LocalizerError> {
         self.counters
             .counted(check_message(&self.config.limits, msg))?;
-        self.predict_unchecked(msg.v_mps, msg.omega_radps, msg.dt_secs);
+        self.predict_unchecked(msg.v_m_per_s, msg.omega_rad_per_s, msg.dt_s);
         Ok(self.update_unchecked(msg.observations()))
     }
 

@@ -58,8 +58,8 @@ impl NoiseConfig {
     }
 
     /// Variances (σ_v², σ_ω²) of the control noise for a command (seed 001 Algorithm 1 line 5).
-    pub fn control_variances(&self, v_mps: f64, omega_radps: f64) -> (f64, f64) {
-        let (v2, w2) = (v_mps * v_mps, omega_radps * omega_radps);
+    pub fn control_variances(&self, v_m_per_s: f64, omega_rad_per_s: f64) -> (f64, f64) {
+        let (v2, w2) = (v_m_per_s * v_m_per_s, omega_rad_per_s * omega_rad_per_s);
         (
             self.alpha1 * v2 + self.alpha2 * w2,
             self.alpha3 * v2 + self.alpha4 * w2,
@@ -267,10 +267,10 @@ mod tests {
         let (mut sv, mut sv2, mut sw, mut sw2) = (0.0, 0.0, 0.0, 0.0);
         for _ in 0..n {
             let o = world.step(&[(1.0, 0.5)])[0].sensor;
-            sv += o.v_mps;
-            sv2 += o.v_mps * o.v_mps;
-            sw += o.omega_radps;
-            sw2 += o.omega_radps * o.omega_radps;
+            sv += o.v_m_per_s;
+            sv2 += o.v_m_per_s * o.v_m_per_s;
+            sw += o.omega_rad_per_s;
+            sw2 += o.omega_rad_per_s * o.omega_rad_per_s;
         }
         let nf = n as f64;
         let var_v = sv2 / nf - (sv / nf).powi(2);
