@@ -23,7 +23,7 @@ use std::time::Duration;
 use criterion::{BenchmarkId, Criterion, Throughput};
 use field::deposit::{prepare, DepositLimits};
 use field::{
-    ChannelSpec, DepositMsg, Evaporation, FieldConfig, FrameView, GridGeometry, Pose2, Stepper,
+    ChannelSpec, DepositMsg, Evaporation, FieldConfig, FrameView, GridGeometry, SamplePose, Stepper,
 };
 
 const CELL_SIZE_M: f32 = 0.05;
@@ -249,7 +249,7 @@ fn bench_sampling(c: &mut Criterion) {
     let g = GridGeometry::new(side as u32, side as u32, CELL_SIZE_M).unwrap();
     let cells = test_pattern(side);
     let view = FrameView::new(g, 1, &cells);
-    let pose = Pose2::new(25.3, 24.7, 0.6);
+    let pose = SamplePose::new(25.3, 24.7, 0.6);
     let mut group = c.benchmark_group("sample");
     group
         .sample_size(20)

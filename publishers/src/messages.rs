@@ -1,8 +1,10 @@
 //! Messages between the robot roles: fixed-size `#[repr(C)]`, `ZeroCopySend`, each with a robot id
 //! and a monotonic stamp (ns, CLOCK_MONOTONIC). Type names carry the layout version.
 //!
-//! Services (robot `r<ID>` of world `W`): `pheromone/W/r<ID>/pose`, `pheromone/W/r<ID>/cmd`,
-//! `pheromone/W/r<ID>/status`, `sim/W/r<ID>/sensors`, `sim/W/r<ID>/truth` (`roles::RobotServices`).
+//! Services (robot `r<ID>` of world `W`, named by `roles::RobotServices`):
+//! `pheromone/W/r<ID>/pose` ([`PoseMsg`]), `pheromone/W/r<ID>/cmd` ([`CmdMsg`]),
+//! `pheromone/W/r<ID>/status` ([`FollowerStatusMsg`]), `sim/W/r<ID>/sensors` ([`SensorMsg`]),
+//! `sim/W/r<ID>/truth` ([`TruthMsg`]); each has a `…-ready` event that wakes its receivers.
 
 use iceoryx2::prelude::ZeroCopySend;
 

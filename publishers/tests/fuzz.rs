@@ -18,7 +18,9 @@ use publishers::messages::{LandmarkObs, PoseMsg, SensorMsg, MAX_OBSERVATIONS};
 use publishers::roles::depositor::{msg_is_finite, DepositMode, Depositor, DepositorConfig};
 use publishers::roles::follower::{Follower, FollowerConfig, StrategyKind};
 use publishers::roles::localizer::{Ekf, EkfConfig, EkfSlam, EkfSlamConfig};
-use publishers::roles::world::{Landmark, OccupancyMap, Pose2, RobotConfig, World, WorldConfig};
+use publishers::roles::world::{
+    Landmark, OccupancyMap, RobotConfig, World, WorldConfig, WorldPose,
+};
 use publishers::sim::scenario::Scenario;
 use testkit::toml_fuzz;
 
@@ -142,7 +144,7 @@ fn localizers_survive_any_sensor_message() {
         cases(256),
         &prop::collection::vec(wild_sensor(), 1..24),
         |msgs| {
-            let start = Pose2::new(1.0, 2.5, 0.3);
+            let start = WorldPose::new(1.0, 2.5, 0.3);
             let cov0 = Matrix3::from_diagonal(&nalgebra::Vector3::new(0.01, 0.01, 0.001));
             let mut ekf = Ekf::new(EkfConfig::default(), landmarks(), start, cov0).unwrap();
             let mut slam = EkfSlam::new(EkfSlamConfig::default(), start, cov0).unwrap();
@@ -371,7 +373,7 @@ fn the_world_survives_any_command() {
         robots: (0..3)
             .map(|id| RobotConfig {
                 id,
-                start: Pose2::new(1.0 + id as f64, 2.5, 0.0),
+                start: WorldPose::new(1.0 + id as f64, 2.5, 0.0),
                 noise: None,
             })
             .collect(),

@@ -56,7 +56,7 @@ pub enum ScenarioError {
 fn builtin_names() -> String {
     BUILTIN
         .iter()
-        .chain(crate::graph::sim::BUILTIN_REGIONS.iter())
+        .chain(crate::graph::agent::BUILTIN_REGIONS.iter())
         .map(|(n, _)| *n)
         .collect::<Vec<_>>()
         .join(", ")

@@ -2,11 +2,12 @@
 //! (eq. 5 with the MODELS.md M3 convention), turn toward the stronger one, forward speed
 //! K·(1 − |P_L − P_R|) (the evident intent of eq. 6).
 
-use field::{FrameView, Pose2};
+use field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    check_nonneg, check_positive, invalid, Decision, FollowerConfigError, Strategy, StrategyKind,
+    check_nonneg, check_positive, invalid, Decision, FollowerConfigError, FollowerStrategy,
+    StrategyKind,
 };
 use crate::messages::FollowerState;
 
@@ -100,15 +101,15 @@ impl AntennaFollower {
     }
 
     /// Raw readings (P_L, P_R) at the antenna points.
-    pub fn readings(&self, frame: &FrameView<'_>, pose: Pose2) -> (f32, f32) {
+    pub fn readings(&self, frame: &FrameView<'_>, pose: SamplePose) -> (f32, f32) {
         let a = self.config.antenna_ahead_m;
         let (s, c) = pose.theta_rad.sin_cos();
-        let head = Pose2::new(pose.x_m + a * c, pose.y_m + a * s, pose.theta_rad);
+        let head = SamplePose::new(pose.x_m + a * c, pose.y_m + a * s, pose.theta_rad);
         frame.antennas(self.channel, head, self.config.wheel_base_m)
     }
 }
 
-impl Strategy for AntennaFollower {
+impl FollowerStrategy for AntennaFollower {
     fn name(&self) -> &'static str {
         StrategyKind::Antenna.name()
     }
@@ -117,7 +118,7 @@ impl Strategy for AntennaFollower {
         self.channel
     }
 
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, _dt_s: f64) -> Decision {
+    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, _dt_s: f64) -> Decision {
         let c = &self.config;
         let (pl, pr) = self.readings(frame, pose);
         let level = 0.5 * (pl + pr);
@@ -214,7 +215,7 @@ mod tests {
         // Pheromone only at y > 5 (left of a robot heading +x at y = 5).
         let (g, cells) = synth(10.0, 10.0, 0.05, |_, y| if y > 5.0 { 1.0 } else { 0.0 });
         let frame = FrameView::new(g, 1, &cells);
-        let d = antenna().decide(&frame, Pose2::new(5.0, 5.0, 0.0), 0.05);
+        let d = antenna().decide(&frame, SamplePose::new(5.0, 5.0, 0.0), 0.05);
         assert!(
             d.omega_rad_per_s > 0.0,
             "should turn left (toward the stronger antenna): {d:?}"
@@ -224,7 +225,7 @@ mod tests {
         let (g2, even) = synth(10.0, 10.0, 0.05, |_, _| 0.7);
         let d = antenna().decide(
             &FrameView::new(g2, 1, &even),
-            Pose2::new(5.0, 5.0, 1.0),
+            SamplePose::new(5.0, 5.0, 1.0),
             0.05,
         );
         assert_eq!(
@@ -235,7 +236,7 @@ mod tests {
         let zero = vec![0.0; g.cells()];
         let d = antenna().decide(
             &FrameView::new(g, 1, &zero),
-            Pose2::new(5.0, 5.0, 0.0),
+            SamplePose::new(5.0, 5.0, 0.0),
             0.05,
         );
         assert_eq!(

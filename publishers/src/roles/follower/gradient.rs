@@ -2,12 +2,12 @@
 //! adapts its speed to the sensed level by the Table 2 speed table, and rejects a trail below an
 //! absolute level or δ·P0 (MODELS.md M1).
 
-use field::{FrameView, Pose2};
+use field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError, Strategy,
-    StrategyKind,
+    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError,
+    FollowerStrategy, StrategyKind,
 };
 use crate::messages::FollowerState;
 
@@ -277,7 +277,7 @@ impl GradientFollower {
 
     /// Score of the direction `phi`: the mean level at `lookahead_samples` points spread evenly
     /// along the ray up to `lookahead_m` (the mean smooths a dotted trail).
-    fn ray_score(&self, frame: &FrameView<'_>, pose: Pose2, phi: f64) -> f32 {
+    fn ray_score(&self, frame: &FrameView<'_>, pose: SamplePose, phi: f64) -> f32 {
         let (x, y) = (pose.x_m as f64, pose.y_m as f64);
         let m = self.config.lookahead_samples;
         let (s, c) = phi.sin_cos();
@@ -291,7 +291,7 @@ impl GradientFollower {
     }
 
     /// The desired heading (rad, world frame), or `None` where the field is flat.
-    pub fn desired_heading(&self, frame: &FrameView<'_>, pose: Pose2) -> Option<f64> {
+    pub fn desired_heading(&self, frame: &FrameView<'_>, pose: SamplePose) -> Option<f64> {
         let th = pose.theta_rad as f64;
         let n = self.config.fan_rays;
         let half = self.config.fan_half_angle_deg.to_radians();
@@ -366,7 +366,7 @@ impl GradientFollower {
     }
 }
 
-impl Strategy for GradientFollower {
+impl FollowerStrategy for GradientFollower {
     fn name(&self) -> &'static str {
         StrategyKind::Gradient.name()
     }
@@ -375,7 +375,7 @@ impl Strategy for GradientFollower {
         self.channel
     }
 
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, _dt_s: f64) -> Decision {
+    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, _dt_s: f64) -> Decision {
         let level = frame.value(self.channel, pose.x_m, pose.y_m);
         self.update_state(level);
         if self.state == FollowerState::TrailAbandoned {
@@ -641,7 +641,7 @@ mod tests {
         )
         .unwrap();
         let g = GridGeometry::new(4, 4, 1.0).unwrap();
-        let pose = Pose2::new(2.0, 2.0, 0.0);
+        let pose = SamplePose::new(2.0, 2.0, 0.0);
         let mut at = |level: f32| {
             let cells = vec![level; g.cells()];
             s.decide(&FrameView::new(g, 1, &cells), pose, 0.1).state
@@ -661,7 +661,7 @@ mod tests {
         let mut s = GradientFollower::new(0, GradientConfig::default()).unwrap();
         let d = s.decide(
             &FrameView::new(g, 1, &cells),
-            Pose2::new(1.0, 1.0, 0.3),
+            SamplePose::new(1.0, 1.0, 0.3),
             0.1,
         );
         assert_eq!(d.state, FollowerState::Exploring);

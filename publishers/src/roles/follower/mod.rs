@@ -1,7 +1,7 @@
 //! The follower role: reads a field frame and the robot's pose and decides a motion command.
 //! Pure library code (deterministic for a seed); the iceoryx2 loop lives elsewhere.
 //!
-//! One [`Strategy`] trait, five strategies:
+//! One [`FollowerStrategy`] trait, five strategies:
 //! - [`GradientFollower`] (`gradient`) — seed 000: climb ∇P (eqs. 15–16) with a ridge-aware
 //!   look-ahead, speed adaptation from the Table 2 speed table, and trail rejection below an
 //!   absolute level or δ·P0 (MODELS.md M1).
@@ -12,6 +12,8 @@
 //!   and V, p(s) ∝ 1 − τ_s (eq. 1), steering θ(t) = θ(t−1) + γ·A_s* (eq. 2).
 //! - [`SectorStrategy::uniform`] (`uniform`) — seed 004's baseline: a sector drawn uniformly, same
 //!   steering.
+//! - [`RouteFollower`] (`route`) — a leader driven through waypoints (the tele-operated or
+//!   planned leader of seed 000); it ignores the field.
 //!
 //! [`Follower`] wraps a strategy and produces the `CmdMsg` and `FollowerStatusMsg` a process
 //! loop publishes.
@@ -30,7 +32,7 @@ mod test_support;
 use std::fmt;
 use std::str::FromStr;
 
-use field::{FrameView, Pose2};
+use field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use crate::messages::{CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg};
@@ -69,13 +71,13 @@ impl Decision {
 }
 
 /// A follower strategy: one decision per step from the current frame and pose.
-pub trait Strategy: Send {
-    /// The CLI name (`gradient`, `antenna`, `inverse`, `uniform`).
+pub trait FollowerStrategy: Send {
+    /// The CLI name (`gradient`, `antenna`, `inverse`, `uniform`, `route`).
     fn name(&self) -> &'static str;
     /// The field channel this strategy reads.
     fn channel(&self) -> usize;
     /// Decides the command for the next `dt_s`. The frame must have `channel()`.
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_s: f64) -> Decision;
+    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, dt_s: f64) -> Decision;
     /// Back to the initial state (keeps the configuration; the RNG is not reseeded).
     fn reset(&mut self) {}
 }
@@ -212,7 +214,7 @@ impl FollowerConfig {
     }
 
     /// The selected strategy.
-    pub fn build(&self) -> Result<Box<dyn Strategy>, FollowerConfigError> {
+    pub fn build(&self) -> Result<Box<dyn FollowerStrategy>, FollowerConfigError> {
         self.validate()?;
         let ch = self.channel as usize;
         Ok(match self.strategy {
@@ -256,7 +258,7 @@ pub struct FollowOutput {
 /// left 0 for the process loop to fill.
 pub struct Follower {
     robot_id: u32,
-    strategy: Box<dyn Strategy>,
+    strategy: Box<dyn FollowerStrategy>,
 }
 
 impl fmt::Debug for Follower {
@@ -269,7 +271,7 @@ impl fmt::Debug for Follower {
 }
 
 impl Follower {
-    pub fn new(robot_id: u32, strategy: Box<dyn Strategy>) -> Self {
+    pub fn new(robot_id: u32, strategy: Box<dyn FollowerStrategy>) -> Self {
         Self { robot_id, strategy }
     }
 
@@ -284,11 +286,11 @@ impl Follower {
         self.robot_id
     }
 
-    pub fn strategy(&self) -> &dyn Strategy {
+    pub fn strategy(&self) -> &dyn FollowerStrategy {
         self.strategy.as_ref()
     }
 
-    pub fn strategy_mut(&mut self) -> &mut dyn Strategy {
+    pub fn strategy_mut(&mut self) -> &mut dyn FollowerStrategy {
         self.strategy.as_mut()
     }
 
@@ -296,7 +298,7 @@ impl Follower {
     pub fn step(
         &mut self,
         frame: &FrameView<'_>,
-        pose: Pose2,
+        pose: SamplePose,
         dt_s: f64,
         step: u64,
     ) -> Result<FollowOutput, FollowError> {
@@ -359,7 +361,7 @@ impl Follower {
         pose: &PoseMsg,
         dt_s: f64,
     ) -> Result<FollowOutput, FollowError> {
-        let mut p = Pose2::default();
+        let mut p = SamplePose::default();
         for (name, v, out) in [
             ("x_m", pose.x_m, &mut p.x_m),
             ("y_m", pose.y_m, &mut p.y_m),
@@ -447,7 +449,7 @@ mod tests {
         )
         .unwrap();
         let e = f
-            .step(&frame, Pose2::new(1.0, 1.0, 0.0), 0.1, 0)
+            .step(&frame, SamplePose::new(1.0, 1.0, 0.0), 0.1, 0)
             .unwrap_err();
         assert_eq!(
             e,
@@ -458,11 +460,11 @@ mod tests {
         );
         let mut f = Follower::from_config(1, &FollowerConfig::default()).unwrap();
         let e = f
-            .step(&frame, Pose2::new(f32::NAN, 1.0, 0.0), 0.1, 0)
+            .step(&frame, SamplePose::new(f32::NAN, 1.0, 0.0), 0.1, 0)
             .unwrap_err();
         assert!(matches!(e, FollowError::BadPose { name: "x_m", .. }), "{e}");
         assert!(matches!(
-            f.step(&frame, Pose2::new(1.0, 1.0, 0.0), 0.0, 0),
+            f.step(&frame, SamplePose::new(1.0, 1.0, 0.0), 0.0, 0),
             Err(FollowError::BadDt(_))
         ));
         let huge = PoseMsg {

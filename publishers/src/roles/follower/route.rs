@@ -1,12 +1,12 @@
 //! The `route` strategy: a leader driven through waypoints, as the tele-operated or planned
 //! leader of seed 000. It ignores the field.
 
-use field::{FrameView, Pose2};
+use field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError, Strategy,
-    StrategyKind,
+    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError,
+    FollowerStrategy, StrategyKind,
 };
 use crate::messages::FollowerState;
 
@@ -89,7 +89,7 @@ impl RouteFollower {
     }
 }
 
-impl Strategy for RouteFollower {
+impl FollowerStrategy for RouteFollower {
     fn name(&self) -> &'static str {
         StrategyKind::Route.name()
     }
@@ -98,7 +98,7 @@ impl Strategy for RouteFollower {
         self.channel
     }
 
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_s: f64) -> Decision {
+    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, dt_s: f64) -> Decision {
         let level = frame.value(self.channel, pose.x_m, pose.y_m);
         self.elapsed_s += dt_s;
         if self.elapsed_s < self.config.start_after_s - 1e-9 {

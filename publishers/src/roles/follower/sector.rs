@@ -4,14 +4,14 @@
 
 use std::f64::consts::{FRAC_PI_2, PI};
 
-use field::{FrameView, Pose2};
+use field::{FrameView, SamplePose};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError, Strategy,
-    StrategyKind,
+    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError,
+    FollowerStrategy, StrategyKind,
 };
 use crate::messages::FollowerState;
 
@@ -213,7 +213,7 @@ impl SectorSteer {
 
     /// τ_s of every sector, normalized and clamped to [0, 1]; sectors blocked on the obstacle
     /// channel (if any) count as saturated.
-    fn taus(&self, frame: &FrameView<'_>, pose: Pose2) -> Vec<f32> {
+    fn taus(&self, frame: &FrameView<'_>, pose: SamplePose) -> Vec<f32> {
         let c = &self.config;
         let mut taus: Vec<f32> = frame
             .sector_means(self.channel, pose, c.radius_m, c.half_sectors)
@@ -241,7 +241,7 @@ impl SectorSteer {
     }
 
     /// 1 for the sectors blocked on the obstacle channel, 0 for the others.
-    fn obstacle_taus(&self, frame: &FrameView<'_>, pose: Pose2) -> Vec<f32> {
+    fn obstacle_taus(&self, frame: &FrameView<'_>, pose: SamplePose) -> Vec<f32> {
         let c = &self.config;
         match c.obstacle_channel.map(|o| o as usize) {
             Some(oc) if oc < frame.channels => frame
@@ -257,7 +257,7 @@ impl SectorSteer {
         &mut self,
         rule: SectorRule,
         frame: &FrameView<'_>,
-        pose: Pose2,
+        pose: SamplePose,
         dt_s: f64,
     ) -> Decision {
         let c = &self.config;
@@ -373,7 +373,7 @@ impl SectorStrategy {
     }
 }
 
-impl Strategy for SectorStrategy {
+impl FollowerStrategy for SectorStrategy {
     fn name(&self) -> &'static str {
         match self.rule {
             SectorRule::Inverse => StrategyKind::Inverse.name(),
@@ -385,7 +385,7 @@ impl Strategy for SectorStrategy {
         self.core.channel
     }
 
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_s: f64) -> Decision {
+    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, dt_s: f64) -> Decision {
         self.core.decide(self.rule, frame, pose, dt_s)
     }
 
@@ -440,7 +440,7 @@ mod tests {
     fn inverse_prefers_low_pheromone_sectors_over_uniform() {
         let (g, cells) = half_field();
         let frame = FrameView::new(g, 1, &cells);
-        let pose = Pose2::new(5.0, 5.0, 0.0);
+        let pose = SamplePose::new(5.0, 5.0, 0.0);
         let cfg = SectorConfig::default();
         let taus = frame.sector_means(0, pose, cfg.radius_m, cfg.half_sectors);
         let low: Vec<bool> = taus.iter().map(|&t| t < 0.5).collect();
@@ -477,7 +477,7 @@ mod tests {
     fn sector_steering_follows_eq2_and_is_deterministic() {
         let (g, cells) = half_field();
         let frame = FrameView::new(g, 1, &cells);
-        let pose = Pose2::new(5.0, 5.0, 0.4);
+        let pose = SamplePose::new(5.0, 5.0, 0.4);
         let cfg = SectorConfig {
             omega_max_rad_per_s: 100.0,
             ..SectorConfig::default()

@@ -488,12 +488,12 @@ fn validate_common(
 mod tests {
     use super::*;
     use crate::roles::localizer::test_support::{corridor, initial_cov, CAPTURED};
-    use crate::roles::world::Pose2;
+    use crate::roles::world::WorldPose;
 
     #[test]
     fn malformed_landmark_region_is_rejected_naming_the_key() {
         let map = corridor().landmarks;
-        let start = Pose2::new(10.0, 2.0, 0.0);
+        let start = WorldPose::new(10.0, 2.0, 0.0);
         let bad_regions = [
             [f64::NAN, 0.0, 24.0, 4.0],
             [8.0, f64::NEG_INFINITY, 24.0, 4.0],

@@ -16,7 +16,7 @@ use super::{
     EkfSlamConfig, LocalizerError, SlamAssociation, UpdateStats,
 };
 use crate::messages::{LandmarkObs, PoseMsg, SensorMsg};
-use crate::roles::world::{wrap_angle, Pose2};
+use crate::roles::world::{wrap_angle, WorldPose};
 
 /// A landmark estimated by [`EkfSlam`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,7 +45,7 @@ impl EkfSlam {
     /// An empty map with the robot at `initial_pose` with `initial_cov`.
     pub fn new(
         config: EkfSlamConfig,
-        initial_pose: Pose2,
+        initial_pose: WorldPose,
         initial_cov: Matrix3<f64>,
     ) -> Result<Self, LocalizerError> {
         validate_common(&config.noise, &config.limits, config.gate_chi2)?;
@@ -331,8 +331,8 @@ impl EkfSlam {
         self.signatures.push(obs.signature);
     }
 
-    pub fn pose(&self) -> Pose2 {
-        Pose2::new(self.mean[0], self.mean[1], self.mean[2])
+    pub fn pose(&self) -> WorldPose {
+        WorldPose::new(self.mean[0], self.mean[1], self.mean[2])
     }
 
     /// The robot block of the covariance.

@@ -39,13 +39,13 @@ use walls::{inside_rect, wall_segments, SegmentIndex};
 /// A planar pose: metres and radians, θ counter-clockwise from +x.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Pose2 {
+pub struct WorldPose {
     pub x_m: f64,
     pub y_m: f64,
     pub theta_rad: f64,
 }
 
-impl Pose2 {
+impl WorldPose {
     pub fn new(x_m: f64, y_m: f64, theta_rad: f64) -> Self {
         Self {
             x_m,
@@ -99,11 +99,11 @@ pub(crate) fn sinc_derivative(x: f64) -> f64 {
 /// exact and stays accurate for tiny β. Eq. 31 as printed has the sign of its last term flipped
 /// (it would not reduce to p' = p for β → 0); the chord form is the corrected eq. 31:
 /// p' = C + (R + W/2)·(sin θ', −cos θ').
-pub fn diff_drive(pose: Pose2, left_m: f64, right_m: f64, wheel_base_m: f64) -> Pose2 {
+pub fn diff_drive(pose: WorldPose, left_m: f64, right_m: f64, wheel_base_m: f64) -> WorldPose {
     let theta = pose.theta_rad;
     if left_m == right_m {
         // seed 000 eqs. 32–33
-        return Pose2 {
+        return WorldPose {
             x_m: pose.x_m + left_m * theta.cos(),
             y_m: pose.y_m + left_m * theta.sin(),
             theta_rad: heading_mod_tau(theta),
@@ -113,7 +113,7 @@ pub fn diff_drive(pose: Pose2, left_m: f64, right_m: f64, wheel_base_m: f64) -> 
     let arc_m = 0.5 * (left_m + right_m); // (R + W/2)·β with R = l/β, seed 000 eq. 28
     let half = 0.5 * beta;
     let chord_m = arc_m * sinc(half);
-    Pose2 {
+    WorldPose {
         x_m: pose.x_m + chord_m * (theta + half).cos(),
         y_m: pose.y_m + chord_m * (theta + half).sin(),
         theta_rad: heading_mod_tau(theta + beta), // seed 000 eq. 30
@@ -152,7 +152,7 @@ pub struct RobotConfig {
     pub id: u32,
     /// True start pose.
     #[serde(default)]
-    pub start: Pose2,
+    pub start: WorldPose,
     /// Noise for this robot; the world's `noise` when absent.
     #[serde(default)]
     pub noise: Option<NoiseConfig>,
@@ -251,7 +251,7 @@ pub struct StepOutput {
 #[derive(Debug, Clone)]
 pub struct World {
     config: WorldConfig,
-    poses: Vec<Pose2>,
+    poses: Vec<WorldPose>,
     walls: SegmentIndex,
     rng: ChaCha8Rng,
     step: u64,
@@ -277,7 +277,7 @@ impl World {
         let poses = config
             .robots
             .iter()
-            .map(|r| Pose2 {
+            .map(|r| WorldPose {
                 theta_rad: heading_mod_tau(r.start.theta_rad),
                 ..r.start
             })
@@ -329,7 +329,7 @@ impl World {
             let (executed_v, new_pose) = if collided {
                 (
                     0.0,
-                    Pose2 {
+                    WorldPose {
                         theta_rad: next.theta_rad,
                         ..pose
                     },
@@ -371,7 +371,7 @@ impl World {
     }
 
     /// True poses, in the order of `config.robots`.
-    pub fn poses(&self) -> &[Pose2] {
+    pub fn poses(&self) -> &[WorldPose] {
         &self.poses
     }
 
@@ -484,7 +484,7 @@ mod tests {
     #[test]
     fn straight_when_wheels_travel_equally() {
         // seed 000 eqs. 32–33
-        let p = diff_drive(Pose2::new(1.0, 2.0, FRAC_PI_6), 0.5, 0.5, 0.3);
+        let p = diff_drive(WorldPose::new(1.0, 2.0, FRAC_PI_6), 0.5, 0.5, 0.3);
         assert_relative_eq!(p.x_m, 1.0 + 0.5 * FRAC_PI_6.cos(), epsilon = 1e-12);
         assert_relative_eq!(p.y_m, 2.0 + 0.5 * FRAC_PI_6.sin(), epsilon = 1e-12);
         assert_relative_eq!(p.theta_rad, FRAC_PI_6, epsilon = 1e-12);
@@ -494,12 +494,12 @@ mod tests {
     fn turning_in_place_keeps_position() {
         // r = −l: β = 2r/W, R = l/β = −W/2, the centre of rotation is the robot itself.
         let w = 0.4;
-        let p = diff_drive(Pose2::new(3.0, -1.0, 0.2), -0.1, 0.1, w);
+        let p = diff_drive(WorldPose::new(3.0, -1.0, 0.2), -0.1, 0.1, w);
         assert_relative_eq!(p.x_m, 3.0, epsilon = 1e-12);
         assert_relative_eq!(p.y_m, -1.0, epsilon = 1e-12);
         assert_relative_eq!(p.theta_rad, 0.2 + 0.2 / w, epsilon = 1e-12);
         // Negative turn wraps into [0, 2π) (eq. 30).
-        let q = diff_drive(Pose2::new(0.0, 0.0, 0.0), 0.1, -0.1, w);
+        let q = diff_drive(WorldPose::new(0.0, 0.0, 0.0), 0.1, -0.1, w);
         assert_relative_eq!(q.theta_rad, TAU - 0.5, epsilon = 1e-12);
     }
 
@@ -513,13 +513,13 @@ mod tests {
         let (cx, cy) = (x - k * th.sin(), y + k * th.cos());
         let th2 = th + beta;
         let (x2, y2) = (cx + k * th2.sin(), cy - k * th2.cos());
-        let p = diff_drive(Pose2::new(x, y, th), l, r, w);
+        let p = diff_drive(WorldPose::new(x, y, th), l, r, w);
         assert_relative_eq!(p.x_m, x2, epsilon = 1e-12);
         assert_relative_eq!(p.y_m, y2, epsilon = 1e-12);
         assert_relative_eq!(p.theta_rad, th2, epsilon = 1e-12);
         // A quarter circle of radius 1 m from the origin ends at (1, 1) facing +y.
         let (l, r) = wheel_travel(1.0, 1.0, FRAC_PI_2, 0.3);
-        let q = diff_drive(Pose2::default(), l, r, 0.3);
+        let q = diff_drive(WorldPose::default(), l, r, 0.3);
         assert_relative_eq!(q.x_m, 1.0, epsilon = 1e-12);
         assert_relative_eq!(q.y_m, 1.0, epsilon = 1e-12);
         assert_relative_eq!(q.theta_rad, FRAC_PI_2, epsilon = 1e-12);
@@ -535,7 +535,7 @@ mod tests {
 
     #[test]
     fn world_step_moves_without_noise() {
-        let mut world = World::new(one_robot(Pose2::default()), 1).unwrap();
+        let mut world = World::new(one_robot(WorldPose::default()), 1).unwrap();
         for _ in 0..10 {
             let out = world.step(&[(1.0, 0.0)]);
             assert_eq!(out.len(), 1);
@@ -551,7 +551,7 @@ mod tests {
 
     #[test]
     fn start_inside_wall_is_an_error() {
-        let mut cfg = one_robot(Pose2::new(1.1, 0.0, 0.0));
+        let mut cfg = one_robot(WorldPose::new(1.1, 0.0, 0.0));
         cfg.walls = vec![WallConfig::Rect {
             min_x_m: 1.0,
             min_y_m: -1.0,
@@ -569,12 +569,12 @@ mod tests {
             robots: vec![
                 RobotConfig {
                     id: 1,
-                    start: Pose2::default(),
+                    start: WorldPose::default(),
                     noise: None,
                 },
                 RobotConfig {
                     id: 2,
-                    start: Pose2::new(2.0, 2.0, 1.0),
+                    start: WorldPose::new(2.0, 2.0, 1.0),
                     noise: Some(NoiseConfig {
                         alpha1: 0.1,
                         ..NoiseConfig::default()

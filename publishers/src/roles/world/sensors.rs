@@ -9,7 +9,7 @@ use rand::Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
-use super::{wrap_angle, Pose2, World};
+use super::{wrap_angle, World, WorldPose};
 use crate::messages::{LandmarkObs, MAX_OBSERVATIONS};
 
 /// Sensor and odometry noise. The α's are those of the velocity motion model (seed 001
@@ -93,7 +93,7 @@ impl World {
     /// Fills `out` with noisy observations, nearest landmark first; returns how many.
     pub(super) fn observe(
         &mut self,
-        pose: Pose2,
+        pose: WorldPose,
         noise: &NoiseConfig,
         out: &mut [LandmarkObs; MAX_OBSERVATIONS],
     ) -> usize {
@@ -144,7 +144,7 @@ mod tests {
 
     #[test]
     fn observations_within_range_nearest_first() {
-        let mut cfg = one_robot(Pose2::new(0.0, 0.0, FRAC_PI_2));
+        let mut cfg = one_robot(WorldPose::new(0.0, 0.0, FRAC_PI_2));
         cfg.sensor_range_m = 3.0;
         cfg.landmarks = vec![
             Landmark {
@@ -185,7 +185,7 @@ mod tests {
 
     #[test]
     fn field_of_view_and_line_of_sight_hide_landmarks() {
-        let mut cfg = one_robot(Pose2::default());
+        let mut cfg = one_robot(WorldPose::default());
         cfg.field_of_view_rad = Some(PI); // front half only
         cfg.landmarks = vec![
             Landmark {
@@ -231,7 +231,7 @@ mod tests {
 
     #[test]
     fn at_most_max_observations() {
-        let mut cfg = one_robot(Pose2::default());
+        let mut cfg = one_robot(WorldPose::default());
         cfg.landmarks = (0..50)
             .map(|i| Landmark {
                 x_m: 0.05 * (i + 1) as f64,
@@ -254,7 +254,7 @@ mod tests {
     #[test]
     fn odometry_noise_matches_velocity_model() {
         // σ_v² = α1 v² + α2 ω² (seed 001 Algorithm 1 line 5), checked by sample variance.
-        let mut cfg = one_robot(Pose2::default());
+        let mut cfg = one_robot(WorldPose::default());
         cfg.noise = NoiseConfig {
             alpha1: 0.04,
             alpha2: 0.0,

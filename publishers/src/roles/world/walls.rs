@@ -310,13 +310,13 @@ impl SegmentIndex {
 mod tests {
     use super::*;
     use crate::roles::world::test_support::one_robot;
-    use crate::roles::world::{Pose2, World};
+    use crate::roles::world::{World, WorldPose};
     use approx::assert_relative_eq;
     use std::f64::consts::PI;
 
     #[test]
     fn wall_blocks_robot() {
-        let mut cfg = one_robot(Pose2::default());
+        let mut cfg = one_robot(WorldPose::default());
         cfg.walls = vec![
             WallConfig::Rect {
                 min_x_m: 1.0,
@@ -358,7 +358,7 @@ mod tests {
 
     #[test]
     fn fast_robot_does_not_tunnel_through_thin_wall() {
-        let mut cfg = one_robot(Pose2::default());
+        let mut cfg = one_robot(WorldPose::default());
         cfg.robot_radius_m = 0.05;
         cfg.dt_s = 1.0;
         cfg.walls = vec![WallConfig::Polyline {
