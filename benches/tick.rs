@@ -23,7 +23,7 @@ use std::time::Duration;
 use criterion::{BenchmarkId, Criterion, Throughput};
 use field::deposit::{prepare, DepositLimits};
 use field::{
-    ChannelSpec, DepositMsg, Evaporation, FieldConfig, FrameView, GridGeometry, Pose2, Stepper,
+    ChannelSpec, DepositMsg, Evaporation, FieldConfig, FrameView, GridGeometry, SamplePose, Stepper,
 };
 
 const CELL_SIZE_M: f32 = 0.05;
@@ -33,25 +33,25 @@ const DEFAULT_SIZES: &[usize] = &[512, 1024, 2048, 4096];
 /// The evaporation models benchmarked, by bench id.
 fn models() -> Vec<(&'static str, ChannelSpec)> {
     let ambient = |radius_m: f32| Evaporation::Ambient {
-        decay_per_sec: 0.0057,
+        decay_per_s: 0.0057,
         alpha: 0.5,
         radius_m,
     };
     let mut diffusing = ChannelSpec::new(
         "trail",
         Evaporation::Exponential {
-            decay_per_sec: 0.0057,
+            decay_per_s: 0.0057,
         },
     );
     // κ = D·dt/h² = 0.1.
-    diffusing.diffusion_m2_per_sec = 0.1 * CELL_SIZE_M * CELL_SIZE_M * TICK_HZ;
+    diffusing.diffusion_m2_per_s = 0.1 * CELL_SIZE_M * CELL_SIZE_M * TICK_HZ;
     let mut saturating = ChannelSpec::new("anti", Evaporation::Saturating { rho_per_tick: 0.01 });
     saturating.signed = true;
     let mut quantum = ChannelSpec::new(
         "counter",
         Evaporation::Quantum {
             quantum: 1.0,
-            tau_secs: 1.0,
+            tau_s: 1.0,
         },
     );
     quantum.signed = true;
@@ -61,7 +61,7 @@ fn models() -> Vec<(&'static str, ChannelSpec)> {
             ChannelSpec::new(
                 "trail",
                 Evaporation::Exponential {
-                    decay_per_sec: 0.0057,
+                    decay_per_s: 0.0057,
                 },
             ),
         ),
@@ -184,7 +184,7 @@ fn bench_deposits(c: &mut Criterion) {
     let trail = ChannelSpec::new(
         "trail",
         Evaporation::Exponential {
-            decay_per_sec: 0.0057,
+            decay_per_s: 0.0057,
         },
     );
     let mut anti = ChannelSpec::new("anti", Evaporation::Saturating { rho_per_tick: 0.01 });
@@ -249,7 +249,7 @@ fn bench_sampling(c: &mut Criterion) {
     let g = GridGeometry::new(side as u32, side as u32, CELL_SIZE_M).unwrap();
     let cells = test_pattern(side);
     let view = FrameView::new(g, 1, &cells);
-    let pose = Pose2::new(25.3, 24.7, 0.6);
+    let pose = SamplePose::new(25.3, 24.7, 0.6);
     let mut group = c.benchmark_group("sample");
     group
         .sample_size(20)

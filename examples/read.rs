@@ -28,7 +28,7 @@ fn main() -> anyhow::Result<()> {
         };
         let h = frame.header;
         // Print at most ~2 lines per second.
-        if h.sequence < last_print + (0.5 / h.dt_secs as f64) as u64 {
+        if h.sequence < last_print + (0.5 / h.dt_s as f64) as u64 {
             continue;
         }
         last_print = h.sequence;

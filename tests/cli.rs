@@ -28,6 +28,7 @@ fn a_deposit_from_another_process_arrives_in_a_frame_then_evaporates() {
         "0.1",
         "--model",
         "exponential",
+        // The old spelling of --decay-per-s, still accepted.
         "--decay-per-sec",
         "2",
         "--tick-hz",

@@ -70,7 +70,7 @@ fn field_config(width: u32, readers: usize) -> FieldConfig {
         channels: vec![ChannelSpec::new(
             "trail",
             Evaporation::Exponential {
-                decay_per_sec: 0.0057,
+                decay_per_s: 0.0057,
             },
         )],
         ..FieldConfig::default()

@@ -55,7 +55,7 @@ pub fn measure(width: u32, reps: usize) -> Result<TickRow, BenchError> {
     let mut exp = stepper(
         width,
         Evaporation::Exponential {
-            decay_per_sec: 0.0057,
+            decay_per_s: 0.0057,
         },
     )?;
     let exponential = median_ns(reps, || {
@@ -65,7 +65,7 @@ pub fn measure(width: u32, reps: usize) -> Result<TickRow, BenchError> {
     let mut amb = stepper(
         width,
         Evaporation::Ambient {
-            decay_per_sec: 0.0057,
+            decay_per_s: 0.0057,
             alpha: 0.5,
             radius_m: 0.5,
         },

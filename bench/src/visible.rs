@@ -37,7 +37,7 @@ fn config(width: u32, tick_hz: f32) -> FieldConfig {
         channels: vec![ChannelSpec::new(
             "trail",
             Evaporation::Exponential {
-                decay_per_sec: 0.0057,
+                decay_per_s: 0.0057,
             },
         )],
         ..FieldConfig::default()

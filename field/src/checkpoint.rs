@@ -116,7 +116,7 @@ pub fn encode(header: &FrameHeader, config: &FieldConfig, cells: &[f32]) -> Vec<
         header.cell_size_m,
         header.origin_x_m,
         header.origin_y_m,
-        header.dt_secs,
+        header.dt_s,
     ] {
         b.extend_from_slice(&v.to_le_bytes());
     }
@@ -195,7 +195,7 @@ pub fn decode(bytes: &[u8]) -> Result<Checkpoint, FormatError> {
     let cell_size_m = c.f32("header")?;
     let origin_x_m = c.f32("header")?;
     let origin_y_m = c.f32("header")?;
-    let dt_secs = c.f32("header")?;
+    let dt_s = c.f32("header")?;
     let reasons = c.u32("header")?;
     if reasons as usize != REJECT_REASONS {
         return Err(FormatError::Invalid {
@@ -280,7 +280,7 @@ pub fn decode(bytes: &[u8]) -> Result<Checkpoint, FormatError> {
         cell_size_m,
         origin_x_m,
         origin_y_m,
-        dt_secs,
+        dt_s,
         tick_compute_ns: 0,
         deposits_applied,
         deposits_rejected,

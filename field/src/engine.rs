@@ -75,7 +75,7 @@ mod defaults {
         vec![ChannelSpec::new(
             "trail",
             Evaporation::Ambient {
-                decay_per_sec: 0.0057,
+                decay_per_s: 0.0057,
                 alpha: 0.5,
                 radius_m: 0.5,
             },
@@ -112,7 +112,7 @@ impl FieldConfig {
         }
     }
 
-    pub fn dt_secs(&self) -> f32 {
+    pub fn dt_s(&self) -> f32 {
         1.0 / self.tick_hz
     }
 
@@ -155,7 +155,7 @@ impl FieldConfig {
                     "must be non-empty and unique",
                 ));
             }
-            c.validate(self.dt_secs(), self.cell_size_m)?;
+            c.validate(self.dt_s(), self.cell_size_m)?;
         }
         for (name, v, max) in [
             ("max_readers", self.max_readers, 1024),
@@ -316,11 +316,11 @@ impl Stepper {
             "previous frame has the wrong length"
         );
         assert_eq!(next.len(), prev.len(), "next frame has the wrong length");
-        let dt = self.config.dt_secs();
+        let dt = self.config.dt_s();
         let h = self.geometry.cell_size_m;
         for (c, spec) in self.config.channels.iter().enumerate() {
             let plan = PlanePlan::for_tick(spec, self.sim_time_s, dt, h);
-            let kappa = spec.diffusion_m2_per_sec * dt / (h * h);
+            let kappa = spec.diffusion_m2_per_s * dt / (h * h);
             step_plane(
                 plan,
                 kappa,
@@ -366,7 +366,7 @@ impl Stepper {
             cell_size_m: g.cell_size_m,
             origin_x_m: g.origin_x_m,
             origin_y_m: g.origin_y_m,
-            dt_secs: self.config.dt_secs(),
+            dt_s: self.config.dt_s(),
             tick_compute_ns,
             deposits_applied: self.counters.applied,
             deposits_rejected: self.counters.rejected,

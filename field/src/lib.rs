@@ -25,4 +25,4 @@ pub use error::ConfigError;
 pub use geometry::GridGeometry;
 pub use messages::{DepositMsg, FrameHeader, KernelKind};
 pub use models::{ChannelSpec, Evaporation};
-pub use sample::{FrameView, Pose2};
+pub use sample::{FrameView, SamplePose};

@@ -306,7 +306,7 @@ impl Conductor {
             stamp_ns: now_ns(),
             step,
             sim_time_s,
-            dt_secs: dt_s,
+            dt_s,
             finished: 0,
             _pad: 0,
         })?;
@@ -319,7 +319,7 @@ impl Conductor {
             stamp_ns: now_ns(),
             step: steps,
             sim_time_s,
-            dt_secs: dt_s,
+            dt_s,
             finished: 1,
             _pad: 0,
         })?;

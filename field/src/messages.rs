@@ -180,7 +180,7 @@ pub struct FrameHeader {
     pub cell_size_m: f32,
     pub origin_x_m: f32,
     pub origin_y_m: f32,
-    pub dt_secs: f32,
+    pub dt_s: f32,
     /// Compute time of the tick that produced this frame (ns).
     pub tick_compute_ns: u64,
     pub deposits_applied: u64,
@@ -232,7 +232,7 @@ pub struct ClockMsg {
     pub stamp_ns: u64,
     pub step: u64,
     pub sim_time_s: f64,
-    pub dt_secs: f64,
+    pub dt_s: f64,
     /// 1 when the simulation has ended and listeners should stop.
     pub finished: u32,
     pub _pad: u32,

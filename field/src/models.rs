@@ -16,21 +16,29 @@ pub enum Evaporation {
     /// Nothing evaporates.
     None,
     /// Plain exponential decay: P' = P·e^(−K·dt).
-    Exponential { decay_per_sec: f32 },
+    Exponential {
+        #[serde(alias = "decay_per_sec")]
+        decay_per_s: f32,
+    },
     /// Seed 000 eq. 17–22 with the MODELS.md M1 decision:
     /// P' = P·e^(−K·dt) + (1 − e^(−K·dt))·min(P, α·Pa), Pa = mean over the square window of
     /// half-width `radius_m` centred on the cell (clipped at the grid's edge).
     Ambient {
-        decay_per_sec: f32,
+        #[serde(alias = "decay_per_sec")]
+        decay_per_s: f32,
         #[serde(default = "default_alpha")]
         alpha: f32,
         radius_m: f32,
     },
     /// Seed 001 eqs. 6–7 / seed 004 eqs. 3–6: ξ' = ξ − ρ·ξ per tick; deposits saturate at ±1.
     Saturating { rho_per_tick: f32 },
-    /// Seed 002 counter (MODELS.md M3 reading): every whole `tau_secs` of field time each cell
+    /// Seed 002 counter (MODELS.md M3 reading): every whole `tau_s` of field time each cell
     /// loses `quantum`, never crossing zero.
-    Quantum { quantum: f32, tau_secs: f32 },
+    Quantum {
+        quantum: f32,
+        #[serde(alias = "tau_secs")]
+        tau_s: f32,
+    },
 }
 
 fn default_alpha() -> f32 {
@@ -40,7 +48,7 @@ fn default_alpha() -> f32 {
 impl Default for Evaporation {
     fn default() -> Self {
         Evaporation::Exponential {
-            decay_per_sec: 0.0057,
+            decay_per_s: 0.0057,
         }
     }
 }
@@ -55,7 +63,8 @@ pub struct ChannelSpec {
     pub evaporation: Evaporation,
     /// Isotropic diffusion coefficient D (m²/s), explicit 5-point stencil, zero-flux edges.
     #[serde(default)]
-    pub diffusion_m2_per_sec: f32,
+    #[serde(alias = "diffusion_m2_per_sec")]
+    pub diffusion_m2_per_s: f32,
     /// Signed channels hold pheromone (> 0) and anti-pheromone (< 0).
     #[serde(default)]
     pub signed: bool,
@@ -66,14 +75,14 @@ impl ChannelSpec {
         Self {
             name: name.to_string(),
             evaporation,
-            diffusion_m2_per_sec: 0.0,
+            diffusion_m2_per_s: 0.0,
             signed: false,
         }
     }
 
     /// Checks the model against the tick length and cell size (e.g. the diffusion stability
     /// bound D·dt/h² ≤ ¼).
-    pub fn validate(&self, dt_secs: f32, cell_size_m: f32) -> Result<(), ConfigError> {
+    pub fn validate(&self, dt_s: f32, cell_size_m: f32) -> Result<(), ConfigError> {
         let n = &self.name;
         let finite_nonneg = |what: &str, v: f32| {
             if v.is_finite() && v >= 0.0 {
@@ -88,15 +97,13 @@ impl ChannelSpec {
         };
         match self.evaporation {
             Evaporation::None => {}
-            Evaporation::Exponential { decay_per_sec } => {
-                finite_nonneg("decay_per_sec", decay_per_sec)?
-            }
+            Evaporation::Exponential { decay_per_s } => finite_nonneg("decay_per_s", decay_per_s)?,
             Evaporation::Ambient {
-                decay_per_sec,
+                decay_per_s,
                 alpha,
                 radius_m,
             } => {
-                finite_nonneg("decay_per_sec", decay_per_sec)?;
+                finite_nonneg("decay_per_s", decay_per_s)?;
                 if !(0.0..=1.0).contains(&alpha) {
                     return Err(ConfigError::invalid(
                         format!("channel '{n}' alpha"),
@@ -122,25 +129,25 @@ impl ChannelSpec {
                     ));
                 }
             }
-            Evaporation::Quantum { quantum, tau_secs } => {
+            Evaporation::Quantum { quantum, tau_s } => {
                 finite_nonneg("quantum", quantum)?;
-                if !(tau_secs.is_finite() && tau_secs > 0.0) {
+                if !(tau_s.is_finite() && tau_s > 0.0) {
                     return Err(ConfigError::invalid(
-                        format!("channel '{n}' tau_secs"),
-                        tau_secs,
+                        format!("channel '{n}' tau_s"),
+                        tau_s,
                         "must be finite and > 0",
                     ));
                 }
             }
         }
-        finite_nonneg("diffusion_m2_per_sec", self.diffusion_m2_per_sec)?;
-        let kappa = self.diffusion_m2_per_sec * dt_secs / (cell_size_m * cell_size_m);
+        finite_nonneg("diffusion_m2_per_s", self.diffusion_m2_per_s)?;
+        let kappa = self.diffusion_m2_per_s * dt_s / (cell_size_m * cell_size_m);
         if kappa > 0.25 {
             return Err(ConfigError::invalid(
-                format!("channel '{n}' diffusion_m2_per_sec"),
-                self.diffusion_m2_per_sec,
+                format!("channel '{n}' diffusion_m2_per_s"),
+                self.diffusion_m2_per_s,
                 format!(
-                    "unstable: D·dt/h² = {kappa:.3} > 0.25 (dt = {dt_secs} s, h = {cell_size_m} m); \
+                    "unstable: D·dt/h² = {kappa:.3} > 0.25 (dt = {dt_s} s, h = {cell_size_m} m); \
                      lower D or dt, or raise the cell size"
                 ),
             ));
@@ -179,33 +186,33 @@ pub enum PlanePlan {
 }
 
 impl PlanePlan {
-    /// The plan for a tick of `dt_secs` that starts at field time `t_secs`.
-    pub fn for_tick(spec: &ChannelSpec, t_secs: f64, dt_secs: f32, cell_size_m: f32) -> Self {
+    /// The plan for a tick of `dt_s` that starts at field time `t_s`.
+    pub fn for_tick(spec: &ChannelSpec, t_s: f64, dt_s: f32, cell_size_m: f32) -> Self {
         match spec.evaporation {
             Evaporation::None => PlanePlan::Scale { factor: 1.0 },
-            Evaporation::Exponential { decay_per_sec } => PlanePlan::Scale {
-                factor: (-decay_per_sec * dt_secs).exp(),
+            Evaporation::Exponential { decay_per_s } => PlanePlan::Scale {
+                factor: (-decay_per_s * dt_s).exp(),
             },
             Evaporation::Ambient {
-                decay_per_sec,
+                decay_per_s,
                 alpha,
                 radius_m,
             } => PlanePlan::Ambient {
-                factor: (-decay_per_sec * dt_secs).exp(),
+                factor: (-decay_per_s * dt_s).exp(),
                 alpha,
                 radius_cells: (radius_m / cell_size_m).round() as u32,
             },
             Evaporation::Saturating { rho_per_tick } => PlanePlan::Scale {
                 factor: 1.0 - rho_per_tick,
             },
-            Evaporation::Quantum { quantum, tau_secs } => {
-                let tau = tau_secs as f64;
+            Evaporation::Quantum { quantum, tau_s } => {
+                let tau = tau_s as f64;
                 // The clock (a sum of f32 ticks) and τ are f32-precise: 50 ticks of 0.02f32 s
                 // fall 2e-8 s short of 1 s. t/τ is off by at most ~1.2e-7 (relative) from the
                 // intended ratio, so periods count as elapsed within 2.5e-7 of their end: "every
                 // τ" means every τ, not one tick later.
                 let periods = |t: f64| (t / tau * (1.0 + 2.5e-7)).floor();
-                let crossed = periods(t_secs + dt_secs as f64) - periods(t_secs);
+                let crossed = periods(t_s + dt_s as f64) - periods(t_s);
                 PlanePlan::Subtract {
                     loss: quantum * crossed.max(0.0) as f32,
                 }

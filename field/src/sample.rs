@@ -14,13 +14,13 @@ pub struct FrameView<'a> {
 
 /// A planar pose: position (m) and heading θ (rad, counter-clockwise from +x).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Pose2 {
+pub struct SamplePose {
     pub x_m: f32,
     pub y_m: f32,
     pub theta_rad: f32,
 }
 
-impl Pose2 {
+impl SamplePose {
     pub fn new(x_m: f32, y_m: f32, theta_rad: f32) -> Self {
         Self {
             x_m,
@@ -88,7 +88,7 @@ impl<'a> FrameView<'a> {
 
     /// Readings `(P_L, P_R)` of two antennas half a wheel base to each side of the pose
     /// (MODELS.md M3: left = μ + (b/2)(−sin θ, cos θ), right = μ − (b/2)(−sin θ, cos θ)).
-    pub fn antennas(&self, channel: usize, pose: Pose2, wheel_base_m: f32) -> (f32, f32) {
+    pub fn antennas(&self, channel: usize, pose: SamplePose, wheel_base_m: f32) -> (f32, f32) {
         let (l, r) = antenna_points(pose, wheel_base_m);
         (self.value(channel, l.0, l.1), self.value(channel, r.0, r.1))
     }
@@ -100,7 +100,7 @@ impl<'a> FrameView<'a> {
     pub fn sector_means(
         &self,
         channel: usize,
-        pose: Pose2,
+        pose: SamplePose,
         radius_m: f32,
         half_sectors: usize,
     ) -> Vec<f32> {
@@ -148,7 +148,7 @@ impl<'a> FrameView<'a> {
 }
 
 /// World positions of the left and right antenna (MODELS.md M3 convention).
-pub fn antenna_points(pose: Pose2, wheel_base_m: f32) -> ((f32, f32), (f32, f32)) {
+pub fn antenna_points(pose: SamplePose, wheel_base_m: f32) -> ((f32, f32), (f32, f32)) {
     let half = 0.5 * wheel_base_m;
     let (s, c) = pose.theta_rad.sin_cos();
     let (ox, oy) = (-s * half, c * half);
@@ -191,14 +191,18 @@ mod tests {
     fn antennas_sit_left_and_right_of_the_heading() {
         // Heading +y: left is −x, right is +x.
         let ((lx, ly), (rx, ry)) =
-            antenna_points(Pose2::new(1.0, 1.0, std::f32::consts::FRAC_PI_2), 0.4);
+            antenna_points(SamplePose::new(1.0, 1.0, std::f32::consts::FRAC_PI_2), 0.4);
         assert_relative_eq!(lx, 0.8, epsilon = 1e-6);
         assert_relative_eq!(ly, 1.0, epsilon = 1e-6);
         assert_relative_eq!(rx, 1.2, epsilon = 1e-6);
         assert_relative_eq!(ry, 1.0, epsilon = 1e-6);
         let (g, cells) = ramp();
         let f = FrameView::new(g, 1, &cells);
-        let (pl, pr) = f.antennas(0, Pose2::new(5.0, 2.5, std::f32::consts::FRAC_PI_2), 0.4);
+        let (pl, pr) = f.antennas(
+            0,
+            SamplePose::new(5.0, 2.5, std::f32::consts::FRAC_PI_2),
+            0.4,
+        );
         assert!(
             pr > pl,
             "field grows with x, so the right antenna (+x) reads more"
@@ -218,7 +222,7 @@ mod tests {
             }
         }
         let f = FrameView::new(g, 1, &cells);
-        let s = f.sector_means(0, Pose2::new(5.0, 5.0, 0.0), 2.0, 2);
+        let s = f.sector_means(0, SamplePose::new(5.0, 5.0, 0.0), 2.0, 2);
         assert_eq!(s.len(), 5);
         assert!(s[0] < 0.05 && s[1] < 0.05, "{s:?}");
         assert!(s[3] > 0.9 && s[4] > 0.9, "{s:?}");

@@ -29,12 +29,12 @@ fn finite(name: &'static str, v: f64) -> Result<(), TuneError> {
 
 /// Seed 000 eq. 23: the evaporation rate K (1/s) that takes P0 to P_tm in t_m seconds with
 /// ambient pheromone Pa: K = −(1/t_m)·ln((P_tm − Pa)/(P0 − Pa)).
-pub fn k_per_s(p0: f64, p_tm: f64, t_m_secs: f64, pa: f64) -> Result<f64, TuneError> {
-    for (n, v) in [("p0", p0), ("ptm", p_tm), ("tm", t_m_secs), ("pa", pa)] {
+pub fn k_per_s(p0: f64, p_tm: f64, t_m_s: f64, pa: f64) -> Result<f64, TuneError> {
+    for (n, v) in [("p0", p0), ("ptm", p_tm), ("tm", t_m_s), ("pa", pa)] {
         finite(n, v)?;
     }
-    if t_m_secs <= 0.0 {
-        return Err(impossible("tm", t_m_secs, "the time must be > 0 s"));
+    if t_m_s <= 0.0 {
+        return Err(impossible("tm", t_m_s, "the time must be > 0 s"));
     }
     if p0 <= pa {
         return Err(impossible(
@@ -57,7 +57,7 @@ pub fn k_per_s(p0: f64, p_tm: f64, t_m_secs: f64, pa: f64) -> Result<f64, TuneEr
             format!("must be above the ambient level pa = {pa}: the decay approaches pa but never reaches it"),
         ));
     }
-    Ok(-((p_tm - pa) / (p0 - pa)).ln() / t_m_secs)
+    Ok(-((p_tm - pa) / (p0 - pa)).ln() / t_m_s)
 }
 
 /// Seed 000 eq. 26: the time (s) for P0 to fall to the level T with rate K and ambient Pa:

@@ -58,7 +58,7 @@ fn fuzz_field(cell_size_m: f32, origin_m: (f32, f32)) -> FieldConfig {
     };
     let ch = |name: &str, evaporation, diffusion, signed| {
         let mut c = ChannelSpec::new(name, evaporation);
-        c.diffusion_m2_per_sec = diffusion;
+        c.diffusion_m2_per_s = diffusion;
         c.signed = signed;
         c
     };
@@ -73,7 +73,7 @@ fn fuzz_field(cell_size_m: f32, origin_m: (f32, f32)) -> FieldConfig {
             ch(
                 "ambient",
                 Evaporation::Ambient {
-                    decay_per_sec: 0.5,
+                    decay_per_s: 0.5,
                     alpha: 0.5,
                     radius_m: 3.0 * cell_size_m,
                 },
@@ -90,14 +90,14 @@ fn fuzz_field(cell_size_m: f32, origin_m: (f32, f32)) -> FieldConfig {
                 "counter",
                 Evaporation::Quantum {
                     quantum: 1.0,
-                    tau_secs: 0.2,
+                    tau_s: 0.2,
                 },
                 stable_diffusion,
                 true,
             ),
             ch(
                 "exp",
-                Evaporation::Exponential { decay_per_sec: 1.0 },
+                Evaporation::Exponential { decay_per_s: 1.0 },
                 stable_diffusion,
                 false,
             ),

@@ -13,11 +13,11 @@ use proptest::prelude::*;
 // ---------------------------------------------------------------------------------------------
 // Helpers and strategies
 
-fn channel(evaporation: Evaporation, diffusion_m2_per_sec: f32, signed: bool) -> ChannelSpec {
+fn channel(evaporation: Evaporation, diffusion_m2_per_s: f32, signed: bool) -> ChannelSpec {
     ChannelSpec {
         name: "c".to_string(),
         evaporation,
-        diffusion_m2_per_sec,
+        diffusion_m2_per_s,
         signed,
     }
 }
@@ -97,17 +97,17 @@ fn unit_interval() -> impl Strategy<Value = f32> + Clone {
 fn evaporation() -> impl Strategy<Value = Evaporation> {
     prop_oneof![
         Just(Evaporation::None),
-        (0.0f32..20.0).prop_map(|k| Evaporation::Exponential { decay_per_sec: k }),
+        (0.0f32..20.0).prop_map(|k| Evaporation::Exponential { decay_per_s: k }),
         (0.0f32..20.0, unit_interval(), 0.0f32..3.0).prop_map(|(k, alpha, radius_m)| {
             Evaporation::Ambient {
-                decay_per_sec: k,
+                decay_per_s: k,
                 alpha,
                 radius_m,
             }
         }),
         unit_interval().prop_map(|rho| Evaporation::Saturating { rho_per_tick: rho }),
         (0.0f32..10.0, 0.001f32..2.0)
-            .prop_map(|(quantum, tau_secs)| Evaporation::Quantum { quantum, tau_secs }),
+            .prop_map(|(quantum, tau_s)| Evaporation::Quantum { quantum, tau_s }),
     ]
 }
 
@@ -162,22 +162,22 @@ proptest! {
         signs in vec(any::<bool>(), 1..64),
         signed in any::<bool>(),
         kappa in 0.0f32..0.249,
-        decay_per_sec in prop_oneof![Just(0.0f32), 0.0f32..2.0],
+        decay_per_s in prop_oneof![Just(0.0f32), 0.0f32..2.0],
         tick_hz in 1.0f32..100.0,
         cell_size_m in 0.02f32..1.0,
         ticks in 1usize..6,
     ) {
         let dt = 1.0 / tick_hz;
         let d = kappa * cell_size_m * cell_size_m / dt;
-        let evaporation = if decay_per_sec == 0.0 {
+        let evaporation = if decay_per_s == 0.0 {
             Evaporation::None
         } else {
-            Evaporation::Exponential { decay_per_sec }
+            Evaporation::Exponential { decay_per_s }
         };
         let mut prev = signed_cells(cells, &signs, signed);
         let mut stepper =
             Stepper::new(config(w, h, cell_size_m, tick_hz, vec![channel(evaporation, d, signed)])).expect("valid config");
-        let factor = (-(decay_per_sec as f64) * dt as f64).exp();
+        let factor = (-(decay_per_s as f64) * dt as f64).exp();
         let mut next = vec![f32::NAN; prev.len()];
         for _ in 0..ticks {
             let (before, scale) = (sum_f64(&prev), sum_abs_f64(&prev));
@@ -196,15 +196,15 @@ proptest! {
     #[test]
     fn exponential_matches_its_closed_form(
         (w, h, cells) in plane_of(16, 16, cell_value()),
-        decay_per_sec in 0.0f32..20.0,
+        decay_per_s in 0.0f32..20.0,
         tick_hz in 0.5f32..500.0,
     ) {
         let next = tick_once(
-            config(w, h, 0.05, tick_hz, vec![channel(Evaporation::Exponential { decay_per_sec }, 0.0, false)]),
+            config(w, h, 0.05, tick_hz, vec![channel(Evaporation::Exponential { decay_per_s }, 0.0, false)]),
             0.0,
             &cells,
         );
-        let e = (-(decay_per_sec as f64) / tick_hz as f64).exp();
+        let e = (-(decay_per_s as f64) / tick_hz as f64).exp();
         for (&p, &n) in cells.iter().zip(&next) {
             assert_relative_eq!(n as f64, p as f64 * e, max_relative = 1e-5, epsilon = 1e-37);
         }
@@ -215,16 +215,16 @@ proptest! {
     #[test]
     fn ambient_matches_its_closed_form(
         (w, h, cells) in plane_of(20, 20, moderate_value()),
-        decay_per_sec in 0.0f32..20.0,
+        decay_per_s in 0.0f32..20.0,
         alpha in unit_interval(),
         radius_m in 0.0f32..2.0,
         cell_size_m in 0.05f32..0.5,
         tick_hz in 0.5f32..500.0,
     ) {
-        let evaporation = Evaporation::Ambient { decay_per_sec, alpha, radius_m };
+        let evaporation = Evaporation::Ambient { decay_per_s, alpha, radius_m };
         let next = tick_once(config(w, h, cell_size_m, tick_hz, vec![channel(evaporation, 0.0, false)]), 0.0, &cells);
         let r = (radius_m / cell_size_m).round() as usize;
-        let e = (-(decay_per_sec as f64) / tick_hz as f64).exp();
+        let e = (-(decay_per_s as f64) / tick_hz as f64).exp();
         for y in 0..h {
             for x in 0..w {
                 let p = cells[y * w + x] as f64;
@@ -262,9 +262,9 @@ proptest! {
         n in 1u32..6,
         quantum in 0.01f32..20.0,
     ) {
-        let tau_secs = (ticks_per_tau as f64 / tick_hz as f64) as f32;
+        let tau_s = (ticks_per_tau as f64 / tick_hz as f64) as f32;
         let cells = signed_cells(cells, &signs, true);
-        let cfg = config(w, h, 0.05, tick_hz, vec![channel(Evaporation::Quantum { quantum, tau_secs }, 0.0, true)]);
+        let cfg = config(w, h, 0.05, tick_hz, vec![channel(Evaporation::Quantum { quantum, tau_s }, 0.0, true)]);
         let mut f = OwnedField::with_cells(cfg, cells.clone()).expect("valid field");
         let expect = |lost: u32, p: f32| {
             let m = (p.abs() as f64 - lost as f64 * quantum as f64).max(0.0);
@@ -277,13 +277,13 @@ proptest! {
         for (&p, &v) in cells.iter().zip(f.cells()) {
             let e = expect(n - 1, p);
             prop_assert!((v as f64 - e).abs() <= 1e-4 * (p.abs() as f64 + 1.0),
-                "after {} ticks of {tick_hz} Hz (τ = {tau_secs} s): {p} -> {v}, expected {e}", total - 1);
+                "after {} ticks of {tick_hz} Hz (τ = {tau_s} s): {p} -> {v}, expected {e}", total - 1);
         }
         f.tick();
         for (&p, &v) in cells.iter().zip(f.cells()) {
             let e = expect(n, p);
             prop_assert!((v as f64 - e).abs() <= 1e-4 * (p.abs() as f64 + 1.0),
-                "after {total} ticks of {tick_hz} Hz (τ = {tau_secs} s): {p} -> {v}, expected {e}");
+                "after {total} ticks of {tick_hz} Hz (τ = {tau_s} s): {p} -> {v}, expected {e}");
         }
     }
 }
@@ -326,7 +326,7 @@ fn running_sum_round_off_never_makes_mass_negative() {
     let fast = ambient_mean_plane(&cells, 1, 0);
     assert!(fast.iter().all(|&m| m >= 0.0), "{fast:?}");
     let evaporation = Evaporation::Ambient {
-        decay_per_sec: 1.0,
+        decay_per_s: 1.0,
         alpha: 1.0,
         radius_m: 0.0,
     };
@@ -348,9 +348,9 @@ fn papers_check_35_to_18_in_about_116_s_tick_by_tick() {
     let k = 0.0057f32;
     let formula = time_to_threshold_s(35.0, k as f64, 18.0, 0.0).unwrap();
     for evaporation in [
-        Evaporation::Exponential { decay_per_sec: k },
+        Evaporation::Exponential { decay_per_s: k },
         Evaporation::Ambient {
-            decay_per_sec: k,
+            decay_per_s: k,
             alpha: 0.0,
             radius_m: 0.2,
         },
@@ -634,7 +634,7 @@ fn wild_field(cell_size_m: f32) -> FieldConfig {
     let mut counter = channel(
         Evaporation::Quantum {
             quantum: 1.0,
-            tau_secs: 0.3,
+            tau_s: 0.3,
         },
         // κ = D·dt/h² = 0.1 whatever the cell size (none where h² overflows).
         Some(0.1 * cell_size_m * cell_size_m * 10.0)
@@ -646,7 +646,7 @@ fn wild_field(cell_size_m: f32) -> FieldConfig {
     let trail = ChannelSpec::new(
         "trail",
         Evaporation::Ambient {
-            decay_per_sec: 0.5,
+            decay_per_s: 0.5,
             alpha: 0.5,
             radius_m: 0.3,
         },
@@ -759,7 +759,7 @@ fn paper_kernel_on_tiny_cells_stays_finite() {
 fn quantum_counts_whole_seconds_at_50_hz() {
     let evaporation = Evaporation::Quantum {
         quantum: 1.0,
-        tau_secs: 1.0,
+        tau_s: 1.0,
     };
     let cfg = config(1, 1, 0.05, 50.0, vec![channel(evaporation, 0.0, false)]);
     let mut f = OwnedField::with_cells(cfg, vec![10.0]).unwrap();

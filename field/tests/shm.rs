@@ -25,7 +25,7 @@ fn deposit_arrives_in_a_frame_and_evaporates() {
     let mut server = FieldServer::start(
         &node,
         &name,
-        small_config(Evaporation::Exponential { decay_per_sec: 5.0 }),
+        small_config(Evaporation::Exponential { decay_per_s: 5.0 }),
         None,
     )
     .unwrap();

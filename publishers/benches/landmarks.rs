@@ -22,7 +22,7 @@ use criterion::{BatchSize, BenchmarkId, Criterion, Throughput};
 use nalgebra::Matrix3;
 use publishers::messages::LandmarkObs;
 use publishers::roles::localizer::{Ekf, EkfConfig};
-use publishers::roles::world::{Landmark, Pose2};
+use publishers::roles::world::{Landmark, WorldPose};
 
 const MAP_SIZES: &[usize] = &[50, 200, 1000];
 /// Observations per update (what a 5 m sensor sees in the corridor).
@@ -35,7 +35,7 @@ const GROUP: &str = "ekf_update_10_obs";
 /// `n` landmarks (n even) in two rows along x, signature 0; the captured area
 /// `[min_x, min_y, max_x, max_y]` holding the middle `CAPTURED_SHARE` of them; the robot pose
 /// in its centre.
-fn corridor(n: usize) -> (Vec<Landmark>, [f64; 4], Pose2) {
+fn corridor(n: usize) -> (Vec<Landmark>, [f64; 4], WorldPose) {
     let columns = n / 2;
     let map = (0..n)
         .map(|k| Landmark {
@@ -48,12 +48,12 @@ fn corridor(n: usize) -> (Vec<Landmark>, [f64; 4], Pose2) {
     let first = (columns - captured_columns) / 2;
     let min_x_m = SPACING_M * (first as f64 - 0.5);
     let max_x_m = SPACING_M * ((first + captured_columns) as f64 - 0.5);
-    let robot = Pose2::new(0.5 * (min_x_m + max_x_m), 1.0, 0.0);
+    let robot = WorldPose::new(0.5 * (min_x_m + max_x_m), 1.0, 0.0);
     (map, [min_x_m, -1.0, max_x_m, 3.0], robot)
 }
 
 /// Exact observations of the `OBSERVATIONS` landmarks nearest to `robot`.
-fn observations(map: &[Landmark], robot: Pose2) -> Vec<LandmarkObs> {
+fn observations(map: &[Landmark], robot: WorldPose) -> Vec<LandmarkObs> {
     let mut near: Vec<&Landmark> = map.iter().collect();
     near.sort_by(|a, b| {
         let d = |l: &Landmark| (l.x_m - robot.x_m).hypot(l.y_m - robot.y_m);

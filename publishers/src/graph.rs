@@ -7,15 +7,15 @@
 //! A* / Dijkstra on the graph, the update rules ([`GraphState::apply`]). [`region`] holds the
 //! region table with its Max-R rule, [`conflict`] the paper's contention message and order,
 //! [`skeleton`] graph extraction from an occupancy grid, [`shm`] the one-writer iceoryx2 service
-//! and [`sim`] the robot agents and a single-process simulation of the paper's corridor.
+//! and [`agent`] the robot agents and a single-process simulation of the paper's corridor.
 
+pub mod agent;
 pub mod compare;
 pub mod conflict;
-pub mod process;
+pub mod processes;
 pub mod region;
 pub mod run;
 pub mod shm;
-pub mod sim;
 pub mod skeleton;
 
 use std::cmp::Ordering;

@@ -1,8 +1,10 @@
 //! Messages between the robot roles: fixed-size `#[repr(C)]`, `ZeroCopySend`, each with a robot id
 //! and a monotonic stamp (ns, CLOCK_MONOTONIC). Type names carry the layout version.
 //!
-//! Services (robot `r<ID>` of world `W`): `pheromone/W/r<ID>/pose`, `pheromone/W/r<ID>/cmd`,
-//! `pheromone/W/r<ID>/status`, `sim/W/r<ID>/sensors`, `sim/W/r<ID>/truth` (`roles::RobotServices`).
+//! Services (robot `r<ID>` of world `W`, named by `roles::RobotServices`):
+//! `pheromone/W/r<ID>/pose` ([`PoseMsg`]), `pheromone/W/r<ID>/cmd` ([`CmdMsg`]),
+//! `pheromone/W/r<ID>/status` ([`FollowerStatusMsg`]), `sim/W/r<ID>/sensors` ([`SensorMsg`]),
+//! `sim/W/r<ID>/truth` ([`TruthMsg`]); each has a `…-ready` event that wakes its receivers.
 
 /// Most landmark observations one sensor message carries; the world reports the nearest ones.
 pub const MAX_OBSERVATIONS: usize = 32;
@@ -57,10 +59,10 @@ pub struct SensorMsg {
     /// Valid entries of `observations`.
     pub count: u32,
     pub sim_time_s: f64,
-    pub dt_secs: f64,
+    pub dt_s: f64,
     /// Odometry: linear and angular velocity measured over the last step.
-    pub v_mps: f64,
-    pub omega_radps: f64,
+    pub v_m_per_s: f64,
+    pub omega_rad_per_s: f64,
     pub observations: [LandmarkObs; MAX_OBSERVATIONS],
 }
 
@@ -80,9 +82,9 @@ impl Default for SensorMsg {
             robot_id: 0,
             count: 0,
             sim_time_s: 0.0,
-            dt_secs: 0.0,
-            v_mps: 0.0,
-            omega_radps: 0.0,
+            dt_s: 0.0,
+            v_m_per_s: 0.0,
+            omega_rad_per_s: 0.0,
             observations: [LandmarkObs::default(); MAX_OBSERVATIONS],
         }
     }
@@ -121,8 +123,8 @@ pub struct CmdMsg {
     pub step: u64,
     pub robot_id: u32,
     pub _pad: u32,
-    pub v_mps: f64,
-    pub omega_radps: f64,
+    pub v_m_per_s: f64,
+    pub omega_rad_per_s: f64,
 }
 
 // repr(C): numbers and arrays of numbers only.

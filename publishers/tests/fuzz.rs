@@ -18,7 +18,9 @@ use publishers::messages::{LandmarkObs, PoseMsg, SensorMsg, MAX_OBSERVATIONS};
 use publishers::roles::depositor::{msg_is_finite, DepositMode, Depositor, DepositorConfig};
 use publishers::roles::follower::{Follower, FollowerConfig, StrategyKind};
 use publishers::roles::localizer::{Ekf, EkfConfig, EkfSlam, EkfSlamConfig};
-use publishers::roles::world::{Landmark, OccupancyMap, Pose2, RobotConfig, World, WorldConfig};
+use publishers::roles::world::{
+    Landmark, OccupancyMap, RobotConfig, World, WorldConfig, WorldPose,
+};
 use publishers::sim::scenario::Scenario;
 use testkit::toml_fuzz;
 
@@ -104,7 +106,7 @@ fn wild_sensor() -> impl Strategy<Value = SensorMsg> {
         prop::collection::vec(wild_obs(), MAX_OBSERVATIONS),
     )
         .prop_map(
-            |(step, count, (v_mps, omega_radps, sim_time_s), dt_secs, obs)| {
+            |(step, count, (v_m_per_s, omega_rad_per_s, sim_time_s), dt_s, obs)| {
                 let mut observations = [LandmarkObs::default(); MAX_OBSERVATIONS];
                 observations.copy_from_slice(&obs);
                 SensorMsg {
@@ -113,9 +115,9 @@ fn wild_sensor() -> impl Strategy<Value = SensorMsg> {
                     robot_id: 0,
                     count,
                     sim_time_s,
-                    dt_secs,
-                    v_mps,
-                    omega_radps,
+                    dt_s,
+                    v_m_per_s,
+                    omega_rad_per_s,
                     observations,
                 }
             },
@@ -142,7 +144,7 @@ fn localizers_survive_any_sensor_message() {
         cases(256),
         &prop::collection::vec(wild_sensor(), 1..24),
         |msgs| {
-            let start = Pose2::new(1.0, 2.5, 0.3);
+            let start = WorldPose::new(1.0, 2.5, 0.3);
             let cov0 = Matrix3::from_diagonal(&nalgebra::Vector3::new(0.01, 0.01, 0.001));
             let mut ekf = Ekf::new(EkfConfig::default(), landmarks(), start, cov0).unwrap();
             let mut slam = EkfSlam::new(EkfSlamConfig::default(), start, cov0).unwrap();
@@ -234,7 +236,7 @@ fn the_depositor_never_turns_a_bad_pose_into_a_bad_deposit() {
         cell_size_m: 0.05,
         tick_hz: 10.0,
         channels: vec![{
-            let mut c = ChannelSpec::new("trail", Evaporation::Exponential { decay_per_sec: 0.1 });
+            let mut c = ChannelSpec::new("trail", Evaporation::Exponential { decay_per_s: 0.1 });
             c.signed = true;
             c
         }],
@@ -341,8 +343,8 @@ fn followers_never_command_a_non_finite_velocity() {
                 match follower.step_pose(&frame, pose, dt) {
                     Ok(out) => {
                         prop_assert!(
-                            out.cmd.v_mps.is_finite()
-                                && out.cmd.omega_radps.is_finite()
+                            out.cmd.v_m_per_s.is_finite()
+                                && out.cmd.omega_rad_per_s.is_finite()
                                 && out.status.sensed_level.is_finite(),
                             "{:?} from {:?}",
                             out,
@@ -371,7 +373,7 @@ fn the_world_survives_any_command() {
         robots: (0..3)
             .map(|id| RobotConfig {
                 id,
-                start: Pose2::new(1.0 + id as f64, 2.5, 0.0),
+                start: WorldPose::new(1.0 + id as f64, 2.5, 0.0),
                 noise: None,
             })
             .collect(),
@@ -401,7 +403,7 @@ fn the_world_survives_any_command() {
                     .count() as u64;
                 for out in world.step(cmds) {
                     let s = &out.sensor;
-                    prop_assert!(s.v_mps.is_finite() && s.omega_radps.is_finite());
+                    prop_assert!(s.v_m_per_s.is_finite() && s.omega_rad_per_s.is_finite());
                     prop_assert!(s
                         .observations()
                         .iter()

@@ -5,8 +5,8 @@ use std::cmp::Ordering;
 use std::time::{Duration, Instant};
 
 use proptest::prelude::*;
+use publishers::graph::agent::RegionsScenario;
 use publishers::graph::shm::{GraphReader, GraphServer, GraphUpdater};
-use publishers::graph::sim::RegionsScenario;
 use publishers::graph::{
     CaptureOutcome, ContendMsg, Dir, Graph, GraphState, GraphUpdate, RegionConfig, RegionShape,
     RegionTable, RgbRes, DEAD_END,

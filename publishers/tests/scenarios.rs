@@ -113,7 +113,7 @@ fn inverse_explores_more_than_uniform_over_several_seeds() {
 fn evaporation_probes_match_the_closed_forms() {
     let (s, _, rec, _) = run("evaporation", Overrides::default());
     let k = 0.0057f64;
-    let dt = s.world.dt_secs;
+    let dt = s.world.dt_s;
     assert_eq!(
         rec.probes.len(),
         s.probes.iter().map(|p| p.times_s.len()).sum::<usize>()
@@ -121,7 +121,7 @@ fn evaporation_probes_match_the_closed_forms() {
     for p in &rec.probes {
         // Deposits of t = 0 land with the first tick (field time dt) and evaporate from then.
         let t = p.t_s - dt;
-        let expected = match (p.channel, p.x) {
+        let expected = match (p.channel, p.x_m) {
             (0, x) if x < 2.0 => 50.0 * (-k * t).exp(),
             (0, _) => 35.0 * (-k * t).exp(),
             // Seed 000 eq. 19 with Pa = 10 (α = 1).
@@ -170,4 +170,80 @@ fn overrides_are_checked() {
     .unwrap();
     assert_eq!(s.world.robots.len(), 5);
     assert_eq!(s.robots.len(), 5);
+}
+
+/// Keys renamed to one unit suffix each (issue 12): (new, old). The old spelling stays an alias.
+/// Longest first, so no key is replaced inside a longer one (`dt_s` in `max_dt_s`).
+const RENAMED_KEYS: &[(&str, &str)] = &[
+    ("max_turn_rate_rad_per_s", "max_turn_rate_radps"),
+    ("omega_gain_rad_per_s", "omega_gain_radps"),
+    ("omega_max_rad_per_s", "omega_max_radps"),
+    ("diffusion_m2_per_s", "diffusion_m2_per_sec"),
+    ("max_speed_m_per_s", "max_speed_mps"),
+    ("explore_v_m_per_s", "explore_v_mps"),
+    ("k_v_m_per_s", "k_v_mps"),
+    ("decay_per_s", "decay_per_sec"),
+    ("v_m_per_s", "v_mps"),
+    ("max_dt_s", "max_dt_secs"),
+    ("tau_s", "tau_secs"),
+    ("dt_s", "dt_secs"),
+];
+
+fn with_old_keys(text: &str) -> String {
+    RENAMED_KEYS.iter().fold(text.to_string(), |t, (new, old)| {
+        t.replace(&format!("{new} ="), &format!("{old} ="))
+    })
+}
+
+#[test]
+fn a_scenario_with_the_old_key_spellings_loads_and_equals_the_new_one() {
+    let mut used = std::collections::BTreeSet::<&(&str, &str)>::new();
+    for (name, text) in BUILTIN {
+        let old = with_old_keys(text);
+        assert_ne!(old, *text, "{name} uses no renamed key");
+        let new = Scenario::parse(text, name).unwrap();
+        assert_eq!(Scenario::parse(&old, name).unwrap(), new, "{name}");
+        used.extend(
+            RENAMED_KEYS
+                .iter()
+                .filter(|(n, _)| text.contains(&format!("{n} ="))),
+        );
+    }
+    // The keys no built-in sets, added to `trail`.
+    let trail = BUILTIN.iter().find(|(n, _)| *n == "trail").unwrap().1;
+    let text = trail
+        .replacen(
+            "decay_per_s = 0.0057 }\n",
+            "decay_per_s = 0.0057 }\ndiffusion_m2_per_s = 0.0001\n",
+            1,
+        )
+        .replacen(
+            "dt_s = 0.1\n",
+            "dt_s = 0.1\nmax_speed_m_per_s = 1.5\nmax_turn_rate_rad_per_s = 2.5\n",
+            1,
+        )
+        .replacen(
+            "[[robot]]\nid = 0\n",
+            "[[robot]]\nid = 0\n[robot.localizer.limits]\nmax_dt_s = 0.5\nmax_speed_m_per_s = 3.0\n\
+             max_turn_rate_rad_per_s = 4.0\n",
+            1,
+        )
+        .replacen(
+            "[robot.follower]\nstrategy = \"gradient\"\n",
+            "[robot.follower]\nstrategy = \"gradient\"\nantenna = { k_v_m_per_s = 0.3, \
+             omega_gain_rad_per_s = 1.5 }\n",
+            1,
+        );
+    used.extend(
+        RENAMED_KEYS
+            .iter()
+            .filter(|(n, _)| text.contains(&format!("{n} ="))),
+    );
+    assert_eq!(used.len(), RENAMED_KEYS.len(), "keys not exercised");
+    let new = Scenario::parse(&text, "trail with every renamed key").unwrap();
+    assert_eq!(new.world.max_speed_m_per_s, 1.5);
+    assert_eq!(new.field.channels[0].diffusion_m2_per_s, 0.0001);
+    let old = with_old_keys(&text);
+    assert!(old.contains("max_turn_rate_radps = 2.5"), "{old}");
+    assert_eq!(Scenario::parse(&old, "old spelling").unwrap(), new);
 }

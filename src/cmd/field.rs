@@ -75,8 +75,8 @@ pub struct FieldArgs {
     #[arg(long, value_enum)]
     pub model: Option<ModelArg>,
     /// Evaporation rate K per second (exponential, ambient) [default: 0.0057].
-    #[arg(long, value_name = "K")]
-    pub decay_per_sec: Option<f32>,
+    #[arg(long, value_name = "K", visible_alias = "decay-per-sec")]
+    pub decay_per_s: Option<f32>,
     /// Ambient weight α in [0, 1] (ambient) [default: 0.5].
     #[arg(long)]
     pub alpha: Option<f32>,
@@ -90,10 +90,10 @@ pub struct FieldArgs {
     #[arg(long)]
     pub quantum: Option<f32>,
     /// Counter time constant τ in seconds (quantum) [default: 1].
-    #[arg(long, value_name = "SECS")]
-    pub tau_secs: Option<f32>,
+    #[arg(long, value_name = "SECS", visible_alias = "tau-secs")]
+    pub tau_s: Option<f32>,
     /// Diffusion coefficient D in m²/s of the first channel (stability D·dt/h² ≤ ¼ is checked).
-    #[arg(long, value_name = "M2_PER_SEC")]
+    #[arg(long, value_name = "M2_PER_S")]
     pub diffusion: Option<f32>,
     /// Let the first channel hold negative values (anti-pheromone).
     #[arg(long)]
@@ -168,11 +168,11 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
     });
     let (k0, alpha0, radius0) = match current {
         Evaporation::Ambient {
-            decay_per_sec,
+            decay_per_s,
             alpha,
             radius_m,
-        } => (decay_per_sec, alpha, radius_m),
-        Evaporation::Exponential { decay_per_sec } => (decay_per_sec, 0.5, 0.5),
+        } => (decay_per_s, alpha, radius_m),
+        Evaporation::Exponential { decay_per_s } => (decay_per_s, 0.5, 0.5),
         _ => (0.0057, 0.5, 0.5),
     };
     let unused = |flag: &str, v: Option<f32>| -> anyhow::Result<()> {
@@ -186,7 +186,7 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
     ch.evaporation = match model {
         ModelArg::None => {
             for (f, v) in [
-                ("decay-per-sec", a.decay_per_sec),
+                ("decay-per-s", a.decay_per_s),
                 ("alpha", a.alpha),
                 ("ambient-radius", a.ambient_radius),
             ] {
@@ -198,11 +198,11 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
             unused("alpha", a.alpha)?;
             unused("ambient-radius", a.ambient_radius)?;
             Evaporation::Exponential {
-                decay_per_sec: a.decay_per_sec.unwrap_or(k0),
+                decay_per_s: a.decay_per_s.unwrap_or(k0),
             }
         }
         ModelArg::Ambient => Evaporation::Ambient {
-            decay_per_sec: a.decay_per_sec.unwrap_or(k0),
+            decay_per_s: a.decay_per_s.unwrap_or(k0),
             alpha: a.alpha.unwrap_or(alpha0),
             radius_m: a.ambient_radius.unwrap_or(radius0),
         },
@@ -214,12 +214,12 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
         },
         ModelArg::Quantum => {
             let (q0, t0) = match current {
-                Evaporation::Quantum { quantum, tau_secs } => (quantum, tau_secs),
+                Evaporation::Quantum { quantum, tau_s } => (quantum, tau_s),
                 _ => (1.0, 1.0),
             };
             Evaporation::Quantum {
                 quantum: a.quantum.unwrap_or(q0),
-                tau_secs: a.tau_secs.unwrap_or(t0),
+                tau_s: a.tau_s.unwrap_or(t0),
             }
         }
     };
@@ -228,10 +228,10 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
     }
     if model != ModelArg::Quantum {
         unused("quantum", a.quantum)?;
-        unused("tau-secs", a.tau_secs)?;
+        unused("tau-s", a.tau_s)?;
     }
     if let Some(d) = a.diffusion {
-        ch.diffusion_m2_per_sec = d;
+        ch.diffusion_m2_per_s = d;
     }
     if a.signed {
         ch.signed = true;

@@ -7,10 +7,10 @@ use std::time::{Duration, Instant};
 
 use clap::Args;
 use field::shm::create_node;
+use publishers::graph::agent::{GraphStrategy, RegionsScenario, Until, BUILTIN_REGIONS};
 use publishers::graph::compare::{compare, comparison_text};
-use publishers::graph::process::{run_graph_robot, run_graph_writer, WriterOptions};
+use publishers::graph::processes::{run_graph_robot, run_graph_writer, WriterOptions};
 use publishers::graph::run::{simulate, tables_text, RunReport};
-use publishers::graph::sim::{RegionsScenario, Strategy, Until, BUILTIN_REGIONS};
 use serde_json::json;
 
 use super::bad;
@@ -44,8 +44,8 @@ pub fn load_regions(name: &str) -> anyhow::Result<RegionsScenario> {
     Ok(sc)
 }
 
-fn parse_strategy(s: &str) -> anyhow::Result<Strategy> {
-    s.parse::<Strategy>().map_err(bad)
+fn parse_strategy(s: &str) -> anyhow::Result<GraphStrategy> {
+    s.parse::<GraphStrategy>().map_err(bad)
 }
 
 /// Run the graph writer of a `regions` run: owns the node graph and its regions in shared
@@ -289,7 +289,7 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
 /// One run as processes: the graph writer and one `graph-robot` per robot.
 fn run_as_processes(
     a: &SimArgs,
-    strategy: Strategy,
+    strategy: GraphStrategy,
     robots: usize,
     seed: u64,
 ) -> anyhow::Result<RunReport> {

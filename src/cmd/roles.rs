@@ -295,7 +295,7 @@ pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
         &a.common.role_options(a.robot),
         follower,
         config.steer_by,
-        scenario.world.dt_secs,
+        scenario.world.dt_s,
     )?;
     eprintln!(
         "follower r{}: {} steps, {} rejected",

@@ -70,7 +70,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         )?;
         (out.0, out.1, None)
     } else {
-        let dt = scenario.world.dt_secs;
+        let dt = scenario.world.dt_s;
         let mut tick = |t: f64| bar.set_position((t / dt).round() as u64);
         let (summary, rec, info) = run_processes(&a, &scenario, Some(&mut tick))?;
         (summary, rec, Some(info))

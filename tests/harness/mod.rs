@@ -78,8 +78,8 @@ pub fn json(o: &Output) -> serde_json::Value {
     })
 }
 
-/// Entries of /dev/shm whose names mention `needle` (iceoryx2 names hash service names, so
-/// callers pass node names or compare counts before/after).
+/// Every entry of /dev/shm (iceoryx2 names hash service names, so callers look for node names
+/// or compare counts before/after).
 pub fn shm_entries() -> Vec<String> {
     std::fs::read_dir("/dev/shm")
         .map(|d| {

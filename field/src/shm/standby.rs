@@ -191,7 +191,7 @@ impl Standby {
                     if h.geometry() != c.geometry()
                         || h.channels as usize != c.channels.len()
                         || s.payload().len() != c.frame_len()
-                        || h.dt_secs != c.dt_secs()
+                        || h.dt_s != c.dt_s()
                     {
                         return Err(ShmError::StandbyMismatch {
                             field: self.field.clone(),
@@ -206,14 +206,14 @@ impl Standby {
                                 h.cell_size_m,
                                 h.origin_x_m,
                                 h.origin_y_m,
-                                h.dt_secs,
+                                h.dt_s,
                                 c.width,
                                 c.height,
                                 c.channels.len(),
                                 c.cell_size_m,
                                 c.origin_x_m,
                                 c.origin_y_m,
-                                c.dt_secs()
+                                c.dt_s()
                             ),
                         });
                     }

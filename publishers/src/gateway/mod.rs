@@ -23,7 +23,7 @@ pub mod udp;
 use std::time::Duration;
 
 use field::shm::{DepositPublisher, FieldReader, ShmError, Svc};
-use field::{DepositMsg, Pose2};
+use field::{DepositMsg, SamplePose};
 use gateway_codec::{
     DecodeError, DepositReply, DepositRequest, DepositStatus, ErrorReason, Frame, Message,
     PirReply, PirRequest, StatusReply,
@@ -258,7 +258,7 @@ impl Gateway {
         if !(p.half_wheel_base_m > 0.0 && p.half_wheel_base_m <= MAX_HALF_WHEEL_BASE_M) {
             return self.error(id, ErrorReason::BadValue);
         }
-        let pose = Pose2::new(p.x_m, p.y_m, p.theta_rad);
+        let pose = SamplePose::new(p.x_m, p.y_m, p.theta_rad);
         let (p_left, p_right) =
             f.view
                 .antennas(p.channel as usize, pose, 2.0 * p.half_wheel_base_m);

@@ -3,8 +3,8 @@
 
 use serde_json::{json, Value};
 
+use super::agent::GraphStrategy;
 use super::run::RunReport;
-use super::sim::Strategy;
 
 /// Per robot count: the time to the goal with each strategy and their ratio (Fig. 4c).
 pub fn compare(runs: &[RunReport]) -> Vec<Value> {
@@ -13,9 +13,9 @@ pub fn compare(runs: &[RunReport]) -> Vec<Value> {
     counts
         .into_iter()
         .map(|n| {
-            let of = |s: Strategy| runs.iter().find(|r| r.robots == n && r.strategy == s);
-            let ph = of(Strategy::Pheromone);
-            let sp = of(Strategy::ShortestPath);
+            let of = |s: GraphStrategy| runs.iter().find(|r| r.robots == n && r.strategy == s);
+            let ph = of(GraphStrategy::Pheromone);
+            let sp = of(GraphStrategy::ShortestPath);
             let ratio = match (ph.and_then(|r| r.finish_s), sp.and_then(|r| r.finish_s)) {
                 (Some(a), Some(b)) if a > 0.0 => Some(b / a),
                 _ => None,

@@ -1,5 +1,5 @@
 //! Lockstep runs of a `regions` scenario, the same in one process ([`simulate`]) and as
-//! processes ([`super::process`]):
+//! processes ([`super::processes`]):
 //! - [`GraphWorld`] is the graph's one writer. Each step it opens a [`StepView`] (the state,
 //!   the simulated time and the claims of the previous step), then takes every robot's
 //!   [`RobotOutput`] and applies the updates in robot order, records captures and releases,
@@ -15,9 +15,11 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use super::agent::{
+    Action, GraphAgent, GraphStrategy, RegionsScenario, RobotProfile, SimParams, Until,
+};
 use super::conflict::{ContendMsg, RgbRes};
 use super::shm::GraphShmError;
-use super::sim::{Action, GraphAgent, RegionsScenario, RobotProfile, SimParams, Strategy, Until};
 use super::{CaptureOutcome, GraphError, GraphState, GraphUpdate, MAX_LINKS};
 
 /// What a robot sees at the start of a step.
@@ -97,7 +99,7 @@ pub struct GraphRobot {
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct RobotReport {
     pub robot: u32,
-    pub strategy: Strategy,
+    pub strategy: GraphStrategy,
     pub distance_m: f32,
     /// Regions the writer let this robot capture (held to the end or released).
     pub capture_count: u32,
@@ -115,7 +117,7 @@ impl GraphRobot {
         scenario: &RegionsScenario,
         state: &GraphState,
         index: usize,
-        strategy: Strategy,
+        strategy: GraphStrategy,
         seed: u64,
     ) -> Result<Self, GraphError> {
         let dock = scenario.dock_node(&state.graph)?;
@@ -350,7 +352,7 @@ pub struct AreaRow {
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct RunReport {
     pub scenario: String,
-    pub strategy: Strategy,
+    pub strategy: GraphStrategy,
     pub robots: usize,
     pub seed: u64,
     pub until: Until,
@@ -378,7 +380,7 @@ pub struct RunReport {
 pub struct GraphWorld {
     scenario_name: String,
     params: SimParams,
-    strategy: Strategy,
+    strategy: GraphStrategy,
     robots: usize,
     seed: u64,
     pub state: GraphState,
@@ -397,7 +399,7 @@ pub struct GraphWorld {
 impl GraphWorld {
     pub fn new(
         scenario: &RegionsScenario,
-        strategy: Strategy,
+        strategy: GraphStrategy,
         robots: usize,
         seed: u64,
     ) -> Result<Self, GraphError> {
@@ -601,10 +603,10 @@ impl GraphWorld {
 }
 
 /// Runs `robots` robots with `strategy` on `scenario` in this process, in lockstep, exactly
-/// as the processes of [`super::process`] do.
+/// as the processes of [`super::processes`] do.
 pub fn simulate(
     scenario: &RegionsScenario,
-    strategy: Strategy,
+    strategy: GraphStrategy,
     robots: usize,
     seed: u64,
 ) -> Result<RunReport, GraphShmError> {
@@ -770,7 +772,7 @@ mod tests {
     #[test]
     fn two_robots_split_like_table_2() {
         let sc = RegionsScenario::paper_corridor();
-        let r = simulate(&sc, Strategy::Pheromone, 2, 1).unwrap();
+        let r = simulate(&sc, GraphStrategy::Pheromone, 2, 1).unwrap();
         // Table 2, two robots: R1 serves B then A; R2 serves C, D, E.
         assert_eq!(
             ["A", "B", "C", "D", "E"].map(|n| who(&r, n)),
@@ -785,7 +787,7 @@ mod tests {
     #[test]
     fn four_robots_first_round_like_table_2() {
         let sc = RegionsScenario::paper_corridor();
-        let r = simulate(&sc, Strategy::Pheromone, 4, 1).unwrap();
+        let r = simulate(&sc, GraphStrategy::Pheromone, 4, 1).unwrap();
         // Table 2, four robots, Tw1: A R3, B R1, C R2, D R4.
         assert_eq!(["A", "B", "C", "D"].map(|n| who(&r, n)), [3, 1, 2, 4]);
     }
@@ -796,8 +798,8 @@ mod tests {
     fn capture_beats_shortest_path_in_simulated_time() {
         let sc = RegionsScenario::paper_corridor();
         for n in 2..=4 {
-            let ph = simulate(&sc, Strategy::Pheromone, n, 1).unwrap();
-            let sp = simulate(&sc, Strategy::ShortestPath, n, 1).unwrap();
+            let ph = simulate(&sc, GraphStrategy::Pheromone, n, 1).unwrap();
+            let sp = simulate(&sc, GraphStrategy::ShortestPath, n, 1).unwrap();
             assert!(
                 ph.finish_s.unwrap() < sp.finish_s.unwrap(),
                 "{n}: {ph:?} {sp:?}"
@@ -809,7 +811,7 @@ mod tests {
     #[test]
     fn every_run_finishes_within_max_r_and_marks_dead_ends() {
         let sc = RegionsScenario::paper_corridor();
-        for strategy in [Strategy::Pheromone, Strategy::ShortestPath] {
+        for strategy in [GraphStrategy::Pheromone, GraphStrategy::ShortestPath] {
             for n in 1..=4 {
                 let r = simulate(&sc, strategy, n, 1).unwrap();
                 assert!(r.finish_s.is_some(), "{strategy:?} {n}: {r:?}");
@@ -818,7 +820,7 @@ mod tests {
                 assert_eq!(r.updates_rejected, 0);
             }
         }
-        let r = simulate(&sc, Strategy::Pheromone, 2, 1).unwrap();
+        let r = simulate(&sc, GraphStrategy::Pheromone, 2, 1).unwrap();
         let j1 = r.links.iter().find(|l| l.node == "j1").unwrap();
         assert_eq!(j1.up, "-inf", "the side passage s1 is a dead end: {j1:?}");
         let text = tables_text(&r);
@@ -828,8 +830,8 @@ mod tests {
     #[test]
     fn a_run_is_deterministic_for_a_seed() {
         let sc = RegionsScenario::paper_corridor();
-        let a = simulate(&sc, Strategy::Pheromone, 3, 7).unwrap();
-        let b = simulate(&sc, Strategy::Pheromone, 3, 7).unwrap();
+        let a = simulate(&sc, GraphStrategy::Pheromone, 3, 7).unwrap();
+        let b = simulate(&sc, GraphStrategy::Pheromone, 3, 7).unwrap();
         assert_eq!(a, b);
     }
 }
@@ -843,14 +845,14 @@ mod backup_tests {
     #[test]
     fn a_robot_follows_positive_pheromone_to_the_leaders_goal() {
         let mut sc = RegionsScenario::builtin("regions-backup").unwrap();
-        let r = simulate(&sc, Strategy::Pheromone, 2, 1).unwrap();
+        let r = simulate(&sc, GraphStrategy::Pheromone, 2, 1).unwrap();
         let (r1, r2) = (&r.robot_reports[0], &r.robot_reports[1]);
         assert_eq!(r1.path.last().map(String::as_str), Some("E"), "{r1:?}");
         assert_eq!(r2.path, r1.path, "{}", tables_text(&r));
         let e = r.links.iter().find(|l| l.node == "D").unwrap();
         assert_eq!(e.right, "1", "R1 deposited +1, R2 nothing: {e:?}");
         sc.robot_roles[0].link_deposit = Some(-1.0);
-        let r = simulate(&sc, Strategy::Pheromone, 2, 1).unwrap();
+        let r = simulate(&sc, GraphStrategy::Pheromone, 2, 1).unwrap();
         assert_eq!(r.robot_reports[1].path, ["dock"], "{}", tables_text(&r));
     }
 }
@@ -864,8 +866,8 @@ mod skeleton_tests {
     #[test]
     fn eight_robots_capture_every_region_of_the_skeleton_map() {
         let sc = RegionsScenario::paper_skeleton();
-        let ph = simulate(&sc, Strategy::Pheromone, 8, 1).unwrap();
-        let sp = simulate(&sc, Strategy::ShortestPath, 8, 1).unwrap();
+        let ph = simulate(&sc, GraphStrategy::Pheromone, 8, 1).unwrap();
+        let sp = simulate(&sc, GraphStrategy::ShortestPath, 8, 1).unwrap();
         for r in [&ph, &sp] {
             assert!(r.finish_s.is_some(), "{}", tables_text(r));
             for a in &r.areas {

@@ -37,8 +37,8 @@ pub(super) fn robot_csv(rows: &[RobotSample]) -> String {
             opt(est.map(|p| p[1])),
             opt(est.map(|p| p[2])),
             opt(r.est_sigma_m),
-            r.v_mps,
-            r.omega_radps,
+            r.v_m_per_s,
+            r.omega_rad_per_s,
             r.state.map(|s| s.name()).unwrap_or(""),
             opt(r.sensed_level),
         );

@@ -62,7 +62,7 @@ pub enum ReportError {
 
 /// Header of `robot_<id>.csv`.
 pub const ROBOT_CSV_HEADER: &str = "t_s,true_x_m,true_y_m,true_theta_rad,est_x_m,est_y_m,\
-est_theta_rad,est_sigma_m,v_mps,omega_radps,state,sensed_level";
+est_theta_rad,est_sigma_m,v_m_per_s,omega_rad_per_s,state,sensed_level";
 
 /// Header of `probes.csv`.
 pub const PROBES_CSV_HEADER: &str = "t_s,x_m,y_m,channel,value";
@@ -103,7 +103,11 @@ pub fn write_outputs(
         let mut text = String::from(PROBES_CSV_HEADER);
         text.push('\n');
         for p in &rec.probes {
-            let _ = writeln!(text, "{},{},{},{},{}", p.t_s, p.x, p.y, p.channel, p.value);
+            let _ = writeln!(
+                text,
+                "{},{},{},{},{}",
+                p.t_s, p.x_m, p.y_m, p.channel, p.value
+            );
         }
         let path = dir.join("probes.csv");
         write_file(&path, text.as_bytes())?;
@@ -224,8 +228,8 @@ mod tests {
             true_pose: [x, y, 0.0],
             est_pose: None,
             est_sigma_m: None,
-            v_mps: 0.5,
-            omega_radps: 0.0,
+            v_m_per_s: 0.5,
+            omega_rad_per_s: 0.0,
             state: None,
             sensed_level: None,
         }
@@ -297,8 +301,8 @@ mod tests {
         );
         rec.probes.push(ProbeReading {
             t_s: 2.0,
-            x: 1.5,
-            y: 0.5,
+            x_m: 1.5,
+            y_m: 0.5,
             channel: 0,
             value: 0.25,
         });

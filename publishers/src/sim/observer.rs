@@ -106,8 +106,8 @@ impl Observer {
             }
             while let Some(c) = r.cmd.try_recv()? {
                 let row = r.rows.entry(c.step).or_insert_with(|| empty_row(f64::NAN));
-                row.v_mps = c.v_mps;
-                row.omega_radps = c.omega_radps;
+                row.v_m_per_s = c.v_m_per_s;
+                row.omega_rad_per_s = c.omega_rad_per_s;
             }
             while let Some(s) = r.status.try_recv()? {
                 let row = r.rows.entry(s.step).or_insert_with(|| empty_row(f64::NAN));
@@ -175,8 +175,8 @@ fn empty_row(t_s: f64) -> RobotSample {
         true_pose: [f64::NAN; 3],
         est_pose: None,
         est_sigma_m: None,
-        v_mps: 0.0,
-        omega_radps: 0.0,
+        v_m_per_s: 0.0,
+        omega_rad_per_s: 0.0,
         state: None,
         sensed_level: None,
     }

@@ -373,7 +373,7 @@ fn run_summary(
 pub fn run_graph_as_processes(
     exe: &Path,
     scenario: &str,
-    strategy: crate::graph::sim::Strategy,
+    strategy: crate::graph::agent::GraphStrategy,
     robots: usize,
     seed: u64,
     timeout: Duration,

@@ -20,8 +20,8 @@ pub struct RobotSample {
     /// √(largest eigenvalue of the estimate's position covariance) (m).
     pub est_sigma_m: Option<f64>,
     /// Commanded forward speed (m/s) and turn rate (rad/s).
-    pub v_mps: f64,
-    pub omega_radps: f64,
+    pub v_m_per_s: f64,
+    pub omega_rad_per_s: f64,
     /// The follower's state and the level it sensed, if the robot has a follower.
     pub state: Option<FollowerState>,
     pub sensed_level: Option<f32>,
@@ -50,8 +50,8 @@ impl Snapshot {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ProbeReading {
     pub t_s: f64,
-    pub x: f32,
-    pub y: f32,
+    pub x_m: f32,
+    pub y_m: f32,
     pub channel: u32,
     pub value: f32,
 }

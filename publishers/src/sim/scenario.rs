@@ -56,7 +56,7 @@ pub enum ScenarioError {
 fn builtin_names() -> String {
     BUILTIN
         .iter()
-        .chain(crate::graph::sim::BUILTIN_REGIONS.iter())
+        .chain(crate::graph::agent::BUILTIN_REGIONS.iter())
         .map(|(n, _)| *n)
         .collect::<Vec<_>>()
         .join(", ")
@@ -352,10 +352,10 @@ impl Scenario {
             return Err(format!("duration_s = {}: must be > 0", self.duration_s));
         }
         let field_dt = 1.0 / self.field.tick_hz as f64;
-        if (field_dt - self.world.dt_secs).abs() > 1e-6 * self.world.dt_secs.max(1e-9) + 1e-9 {
+        if (field_dt - self.world.dt_s).abs() > 1e-6 * self.world.dt_s.max(1e-9) + 1e-9 {
             return Err(format!(
-                "field.tick_hz = {} gives dt = {field_dt} s but world.dt_secs = {}: in lockstep the field ticks once per world step",
-                self.field.tick_hz, self.world.dt_secs
+                "field.tick_hz = {} gives dt = {field_dt} s but world.dt_s = {}: in lockstep the field ticks once per world step",
+                self.field.tick_hz, self.world.dt_s
             ));
         }
         for r in &self.robots {
@@ -561,7 +561,7 @@ impl Scenario {
         c.max_depositors = c.max_depositors.max(depositors + 2);
         let world = crate::roles::world::World::new(self.world.clone(), self.seed)
             .map_err(|e| e.to_string())?;
-        let dt = self.world.dt_secs;
+        let dt = self.world.dt_s;
         let mut per_step = std::collections::BTreeMap::<u64, usize>::new();
         for (t, _) in self.scripted(world.wall_segments())? {
             // The world sends a deposit of time t at the first step whose end reaches it.
@@ -593,7 +593,7 @@ impl Scenario {
 
     /// Number of world steps the run lasts.
     pub fn steps(&self) -> u64 {
-        (self.duration_s / self.world.dt_secs).round() as u64
+        (self.duration_s / self.world.dt_s).round() as u64
     }
 
     pub fn roles(&self, robot_id: u32) -> Option<&RobotRoles> {

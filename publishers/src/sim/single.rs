@@ -177,7 +177,7 @@ pub fn run_single_process(
             .collect(),
         ..Recording::default()
     };
-    let dt = scenario.world.dt_secs;
+    let dt = scenario.world.dt_s;
     let steps = scenario.steps();
     let mut frames = FrameSchedule::new(scenario);
     let mut commands = vec![(0.0, 0.0); robots.len()];
@@ -219,7 +219,7 @@ pub fn run_single_process(
                 };
                 match f.step_pose(&view, &steer, dt) {
                     Ok(o) => {
-                        *cmd = (o.cmd.v_mps, o.cmd.omega_radps);
+                        *cmd = (o.cmd.v_m_per_s, o.cmd.omega_rad_per_s);
                         state = Some(o.decision.state);
                         level = Some(o.decision.sensed_level);
                     }
@@ -231,8 +231,8 @@ pub fn run_single_process(
                 true_pose: [out.truth.x_m, out.truth.y_m, out.truth.theta_rad],
                 est_pose: Some([pose.x_m, pose.y_m, pose.theta_rad]),
                 est_sigma_m: Some(sigma_max_m(&pose)),
-                v_mps: cmd.0,
-                omega_radps: cmd.1,
+                v_m_per_s: cmd.0,
+                omega_rad_per_s: cmd.1,
                 state,
                 sensed_level: level,
             });
@@ -292,7 +292,7 @@ impl FrameSchedule {
                 .map(|(t, i)| (t, scenario.probes[i].clone()))
                 .collect(),
             snapshot_times_s: times.into(),
-            half_dt_s: 0.5 * scenario.world.dt_secs,
+            half_dt_s: 0.5 * scenario.world.dt_s,
         }
     }
 
@@ -302,8 +302,8 @@ impl FrameSchedule {
             let (_, p) = self.probes.pop_front().expect("checked");
             rec.probes.push(ProbeReading {
                 t_s,
-                x: p.x_m,
-                y: p.y_m,
+                x_m: p.x_m,
+                y_m: p.y_m,
                 channel: p.channel,
                 value: view.value(p.channel as usize, p.x_m, p.y_m),
             });

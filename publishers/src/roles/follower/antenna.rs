@@ -2,11 +2,12 @@
 //! (eq. 5 with the MODELS.md M3 convention), turn toward the stronger one, forward speed
 //! K·(1 − |P_L − P_R|) (the evident intent of eq. 6).
 
-use field::{FrameView, Pose2};
+use field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    check_nonneg, check_positive, invalid, Decision, FollowerConfigError, Strategy, StrategyKind,
+    check_nonneg, check_positive, invalid, Decision, FollowerConfigError, FollowerStrategy,
+    StrategyKind,
 };
 use crate::messages::FollowerState;
 
@@ -22,14 +23,18 @@ pub struct AntennaConfig {
     /// Readings are divided by this before clamping to [0, 1]; unset = by the larger reading.
     pub normalize_max: Option<f32>,
     /// K of seed 002 eq. 6: forward speed K·(1 − |P_L − P_R|) (m/s).
-    pub k_v_mps: f64,
+    #[serde(alias = "k_v_mps")]
+    pub k_v_m_per_s: f64,
     /// Turn rate per unit normalized difference: ω = k·(P_L − P_R) (rad/s).
-    pub omega_gain_radps: f64,
-    pub omega_max_radps: f64,
+    #[serde(alias = "omega_gain_radps")]
+    pub omega_gain_rad_per_s: f64,
+    #[serde(alias = "omega_max_radps")]
+    pub omega_max_rad_per_s: f64,
     /// Both readings at or below this count as "no pheromone" (state `Exploring`).
     pub min_level: f32,
     /// Forward speed while exploring (m/s); 0 = stop.
-    pub explore_v_mps: f64,
+    #[serde(alias = "explore_v_mps")]
+    pub explore_v_m_per_s: f64,
 }
 
 impl Default for AntennaConfig {
@@ -38,11 +43,11 @@ impl Default for AntennaConfig {
             wheel_base_m: 0.3,
             antenna_ahead_m: 0.15,
             normalize_max: None,
-            k_v_mps: 0.5,
-            omega_gain_radps: 3.0,
-            omega_max_radps: 2.0,
+            k_v_m_per_s: 0.5,
+            omega_gain_rad_per_s: 3.0,
+            omega_max_rad_per_s: 2.0,
             min_level: 1e-3,
-            explore_v_mps: 0.1,
+            explore_v_m_per_s: 0.1,
         }
     }
 }
@@ -60,11 +65,11 @@ impl AntennaConfig {
         if let Some(m) = self.normalize_max {
             check_positive("antenna.normalize_max", m as f64)?;
         }
-        check_nonneg("antenna.k_v_mps", self.k_v_mps)?;
-        check_nonneg("antenna.omega_gain_radps", self.omega_gain_radps)?;
-        check_positive("antenna.omega_max_radps", self.omega_max_radps)?;
+        check_nonneg("antenna.k_v_m_per_s", self.k_v_m_per_s)?;
+        check_nonneg("antenna.omega_gain_rad_per_s", self.omega_gain_rad_per_s)?;
+        check_positive("antenna.omega_max_rad_per_s", self.omega_max_rad_per_s)?;
         check_nonneg("antenna.min_level", self.min_level as f64)?;
-        check_nonneg("antenna.explore_v_mps", self.explore_v_mps)?;
+        check_nonneg("antenna.explore_v_m_per_s", self.explore_v_m_per_s)?;
         Ok(())
     }
 }
@@ -96,15 +101,15 @@ impl AntennaFollower {
     }
 
     /// Raw readings (P_L, P_R) at the antenna points.
-    pub fn readings(&self, frame: &FrameView<'_>, pose: Pose2) -> (f32, f32) {
+    pub fn readings(&self, frame: &FrameView<'_>, pose: SamplePose) -> (f32, f32) {
         let a = self.config.antenna_ahead_m;
         let (s, c) = pose.theta_rad.sin_cos();
-        let head = Pose2::new(pose.x_m + a * c, pose.y_m + a * s, pose.theta_rad);
+        let head = SamplePose::new(pose.x_m + a * c, pose.y_m + a * s, pose.theta_rad);
         frame.antennas(self.channel, head, self.config.wheel_base_m)
     }
 }
 
-impl Strategy for AntennaFollower {
+impl FollowerStrategy for AntennaFollower {
     fn name(&self) -> &'static str {
         StrategyKind::Antenna.name()
     }
@@ -113,15 +118,15 @@ impl Strategy for AntennaFollower {
         self.channel
     }
 
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, _dt_secs: f64) -> Decision {
+    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, _dt_s: f64) -> Decision {
         let c = &self.config;
         let (pl, pr) = self.readings(frame, pose);
         let level = 0.5 * (pl + pr);
         let strongest = pl.max(pr);
         if strongest.is_nan() || strongest <= c.min_level {
             return Decision {
-                v_mps: c.explore_v_mps,
-                omega_radps: 0.0,
+                v_m_per_s: c.explore_v_m_per_s,
+                omega_rad_per_s: 0.0,
                 state: FollowerState::Exploring,
                 sensed_level: level,
             };
@@ -133,8 +138,9 @@ impl Strategy for AntennaFollower {
         );
         let diff = nl - nr;
         Decision {
-            v_mps: c.k_v_mps * (1.0 - diff.abs()),
-            omega_radps: (c.omega_gain_radps * diff).clamp(-c.omega_max_radps, c.omega_max_radps),
+            v_m_per_s: c.k_v_m_per_s * (1.0 - diff.abs()),
+            omega_rad_per_s: (c.omega_gain_rad_per_s * diff)
+                .clamp(-c.omega_max_rad_per_s, c.omega_max_rad_per_s),
             state: FollowerState::Following,
             sensed_level: level,
         }
@@ -209,32 +215,32 @@ mod tests {
         // Pheromone only at y > 5 (left of a robot heading +x at y = 5).
         let (g, cells) = synth(10.0, 10.0, 0.05, |_, y| if y > 5.0 { 1.0 } else { 0.0 });
         let frame = FrameView::new(g, 1, &cells);
-        let d = antenna().decide(&frame, Pose2::new(5.0, 5.0, 0.0), 0.05);
+        let d = antenna().decide(&frame, SamplePose::new(5.0, 5.0, 0.0), 0.05);
         assert!(
-            d.omega_radps > 0.0,
+            d.omega_rad_per_s > 0.0,
             "should turn left (toward the stronger antenna): {d:?}"
         );
-        assert!(d.v_mps < 0.5 && d.state == FollowerState::Following);
+        assert!(d.v_m_per_s < 0.5 && d.state == FollowerState::Following);
         // Symmetric readings: straight on at full speed K.
         let (g2, even) = synth(10.0, 10.0, 0.05, |_, _| 0.7);
         let d = antenna().decide(
             &FrameView::new(g2, 1, &even),
-            Pose2::new(5.0, 5.0, 1.0),
+            SamplePose::new(5.0, 5.0, 1.0),
             0.05,
         );
         assert_eq!(
-            (d.v_mps, d.omega_radps, d.state),
+            (d.v_m_per_s, d.omega_rad_per_s, d.state),
             (0.5, 0.0, FollowerState::Following)
         );
         // Nothing at all: exploring.
         let zero = vec![0.0; g.cells()];
         let d = antenna().decide(
             &FrameView::new(g, 1, &zero),
-            Pose2::new(5.0, 5.0, 0.0),
+            SamplePose::new(5.0, 5.0, 0.0),
             0.05,
         );
         assert_eq!(
-            (d.state, d.v_mps, d.omega_radps),
+            (d.state, d.v_m_per_s, d.omega_rad_per_s),
             (FollowerState::Exploring, 0.1, 0.0)
         );
     }

@@ -2,43 +2,47 @@
 //! adapts its speed to the sensed level by the Table 2 speed table, and rejects a trail below an
 //! absolute level or δ·P0 (MODELS.md M1).
 
-use field::{FrameView, Pose2};
+use field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError, Strategy,
-    StrategyKind,
+    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError,
+    FollowerStrategy, StrategyKind,
 };
 use crate::messages::FollowerState;
 
 // ---------------------------------------------------------------------------------------------
 // Speed adaptation (seed 000 Table 2)
 
-/// One row of the speed table: from this sensed level up to the next row's, drive at `v_mps`.
+/// One row of the speed table: from this sensed level up to the next row's, drive at `v_m_per_s`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SpeedBand {
     pub from_level: f32,
-    pub v_mps: f64,
+    #[serde(alias = "v_mps")]
+    pub v_m_per_s: f64,
 }
 
 /// Seed 000 Table 2: sensed 0–15 → 0.15 m/s, 15–30 → 0.45, 30–60 → 0.65, 60–100 → 1.0.
 pub fn table2_speed_bands() -> Vec<SpeedBand> {
     [(0.0, 0.15), (15.0, 0.45), (30.0, 0.65), (60.0, 1.0)]
         .into_iter()
-        .map(|(from_level, v_mps)| SpeedBand { from_level, v_mps })
+        .map(|(from_level, v_m_per_s)| SpeedBand {
+            from_level,
+            v_m_per_s,
+        })
         .collect()
 }
 
 /// The speed of the highest band whose `from_level` ≤ `level` (the first band's below all of
 /// them). Levels above the last band keep its speed.
 pub fn speed_for_level(bands: &[SpeedBand], level: f32) -> f64 {
-    let first = bands.first().map_or(0.0, |b| b.v_mps);
+    let first = bands.first().map_or(0.0, |b| b.v_m_per_s);
     bands
         .iter()
         .take_while(|b| b.from_level <= level)
         .last()
-        .map_or(first, |b| b.v_mps)
+        .map_or(first, |b| b.v_m_per_s)
 }
 
 fn validate_bands(prefix: &str, bands: &[SpeedBand]) -> Result<(), FollowerConfigError> {
@@ -57,7 +61,7 @@ fn validate_bands(prefix: &str, bands: &[SpeedBand]) -> Result<(), FollowerConfi
                 "must be finite",
             ));
         }
-        check_nonneg(&format!("{prefix}.speed_table[{i}].v_mps"), b.v_mps)?;
+        check_nonneg(&format!("{prefix}.speed_table[{i}].v_m_per_s"), b.v_m_per_s)?;
         if i > 0 && b.from_level <= bands[i - 1].from_level {
             return Err(invalid(
                 &format!("{prefix}.speed_table[{i}].from_level"),
@@ -104,9 +108,11 @@ pub struct GradientConfig {
     pub fan_rays: usize,
     /// Proportional heading gain: ω = k·(heading error), clamped (1/s).
     pub heading_gain_per_s: f64,
-    pub omega_max_radps: f64,
+    #[serde(alias = "omega_max_radps")]
+    pub omega_max_rad_per_s: f64,
     /// Forward speed while no trail is acquired (m/s); 0 = wait in place.
-    pub explore_v_mps: f64,
+    #[serde(alias = "explore_v_mps")]
+    pub explore_v_m_per_s: f64,
 }
 
 impl Default for GradientConfig {
@@ -123,8 +129,8 @@ impl Default for GradientConfig {
             fan_half_angle_deg: 90.0,
             fan_rays: 17,
             heading_gain_per_s: 3.0,
-            omega_max_radps: 1.5,
-            explore_v_mps: 0.15,
+            omega_max_rad_per_s: 1.5,
+            explore_v_m_per_s: 0.15,
         }
     }
 }
@@ -175,8 +181,8 @@ impl GradientConfig {
             ));
         }
         check_positive("gradient.heading_gain_per_s", self.heading_gain_per_s)?;
-        check_positive("gradient.omega_max_radps", self.omega_max_radps)?;
-        check_nonneg("gradient.explore_v_mps", self.explore_v_mps)?;
+        check_positive("gradient.omega_max_rad_per_s", self.omega_max_rad_per_s)?;
+        check_nonneg("gradient.explore_v_m_per_s", self.explore_v_m_per_s)?;
         Ok(())
     }
 }
@@ -205,7 +211,7 @@ impl GradientConfig {
 /// Control: ω = clamp(k·e, ±ω_max) for the heading error e; v = v_table(level)·max(0, cos e), so
 /// the robot turns in place rather than driving away from the trail.
 ///
-/// States: `Exploring` until the level reaches `abandon_below` (moving at `explore_v_mps` with
+/// States: `Exploring` until the level reaches `abandon_below` (moving at `explore_v_m_per_s` with
 /// the same steering), then `Following`; `TrailAbandoned` (v = 0, ω = 0) when the level falls
 /// below max(`abandon_below`, δ·P0), latched unless `latch_abandon` is false.
 #[derive(Debug, Clone)]
@@ -271,7 +277,7 @@ impl GradientFollower {
 
     /// Score of the direction `phi`: the mean level at `lookahead_samples` points spread evenly
     /// along the ray up to `lookahead_m` (the mean smooths a dotted trail).
-    fn ray_score(&self, frame: &FrameView<'_>, pose: Pose2, phi: f64) -> f32 {
+    fn ray_score(&self, frame: &FrameView<'_>, pose: SamplePose, phi: f64) -> f32 {
         let (x, y) = (pose.x_m as f64, pose.y_m as f64);
         let m = self.config.lookahead_samples;
         let (s, c) = phi.sin_cos();
@@ -285,7 +291,7 @@ impl GradientFollower {
     }
 
     /// The desired heading (rad, world frame), or `None` where the field is flat.
-    pub fn desired_heading(&self, frame: &FrameView<'_>, pose: Pose2) -> Option<f64> {
+    pub fn desired_heading(&self, frame: &FrameView<'_>, pose: SamplePose) -> Option<f64> {
         let th = pose.theta_rad as f64;
         let n = self.config.fan_rays;
         let half = self.config.fan_half_angle_deg.to_radians();
@@ -360,7 +366,7 @@ impl GradientFollower {
     }
 }
 
-impl Strategy for GradientFollower {
+impl FollowerStrategy for GradientFollower {
     fn name(&self) -> &'static str {
         StrategyKind::Gradient.name()
     }
@@ -369,7 +375,7 @@ impl Strategy for GradientFollower {
         self.channel
     }
 
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, _dt_secs: f64) -> Decision {
+    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, _dt_s: f64) -> Decision {
         let level = frame.value(self.channel, pose.x_m, pose.y_m);
         self.update_state(level);
         if self.state == FollowerState::TrailAbandoned {
@@ -379,16 +385,17 @@ impl Strategy for GradientFollower {
         let err = self
             .desired_heading(frame, pose)
             .map_or(0.0, |phi| wrap_angle(phi - pose.theta_rad as f64));
-        let omega = (c.heading_gain_per_s * err).clamp(-c.omega_max_radps, c.omega_max_radps);
+        let omega =
+            (c.heading_gain_per_s * err).clamp(-c.omega_max_rad_per_s, c.omega_max_rad_per_s);
         let v_base = match self.state {
             FollowerState::Following => {
                 speed_for_level(&c.speed_table, level * c.speed_level_scale)
             }
-            _ => c.explore_v_mps,
+            _ => c.explore_v_m_per_s,
         };
         Decision {
-            v_mps: v_base * err.cos().max(0.0),
-            omega_radps: omega,
+            v_m_per_s: v_base * err.cos().max(0.0),
+            omega_rad_per_s: omega,
             state: self.state,
             sensed_level: level,
         }
@@ -433,11 +440,11 @@ mod tests {
             speed_table: vec![
                 SpeedBand {
                     from_level: 0.0,
-                    v_mps: 0.1,
+                    v_m_per_s: 0.1,
                 },
                 SpeedBand {
                     from_level: 0.0,
-                    v_mps: 0.2,
+                    v_m_per_s: 0.2,
                 },
             ],
             ..GradientConfig::default()
@@ -508,9 +515,9 @@ mod tests {
         assert!(off < 0.05, "mean offset {off:.3} m");
         assert_eq!(d.state, FollowerState::Following);
         assert!(
-            (d.v_mps - 1.0).abs() < 1e-6,
+            (d.v_m_per_s - 1.0).abs() < 1e-6,
             "level 80 → Table 2 speed 1.0 m/s, got {}",
-            d.v_mps
+            d.v_m_per_s
         );
     }
 
@@ -591,14 +598,14 @@ mod tests {
                 let d = s.decide(&frame, r.pose(), 0.05);
                 if d.state == FollowerState::TrailAbandoned {
                     assert!(d.sensed_level < 10.0);
-                    assert_eq!((d.v_mps, d.omega_radps), (0.0, 0.0));
+                    assert_eq!((d.v_m_per_s, d.omega_rad_per_s), (0.0, 0.0));
                     abandoned_at.get_or_insert(k);
                 } else {
                     assert!(
                         abandoned_at.is_none(),
                         "left TrailAbandoned without a stronger trail"
                     );
-                    assert!(d.sensed_level >= 10.0 && d.v_mps >= 0.0);
+                    assert!(d.sensed_level >= 10.0 && d.v_m_per_s >= 0.0);
                 }
                 r.advance(&d, 0.05);
                 amp *= 0.97;
@@ -609,7 +616,7 @@ mod tests {
             let d = s.decide(&frame, r.pose(), 0.05);
             if latch {
                 assert_eq!(d.state, FollowerState::TrailAbandoned);
-                assert_eq!(d.v_mps, 0.0);
+                assert_eq!(d.v_m_per_s, 0.0);
                 s.reset();
                 assert_eq!(
                     s.decide(&frame, r.pose(), 0.05).state,
@@ -617,7 +624,7 @@ mod tests {
                 );
             } else {
                 assert_eq!(d.state, FollowerState::Following);
-                assert!(d.v_mps > 0.0 || d.omega_radps != 0.0);
+                assert!(d.v_m_per_s > 0.0 || d.omega_rad_per_s != 0.0);
             }
         }
     }
@@ -634,7 +641,7 @@ mod tests {
         )
         .unwrap();
         let g = GridGeometry::new(4, 4, 1.0).unwrap();
-        let pose = Pose2::new(2.0, 2.0, 0.0);
+        let pose = SamplePose::new(2.0, 2.0, 0.0);
         let mut at = |level: f32| {
             let cells = vec![level; g.cells()];
             s.decide(&FrameView::new(g, 1, &cells), pose, 0.1).state
@@ -654,11 +661,11 @@ mod tests {
         let mut s = GradientFollower::new(0, GradientConfig::default()).unwrap();
         let d = s.decide(
             &FrameView::new(g, 1, &cells),
-            Pose2::new(1.0, 1.0, 0.3),
+            SamplePose::new(1.0, 1.0, 0.3),
             0.1,
         );
         assert_eq!(d.state, FollowerState::Exploring);
-        assert_eq!((d.v_mps, d.omega_radps), (0.15, 0.0));
+        assert_eq!((d.v_m_per_s, d.omega_rad_per_s), (0.15, 0.0));
     }
 
     /// End to end with the depositor: a well-localized leader lays a dotted trail (a deposit
@@ -675,7 +682,7 @@ mod tests {
             tick_hz: 10.0,
             channels: vec![ChannelSpec::new(
                 "trail",
-                Evaporation::Exponential { decay_per_sec: 0.1 },
+                Evaporation::Exponential { decay_per_s: 0.1 },
             )],
             ..FieldConfig::default()
         })
@@ -713,7 +720,7 @@ mod tests {
             let d = s.decide(&f.view(), r.pose(), 0.1);
             if d.state == FollowerState::TrailAbandoned {
                 abandoned_at.get_or_insert((k, d.sensed_level));
-                assert_eq!((d.v_mps, d.omega_radps), (0.0, 0.0));
+                assert_eq!((d.v_m_per_s, d.omega_rad_per_s), (0.0, 0.0));
             } else {
                 assert!(abandoned_at.is_none());
                 assert_eq!(d.state, FollowerState::Following);

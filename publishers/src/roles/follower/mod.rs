@@ -1,7 +1,7 @@
 //! The follower role: reads a field frame and the robot's pose and decides a motion command.
 //! Pure library code (deterministic for a seed); the iceoryx2 loop lives elsewhere.
 //!
-//! One [`Strategy`] trait, five strategies:
+//! One [`FollowerStrategy`] trait, five strategies:
 //! - [`GradientFollower`] (`gradient`) — seed 000: climb ∇P (eqs. 15–16) with a ridge-aware
 //!   look-ahead, speed adaptation from the Table 2 speed table, and trail rejection below an
 //!   absolute level or δ·P0 (MODELS.md M1).
@@ -12,6 +12,8 @@
 //!   and V, p(s) ∝ 1 − τ_s (eq. 1), steering θ(t) = θ(t−1) + γ·A_s* (eq. 2).
 //! - [`SectorStrategy::uniform`] (`uniform`) — seed 004's baseline: a sector drawn uniformly, same
 //!   steering.
+//! - [`RouteFollower`] (`route`) — a leader driven through waypoints (the tele-operated or
+//!   planned leader of seed 000); it ignores the field.
 //!
 //! [`Follower`] wraps a strategy and produces the `CmdMsg` and `FollowerStatusMsg` a process
 //! loop publishes.
@@ -30,7 +32,7 @@ mod test_support;
 use std::fmt;
 use std::str::FromStr;
 
-use field::{FrameView, Pose2};
+use field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use crate::messages::{CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg};
@@ -48,9 +50,9 @@ pub use sector::{
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Decision {
     /// Forward speed (m/s).
-    pub v_mps: f64,
+    pub v_m_per_s: f64,
     /// Turn rate (rad/s, counter-clockwise positive).
-    pub omega_radps: f64,
+    pub omega_rad_per_s: f64,
     pub state: FollowerState,
     /// Pheromone level the strategy sensed (at the pose, or the antennas' mean).
     pub sensed_level: f32,
@@ -60,8 +62,8 @@ impl Decision {
     /// Standing still.
     pub fn stop(state: FollowerState, sensed_level: f32) -> Self {
         Self {
-            v_mps: 0.0,
-            omega_radps: 0.0,
+            v_m_per_s: 0.0,
+            omega_rad_per_s: 0.0,
             state,
             sensed_level,
         }
@@ -69,13 +71,13 @@ impl Decision {
 }
 
 /// A follower strategy: one decision per step from the current frame and pose.
-pub trait Strategy: Send {
-    /// The CLI name (`gradient`, `antenna`, `inverse`, `uniform`).
+pub trait FollowerStrategy: Send {
+    /// The CLI name (`gradient`, `antenna`, `inverse`, `uniform`, `route`).
     fn name(&self) -> &'static str;
     /// The field channel this strategy reads.
     fn channel(&self) -> usize;
-    /// Decides the command for the next `dt_secs`. The frame must have `channel()`.
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_secs: f64) -> Decision;
+    /// Decides the command for the next `dt_s`. The frame must have `channel()`.
+    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, dt_s: f64) -> Decision;
     /// Back to the initial state (keeps the configuration; the RNG is not reseeded).
     fn reset(&mut self) {}
 }
@@ -212,7 +214,7 @@ impl FollowerConfig {
     }
 
     /// The selected strategy.
-    pub fn build(&self) -> Result<Box<dyn Strategy>, FollowerConfigError> {
+    pub fn build(&self) -> Result<Box<dyn FollowerStrategy>, FollowerConfigError> {
         self.validate()?;
         let ch = self.channel as usize;
         Ok(match self.strategy {
@@ -240,7 +242,7 @@ pub enum FollowError {
     ChannelMissing { channel: usize, channels: usize },
     #[error("pose {name} = {value} is not a finite f32")]
     BadPose { name: &'static str, value: f64 },
-    #[error("dt_secs = {0} must be finite and > 0")]
+    #[error("dt_s = {0} must be finite and > 0")]
     BadDt(f64),
 }
 
@@ -256,7 +258,7 @@ pub struct FollowOutput {
 /// left 0 for the process loop to fill.
 pub struct Follower {
     robot_id: u32,
-    strategy: Box<dyn Strategy>,
+    strategy: Box<dyn FollowerStrategy>,
 }
 
 impl fmt::Debug for Follower {
@@ -269,7 +271,7 @@ impl fmt::Debug for Follower {
 }
 
 impl Follower {
-    pub fn new(robot_id: u32, strategy: Box<dyn Strategy>) -> Self {
+    pub fn new(robot_id: u32, strategy: Box<dyn FollowerStrategy>) -> Self {
         Self { robot_id, strategy }
     }
 
@@ -284,11 +286,11 @@ impl Follower {
         self.robot_id
     }
 
-    pub fn strategy(&self) -> &dyn Strategy {
+    pub fn strategy(&self) -> &dyn FollowerStrategy {
         self.strategy.as_ref()
     }
 
-    pub fn strategy_mut(&mut self) -> &mut dyn Strategy {
+    pub fn strategy_mut(&mut self) -> &mut dyn FollowerStrategy {
         self.strategy.as_mut()
     }
 
@@ -296,8 +298,8 @@ impl Follower {
     pub fn step(
         &mut self,
         frame: &FrameView<'_>,
-        pose: Pose2,
-        dt_secs: f64,
+        pose: SamplePose,
+        dt_s: f64,
         step: u64,
     ) -> Result<FollowOutput, FollowError> {
         let channel = self.strategy.channel();
@@ -319,13 +321,13 @@ impl Follower {
                 });
             }
         }
-        if !(dt_secs.is_finite() && dt_secs > 0.0) {
-            return Err(FollowError::BadDt(dt_secs));
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return Err(FollowError::BadDt(dt_s));
         }
-        let mut d = self.strategy.decide(frame, pose, dt_secs);
+        let mut d = self.strategy.decide(frame, pose, dt_s);
         let finite_or_zero = |v: f64| if v.is_finite() { v } else { 0.0 };
-        d.v_mps = finite_or_zero(d.v_mps);
-        d.omega_radps = finite_or_zero(d.omega_radps);
+        d.v_m_per_s = finite_or_zero(d.v_m_per_s);
+        d.omega_rad_per_s = finite_or_zero(d.omega_rad_per_s);
         if !d.sensed_level.is_finite() {
             d.sensed_level = 0.0;
         }
@@ -334,8 +336,8 @@ impl Follower {
             step,
             robot_id: self.robot_id,
             _pad: 0,
-            v_mps: d.v_mps,
-            omega_radps: d.omega_radps,
+            v_m_per_s: d.v_m_per_s,
+            omega_rad_per_s: d.omega_rad_per_s,
         };
         let status = FollowerStatusMsg {
             stamp_ns: 0,
@@ -357,9 +359,9 @@ impl Follower {
         &mut self,
         frame: &FrameView<'_>,
         pose: &PoseMsg,
-        dt_secs: f64,
+        dt_s: f64,
     ) -> Result<FollowOutput, FollowError> {
-        let mut p = Pose2::default();
+        let mut p = SamplePose::default();
         for (name, v, out) in [
             ("x_m", pose.x_m, &mut p.x_m),
             ("y_m", pose.y_m, &mut p.y_m),
@@ -371,7 +373,7 @@ impl Follower {
             }
             *out = f;
         }
-        self.step(frame, p, dt_secs, pose.step)
+        self.step(frame, p, dt_s, pose.step)
     }
 }
 
@@ -423,14 +425,14 @@ mod tests {
                 (out.status.robot_id, out.status.step, out.status.stamp_ns),
                 (7, 12, 0)
             );
-            assert_eq!(out.cmd.v_mps, out.decision.v_mps);
-            assert_eq!(out.cmd.omega_radps, out.decision.omega_radps);
+            assert_eq!(out.cmd.v_m_per_s, out.decision.v_m_per_s);
+            assert_eq!(out.cmd.omega_rad_per_s, out.decision.omega_rad_per_s);
             assert_eq!(
                 FollowerState::from_code(out.status.state),
                 Some(out.decision.state)
             );
             assert_eq!(out.status.sensed_level, out.decision.sensed_level);
-            assert!(out.cmd.v_mps.is_finite() && out.cmd.omega_radps.is_finite());
+            assert!(out.cmd.v_m_per_s.is_finite() && out.cmd.omega_rad_per_s.is_finite());
         }
     }
 
@@ -447,7 +449,7 @@ mod tests {
         )
         .unwrap();
         let e = f
-            .step(&frame, Pose2::new(1.0, 1.0, 0.0), 0.1, 0)
+            .step(&frame, SamplePose::new(1.0, 1.0, 0.0), 0.1, 0)
             .unwrap_err();
         assert_eq!(
             e,
@@ -458,11 +460,11 @@ mod tests {
         );
         let mut f = Follower::from_config(1, &FollowerConfig::default()).unwrap();
         let e = f
-            .step(&frame, Pose2::new(f32::NAN, 1.0, 0.0), 0.1, 0)
+            .step(&frame, SamplePose::new(f32::NAN, 1.0, 0.0), 0.1, 0)
             .unwrap_err();
         assert!(matches!(e, FollowError::BadPose { name: "x_m", .. }), "{e}");
         assert!(matches!(
-            f.step(&frame, Pose2::new(1.0, 1.0, 0.0), 0.0, 0),
+            f.step(&frame, SamplePose::new(1.0, 1.0, 0.0), 0.0, 0),
             Err(FollowError::BadDt(_))
         ));
         let huge = PoseMsg {

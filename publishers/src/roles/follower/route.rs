@@ -1,12 +1,12 @@
 //! The `route` strategy: a leader driven through waypoints, as the tele-operated or planned
 //! leader of seed 000. It ignores the field.
 
-use field::{FrameView, Pose2};
+use field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError, Strategy,
-    StrategyKind,
+    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError,
+    FollowerStrategy, StrategyKind,
 };
 use crate::messages::FollowerState;
 
@@ -17,12 +17,14 @@ use crate::messages::FollowerState;
 pub struct RouteConfig {
     /// Waypoints [x, y] (m), driven in order.
     pub waypoints: Vec<[f64; 2]>,
-    pub v_mps: f64,
+    #[serde(alias = "v_mps")]
+    pub v_m_per_s: f64,
     /// A waypoint counts as reached within this distance (m).
     pub reach_m: f64,
     /// Proportional heading gain (1/s).
     pub heading_gain_per_s: f64,
-    pub omega_max_radps: f64,
+    #[serde(alias = "omega_max_radps")]
+    pub omega_max_rad_per_s: f64,
     /// Start driving only after this much time (s).
     pub start_after_s: f64,
 }
@@ -31,10 +33,10 @@ impl Default for RouteConfig {
     fn default() -> Self {
         Self {
             waypoints: Vec::new(),
-            v_mps: 0.3,
+            v_m_per_s: 0.3,
             reach_m: 0.2,
             heading_gain_per_s: 2.0,
-            omega_max_radps: 1.0,
+            omega_max_rad_per_s: 1.0,
             start_after_s: 0.0,
         }
     }
@@ -51,10 +53,10 @@ impl RouteConfig {
                 ));
             }
         }
-        check_nonneg("route.v_mps", self.v_mps)?;
+        check_nonneg("route.v_m_per_s", self.v_m_per_s)?;
         check_positive("route.reach_m", self.reach_m)?;
         check_nonneg("route.heading_gain_per_s", self.heading_gain_per_s)?;
-        check_positive("route.omega_max_radps", self.omega_max_radps)?;
+        check_positive("route.omega_max_rad_per_s", self.omega_max_rad_per_s)?;
         check_nonneg("route.start_after_s", self.start_after_s)?;
         Ok(())
     }
@@ -87,7 +89,7 @@ impl RouteFollower {
     }
 }
 
-impl Strategy for RouteFollower {
+impl FollowerStrategy for RouteFollower {
     fn name(&self) -> &'static str {
         StrategyKind::Route.name()
     }
@@ -96,9 +98,9 @@ impl Strategy for RouteFollower {
         self.channel
     }
 
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_secs: f64) -> Decision {
+    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, dt_s: f64) -> Decision {
         let level = frame.value(self.channel, pose.x_m, pose.y_m);
-        self.elapsed_s += dt_secs;
+        self.elapsed_s += dt_s;
         if self.elapsed_s < self.config.start_after_s - 1e-9 {
             return Decision::stop(FollowerState::Following, level);
         }
@@ -115,8 +117,9 @@ impl Strategy for RouteFollower {
         let err = wrap_angle((w[1] - y).atan2(w[0] - x) - pose.theta_rad as f64);
         let c = &self.config;
         Decision {
-            v_mps: c.v_mps * err.cos().max(0.0),
-            omega_radps: (c.heading_gain_per_s * err).clamp(-c.omega_max_radps, c.omega_max_radps),
+            v_m_per_s: c.v_m_per_s * err.cos().max(0.0),
+            omega_rad_per_s: (c.heading_gain_per_s * err)
+                .clamp(-c.omega_max_rad_per_s, c.omega_max_rad_per_s),
             state: FollowerState::Following,
             sensed_level: level,
         }

@@ -4,14 +4,14 @@
 
 use std::f64::consts::{FRAC_PI_2, PI};
 
-use field::{FrameView, Pose2};
+use field::{FrameView, SamplePose};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError, Strategy,
-    StrategyKind,
+    check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError,
+    FollowerStrategy, StrategyKind,
 };
 use crate::messages::FollowerState;
 
@@ -30,11 +30,13 @@ pub struct SectorConfig {
     /// γ ∈ [0, 1] of eq. 2: θ(t) = θ(t−1) + γ·A_s*.
     pub gamma: f64,
     /// Constant forward speed (m/s).
-    pub v_mps: f64,
+    #[serde(alias = "v_mps")]
+    pub v_m_per_s: f64,
     /// Turn-rate limit (rad/s).
-    pub omega_max_radps: f64,
+    #[serde(alias = "omega_max_radps")]
+    pub omega_max_rad_per_s: f64,
     /// A new sector is drawn every this many seconds (one seed 004 iteration); 0 = every step.
-    /// In between the robot turns toward the heading of eq. 2 at up to `omega_max_radps`.
+    /// In between the robot turns toward the heading of eq. 2 at up to `omega_max_rad_per_s`.
     pub decision_period_s: f64,
     /// τ_s = clamp(sector mean / this, 0, 1). 1 for a saturating channel; a negative value reads
     /// anti-pheromone (negative cells) as τ > 0.
@@ -55,8 +57,8 @@ impl Default for SectorConfig {
             u_count: 2,
             v_count: 2,
             gamma: 0.5,
-            v_mps: 0.3,
-            omega_max_radps: 1.5,
+            v_m_per_s: 0.3,
+            omega_max_rad_per_s: 1.5,
             decision_period_s: 0.0,
             saturation_level: 1.0,
             obstacle_channel: None,
@@ -97,8 +99,8 @@ impl SectorConfig {
                 "must be within [0, 1]",
             ));
         }
-        check_nonneg("sectors.v_mps", self.v_mps)?;
-        check_positive("sectors.omega_max_radps", self.omega_max_radps)?;
+        check_nonneg("sectors.v_m_per_s", self.v_m_per_s)?;
+        check_positive("sectors.omega_max_rad_per_s", self.omega_max_rad_per_s)?;
         check_nonneg("sectors.decision_period_s", self.decision_period_s)?;
         check_nonneg("sectors.obstacle_level", self.obstacle_level as f64)?;
         if !(self.saturation_level.is_finite() && self.saturation_level != 0.0) {
@@ -211,7 +213,7 @@ impl SectorSteer {
 
     /// τ_s of every sector, normalized and clamped to [0, 1]; sectors blocked on the obstacle
     /// channel (if any) count as saturated.
-    fn taus(&self, frame: &FrameView<'_>, pose: Pose2) -> Vec<f32> {
+    fn taus(&self, frame: &FrameView<'_>, pose: SamplePose) -> Vec<f32> {
         let c = &self.config;
         let mut taus: Vec<f32> = frame
             .sector_means(self.channel, pose, c.radius_m, c.half_sectors)
@@ -239,7 +241,7 @@ impl SectorSteer {
     }
 
     /// 1 for the sectors blocked on the obstacle channel, 0 for the others.
-    fn obstacle_taus(&self, frame: &FrameView<'_>, pose: Pose2) -> Vec<f32> {
+    fn obstacle_taus(&self, frame: &FrameView<'_>, pose: SamplePose) -> Vec<f32> {
         let c = &self.config;
         match c.obstacle_channel.map(|o| o as usize) {
             Some(oc) if oc < frame.channels => frame
@@ -255,8 +257,8 @@ impl SectorSteer {
         &mut self,
         rule: SectorRule,
         frame: &FrameView<'_>,
-        pose: Pose2,
-        dt_secs: f64,
+        pose: SamplePose,
+        dt_s: f64,
     ) -> Decision {
         let c = &self.config;
         let level = frame.value(self.channel, pose.x_m, pose.y_m);
@@ -294,17 +296,17 @@ impl SectorSteer {
             self.last_sector = Some(s);
             self.decisions += 1;
         }
-        let dt = if dt_secs.is_finite() && dt_secs > 0.0 {
-            self.since_decision_s += dt_secs;
-            dt_secs
+        let dt = if dt_s.is_finite() && dt_s > 0.0 {
+            self.since_decision_s += dt_s;
+            dt_s
         } else {
             f64::INFINITY
         };
         let c = &self.config;
         let err = wrap_angle(self.goal_heading_rad.unwrap_or(theta) - theta);
         Decision {
-            v_mps: c.v_mps,
-            omega_radps: (err / dt).clamp(-c.omega_max_radps, c.omega_max_radps),
+            v_m_per_s: c.v_m_per_s,
+            omega_rad_per_s: (err / dt).clamp(-c.omega_max_rad_per_s, c.omega_max_rad_per_s),
             state: FollowerState::Exploring,
             sensed_level: level,
         }
@@ -322,8 +324,8 @@ impl SectorSteer {
 ///   U ∪ V with p(s) ∝ 1 − τ_s (eq. 1) and sets the heading goal θ(t−1) + γ·A_s* (eq. 2);
 /// - `uniform` (the paper's baseline): the sector is drawn uniformly from all 2S + 1.
 ///
-/// The command is ω = wrap(goal − θ)/dt clamped to ±`omega_max_radps` (= γ·A_s*/dt when a sector
-/// is drawn every step and the clamp is not reached), at the constant speed `v_mps`. State is
+/// The command is ω = wrap(goal − θ)/dt clamped to ±`omega_max_rad_per_s` (= γ·A_s*/dt when a sector
+/// is drawn every step and the clamp is not reached), at the constant speed `v_m_per_s`. State is
 /// always `Exploring`.
 #[derive(Debug, Clone)]
 pub struct SectorStrategy {
@@ -371,7 +373,7 @@ impl SectorStrategy {
     }
 }
 
-impl Strategy for SectorStrategy {
+impl FollowerStrategy for SectorStrategy {
     fn name(&self) -> &'static str {
         match self.rule {
             SectorRule::Inverse => StrategyKind::Inverse.name(),
@@ -383,8 +385,8 @@ impl Strategy for SectorStrategy {
         self.core.channel
     }
 
-    fn decide(&mut self, frame: &FrameView<'_>, pose: Pose2, dt_secs: f64) -> Decision {
-        self.core.decide(self.rule, frame, pose, dt_secs)
+    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, dt_s: f64) -> Decision {
+        self.core.decide(self.rule, frame, pose, dt_s)
     }
 
     fn reset(&mut self) {
@@ -438,7 +440,7 @@ mod tests {
     fn inverse_prefers_low_pheromone_sectors_over_uniform() {
         let (g, cells) = half_field();
         let frame = FrameView::new(g, 1, &cells);
-        let pose = Pose2::new(5.0, 5.0, 0.0);
+        let pose = SamplePose::new(5.0, 5.0, 0.0);
         let cfg = SectorConfig::default();
         let taus = frame.sector_means(0, pose, cfg.radius_m, cfg.half_sectors);
         let low: Vec<bool> = taus.iter().map(|&t| t < 0.5).collect();
@@ -475,9 +477,9 @@ mod tests {
     fn sector_steering_follows_eq2_and_is_deterministic() {
         let (g, cells) = half_field();
         let frame = FrameView::new(g, 1, &cells);
-        let pose = Pose2::new(5.0, 5.0, 0.4);
+        let pose = SamplePose::new(5.0, 5.0, 0.4);
         let cfg = SectorConfig {
-            omega_max_radps: 100.0,
+            omega_max_rad_per_s: 100.0,
             ..SectorConfig::default()
         };
         let n = cfg.sectors();
@@ -486,12 +488,12 @@ mod tests {
             let d = s.decide(&frame, pose, 0.1);
             let a = sector_angle(s.last_sector().unwrap(), n);
             // ω = γ·A_s*/dt (eq. 2 over one step).
-            assert!((d.omega_radps - 0.5 * a / 0.1).abs() < 1e-5, "{d:?}");
-            assert_eq!((d.v_mps, d.state), (0.3, FollowerState::Exploring));
+            assert!((d.omega_rad_per_s - 0.5 * a / 0.1).abs() < 1e-5, "{d:?}");
+            assert_eq!((d.v_m_per_s, d.state), (0.3, FollowerState::Exploring));
         }
         // Clamped turn rate.
         let mut c = SectorStrategy::inverse(0, SectorConfig::default(), 1).unwrap();
-        assert!(c.decide(&frame, pose, 0.01).omega_radps.abs() <= 1.5);
+        assert!(c.decide(&frame, pose, 0.01).omega_rad_per_s.abs() <= 1.5);
         // Same seed, same choices; another seed, other choices.
         let run = |seed| {
             let mut s = SectorStrategy::inverse(0, cfg.clone(), seed).unwrap();
@@ -523,7 +525,7 @@ mod tests {
                 let a = sector_angle(s.last_sector().unwrap(), 9);
                 goal = Some(r.th + 0.5 * a);
             }
-            assert!(d.omega_radps.abs() <= 1.5 + 1e-12);
+            assert!(d.omega_rad_per_s.abs() <= 1.5 + 1e-12);
             r.advance(&d, 0.1);
             if k % 10 == 9 {
                 assert!(

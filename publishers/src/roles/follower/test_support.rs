@@ -1,9 +1,9 @@
 //! Test helpers shared by the follower strategies' unit tests: synthetic fields, a unicycle
 //! robot and the closed-loop simulation.
 
-use field::{FrameView, GridGeometry, Pose2};
+use field::{FrameView, GridGeometry, SamplePose};
 
-use super::{wrap_angle, Decision, Strategy};
+use super::{wrap_angle, Decision, FollowerStrategy};
 
 /// A one-channel synthetic field sampled at cell centres.
 pub(super) fn synth(
@@ -40,19 +40,19 @@ impl Robot {
     pub(super) fn new(x: f64, y: f64, th: f64) -> Self {
         Self { x, y, th }
     }
-    pub(super) fn pose(&self) -> Pose2 {
-        Pose2::new(self.x as f32, self.y as f32, self.th as f32)
+    pub(super) fn pose(&self) -> SamplePose {
+        SamplePose::new(self.x as f32, self.y as f32, self.th as f32)
     }
     pub(super) fn advance(&mut self, d: &Decision, dt: f64) {
-        let mid = self.th + 0.5 * d.omega_radps * dt;
-        self.x += d.v_mps * mid.cos() * dt;
-        self.y += d.v_mps * mid.sin() * dt;
-        self.th = wrap_angle(self.th + d.omega_radps * dt);
+        let mid = self.th + 0.5 * d.omega_rad_per_s * dt;
+        self.x += d.v_m_per_s * mid.cos() * dt;
+        self.y += d.v_m_per_s * mid.sin() * dt;
+        self.th = wrap_angle(self.th + d.omega_rad_per_s * dt);
     }
 }
 
 pub(super) fn simulate(
-    s: &mut dyn Strategy,
+    s: &mut dyn FollowerStrategy,
     frame: &FrameView<'_>,
     mut r: Robot,
     dt: f64,

@@ -15,7 +15,7 @@ use super::{
     LocalizerError, UpdateStats,
 };
 use crate::messages::{LandmarkObs, PoseMsg, SensorMsg};
-use crate::roles::world::{wrap_angle, Landmark, Pose2};
+use crate::roles::world::{wrap_angle, Landmark, WorldPose};
 
 /// Landmark-based EKF localization (seed 001 Algorithm 1).
 #[derive(Debug, Clone)]
@@ -37,7 +37,7 @@ impl Ekf {
     pub fn new(
         config: EkfConfig,
         map: Vec<Landmark>,
-        initial_pose: Pose2,
+        initial_pose: WorldPose,
         initial_cov: Matrix3<f64>,
     ) -> Result<Self, LocalizerError> {
         config.validate()?;
@@ -81,17 +81,17 @@ impl Ekf {
     /// (see [`LossConfig`](super::LossConfig)) M_t is multiplied by `noise_inflation`.
     pub fn predict(
         &mut self,
-        v_mps: f64,
-        omega_radps: f64,
-        dt_secs: f64,
+        v_m_per_s: f64,
+        omega_rad_per_s: f64,
+        dt_s: f64,
     ) -> Result<(), LocalizerError> {
         self.counters.counted(check_odometry(
             &self.config.limits,
-            v_mps,
-            omega_radps,
-            dt_secs,
+            v_m_per_s,
+            omega_rad_per_s,
+            dt_s,
         ))?;
-        self.predict_unchecked(v_mps, omega_radps, dt_secs);
+        self.predict_unchecked(v_m_per_s, omega_rad_per_s, dt_s);
         Ok(())
     }
 
@@ -121,12 +121,12 @@ impl Ekf {
         Ok(self.update_unchecked(observations))
     }
 
-    /// One world step: prediction with the message's odometry and `dt_secs`, then correction
+    /// One world step: prediction with the message's odometry and `dt_s`, then correction
     /// with its observations. The whole message is checked before either is applied.
     pub fn step(&mut self, msg: &SensorMsg) -> Result<UpdateStats, LocalizerError> {
         self.counters
             .counted(check_message(&self.config.limits, msg))?;
-        self.predict_unchecked(msg.v_mps, msg.omega_radps, msg.dt_secs);
+        self.predict_unchecked(msg.v_m_per_s, msg.omega_rad_per_s, msg.dt_s);
         Ok(self.update_unchecked(msg.observations()))
     }
 
@@ -270,8 +270,8 @@ impl Ekf {
         self.mean
     }
 
-    pub fn pose(&self) -> Pose2 {
-        Pose2::new(self.mean.x, self.mean.y, self.mean.z)
+    pub fn pose(&self) -> WorldPose {
+        WorldPose::new(self.mean.x, self.mean.y, self.mean.z)
     }
 
     pub fn covariance(&self) -> Matrix3<f64> {
@@ -320,17 +320,17 @@ mod tests {
     use rand_distr::StandardNormal;
 
     /// A start pose drawn from N(truth, initial_cov) so the NEES is consistent from step 0.
-    fn perturbed_start(truth: Pose2, rng: &mut ChaCha8Rng) -> Pose2 {
+    fn perturbed_start(truth: WorldPose, rng: &mut ChaCha8Rng) -> WorldPose {
         let d = initial_cov().map(f64::sqrt);
         let mut n = || rng.sample::<f64, _>(StandardNormal);
-        Pose2::new(
+        WorldPose::new(
             truth.x_m + d[(0, 0)] * n(),
             truth.y_m + d[(1, 1)] * n(),
             truth.theta_rad + d[(2, 2)] * n(),
         )
     }
 
-    fn nees(mean: &Vector3<f64>, cov: &Matrix3<f64>, truth: Pose2) -> f64 {
+    fn nees(mean: &Vector3<f64>, cov: &Matrix3<f64>, truth: WorldPose) -> f64 {
         let e = Vector3::new(
             truth.x_m - mean.x,
             truth.y_m - mean.y,
@@ -356,7 +356,7 @@ mod tests {
         seed: u64,
         steps: usize,
         config: EkfConfig,
-        mut each: impl FnMut(&Ekf, Pose2, &UpdateStats),
+        mut each: impl FnMut(&Ekf, WorldPose, &UpdateStats),
     ) -> Ekf {
         let world_cfg = arena();
         let map = world_cfg.landmarks.clone();
@@ -419,7 +419,7 @@ mod tests {
         let mut ekf = Ekf::new(
             EkfConfig::default(),
             arena().landmarks,
-            Pose2::new(10.0, 7.0, 0.0),
+            WorldPose::new(10.0, 7.0, 0.0),
             initial_cov(),
         )
         .unwrap();
@@ -460,17 +460,17 @@ mod tests {
         ));
         // A message with good odometry but a NaN observation: prediction is not applied either.
         let mut msg = SensorMsg {
-            dt_secs: 0.1,
-            v_mps: 0.5,
+            dt_s: 0.1,
+            v_m_per_s: 0.5,
             count: 2,
             ..SensorMsg::default()
         };
         msg.observations[0] = some_obs()[0];
         msg.observations[1].bearing_rad = f32::NAN;
         assert_eq!(ekf.step(&msg), Err(E::NonFiniteObservation { index: 1 }));
-        msg.dt_secs = f64::NAN;
+        msg.dt_s = f64::NAN;
         assert!(matches!(ekf.step(&msg), Err(E::BadDt { .. })));
-        msg.dt_secs = 0.1;
+        msg.dt_s = 0.1;
         msg.count = 33;
         assert!(matches!(
             ekf.step(&msg),
@@ -498,7 +498,7 @@ mod tests {
     #[test]
     fn bad_config_and_initial_state_are_rejected() {
         let map = arena().landmarks;
-        let start = Pose2::new(1.0, 1.0, 0.0);
+        let start = WorldPose::new(1.0, 1.0, 0.0);
         let mut cfg = EkfConfig::default();
         cfg.noise.range_sigma_m = 0.0;
         assert!(matches!(
@@ -579,7 +579,7 @@ mod tests {
         let mut ekf = Ekf::new(
             cfg,
             arena().landmarks,
-            Pose2::new(10.0, 7.0, 0.0),
+            WorldPose::new(10.0, 7.0, 0.0),
             initial_cov(),
         )
         .unwrap();
@@ -752,7 +752,7 @@ mod tests {
         let ekf = Ekf::new(
             EkfConfig::default(),
             Vec::new(),
-            Pose2::new(1.0, 2.0, 3.0),
+            WorldPose::new(1.0, 2.0, 3.0),
             cov,
         )
         .unwrap();

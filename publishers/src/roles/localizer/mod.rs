@@ -46,11 +46,14 @@ use crate::roles::world::NoiseConfig;
 #[serde(default, deny_unknown_fields)]
 pub struct InputLimits {
     /// Largest accepted time step.
-    pub max_dt_secs: f64,
+    #[serde(alias = "max_dt_secs")]
+    pub max_dt_s: f64,
     /// Largest accepted |v| of the odometry.
-    pub max_speed_mps: f64,
+    #[serde(alias = "max_speed_mps")]
+    pub max_speed_m_per_s: f64,
     /// Largest accepted |ω| of the odometry.
-    pub max_turn_rate_radps: f64,
+    #[serde(alias = "max_turn_rate_radps")]
+    pub max_turn_rate_rad_per_s: f64,
     /// Largest accepted observed range.
     pub max_range_m: f64,
 }
@@ -58,9 +61,9 @@ pub struct InputLimits {
 impl Default for InputLimits {
     fn default() -> Self {
         Self {
-            max_dt_secs: 1.0,
-            max_speed_mps: 10.0,
-            max_turn_rate_radps: 20.0,
+            max_dt_s: 1.0,
+            max_speed_m_per_s: 10.0,
+            max_turn_rate_rad_per_s: 20.0,
             max_range_m: 1000.0,
         }
     }
@@ -212,14 +215,20 @@ pub fn parse_landmark_region(text: &str) -> Result<[f64; 4], LocalizerError> {
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum LocalizerError {
     /// Odometry v or ω is NaN or infinite.
-    #[error("odometry is not finite: v = {v_mps} m/s, omega = {omega_radps} rad/s")]
-    NonFiniteOdometry { v_mps: f64, omega_radps: f64 },
+    #[error("odometry is not finite: v = {v_m_per_s} m/s, omega = {omega_rad_per_s} rad/s")]
+    NonFiniteOdometry {
+        v_m_per_s: f64,
+        omega_rad_per_s: f64,
+    },
     /// Odometry beyond [`InputLimits`].
-    #[error("odometry is absurd: v = {v_mps} m/s, omega = {omega_radps} rad/s exceed the limits")]
-    AbsurdOdometry { v_mps: f64, omega_radps: f64 },
-    /// `dt` not finite, ≤ 0 or above `max_dt_secs`.
-    #[error("dt_secs = {dt_secs} is not in (0, {max_dt_secs}]")]
-    BadDt { dt_secs: f64, max_dt_secs: f64 },
+    #[error("odometry is absurd: v = {v_m_per_s} m/s, omega = {omega_rad_per_s} rad/s exceed the limits")]
+    AbsurdOdometry {
+        v_m_per_s: f64,
+        omega_rad_per_s: f64,
+    },
+    /// `dt` not finite, ≤ 0 or above `max_dt_s`.
+    #[error("dt_s = {dt_s} is not in (0, {max_dt_s}]")]
+    BadDt { dt_s: f64, max_dt_s: f64 },
     /// An observation's range or bearing is NaN or infinite.
     #[error("observation {index} is not finite")]
     NonFiniteObservation { index: usize },
@@ -378,21 +387,29 @@ impl Default for EkfSlamConfig {
 
 fn check_odometry(
     limits: &InputLimits,
-    v_mps: f64,
-    omega_radps: f64,
-    dt_secs: f64,
+    v_m_per_s: f64,
+    omega_rad_per_s: f64,
+    dt_s: f64,
 ) -> Result<(), LocalizerError> {
-    if !(v_mps.is_finite() && omega_radps.is_finite()) {
-        return Err(LocalizerError::NonFiniteOdometry { v_mps, omega_radps });
-    }
-    if !(dt_secs.is_finite() && dt_secs > 0.0 && dt_secs <= limits.max_dt_secs) {
-        return Err(LocalizerError::BadDt {
-            dt_secs,
-            max_dt_secs: limits.max_dt_secs,
+    if !(v_m_per_s.is_finite() && omega_rad_per_s.is_finite()) {
+        return Err(LocalizerError::NonFiniteOdometry {
+            v_m_per_s,
+            omega_rad_per_s,
         });
     }
-    if v_mps.abs() > limits.max_speed_mps || omega_radps.abs() > limits.max_turn_rate_radps {
-        return Err(LocalizerError::AbsurdOdometry { v_mps, omega_radps });
+    if !(dt_s.is_finite() && dt_s > 0.0 && dt_s <= limits.max_dt_s) {
+        return Err(LocalizerError::BadDt {
+            dt_s,
+            max_dt_s: limits.max_dt_s,
+        });
+    }
+    if v_m_per_s.abs() > limits.max_speed_m_per_s
+        || omega_rad_per_s.abs() > limits.max_turn_rate_rad_per_s
+    {
+        return Err(LocalizerError::AbsurdOdometry {
+            v_m_per_s,
+            omega_rad_per_s,
+        });
     }
     Ok(())
 }
@@ -416,7 +433,7 @@ fn check_observations(limits: &InputLimits, obs: &[LandmarkObs]) -> Result<(), L
 
 /// Checks a whole sensor message: odometry, `dt`, count and observations.
 fn check_message(limits: &InputLimits, msg: &SensorMsg) -> Result<(), LocalizerError> {
-    check_odometry(limits, msg.v_mps, msg.omega_radps, msg.dt_secs)?;
+    check_odometry(limits, msg.v_m_per_s, msg.omega_rad_per_s, msg.dt_s)?;
     if msg.count as usize > MAX_OBSERVATIONS {
         return Err(LocalizerError::BadObservationCount {
             count: msg.count,
@@ -451,9 +468,12 @@ fn validate_common(
     }
     let positive = [
         ("gate_chi2", gate_chi2),
-        ("limits.max_dt_secs", limits.max_dt_secs),
-        ("limits.max_speed_mps", limits.max_speed_mps),
-        ("limits.max_turn_rate_radps", limits.max_turn_rate_radps),
+        ("limits.max_dt_s", limits.max_dt_s),
+        ("limits.max_speed_m_per_s", limits.max_speed_m_per_s),
+        (
+            "limits.max_turn_rate_rad_per_s",
+            limits.max_turn_rate_rad_per_s,
+        ),
         ("limits.max_range_m", limits.max_range_m),
     ];
     for (name, value) in positive {
@@ -468,12 +488,12 @@ fn validate_common(
 mod tests {
     use super::*;
     use crate::roles::localizer::test_support::{corridor, initial_cov, CAPTURED};
-    use crate::roles::world::Pose2;
+    use crate::roles::world::WorldPose;
 
     #[test]
     fn malformed_landmark_region_is_rejected_naming_the_key() {
         let map = corridor().landmarks;
-        let start = Pose2::new(10.0, 2.0, 0.0);
+        let start = WorldPose::new(10.0, 2.0, 0.0);
         let bad_regions = [
             [f64::NAN, 0.0, 24.0, 4.0],
             [8.0, f64::NEG_INFINITY, 24.0, 4.0],

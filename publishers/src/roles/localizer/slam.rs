@@ -16,7 +16,7 @@ use super::{
     EkfSlamConfig, LocalizerError, SlamAssociation, UpdateStats,
 };
 use crate::messages::{LandmarkObs, PoseMsg, SensorMsg};
-use crate::roles::world::{wrap_angle, Pose2};
+use crate::roles::world::{wrap_angle, WorldPose};
 
 /// A landmark estimated by [`EkfSlam`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,7 +45,7 @@ impl EkfSlam {
     /// An empty map with the robot at `initial_pose` with `initial_cov`.
     pub fn new(
         config: EkfSlamConfig,
-        initial_pose: Pose2,
+        initial_pose: WorldPose,
         initial_cov: Matrix3<f64>,
     ) -> Result<Self, LocalizerError> {
         validate_common(&config.noise, &config.limits, config.gate_chi2)?;
@@ -79,17 +79,17 @@ impl EkfSlam {
     /// cross-covariances change.
     pub fn predict(
         &mut self,
-        v_mps: f64,
-        omega_radps: f64,
-        dt_secs: f64,
+        v_m_per_s: f64,
+        omega_rad_per_s: f64,
+        dt_s: f64,
     ) -> Result<(), LocalizerError> {
         self.counters.counted(check_odometry(
             &self.config.limits,
-            v_mps,
-            omega_radps,
-            dt_secs,
+            v_m_per_s,
+            omega_rad_per_s,
+            dt_s,
         ))?;
-        self.predict_unchecked(v_mps, omega_radps, dt_secs);
+        self.predict_unchecked(v_m_per_s, omega_rad_per_s, dt_s);
         Ok(())
     }
 
@@ -137,7 +137,7 @@ impl EkfSlam {
     pub fn step(&mut self, msg: &SensorMsg) -> Result<UpdateStats, LocalizerError> {
         self.counters
             .counted(check_message(&self.config.limits, msg))?;
-        self.predict_unchecked(msg.v_mps, msg.omega_radps, msg.dt_secs);
+        self.predict_unchecked(msg.v_m_per_s, msg.omega_rad_per_s, msg.dt_s);
         Ok(self.update_unchecked(msg.observations()))
     }
 
@@ -331,8 +331,8 @@ impl EkfSlam {
         self.signatures.push(obs.signature);
     }
 
-    pub fn pose(&self) -> Pose2 {
-        Pose2::new(self.mean[0], self.mean[1], self.mean[2])
+    pub fn pose(&self) -> WorldPose {
+        WorldPose::new(self.mean[0], self.mean[1], self.mean[2])
     }
 
     /// The robot block of the covariance.

@@ -4,7 +4,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::messages::LandmarkObs;
-use crate::roles::world::{Landmark, Pose2, RobotConfig, WallConfig, WorldConfig};
+use crate::roles::world::{Landmark, RobotConfig, WallConfig, WorldConfig, WorldPose};
 
 pub(super) const V_MPS: f64 = 0.6;
 pub(super) const OMEGA_RADPS: f64 = 0.2;
@@ -22,7 +22,7 @@ pub(super) fn arena() -> WorldConfig {
     WorldConfig {
         robots: vec![RobotConfig {
             id: 1,
-            start: Pose2::new(10.0, 7.0, 0.0),
+            start: WorldPose::new(10.0, 7.0, 0.0),
             noise: None,
         }],
         walls: vec![WallConfig::Polyline {
@@ -72,7 +72,7 @@ pub(super) fn corridor() -> WorldConfig {
     WorldConfig {
         robots: vec![RobotConfig {
             id: 1,
-            start: Pose2::new(10.0, 2.0, 0.0),
+            start: WorldPose::new(10.0, 2.0, 0.0),
             noise: None,
         }],
         walls: vec![WallConfig::Polyline {

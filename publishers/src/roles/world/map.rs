@@ -319,7 +319,7 @@ fn parse_pgm(bytes: &[u8]) -> Result<(usize, usize, u16, Vec<u16>), MapError> {
 mod tests {
     use super::*;
     use crate::roles::world::test_support::one_robot;
-    use crate::roles::world::{Pose2, World};
+    use crate::roles::world::{World, WorldPose};
     use std::f64::consts::FRAC_PI_2;
 
     const MAP_YAML: &str = "image: map.pgm\nresolution: 0.5\norigin: [-1.0, -2.0, 0.0]\n\
@@ -348,7 +348,7 @@ mod tests {
             max_y_m: -1.5,
         }));
         // A world built from them blocks a robot.
-        let mut cfg = one_robot(Pose2::new(-0.5, -3.0, FRAC_PI_2));
+        let mut cfg = one_robot(WorldPose::new(-0.5, -3.0, FRAC_PI_2));
         cfg.robot_radius_m = 0.1;
         cfg.walls = walls;
         let mut world = World::new(cfg, 0).unwrap();

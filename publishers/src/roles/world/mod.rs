@@ -39,13 +39,13 @@ use walls::{inside_rect, wall_segments, SegmentIndex};
 /// A planar pose: metres and radians, θ counter-clockwise from +x.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Pose2 {
+pub struct WorldPose {
     pub x_m: f64,
     pub y_m: f64,
     pub theta_rad: f64,
 }
 
-impl Pose2 {
+impl WorldPose {
     pub fn new(x_m: f64, y_m: f64, theta_rad: f64) -> Self {
         Self {
             x_m,
@@ -99,11 +99,11 @@ pub(crate) fn sinc_derivative(x: f64) -> f64 {
 /// exact and stays accurate for tiny β. Eq. 31 as printed has the sign of its last term flipped
 /// (it would not reduce to p' = p for β → 0); the chord form is the corrected eq. 31:
 /// p' = C + (R + W/2)·(sin θ', −cos θ').
-pub fn diff_drive(pose: Pose2, left_m: f64, right_m: f64, wheel_base_m: f64) -> Pose2 {
+pub fn diff_drive(pose: WorldPose, left_m: f64, right_m: f64, wheel_base_m: f64) -> WorldPose {
     let theta = pose.theta_rad;
     if left_m == right_m {
         // seed 000 eqs. 32–33
-        return Pose2 {
+        return WorldPose {
             x_m: pose.x_m + left_m * theta.cos(),
             y_m: pose.y_m + left_m * theta.sin(),
             theta_rad: heading_mod_tau(theta),
@@ -113,7 +113,7 @@ pub fn diff_drive(pose: Pose2, left_m: f64, right_m: f64, wheel_base_m: f64) -> 
     let arc_m = 0.5 * (left_m + right_m); // (R + W/2)·β with R = l/β, seed 000 eq. 28
     let half = 0.5 * beta;
     let chord_m = arc_m * sinc(half);
-    Pose2 {
+    WorldPose {
         x_m: pose.x_m + chord_m * (theta + half).cos(),
         y_m: pose.y_m + chord_m * (theta + half).sin(),
         theta_rad: heading_mod_tau(theta + beta), // seed 000 eq. 30
@@ -129,13 +129,18 @@ fn heading_mod_tau(theta_rad: f64) -> f64 {
     }
 }
 
-/// Wheel travel `(left_m, right_m)` of a velocity command held for `dt_secs`:
+/// Wheel travel `(left_m, right_m)` of a velocity command held for `dt_s`:
 /// l = (v − ω·W/2)·dt, r = (v + ω·W/2)·dt, so that β = ω·dt and (l + r)/2 = v·dt.
-pub fn wheel_travel(v_mps: f64, omega_radps: f64, dt_secs: f64, wheel_base_m: f64) -> (f64, f64) {
+pub fn wheel_travel(
+    v_m_per_s: f64,
+    omega_rad_per_s: f64,
+    dt_s: f64,
+    wheel_base_m: f64,
+) -> (f64, f64) {
     let half_w = 0.5 * wheel_base_m;
     (
-        (v_mps - omega_radps * half_w) * dt_secs,
-        (v_mps + omega_radps * half_w) * dt_secs,
+        (v_m_per_s - omega_rad_per_s * half_w) * dt_s,
+        (v_m_per_s + omega_rad_per_s * half_w) * dt_s,
     )
 }
 
@@ -147,7 +152,7 @@ pub struct RobotConfig {
     pub id: u32,
     /// True start pose.
     #[serde(default)]
-    pub start: Pose2,
+    pub start: WorldPose,
     /// Noise for this robot; the world's `noise` when absent.
     #[serde(default)]
     pub noise: Option<NoiseConfig>,
@@ -168,7 +173,8 @@ pub struct Landmark {
 #[serde(default, deny_unknown_fields)]
 pub struct WorldConfig {
     /// Time advanced by one [`World::step`].
-    pub dt_secs: f64,
+    #[serde(alias = "dt_secs")]
+    pub dt_s: f64,
     /// Distance between the wheels (W of seed 000 eq. 27).
     pub wheel_base_m: f64,
     /// Robots are discs of this radius for wall collisions.
@@ -180,9 +186,11 @@ pub struct WorldConfig {
     /// Walls hide the landmarks behind them.
     pub line_of_sight: bool,
     /// Commands are clamped to |v| ≤ this.
-    pub max_speed_mps: f64,
+    #[serde(alias = "max_speed_mps")]
+    pub max_speed_m_per_s: f64,
     /// Commands are clamped to |ω| ≤ this.
-    pub max_turn_rate_radps: f64,
+    #[serde(alias = "max_turn_rate_radps")]
+    pub max_turn_rate_rad_per_s: f64,
     /// Default noise for every robot.
     pub noise: NoiseConfig,
     pub robots: Vec<RobotConfig>,
@@ -193,14 +201,14 @@ pub struct WorldConfig {
 impl Default for WorldConfig {
     fn default() -> Self {
         Self {
-            dt_secs: 0.1,
+            dt_s: 0.1,
             wheel_base_m: 0.3,
             robot_radius_m: 0.2,
             sensor_range_m: 5.0,
             field_of_view_rad: None,
             line_of_sight: true,
-            max_speed_mps: 2.0,
-            max_turn_rate_radps: 4.0,
+            max_speed_m_per_s: 2.0,
+            max_turn_rate_rad_per_s: 4.0,
             noise: NoiseConfig::default(),
             robots: Vec::new(),
             walls: Vec::new(),
@@ -243,7 +251,7 @@ pub struct StepOutput {
 #[derive(Debug, Clone)]
 pub struct World {
     config: WorldConfig,
-    poses: Vec<Pose2>,
+    poses: Vec<WorldPose>,
     walls: SegmentIndex,
     rng: ChaCha8Rng,
     step: u64,
@@ -269,7 +277,7 @@ impl World {
         let poses = config
             .robots
             .iter()
-            .map(|r| Pose2 {
+            .map(|r| WorldPose {
                 theta_rad: heading_mod_tau(r.start.theta_rad),
                 ..r.start
             })
@@ -284,7 +292,7 @@ impl World {
         })
     }
 
-    /// Advances every robot by `dt_secs` under its command `(v_mps, omega_radps)`, in the order
+    /// Advances every robot by `dt_s` under its command `(v_m_per_s, omega_rad_per_s)`, in the order
     /// of `config.robots`. A missing command (slice too short) means stop; a non-finite command
     /// is counted in [`World::rejected_commands`] and also means stop; commands are clamped to
     /// the speed limits. A move that would bring the robot's disc into a wall is not executed
@@ -292,7 +300,7 @@ impl World {
     /// reported as `collided`, with executed v = 0 in the odometry.
     pub fn step(&mut self, cmds: &[(f64, f64)]) -> Vec<StepOutput> {
         self.step += 1;
-        let dt = self.config.dt_secs;
+        let dt = self.config.dt_s;
         let sim_time_s = self.step as f64 * dt;
         let mut out = Vec::with_capacity(self.poses.len());
         for i in 0..self.poses.len() {
@@ -302,10 +310,13 @@ impl World {
                 v = 0.0;
                 w = 0.0;
             }
-            v = v.clamp(-self.config.max_speed_mps, self.config.max_speed_mps);
+            v = v.clamp(
+                -self.config.max_speed_m_per_s,
+                self.config.max_speed_m_per_s,
+            );
             w = w.clamp(
-                -self.config.max_turn_rate_radps,
-                self.config.max_turn_rate_radps,
+                -self.config.max_turn_rate_rad_per_s,
+                self.config.max_turn_rate_rad_per_s,
             );
             let pose = self.poses[i];
             let (l, r) = wheel_travel(v, w, dt, self.config.wheel_base_m);
@@ -318,7 +329,7 @@ impl World {
             let (executed_v, new_pose) = if collided {
                 (
                     0.0,
-                    Pose2 {
+                    WorldPose {
                         theta_rad: next.theta_rad,
                         ..pose
                     },
@@ -338,9 +349,9 @@ impl World {
                 step: self.step,
                 robot_id: self.config.robots[i].id,
                 sim_time_s,
-                dt_secs: dt,
-                v_mps: odo_v,
-                omega_radps: odo_w,
+                dt_s: dt,
+                v_m_per_s: odo_v,
+                omega_rad_per_s: odo_w,
                 ..SensorMsg::default()
             };
             sensor.count = self.observe(new_pose, &noise, &mut sensor.observations) as u32;
@@ -360,7 +371,7 @@ impl World {
     }
 
     /// True poses, in the order of `config.robots`.
-    pub fn poses(&self) -> &[Pose2] {
+    pub fn poses(&self) -> &[WorldPose] {
         &self.poses
     }
 
@@ -373,9 +384,9 @@ impl World {
         self.step
     }
 
-    /// Simulated time: steps × `dt_secs`.
+    /// Simulated time: steps × `dt_s`.
     pub fn sim_time_s(&self) -> f64 {
-        self.step as f64 * self.config.dt_secs
+        self.step as f64 * self.config.dt_s
     }
 
     /// Non-finite commands seen (each treated as stop).
@@ -406,7 +417,7 @@ fn invalid(field: impl Into<String>, value: f64, expected: &'static str) -> Worl
 
 fn validate_config(c: &WorldConfig) -> Result<(), WorldError> {
     let positive = [
-        ("dt_secs", c.dt_secs),
+        ("dt_s", c.dt_s),
         ("wheel_base_m", c.wheel_base_m),
         ("sensor_range_m", c.sensor_range_m),
     ];
@@ -417,8 +428,8 @@ fn validate_config(c: &WorldConfig) -> Result<(), WorldError> {
     }
     let non_negative = [
         ("robot_radius_m", c.robot_radius_m),
-        ("max_speed_mps", c.max_speed_mps),
-        ("max_turn_rate_radps", c.max_turn_rate_radps),
+        ("max_speed_m_per_s", c.max_speed_m_per_s),
+        ("max_turn_rate_rad_per_s", c.max_turn_rate_rad_per_s),
     ];
     for (name, value) in non_negative {
         if !(value.is_finite() && value >= 0.0) {
@@ -473,7 +484,7 @@ mod tests {
     #[test]
     fn straight_when_wheels_travel_equally() {
         // seed 000 eqs. 32–33
-        let p = diff_drive(Pose2::new(1.0, 2.0, FRAC_PI_6), 0.5, 0.5, 0.3);
+        let p = diff_drive(WorldPose::new(1.0, 2.0, FRAC_PI_6), 0.5, 0.5, 0.3);
         assert_relative_eq!(p.x_m, 1.0 + 0.5 * FRAC_PI_6.cos(), epsilon = 1e-12);
         assert_relative_eq!(p.y_m, 2.0 + 0.5 * FRAC_PI_6.sin(), epsilon = 1e-12);
         assert_relative_eq!(p.theta_rad, FRAC_PI_6, epsilon = 1e-12);
@@ -483,12 +494,12 @@ mod tests {
     fn turning_in_place_keeps_position() {
         // r = −l: β = 2r/W, R = l/β = −W/2, the centre of rotation is the robot itself.
         let w = 0.4;
-        let p = diff_drive(Pose2::new(3.0, -1.0, 0.2), -0.1, 0.1, w);
+        let p = diff_drive(WorldPose::new(3.0, -1.0, 0.2), -0.1, 0.1, w);
         assert_relative_eq!(p.x_m, 3.0, epsilon = 1e-12);
         assert_relative_eq!(p.y_m, -1.0, epsilon = 1e-12);
         assert_relative_eq!(p.theta_rad, 0.2 + 0.2 / w, epsilon = 1e-12);
         // Negative turn wraps into [0, 2π) (eq. 30).
-        let q = diff_drive(Pose2::new(0.0, 0.0, 0.0), 0.1, -0.1, w);
+        let q = diff_drive(WorldPose::new(0.0, 0.0, 0.0), 0.1, -0.1, w);
         assert_relative_eq!(q.theta_rad, TAU - 0.5, epsilon = 1e-12);
     }
 
@@ -502,13 +513,13 @@ mod tests {
         let (cx, cy) = (x - k * th.sin(), y + k * th.cos());
         let th2 = th + beta;
         let (x2, y2) = (cx + k * th2.sin(), cy - k * th2.cos());
-        let p = diff_drive(Pose2::new(x, y, th), l, r, w);
+        let p = diff_drive(WorldPose::new(x, y, th), l, r, w);
         assert_relative_eq!(p.x_m, x2, epsilon = 1e-12);
         assert_relative_eq!(p.y_m, y2, epsilon = 1e-12);
         assert_relative_eq!(p.theta_rad, th2, epsilon = 1e-12);
         // A quarter circle of radius 1 m from the origin ends at (1, 1) facing +y.
         let (l, r) = wheel_travel(1.0, 1.0, FRAC_PI_2, 0.3);
-        let q = diff_drive(Pose2::default(), l, r, 0.3);
+        let q = diff_drive(WorldPose::default(), l, r, 0.3);
         assert_relative_eq!(q.x_m, 1.0, epsilon = 1e-12);
         assert_relative_eq!(q.y_m, 1.0, epsilon = 1e-12);
         assert_relative_eq!(q.theta_rad, FRAC_PI_2, epsilon = 1e-12);
@@ -524,13 +535,13 @@ mod tests {
 
     #[test]
     fn world_step_moves_without_noise() {
-        let mut world = World::new(one_robot(Pose2::default()), 1).unwrap();
+        let mut world = World::new(one_robot(WorldPose::default()), 1).unwrap();
         for _ in 0..10 {
             let out = world.step(&[(1.0, 0.0)]);
             assert_eq!(out.len(), 1);
             assert_eq!(out[0].truth.collided, 0);
             assert_eq!(out[0].sensor.robot_id, 7);
-            assert_eq!(out[0].sensor.v_mps, 1.0);
+            assert_eq!(out[0].sensor.v_m_per_s, 1.0);
             assert_eq!(out[0].sensor.stamp_ns, 0);
         }
         assert_relative_eq!(world.poses()[0].x_m, 1.0, epsilon = 1e-12);
@@ -540,7 +551,7 @@ mod tests {
 
     #[test]
     fn start_inside_wall_is_an_error() {
-        let mut cfg = one_robot(Pose2::new(1.1, 0.0, 0.0));
+        let mut cfg = one_robot(WorldPose::new(1.1, 0.0, 0.0));
         cfg.walls = vec![WallConfig::Rect {
             min_x_m: 1.0,
             min_y_m: -1.0,
@@ -558,12 +569,12 @@ mod tests {
             robots: vec![
                 RobotConfig {
                     id: 1,
-                    start: Pose2::default(),
+                    start: WorldPose::default(),
                     noise: None,
                 },
                 RobotConfig {
                     id: 2,
-                    start: Pose2::new(2.0, 2.0, 1.0),
+                    start: WorldPose::new(2.0, 2.0, 1.0),
                     noise: Some(NoiseConfig {
                         alpha1: 0.1,
                         ..NoiseConfig::default()
@@ -600,7 +611,7 @@ mod tests {
         // Noise is present: odometry differs from the command.
         assert!(a
             .iter()
-            .any(|o| o.sensor.v_mps != 0.5 && o.sensor.robot_id == 1));
+            .any(|o| o.sensor.v_m_per_s != 0.5 && o.sensor.robot_id == 1));
     }
 
     #[test]
@@ -616,7 +627,7 @@ mod tests {
         assert_relative_eq!(world.poses()[0].x_m, 0.2, epsilon = 1e-12);
 
         let mut cfg = noisy_config();
-        cfg.dt_secs = 0.0;
+        cfg.dt_s = 0.0;
         assert!(matches!(
             World::new(cfg, 0),
             Err(WorldError::InvalidSetting { .. })

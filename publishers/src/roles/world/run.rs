@@ -159,7 +159,7 @@ pub fn run_world(
     let mut last_pose: Vec<_> = world.poses().to_vec();
     let mut commands = vec![(0.0, 0.0); ids.len()];
     let steps = scenario.steps();
-    let dt = scenario.world.dt_secs;
+    let dt = scenario.world.dt_s;
     let mut next_wall = Instant::now();
     let mut stopped = false;
     let mut run = || -> Result<(), ProcessError> {
@@ -207,7 +207,7 @@ pub fn run_world(
                 for (i, rx) in cmds.iter().enumerate() {
                     let Some(rx) = rx else { continue };
                     if let Some(c) = rx.latest()? {
-                        commands[i] = (c.v_mps, c.omega_radps);
+                        commands[i] = (c.v_m_per_s, c.omega_rad_per_s);
                     }
                 }
                 continue;
@@ -230,7 +230,7 @@ pub fn run_world(
                 loop {
                     match rx.recv_timeout(Duration::from_millis(100))? {
                         Some(c) if c.step == k => {
-                            commands[i] = (c.v_mps, c.omega_radps);
+                            commands[i] = (c.v_m_per_s, c.omega_rad_per_s);
                             break;
                         }
                         Some(_) => deadline = Instant::now() + o.stall_timeout,

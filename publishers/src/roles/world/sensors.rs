@@ -9,7 +9,7 @@ use rand::Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
-use super::{wrap_angle, Pose2, World};
+use super::{wrap_angle, World, WorldPose};
 use crate::messages::{LandmarkObs, MAX_OBSERVATIONS};
 
 /// Sensor and odometry noise. The α's are those of the velocity motion model (seed 001
@@ -58,8 +58,8 @@ impl NoiseConfig {
     }
 
     /// Variances (σ_v², σ_ω²) of the control noise for a command (seed 001 Algorithm 1 line 5).
-    pub fn control_variances(&self, v_mps: f64, omega_radps: f64) -> (f64, f64) {
-        let (v2, w2) = (v_mps * v_mps, omega_radps * omega_radps);
+    pub fn control_variances(&self, v_m_per_s: f64, omega_rad_per_s: f64) -> (f64, f64) {
+        let (v2, w2) = (v_m_per_s * v_m_per_s, omega_rad_per_s * omega_rad_per_s);
         (
             self.alpha1 * v2 + self.alpha2 * w2,
             self.alpha3 * v2 + self.alpha4 * w2,
@@ -93,7 +93,7 @@ impl World {
     /// Fills `out` with noisy observations, nearest landmark first; returns how many.
     pub(super) fn observe(
         &mut self,
-        pose: Pose2,
+        pose: WorldPose,
         noise: &NoiseConfig,
         out: &mut [LandmarkObs; MAX_OBSERVATIONS],
     ) -> usize {
@@ -144,7 +144,7 @@ mod tests {
 
     #[test]
     fn observations_within_range_nearest_first() {
-        let mut cfg = one_robot(Pose2::new(0.0, 0.0, FRAC_PI_2));
+        let mut cfg = one_robot(WorldPose::new(0.0, 0.0, FRAC_PI_2));
         cfg.sensor_range_m = 3.0;
         cfg.landmarks = vec![
             Landmark {
@@ -185,7 +185,7 @@ mod tests {
 
     #[test]
     fn field_of_view_and_line_of_sight_hide_landmarks() {
-        let mut cfg = one_robot(Pose2::default());
+        let mut cfg = one_robot(WorldPose::default());
         cfg.field_of_view_rad = Some(PI); // front half only
         cfg.landmarks = vec![
             Landmark {
@@ -231,7 +231,7 @@ mod tests {
 
     #[test]
     fn at_most_max_observations() {
-        let mut cfg = one_robot(Pose2::default());
+        let mut cfg = one_robot(WorldPose::default());
         cfg.landmarks = (0..50)
             .map(|i| Landmark {
                 x_m: 0.05 * (i + 1) as f64,
@@ -254,7 +254,7 @@ mod tests {
     #[test]
     fn odometry_noise_matches_velocity_model() {
         // σ_v² = α1 v² + α2 ω² (seed 001 Algorithm 1 line 5), checked by sample variance.
-        let mut cfg = one_robot(Pose2::default());
+        let mut cfg = one_robot(WorldPose::default());
         cfg.noise = NoiseConfig {
             alpha1: 0.04,
             alpha2: 0.0,
@@ -267,10 +267,10 @@ mod tests {
         let (mut sv, mut sv2, mut sw, mut sw2) = (0.0, 0.0, 0.0, 0.0);
         for _ in 0..n {
             let o = world.step(&[(1.0, 0.5)])[0].sensor;
-            sv += o.v_mps;
-            sv2 += o.v_mps * o.v_mps;
-            sw += o.omega_radps;
-            sw2 += o.omega_radps * o.omega_radps;
+            sv += o.v_m_per_s;
+            sv2 += o.v_m_per_s * o.v_m_per_s;
+            sw += o.omega_rad_per_s;
+            sw2 += o.omega_rad_per_s * o.omega_rad_per_s;
         }
         let nf = n as f64;
         let var_v = sv2 / nf - (sv / nf).powi(2);

@@ -1,8 +1,8 @@
 //! Test fixtures shared by the world's unit tests.
 
-use crate::roles::world::{NoiseConfig, Pose2, RobotConfig, WorldConfig};
+use crate::roles::world::{NoiseConfig, RobotConfig, WorldConfig, WorldPose};
 
-pub(super) fn one_robot(start: Pose2) -> WorldConfig {
+pub(super) fn one_robot(start: WorldPose) -> WorldConfig {
     WorldConfig {
         robots: vec![RobotConfig {
             id: 7,

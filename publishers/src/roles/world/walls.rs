@@ -310,13 +310,13 @@ impl SegmentIndex {
 mod tests {
     use super::*;
     use crate::roles::world::test_support::one_robot;
-    use crate::roles::world::{Pose2, World};
+    use crate::roles::world::{World, WorldPose};
     use approx::assert_relative_eq;
     use std::f64::consts::PI;
 
     #[test]
     fn wall_blocks_robot() {
-        let mut cfg = one_robot(Pose2::default());
+        let mut cfg = one_robot(WorldPose::default());
         cfg.walls = vec![
             WallConfig::Rect {
                 min_x_m: 1.0,
@@ -335,7 +335,7 @@ mod tests {
             let out = world.step(&[(1.0, 0.0)]);
             collided |= out[0].truth.collided == 1;
             if out[0].truth.collided == 1 {
-                assert_eq!(out[0].sensor.v_mps, 0.0);
+                assert_eq!(out[0].sensor.v_m_per_s, 0.0);
             }
         }
         assert!(collided);
@@ -344,7 +344,7 @@ mod tests {
         assert!(x > 0.6, "robot stopped far from the wall: x = {x}");
         // It can still turn in place (8 × π/8) and drive away, until the thin polyline stops it.
         for _ in 0..8 {
-            world.step(&[(0.0, PI / 8.0 / world.config().dt_secs)]);
+            world.step(&[(0.0, PI / 8.0 / world.config().dt_s)]);
         }
         assert_relative_eq!(world.poses()[0].theta_rad, PI, epsilon = 1e-9);
         for _ in 0..60 {
@@ -358,9 +358,9 @@ mod tests {
 
     #[test]
     fn fast_robot_does_not_tunnel_through_thin_wall() {
-        let mut cfg = one_robot(Pose2::default());
+        let mut cfg = one_robot(WorldPose::default());
         cfg.robot_radius_m = 0.05;
-        cfg.dt_secs = 1.0;
+        cfg.dt_s = 1.0;
         cfg.walls = vec![WallConfig::Polyline {
             points_m: vec![[0.5, -1.0], [0.5, 1.0]],
             closed: false,

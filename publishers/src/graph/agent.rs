@@ -1,6 +1,6 @@
 //! Robots on the node graph: [`GraphAgent`] with the paper's anti-pheromone strategy
-//! ([`Strategy::Pheromone`]: eq. 8 link choice towards regions with room, eq. 9 targets, region
-//! capture, dead ends marked −∞) or the baseline ([`Strategy::ShortestPath`]: A* to the nearest
+//! ([`GraphStrategy::Pheromone`]: eq. 8 link choice towards regions with room, eq. 9 targets, region
+//! capture, dead ends marked −∞) or the baseline ([`GraphStrategy::ShortestPath`]: A* to the nearest
 //! region the robot does not know to be taken, no signalling, conflicts resolved on arrival),
 //! and the `regions` scenario format ([`RegionsScenario`]: an explicit graph or a map to
 //! skeletonize, regions, a dock, timing). Runs are in [`super::run`].
@@ -18,28 +18,28 @@ use super::{
 /// How a robot moves on the graph.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
-pub enum Strategy {
+pub enum GraphStrategy {
     /// Seed 001: anti-pheromone on links, region capture, eq. 8 + eq. 9.
     Pheromone,
     /// Baseline: A* to the nearest region, no signalling, conflicts resolved on arrival.
     ShortestPath,
 }
 
-impl Strategy {
-    pub const ALL: [Strategy; 2] = [Strategy::Pheromone, Strategy::ShortestPath];
+impl GraphStrategy {
+    pub const ALL: [GraphStrategy; 2] = [GraphStrategy::Pheromone, GraphStrategy::ShortestPath];
 
     pub fn name(self) -> &'static str {
         match self {
-            Strategy::Pheromone => "pheromone",
-            Strategy::ShortestPath => "shortest-path",
+            GraphStrategy::Pheromone => "pheromone",
+            GraphStrategy::ShortestPath => "shortest-path",
         }
     }
 }
 
-impl std::str::FromStr for Strategy {
+impl std::str::FromStr for GraphStrategy {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Strategy::ALL
+        GraphStrategy::ALL
             .into_iter()
             .find(|k| k.name() == s)
             .ok_or_else(|| {
@@ -73,7 +73,7 @@ pub enum Action {
 #[derive(Debug, Clone)]
 pub struct GraphAgent {
     pub profile: RobotProfile,
-    pub strategy: Strategy,
+    pub strategy: GraphStrategy,
     /// Added to a link when taking it: −1 (anti-pheromone, Sec. 4.1) or positive to make
     /// others follow (Sec. 4.3, surveillance backup).
     pub link_deposit: f32,
@@ -96,7 +96,7 @@ pub struct GraphAgent {
 }
 
 impl GraphAgent {
-    pub fn new(profile: RobotProfile, strategy: Strategy, seed: u64) -> Self {
+    pub fn new(profile: RobotProfile, strategy: GraphStrategy, seed: u64) -> Self {
         Self {
             profile,
             strategy,
@@ -173,8 +173,8 @@ impl GraphAgent {
             return self.decide_follow(s, node);
         }
         match self.strategy {
-            Strategy::Pheromone => self.decide_pheromone(s, node),
-            Strategy::ShortestPath => self.decide_shortest(s, node),
+            GraphStrategy::Pheromone => self.decide_pheromone(s, node),
+            GraphStrategy::ShortestPath => self.decide_shortest(s, node),
         }
     }
 
@@ -437,7 +437,7 @@ pub struct RegionsScenario {
     pub dock: NodeRef,
     /// Strategies `pheromone sim` compares unless the command line says otherwise.
     #[serde(default = "all_strategies")]
-    pub strategies: Vec<Strategy>,
+    pub strategies: Vec<GraphStrategy>,
     /// Robots given a role of their own (Sec. 6.2: one told where to go, one following).
     #[serde(default, rename = "robot", skip_serializing_if = "Vec::is_empty")]
     pub robot_roles: Vec<RobotRole>,
@@ -445,8 +445,8 @@ pub struct RegionsScenario {
     pub regions_sim: SimParams,
 }
 
-fn all_strategies() -> Vec<Strategy> {
-    Strategy::ALL.to_vec()
+fn all_strategies() -> Vec<GraphStrategy> {
+    GraphStrategy::ALL.to_vec()
 }
 
 /// `[[robot]]` of a `regions` scenario: a robot with a role of its own.
@@ -580,7 +580,7 @@ impl RegionsScenario {
                     lrf_range_m: 4.0,
                     rgb_res: RgbRes::Vga,
                 },
-                Strategy::Pheromone,
+                GraphStrategy::Pheromone,
                 0,
             );
             self.apply_role(&state.graph, &mut probe)?;

@@ -15,12 +15,12 @@ use field::lockstep::{self, JoinWatch};
 use field::shm::{now_ns, Svc};
 use iceoryx2::node::Node;
 
+use super::agent::{GraphStrategy, RegionsScenario};
 use super::run::{GraphRobot, GraphWorld, RobotReport, RunReport, StepView};
 use super::shm::{
     graph_services, kind, Contention, GraphReader, GraphShmError, GraphSnapshot, GraphUpdateMsg,
     GraphUpdater, MAX_GRAPH_ROBOTS, NO_CLAIM, SNAPSHOT_LINK, UPDATE_LINK,
 };
-use super::sim::{RegionsScenario, Strategy};
 use super::GraphUpdate;
 
 /// Options of the graph writer.
@@ -29,7 +29,7 @@ pub struct WriterOptions {
     /// Name of the graph (its services are `pheromone/<NAME>/…`).
     pub name: String,
     pub robots: usize,
-    pub strategy: Strategy,
+    pub strategy: GraphStrategy,
     pub seed: u64,
     /// How long to wait for every robot to attach.
     pub attach_timeout: Duration,
@@ -154,7 +154,7 @@ pub fn run_graph_robot(
     name: &str,
     index: usize,
     robots: usize,
-    strategy: Strategy,
+    strategy: GraphStrategy,
     seed: u64,
     timeout: Duration,
 ) -> Result<RobotReport, GraphRunError> {
