@@ -21,7 +21,7 @@ use std::path::PathBuf;
 use criterion::{BatchSize, BenchmarkId, Criterion, Throughput};
 use nalgebra::Matrix3;
 use publishers::messages::LandmarkObs;
-use publishers::roles::localizer::{Ekf, EkfConfig};
+use publishers::roles::localizer::{CheckedFilter, Ekf, EkfConfig};
 use publishers::roles::world::{Landmark, WorldPose};
 
 const MAP_SIZES: &[usize] = &[50, 200, 1000];

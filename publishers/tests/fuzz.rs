@@ -17,7 +17,7 @@ use proptest::test_runner::{Config, TestRunner};
 use publishers::messages::{LandmarkObs, PoseMsg, SensorMsg, MAX_OBSERVATIONS};
 use publishers::roles::depositor::{msg_is_finite, DepositMode, Depositor, DepositorConfig};
 use publishers::roles::follower::{Follower, FollowerConfig, StrategyKind};
-use publishers::roles::localizer::{Ekf, EkfConfig, EkfSlam, EkfSlamConfig};
+use publishers::roles::localizer::{CheckedFilter, Ekf, EkfConfig, EkfSlam, EkfSlamConfig};
 use publishers::roles::world::{
     Landmark, OccupancyMap, RobotConfig, World, WorldConfig, WorldPose,
 };

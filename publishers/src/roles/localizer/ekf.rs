@@ -11,10 +11,9 @@ use super::models::{
     signatures_match, symmetrize3, valid_covariance3, velocity_motion,
 };
 use super::{
-    check_message, check_observations, check_odometry, invalid, EkfConfig, EkfCounters,
-    LocalizerError, UpdateStats,
+    invalid, CheckedFilter, EkfConfig, EkfCounters, InputLimits, LocalizerError, UpdateStats,
 };
-use crate::messages::{LandmarkObs, PoseMsg, SensorMsg};
+use crate::messages::{LandmarkObs, PoseMsg};
 use crate::roles::world::{wrap_angle, Landmark, WorldPose};
 
 /// Landmark-based EKF localization (seed 001 Algorithm 1).
@@ -75,94 +74,6 @@ impl Ekf {
     /// The landmark filter in effect: map indices association runs over, `None` = all.
     pub fn landmark_filter(&self) -> Option<&[usize]> {
         self.filter.as_deref()
-    }
-
-    /// Prediction with the velocity motion model (seed 001 Algorithm 1 lines 2–7). While lost
-    /// (see [`LossConfig`](super::LossConfig)) M_t is multiplied by `noise_inflation`.
-    pub fn predict(
-        &mut self,
-        v_m_per_s: f64,
-        omega_rad_per_s: f64,
-        dt_s: f64,
-    ) -> Result<(), LocalizerError> {
-        self.counters.counted(check_odometry(
-            &self.config.limits,
-            v_m_per_s,
-            omega_rad_per_s,
-            dt_s,
-        ))?;
-        self.predict_unchecked(v_m_per_s, omega_rad_per_s, dt_s);
-        Ok(())
-    }
-
-    fn predict_unchecked(&mut self, v: f64, w: f64, dt: f64) {
-        let (delta, g, vj) = velocity_motion(self.mean.z, v, w, dt);
-        let inflation = if self.is_lost() {
-            self.config.loss.noise_inflation
-        } else {
-            1.0
-        };
-        let m = control_noise(&self.config.noise, v, w, inflation); // line 5
-        let mut mean = self.mean + delta; // line 6
-        mean.z = wrap_angle(mean.z);
-        let cov = g * self.cov * g.transpose() + vj * m * vj.transpose(); // line 7
-        self.mean = mean;
-        self.cov = symmetrize3(&cov);
-        self.time_s += dt;
-        self.counters.predictions += 1;
-    }
-
-    /// Correction with landmark observations (seed 001 Algorithm 1 lines 8–25), one observation
-    /// after the other. All observations are checked first; one bad observation rejects the
-    /// whole set and leaves the state untouched.
-    pub fn update(&mut self, observations: &[LandmarkObs]) -> Result<UpdateStats, LocalizerError> {
-        self.counters
-            .counted(check_observations(&self.config.limits, observations))?;
-        Ok(self.update_unchecked(observations))
-    }
-
-    /// One world step: prediction with the message's odometry and `dt_s`, then correction
-    /// with its observations. The whole message is checked before either is applied.
-    pub fn step(&mut self, msg: &SensorMsg) -> Result<UpdateStats, LocalizerError> {
-        self.counters
-            .counted(check_message(&self.config.limits, msg))?;
-        self.predict_unchecked(msg.v_m_per_s, msg.omega_rad_per_s, msg.dt_s);
-        Ok(self.update_unchecked(msg.observations()))
-    }
-
-    fn update_unchecked(&mut self, observations: &[LandmarkObs]) -> UpdateStats {
-        let mut stats = UpdateStats::default();
-        let q = measurement_noise(&self.config.noise); // line 8
-        let lost = self.is_lost();
-        for obs in observations {
-            // line 9
-            let mut obs = *obs;
-            if lost {
-                self.dropout_acc += self.config.loss.landmark_dropout;
-                if self.dropout_acc >= 1.0 - 1e-12 {
-                    self.dropout_acc -= 1.0;
-                    stats.dropped += 1;
-                    continue;
-                }
-                if self.config.loss.ambiguous_signatures {
-                    obs.signature = 0;
-                }
-            }
-            match self.associate(&obs, &q) {
-                Association::Matched { z_hat, h, s } => {
-                    self.correct(&obs, &z_hat, &h, &s, &q);
-                    stats.used += 1;
-                }
-                Association::Gated => stats.gated += 1,
-                Association::NoCandidate => stats.unmatched += 1,
-            }
-        }
-        self.counters.observations_used += u64::from(stats.used);
-        self.counters.observations_gated += u64::from(stats.gated);
-        self.counters.observations_unmatched += u64::from(stats.unmatched);
-        self.counters.observations_dropped += u64::from(stats.dropped);
-        self.last_used = stats.used;
-        stats
     }
 
     /// Maximum-likelihood association (seed 001 Algorithm 1 lines 10–21) among the landmarks of
@@ -297,6 +208,68 @@ impl Ekf {
     }
 }
 
+impl CheckedFilter for Ekf {
+    fn limits(&self) -> &InputLimits {
+        &self.config.limits
+    }
+
+    fn counters_mut(&mut self) -> &mut EkfCounters {
+        &mut self.counters
+    }
+
+    fn predict_unchecked(&mut self, v: f64, w: f64, dt: f64) {
+        let (delta, g, vj) = velocity_motion(self.mean.z, v, w, dt);
+        let inflation = if self.is_lost() {
+            self.config.loss.noise_inflation
+        } else {
+            1.0
+        };
+        let m = control_noise(&self.config.noise, v, w, inflation); // line 5
+        let mut mean = self.mean + delta; // line 6
+        mean.z = wrap_angle(mean.z);
+        let cov = g * self.cov * g.transpose() + vj * m * vj.transpose(); // line 7
+        self.mean = mean;
+        self.cov = symmetrize3(&cov);
+        self.time_s += dt;
+        self.counters.predictions += 1;
+    }
+
+    fn update_unchecked(&mut self, observations: &[LandmarkObs]) -> UpdateStats {
+        let mut stats = UpdateStats::default();
+        let q = measurement_noise(&self.config.noise); // line 8
+        let lost = self.is_lost();
+        for obs in observations {
+            // line 9
+            let mut obs = *obs;
+            if lost {
+                self.dropout_acc += self.config.loss.landmark_dropout;
+                if self.dropout_acc >= 1.0 - 1e-12 {
+                    self.dropout_acc -= 1.0;
+                    stats.dropped += 1;
+                    continue;
+                }
+                if self.config.loss.ambiguous_signatures {
+                    obs.signature = 0;
+                }
+            }
+            match self.associate(&obs, &q) {
+                Association::Matched { z_hat, h, s } => {
+                    self.correct(&obs, &z_hat, &h, &s, &q);
+                    stats.used += 1;
+                }
+                Association::Gated => stats.gated += 1,
+                Association::NoCandidate => stats.unmatched += 1,
+            }
+        }
+        self.counters.observations_used += u64::from(stats.used);
+        self.counters.observations_gated += u64::from(stats.gated);
+        self.counters.observations_unmatched += u64::from(stats.unmatched);
+        self.counters.observations_dropped += u64::from(stats.dropped);
+        self.last_used = stats.used;
+        stats
+    }
+}
+
 enum Association {
     Matched {
         z_hat: Vector2<f64>,
@@ -310,6 +283,7 @@ enum Association {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::messages::SensorMsg;
     use crate::roles::localizer::test_support::{
         arena, corridor, initial_cov, some_obs, CAPTURED, OMEGA_RADPS, V_MPS,
     };

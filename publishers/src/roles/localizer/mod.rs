@@ -323,6 +323,49 @@ impl EkfCounters {
     }
 }
 
+/// What [`Ekf`] and [`EkfSlam`] share: every input is checked first (a rejection is counted by
+/// reason and leaves the state untouched), then the filter's own step runs.
+pub trait CheckedFilter {
+    /// The input limits the checks apply.
+    fn limits(&self) -> &InputLimits;
+    /// The counters checks and steps add to.
+    fn counters_mut(&mut self) -> &mut EkfCounters;
+    /// Prediction with checked odometry (seed 001 Algorithm 1 lines 2–7).
+    fn predict_unchecked(&mut self, v_m_per_s: f64, omega_rad_per_s: f64, dt_s: f64);
+    /// Correction with checked observations (lines 8–25), one after the other.
+    fn update_unchecked(&mut self, observations: &[LandmarkObs]) -> UpdateStats;
+
+    /// Prediction with the velocity motion model; the odometry is checked first.
+    fn predict(
+        &mut self,
+        v_m_per_s: f64,
+        omega_rad_per_s: f64,
+        dt_s: f64,
+    ) -> Result<(), LocalizerError> {
+        let checked = check_odometry(self.limits(), v_m_per_s, omega_rad_per_s, dt_s);
+        self.counters_mut().counted(checked)?;
+        self.predict_unchecked(v_m_per_s, omega_rad_per_s, dt_s);
+        Ok(())
+    }
+
+    /// Correction with landmark observations. All are checked first; one bad observation
+    /// rejects the whole set.
+    fn update(&mut self, observations: &[LandmarkObs]) -> Result<UpdateStats, LocalizerError> {
+        let checked = check_observations(self.limits(), observations);
+        self.counters_mut().counted(checked)?;
+        Ok(self.update_unchecked(observations))
+    }
+
+    /// One world step: prediction with the message's odometry and `dt_s`, then correction with
+    /// its observations. The whole message is checked before either is applied.
+    fn step(&mut self, msg: &SensorMsg) -> Result<UpdateStats, LocalizerError> {
+        let checked = check_message(self.limits(), msg);
+        self.counters_mut().counted(checked)?;
+        self.predict_unchecked(msg.v_m_per_s, msg.omega_rad_per_s, msg.dt_s);
+        Ok(self.update_unchecked(msg.observations()))
+    }
+}
+
 /// What one correction did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct UpdateStats {

@@ -6,7 +6,7 @@ use iceoryx2::node::Node;
 use nalgebra::Matrix3;
 
 use crate::messages::{PoseMsg, SensorMsg};
-use crate::roles::localizer::{Ekf, EkfSlam, EkfSlamConfig, LocalizerError};
+use crate::roles::localizer::{CheckedFilter, Ekf, EkfSlam, EkfSlamConfig, LocalizerError};
 use crate::roles::{
     receiver, role_loop, sender, sim_stamp_ns, summary_of, ProcessError, RobotServices,
     RoleOptions, RoleSummary,

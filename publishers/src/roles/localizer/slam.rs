@@ -12,10 +12,10 @@ use super::models::{
     signatures_match, symmetrize3, valid_covariance3, velocity_motion,
 };
 use super::{
-    check_message, check_observations, check_odometry, invalid, validate_common, EkfCounters,
-    EkfSlamConfig, LocalizerError, SlamAssociation, UpdateStats,
+    invalid, validate_common, CheckedFilter, EkfCounters, EkfSlamConfig, InputLimits,
+    LocalizerError, SlamAssociation, UpdateStats,
 };
-use crate::messages::{LandmarkObs, PoseMsg, SensorMsg};
+use crate::messages::{LandmarkObs, PoseMsg};
 use crate::roles::world::{wrap_angle, WorldPose};
 
 /// A landmark estimated by [`EkfSlam`].
@@ -73,100 +73,6 @@ impl EkfSlam {
             last_used: 0,
             counters: EkfCounters::default(),
         })
-    }
-
-    /// Prediction (seed 001 Algorithm 1 lines 2–7): only the robot block and the robot–landmark
-    /// cross-covariances change.
-    pub fn predict(
-        &mut self,
-        v_m_per_s: f64,
-        omega_rad_per_s: f64,
-        dt_s: f64,
-    ) -> Result<(), LocalizerError> {
-        self.counters.counted(check_odometry(
-            &self.config.limits,
-            v_m_per_s,
-            omega_rad_per_s,
-            dt_s,
-        ))?;
-        self.predict_unchecked(v_m_per_s, omega_rad_per_s, dt_s);
-        Ok(())
-    }
-
-    fn predict_unchecked(&mut self, v: f64, w: f64, dt: f64) {
-        let n = self.mean.len();
-        let (delta, g, vj) = velocity_motion(self.mean[2], v, w, dt);
-        let m = control_noise(&self.config.noise, v, w, 1.0);
-        self.mean[0] += delta.x;
-        self.mean[1] += delta.y;
-        self.mean[2] = wrap_angle(self.mean[2] + delta.z);
-        let srr = self.robot_covariance();
-        let srr = symmetrize3(&(g * srr * g.transpose() + vj * m * vj.transpose()));
-        if n > 3 {
-            let gf = Mat::from_fn(3, 3, |i, j| g[(i, j)]);
-            let mut cross = Mat::<f64>::zeros(3, n - 3);
-            matmul(
-                &mut cross,
-                Accum::Replace,
-                &gf,
-                self.cov.submatrix(0, 3, 3, n - 3),
-                1.0,
-                Par::Seq,
-            );
-            self.cov.submatrix_mut(0, 3, 3, n - 3).copy_from(&cross);
-            self.cov
-                .submatrix_mut(3, 0, n - 3, 3)
-                .copy_from(cross.transpose());
-        }
-        for i in 0..3 {
-            for j in 0..3 {
-                self.cov[(i, j)] = srr[(i, j)];
-            }
-        }
-        self.counters.predictions += 1;
-    }
-
-    /// Correction with observations; unknown landmarks join the state.
-    pub fn update(&mut self, observations: &[LandmarkObs]) -> Result<UpdateStats, LocalizerError> {
-        self.counters
-            .counted(check_observations(&self.config.limits, observations))?;
-        Ok(self.update_unchecked(observations))
-    }
-
-    /// One world step: prediction then correction, the message checked first.
-    pub fn step(&mut self, msg: &SensorMsg) -> Result<UpdateStats, LocalizerError> {
-        self.counters
-            .counted(check_message(&self.config.limits, msg))?;
-        self.predict_unchecked(msg.v_m_per_s, msg.omega_rad_per_s, msg.dt_s);
-        Ok(self.update_unchecked(msg.observations()))
-    }
-
-    fn update_unchecked(&mut self, observations: &[LandmarkObs]) -> UpdateStats {
-        let mut stats = UpdateStats::default();
-        let q = measurement_noise(&self.config.noise);
-        for obs in observations {
-            match self.associate(obs, &q) {
-                SlamMatch::Existing(j) => {
-                    self.correct(j, obs, &q);
-                    stats.used += 1;
-                }
-                SlamMatch::New => {
-                    if self.signatures.len() < self.config.max_landmarks {
-                        self.add_landmark(obs, &q);
-                        stats.added += 1;
-                    } else {
-                        stats.unmatched += 1;
-                    }
-                }
-                SlamMatch::Gated => stats.gated += 1,
-            }
-        }
-        self.counters.observations_used += u64::from(stats.used);
-        self.counters.observations_gated += u64::from(stats.gated);
-        self.counters.observations_unmatched += u64::from(stats.unmatched);
-        self.counters.landmarks_added += u64::from(stats.added);
-        self.last_used = stats.used;
-        stats
     }
 
     /// Innovation, Jacobians (robot 2×3, landmark 2×2) and S for landmark `j`.
@@ -393,6 +299,77 @@ impl EkfSlam {
             step,
             self.last_used,
         )
+    }
+}
+
+impl CheckedFilter for EkfSlam {
+    fn limits(&self) -> &InputLimits {
+        &self.config.limits
+    }
+
+    fn counters_mut(&mut self) -> &mut EkfCounters {
+        &mut self.counters
+    }
+
+    fn predict_unchecked(&mut self, v: f64, w: f64, dt: f64) {
+        let n = self.mean.len();
+        let (delta, g, vj) = velocity_motion(self.mean[2], v, w, dt);
+        let m = control_noise(&self.config.noise, v, w, 1.0);
+        self.mean[0] += delta.x;
+        self.mean[1] += delta.y;
+        self.mean[2] = wrap_angle(self.mean[2] + delta.z);
+        let srr = self.robot_covariance();
+        let srr = symmetrize3(&(g * srr * g.transpose() + vj * m * vj.transpose()));
+        if n > 3 {
+            let gf = Mat::from_fn(3, 3, |i, j| g[(i, j)]);
+            let mut cross = Mat::<f64>::zeros(3, n - 3);
+            matmul(
+                &mut cross,
+                Accum::Replace,
+                &gf,
+                self.cov.submatrix(0, 3, 3, n - 3),
+                1.0,
+                Par::Seq,
+            );
+            self.cov.submatrix_mut(0, 3, 3, n - 3).copy_from(&cross);
+            self.cov
+                .submatrix_mut(3, 0, n - 3, 3)
+                .copy_from(cross.transpose());
+        }
+        for i in 0..3 {
+            for j in 0..3 {
+                self.cov[(i, j)] = srr[(i, j)];
+            }
+        }
+        self.counters.predictions += 1;
+    }
+
+    fn update_unchecked(&mut self, observations: &[LandmarkObs]) -> UpdateStats {
+        let mut stats = UpdateStats::default();
+        let q = measurement_noise(&self.config.noise);
+        for obs in observations {
+            match self.associate(obs, &q) {
+                SlamMatch::Existing(j) => {
+                    self.correct(j, obs, &q);
+                    stats.used += 1;
+                }
+                SlamMatch::New => {
+                    if self.signatures.len() < self.config.max_landmarks {
+                        self.add_landmark(obs, &q);
+                        stats.added += 1;
+                    } else {
+                        stats.unmatched += 1;
+                    }
+                }
+                SlamMatch::Gated => stats.gated += 1,
+            }
+        }
+        self.counters.observations_used += u64::from(stats.used);
+        self.counters.observations_gated += u64::from(stats.gated);
+        self.counters.observations_unmatched += u64::from(stats.unmatched);
+        self.counters.landmarks_added += u64::from(stats.added);
+        self.last_used = stats.used;
+        stats
     }
 }
 
