@@ -15,7 +15,7 @@ use crate::roles::world::World;
 use crate::roles::{lockstep_participants, RoleSummary, WorldOptions, WorldSummary};
 use crate::sim::observer::Observer;
 use crate::sim::record::Recording;
-use crate::sim::scenario::Scenario;
+use crate::sim::scenario::{Scenario, ScenarioError};
 use crate::sim::single::{role_name, FieldSummary, RobotResult, RunSummary};
 use crate::sim::supervisor::{ChildId, ChildSpec, Supervisor, SupervisorError};
 
@@ -45,7 +45,7 @@ pub enum ProcessRunError {
     #[error("observer: {0}")]
     Observer(#[from] ShmError),
     #[error("scenario: {0}")]
-    Scenario(String),
+    Scenario(#[from] ScenarioError),
     #[error("cannot write the scenario file {path}: {source}")]
     ScenarioFile {
         path: String,
@@ -94,7 +94,7 @@ impl ScenarioFile {
             source,
         };
         std::fs::create_dir_all(&dir).map_err(io)?;
-        let text = scenario.to_toml().map_err(ProcessRunError::Scenario)?;
+        let text = scenario.to_toml()?;
         std::fs::write(&path, text).map_err(io)?;
         Ok(Self(path))
     }

@@ -138,24 +138,27 @@ pub fn run_single_process(
     scenario: &Scenario,
     mut options: SingleProcessOptions<'_>,
 ) -> Result<(RunSummary, Recording), ProcessError> {
-    let setup = |e: String| ProcessError::Setup(e);
     let mut world =
-        World::new(scenario.world.clone(), scenario.seed).map_err(|e| setup(e.to_string()))?;
-    let mut field = OwnedField::new(scenario.field.clone()).map_err(|e| setup(e.to_string()))?;
-    let mut scripted =
-        std::collections::VecDeque::from(scenario.scripted(world.wall_segments()).map_err(setup)?);
+        World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::World)?;
+    let mut field = OwnedField::new(scenario.field.clone()).map_err(ProcessError::Field)?;
+    let mut scripted = std::collections::VecDeque::from(scenario.scripted(world.wall_segments())?);
     let scripted_total = scripted.len() as u64;
     let mut robots = Vec::new();
     for r in &scenario.world.robots {
         let roles = scenario.roles(r.id);
         let depositor = match roles.and_then(|x| x.depositor.clone()) {
-            Some(c) => Some(Depositor::new(c).map_err(|e| setup(format!("robot {}: {e}", r.id)))?),
+            Some(c) => Some(Depositor::new(c).map_err(|source| ProcessError::Depositor {
+                robot: Some(r.id),
+                source,
+            })?),
             None => None,
         };
         let follower = match scenario.follower_config(r.id) {
             Some(c) => Some((
-                Follower::from_config(r.id, &c)
-                    .map_err(|e| setup(format!("robot {}: {e}", r.id)))?,
+                Follower::from_config(r.id, &c).map_err(|source| ProcessError::Follower {
+                    robot: r.id,
+                    source,
+                })?,
                 c.steer_by,
             )),
             None => None,
