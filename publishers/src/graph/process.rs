@@ -147,8 +147,15 @@ pub fn run_graph_writer(
         }
         Ok(())
     })();
-    // Announce the end also after a failure, so every robot stops.
-    let _ = publish(&world, true);
+    // Announce the end also after a failure, so every robot stops. After a failure that error
+    // is the one to report; after a run that went well, a robot that never hears of the end
+    // is one.
+    let announced = publish(&world, true);
+    match (&result, announced) {
+        (Err(_), Err(e)) => eprintln!("graph '{}': could not announce the end: {e}", o.name),
+        (Ok(()), Err(e)) => return Err(e.into()),
+        (_, Ok(())) => {}
+    }
     result?;
     Ok(world.report())
 }

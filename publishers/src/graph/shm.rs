@@ -547,6 +547,8 @@ impl GraphServer {
         let mut n = 0;
         let mut next = self.updates.recv_timeout(timeout)?;
         while let Some(m) = next {
+            // A rejected update is counted in `counters.rejected` (what the snapshots report);
+            // the server goes on with the next one.
             let _ = self.apply(&m);
             n += 1;
             next = self.updates.try_recv()?;

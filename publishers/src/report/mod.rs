@@ -103,6 +103,7 @@ pub fn write_outputs(
         let mut text = String::from(PROBES_CSV_HEADER);
         text.push('\n');
         for p in &rec.probes {
+            // Writing into a String cannot fail.
             let _ = writeln!(text, "{},{},{},{},{}", p.t_s, p.x, p.y, p.channel, p.value);
         }
         let path = dir.join("probes.csv");

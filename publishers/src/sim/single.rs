@@ -193,16 +193,16 @@ pub fn run_single_process(
         }
         for (r, out) in robots.iter_mut().zip(&outputs) {
             r.collisions += out.truth.collided as u64;
-            if let Err(e) = r.filter.step(&out.sensor) {
-                // The localizer keeps its previous estimate, as the process does.
-                let _ = e;
-            }
+            // A rejected sensor message: the localizer keeps its previous estimate, as the
+            // process does (which also logs it).
+            let _ = r.filter.step(&out.sensor);
             let mut p = r.filter.to_msg(r.id, k);
             // Simulated time as the stamp: deterministic, and what interval_s measures.
             p.stamp_ns = (t * 1e9).round() as u64;
             r.pose = Some(p);
             if let Some(d) = r.depositor.as_mut() {
                 if let Ok(Some(m)) = d.process(&p) {
+                    // A rejection is counted by the field.
                     let _ = field.offer(&m);
                 }
             }
