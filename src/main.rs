@@ -75,7 +75,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", cmd::one_line(&e));
             if e.downcast_ref::<cmd::BadInput>().is_some() {
                 ExitCode::from(2)
             } else {

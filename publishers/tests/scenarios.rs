@@ -161,7 +161,8 @@ fn overrides_are_checked() {
             robots: Some(40),
             ..Overrides::default()
         })
-        .unwrap_err();
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("--robots 40") && e.contains("8"), "{e}");
     s.apply(&Overrides {
         robots: Some(5),

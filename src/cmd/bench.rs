@@ -5,7 +5,7 @@ use anyhow::Context;
 use clap::Args;
 use pheromone_bench::{Latency, Mode, Options, Report};
 
-use super::bad;
+use super::{bad, bad_from};
 
 /// Measure the field side by side with the alternatives, on this machine, in one run.
 ///
@@ -84,7 +84,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
 
 pub fn run_peer(a: BenchPeerArgs) -> anyhow::Result<()> {
     pheromone_bench::run_peer(&a.spec).map_err(|e| match e {
-        pheromone_bench::BenchError::Spec { .. } => bad(e.to_string()),
+        pheromone_bench::BenchError::Spec { .. } => bad_from(e),
         e => e.into(),
     })
 }

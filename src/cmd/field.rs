@@ -9,7 +9,7 @@ use field::run::{run_field, FieldRunOptions};
 use field::shm::{create_node, frame_pool};
 use field::{Evaporation, FieldConfig};
 
-use super::{bad, read_toml};
+use super::{bad, bad_from, bad_in, read_toml};
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
 pub enum ModelArg {
@@ -148,7 +148,7 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
         (Some(p), _) => read_toml(p)?,
         (None, Some(s)) => super::roles::load_scenario(s)?
             .field_config_for_processes()
-            .map_err(|e| bad(format!("{s}: {e}")))?,
+            .map_err(|e| bad_in(s.as_str(), e))?,
         (None, None) => FieldConfig::default(),
     };
     macro_rules! set {
@@ -236,18 +236,16 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
     if a.signed {
         ch.signed = true;
     }
-    let origin = a
-        .config
-        .as_ref()
-        .map(|p| format!("{}: ", p.display()))
-        .unwrap_or_default();
-    c.validate().map_err(|e| bad(format!("{origin}{e}")))?;
+    c.validate().map_err(|e| match &a.config {
+        Some(p) => bad_in(p.display().to_string(), e),
+        None => bad_from(e),
+    })?;
     Ok(c)
 }
 
 pub fn run(a: FieldArgs) -> anyhow::Result<()> {
     let config = config_from_args(&a)?;
-    field::shm::check_name(&a.name).map_err(|e| bad(e.to_string()))?;
+    field::shm::check_name(&a.name).map_err(bad_from)?;
     if a.print_config {
         print!("{}", toml::to_string_pretty(&config)?);
         return Ok(());
@@ -268,9 +266,8 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
     };
     let restore = match &a.restore {
         Some(path) => {
-            let cp = checkpoint::read(path).map_err(|e| bad(e.to_string()))?;
-            cp.check_against(path, &config)
-                .map_err(|e| bad(e.to_string()))?;
+            let cp = checkpoint::read(path).map_err(bad_from)?;
+            cp.check_against(path, &config).map_err(bad_from)?;
             Some((path.clone(), cp))
         }
         None => None,
@@ -301,7 +298,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
     };
     let summary = match run_field(&node, &options) {
         Ok(s) => s,
-        Err(e) if e.is_bad_input() => return Err(bad(e.to_string())),
+        Err(e) if e.is_bad_input() => return Err(bad_from(e)),
         Err(e) => return Err(e.into()),
     };
     if a.json {

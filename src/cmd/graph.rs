@@ -5,6 +5,7 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use anyhow::Context;
 use clap::Args;
 use field::shm::create_node;
 use publishers::graph::agent::{GraphStrategy, RegionsScenario, Until, BUILTIN_REGIONS};
@@ -13,8 +14,8 @@ use publishers::graph::processes::{run_graph_robot, run_graph_writer, WriterOpti
 use publishers::graph::run::{simulate, tables_text, RunReport};
 use serde_json::json;
 
-use super::bad;
 use super::sim_args::SimArgs;
+use super::{bad, bad_from, bad_in};
 
 /// Whether `name` is a `regions` scenario: a built-in one, or a TOML file with a `dock`.
 pub fn is_regions(name: &str) -> bool {
@@ -32,20 +33,23 @@ pub fn load_regions(name: &str) -> anyhow::Result<RegionsScenario> {
         None => {
             let text = std::fs::read_to_string(name).map_err(|e| {
                 let names: Vec<&str> = BUILTIN_REGIONS.iter().map(|(n, _)| *n).collect();
-                bad(format!(
-                    "regions scenario '{name}': not a built-in one ({}) and cannot read it as a file: {e}",
-                    names.join(", ")
-                ))
+                bad_in(
+                    format!(
+                        "regions scenario '{name}': not a built-in one ({}) and cannot read it as a file",
+                        names.join(", ")
+                    ),
+                    e,
+                )
             })?;
-            toml::from_str(&text).map_err(|e| bad(format!("{name}: {e}")))?
+            toml::from_str(&text).map_err(|e| bad_in(name, e))?
         }
     };
-    sc.validate().map_err(|e| bad(format!("{name}: {e}")))?;
+    sc.validate().map_err(|e| bad_in(name, e))?;
     Ok(sc)
 }
 
 fn parse_strategy(s: &str) -> anyhow::Result<GraphStrategy> {
-    s.parse::<GraphStrategy>().map_err(bad)
+    s.parse::<GraphStrategy>().map_err(bad_from)
 }
 
 /// Run the graph writer of a `regions` run: owns the node graph and its regions in shared
@@ -91,7 +95,7 @@ fn secs(what: &str, v: f64) -> anyhow::Result<Duration> {
 }
 
 pub fn run_writer(a: GraphArgs) -> anyhow::Result<()> {
-    field::shm::check_name(&a.name).map_err(|e| bad(e.to_string()))?;
+    field::shm::check_name(&a.name).map_err(bad_from)?;
     let scenario = load_regions(&a.scenario)?;
     let o = WriterOptions {
         name: a.name.clone(),
@@ -148,7 +152,7 @@ pub struct GraphRobotArgs {
 }
 
 pub fn run_robot(a: GraphRobotArgs) -> anyhow::Result<()> {
-    field::shm::check_name(&a.name).map_err(|e| bad(e.to_string()))?;
+    field::shm::check_name(&a.name).map_err(bad_from)?;
     if a.robot == 0 || a.robot as usize > a.robots {
         return Err(bad(format!(
             "--robot {}: ids run from 1 to --robots ({})",
@@ -258,7 +262,7 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
             .clone()
             .unwrap_or_else(|| Path::new("pheromone-out").join(&scenario.name));
         std::fs::create_dir_all(&dir)
-            .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+            .with_context(|| format!("cannot create {}", dir.display()))?;
         std::fs::write(
             dir.join("metrics.json"),
             serde_json::to_string_pretty(&metrics)?,

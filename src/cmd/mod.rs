@@ -10,31 +10,88 @@ pub mod sim;
 pub mod sim_args;
 pub mod tune;
 
+use std::error::Error;
 use std::fmt;
 use std::path::Path;
 
-/// Bad input or usage: the process exits with status 2 (clap's convention).
+type Cause = Box<dyn Error + Send + Sync + 'static>;
+
+/// Bad input or usage: the process exits with status 2 (clap's convention). It keeps the error
+/// it stems from, so the printed chain shows every cause.
 #[derive(Debug)]
-pub struct BadInput(pub String);
+pub struct BadInput {
+    /// What the user reads first; `None`: the cause's own message (the marker is transparent).
+    context: Option<String>,
+    cause: Option<Cause>,
+}
 
 impl fmt::Display for BadInput {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
+        match (&self.context, &self.cause) {
+            (Some(c), _) => f.write_str(c),
+            (None, Some(e)) => e.fmt(f),
+            (None, None) => Ok(()),
+        }
     }
 }
 
-impl std::error::Error for BadInput {}
+impl Error for BadInput {
+    fn source(&self) -> Option<&(dyn Error + 'static)> {
+        let cause = self.cause.as_deref()?;
+        match self.context {
+            Some(_) => Some(cause),
+            // Transparent: the cause is this error's message; its causes follow.
+            None => cause.source(),
+        }
+    }
+}
 
-/// Shorthand for a `BadInput` error.
+/// A `BadInput` error with a message and no cause.
 pub fn bad(msg: impl Into<String>) -> anyhow::Error {
-    anyhow::Error::new(BadInput(msg.into()))
+    anyhow::Error::new(BadInput {
+        context: Some(msg.into()),
+        cause: None,
+    })
+}
+
+/// The error `e` marked as bad input: its message, and its causes, unchanged.
+pub fn bad_from(e: impl Into<Cause>) -> anyhow::Error {
+    anyhow::Error::new(BadInput {
+        context: None,
+        cause: Some(e.into()),
+    })
+}
+
+/// The error `e` marked as bad input, after `context` (printed `context: e`).
+pub fn bad_in(context: impl Into<String>, e: impl Into<Cause>) -> anyhow::Error {
+    anyhow::Error::new(BadInput {
+        context: Some(context.into()),
+        cause: Some(e.into()),
+    })
+}
+
+/// The error and its causes on one line, `: `-separated as `{:#}` prints them, leaving out a
+/// cause whose text is already on the line (the libraries' messages name their cause).
+pub fn one_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if text.is_empty() || line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
 }
 
 /// Reads a TOML file into `T`; any problem is `BadInput` naming the file, line and key.
 pub fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
     let text = std::fs::read_to_string(path)
-        .map_err(|e| bad(format!("{}: cannot read: {e}", path.display())))?;
-    toml::from_str(&text).map_err(|e| bad(format!("{}: {e}", path.display())))
+        .map_err(|e| bad_in(format!("{}: cannot read", path.display()), e))?;
+    toml::from_str(&text).map_err(|e| bad_in(path.display().to_string(), e))
 }
 
 /// A positive number of seconds from a flag, or a `BadInput` naming the flag and the value.
@@ -45,5 +102,33 @@ pub fn seconds(flag: &str, v: f64) -> anyhow::Result<std::time::Duration> {
         Err(bad(format!(
             "--{flag} {v}: must be a positive number of seconds"
         )))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_input_keeps_its_cause_and_prints_each_once() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "no such file");
+        let e = bad_in("x.toml: cannot read", io);
+        assert!(e.downcast_ref::<BadInput>().is_some());
+        assert_eq!(one_line(&e), "x.toml: cannot read: no such file");
+        assert!(e
+            .chain()
+            .nth(1)
+            .is_some_and(|c| c.downcast_ref::<std::io::Error>().is_some()));
+        // Transparent: the scenario's message (which names what was refused) once, and the
+        // refused part behind it in the chain.
+        let s =
+            publishers::sim::scenario::Scenario::parse("name = 'x'\nduration_s = -1\n", "y.toml")
+                .unwrap_err();
+        let text = s.to_string();
+        let e = bad_from(s);
+        assert!(e.downcast_ref::<BadInput>().is_some());
+        assert_eq!(e.to_string(), text);
+        assert_eq!(one_line(&e), text);
+        assert_eq!(e.chain().count(), 2, "{e:?}");
     }
 }

@@ -10,7 +10,7 @@ use publishers::roles::{
 };
 use publishers::sim::scenario::Scenario;
 
-use super::{bad, seconds};
+use super::{bad_from, seconds};
 
 /// Options every robot process shares.
 #[derive(Args, Debug, Clone)]
@@ -46,12 +46,12 @@ impl Common {
 }
 
 pub fn load_scenario(name: &str) -> anyhow::Result<Scenario> {
-    Scenario::load(name).map_err(|e| bad(e.to_string()))
+    Scenario::load(name).map_err(bad_from)
 }
 
 fn check_names(c: &Common) -> anyhow::Result<()> {
     for n in [&c.world, &c.field] {
-        field::shm::check_name(n).map_err(|e| bad(e.to_string()))?;
+        field::shm::check_name(n).map_err(bad_from)?;
     }
     Ok(())
 }
@@ -241,7 +241,7 @@ pub fn run_depositor_cmd(a: DepositorArgs) -> anyhow::Result<()> {
     if let Some(v) = a.range {
         config.range_m = v;
     }
-    config.validate().map_err(|e| bad(e.to_string()))?;
+    config.validate().map_err(bad_from)?;
     let node = create_node(&format!("depositor-r{}-{}", a.robot, std::process::id()))?;
     let summary = run_depositor(&node, &a.common.role_options(a.robot), config)?;
     eprintln!(
@@ -287,8 +287,8 @@ pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
     if let Some(s) = a.seed {
         config.seed = s;
     }
-    config.validate().map_err(|e| bad(e.to_string()))?;
-    let follower = Follower::from_config(a.robot, &config).map_err(|e| bad(e.to_string()))?;
+    config.validate().map_err(bad_from)?;
+    let follower = Follower::from_config(a.robot, &config).map_err(bad_from)?;
     let node = create_node(&format!("follower-r{}-{}", a.robot, std::process::id()))?;
     let summary = run_follower(
         &node,

@@ -14,15 +14,15 @@ use publishers::sim::scenario::{Overrides, Scenario};
 use publishers::sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 use serde_json::{json, Value};
 
-use super::bad;
 use super::roles::load_scenario;
 pub use super::sim_args::SimArgs;
+use super::{bad, bad_from, bad_in};
 
 /// The follower strategy of --strategy (grid scenarios).
 fn follower_strategy(a: &SimArgs) -> anyhow::Result<Option<StrategyKind>> {
     a.strategy
         .as_deref()
-        .map(|s| s.parse::<StrategyKind>().map_err(|e| bad(e.to_string())))
+        .map(|s| s.parse::<StrategyKind>().map_err(bad_from))
         .transpose()
 }
 
@@ -39,7 +39,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             strategy: follower_strategy(&a)?,
             constant: a.constant,
         })
-        .map_err(|e| bad(format!("{}: {e}", a.scenario)))?;
+        .map_err(|e| bad_in(a.scenario.as_str(), e))?;
     if let Some(t) = a.trials {
         return run_trials(&a, &scenario, t);
     }
@@ -188,7 +188,7 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
                 strategy: Some(kind),
                 ..Overrides::default()
             })
-            .map_err(bad)?;
+            .map_err(bad_from)?;
             let rec = if a.single_process {
                 run_single_process(
                     &s,

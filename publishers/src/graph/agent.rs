@@ -36,15 +36,18 @@ impl GraphStrategy {
     }
 }
 
+/// A `--strategy` of a graph run that is not one of [`GraphStrategy::ALL`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("unknown graph strategy '{0}' (expected one of: pheromone, shortest-path)")]
+pub struct UnknownGraphStrategy(pub String);
+
 impl std::str::FromStr for GraphStrategy {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownGraphStrategy;
+    fn from_str(s: &str) -> Result<Self, UnknownGraphStrategy> {
         GraphStrategy::ALL
             .into_iter()
             .find(|k| k.name() == s)
-            .ok_or_else(|| {
-                format!("unknown graph strategy '{s}' (expected one of: pheromone, shortest-path)")
-            })
+            .ok_or_else(|| UnknownGraphStrategy(s.to_string()))
     }
 }
 

@@ -56,10 +56,12 @@ impl std::str::FromStr for RgbRes {
 }
 
 /// A contention message that could not be read.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum ConflictError {
     #[error("contention message: {0}")]
-    Json(String),
+    Json(#[source] serde_json::Error),
+    #[error("contention message: not UTF-8: {0}")]
+    Utf8(#[source] std::str::Utf8Error),
     #[error("contention message: field '{field}' = '{value}': expected {expected}")]
     Field {
         field: &'static str,
@@ -151,7 +153,7 @@ impl ContendMsg {
 
     /// Reads Listing 1's JSON; every field must be present and well-formed.
     pub fn from_json(text: &str) -> Result<Self, ConflictError> {
-        let w: Wire = serde_json::from_str(text).map_err(|e| ConflictError::Json(e.to_string()))?;
+        let w: Wire = serde_json::from_str(text).map_err(ConflictError::Json)?;
         let p = &w.robot_param;
         fn num<T: std::str::FromStr>(field: &'static str, v: &str) -> Result<T, ConflictError> {
             v.parse().map_err(|_| ConflictError::Field {

@@ -41,8 +41,15 @@ pub struct WriterOptions {
 pub enum GraphRunError {
     #[error(transparent)]
     Shm(#[from] GraphShmError),
-    #[error("{0}")]
-    Setup(String),
+    #[error("robots {robots}: a graph run takes 1 to {max}")]
+    Robots { robots: usize, max: usize },
+    #[error("graph '{name}': {listening} of {robots} robots listen for contention messages after {waited_s:.1} s")]
+    NoListeners {
+        name: String,
+        listening: usize,
+        robots: usize,
+        waited_s: f64,
+    },
     #[error(transparent)]
     Lockstep(#[from] field::lockstep::LockstepError),
     #[error("graph '{name}': the writer is gone (last step seen: {step})")]
@@ -71,10 +78,10 @@ pub fn run_graph_writer(
     o: &WriterOptions,
 ) -> Result<RunReport, GraphRunError> {
     if o.robots == 0 || o.robots > MAX_GRAPH_ROBOTS {
-        return Err(GraphRunError::Setup(format!(
-            "robots {}: a graph run takes 1 to {MAX_GRAPH_ROBOTS}",
-            o.robots
-        )));
+        return Err(GraphRunError::Robots {
+            robots: o.robots,
+            max: MAX_GRAPH_ROBOTS,
+        });
     }
     let mut world = GraphWorld::new(scenario, o.strategy, o.robots, o.seed)?;
     let [(snap, snap_wake), (upd, upd_wake), _] = graph_services(&o.name);
@@ -140,8 +147,15 @@ pub fn run_graph_writer(
         }
         Ok(())
     })();
-    // Announce the end also after a failure, so every robot stops.
-    let _ = publish(&world, true);
+    // Announce the end also after a failure, so every robot stops. After a failure that error
+    // is the one to report; after a run that went well, a robot that never hears of the end
+    // is one.
+    let announced = publish(&world, true);
+    match (&result, announced) {
+        (Err(_), Err(e)) => eprintln!("graph '{}': could not announce the end: {e}", o.name),
+        (Ok(()), Err(e)) => return Err(e.into()),
+        (_, Ok(())) => {}
+    }
     result?;
     Ok(world.report())
 }
@@ -166,11 +180,12 @@ pub fn run_graph_robot(
     // Every port of this robot exists: tell the writer (`field::lockstep`).
     let _joined = lockstep::announce_join(node, name)?;
     if !contention.wait_listeners(robots, timeout)? {
-        return Err(GraphRunError::Setup(format!(
-            "graph '{name}': {} of {robots} robots listen for contention messages after {:.1} s",
-            contention.listeners(),
-            timeout.as_secs_f64()
-        )));
+        return Err(GraphRunError::NoListeners {
+            name: name.to_string(),
+            listening: contention.listeners(),
+            robots,
+            waited_s: timeout.as_secs_f64(),
+        });
     }
     let mut seq = 0u64;
     let mut last_step = None;

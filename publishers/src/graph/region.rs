@@ -101,17 +101,14 @@ impl RegionShape {
         )
     }
 
-    fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), ShapeError> {
         match self {
             RegionShape::Polygon { vertices_m } => {
                 if vertices_m.len() < 3 {
-                    return Err(format!(
-                        "a polygon needs at least 3 vertices, got {}",
-                        vertices_m.len()
-                    ));
+                    return Err(ShapeError::FewVertices(vertices_m.len()));
                 }
                 if vertices_m.iter().flatten().any(|v| !v.is_finite()) {
-                    return Err("polygon vertices must be finite".into());
+                    return Err(ShapeError::NonFiniteVertex);
                 }
             }
             RegionShape::Cells {
@@ -120,10 +117,10 @@ impl RegionShape {
                 cells,
             } => {
                 if !(cell_size_m.is_finite() && *cell_size_m > 0.0) {
-                    return Err(format!("cell_size_m {cell_size_m} must be > 0"));
+                    return Err(ShapeError::CellSize(*cell_size_m));
                 }
                 if origin_m.iter().any(|v| !v.is_finite()) || cells.is_empty() {
-                    return Err("cells need a finite origin and at least one cell".into());
+                    return Err(ShapeError::NoCells);
                 }
             }
         }
@@ -171,10 +168,29 @@ impl Region {
     }
 }
 
+/// Why a region's shape cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ShapeError {
+    #[error("a polygon needs at least 3 vertices, got {0}")]
+    FewVertices(usize),
+    #[error("polygon vertices must be finite")]
+    NonFiniteVertex,
+    #[error("cell_size_m {0} must be > 0")]
+    CellSize(f32),
+    #[error("cells need a finite origin and at least one cell")]
+    NoCells,
+}
+
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RegionError {
     #[error("region '{region}': {detail}")]
     Invalid { region: String, detail: String },
+    #[error("region '{region}': {source}")]
+    Shape {
+        region: String,
+        #[source]
+        source: ShapeError,
+    },
     #[error("region index {0} out of range")]
     Index(usize),
     #[error("region '{region}': robot {robot} cannot release it, it does not hold it")]
@@ -217,7 +233,10 @@ impl RegionTable {
             if c.max_r == 0 {
                 return Err(bad("max_r 0: a region must admit at least one robot".into()));
             }
-            c.shape.validate().map_err(bad)?;
+            c.shape.validate().map_err(|source| RegionError::Shape {
+                region: c.name.clone(),
+                source,
+            })?;
             let node =
                 node_of(&c.node).ok_or_else(|| bad(format!("unknown graph node '{}'", c.node)))?;
             regions.push(Region {

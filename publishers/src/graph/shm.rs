@@ -191,17 +191,16 @@ impl GraphSnapshot {
     /// `base` (the same graph and regions, from the same scenario) with this snapshot's link
     /// values and captures; an error if the structure differs.
     pub fn apply_to(&self, base: &GraphState) -> Result<GraphState, GraphShmError> {
-        let mismatch = |what: String| GraphShmError::Mismatch(what);
         if self.n_nodes as usize != base.graph.len()
             || self.n_regions as usize != base.regions.len()
         {
-            return Err(mismatch(format!(
-                "snapshot has {} nodes and {} regions, the scenario {} and {}",
-                self.n_nodes,
-                self.n_regions,
-                base.graph.len(),
-                base.regions.len()
-            )));
+            return Err(SnapshotMismatch::Size {
+                nodes: self.n_nodes,
+                regions: self.n_regions,
+                scenario_nodes: base.graph.len(),
+                scenario_regions: base.regions.len(),
+            }
+            .into());
         }
         let mut s = base.clone();
         for (i, slot) in self.nodes[..self.n_nodes as usize].iter().enumerate() {
@@ -209,12 +208,13 @@ impl GraphSnapshot {
             for d in Dir::ALL {
                 let to = n.links[d.index()].map(|l| l.to as u32).unwrap_or(NO_LINK);
                 if to != slot.link_to[d.index()] {
-                    return Err(mismatch(format!(
-                        "node '{}' link {}: snapshot leads to {}, the scenario to {to}",
-                        n.name,
-                        d.name(),
-                        slot.link_to[d.index()]
-                    )));
+                    return Err(SnapshotMismatch::Link {
+                        node: n.name.clone(),
+                        dir: d.name(),
+                        snapshot: slot.link_to[d.index()],
+                        scenario: to,
+                    }
+                    .into());
                 }
                 if to != NO_LINK {
                     let v = slot.link_value[d.index()];
@@ -318,11 +318,8 @@ impl GraphUpdateMsg {
     }
 
     /// The update, or why the message is malformed.
-    pub fn update(&self) -> Result<GraphUpdate, String> {
-        let dir = || {
-            Dir::from_index(self.dir as usize)
-                .ok_or_else(|| format!("unknown link direction {}", self.dir))
-        };
+    pub fn update(&self) -> Result<GraphUpdate, MalformedUpdate> {
+        let dir = || Dir::from_index(self.dir as usize).ok_or(MalformedUpdate::Dir(self.dir));
         Ok(match self.kind {
             kind::ADD_TO_LINK => GraphUpdate::AddToLink {
                 node: self.node as usize,
@@ -341,8 +338,8 @@ impl GraphUpdateMsg {
                 region: self.region as usize,
                 robot: self.robot_id,
             },
-            kind::STEP_DONE => return Err("a step-done message is not an update".into()),
-            k => return Err(format!("unknown update kind {k}")),
+            kind::STEP_DONE => return Err(MalformedUpdate::StepDone),
+            k => return Err(MalformedUpdate::Kind(k)),
         })
     }
 }
@@ -399,8 +396,7 @@ impl ContendWire {
                 max: CONTEND_BYTES,
             });
         }
-        let text = std::str::from_utf8(&self.text[..n])
-            .map_err(|e| ConflictError::Json(format!("not UTF-8: {e}")))?;
+        let text = std::str::from_utf8(&self.text[..n]).map_err(ConflictError::Utf8)?;
         ContendMsg::from_json(text)
     }
 }
@@ -416,13 +412,53 @@ pub enum GraphShmError {
         max: usize,
     },
     #[error("graph snapshot does not match the scenario: {0}")]
-    Mismatch(String),
+    Mismatch(#[from] SnapshotMismatch),
     #[error("graph update on '{0}' was not delivered (no graph server, or its buffer is full)")]
     NotDelivered(String),
     #[error(transparent)]
     Graph(#[from] GraphError),
     #[error(transparent)]
     Conflict(#[from] ConflictError),
+}
+
+/// How a snapshot's structure differs from the scenario's graph.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SnapshotMismatch {
+    #[error("snapshot has {nodes} nodes and {regions} regions, the scenario {scenario_nodes} and {scenario_regions}")]
+    Size {
+        nodes: u32,
+        regions: u32,
+        scenario_nodes: usize,
+        scenario_regions: usize,
+    },
+    #[error("node '{node}' link {dir}: snapshot leads to {snapshot}, the scenario to {scenario}")]
+    Link {
+        node: String,
+        dir: &'static str,
+        snapshot: u32,
+        scenario: u32,
+    },
+}
+
+/// Why a [`GraphUpdateMsg`] is not an update.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MalformedUpdate {
+    #[error("unknown link direction {0}")]
+    Dir(u32),
+    #[error("a step-done message is not an update")]
+    StepDone,
+    #[error("unknown update kind {0}")]
+    Kind(u32),
+}
+
+/// Why the server did not apply an update message.
+#[derive(Debug, thiserror::Error)]
+pub enum UpdateRejected {
+    #[error(transparent)]
+    Malformed(#[from] MalformedUpdate),
+    /// The graph refused it (unknown node, link, region …).
+    #[error(transparent)]
+    Refused(#[from] GraphError),
 }
 
 pub use field::wire::graph_services;
@@ -490,10 +526,11 @@ impl GraphServer {
     }
 
     /// Applies one update message in arrival order; a malformed one is counted, never applied.
-    pub fn apply(&mut self, m: &GraphUpdateMsg) -> Result<Option<CaptureOutcome>, String> {
+    pub fn apply(&mut self, m: &GraphUpdateMsg) -> Result<Option<CaptureOutcome>, UpdateRejected> {
         let r = m
             .update()
-            .and_then(|u| self.state.apply(u).map_err(|e| e.to_string()));
+            .map_err(UpdateRejected::from)
+            .and_then(|u| Ok(self.state.apply(u)?));
         match &r {
             Ok(Some(CaptureOutcome::Full)) => self.counters.captures_refused += 1,
             Ok(_) => self.counters.applied += 1,
@@ -514,6 +551,8 @@ impl GraphServer {
         let mut n = 0;
         let mut next = self.updates.recv_timeout(timeout)?;
         while let Some(m) = next {
+            // A rejected update is counted in `counters.rejected` (what the snapshots report);
+            // the server goes on with the next one.
             let _ = self.apply(&m);
             n += 1;
             next = self.updates.try_recv()?;

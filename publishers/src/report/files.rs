@@ -26,6 +26,7 @@ pub(super) fn robot_csv(rows: &[RobotSample]) -> String {
     text.push('\n');
     for r in rows {
         let est = r.est_pose;
+        // Writing into a String cannot fail.
         let _ = writeln!(
             text,
             "{},{},{},{},{},{},{},{},{},{},{},{}",

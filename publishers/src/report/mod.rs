@@ -103,6 +103,7 @@ pub fn write_outputs(
         let mut text = String::from(PROBES_CSV_HEADER);
         text.push('\n');
         for p in &rec.probes {
+            // Writing into a String cannot fail.
             let _ = writeln!(
                 text,
                 "{},{},{},{},{}",

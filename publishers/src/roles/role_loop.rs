@@ -9,15 +9,55 @@ use std::time::{Duration, Instant};
 use field::link::{Receiver, Sender};
 use field::lockstep::{LockstepError, Participant};
 use field::shm::{ShmError, Svc};
+use field::ConfigError;
 use iceoryx2::node::Node;
 
-/// Why a role's loop stopped with an error.
+use crate::roles::depositor::DepositorConfigError;
+use crate::roles::follower::FollowerConfigError;
+use crate::roles::localizer::LocalizerError;
+use crate::roles::world::WorldError;
+use crate::sim::scenario::ScenarioError;
+
+/// Why a role's loop stopped with an error. The set-up errors (`scenario: …`) keep the error of
+/// the scenario part that was refused as their source.
 #[derive(Debug, thiserror::Error)]
 pub enum ProcessError {
     #[error(transparent)]
     Shm(#[from] ShmError),
     #[error("scenario: {0}")]
-    Setup(String),
+    Scenario(#[from] ScenarioError),
+    /// The field of a single-process run cannot be built.
+    #[error("scenario: {0}")]
+    Field(#[source] ConfigError),
+    #[error("scenario: {0}")]
+    World(#[source] WorldError),
+    #[error("scenario: {}{source}", robot_prefix(.robot))]
+    Depositor {
+        /// The robot, where the error names it.
+        robot: Option<u32>,
+        #[source]
+        source: DepositorConfigError,
+    },
+    #[error("scenario: robot {robot}: {source}")]
+    Follower {
+        robot: u32,
+        #[source]
+        source: FollowerConfigError,
+    },
+    #[error("scenario: {0}")]
+    Localizer(#[source] LocalizerError),
+    #[error("scenario: robot {robot} has no [[robot]] entry")]
+    NoRoles { robot: u32 },
+    #[error("scenario: robot {robot} is not in the world")]
+    NotInWorld { robot: u32 },
+    #[error("scenario: robot {robot}: `{key}` = {region:?} restricts the known map of the EKF; EKF-SLAM (--slam) has no map to restrict")]
+    SlamRegion {
+        robot: u32,
+        key: &'static str,
+        region: [f64; 4],
+    },
+    #[error("scenario: interrupted while waiting for the robot processes")]
+    Interrupted(#[source] LockstepError),
     #[error(transparent)]
     Lockstep(#[from] LockstepError),
     #[error("robot {robot} sent no command for step {step} within {timeout_s} s (is its follower running?)")]
@@ -30,6 +70,12 @@ pub enum ProcessError {
 
 pub use field::wire::RobotServices;
 use field::wire::{ready_service as wake, ROBOT_LINK};
+
+/// `robot N: ` where an error names the robot.
+fn robot_prefix(robot: &Option<u32>) -> String {
+    robot.map(|r| format!("robot {r}: ")).unwrap_or_default()
+}
+
 
 pub(crate) fn sender<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,

@@ -7,5 +7,6 @@ pub mod observer;
 pub mod processes;
 pub mod record;
 pub mod scenario;
+mod scenario_error;
 pub mod single;
 pub mod supervisor;

@@ -15,7 +15,7 @@ use crate::roles::world::World;
 use crate::roles::{lockstep_participants, RoleSummary, WorldOptions, WorldSummary};
 use crate::sim::observer::Observer;
 use crate::sim::record::Recording;
-use crate::sim::scenario::Scenario;
+use crate::sim::scenario::{Scenario, ScenarioError};
 use crate::sim::single::{role_name, FieldSummary, RobotResult, RunSummary};
 use crate::sim::supervisor::{ChildId, ChildSpec, Supervisor, SupervisorError};
 
@@ -45,7 +45,7 @@ pub enum ProcessRunError {
     #[error("observer: {0}")]
     Observer(#[from] ShmError),
     #[error("scenario: {0}")]
-    Scenario(String),
+    Scenario(#[from] ScenarioError),
     #[error("cannot write the scenario file {path}: {source}")]
     ScenarioFile {
         path: String,
@@ -94,7 +94,7 @@ impl ScenarioFile {
             source,
         };
         std::fs::create_dir_all(&dir).map_err(io)?;
-        let text = scenario.to_toml().map_err(ProcessRunError::Scenario)?;
+        let text = scenario.to_toml()?;
         std::fs::write(&path, text).map_err(io)?;
         Ok(Self(path))
     }
@@ -102,11 +102,30 @@ impl ScenarioFile {
 
 impl Drop for ScenarioFile {
     fn drop(&mut self) {
-        // A temporary file that another cleanup already removed is not an error.
-        let _ = std::fs::remove_file(&self.0);
+        // A temporary file that another cleanup already removed is not an error; anything else
+        // leaves it behind, and says so.
+        let gone = |r: std::io::Result<()>, what: &std::path::Path| match r {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                eprintln!("sim: cannot remove {}: {e}", what.display())
+            }
+            _ => {}
+        };
+        gone(std::fs::remove_file(&self.0), &self.0);
         if let Some(d) = self.0.parent() {
-            let _ = std::fs::remove_dir(d);
+            gone(std::fs::remove_dir(d), d);
         }
+    }
+}
+
+/// Removes what killed (or crashed) children of run `tag` left in shared memory: their nodes
+/// and the memory behind them. A cleanup that cannot run says so: the leftovers stay until the
+/// next run's cleanup.
+fn cleanup_after(tag: &str) {
+    match create_node(&format!("{tag}-cleanup")) {
+        Ok(node) => {
+            cleanup_dead_nodes(&node);
+        }
+        Err(e) => eprintln!("sim: cannot clean up the shared memory of run {tag}: {e}"),
     }
 }
 
@@ -136,9 +155,7 @@ pub fn run_as_processes(
         sup.stop_all(Duration::from_secs(5));
     }
     // Children killed (or crashed) leave their nodes behind: remove them, and their memory.
-    if let Ok(node) = create_node(&format!("{tag}-cleanup")) {
-        cleanup_dead_nodes(&node);
-    }
+    cleanup_after(&tag);
     drop(file);
     result
 }
@@ -445,8 +462,6 @@ pub fn run_graph_as_processes(
     if result.is_err() {
         sup.stop_all(Duration::from_secs(5));
     }
-    if let Ok(node) = create_node(&format!("{tag}-cleanup")) {
-        cleanup_dead_nodes(&node);
-    }
+    cleanup_after(&tag);
     result
 }

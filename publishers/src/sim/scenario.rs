@@ -12,6 +12,8 @@ use crate::roles::follower::{FollowerConfig, StrategyKind};
 use crate::roles::localizer::EkfConfig;
 use crate::roles::world::WorldConfig;
 
+pub use super::scenario_error::{DepositError, ScenarioError};
+
 /// Built-in scenarios: (name, TOML text).
 pub const BUILTIN: &[(&str, &str)] = &[
     (
@@ -39,21 +41,8 @@ pub const BUILTIN: &[(&str, &str)] = &[
 /// The scenario `pheromone sim` runs when none is named.
 pub const DEFAULT_SCENARIO: &str = "blind-leader";
 
-/// Why a scenario could not be loaded. Names the file (or built-in) and what is wrong.
-#[derive(Debug, thiserror::Error)]
-pub enum ScenarioError {
-    #[error("{origin}: cannot read: {detail}")]
-    Read { origin: String, detail: String },
-    #[error("{origin}: {detail}")]
-    Parse { origin: String, detail: String },
-    #[error("{origin}: {detail}")]
-    Invalid { origin: String, detail: String },
-    #[error("unknown scenario '{0}': not a file, and not a built-in ({builtins})", builtins = builtin_names())]
-    Unknown(String),
-}
-
 /// Every built-in scenario name: the grid ones, then the node-graph (`regions`) ones.
-fn builtin_names() -> String {
+pub(super) fn builtin_names() -> String {
     BUILTIN
         .iter()
         .chain(crate::graph::agent::BUILTIN_REGIONS.iter())
@@ -269,8 +258,11 @@ fn default_sigma_m() -> f32 {
 
 impl ScriptedDeposit {
     /// The deposit messages this entry stands for.
-    pub fn messages(&self) -> Result<Vec<DepositMsg>, String> {
-        let kernel: KernelKind = self.kernel.parse()?;
+    pub fn messages(&self) -> Result<Vec<DepositMsg>, DepositError> {
+        let kernel = self
+            .kernel
+            .parse::<KernelKind>()
+            .map_err(|e| DepositError::Kernel(e.into()))?;
         let one = |x_m: f32, y_m: f32| DepositMsg {
             channel: self.channel,
             kernel: kernel as u32,
@@ -291,14 +283,12 @@ impl ScriptedDeposit {
             (None, None, None) => Ok(vec![one(self.x_m, self.y_m)]),
             (Some(tx), Some(ty), Some(sp)) => {
                 if !(sp.is_finite() && sp > 0.0) {
-                    return Err(format!("spacing_m = {sp}: must be > 0"));
+                    return Err(DepositError::Spacing { spacing_m: sp });
                 }
                 let len = ((tx - self.x_m).powi(2) + (ty - self.y_m).powi(2)).sqrt();
                 let n = (len / sp).floor() as usize;
                 if n > 1_000_000 {
-                    return Err(format!(
-                        "a line of {n} deposits is too long (spacing_m = {sp})"
-                    ));
+                    return Err(DepositError::TooLong { n, spacing_m: sp });
                 }
                 Ok((0..=n)
                     .map(|i| {
@@ -310,7 +300,7 @@ impl ScriptedDeposit {
                     })
                     .collect())
             }
-            _ => Err("a line needs all of to_x_m, to_y_m and spacing_m".into()),
+            _ => Err(DepositError::IncompleteLine),
         }
     }
 }
@@ -320,9 +310,9 @@ impl Scenario {
     pub fn load(name_or_path: &str) -> Result<Self, ScenarioError> {
         let path = Path::new(name_or_path);
         if path.is_file() {
-            let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read {
+            let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
                 origin: path.display().to_string(),
-                detail: e.to_string(),
+                source,
             })?;
             return Self::parse(&text, &path.display().to_string());
         }
@@ -336,87 +326,96 @@ impl Scenario {
     pub fn parse(text: &str, origin: &str) -> Result<Self, ScenarioError> {
         let s: Scenario = toml::from_str(text).map_err(|e| ScenarioError::Parse {
             origin: origin.to_string(),
-            detail: e.to_string(),
+            source: Box::new(e),
         })?;
-        s.validate().map_err(|detail| ScenarioError::Invalid {
+        s.validate().map_err(|e| ScenarioError::Invalid {
             origin: origin.to_string(),
-            detail,
+            source: Box::new(e),
         })?;
         Ok(s)
     }
 
     /// Cross-checks the parts: sizes, the field clock against the world step, robot ids.
-    pub fn validate(&self) -> Result<(), String> {
-        self.field.validate().map_err(|e| format!("field: {e}"))?;
+    pub fn validate(&self) -> Result<(), ScenarioError> {
+        self.field.validate().map_err(ScenarioError::Field)?;
         if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
-            return Err(format!("duration_s = {}: must be > 0", self.duration_s));
+            return Err(ScenarioError::value(
+                "duration_s",
+                self.duration_s,
+                "must be > 0",
+            ));
         }
         let field_dt = 1.0 / self.field.tick_hz as f64;
         if (field_dt - self.world.dt_s).abs() > 1e-6 * self.world.dt_s.max(1e-9) + 1e-9 {
-            return Err(format!(
-                "field.tick_hz = {} gives dt = {field_dt} s but world.dt_s = {}: in lockstep the field ticks once per world step",
-                self.field.tick_hz, self.world.dt_s
-            ));
+            return Err(ScenarioError::ClockMismatch {
+                tick_hz: self.field.tick_hz,
+                field_dt,
+                world_dt: self.world.dt_s,
+            });
         }
         for r in &self.robots {
             if !self.world.robots.iter().any(|w| w.id == r.id) {
-                return Err(format!(
-                    "robot id = {}: no [[world.robots]] entry with that id",
-                    r.id
-                ));
+                return Err(ScenarioError::NoWorldRobot { robot: r.id });
             }
+            let robot = r.id;
             r.localizer
                 .validate()
-                .map_err(|e| format!("robot {} localizer: {e}", r.id))?;
+                .map_err(|source| ScenarioError::Localizer { robot, source })?;
             if let Some(d) = &r.depositor {
                 d.validate()
-                    .map_err(|e| format!("robot {} depositor: {e}", r.id))?;
+                    .map_err(|source| ScenarioError::Depositor { robot, source })?;
             }
             if let Some(f) = &r.follower {
                 f.validate()
-                    .map_err(|e| format!("robot {} follower: {e}", r.id))?;
+                    .map_err(|source| ScenarioError::Follower { robot, source })?;
             }
         }
         for (i, d) in self.deposits.iter().enumerate() {
-            d.messages()
-                .map_err(|e| format!("deposit {}: {e}", i + 1))?;
+            d.messages().map_err(|source| ScenarioError::Deposit {
+                index: i + 1,
+                source,
+            })?;
         }
         crate::roles::world::World::new(self.world.clone(), self.seed)
-            .map_err(|e| e.to_string())?;
+            .map_err(ScenarioError::World)?;
         if let Some(n) = self.active_robots {
             if n == 0 || n > self.world.robots.len() {
-                return Err(format!(
-                    "active_robots = {n}: the world has {} robot(s); choose 1 to {}",
-                    self.world.robots.len(),
-                    self.world.robots.len()
-                ));
+                return Err(ScenarioError::ActiveRobots {
+                    n,
+                    robots: self.world.robots.len(),
+                });
             }
         }
         let channels = self.field.channels.len() as u32;
         if let Some(m) = &self.mark_walls {
             if m.channel >= channels {
-                return Err(format!(
-                    "mark_walls.channel = {}: the field has {channels} channel(s)",
-                    m.channel
-                ));
+                return Err(ScenarioError::Channel {
+                    key: "mark_walls.channel".into(),
+                    channel: m.channel,
+                    channels,
+                });
             }
             if !(m.spacing_m.is_finite() && m.spacing_m > 0.0) {
-                return Err(format!(
-                    "mark_walls.spacing_m = {}: must be > 0",
-                    m.spacing_m
+                return Err(ScenarioError::value(
+                    "mark_walls.spacing_m",
+                    m.spacing_m,
+                    "must be > 0",
                 ));
             }
         }
         for (i, p) in self.probes.iter().enumerate() {
             if p.channel >= channels {
-                return Err(format!(
-                    "probe {}: channel = {}: the field has {channels} channel(s)",
-                    i + 1,
-                    p.channel
-                ));
+                return Err(ScenarioError::Channel {
+                    key: format!("probe {}: channel", i + 1),
+                    channel: p.channel,
+                    channels,
+                });
             }
             if let Some(t) = p.times_s.iter().find(|t| !(t.is_finite() && **t >= 0.0)) {
-                return Err(format!("probe {}: times_s has {t}: must be ≥ 0", i + 1));
+                return Err(ScenarioError::NegativeTime {
+                    key: format!("probe {}: times_s", i + 1),
+                    value: *t,
+                });
             }
         }
         if let Some(t) = self
@@ -424,51 +423,61 @@ impl Scenario {
             .iter()
             .find(|t| !(t.is_finite() && **t >= 0.0))
         {
-            return Err(format!("snapshots_s has {t}: must be ≥ 0"));
+            return Err(ScenarioError::NegativeTime {
+                key: "snapshots_s".into(),
+                value: *t,
+            });
         }
         for p in &self.metrics.paths {
             if p.points.len() < 2 {
-                return Err(format!(
-                    "metrics.paths '{}': needs at least 2 points",
-                    p.name
-                ));
+                return Err(ScenarioError::Metric {
+                    metric: format!("metrics.paths '{}'", p.name),
+                    reason: "needs at least 2 points".into(),
+                });
             }
             if !(p.every_s > 0.0 && p.over_s > 0.0) {
-                return Err(format!(
-                    "metrics.paths '{}': every_s = {} and over_s = {} must be > 0",
-                    p.name, p.every_s, p.over_s
-                ));
+                return Err(ScenarioError::Metric {
+                    metric: format!("metrics.paths '{}'", p.name),
+                    reason: format!(
+                        "every_s = {} and over_s = {} must be > 0",
+                        p.every_s, p.over_s
+                    ),
+                });
             }
         }
         if let Some(e) = &self.metrics.exploration {
             if e.cols == 0 || e.rows == 0 || e.max_m[0] <= e.min_m[0] || e.max_m[1] <= e.min_m[1] {
-                return Err(format!(
-                    "metrics.exploration: {e:?} is an empty grid of sectors"
-                ));
+                return Err(ScenarioError::Metric {
+                    metric: "metrics.exploration".into(),
+                    reason: format!("{e:?} is an empty grid of sectors"),
+                });
             }
         }
         Ok(())
     }
 
     /// Applies `pheromone sim`'s flags and re-validates. Keeps only the active robots.
-    pub fn apply(&mut self, o: &Overrides) -> Result<(), String> {
+    pub fn apply(&mut self, o: &Overrides) -> Result<(), ScenarioError> {
         if let Some(seed) = o.seed {
             self.seed = seed;
         }
         if let Some(d) = o.duration_s {
             if !(d.is_finite() && d > 0.0) {
-                return Err(format!("--duration {d}: must be > 0"));
+                return Err(ScenarioError::Flag {
+                    flag: "--duration",
+                    value: d.to_string(),
+                    reason: "must be > 0",
+                });
             }
             self.duration_s = d;
         }
         if let Some(n) = o.robots {
             if n == 0 || n > self.world.robots.len() {
-                return Err(format!(
-                    "--robots {n}: scenario '{}' places {} robot(s); choose 1 to {}",
-                    self.name,
-                    self.world.robots.len(),
-                    self.world.robots.len()
-                ));
+                return Err(ScenarioError::Robots {
+                    n,
+                    scenario: self.name.clone(),
+                    robots: self.world.robots.len(),
+                });
             }
             self.active_robots = Some(n);
         }
@@ -510,7 +519,7 @@ impl Scenario {
     pub fn scripted(
         &self,
         walls: &[crate::roles::world::Segment],
-    ) -> Result<Vec<(f64, DepositMsg)>, String> {
+    ) -> Result<Vec<(f64, DepositMsg)>, ScenarioError> {
         let mut out = Vec::new();
         if let Some(m) = &self.mark_walls {
             for w in walls {
@@ -531,13 +540,15 @@ impl Scenario {
                     plateau_m: m.plateau_m,
                     slope_m: 0.0,
                 };
-                out.extend(d.messages()?.into_iter().map(|m| (0.0, m)));
+                let msgs = d.messages().map_err(ScenarioError::WallMark)?;
+                out.extend(msgs.into_iter().map(|m| (0.0, m)));
             }
         }
         for (i, d) in self.deposits.iter().enumerate() {
-            let msgs = d
-                .messages()
-                .map_err(|e| format!("deposit {}: {e}", i + 1))?;
+            let msgs = d.messages().map_err(|source| ScenarioError::Deposit {
+                index: i + 1,
+                source,
+            })?;
             out.extend(msgs.into_iter().map(|m| (d.t_s, m)));
         }
         out.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -553,14 +564,14 @@ impl Scenario {
     /// deposit is dropped. Readers: every follower, the observer and two spare. Deposit queue:
     /// the largest number of deposits one step can bring (the scripted ones due at that step,
     /// one per depositor) and 64 spare.
-    pub fn field_config_for_processes(&self) -> Result<FieldConfig, String> {
+    pub fn field_config_for_processes(&self) -> Result<FieldConfig, ScenarioError> {
         let mut c = self.field.clone();
         let followers = self.robots.iter().filter(|r| r.follower.is_some()).count();
         let depositors = self.robots.iter().filter(|r| r.depositor.is_some()).count();
         c.max_readers = c.max_readers.max(followers + 3);
         c.max_depositors = c.max_depositors.max(depositors + 2);
         let world = crate::roles::world::World::new(self.world.clone(), self.seed)
-            .map_err(|e| e.to_string())?;
+            .map_err(ScenarioError::World)?;
         let dt = self.world.dt_s;
         let mut per_step = std::collections::BTreeMap::<u64, usize>::new();
         for (t, _) in self.scripted(world.wall_segments())? {
@@ -570,7 +581,7 @@ impl Scenario {
         }
         let burst = per_step.values().copied().max().unwrap_or(0);
         c.deposit_buffer = c.deposit_buffer.max(burst + depositors + 64);
-        c.validate().map_err(|e| e.to_string())?;
+        c.validate().map_err(ScenarioError::FieldLimits)?;
         Ok(c)
     }
 
@@ -587,8 +598,8 @@ impl Scenario {
     }
 
     /// The scenario as TOML (what `--print-config`-style dumps and sub-processes read).
-    pub fn to_toml(&self) -> Result<String, String> {
-        toml::to_string(self).map_err(|e| e.to_string())
+    pub fn to_toml(&self) -> Result<String, ScenarioError> {
+        toml::to_string(self).map_err(ScenarioError::Serialize)
     }
 
     /// Number of world steps the run lasts.
@@ -625,6 +636,34 @@ mod tests {
         assert!(e.contains("y.toml") && e.contains("duration_s = -1"), "{e}");
         let e = Scenario::load("no-such-scenario").unwrap_err().to_string();
         assert!(e.contains("no-such-scenario") && e.contains("trail"), "{e}");
+    }
+
+    #[test]
+    fn a_refused_scenario_keeps_what_was_refused_as_its_source() {
+        use std::error::Error;
+        let e = Scenario::parse("name = 'x'\nduration_s = -1\n", "y.toml").unwrap_err();
+        let inner = e
+            .source()
+            .and_then(|s| s.downcast_ref::<Box<ScenarioError>>());
+        assert!(
+            matches!(inner.map(|b| &**b), Some(ScenarioError::Value { key, .. }) if key == "duration_s"),
+            "{e:?}"
+        );
+        let mut s = Scenario::load("trail").unwrap();
+        s.deposits[0].kernel = "blob".into();
+        let e = s.validate().unwrap_err();
+        assert!(
+            matches!(
+                &e,
+                ScenarioError::Deposit {
+                    index: 1,
+                    source: DepositError::Kernel(_)
+                }
+            ),
+            "{e:?}"
+        );
+        let kernel = e.source().and_then(|d| d.source()).map(|k| k.to_string());
+        assert!(kernel.is_some_and(|k| k.contains("'blob'")), "{e}");
     }
 
     #[test]

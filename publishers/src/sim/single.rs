@@ -138,24 +138,27 @@ pub fn run_single_process(
     scenario: &Scenario,
     mut options: SingleProcessOptions<'_>,
 ) -> Result<(RunSummary, Recording), ProcessError> {
-    let setup = |e: String| ProcessError::Setup(e);
     let mut world =
-        World::new(scenario.world.clone(), scenario.seed).map_err(|e| setup(e.to_string()))?;
-    let mut field = OwnedField::new(scenario.field.clone()).map_err(|e| setup(e.to_string()))?;
-    let mut scripted =
-        std::collections::VecDeque::from(scenario.scripted(world.wall_segments()).map_err(setup)?);
+        World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::World)?;
+    let mut field = OwnedField::new(scenario.field.clone()).map_err(ProcessError::Field)?;
+    let mut scripted = std::collections::VecDeque::from(scenario.scripted(world.wall_segments())?);
     let scripted_total = scripted.len() as u64;
     let mut robots = Vec::new();
     for r in &scenario.world.robots {
         let roles = scenario.roles(r.id);
         let depositor = match roles.and_then(|x| x.depositor.clone()) {
-            Some(c) => Some(Depositor::new(c).map_err(|e| setup(format!("robot {}: {e}", r.id)))?),
+            Some(c) => Some(Depositor::new(c).map_err(|source| ProcessError::Depositor {
+                robot: Some(r.id),
+                source,
+            })?),
             None => None,
         };
         let follower = match scenario.follower_config(r.id) {
             Some(c) => Some((
-                Follower::from_config(r.id, &c)
-                    .map_err(|e| setup(format!("robot {}: {e}", r.id)))?,
+                Follower::from_config(r.id, &c).map_err(|source| ProcessError::Follower {
+                    robot: r.id,
+                    source,
+                })?,
                 c.steer_by,
             )),
             None => None,
@@ -190,16 +193,16 @@ pub fn run_single_process(
         }
         for (r, out) in robots.iter_mut().zip(&outputs) {
             r.collisions += out.truth.collided as u64;
-            if let Err(e) = r.filter.step(&out.sensor) {
-                // The localizer keeps its previous estimate, as the process does.
-                let _ = e;
-            }
+            // A rejected sensor message: the localizer keeps its previous estimate, as the
+            // process does (which also logs it).
+            let _ = r.filter.step(&out.sensor);
             let mut p = r.filter.to_msg(r.id, k);
             // Simulated time as the stamp: deterministic, and what interval_s measures.
             p.stamp_ns = (t * 1e9).round() as u64;
             r.pose = Some(p);
             if let Some(d) = r.depositor.as_mut() {
                 if let Ok(Some(m)) = d.process(&p) {
+                    // A rejection is counted by the field.
                     let _ = field.offer(&m);
                 }
             }

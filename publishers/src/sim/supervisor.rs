@@ -203,8 +203,12 @@ impl Supervisor {
                     }
                     if let Some(f) = log.as_mut() {
                         use std::io::Write;
-                        // A log that cannot be written loses lines, not the child's output.
-                        let _ = writeln!(f, "{line}");
+                        // A log that cannot be written loses lines, not the child's output:
+                        // say so once and stop writing it.
+                        if let Err(e) = writeln!(f, "{line}") {
+                            eprintln!("[{who}] cannot write its log: {e}; the log ends here");
+                            log = None;
+                        }
                     }
                     if let Ok(mut t) = tail.lock() {
                         if t.len() == STDERR_KEPT_LINES {
@@ -300,13 +304,8 @@ impl Supervisor {
 
     /// The last lines the child wrote to stderr (all of them once it has exited).
     pub fn stderr_tail(&mut self, id: ChildId) -> String {
-        let c = &mut self.children[id.0];
-        if c.exit.is_some() {
-            if let Some(h) = c.stderr.take() {
-                // The pipe closes when the child exits; a reader that panicked left what it had.
-                let _ = h.join();
-            }
-        }
+        self.join_stderr(id);
+        let c = &self.children[id.0];
         c.stderr_tail
             .lock()
             .map(|t| {
@@ -314,6 +313,22 @@ impl Supervisor {
                 t.iter().skip(skip).cloned().collect::<Vec<_>>().join("\n")
             })
             .unwrap_or_default()
+    }
+
+    /// Once the child has exited, waits for its stderr reader (the pipe closes when the child
+    /// exits). A reader that panicked left what it had read.
+    fn join_stderr(&mut self, id: ChildId) {
+        let c = &mut self.children[id.0];
+        if c.exit.is_some() {
+            if let Some(h) = c.stderr.take() {
+                if h.join().is_err() {
+                    eprintln!(
+                        "supervisor: the stderr reader of {} panicked; its output may be cut short",
+                        c.spec.who()
+                    );
+                }
+            }
+        }
     }
 
     /// Takes what the child has printed on stdout so far into its kept lines (all of it once
@@ -340,12 +355,7 @@ impl Supervisor {
     /// Everything the child printed: its stdout and its stderr (the last lines kept), each
     /// line ending in a newline.
     pub fn output(&mut self, id: ChildId) -> (String, String) {
-        if self.children[id.0].exit.is_some() {
-            if let Some(h) = self.children[id.0].stderr.take() {
-                // The pipe closes when the child exits; a reader that panicked left what it had.
-                let _ = h.join();
-            }
-        }
+        self.join_stderr(id);
         self.drain_stdout(id);
         let c = &self.children[id.0];
         let join = |lines: &mut dyn Iterator<Item = &String>| {
@@ -366,12 +376,9 @@ impl Supervisor {
 
     /// Sends `signal` to the child unless it is known to have exited.
     pub fn signal(&self, id: ChildId, signal: nix::sys::signal::Signal) {
-        if self.children[id.0].exit.is_none() {
-            // A child that exited between the check and the signal is not an error.
-            let _ = nix::sys::signal::kill(
-                nix::unistd::Pid::from_raw(self.children[id.0].pid as i32),
-                signal,
-            );
+        let c = &self.children[id.0];
+        if c.exit.is_none() {
+            send_signal(c, signal);
         }
     }
 
@@ -452,8 +459,7 @@ impl Supervisor {
     fn signal_running(&self, signal: nix::sys::signal::Signal) {
         for c in self.children.iter().rev() {
             if c.exit.is_none() {
-                // A child that exited between the check and the signal is not an error.
-                let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(c.pid as i32), signal);
+                send_signal(c, signal);
             }
         }
     }
@@ -498,6 +504,19 @@ impl Drop for Supervisor {
         if !self.children.iter().all(|c| c.exit.is_some()) {
             self.stop_all(Duration::from_secs(3));
         }
+    }
+}
+
+/// Sends `signal` to the child. A child that exited between the check and the signal (ESRCH)
+/// is not an error; any other failure is reported.
+fn send_signal(c: &Child, signal: nix::sys::signal::Signal) {
+    match nix::sys::signal::kill(nix::unistd::Pid::from_raw(c.pid as i32), signal) {
+        Ok(()) | Err(nix::errno::Errno::ESRCH) => {}
+        Err(e) => eprintln!(
+            "supervisor: cannot send {signal} to {} (pid {}): {e}",
+            c.spec.who(),
+            c.pid
+        ),
     }
 }
 

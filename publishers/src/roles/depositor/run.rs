@@ -21,7 +21,10 @@ pub fn run_depositor(
     config: crate::roles::depositor::DepositorConfig,
 ) -> Result<RoleSummary, ProcessError> {
     let robot = o.robot;
-    let mut depositor = Depositor::new(config).map_err(|e| ProcessError::Setup(e.to_string()))?;
+    let mut depositor = Depositor::new(config).map_err(|source| ProcessError::Depositor {
+        robot: None,
+        source,
+    })?;
     let s = RobotServices::new(&o.world, robot);
     let poses = receiver::<PoseMsg>(node, &s.pose)?;
     let mut publisher =

@@ -576,7 +576,7 @@ mod tests {
         // A scenario with a bad region fails validation naming the robot and the key.
         let mut scenario = crate::sim::scenario::Scenario::load("trail").unwrap();
         scenario.robots[0].localizer.landmark_region_m = Some([1.0, 1.0, 0.0, 2.0]);
-        let e = scenario.validate().unwrap_err();
+        let e = scenario.validate().unwrap_err().to_string();
         assert!(
             e.contains("localizer") && e.contains("`landmark_region_m`"),
             "{e}"

@@ -70,23 +70,24 @@ impl Filter {
     pub fn for_robot(scenario: &Scenario, robot: u32, slam: bool) -> Result<Self, ProcessError> {
         let roles = scenario
             .roles(robot)
-            .ok_or_else(|| ProcessError::Setup(format!("robot {robot} has no [[robot]] entry")))?;
+            .ok_or(ProcessError::NoRoles { robot })?;
         let start = scenario
             .world
             .robots
             .iter()
             .find(|r| r.id == robot)
-            .ok_or_else(|| ProcessError::Setup(format!("robot {robot} is not in the world")))?
+            .ok_or(ProcessError::NotInWorld { robot })?
             .start;
         let var = roles.initial_sigma_m.powi(2);
         let cov0 = Matrix3::from_diagonal(&nalgebra::Vector3::new(var, var, (0.05f64).powi(2)));
         Ok(if slam {
             // EKF-SLAM: landmarks are not given, they join the state as they are seen.
             if let Some(region) = roles.localizer.landmark_region_m {
-                return Err(ProcessError::Setup(format!(
-                    "robot {robot}: `{}` = {region:?} restricts the known map of the EKF; EKF-SLAM (--slam) has no map to restrict",
-                    crate::roles::localizer::LANDMARK_REGION_KEY
-                )));
+                return Err(ProcessError::SlamRegion {
+                    robot,
+                    key: crate::roles::localizer::LANDMARK_REGION_KEY,
+                    region,
+                });
             }
             let config = EkfSlamConfig {
                 noise: roles.localizer.noise,
@@ -94,8 +95,7 @@ impl Filter {
                 ..EkfSlamConfig::default()
             };
             Filter::Slam(Box::new(
-                EkfSlam::new(config, start, cov0)
-                    .map_err(|e| ProcessError::Setup(e.to_string()))?,
+                EkfSlam::new(config, start, cov0).map_err(ProcessError::Localizer)?,
             ))
         } else {
             Filter::Ekf(Box::new(
@@ -105,7 +105,7 @@ impl Filter {
                     start,
                     cov0,
                 )
-                .map_err(|e| ProcessError::Setup(e.to_string()))?,
+                .map_err(ProcessError::Localizer)?,
             ))
         })
     }

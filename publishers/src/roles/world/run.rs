@@ -80,8 +80,8 @@ pub fn run_world(
     o: &WorldOptions,
 ) -> Result<WorldSummary, ProcessError> {
     let started = Instant::now();
-    let mut world = World::new(scenario.world.clone(), scenario.seed)
-        .map_err(|e| ProcessError::Setup(e.to_string()))?;
+    let mut world =
+        World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::World)?;
     let ids: Vec<u32> = scenario.world.robots.iter().map(|r| r.id).collect();
     let mut conductor = Conductor::create(node, &o.world, !o.realtime)?;
     let mut sensors = Vec::new();
@@ -124,19 +124,11 @@ pub fn run_world(
             timeout,
         ) {
             Ok(_) => started.elapsed(),
-            Err(LockstepError::Interrupted { .. }) => {
-                return Err(ProcessError::Setup(
-                    "interrupted while waiting for the robot processes".into(),
-                ))
-            }
+            Err(e @ LockstepError::Interrupted { .. }) => return Err(ProcessError::Interrupted(e)),
             Err(e) => return Err(e.into()),
         };
     }
-    let mut scripted = std::collections::VecDeque::from(
-        scenario
-            .scripted(world.wall_segments())
-            .map_err(ProcessError::Setup)?,
-    );
+    let mut scripted = std::collections::VecDeque::from(scenario.scripted(world.wall_segments())?);
     let mut depositor = if scripted.is_empty() {
         None
     } else {
