@@ -1,0 +1,178 @@
+"""The shared-memory contract of a pheromone field, as ctypes: the Python mirror of
+`field/src/wire.rs` and the field's wire types in `field/src/messages.rs`.
+
+Everything here must match the Rust layout byte for byte: `python/tests/test_wire.py` parses
+the Rust sources (the layout-version literal in `wire.rs`, the `wire_type!` size and alignment
+and the struct fields in `messages.rs`) and fails when this module diverges from them. Change the
+Rust side first (its layout version is the one place to bump), then this file.
+"""
+
+import ctypes
+
+#: Layout version of every wire type (`field::wire::LAYOUT_VERSION`); part of every type name.
+LAYOUT_VERSION = 1
+
+#: Number of deposit rejection reasons (`field::deposit::REJECT_REASONS`).
+REJECT_REASONS = 7
+
+#: Names of the rejection reasons, in the order of `FrameHeader.deposits_rejected`
+#: (`RejectReason::name`).
+REJECT_REASON_NAMES = (
+    "non_finite",
+    "not_psd",
+    "unknown_channel",
+    "unknown_kernel",
+    "out_of_limits",
+    "outside_grid",
+    "negative_on_unsigned",
+)
+
+#: Deposit kernel codes (`KernelKind`), by their CLI names (`KernelKind::name`).
+KERNELS = {"ellipse": 0, "paper": 1, "saturating": 2, "z-shape": 3}
+
+#: Event id the field notifies on `frame-ready` after each frame.
+FRAME_READY_EVENT_ID = 0
+
+#: Frames one reader may hold at once (`wire::READER_BORROWED_FRAMES`): the frame service's
+#: `subscriber_max_borrowed_samples`.
+READER_BORROWED_FRAMES = 2
+
+#: Frames each subscriber buffers (`wire::FRAME_SUBSCRIBER_BUFFER`).
+FRAME_SUBSCRIBER_BUFFER = 1
+
+
+def wire_type_name(name: str, layout_version: int = LAYOUT_VERSION) -> str:
+    """The iceoryx2 type name of wire type `name`: `pheromone::<name>/v<layout>` (`wire_type!`)."""
+    return f"pheromone::{name}/v{layout_version}"
+
+
+def frame_service(field: str) -> str:
+    return f"pheromone/{field}/frame"
+
+
+def frame_ready_service(field: str) -> str:
+    return f"pheromone/{field}/frame-ready"
+
+
+def deposit_service(field: str) -> str:
+    return f"pheromone/{field}/deposit"
+
+
+def check_name(name: str) -> None:
+    """Field names: 1–64 characters of `[A-Za-z0-9_-]` (`shm::check_name`)."""
+    ok = (
+        isinstance(name, str)
+        and 0 < len(name) <= 64
+        and all(c.isascii() and (c.isalnum() or c in "_-") for c in name)
+    )
+    if not ok:
+        raise ValueError(
+            f"invalid field name {name!r}: use 1–64 characters from A–Z, a–z, 0–9, '_' and '-'"
+        )
+
+
+class FrameHeader(ctypes.Structure):
+    """`field::messages::FrameHeader`: the user header of every frame (136 bytes, align 8)."""
+
+    _fields_ = [
+        ("layout_version", ctypes.c_uint32),
+        ("channels", ctypes.c_uint32),
+        ("width", ctypes.c_uint32),
+        ("height", ctypes.c_uint32),
+        ("sequence", ctypes.c_uint64),
+        ("stamp_ns", ctypes.c_uint64),
+        ("sim_time_s", ctypes.c_double),
+        ("cell_size_m", ctypes.c_float),
+        ("origin_x_m", ctypes.c_float),
+        ("origin_y_m", ctypes.c_float),
+        ("dt_secs", ctypes.c_float),
+        ("tick_compute_ns", ctypes.c_uint64),
+        ("deposits_applied", ctypes.c_uint64),
+        ("deposits_rejected", ctypes.c_uint64 * REJECT_REASONS),
+        ("deposits_this_tick", ctypes.c_uint32),
+        ("_reserved", ctypes.c_uint32),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return wire_type_name("FrameHeader")
+
+
+class DepositMsg(ctypes.Structure):
+    """`field::messages::DepositMsg`: one deposit request (64 bytes, align 8)."""
+
+    _fields_ = [
+        ("stamp_ns", ctypes.c_uint64),
+        ("robot_id", ctypes.c_uint32),
+        ("channel", ctypes.c_uint32),
+        ("kernel", ctypes.c_uint32),
+        ("x_m", ctypes.c_float),
+        ("y_m", ctypes.c_float),
+        ("amount", ctypes.c_float),
+        ("cov_xx", ctypes.c_float),
+        ("cov_xy", ctypes.c_float),
+        ("cov_yy", ctypes.c_float),
+        ("range_m", ctypes.c_float),
+        ("gamma_max", ctypes.c_float),
+        ("sigma_m", ctypes.c_float),
+        ("plateau_m", ctypes.c_float),
+        ("slope_m", ctypes.c_float),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return wire_type_name("DepositMsg")
+
+
+#: The wire types and the Rust names they mirror (checked against the Rust sources).
+WIRE_TYPES = {"FrameHeader": FrameHeader, "DepositMsg": DepositMsg}
+
+
+def ellipse(channel, x_m, y_m, tau, cov, range_m, gamma_max) -> DepositMsg:
+    """`DepositMsg::ellipse`: a seed 000 deposit (amount τ, covariance Σxy, range, γ cap)."""
+    return DepositMsg(
+        channel=channel,
+        kernel=KERNELS["ellipse"],
+        x_m=x_m,
+        y_m=y_m,
+        amount=tau,
+        cov_xx=cov[0],
+        cov_xy=cov[1],
+        cov_yy=cov[2],
+        range_m=range_m,
+        gamma_max=gamma_max,
+    )
+
+
+def paper(channel, x_m, y_m, tau, cov, range_m, gamma_max) -> DepositMsg:
+    """The seed 000 eq. 14 kernel: the ellipse's fields with kernel code `paper` (Rust has no
+    constructor for it; `pheromone deposit --kernel paper` fills the same fields)."""
+    msg = ellipse(channel, x_m, y_m, tau, cov, range_m, gamma_max)
+    msg.kernel = KERNELS["paper"]
+    return msg
+
+
+def saturating(channel, x_m, y_m, rho, sigma_m, range_m) -> DepositMsg:
+    """`DepositMsg::saturating`: a seed 001/004 deposit of strength ρt ∈ [−1, 1]."""
+    return DepositMsg(
+        channel=channel,
+        kernel=KERNELS["saturating"],
+        x_m=x_m,
+        y_m=y_m,
+        amount=rho,
+        sigma_m=sigma_m,
+        range_m=range_m,
+    )
+
+
+def z_shape(channel, x_m, y_m, amount, plateau_m, slope_m) -> DepositMsg:
+    """`DepositMsg::z_shape`: a seed 002 Z-shape deposit of quantum `amount`."""
+    return DepositMsg(
+        channel=channel,
+        kernel=KERNELS["z-shape"],
+        x_m=x_m,
+        y_m=y_m,
+        amount=amount,
+        plateau_m=plateau_m,
+        slope_m=slope_m,
+    )

@@ -1,0 +1,572 @@
+"""Attach to a running field: frames as zero-copy NumPy views, deposits.
+
+The services, as the Rust side builds them (`field/src/shm/`):
+
+- `pheromone/<F>/frame`: publish-subscribe of `[f32]` (here `iox2.Slice[ctypes.c_float]`) with
+  the user header `FrameHeader`; a reader opens it and creates a subscriber with a buffer of 1;
+- `pheromone/<F>/frame-ready`: an event the field notifies after each frame; a reader waits on it;
+- `pheromone/<F>/deposit`: publish-subscribe of `DepositMsg`; a depositor opens it and creates a
+  publisher that discards instead of blocking when the field's queue is full.
+
+Clients only *open* these services (never create them), so every identity option is the field's.
+"""
+
+import ctypes
+import dataclasses
+import re
+import sys
+import time
+from typing import Optional
+
+import iceoryx2 as iox2
+import numpy as np
+
+from . import _wire
+from .sample import gradient as _gradient
+from .sample import sample as _sample
+
+
+class PheromoneError(Exception):
+    """Base class of this package's errors."""
+
+
+class FieldNotFound(PheromoneError):
+    """No field of that name runs (or none published a frame) within the timeout."""
+
+
+class LayoutMismatch(PheromoneError):
+    """The running field speaks another layout version (its type names differ from ours)."""
+
+    def __init__(self, service: str, ours: str, theirs: Optional[str]):
+        self.service, self.ours, self.theirs = service, ours, theirs
+        super().__init__(
+            f"service '{service}' was created with another message layout: the field speaks "
+            f"{theirs or 'an unknown type'}, this client speaks {ours}; use the Python package "
+            "and the field of the same version"
+        )
+
+
+class FramesHeld(PheromoneError):
+    """Receiving a frame would exceed the frames a reader may hold at once."""
+
+
+class DepositNotDelivered(PheromoneError):
+    """No field took the deposit (none subscribed, or its deposit buffer is full)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Header:
+    """A frame's header: the fields of Rust's `FrameHeader`, same names (a copy: 136 bytes)."""
+
+    layout_version: int
+    channels: int
+    width: int
+    height: int
+    sequence: int
+    stamp_ns: int
+    sim_time_s: float
+    cell_size_m: float
+    origin_x_m: float
+    origin_y_m: float
+    dt_secs: float
+    tick_compute_ns: int
+    deposits_applied: int
+    deposits_rejected: tuple
+    deposits_this_tick: int
+    _reserved: int
+
+    @classmethod
+    def from_ctypes(cls, h) -> "Header":
+        values = {}
+        for name, _ in h._fields_:
+            v = getattr(h, name)
+            values[name] = tuple(v) if isinstance(v, ctypes.Array) else v
+        return cls(**values)
+
+    def deposits_rejected_total(self) -> int:
+        return sum(self.deposits_rejected)
+
+    def deposits_rejected_by_reason(self) -> dict:
+        return dict(zip(_wire.REJECT_REASON_NAMES, self.deposits_rejected))
+
+    def __len__(self) -> int:
+        """Number of `f32` cells in the frame."""
+        return self.channels * self.width * self.height
+
+
+class Frame:
+    """One frame lent by the field: `header` (a `Header`) and `cells`, a read-only `float32`
+    array `(channels, height, width)` that maps the shared-memory sample (no copy).
+
+    The frame holds its iceoryx2 sample while it is open: `close()` (or leaving a `with` block)
+    returns it to the field. `cells` must not be used after that (its memory is then reused for
+    newer frames); use `copy()` to keep the values. Unpacks as `header, cells = frame`.
+    """
+
+    def __init__(self, sample, header: Header, cells: np.ndarray, address: int, nbytes: int):
+        self._sample = sample
+        self.header = header
+        self.cells = cells
+        #: Address and size (bytes) of the sample's payload in shared memory.
+        self.payload_address = address
+        self.payload_nbytes = nbytes
+        self._handed_out = False
+
+    @property
+    def closed(self) -> bool:
+        return self._sample is None
+
+    def close(self) -> None:
+        """Returns the sample to the field. `cells` is invalid afterwards."""
+        s, self._sample = self._sample, None
+        if s is not None:
+            s.delete()
+
+    def __enter__(self) -> "Frame":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __iter__(self):
+        yield self.header
+        yield self.cells
+
+    def copy(self) -> np.ndarray:
+        """An owned copy of the cells (valid after `close()`)."""
+        return np.array(self.cells, copy=True)
+
+    def sample(self, x_m: float, y_m: float, channel: int = 0) -> float:
+        return _sample(self, x_m, y_m, channel)
+
+    def gradient(self, x_m: float, y_m: float, channel: int = 0) -> tuple:
+        return _gradient(self, x_m, y_m, channel)
+
+    def __repr__(self) -> str:
+        h = self.header
+        state = "closed" if self.closed else "open"
+        return (
+            f"<pheromone.Frame {h.sequence} {h.channels}×{h.height}×{h.width} "
+            f"{h.cell_size_m} m, {state}>"
+        )
+
+
+def _duration(seconds: float):
+    return iox2.Duration.from_nanos(max(0, int(seconds * 1e9)))
+
+
+def _their_user_header(node, service: str) -> Optional[str]:
+    """The user-header type name the running service was created with. iceoryx2 0.10's Python
+    binding does not expose a service's static configuration, only its debug text: read it there."""
+    try:
+        details = iox2.Service.details(
+            iox2.ServiceName.new(service),
+            node.config,
+            iox2.MessagingPattern.PublishSubscribe,
+            iox2.ServiceType.Ipc,
+        )
+    except Exception:
+        return None
+    m = re.search(r'user_header: TypeDetail \{.*?type_name: [^"]*"([^"]*)"', str(details), re.S)
+    return m.group(1) if m else None
+
+
+def _open_error(e) -> str:
+    return str(e.args[0]) if e.args else ""
+
+
+class Field:
+    """A process's access to a running field: reads frames (zero-copy) and sends deposits.
+
+    Create it with `Field.attach(name)`. Close it (or use `with`) to remove its iceoryx2 node and
+    ports from shared memory; `close()` also waits (at most `flush_timeout_s`) until the field
+    has taken the deposits sent, as Rust's `DepositPublisher` does when dropped.
+    """
+
+    def __init__(self):
+        raise TypeError("use Field.attach(name)")
+
+    @classmethod
+    def attach(
+        cls,
+        name: str,
+        timeout_s: float = 5.0,
+        *,
+        robot_id: int = 0,
+        header_type=_wire.FrameHeader,
+    ) -> "Field":
+        """Attaches to the running field `name`, waiting up to `timeout_s` for it to exist and to
+        publish a frame. Raises `FieldNotFound` (naming the field) if it does not, and
+        `LayoutMismatch` (naming both type names) if it speaks another layout. `robot_id` is
+        stamped on this client's deposits; `header_type` is for tools and tests that speak
+        another layout on purpose."""
+        _wire.check_name(name)
+        self = object.__new__(cls)
+        self.name = name
+        self.robot_id = int(robot_id)
+        self.flush_timeout_s = 1.0
+        self._header_type = header_type
+        self._latest: Optional[Frame] = None
+        self._subscriber = self._listener = self._publisher = None
+        self._frames = self._ready = self._deposits = None
+        self._unflushed_after = None
+        self._frame_service = _wire.frame_service(name)
+        self._ready_service = _wire.frame_ready_service(name)
+        self._deposit_service = _wire.deposit_service(name)
+        iox2.set_log_level(iox2.LogLevel.Fatal)
+        # Python keeps Ctrl-C (KeyboardInterrupt): iceoryx2 installs no signal handler.
+        self._node = (
+            iox2.NodeBuilder.new()
+            .name(iox2.NodeName.new(f"pheromone-py-{_pid()}"))
+            .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
+            .create(iox2.ServiceType.Ipc)
+        )
+        try:
+            self._attach(timeout_s)
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def _attach(self, timeout_s: float) -> None:
+        deadline = time.monotonic() + timeout_s
+        ours = _wire.wire_type_name("FrameHeader")
+        if hasattr(self._header_type, "type_name"):
+            ours = self._header_type.type_name()
+        while True:
+            try:
+                self._frames = (
+                    self._node.service_builder(iox2.ServiceName.new(self._frame_service))
+                    .publish_subscribe(iox2.Slice[ctypes.c_float])
+                    .user_header(self._header_type)
+                    .open()
+                )
+                self._ready = (
+                    self._node.service_builder(iox2.ServiceName.new(self._ready_service))
+                    .event()
+                    .open()
+                )
+                break
+            except iox2.PublishSubscribeOpenError as e:
+                if _open_error(e) == "IncompatibleTypes":
+                    raise LayoutMismatch(
+                        self._frame_service, ours, _their_user_header(self._node, self._frame_service)
+                    ) from None
+                if _open_error(e) not in ("DoesNotExist", "ServiceInCorruptedState",
+                                          "InsufficientPermissions", "HangsInCreation"):
+                    raise PheromoneError(f"service '{self._frame_service}': open failed: {e!r}") from e
+                last = e
+            except iox2.EventOpenError as e:
+                last = e
+            self._frames = self._ready = None
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise FieldNotFound(
+                    f"no field called '{self.name}' is running (service '{self._frame_service}' "
+                    f"could not be opened within {timeout_s} s: {_open_error(last)})"
+                ) from None
+            time.sleep(min(left, 0.02))
+        self._subscriber = (
+            self._frames.subscriber_builder().buffer_size(_wire.FRAME_SUBSCRIBER_BUFFER).create()
+        )
+        self._listener = self._ready.listener_builder().create()
+        # The field's history hands a late reader the current frame at its next tick.
+        while not self.update():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise FieldNotFound(
+                    f"field '{self.name}' exists but published no frame within {timeout_s} s"
+                )
+            self._wait_event(min(left, 0.1))
+
+    # ---- frames ---------------------------------------------------------------------------
+
+    def _wait_event(self, seconds: float) -> None:
+        try:
+            self._listener.timed_wait(_duration(seconds))
+        except iox2.ListenerWaitError:
+            pass  # interrupted by a signal: the caller loops on its own deadline
+
+    def _receive(self):
+        if not self._subscriber.has_samples():
+            return None
+        try:
+            return self._subscriber.receive()
+        except iox2.ReceiveError as e:
+            if "ExceedsMaxBorrow" not in _open_error(e):
+                raise
+        # The caller holds a frame besides the newest one: the newest can make room if nobody
+        # but this Field holds it (it was never handed out, or every reference to it is gone).
+        latest, self._latest = self._latest, None
+        if latest is not None and not latest.closed and _only_ours(latest):
+            latest.close()
+            return self._subscriber.receive()
+        self._latest = latest
+        raise FramesHeld(
+            f"field '{self.name}': a reader may hold {_wire.READER_BORROWED_FRAMES} frames at "
+            "once (the newest and one it is still reading); close() the frames you no longer need"
+        )
+
+    def update(self) -> bool:
+        """Takes the newest frame that has arrived, if any; returns whether it is new."""
+        self._check_open()
+        fresh = False
+        while True:
+            s = self._receive()
+            if s is None:
+                return fresh
+            frame = self._frame_of(s)
+            previous, self._latest = self._latest, frame
+            if previous is not None and _only_ours(previous):
+                previous.close()
+            fresh = True
+
+    def _frame_of(self, s) -> Frame:
+        header = Header.from_ctypes(s.user_header().contents)
+        # iceoryx2 0.10's Python binding reports a slice's length in bytes, not elements
+        # (upstream issue eclipse-iceoryx/iceoryx2#1533): the element count is taken from the
+        # sample's iceoryx2 header, which the Rust publisher wrote.
+        n = s.header.number_of_elements
+        if n != len(header):
+            s.delete()
+            raise PheromoneError(
+                f"field '{self.name}': the frame received has {n} cells but its header says "
+                f"{len(header)}"
+            )
+        view = iox2.Slice(s.payload_ptr, n, ctypes.c_float, owner=s).as_memory_view()
+        # The array's base is the ctypes array under the memoryview, which holds the sample: the
+        # sample lives as long as the array or any view of it (unless closed explicitly).
+        view.obj._pheromone_sample = s
+        cells = np.ndarray(
+            (header.channels, header.height, header.width), dtype=np.float32, buffer=view
+        )
+        cells.flags.writeable = False
+        return Frame(s, header, cells, s.payload_ptr, n * ctypes.sizeof(ctypes.c_float))
+
+    def wait_frame(self, timeout_s: float) -> bool:
+        """Waits up to `timeout_s` for a frame newer than the one held; returns whether one came."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            if self.update():
+                return True
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            self._wait_event(min(left, 0.1))
+
+    def frame(self) -> Frame:
+        """The newest frame held (see `Frame`): `header, cells = field.frame()`."""
+        self._check_open()
+        if self._latest is None or self._latest.closed:
+            self.update()
+        if self._latest is None or self._latest.closed:
+            raise PheromoneError(
+                f"field '{self.name}': no frame held (the last one was closed); wait_frame() first"
+            )
+        self._latest._handed_out = True
+        return self._latest
+
+    def sample(self, x_m: float, y_m: float, channel: int = 0) -> float:
+        """The value at `(x_m, y_m)` on the newest frame (see `pheromone.sample`)."""
+        return _sample(self.frame(), x_m, y_m, channel)
+
+    def gradient(self, x_m: float, y_m: float, channel: int = 0) -> tuple:
+        """∇P at `(x_m, y_m)` on the newest frame (see `pheromone.gradient`)."""
+        return _gradient(self.frame(), x_m, y_m, channel)
+
+    # ---- deposits -------------------------------------------------------------------------
+
+    def deposit(
+        self,
+        x_m: float,
+        y_m: float,
+        amount: float,
+        cov=None,
+        kernel: str = "ellipse",
+        channel: int = 0,
+        *,
+        range_m: Optional[float] = None,
+        gamma_max: Optional[float] = None,
+        sigma_m: Optional[float] = None,
+        plateau_m: Optional[float] = None,
+        slope_m: Optional[float] = None,
+        stamp_ns: Optional[int] = None,
+    ) -> None:
+        """Sends one deposit, built as Rust's constructor of that kernel builds it
+        (`DepositMsg::ellipse`, `::saturating`, `::z_shape`; `paper` fills the ellipse's fields).
+        Parameters a kernel does not use are refused; omitted ones take `pheromone deposit`'s
+        defaults (cov 0.01,0,0.01 m², range 1 m, γmax 100, σ 0.1 m, plateau 0.2 m, slope 0.3 m).
+        Raises `DepositNotDelivered` if no field took it."""
+        self._check_open()
+        given = {
+            "cov": cov,
+            "range_m": range_m,
+            "gamma_max": gamma_max,
+            "sigma_m": sigma_m,
+            "plateau_m": plateau_m,
+            "slope_m": slope_m,
+        }
+        used = {
+            "ellipse": ("cov", "range_m", "gamma_max"),
+            "paper": ("cov", "range_m", "gamma_max"),
+            "saturating": ("sigma_m", "range_m"),
+            "z-shape": ("plateau_m", "slope_m"),
+        }
+        if kernel not in used:
+            raise ValueError(
+                f"unknown kernel '{kernel}' (expected ellipse, paper, saturating or z-shape)"
+            )
+        unused = [k for k, v in given.items() if v is not None and k not in used[kernel]]
+        if unused:
+            raise ValueError(f"kernel '{kernel}' does not use {', '.join(unused)}")
+        d = dict(cov=(0.01, 0.0, 0.01), range_m=1.0, gamma_max=100.0, sigma_m=0.1,
+                 plateau_m=0.2, slope_m=0.3)
+        d.update({k: v for k, v in given.items() if v is not None})
+        if len(tuple(d["cov"])) != 3:
+            raise ValueError("cov needs three values (xx, xy, yy)")
+        if kernel in ("ellipse", "paper"):
+            build = _wire.ellipse if kernel == "ellipse" else _wire.paper
+            msg = build(channel, x_m, y_m, amount, tuple(d["cov"]), d["range_m"], d["gamma_max"])
+        elif kernel == "saturating":
+            msg = _wire.saturating(channel, x_m, y_m, amount, d["sigma_m"], d["range_m"])
+        else:
+            msg = _wire.z_shape(channel, x_m, y_m, amount, d["plateau_m"], d["slope_m"])
+        self.send(msg, stamp_ns=stamp_ns)
+
+    def send(self, msg: "_wire.DepositMsg", stamp_ns: Optional[int] = None) -> None:
+        """Sends a ready-made `DepositMsg`, stamped with this client's robot id and, unless it
+        has one, CLOCK_MONOTONIC (as `DepositPublisher::send`)."""
+        self._check_open()
+        if self._publisher is None:
+            self._open_deposits()
+        msg.robot_id = self.robot_id
+        if stamp_ns is not None:
+            msg.stamp_ns = stamp_ns
+        if msg.stamp_ns == 0:
+            msg.stamp_ns = time.monotonic_ns()
+        try:
+            delivered = self._publisher.send_copy(msg)
+        except iox2.SendError as e:
+            raise DepositNotDelivered(f"deposit on '{self._deposit_service}' not delivered: {e!r}") from e
+        if delivered == 0:
+            raise DepositNotDelivered(
+                f"deposit not delivered: no field is subscribed to '{self._deposit_service}' "
+                "or its deposit buffer is full"
+            )
+        # The field takes it at its next tick: two frames after the newest one held.
+        self.update()
+        seq = self._latest.header.sequence if self._latest is not None else 0
+        self._unflushed_after = seq
+
+    def _open_deposits(self) -> None:
+        try:
+            self._deposits = (
+                self._node.service_builder(iox2.ServiceName.new(self._deposit_service))
+                .publish_subscribe(_wire.DepositMsg)
+                .open()
+            )
+        except iox2.PublishSubscribeOpenError as e:
+            if _open_error(e) == "IncompatibleTypes":
+                raise LayoutMismatch(
+                    self._deposit_service,
+                    _wire.DepositMsg.type_name(),
+                    None,
+                ) from None
+            if _open_error(e) == "DoesNotExist":
+                raise FieldNotFound(
+                    f"no field called '{self.name}' is running (service "
+                    f"'{self._deposit_service}' does not exist)"
+                ) from None
+            raise
+        self._publisher = (
+            self._deposits.publisher_builder()
+            .backpressure_strategy(iox2.BackpressureStrategy.DiscardData)
+            .create()
+        )
+
+    def flush(self, timeout_s: float = 1.0) -> bool:
+        """Waits (at most `timeout_s`) until the field has taken every deposit sent so far: two
+        frames past the newest one held when the last was sent. Returns whether it has."""
+        if self._unflushed_after is None:
+            return True
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self.update()
+            if self._latest is not None and self._latest.header.sequence >= self._unflushed_after + 2:
+                self._unflushed_after = None
+                return True
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            self._wait_event(min(left, 0.1))
+
+    # ---- lifetime -------------------------------------------------------------------------
+
+    def _check_open(self) -> None:
+        if self._node is None:
+            raise PheromoneError(f"field '{self.name}': this client is closed")
+
+    @property
+    def closed(self) -> bool:
+        return self._node is None
+
+    def close(self) -> None:
+        """Flushes deposits (at most `flush_timeout_s`), releases the frames and removes this
+        client's iceoryx2 node and ports."""
+        if self._node is None:
+            return
+        try:
+            if self._subscriber is not None and self._unflushed_after is not None:
+                self.flush(self.flush_timeout_s)
+        except Exception:
+            pass
+        if self._latest is not None:
+            self._latest.close()
+            self._latest = None
+        for port in (self._publisher, self._subscriber, self._listener):
+            if port is not None:
+                port.delete()
+        self._publisher = self._subscriber = self._listener = None
+        self._frames = self._ready = self._deposits = None
+        self._node = None
+
+    def __enter__(self) -> "Field":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    def __repr__(self) -> str:
+        return f"<pheromone.Field '{self.name}'{' closed' if self.closed else ''}>"
+
+
+def _only_ours(frame: Frame) -> bool:
+    """Whether nobody but the Field holds `frame` or a view of its cells: it was never handed
+    out by `frame()`, or (CPython) no reference to it, its array or the array's buffer is left
+    besides the Field's own."""
+    if not frame._handed_out:
+        return True
+    getrefcount = getattr(sys, "getrefcount", None)
+    if getrefcount is None:
+        return False
+    # Each count includes getrefcount's own argument. The caller holds the frame in a local
+    # (and this function in `frame`); the frame holds `cells`, which every view of it references
+    # (NumPy sets a view's base to `cells`, the first array up the chain); `cells` holds the
+    # ctypes array over the sample (its base), which a memoryview of it would reference.
+    return (
+        getrefcount(frame) <= 3
+        and getrefcount(frame.cells) <= 2
+        and getrefcount(frame.cells.base) <= 2
+    )
+
+
+def _pid() -> int:
+    import os
+
+    return os.getpid()

@@ -1,0 +1,65 @@
+"""Reading a frame: the bilinear value and the gradient of `field/src/sample.rs` (`FrameView`).
+
+Computed in `float32` step by step, in the order Rust computes them, so the results are the
+same numbers Rust's `FrameView::value` and `FrameView::gradient` give on the same frame (the
+tests compare them with `pheromone probe`).
+"""
+
+import numpy as np
+
+_F = np.float32
+_HALF = _F(0.5)
+_ONE = _F(1.0)
+_TWO = _F(2.0)
+
+
+def _parts(frame):
+    """(header, cells) of a `Frame` or of a `(header, cells)` pair."""
+    if hasattr(frame, "header") and hasattr(frame, "cells"):
+        return frame.header, frame.cells
+    header, cells = frame
+    return header, cells
+
+
+def _value(header, plane, x_m, y_m):
+    w, h = int(header.width), int(header.height)
+    cell = _F(header.cell_size_m)
+    gx = (_F(x_m) - _F(header.origin_x_m)) / cell
+    gy = (_F(y_m) - _F(header.origin_y_m)) / cell
+    # 0 outside the grid (and for NaN coordinates: every comparison is false).
+    if not (gx >= 0 and gy >= 0 and gx <= _F(w) and gy <= _F(h)):
+        return _F(0.0)
+    fx = min(max(gx - _HALF, _F(0.0)), _F(w - 1))
+    fy = min(max(gy - _HALF, _F(0.0)), _F(h - 1))
+    x0, y0 = int(np.floor(fx)), int(np.floor(fy))
+    x1, y1 = min(x0 + 1, w - 1), min(y0 + 1, h - 1)
+    tx, ty = fx - _F(x0), fy - _F(y0)
+    top = plane[y0, x0] * (_ONE - tx) + plane[y0, x1] * tx
+    bottom = plane[y1, x0] * (_ONE - tx) + plane[y1, x1] * tx
+    return _F(top * (_ONE - ty) + bottom * ty)
+
+
+def _plane(header, cells, channel):
+    channel = int(channel)
+    if not 0 <= channel < int(header.channels):
+        raise IndexError(f"channel {channel}: the field has {header.channels} channel(s)")
+    return cells[channel]
+
+
+def sample(frame, x_m: float, y_m: float, channel: int = 0) -> float:
+    """Bilinear value at world point `(x_m, y_m)` of `channel` (`FrameView::value`): interpolated
+    between cell centres, edge cells extend to the border, 0 outside the grid."""
+    header, cells = _parts(frame)
+    return float(_value(header, _plane(header, cells, channel), x_m, y_m))
+
+
+def gradient(frame, x_m: float, y_m: float, channel: int = 0) -> tuple:
+    """∇P per metre at `(x_m, y_m)` (`FrameView::gradient`): central differences of the
+    bilinear value one cell apart."""
+    header, cells = _parts(frame)
+    plane = _plane(header, cells, channel)
+    h = _F(header.cell_size_m)
+    x, y = _F(x_m), _F(y_m)
+    gx = (_value(header, plane, x + h, y) - _value(header, plane, x - h, y)) / (_TWO * h)
+    gy = (_value(header, plane, x, y + h) - _value(header, plane, x, y - h)) / (_TWO * h)
+    return float(gx), float(gy)
