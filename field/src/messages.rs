@@ -58,6 +58,22 @@ impl std::str::FromStr for KernelKind {
     }
 }
 
+/// Every kernel's shape parameters, for [`DepositMsg::with_params`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct KernelParams {
+    /// Position covariance Σxy as `[xx, xy, yy]` (m²), for ellipse and paper.
+    pub cov: [f32; 3],
+    /// Cut-off radius z_rng (m), for ellipse, paper and saturating.
+    pub range_m: f32,
+    /// γmax, for ellipse and paper.
+    pub gamma_max: f32,
+    /// λ (m), for saturating.
+    pub sigma_m: f32,
+    /// c and σ (m), for z-shape.
+    pub plateau_m: f32,
+    pub slope_m: f32,
+}
+
 /// One deposit request. Unused parameters of a kernel are ignored but must be finite.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
@@ -93,6 +109,34 @@ pub struct DepositMsg {
 crate::wire_type!(DepositMsg, "DepositMsg", size = 64, align = 8);
 
 impl DepositMsg {
+    /// A deposit of any kernel with every parameter given (`pheromone deposit`, scripted
+    /// deposits); parameters the kernel does not use are carried but ignored.
+    pub fn with_params(
+        kernel: KernelKind,
+        channel: u32,
+        x_m: f32,
+        y_m: f32,
+        amount: f32,
+        p: &KernelParams,
+    ) -> Self {
+        Self {
+            channel,
+            kernel: kernel as u32,
+            x_m,
+            y_m,
+            amount,
+            cov_xx: p.cov[0],
+            cov_xy: p.cov[1],
+            cov_yy: p.cov[2],
+            range_m: p.range_m,
+            gamma_max: p.gamma_max,
+            sigma_m: p.sigma_m,
+            plateau_m: p.plateau_m,
+            slope_m: p.slope_m,
+            ..Default::default()
+        }
+    }
+
     /// A seed 000 deposit: amount τ, pose covariance block Σxy, sensor range z_rng, cap γmax.
     #[allow(clippy::too_many_arguments)]
     pub fn ellipse(

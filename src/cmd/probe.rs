@@ -4,6 +4,7 @@
 use std::time::Duration;
 
 use clap::Args;
+use field::messages::KernelParams;
 use field::shm::{create_node, DepositPublisher, FieldReader};
 use field::{DepositMsg, KernelKind};
 
@@ -180,22 +181,15 @@ pub fn run_deposit(a: DepositArgs) -> anyhow::Result<()> {
         a.robot,
         Duration::from_secs_f64(a.timeout),
     )?;
-    let msg = DepositMsg {
-        channel: a.channel,
-        kernel: a.kernel as u32,
-        x_m: a.x,
-        y_m: a.y,
-        amount: a.amount,
-        cov_xx: a.cov[0],
-        cov_xy: a.cov[1],
-        cov_yy: a.cov[2],
+    let params = KernelParams {
+        cov: [a.cov[0], a.cov[1], a.cov[2]],
         range_m: a.range,
         gamma_max: a.gamma_max,
         sigma_m: a.sigma,
         plateau_m: a.plateau,
         slope_m: a.slope,
-        ..Default::default()
     };
+    let msg = DepositMsg::with_params(a.kernel, a.channel, a.x, a.y, a.amount, &params);
     publisher.send(msg)?;
     eprintln!(
         "deposit sent to field '{}': {} at ({}, {}) amount {}",

@@ -76,7 +76,6 @@ fn robot_prefix(robot: &Option<u32>) -> String {
     robot.map(|r| format!("robot {r}: ")).unwrap_or_default()
 }
 
-
 pub(crate) fn sender<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,
     service: &str,

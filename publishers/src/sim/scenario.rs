@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use field::messages::KernelParams;
 use field::{DepositMsg, FieldConfig, KernelKind};
 use serde::{Deserialize, Serialize};
 
@@ -263,21 +264,16 @@ impl ScriptedDeposit {
             .kernel
             .parse::<KernelKind>()
             .map_err(|e| DepositError::Kernel(e.into()))?;
-        let one = |x_m: f32, y_m: f32| DepositMsg {
-            channel: self.channel,
-            kernel: kernel as u32,
-            x_m,
-            y_m,
-            amount: self.amount,
-            cov_xx: self.cov[0],
-            cov_xy: self.cov[1],
-            cov_yy: self.cov[2],
+        let params = KernelParams {
+            cov: self.cov,
             range_m: self.range_m,
             gamma_max: self.gamma_max,
             sigma_m: self.sigma_m,
             plateau_m: self.plateau_m,
             slope_m: self.slope_m,
-            ..Default::default()
+        };
+        let one = |x_m: f32, y_m: f32| {
+            DepositMsg::with_params(kernel, self.channel, x_m, y_m, self.amount, &params)
         };
         match (self.to_x_m, self.to_y_m, self.spacing_m) {
             (None, None, None) => Ok(vec![one(self.x_m, self.y_m)]),
