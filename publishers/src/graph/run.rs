@@ -747,4 +747,4 @@ pub fn tables_text(r: &RunReport) -> String {
 
 #[cfg(test)]
 #[path = "run_tests.rs"]
-mod tests;
+mod run_tests;
