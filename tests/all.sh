@@ -13,9 +13,13 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --upgrade ./python pytest
 
-echo "== python: pheromone binary"
-cargo build --bin pheromone
+# `cargo test --workspace` has just built target/debug/pheromone for the integration tests; a
+# plain `cargo build` would resolve other features (no dev-dependencies) and rebuild everything.
 export PHEROMONE_BIN="${PHEROMONE_BIN:-${CARGO_TARGET_DIR:-target}/debug/pheromone}"
+if [ ! -x "$PHEROMONE_BIN" ]; then
+    echo "== python: pheromone binary"
+    cargo build --bin pheromone
+fi
 
 echo "== python: pytest python/tests"
 .venv/bin/python -m pytest -q python/tests
