@@ -85,7 +85,7 @@ class FrameHeader(ctypes.Structure):
         ("cell_size_m", ctypes.c_float),
         ("origin_x_m", ctypes.c_float),
         ("origin_y_m", ctypes.c_float),
-        ("dt_secs", ctypes.c_float),
+        ("dt_s", ctypes.c_float),
         ("tick_compute_ns", ctypes.c_uint64),
         ("deposits_applied", ctypes.c_uint64),
         ("deposits_rejected", ctypes.c_uint64 * REJECT_REASONS),

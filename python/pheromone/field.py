@@ -68,7 +68,7 @@ class Header:
     cell_size_m: float
     origin_x_m: float
     origin_y_m: float
-    dt_secs: float
+    dt_s: float
     tick_compute_ns: int
     deposits_applied: int
     deposits_rejected: tuple

@@ -44,7 +44,7 @@ def test_attach_reads_the_header_of_the_running_field(start_field):
         assert (header.channels, header.width, header.height) == (1, 40, 30)
         assert header.cell_size_m == pytest.approx(0.1)
         assert (header.origin_x_m, header.origin_y_m) == (-1.5, 0.5)
-        assert header.dt_secs == pytest.approx(0.02)
+        assert header.dt_s == pytest.approx(0.02)
         assert len(header.deposits_rejected) == 7
         assert cells.shape == (1, 30, 40) and cells.dtype == np.float32
         assert not cells.flags.writeable
