@@ -151,7 +151,7 @@ enum Link {
     Udp(UdpSocket),
     Serial {
         file: File,
-        decoder: gateway_codec::Decoder,
+        decoder: Box<gateway_codec::Decoder>,
         buf: Box<[u8; 512]>,
         at: usize,
         len: usize,
@@ -229,7 +229,7 @@ impl Transport {
             name: name.to_string(),
             link: Link::Serial {
                 file,
-                decoder: gateway_codec::Decoder::new(),
+                decoder: Box::new(gateway_codec::Decoder::new()),
                 buf: Box::new([0; 512]),
                 at: 0,
                 len: 0,

@@ -281,10 +281,8 @@ fn a_deposit_moved_to_the_other_gateway_keeps_its_seq_unless_that_one_was_sent_i
     assert_eq!(c.deposit(0.0, 0.0, 1.0, 0).unwrap(), 0);
     assert_eq!((deposit_seqs(&a), deposit_seqs(&b)), (vec![0], vec![0]));
     // B silent, A back: seq 1 moves to A.
-    (
-        a_silent.store(false, Ordering::Relaxed),
-        b_silent.store(true, Ordering::Relaxed),
-    );
+    a_silent.store(false, Ordering::Relaxed);
+    b_silent.store(true, Ordering::Relaxed);
     assert_eq!(c.deposit(0.0, 0.0, 1.0, 0).unwrap(), 1);
     assert_eq!(c.active(), Which::Primary);
     // 254 deposits on A: seqs 2..=255, then the counter wraps to 0.
@@ -293,10 +291,8 @@ fn a_deposit_moved_to_the_other_gateway_keeps_its_seq_unless_that_one_was_sent_i
     }
     // A silent again: seq 0 moves to B, which applied a seq 0 of this client and would answer
     // it without applying; so B gets a seq it was not sent (1 it was sent too, so 2).
-    (
-        a_silent.store(true, Ordering::Relaxed),
-        b_silent.store(false, Ordering::Relaxed),
-    );
+    a_silent.store(true, Ordering::Relaxed);
+    b_silent.store(false, Ordering::Relaxed);
     assert_eq!(c.deposit(0.0, 0.0, 1.0, 0).unwrap(), 2);
     assert_eq!(deposit_seqs(&a).last(), Some(&0));
     assert_eq!(deposit_seqs(&b), vec![0, 1, 2]);
