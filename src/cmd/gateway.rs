@@ -1,11 +1,11 @@
 //! `pheromone gateway`: seed 002's pheromone server for thin radio clients (DLE/CRC frames over
-//! UDP), in front of a running field.
+//! UDP or a serial line), in front of a running field.
 
 use std::time::Duration;
 
 use clap::Args;
 use field::shm::create_node;
-use publishers::gateway::{udp, Gateway, GatewayConfig};
+use publishers::gateway::{serial, udp, Gateway, GatewayConfig};
 
 use super::bad;
 
@@ -21,9 +21,16 @@ pub struct GatewayArgs {
     /// Field name.
     #[arg(long, default_value = "main")]
     pub field: String,
-    /// UDP address to serve on.
-    #[arg(long, default_value = "127.0.0.1:7402")]
-    pub udp: String,
+    /// UDP address to serve on (default 127.0.0.1:7402 when --serial is not given).
+    #[arg(long, conflicts_with = "serial")]
+    pub udp: Option<String>,
+    /// Serve on this serial line instead (a tty such as /dev/ttyUSB0 or a pty /dev/pts/N):
+    /// raw, 8N1, at --baud; frames are a byte stream, each answered on the same line.
+    #[arg(long)]
+    pub serial: Option<String>,
+    /// Baud rate of --serial (a standard termios rate: 9600, 19200, 115200, …).
+    #[arg(long, default_value_t = 9600, requires = "serial")]
+    pub baud: u32,
     /// Client IDs served, e.g. `1,2,7` or `1-20`; default 1–255 (ID 0 is not protected by the
     /// CRC's zero start value, see docs/gateway-wire.md).
     #[arg(long, value_delimiter = ',')]
@@ -44,6 +51,9 @@ pub struct GatewayArgs {
     #[arg(long)]
     pub json: bool,
 }
+
+/// Where the gateway serves when neither --udp nor --serial is given.
+const DEFAULT_UDP: &str = "127.0.0.1:7402";
 
 /// `1,2,7` and ranges `1-20`; every ID 0–255.
 fn parse_allow(items: &[String]) -> anyhow::Result<Vec<u8>> {
@@ -86,7 +96,23 @@ pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
             a.attach_timeout
         )));
     }
-    let socket = udp::bind(&a.udp)?;
+    // The line or socket first: a bad path, rate or address fails before the field is waited for.
+    let mut line = match &a.serial {
+        Some(path) => {
+            if serial::baud_rate(a.baud).is_none() {
+                return Err(bad(format!(
+                    "--baud {}: not a standard termios rate (e.g. 9600, 19200, 115200)",
+                    a.baud
+                )));
+            }
+            Some((path.clone(), serial::open(path, a.baud)?))
+        }
+        None => None,
+    };
+    let socket = match &line {
+        Some(_) => None,
+        None => Some(udp::bind(a.udp.as_deref().unwrap_or(DEFAULT_UDP))?),
+    };
     let node = create_node(&format!("gateway-{}", std::process::id()))?;
     let mut gateway = match Gateway::attach(
         &node,
@@ -100,9 +126,7 @@ pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
         }
         Err(e) => return Err(e.into()),
     };
-    let local = socket.local_addr()?;
-    eprintln!("gateway: serving field '{}' on udp://{local}", a.field);
-    udp::serve(&node, &mut gateway, &socket, |c| {
+    let log = |c: &publishers::gateway::GatewayCounters| {
         eprintln!(
             "gateway: frames {} pir {} deposits {} (repeated {}, undelivered {}) pings {} \
              errors sent {:?} dropped {} rejected {:?}",
@@ -116,7 +140,22 @@ pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
             c.dropped,
             c.rejected
         )
-    })?;
+    };
+    match (&mut line, &socket) {
+        (Some((path, file)), _) => {
+            eprintln!(
+                "gateway: serving field '{}' on serial {path} at {} baud",
+                a.field, a.baud
+            );
+            serial::serve(&node, &mut gateway, file, path, log)?;
+        }
+        (None, Some(socket)) => {
+            let local = socket.local_addr()?;
+            eprintln!("gateway: serving field '{}' on udp://{local}", a.field);
+            udp::serve(&node, &mut gateway, socket, log)?;
+        }
+        (None, None) => unreachable!("a socket when there is no line"),
+    }
     if a.json {
         println!("{}", serde_json::to_string(gateway.counters())?);
     }

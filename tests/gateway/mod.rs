@@ -3,6 +3,9 @@
 //! parses frames by hand — DLE STX, client ID, opcode, little-endian data, CRC-16/ARC written out
 //! here from its parameters, DLE stuffing, DLE ETX — and uses nothing of the codec crate.
 
+mod backup;
+mod serial;
+
 use std::net::UdpSocket;
 use std::time::Duration;
 

@@ -4,7 +4,9 @@
 //!
 //! [`Gateway`] holds the I/O-free logic: it answers one decoded frame at a time from the newest
 //! frame of a field it reads ([`FieldReader`]) and forwards deposits to the field
-//! ([`DepositPublisher`]). [`udp`] serves it on a UDP socket (one frame per datagram).
+//! ([`DepositPublisher`]). [`udp`] serves it on a UDP socket (one frame per datagram),
+//! [`serial`] on a serial line (a byte stream, half duplex); [`client`] is the thin client's side
+//! of both, with a backup gateway.
 //!
 //! - **PIR:** the two antenna readings at the M3 antenna points, half a wheel base (as the client
 //!   sends it) to each side of the pose ([`field::FrameView::antennas`]), with the sequence of
@@ -18,6 +20,8 @@
 //!   with M3's reason and is never applied; a frame with a bad CRC (or broken framing) is counted
 //!   and dropped, since its client ID cannot be trusted.
 
+pub mod client;
+pub mod serial;
 pub mod udp;
 
 use std::time::Duration;
@@ -75,6 +79,13 @@ pub enum GatewayError {
     },
     #[error("no frame from field '{field}' within {timeout_s} s")]
     NoFrame { field: String, timeout_s: f64 },
+    #[error("serial line {path}: {action} failed")]
+    Serial {
+        path: String,
+        action: &'static str,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("UDP socket {address}: {action} failed")]
     Socket {
         address: String,
