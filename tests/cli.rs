@@ -8,6 +8,7 @@ mod harness;
 mod processes;
 mod reliability;
 mod soak;
+mod view;
 
 use std::time::Duration;
 
