@@ -32,8 +32,10 @@ const PAGE_CSS: &str = include_str!("page/view.css");
 /// How long the loop waits for a request before it looks at the field, the robots and Ctrl-C.
 /// Short enough to see nearly every frame of a 100 Hz field (for the tick statistics).
 const REQUEST_SLICE: Duration = Duration::from_millis(5);
-/// How often a missing field is attached again and missing robots are looked for.
+/// How often missing robots are looked for.
 const RESCAN: Duration = Duration::from_secs(1);
+/// How often a field not there yet is looked for.
+const REATTACH: Duration = Duration::from_millis(200);
 
 /// What `pheromone view` serves.
 #[derive(Debug, Clone)]
@@ -157,6 +159,7 @@ pub struct View {
     robots: Option<Robots>,
     stats: StatsTracker,
     next_scan: Instant,
+    next_attach: Instant,
 }
 
 impl View {
@@ -172,6 +175,7 @@ impl View {
             robots,
             stats: StatsTracker::default(),
             next_scan: Instant::now(),
+            next_attach: Instant::now(),
         }
     }
 
@@ -183,7 +187,8 @@ impl View {
         if rescan {
             self.next_scan = now + RESCAN;
         }
-        if self.reader.is_none() && rescan {
+        if self.reader.is_none() && now >= self.next_attach {
+            self.next_attach = now + REATTACH;
             match FieldReader::attach(node, &self.config.field) {
                 Ok(r) => {
                     eprintln!("view: attached to field '{}'", self.config.field);
