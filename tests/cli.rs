@@ -387,6 +387,7 @@ fn every_role_explains_itself_in_help() {
         "tune",
         "graph",
         "graph-robot",
+        "view",
     ] {
         let o = run(&[role, "--help"]);
         assert!(o.status.success(), "{role} --help");

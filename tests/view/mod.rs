@@ -291,6 +291,22 @@ fn bad_parameters_get_a_400_naming_them_and_unknown_paths_a_404() {
     assert_eq!(status, 405, "{}", String::from_utf8_lossy(&body));
     // The good parameters still work.
     assert_eq!(get(port, "/api/frame?channel=0&max_side=7").0, 200);
+    // Bad flags: exit status 2 with a message naming the flag or the address.
+    let o = run(&["view", "--max-side", "0"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("--max-side 0: must be between 1 and 4096"),
+        "{}",
+        stderr(&o)
+    );
+    let taken = format!("127.0.0.1:{port}");
+    let o = run(&["view", "--listen", &taken]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(&format!("cannot listen on {taken}")),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]
@@ -458,4 +474,53 @@ fn headless_chromium_shows_the_deposited_blob_on_the_page() {
     let hz = number("stat-tick-hz");
     assert!((35.0..65.0).contains(&hz), "page tick rate {hz}");
     assert_eq!(attribute(&dom, "<span id=\"status\"", "data-state"), "live");
+}
+
+#[test]
+fn sim_view_serves_the_runs_field_and_robots_while_it_runs() {
+    let port = free_port();
+    let listen = format!("127.0.0.1:{port}");
+    let sim = Proc::spawn(&[
+        "sim",
+        "blind-leader",
+        "--realtime",
+        "--duration",
+        "8",
+        "--no-out",
+        "--view",
+        &listen,
+    ]);
+    let robots = eventually(
+        Duration::from_secs(30),
+        "the run's robots in the view",
+        || {
+            let (status, _, body) = request(port, "GET", "/api/robots").ok()?;
+            let r: Value = serde_json::from_slice(&body).ok()?;
+            let moving = r["robots"]
+                .as_array()?
+                .iter()
+                .all(|t| t["path"].as_array().is_some_and(|p| p.len() >= 2));
+            (status == 200 && r["robots"].as_array()?.len() == 2 && moving).then_some(r)
+        },
+    );
+    let world = robots["world"].as_str().unwrap().to_string();
+    let stats = eventually(
+        Duration::from_secs(30),
+        "the leader's deposits in the view",
+        || {
+            let s = get_json(port, "/api/stats");
+            (s["deposits_applied"].as_u64()? > 0).then_some(s)
+        },
+    );
+    // The view reads the run's field: named like its world, ticking once per 0.1 s step.
+    assert_eq!(stats["field"].as_str(), Some(world.as_str()), "{stats}");
+    let f = get_json(port, "/api/frame");
+    assert!(f["max"].as_f64().unwrap() > 0.0, "the trail: {}", f["max"]);
+    let out = sim.wait_exit(Duration::from_secs(60));
+    assert!(out.status.success(), "sim: {}", stderr(&out));
+    // The view stops with the run.
+    assert!(
+        request(port, "GET", "/api/stats").is_err(),
+        "the view outlived the run"
+    );
 }
