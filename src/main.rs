@@ -46,6 +46,8 @@ enum Command {
     Deposit(cmd::probe::DepositArgs),
     /// Serve a field to thin radio clients (seed 002's DLE/CRC frames over UDP).
     Gateway(cmd::gateway::GatewayArgs),
+    /// Serve a live web page of a running field: heat map, robots, statistics.
+    View(cmd::view::ViewArgs),
     /// Measure latency and throughput side by side with raw iceoryx2, a Unix socket and Zenoh.
     Bench(cmd::bench::BenchArgs),
     /// One peer process of `pheromone bench` (started by it).
@@ -69,6 +71,7 @@ fn main() -> ExitCode {
         Command::Probe(a) => cmd::probe::run_probe(a),
         Command::Deposit(a) => cmd::probe::run_deposit(a),
         Command::Gateway(a) => cmd::gateway::run(a),
+        Command::View(a) => cmd::view::run(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::BenchPeer(a) => cmd::bench::run_peer(a),
     };

@@ -8,6 +8,7 @@ mod harness;
 mod processes;
 mod reliability;
 mod soak;
+mod view;
 
 use std::time::Duration;
 
@@ -386,6 +387,7 @@ fn every_role_explains_itself_in_help() {
         "tune",
         "graph",
         "graph-robot",
+        "view",
     ] {
         let o = run(&[role, "--help"]);
         assert!(o.status.success(), "{role} --help");

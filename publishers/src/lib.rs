@@ -10,3 +10,4 @@ pub mod messages;
 pub mod report;
 pub mod roles;
 pub mod sim;
+pub mod view;

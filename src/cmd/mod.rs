@@ -9,6 +9,7 @@ pub mod roles;
 pub mod sim;
 pub mod sim_args;
 pub mod tune;
+pub mod view;
 
 use std::error::Error;
 use std::fmt;

@@ -258,6 +258,9 @@ fn run_processes(
     progress: Option<&mut dyn FnMut(f64)>,
 ) -> anyhow::Result<(RunSummary, Recording, ProcessRunInfo)> {
     let stall = super::seconds("stall-timeout", a.stall_timeout)?;
+    if let Some(v) = &a.view {
+        eprintln!("sim: view: http://{v}/ (stops with the run)");
+    }
     let attach = a
         .attach_timeout
         .map(|v| super::seconds("attach-timeout", v))
@@ -272,6 +275,7 @@ fn run_processes(
             attach_timeout: attach,
             stall_timeout: stall,
             progress,
+            view: a.view.clone(),
         },
     )?)
 }

@@ -53,6 +53,12 @@ pub struct SimArgs {
     /// Step the world on wall time (dt per step) instead of lockstep (separate processes only).
     #[arg(long, conflicts_with = "single_process")]
     pub realtime: bool,
+    /// Serve `pheromone view` of the run's field and robots on ADDR (default
+    /// 127.0.0.1:8080) while it runs (separate processes only); with --realtime one can watch
+    /// the scenario unfold.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8080",
+          conflicts_with = "single_process")]
+    pub view: Option<String>,
     /// Every depositor deposits a constant amount, whatever its localization (the traditional
     /// scheme seed 000 argues against).
     #[arg(long)]

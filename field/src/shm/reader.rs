@@ -103,6 +103,11 @@ impl FieldReader {
         live_frame_publishers(&self.service, &self.node_config) > 0
     }
 
+    /// Readers (subscribers of the frame service) attached now, this one included.
+    pub fn readers(&self) -> usize {
+        self.service.dynamic_config().number_of_subscribers()
+    }
+
     /// Takes the newest frame that has arrived (if any); returns whether it is new.
     pub fn update(&mut self) -> Result<bool, ShmError> {
         let mut fresh = false;

@@ -35,6 +35,8 @@ pub struct ProcessRunOptions<'a> {
     pub stall_timeout: Duration,
     /// Called with the field time of each new frame.
     pub progress: Option<&'a mut dyn FnMut(f64)>,
+    /// Serve `pheromone view` of the run's field and robots on this HTTP address.
+    pub view: Option<String>,
 }
 
 /// Why a run as processes failed. Every process of the run has been stopped by then.
@@ -210,6 +212,23 @@ fn supervise(
             "--json",
         ]),
     ))?;
+    // The view is no lockstep participant: it reads frames and poses, and is stopped with the
+    // run (a view that cannot listen fails the run, as any child does).
+    if let Some(listen) = &o.view {
+        sup.spawn(ChildSpec::new(
+            "view",
+            None,
+            args(&[
+                "view",
+                "--field",
+                &field_name,
+                "--world",
+                &world_name,
+                "--listen",
+                listen,
+            ]),
+        ))?;
+    }
     let mut roles: Vec<ChildId> = Vec::new();
     for r in &scenario.robots {
         let mut loc = role("localizer", Some(r.id));

@@ -1,0 +1,55 @@
+//! `pheromone view`: a live web page of a running field (heat map, robots, statistics).
+
+use clap::Args;
+use field::shm::create_node;
+use publishers::view::server::{bind, serve, View, ViewConfig};
+use publishers::view::MAX_SIDE_LIMIT;
+
+use super::bad;
+
+/// Serve a live web page of a running field: a heat map of each channel (automatic or fixed
+/// scale, colour bar), the robots' poses and recent paths (with --world) and the field's
+/// statistics, polled about ten times a second. Frames are downsampled on the server.
+///
+/// Binds loopback unless told otherwise; the page is embedded in the binary (no internet
+/// needed). The field may start after the view. Ctrl-C or SIGTERM stops it.
+#[derive(Args, Debug)]
+pub struct ViewArgs {
+    /// Field name.
+    #[arg(long, default_value = "main")]
+    pub field: String,
+    /// HTTP address to serve on (port 0: any free port; the address is printed).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub listen: String,
+    /// World whose robots' poses are shown (`pheromone/W/r<ID>/pose`).
+    #[arg(long)]
+    pub world: Option<String>,
+    /// Robots r0..r<N-1> looked for in the world.
+    #[arg(long, default_value_t = 32)]
+    pub robots: u32,
+    /// Largest side of a downsampled frame when the page asks for none (1–4096).
+    #[arg(long, default_value_t = 256)]
+    pub max_side: usize,
+}
+
+pub fn run(a: ViewArgs) -> anyhow::Result<()> {
+    if !(1..=MAX_SIDE_LIMIT).contains(&a.max_side) {
+        return Err(bad(format!(
+            "--max-side {}: must be between 1 and {MAX_SIDE_LIMIT}",
+            a.max_side
+        )));
+    }
+    field::shm::check_name(&a.field).map_err(super::bad_from)?;
+    let node = create_node(&format!("view-{}", std::process::id()))?;
+    let (server, local) = bind(&a.listen).map_err(super::bad_from)?;
+    eprintln!("view: http://{local}/ (field '{}')", a.field);
+    let mut view = View::new(ViewConfig {
+        field: a.field,
+        world: a.world,
+        max_robots: a.robots,
+        default_max_side: a.max_side,
+    });
+    serve(&node, &server, &mut view)?;
+    eprintln!("view: stopped");
+    Ok(())
+}
