@@ -41,9 +41,14 @@ impl KernelKind {
     }
 }
 
+/// A kernel name that is none of `KernelKind`'s.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown kernel '{0}' (expected ellipse, paper, saturating or z-shape)")]
+pub struct UnknownKernel(pub String);
+
 impl std::str::FromStr for KernelKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownKernel;
+    fn from_str(s: &str) -> Result<Self, UnknownKernel> {
         [
             KernelKind::Ellipse,
             KernelKind::Paper,
@@ -52,9 +57,7 @@ impl std::str::FromStr for KernelKind {
         ]
         .into_iter()
         .find(|k| k.name() == s)
-        .ok_or_else(|| {
-            format!("unknown kernel '{s}' (expected ellipse, paper, saturating or z-shape)")
-        })
+        .ok_or_else(|| UnknownKernel(s.to_string()))
     }
 }
 
