@@ -205,3 +205,36 @@ fn a_client_with_another_message_layout_gets_a_clear_error() {
         "{err}"
     );
 }
+
+#[test]
+fn a_node_directory_left_by_a_killed_process_is_removed_and_a_live_ones_kept() {
+    // What a process SIGKILLed while it created its node leaves: a directory with the node's
+    // details (naming the process) and no monitor token, so no listing shows it.
+    use iceoryx2::prelude::*;
+    let mut config = iceoryx2::config::Config::default();
+    let prefix = format!("iox2_o{}_", std::process::id() % 100_000);
+    config.global.prefix = FileName::new(prefix.as_bytes()).unwrap();
+    let node_dir = std::path::PathBuf::from(config.global.node_dir().to_string());
+    let orphan = |id: u128, pid: u32| {
+        let dir = node_dir.join(id.to_string());
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join(format!("{prefix}node.details")),
+            format!("executable = \"pheromone\"\nprocess = {pid}\nname = \"x\"\n"),
+        )
+        .unwrap();
+        dir
+    };
+    let base = 7_000_000_000_000_000_000_000_000_000u128 + std::process::id() as u128 * 10;
+    // A pid above the kernel's limit (4194304) belongs to no process.
+    let gone = orphan(base, 99_999_999);
+    let alive = orphan(base + 1, std::process::id());
+    field::shm::cleanup_dead_nodes_of(&config);
+    let (gone_left, alive_left) = (gone.exists(), alive.exists());
+    std::fs::remove_dir_all(&alive).unwrap();
+    assert!(!gone_left, "the dead process's node directory is removed");
+    assert!(
+        alive_left,
+        "a node of a live process (being created) is kept"
+    );
+}

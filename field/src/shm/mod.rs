@@ -278,6 +278,91 @@ pub fn cleanup_dead_nodes(node: &Node<Svc>) -> u64 {
 /// keeps its tags: they are what its cleanup needs to find its services and ports, and removing
 /// them would leave those in /dev/shm for good.
 pub fn cleanup_dead_nodes_of(config: &Config) -> u64 {
+    cleanup_listed_dead_nodes(config) + remove_orphan_node_dirs(config)
+}
+
+/// iceoryx2 0.10 lists a node by its monitor token: a process SIGKILLed while it created or
+/// cleaned a node can leave that node's directory (its details file) without a token, so no
+/// listing shows it and no cleanup removes it. Removes such directories of `config`'s prefix
+/// whose process is gone (the details name it), and empty ones older than a minute; a node being
+/// created now has a live process. Returns how many it removed.
+fn remove_orphan_node_dirs(config: &Config) -> u64 {
+    use iceoryx2::node::NodeView;
+    let node_dir = std::path::PathBuf::from(config.global.node_dir().to_string());
+    let Ok(entries) = std::fs::read_dir(&node_dir) else {
+        return 0;
+    };
+    let mut listed = Vec::new();
+    // Listing fails only on an unreadable node directory: then nothing is removed below.
+    if Node::<Svc>::list(config, |state| {
+        listed.push(match &state {
+            NodeState::Alive(v) => v.id().value().to_string(),
+            NodeState::Dead(v) => v.id().value().to_string(),
+            NodeState::Inaccessible(id) | NodeState::Undefined(id) => id.value().to_string(),
+        });
+        CallbackProgression::Continue
+    })
+    .is_err()
+    {
+        return 0;
+    }
+    let details = format!(
+        "{}node{}",
+        config.global.prefix, config.global.node.static_config_suffix
+    );
+    let mut removed = 0;
+    for dir in entries.flatten() {
+        let name = dir.file_name().to_string_lossy().into_owned();
+        if listed.contains(&name) || !dir.path().is_dir() {
+            continue;
+        }
+        let files: Vec<_> = match std::fs::read_dir(dir.path()) {
+            Ok(f) => f.flatten().map(|e| e.path()).collect(),
+            Err(_) => continue,
+        };
+        let orphan = if files.is_empty() {
+            dir.metadata()
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|t| t.elapsed().ok())
+                .is_some_and(|age| age > Duration::from_secs(60))
+        } else {
+            let Some(d) = files
+                .iter()
+                .find(|f| f.file_name().is_some_and(|n| n == details.as_str()))
+            else {
+                continue; // another prefix's node, or not a node
+            };
+            let pid = std::fs::read_to_string(d).ok().and_then(|t| {
+                t.lines()
+                    .find_map(|l| {
+                        l.strip_prefix("process = ")
+                            .map(|v| v.trim().parse::<i32>())
+                    })
+                    .and_then(Result::ok)
+            });
+            // ESRCH: no such process. Anything else (alive, or not ours to signal) keeps it.
+            pid.is_some_and(|p| {
+                nix::sys::signal::kill(nix::unistd::Pid::from_raw(p), None)
+                    == Err(nix::errno::Errno::ESRCH)
+            })
+        };
+        if !orphan {
+            continue;
+        }
+        for f in &files {
+            // A file another cleaner removed first is gone either way.
+            let _ = std::fs::remove_file(f);
+        }
+        if std::fs::remove_dir(dir.path()).is_ok() {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// The cleanup of every node the listing shows dead (see [`cleanup_dead_nodes_of`]).
+fn cleanup_listed_dead_nodes(config: &Config) -> u64 {
     use iceoryx2::node::{NodeCleanupFailure, NodeView};
     let mut cleaned = 0;
     let mut failed = Vec::new();
