@@ -26,22 +26,7 @@ fn spawn_gateway(field: &str, port: u16) -> Proc {
 #[test]
 fn the_client_switches_to_the_backup_when_the_primary_is_killed_and_deposits_apply_once() {
     let field = unique("gw-backup");
-    let field_proc = Proc::spawn(&[
-        "field",
-        "--name",
-        &field,
-        "--width",
-        "100",
-        "--height",
-        "100",
-        "--cell-size",
-        "0.1",
-        "--model",
-        "none",
-        "--tick-hz",
-        "50",
-        "--json",
-    ]);
+    let field_proc = super::start_field(&field);
     let (p_port, b_port) = (free_port(), free_port());
     let mut primary = spawn_gateway(&field, p_port);
     let backup = spawn_gateway(&field, b_port);

@@ -130,6 +130,26 @@ impl Client {
     }
 }
 
+/// A field of 100×100 cells of 0.1 m, no evaporation, 50 Hz, that prints its summary at exit.
+fn start_field(name: &str) -> Proc {
+    Proc::spawn(&[
+        "field",
+        "--name",
+        name,
+        "--width",
+        "100",
+        "--height",
+        "100",
+        "--cell-size",
+        "0.1",
+        "--model",
+        "none",
+        "--tick-hz",
+        "50",
+        "--json",
+    ])
+}
+
 /// A UDP port free a moment ago (the gateway binds it next).
 fn free_port() -> u16 {
     UdpSocket::bind("127.0.0.1:0")
@@ -160,22 +180,7 @@ fn start_gateway(field: &str, port: u16, extra: &[&str]) -> (Proc, Client) {
 #[test]
 fn a_thin_client_reads_antennas_deposits_once_and_gets_each_documented_error() {
     let field = unique("gw");
-    let field_proc = Proc::spawn(&[
-        "field",
-        "--name",
-        &field,
-        "--width",
-        "100",
-        "--height",
-        "100",
-        "--cell-size",
-        "0.1",
-        "--model",
-        "none",
-        "--tick-hz",
-        "50",
-        "--json",
-    ]);
+    let field_proc = start_field(&field);
     let (gateway, c) = start_gateway(
         &field,
         free_port(),

@@ -15,22 +15,7 @@ use crate::harness::*;
 #[test]
 fn a_client_on_a_pty_pings_deposits_and_reads_the_deposit_through_a_serial_gateway() {
     let field = unique("gw-serial");
-    let field_proc = Proc::spawn(&[
-        "field",
-        "--name",
-        &field,
-        "--width",
-        "100",
-        "--height",
-        "100",
-        "--cell-size",
-        "0.1",
-        "--model",
-        "none",
-        "--tick-hz",
-        "50",
-        "--json",
-    ]);
+    let field_proc = super::start_field(&field);
     let pty = nix::pty::openpty(None, None).expect("openpty");
     // The test keeps the slave open too: the master never sees a hang-up while the gateway
     // starts or stops.
