@@ -49,23 +49,44 @@ fn pubsub<T: Debug + ZeroCopySend>(
     use iceoryx2::service::builder::publish_subscribe::{
         PublishSubscribeOpenError as OpenErr, PublishSubscribeOpenOrCreateError as E,
     };
-    node.service_builder(&service_name(service)?)
-        .publish_subscribe::<T>()
-        .max_publishers(o.max_publishers)
-        .max_subscribers(o.max_subscribers)
-        .max_nodes(o.max_publishers + o.max_subscribers)
-        .subscriber_max_buffer_size(o.buffer)
-        .history_size(1)
-        .enable_safe_overflow(o.keep_latest)
-        .open_or_create()
-        .map_err(|e| match e {
-            E::PublishSubscribeOpenError(OpenErr::IncompatibleTypes) => ShmError::Layout {
-                service: service.to_string(),
-                ours: std::any::type_name::<T>(),
-            },
-            e => err(service, "open or create", e),
-        })
+    let name = service_name(service)?;
+    let mut attempt = 0;
+    loop {
+        let result = node
+            .service_builder(&name)
+            .publish_subscribe::<T>()
+            .max_publishers(o.max_publishers)
+            .max_subscribers(o.max_subscribers)
+            .max_nodes(o.max_publishers + o.max_subscribers)
+            .subscriber_max_buffer_size(o.buffer)
+            .history_size(1)
+            .enable_safe_overflow(o.keep_latest)
+            .open_or_create();
+        match result {
+            Ok(factory) => return Ok(factory),
+            // Several processes open or create one service at once: iceoryx2 0.10 can find it
+            // created by another and then gone (or not yet complete) when it opens it. Another
+            // try sees it settled; a termination request ends the retries.
+            Err(E::PublishSubscribeOpenError(OpenErr::DoesNotExist))
+                if attempt < OPEN_OR_CREATE_ATTEMPTS && node.wait(RETRY_WAIT).is_ok() =>
+            {
+                attempt += 1;
+            }
+            Err(E::PublishSubscribeOpenError(OpenErr::IncompatibleTypes)) => {
+                return Err(ShmError::Layout {
+                    service: service.to_string(),
+                    ours: std::any::type_name::<T>(),
+                })
+            }
+            Err(e) => return Err(err(service, "open or create", e)),
+        }
+    }
 }
+
+/// Tries of an open-or-create that raced another process's (see `pubsub`).
+const OPEN_OR_CREATE_ATTEMPTS: u32 = 50;
+/// The wait between two of them.
+const RETRY_WAIT: Duration = Duration::from_millis(2);
 
 /// The wake-up event of a link: at least as many notifiers and listeners as the link has senders
 /// and receivers (the defaults admit 256 senders and 64 receivers).
