@@ -170,8 +170,11 @@ pub fn serve(
         }
         let n = match port.read(&mut input) {
             Ok(0) => {
-                // End of file (a hung-up line): nothing to read; do not spin.
-                std::thread::sleep(RECEIVE_SLICE);
+                // End of file (a hung-up line): nothing to read; wait on the node (which also
+                // sees Ctrl-C) rather than spin.
+                if node.wait(RECEIVE_SLICE).is_err() {
+                    break;
+                }
                 continue;
             }
             Ok(n) => n,
