@@ -9,13 +9,17 @@
 //!   to 1 and to 8 reader processes: ours against a Unix socket with serde (postcard) and Zenoh
 //!   on loopback (feature `zenoh`);
 //! - `deposit_to_visible_us`: a deposit published → a follower holds a frame containing it, with
-//!   the field ticking as its own process.
+//!   the field ticking as its own process;
+//! - `gateway_pir`: seed 002's PIR round trip over UDP loopback to a `pheromone gateway` process
+//!   beside a direct shared-memory read of the same two antenna values, and the PIRs per second
+//!   one gateway serves (flooded by one client) with its CPU time.
 //!
 //! Percentiles come from HdrHistogram. Performance is measured and reported, never asserted.
 //! The processes are started through a [`peer::Launcher`] (the `pheromone` binary passes itself
 //! and its hidden `bench-peer` subcommand); [`run_peer`] is what that subcommand runs.
 
 pub mod frames;
+pub mod gateway;
 pub mod hop;
 pub mod machine;
 pub mod peer;
@@ -82,6 +86,9 @@ struct Plan {
     frames_1mib: (usize, usize),
     frames_16mib: (usize, usize),
     visible_count: usize,
+    /// (PIRs timed, warm-up) and how long the gateway is flooded.
+    pir_count: (usize, usize),
+    flood: Duration,
 }
 
 impl Mode {
@@ -95,6 +102,8 @@ impl Mode {
                 frames_1mib: (300, 5),
                 frames_16mib: (100, 3),
                 visible_count: 1_000,
+                pir_count: (20_000, 1_000),
+                flood: Duration::from_secs(5),
             },
             Mode::Quick => Plan {
                 tick_widths: &[512, 1024, 2048, 4096],
@@ -104,6 +113,8 @@ impl Mode {
                 frames_1mib: (60, 3),
                 frames_16mib: (15, 2),
                 visible_count: 200,
+                pir_count: (5_000, 500),
+                flood: Duration::from_secs(2),
             },
             Mode::Smoke => Plan {
                 tick_widths: &[512],
@@ -113,6 +124,8 @@ impl Mode {
                 frames_1mib: (4, 1),
                 frames_16mib: (3, 1),
                 visible_count: 20,
+                pir_count: (100, 10),
+                flood: Duration::from_millis(200),
             },
         }
     }
@@ -215,6 +228,7 @@ pub struct Report {
     /// Keyed `"1MiB"` and `"16MiB"`.
     pub frame_ns: BTreeMap<String, FrameReport>,
     pub deposit_to_visible_us: VisibleReport,
+    pub gateway_pir: gateway::GatewayReport,
     pub targets: Vec<Target>,
     pub elapsed_s: f64,
 }
@@ -371,6 +385,23 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         target_p99_us: 1e6 / opts.tick_hz as f64 + 1.2 * compute.p99 + 50.0,
         tick_compute_us: compute,
     };
+    say(&format!(
+        "gateway: {} PIR round trips over UDP loopback, {} direct reads, {:.1} s flood",
+        plan.pir_count.0,
+        plan.pir_count.0,
+        plan.flood.as_secs_f64()
+    ));
+    let gateway_pir = gateway::measure(
+        &opts.launcher,
+        &tag(),
+        gateway::GatewayRun {
+            warmup: plan.pir_count.1,
+            count: plan.pir_count.0,
+            flood: plan.flood,
+            window: 32,
+            pin,
+        },
+    )?;
     if pin {
         machine::unpin();
     }
@@ -384,6 +415,7 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         hop_ns,
         frame_ns,
         deposit_to_visible_us,
+        gateway_pir,
         targets: Vec::new(),
         elapsed_s: 0.0,
     };
@@ -471,6 +503,21 @@ pub fn targets(r: &Report) -> Vec<Target> {
         "<=",
         v.target_p99_us,
         v.latency.p99,
+    ));
+    // Issue 14: a PIR answered well inside a 10 Hz robot's step, and one gateway core serving
+    // 1000 robots at 10 Hz (seed 002's server load grows with N² per axis; ours is O(1) per PIR).
+    let g = &r.gateway_pir;
+    t.push(target(
+        "PIR round trip p99 µs over UDP loopback",
+        "<=",
+        1000.0,
+        g.pir_round_trip_ns.p99 / 1e3,
+    ));
+    t.push(target(
+        "PIRs per second of gateway CPU (one core)",
+        ">=",
+        10_000.0,
+        g.flood.pirs_per_cpu_s,
     ));
     t
 }

@@ -11,7 +11,9 @@ use super::{bad, bad_from};
 ///
 /// Hop latency (ours vs raw iceoryx2), frame delivery of 1 MiB and 16 MiB fields to 1 and 8
 /// reader processes (ours vs a Unix socket with serde, and Zenoh on loopback in a build with
-/// `--features zenoh`), deposit-to-visible latency, and the tick/memcpy ratio at each size.
+/// `--features zenoh`), deposit-to-visible latency, the tick/memcpy ratio at each size, and seed
+/// 002's PIR round trip to a `pheromone gateway` over UDP loopback beside a direct shared-memory
+/// read of the same antennas, with the PIRs per second one gateway core serves.
 /// Progress goes to stderr. The default run takes a few minutes; `--quick` under a minute.
 #[derive(Args)]
 pub struct BenchArgs {
@@ -157,6 +159,20 @@ fn print_tables(r: &Report) {
         v.tick_hz,
         lat(&v.latency, 1e-3, "ms"),
         w = v.width
+    );
+    let g = &r.gateway_pir;
+    println!("\ngateway (seed 002 PIR)           p50       p99     p99.9       max");
+    println!(
+        "PIR round trip, UDP    {}",
+        lat(&g.pir_round_trip_ns, 1e-3, "µs")
+    );
+    println!(
+        "antennas from shm      {}",
+        lat(&g.shm_antennas_ns, 1e-3, "µs")
+    );
+    println!(
+        "flood: {:.0} PIR/s over {:.1} s, gateway CPU {:.2} s → {:.0} PIR per CPU-second ({} in flight)",
+        g.flood.pirs_per_s, g.flood.wall_s, g.flood.gateway_cpu_s, g.flood.pirs_per_cpu_s, g.flood.window
     );
     println!("\ntargets");
     for t in &r.targets {

@@ -50,6 +50,10 @@ pub struct GatewayArgs {
     /// Print the final counters as one JSON object on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Once serving, print the UDP address as one line `udp://HOST:PORT` on stdout (before the
+    /// --json counters): with `--udp 127.0.0.1:0` the caller learns the port the system chose.
+    #[arg(long, conflicts_with = "serial")]
+    pub print_address: bool,
 }
 
 /// Where the gateway serves when neither --udp nor --serial is given.
@@ -152,6 +156,9 @@ pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
         (None, Some(socket)) => {
             let local = socket.local_addr()?;
             eprintln!("gateway: serving field '{}' on udp://{local}", a.field);
+            if a.print_address {
+                println!("udp://{local}");
+            }
             udp::serve(&node, &mut gateway, socket, log)?;
         }
         (None, None) => unreachable!("a socket when there is no line"),

@@ -10,7 +10,7 @@ use publishers::roles::{
 };
 use publishers::sim::scenario::Scenario;
 
-use super::{bad_from, seconds};
+use super::{bad, bad_from, seconds};
 
 /// Options every robot process shares.
 #[derive(Args, Debug, Clone)]
@@ -255,7 +255,9 @@ pub fn run_depositor_cmd(a: DepositorArgs) -> anyhow::Result<()> {
 /// motion command (pheromone/<WORLD>/r<ID>/cmd) and a status (following / trail abandoned / exploring).
 /// Strategies: gradient (seed 000: climb ∇P, trail rejection, speed table), antenna (seed 002),
 /// inverse (seed 004 IAS-SS), uniform (seed 004's random baseline). Settings come from the
-/// scenario's `[robot.follower]`; flags override.
+/// scenario's `[robot.follower]`; flags override. With --gateway an antenna robot reads its two
+/// antennas only through PIR requests to `pheromone gateway` (seed 002's thin client), with an
+/// optional --backup gateway.
 #[derive(Args, Debug)]
 pub struct FollowerArgs {
     #[command(flatten)]
@@ -272,6 +274,158 @@ pub struct FollowerArgs {
     /// Seed of the sector strategies' random choices.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Antenna strategy only: read the two antennas through PIR requests to the gateway at
+    /// `udp://HOST:PORT` (`pheromone gateway`), with nothing of the field in shared memory (the
+    /// pose, command and status services with the world stay). In lockstep a PIR answered from
+    /// a frame older than the step's is sent again until the field's tick lands.
+    #[arg(long, value_name = "udp://HOST:PORT")]
+    pub gateway: Option<String>,
+    /// A backup gateway (`udp://HOST:PORT`), asked when the active one does not answer within
+    /// --gateway-timeout-ms × (1 + --gateway-retries).
+    #[arg(long, value_name = "udp://HOST:PORT", requires = "gateway")]
+    pub backup: Option<String>,
+    /// Client ID in the gateway frames (1–255) [default: robot id + 1].
+    #[arg(long, requires = "gateway")]
+    pub client_id: Option<u8>,
+    /// How long each PIR or deposit waits for the gateway's reply (ms).
+    #[arg(long, default_value_t = 100, value_name = "MS", requires = "gateway")]
+    pub gateway_timeout_ms: u64,
+    /// Attempts after the first on the same gateway before switching to the backup.
+    #[arg(long, default_value_t = 2, requires = "gateway")]
+    pub gateway_retries: u32,
+    /// Deposit this amount at the robot's pose through the gateway every --deposit-every steps
+    /// (a leader laying a trail remotely); a deposit is never resent to the other gateway, so
+    /// it is applied at most once.
+    #[arg(long, requires = "gateway")]
+    pub deposit_amount: Option<f32>,
+    /// Steps between two --deposit-amount deposits.
+    #[arg(
+        long,
+        default_value_t = 10,
+        value_name = "STEPS",
+        requires = "deposit_amount"
+    )]
+    pub deposit_every: u64,
+    /// Lockstep: seconds a step may wait for the frame of its step (from the gateway).
+    #[arg(
+        long,
+        default_value_t = 30.0,
+        value_name = "SECS",
+        requires = "gateway"
+    )]
+    pub frame_timeout: f64,
+}
+
+/// `udp://HOST:PORT` → `HOST:PORT`.
+fn udp_address(flag: &str, url: &str) -> anyhow::Result<String> {
+    match url.strip_prefix("udp://") {
+        Some(a) if !a.is_empty() => Ok(a.to_string()),
+        _ => Err(bad(format!(
+            "{flag} '{url}': expected udp://HOST:PORT (e.g. udp://127.0.0.1:7402)"
+        ))),
+    }
+}
+
+/// The antenna robot of `--gateway`: its client with the backup, and its run.
+fn run_remote_follower(
+    a: &FollowerArgs,
+    scenario: &Scenario,
+    config: &FollowerConfig,
+    gateway: &str,
+) -> anyhow::Result<()> {
+    use publishers::gateway::client::{ClientConfig, DepositRetry, GatewayClient, Transport};
+    use publishers::roles::follower::antenna_source::{AntennaRobot, GatewaySource};
+    use publishers::roles::follower::run_antenna::{
+        run_antenna_robot, AntennaRunOptions, RemoteDeposits,
+    };
+    use publishers::roles::follower::AntennaFollower;
+    if config.strategy != StrategyKind::Antenna {
+        return Err(bad(format!(
+            "--gateway: only the antenna strategy reads through a gateway (robot {} has '{}')",
+            a.robot, config.strategy
+        )));
+    }
+    u8::try_from(config.channel).map_err(|_| {
+        bad(format!(
+            "--channel {}: a gateway names channels 0–255",
+            config.channel
+        ))
+    })?;
+    let client_id = match a.client_id {
+        Some(0) => {
+            return Err(bad(
+                "--client-id 0: use 1–255 (0 is not protected by the CRC)",
+            ))
+        }
+        Some(id) => id,
+        None => u8::try_from(a.robot + 1).map_err(|_| {
+            bad(format!(
+                "robot {}: no default client ID (1–255); give --client-id",
+                a.robot
+            ))
+        })?,
+    };
+    if a.gateway_timeout_ms == 0 {
+        return Err(bad("--gateway-timeout-ms 0: expected a timeout ≥ 1 ms"));
+    }
+    let deposits = match a.deposit_amount {
+        Some(v) if !(v.is_finite() && v > 0.0) => {
+            return Err(bad(format!(
+                "--deposit-amount {v}: expected a finite amount > 0"
+            )))
+        }
+        Some(amount) => Some(RemoteDeposits {
+            amount,
+            every_steps: a.deposit_every.max(1),
+        }),
+        None => None,
+    };
+    let frame_timeout = seconds("frame-timeout", a.frame_timeout)?;
+    let primary = Transport::udp(&udp_address("--gateway", gateway)?).map_err(bad_from)?;
+    let mut client = GatewayClient::new(
+        primary,
+        ClientConfig {
+            client_id,
+            timeout: std::time::Duration::from_millis(a.gateway_timeout_ms),
+            retries: a.gateway_retries,
+            // A restarted robot does not reuse its last run's seqs (the gateway remembers 16).
+            first_seq: (std::process::id() % 256) as u8,
+            deposit_retry: DepositRetry::SameGateway,
+        },
+    );
+    if let Some(b) = &a.backup {
+        client =
+            client.with_backup(Transport::udp(&udp_address("--backup", b)?).map_err(bad_from)?);
+    }
+    let strategy =
+        AntennaFollower::new(config.channel as usize, config.antenna.clone()).map_err(bad_from)?;
+    let robot = AntennaRobot::new(a.robot, strategy, GatewaySource::new(client));
+    let node = create_node(&format!("follower-r{}-{}", a.robot, std::process::id()))?;
+    let summary = run_antenna_robot(
+        &node,
+        &a.common.role_options(a.robot),
+        robot,
+        AntennaRunOptions {
+            steer_by: config.steer_by,
+            dt_s: scenario.world.dt_s,
+            frame_timeout,
+            deposits,
+        },
+    )?;
+    eprintln!(
+        "follower r{} (gateway {}): {} steps, {} rejected, {} PIRs ({} stale), {} switch(es), \
+         deposits {} applied / {} failed",
+        a.robot,
+        summary.source.active,
+        summary.role.steps,
+        summary.role.rejected,
+        summary.source.reads,
+        summary.source.stale_replies,
+        summary.source.switches,
+        summary.source.deposits_applied,
+        summary.source.deposits_failed
+    );
+    print_json(a.common.json, &summary)
 }
 
 pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
@@ -288,6 +442,9 @@ pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
         config.seed = s;
     }
     config.validate().map_err(bad_from)?;
+    if let Some(g) = &a.gateway {
+        return run_remote_follower(&a, &scenario, &config, g);
+    }
     let follower = Follower::from_config(a.robot, &config).map_err(bad_from)?;
     let node = create_node(&format!("follower-r{}-{}", a.robot, std::process::id()))?;
     let summary = run_follower(

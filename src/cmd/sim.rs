@@ -43,6 +43,12 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     if let Some(t) = a.trials {
         return run_trials(&a, &scenario, t);
     }
+    if a.remote && publishers::sim::processes::remote_robots(&scenario).is_empty() {
+        return Err(bad(format!(
+            "--remote: scenario '{}' has no robot with an antenna follower (try trail-following)",
+            scenario.name
+        )));
+    }
     eprintln!(
         "sim '{}' (seed {}): {} robot(s), {:.1} s simulated, field {}×{} cells, {}",
         scenario.name,
@@ -80,6 +86,8 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     let mut metrics = metrics_json(&scenario, &summary, &rec);
     metrics["mode"] = json!(if a.single_process {
         "single-process"
+    } else if a.remote {
+        "processes-remote"
     } else {
         "processes"
     });
@@ -276,6 +284,7 @@ fn run_processes(
             stall_timeout: stall,
             progress,
             view: a.view.clone(),
+            remote: a.remote,
         },
     )?)
 }

@@ -59,6 +59,13 @@ pub struct SimArgs {
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8080",
           conflicts_with = "single_process")]
     pub view: Option<String>,
+    /// Seed 002's thin clients: the antenna robots read the field only through a `pheromone
+    /// gateway` this run starts (UDP on a loopback port the system picks), by PIR requests, with
+    /// no shared memory of the field; the other roles are unchanged. Lockstep holds: a robot asks
+    /// again until the PIR reply comes from the frame of its step. Separate processes only
+    /// (`--single-process` has no processes to put a gateway between).
+    #[arg(long, conflicts_with = "single_process")]
+    pub remote: bool,
     /// Every depositor deposits a constant amount, whatever its localization (the traditional
     /// scheme seed 000 argues against).
     #[arg(long)]

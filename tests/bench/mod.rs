@@ -103,6 +103,27 @@ fn bench_smoke_run_reports_every_figure_as_one_json_object() {
     );
     assert_eq!(v["tick_hz"].as_f64(), Some(200.0));
 
+    // Seed 002's PIR through a gateway process beside the direct shared-memory read, and the
+    // flood: replies counted, the gateway's CPU time measured.
+    let g = &r["gateway_pir"];
+    check_latency(&g["pir_round_trip_ns"], "gateway_pir.pir_round_trip_ns");
+    check_latency(&g["shm_antennas_ns"], "gateway_pir.shm_antennas_ns");
+    let flood = &g["flood"];
+    assert!(flood["replies"].as_u64().is_some_and(|n| n > 0), "{flood}");
+    for k in ["pirs_per_s", "gateway_cpu_s", "pirs_per_cpu_s"] {
+        assert!(flood[k].as_f64().is_some_and(|v| v > 0.0), "{k}: {flood}");
+    }
+    let names: Vec<&str> = r["targets"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|t| t["name"].as_str())
+        .collect();
+    assert!(
+        names.iter().any(|n| n.starts_with("PIR round trip")),
+        "{names:?}"
+    );
+
     let targets = r["targets"].as_array().expect("targets");
     assert!(targets.len() >= 6, "{targets:?}");
     assert!(targets.iter().all(|t| t["met"].is_boolean()));

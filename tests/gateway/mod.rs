@@ -4,6 +4,8 @@
 //! here from its parameters, DLE stuffing, DLE ETX — and uses nothing of the codec crate.
 
 mod backup;
+mod follower_backup;
+mod remote;
 mod serial;
 
 use std::net::UdpSocket;

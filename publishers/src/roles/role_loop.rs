@@ -60,6 +60,9 @@ pub enum ProcessError {
     Interrupted(#[source] LockstepError),
     #[error(transparent)]
     Lockstep(#[from] LockstepError),
+    /// An antenna robot got no readings from its source (gateway, or the field).
+    #[error("antenna readings: {0}")]
+    AntennaSource(String),
     #[error("robot {robot} sent no command for step {step} within {timeout_s} s (is its follower running?)")]
     Stalled {
         robot: u32,

@@ -11,6 +11,7 @@ use field::run::FieldRunSummary;
 use field::shm::{cleanup_dead_nodes, create_node, ShmError};
 use serde::Serialize;
 
+use crate::roles::follower::run_antenna::AntennaRobotSummary;
 use crate::roles::world::World;
 use crate::roles::{lockstep_participants, RoleSummary, WorldOptions, WorldSummary};
 use crate::sim::observer::Observer;
@@ -37,6 +38,24 @@ pub struct ProcessRunOptions<'a> {
     pub progress: Option<&'a mut dyn FnMut(f64)>,
     /// Serve `pheromone view` of the run's field and robots on this HTTP address.
     pub view: Option<String>,
+    /// The antenna robots read the field only through a `pheromone gateway` child (seed 002's
+    /// thin clients, PIR over UDP loopback) instead of shared memory.
+    pub remote: bool,
+}
+
+/// The robots of `scenario` whose follower uses the antenna strategy: the ones a `--remote` run
+/// serves through a gateway.
+pub fn remote_robots(scenario: &Scenario) -> Vec<u32> {
+    scenario
+        .robots
+        .iter()
+        .filter(|r| {
+            scenario
+                .follower_config(r.id)
+                .is_some_and(|f| f.strategy == crate::roles::follower::StrategyKind::Antenna)
+        })
+        .map(|r| r.id)
+        .collect()
 }
 
 /// Why a run as processes failed. Every process of the run has been stopped by then.
@@ -56,6 +75,12 @@ pub enum ProcessRunError {
     },
     #[error("the field of the run did not come up within {timeout_s:.1} s")]
     NoField { timeout_s: f64 },
+    #[error("the gateway of the run did not serve within {timeout_s:.1} s")]
+    NoGateway { timeout_s: f64 },
+    #[error("the gateway of the run announced '{line}', not udp://HOST:PORT")]
+    GatewayAddress { line: String },
+    #[error("--remote: scenario '{scenario}' has no robot with an antenna follower")]
+    NoRemoteRobot { scenario: String },
     #[error("interrupted: stopped every process of the run")]
     Interrupted,
     #[error("the run took longer than {timeout_s} s: stopped every process")]
@@ -229,7 +254,50 @@ fn supervise(
             ]),
         ))?;
     }
+    // --remote: the gateway serves the field to the antenna robots; they start once it serves.
+    let remote = if o.remote {
+        remote_robots(scenario)
+    } else {
+        Vec::new()
+    };
+    if o.remote && remote.is_empty() {
+        return Err(ProcessRunError::NoRemoteRobot {
+            scenario: scenario.name.clone(),
+        });
+    }
+    let gateway = if o.remote {
+        let id = sup.spawn(ChildSpec::new(
+            "gateway",
+            None,
+            args(&[
+                "gateway",
+                "--field",
+                &field_name,
+                "--udp",
+                "127.0.0.1:0",
+                "--rate-hz",
+                "0",
+                "--attach-timeout",
+                &attach_timeout.as_secs_f64().to_string(),
+                "--print-address",
+                "--json",
+            ]),
+        ))?;
+        Some((
+            id,
+            gateway_address(
+                &node,
+                sup,
+                id,
+                started + attach_timeout,
+                attach_timeout.as_secs_f64(),
+            )?,
+        ))
+    } else {
+        None
+    };
     let mut roles: Vec<ChildId> = Vec::new();
+    let mut remote_ids: Vec<ChildId> = Vec::new();
     for r in &scenario.robots {
         let mut loc = role("localizer", Some(r.id));
         if o.slam {
@@ -244,11 +312,16 @@ fn supervise(
             ))?);
         }
         if r.follower.is_some() {
-            roles.push(sup.spawn(ChildSpec::new(
-                "follower",
-                Some(r.id),
-                role("follower", Some(r.id)),
-            ))?);
+            let mut follower = role("follower", Some(r.id));
+            let through = gateway.as_ref().filter(|_| remote.contains(&r.id));
+            if let Some((_, address)) = through {
+                follower.extend(args(&["--gateway", address]));
+            }
+            let id = sup.spawn(ChildSpec::new("follower", Some(r.id), follower))?;
+            if through.is_some() {
+                remote_ids.push(id);
+            }
+            roles.push(id);
         }
     }
     let mut world_args = role("world", None);
@@ -332,8 +405,25 @@ fn supervise(
     let field_summary: FieldRunSummary = sup.summary(field)?;
     reports.push(report("field", &field_summary));
     for &id in &roles {
-        let s: RoleSummary = sup.summary(id)?;
-        reports.push(report(&sup.spec(id).who(), &s));
+        if remote_ids.contains(&id) {
+            let s: AntennaRobotSummary = sup.summary(id)?;
+            reports.push(report(&sup.spec(id).who(), &s));
+        } else {
+            let s: RoleSummary = sup.summary(id)?;
+            reports.push(report(&sup.spec(id).who(), &s));
+        }
+    }
+    if let Some((id, _)) = gateway {
+        // Every robot has gone: stop the gateway as Ctrl-C would, and take its counters.
+        sup.signal(id, nix::sys::signal::Signal::SIGTERM);
+        if !sup.wait_exit(id, end_timeout) {
+            return Err(ProcessRunError::NotStopped {
+                who: sup.spec(id).who(),
+                timeout_s: end_timeout.as_secs_f64(),
+            });
+        }
+        let counters: serde_json::Value = sup.summary(id)?;
+        reports.push(report("gateway", &counters));
     }
     reports.push(report("world", &world_summary));
     let rec = observer.finish();
@@ -347,6 +437,35 @@ fn supervise(
             reports,
         },
     ))
+}
+
+/// The address a gateway child prints on its first stdout line once it serves
+/// (`--print-address`), waited for until `deadline` (woken by the line, or by Ctrl-C and a
+/// failed child within 100 ms).
+fn gateway_address(
+    node: &iceoryx2::node::Node<field::shm::Svc>,
+    sup: &mut Supervisor,
+    id: ChildId,
+    deadline: Instant,
+    timeout_s: f64,
+) -> Result<String, ProcessRunError> {
+    loop {
+        sup.check()?;
+        if node.wait(Duration::ZERO).is_err() {
+            return Err(ProcessRunError::Interrupted);
+        }
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(ProcessRunError::NoGateway { timeout_s });
+        }
+        if let Some(line) = sup.next_line(id, left.min(Duration::from_millis(100)))? {
+            let line = line.trim().to_string();
+            return match line.strip_prefix("udp://") {
+                Some(a) if !a.is_empty() => Ok(line),
+                _ => Err(ProcessRunError::GatewayAddress { line }),
+            };
+        }
+    }
 }
 
 fn report(role: &str, s: &impl Serialize) -> ProcessReport {

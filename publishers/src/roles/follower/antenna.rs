@@ -100,27 +100,24 @@ impl AntennaFollower {
         &self.config
     }
 
-    /// Raw readings (P_L, P_R) at the antenna points.
-    pub fn readings(&self, frame: &FrameView<'_>, pose: SamplePose) -> (f32, f32) {
+    /// The point the two antennas sit either side of: the pose moved `antenna_ahead_m` along
+    /// its heading. A thin client sends this pose in its PIR (with half the wheel base), so
+    /// the gateway reads exactly the points [`Self::readings`] reads.
+    pub fn head(&self, pose: SamplePose) -> SamplePose {
         let a = self.config.antenna_ahead_m;
         let (s, c) = pose.theta_rad.sin_cos();
-        let head = SamplePose::new(pose.x_m + a * c, pose.y_m + a * s, pose.theta_rad);
-        frame.antennas(self.channel, head, self.config.wheel_base_m)
-    }
-}
-
-impl FollowerStrategy for AntennaFollower {
-    fn name(&self) -> &'static str {
-        StrategyKind::Antenna.name()
+        SamplePose::new(pose.x_m + a * c, pose.y_m + a * s, pose.theta_rad)
     }
 
-    fn channel(&self) -> usize {
-        self.channel
+    /// Raw readings (P_L, P_R) at the antenna points.
+    pub fn readings(&self, frame: &FrameView<'_>, pose: SamplePose) -> (f32, f32) {
+        frame.antennas(self.channel, self.head(pose), self.config.wheel_base_m)
     }
 
-    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, _dt_s: f64) -> Decision {
+    /// The decision from the two readings, wherever they were read (a frame in shared memory or
+    /// a gateway's PIR reply).
+    pub fn decide_readings(&self, pl: f32, pr: f32) -> Decision {
         let c = &self.config;
-        let (pl, pr) = self.readings(frame, pose);
         let level = 0.5 * (pl + pr);
         let strongest = pl.max(pr);
         if strongest.is_nan() || strongest <= c.min_level {
@@ -144,6 +141,21 @@ impl FollowerStrategy for AntennaFollower {
             state: FollowerState::Following,
             sensed_level: level,
         }
+    }
+}
+
+impl FollowerStrategy for AntennaFollower {
+    fn name(&self) -> &'static str {
+        StrategyKind::Antenna.name()
+    }
+
+    fn channel(&self) -> usize {
+        self.channel
+    }
+
+    fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, _dt_s: f64) -> Decision {
+        let (pl, pr) = self.readings(frame, pose);
+        self.decide_readings(pl, pr)
     }
 }
 

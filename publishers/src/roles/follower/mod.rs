@@ -22,9 +22,11 @@
 //! all re-exported here); this module holds the shared types, the configuration and the wrapper.
 
 mod antenna;
+pub mod antenna_source;
 mod gradient;
 mod route;
 pub mod run;
+pub mod run_antenna;
 mod sector;
 #[cfg(test)]
 mod test_support;

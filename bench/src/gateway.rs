@@ -1,0 +1,277 @@
+//! Seed 002's pheromone information request (PIR) over the gateway against a direct read of the
+//! same two antenna values in shared memory, and how many PIRs one gateway serves per second.
+//!
+//! - A field peer ticks a 512² one-channel field; a `pheromone gateway` process serves it on a
+//!   loopback port the system picks (`--udp 127.0.0.1:0 --print-address`, no rate limit).
+//! - **Round trip:** this process sends a PIR with the thin client
+//!   ([`publishers::gateway::client::GatewayClient`]) and waits for its reply, one at a time.
+//! - **Direct read:** this process's [`FieldReader`] takes the newest frame (`update`) and reads
+//!   `FrameView::antennas` at the same pose: what a follower in shared memory does per step.
+//! - **Throughput:** a client keeps a window of PIRs in flight on one UDP socket (each reply
+//!   sends the next request) for a while; the gateway's replies per second of wall time and
+//!   its CPU time over the same interval (`/proc/PID/schedstat`) give the PIRs per second of
+//!   one core. The gateway is pinned to core 1 and this process to core 0 where there are two
+//!   cores or more.
+
+use std::net::UdpSocket;
+use std::time::{Duration, Instant};
+
+use field::shm::{create_node, FieldReader};
+use field::SamplePose;
+use gateway_codec::{decode, encode, Message, PirRequest, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
+use publishers::gateway::client::{ClientConfig, GatewayClient, Transport};
+use publishers::sim::supervisor::{ChildSpec, Supervisor};
+use serde::Serialize;
+
+use crate::peer::{Launcher, Peer, PeerSpec};
+use crate::stats::Latency;
+use crate::BenchError;
+
+#[derive(Debug, Clone, Copy)]
+pub struct GatewayRun {
+    pub warmup: usize,
+    pub count: usize,
+    /// How long the gateway is flooded.
+    pub flood: Duration,
+    /// Requests in flight during the flood.
+    pub window: usize,
+    pub pin: bool,
+}
+
+/// PIRs per second of one gateway, flooded by one client.
+#[derive(Debug, Clone, Serialize)]
+pub struct FloodReport {
+    /// Replies received per second of wall time.
+    pub pirs_per_s: f64,
+    /// The gateway's CPU time over the flood (s).
+    pub gateway_cpu_s: f64,
+    pub wall_s: f64,
+    /// Replies per second of the gateway's CPU time: what one core serves.
+    pub pirs_per_cpu_s: f64,
+    pub replies: u64,
+    /// Requests re-sent after no reply came for 100 ms (lost datagrams).
+    pub resent: u64,
+    pub window: usize,
+}
+
+/// PIR over UDP loopback beside the direct shared-memory read, ns.
+#[derive(Debug, Clone, Serialize)]
+pub struct GatewayReport {
+    /// One PIR sent and its reply received by the thin client (round trip).
+    pub pir_round_trip_ns: Latency,
+    /// `FieldReader::update` + `FrameView::antennas` on the newest frame.
+    pub shm_antennas_ns: Latency,
+    pub flood: FloodReport,
+    pub width: u32,
+    pub method: &'static str,
+}
+
+/// The process's CPU time (user + system) so far, from `/proc/PID/schedstat` (ns).
+fn cpu_ns(pid: u32) -> Result<u64, BenchError> {
+    let path = format!("/proc/{pid}/schedstat");
+    let text = std::fs::read_to_string(&path).map_err(|source| BenchError::Io {
+        what: format!("read {path}"),
+        source,
+    })?;
+    text.split_whitespace()
+        .next()
+        .and_then(|v| v.parse().ok())
+        .ok_or_else(|| BenchError::Peer(format!("{path}: '{}' has no CPU time", text.trim())))
+}
+
+fn pin_pid(pid: u32, core: usize) {
+    use nix::sched::{sched_setaffinity, CpuSet};
+    use nix::unistd::Pid;
+    let mut set = CpuSet::new();
+    if set.set(core % crate::machine::cores()).is_ok() {
+        // Pinning is best effort: the figures say whether it was asked for, not whether it held.
+        let _ = sched_setaffinity(Pid::from_raw(pid as i32), &set);
+    }
+}
+
+pub fn measure(
+    launcher: &Launcher,
+    tag: &str,
+    run: GatewayRun,
+) -> Result<GatewayReport, BenchError> {
+    let width = 512;
+    let node = create_node(&format!("bench-gateway-{tag}"))?;
+    let name = format!("bench-{tag}");
+    let mut field = Peer::spawn(
+        launcher,
+        &PeerSpec::Field {
+            name: name.clone(),
+            width,
+            tick_hz: 100.0,
+            core: run.pin.then_some(1),
+        },
+    )?;
+    field.wait_ready(Duration::from_secs(20))?;
+    let mut sup = Supervisor::new(&launcher.program);
+    sup.echo_stderr = false;
+    let gw = sup.spawn(ChildSpec::new(
+        "gateway",
+        None,
+        [
+            "gateway",
+            "--field",
+            &name,
+            "--udp",
+            "127.0.0.1:0",
+            "--rate-hz",
+            "0",
+            "--print-address",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect(),
+    ))?;
+    let result = (|| {
+        let line = sup
+            .next_line(gw, Duration::from_secs(20))?
+            .ok_or_else(|| BenchError::Peer("the gateway did not serve within 20 s".into()))?;
+        let address = line
+            .trim()
+            .strip_prefix("udp://")
+            .ok_or_else(|| BenchError::Peer(format!("the gateway announced '{line}'")))?
+            .to_string();
+        if run.pin {
+            pin_pid(sup.pid(gw), 1);
+        }
+        let mut reader = FieldReader::attach_within(&node, &name, Duration::from_secs(10))?;
+        reader.wait_frame(Duration::from_secs(10))?;
+        // The middle of the field, heading along +x, antennas 0.15 m to each side.
+        let c = 0.5 * width as f32 * field::FieldConfig::default().cell_size_m;
+        let pose = SamplePose::new(c, c, 0.3);
+        let half_m = 0.15;
+
+        let mut client = GatewayClient::new(
+            Transport::udp(&address).map_err(|e| BenchError::Peer(e.to_string()))?,
+            ClientConfig {
+                client_id: 1,
+                timeout: Duration::from_secs(1),
+                retries: 0,
+                ..ClientConfig::default()
+            },
+        );
+        let mut rtt = Vec::with_capacity(run.count);
+        for i in 0..run.warmup + run.count {
+            let t0 = Instant::now();
+            client
+                .pir(pose.x_m, pose.y_m, pose.theta_rad, half_m, 0)
+                .map_err(|e| BenchError::Peer(e.to_string()))?;
+            if i >= run.warmup {
+                rtt.push(t0.elapsed().as_nanos() as u64);
+            }
+        }
+        let mut direct = Vec::with_capacity(run.count);
+        let mut sink = 0.0f32;
+        for i in 0..run.warmup + run.count {
+            let t0 = Instant::now();
+            reader.update()?;
+            let f = reader
+                .frame()
+                .ok_or_else(|| BenchError::Peer("no frame".into()))?;
+            let (l, r) = f.view.antennas(0, pose, 2.0 * half_m);
+            sink += l + r;
+            if i >= run.warmup {
+                direct.push(t0.elapsed().as_nanos() as u64);
+            }
+        }
+        std::hint::black_box(sink);
+        let flood = flood(&address, sup.pid(gw), pose, half_m, run)?;
+        Ok(GatewayReport {
+            pir_round_trip_ns: Latency::from_ns(&rtt)
+                .ok_or_else(|| BenchError::Peer("PIR: no samples".into()))?,
+            shm_antennas_ns: Latency::from_ns(&direct)
+                .ok_or_else(|| BenchError::Peer("direct read: no samples".into()))?,
+            flood,
+            width,
+            method: "round trip: one PIR at a time from GatewayClient over UDP loopback; direct: \
+                     FieldReader::update + FrameView::antennas in this process; flood: a window \
+                     of PIRs in flight on one socket, gateway CPU from /proc/PID/schedstat",
+        })
+    })();
+    sup.stop_all(Duration::from_secs(5));
+    drop(field);
+    result
+}
+
+/// Keeps `run.window` PIRs in flight for `run.flood`; counts the replies.
+fn flood(
+    address: &str,
+    gateway_pid: u32,
+    pose: SamplePose,
+    half_m: f32,
+    run: GatewayRun,
+) -> Result<FloodReport, BenchError> {
+    let io = |what: &str| {
+        let what = what.to_string();
+        move |source| BenchError::Io { what, source }
+    };
+    let socket = UdpSocket::bind("127.0.0.1:0").map_err(io("bind the flood socket"))?;
+    socket
+        .connect(address)
+        .map_err(io("connect the flood socket"))?;
+    socket
+        .set_read_timeout(Some(Duration::from_millis(100)))
+        .map_err(io("set the flood socket's timeout"))?;
+    let mut request = [0u8; MAX_ENCODED_BYTES];
+    let n = encode(
+        &Message::Pir(PirRequest {
+            x_m: pose.x_m,
+            y_m: pose.y_m,
+            theta_rad: pose.theta_rad,
+            half_wheel_base_m: half_m,
+            channel: 0,
+        }),
+        2,
+        &mut request,
+    )
+    .map_err(|e| BenchError::Peer(format!("encode a PIR: {e}")))?;
+    let request = &request[..n];
+    let mut buf = [0u8; MAX_WIRE_BYTES + 1];
+    let (mut replies, mut resent) = (0u64, 0u64);
+    let cpu0 = cpu_ns(gateway_pid)?;
+    let t0 = Instant::now();
+    for _ in 0..run.window {
+        socket.send(request).map_err(io("send a PIR"))?;
+    }
+    while t0.elapsed() < run.flood {
+        match socket.recv(&mut buf) {
+            Ok(len) => {
+                if let Some(Ok(f)) = decode(&buf[..len]) {
+                    if matches!(f.message, Message::PirReply(_)) {
+                        replies += 1;
+                    }
+                }
+                socket.send(request).map_err(io("send a PIR"))?;
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                // Datagrams lost: fill the window again.
+                for _ in 0..run.window {
+                    socket.send(request).map_err(io("send a PIR"))?;
+                }
+                resent += run.window as u64;
+            }
+            Err(e) => return Err(io("receive a PIR reply")(e)),
+        }
+    }
+    let wall_s = t0.elapsed().as_secs_f64();
+    let gateway_cpu_s = cpu_ns(gateway_pid)?.saturating_sub(cpu0) as f64 * 1e-9;
+    let round = |v: f64| (v * 10.0).round() / 10.0;
+    Ok(FloodReport {
+        pirs_per_s: round(replies as f64 / wall_s),
+        gateway_cpu_s: (gateway_cpu_s * 1e4).round() / 1e4,
+        wall_s: (wall_s * 1e3).round() / 1e3,
+        pirs_per_cpu_s: round(replies as f64 / gateway_cpu_s.max(1e-9)),
+        replies,
+        resent,
+        window: run.window,
+    })
+}
