@@ -189,7 +189,9 @@ impl Gateway {
     ) -> Result<Self, GatewayError> {
         check_config(&config)?;
         let mut reader = FieldReader::attach_within(node, field, timeout)?;
-        if reader.frame().is_none() && !reader.wait_frame(timeout)? {
+        // Checked every 100 ms, not only on frame-ready: a lockstep field waiting for its first
+        // clock hands a new reader the current frame (its history) without a new frame event.
+        if reader.frame().is_none() && reader.wait_until(timeout, |_| true)?.is_none() {
             return Err(GatewayError::NoFrame {
                 field: field.to_string(),
                 timeout_s: timeout.as_secs_f64(),
