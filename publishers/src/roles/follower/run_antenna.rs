@@ -157,7 +157,7 @@ fn drive<
             }
             last.set(Some(cmd));
             if let (Some(d), true) = (run.deposits, status.is_some()) {
-                if d.every_steps > 0 && p.step % d.every_steps == 0 {
+                if d.every_steps > 0 && p.step.is_multiple_of(d.every_steps) {
                     // Applied at most once (the client never resends a deposit to the other
                     // gateway); a deposit that got no answer is counted, and the robot goes on.
                     let channel = robot.channel();
