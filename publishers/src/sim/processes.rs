@@ -75,8 +75,8 @@ pub enum ProcessRunError {
     },
     #[error("the field of the run did not come up within {timeout_s:.1} s")]
     NoField { timeout_s: f64 },
-    #[error("the gateway of the run did not serve within {timeout_s:.1} s")]
-    NoGateway { timeout_s: f64 },
+    #[error("the gateway of the run did not serve within {timeout_s:.1} s; its last output:\n{stderr_tail}")]
+    NoGateway { timeout_s: f64, stderr_tail: String },
     #[error("the gateway of the run announced '{line}', not udp://HOST:PORT")]
     GatewayAddress { line: String },
     #[error("--remote: scenario '{scenario}' has no robot with an antenna follower")]
@@ -456,7 +456,10 @@ fn gateway_address(
         }
         let left = deadline.saturating_duration_since(Instant::now());
         if left.is_zero() {
-            return Err(ProcessRunError::NoGateway { timeout_s });
+            return Err(ProcessRunError::NoGateway {
+                timeout_s,
+                stderr_tail: sup.stderr_tail(id),
+            });
         }
         if let Some(line) = sup.next_line(id, left.min(Duration::from_millis(100)))? {
             let line = line.trim().to_string();
