@@ -113,9 +113,13 @@ fn list_shows_two_fields_with_rates_and_readers_then_one_when_a_field_stops() {
     let run = Run::new("ls");
     let a = start_field(&run, "la", ("40", "30"), "50");
     let b = start_field(&run, "lb", ("20", "10"), "10");
-    // A reader on `la` for the whole test.
+    // A reader on `la` for the whole test, and a depositor on `lb` (in this process).
     let reader = Follower::start(&run, "la", "5");
     reader.line();
+    let node = run.node("list-test");
+    let depositor = eventually(WAIT, "a depositor on lb", || {
+        field::shm::DepositPublisher::attach(&node, "lb", 3).ok()
+    });
     let fields = eventually(WAIT, "list to show both fields", || {
         let f = list(&run);
         (f.len() == 2).then_some(f)
@@ -134,7 +138,6 @@ fn list_shows_two_fields_with_rates_and_readers_then_one_when_a_field_stops() {
             "{f}"
         );
         assert_eq!(f["alive"], true, "{f}");
-        assert_eq!(f["depositors"], 0, "{f}");
         // Frames come (the field ticks on wall time; a busy host may tick it slower, never
         // faster than asked).
         let rate = f["tick_hz"].as_f64().unwrap();
@@ -143,6 +146,8 @@ fn list_shows_two_fields_with_rates_and_readers_then_one_when_a_field_stops() {
     }
     assert_eq!(fa["readers"], 1, "the probe reads la: {fa}");
     assert_eq!(fb["readers"], 0, "{fb}");
+    assert_eq!(fa["depositors"], 0, "{fa}");
+    assert_eq!(fb["depositors"], 1, "this test deposits on lb: {fb}");
 
     // The text form has a row per field.
     let o = run.run(&["list", "--window-s", "0.3"]);
@@ -159,6 +164,7 @@ fn list_shows_two_fields_with_rates_and_readers_then_one_when_a_field_stops() {
         "{text}"
     );
 
+    drop(depositor);
     b.interrupt();
     let out = b.wait_exit(WAIT);
     assert!(
@@ -176,6 +182,7 @@ fn list_shows_two_fields_with_rates_and_readers_then_one_when_a_field_stops() {
 
     let (status, err) = reader.interrupt();
     assert!(status.success(), "probe --follow: {status:?} {err}");
+    drop(node);
     a.interrupt();
     let out = a.wait_exit(WAIT);
     assert!(

@@ -58,3 +58,42 @@ impl Scenario {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_map_replaces_the_walls_and_fits_the_field_and_the_sectors() {
+        let dir = std::env::temp_dir().join(format!("pheromone-fit-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // 10 × 5 cells of 0.5 m from (−2, 1): 5 m × 2.5 m, one occupied cell at the top left.
+        let mut pgm = b"P5 10 5 255\n".to_vec();
+        pgm.extend((0..50).map(|i| if i == 0 { 0u8 } else { 254 }));
+        std::fs::write(dir.join("m.pgm"), pgm).unwrap();
+        std::fs::write(
+            dir.join("m.yaml"),
+            "image: m.pgm\nresolution: 0.5\norigin: [-2.0, 1.0, 0.0]\n",
+        )
+        .unwrap();
+        let mut s = Scenario::load("ias-ss").unwrap();
+        assert!(s.world.walls.len() > 1);
+        s.use_map(&dir.join("m.yaml")).unwrap();
+        assert_eq!(s.world.walls.len(), 1, "{:?}", s.world.walls);
+        assert_eq!((s.field.width, s.field.height), (50, 25));
+        assert_eq!((s.field.origin_x_m, s.field.origin_y_m), (-2.0, 1.0));
+        let e = s.metrics.exploration.as_ref().unwrap();
+        assert_eq!(
+            (e.min_m, e.max_m, e.cols, e.rows),
+            ([-2.0, 1.0], [3.0, 3.5], 6, 4)
+        );
+        // The one wall is the top-left cell (the image's first row is the top of the map).
+        match &s.world.walls[0] {
+            crate::roles::world::WallConfig::Rect {
+                min_x_m, min_y_m, ..
+            } => assert_eq!((*min_x_m, *min_y_m), (-2.0, 3.0)),
+            w => panic!("{w:?}"),
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
