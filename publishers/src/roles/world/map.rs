@@ -106,7 +106,9 @@ impl OccupancyMap {
 
     /// Builds a map from the YAML text and the PGM bytes (P5 binary or P2 ASCII). A cell is
     /// occupied when its occupancy probability exceeds `occupied_thresh` (map_server "trinary"
-    /// reading: p = (max − value)/max, or value/max with `negate: 1`).
+    /// reading: p = (max − value)/max, or value/max with `negate: 1`); free cells (p <
+    /// `free_thresh`) and unknown ones are open space for the simulator. `free_thresh` is
+    /// checked (in [0, 1], at most `occupied_thresh`).
     pub fn from_parts(yaml_text: &str, pgm_bytes: &[u8]) -> Result<Self, MapError> {
         let yaml = parse_map_yaml(yaml_text)?;
         Ok(Self::from_yaml_and_image(&yaml, parse_pgm(pgm_bytes)?))
