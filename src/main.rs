@@ -44,6 +44,10 @@ enum Command {
     Probe(cmd::probe::ProbeArgs),
     /// Send one deposit to a running field.
     Deposit(cmd::probe::DepositArgs),
+    /// List the fields on this host: grid, tick rate, sequence, readers, depositors, alive.
+    List(cmd::list::ListArgs),
+    /// Save a running field's next frame as NumPy .npy or as a ROS map_server map (PGM + YAML).
+    Export(cmd::export::ExportArgs),
     /// Serve a field to thin radio clients (seed 002's DLE/CRC frames over UDP).
     Gateway(cmd::gateway::GatewayArgs),
     /// Serve a live web page of a running field: heat map, robots, statistics.
@@ -70,6 +74,8 @@ fn main() -> ExitCode {
         Command::GraphRobot(a) => cmd::graph::run_robot(a),
         Command::Probe(a) => cmd::probe::run_probe(a),
         Command::Deposit(a) => cmd::probe::run_deposit(a),
+        Command::List(a) => cmd::list::run(a),
+        Command::Export(a) => cmd::export::run(a),
         Command::Gateway(a) => cmd::gateway::run(a),
         Command::View(a) => cmd::view::run(a),
         Command::Bench(a) => cmd::bench::run(a),

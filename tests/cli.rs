@@ -5,6 +5,8 @@ mod crash;
 mod gateway;
 mod graph;
 mod harness;
+mod inspect;
+mod maps;
 mod processes;
 mod reliability;
 mod soak;

@@ -141,6 +141,13 @@ impl FieldServices {
     }
 }
 
+/// The field `F` of a frame service name `pheromone/F/frame`, if `service` is one (how
+/// `pheromone list` finds the fields on a host).
+pub fn field_of_frame_service(service: &str) -> Option<&str> {
+    let field = service.strip_prefix("pheromone/")?.strip_suffix("/frame")?;
+    (!field.is_empty() && !field.contains('/')).then_some(field)
+}
+
 /// Frames each subscriber buffers (a reader only ever wants the newest).
 pub const FRAME_SUBSCRIBER_BUFFER: usize = 1;
 /// Frames a late subscriber receives on connect.
@@ -312,6 +319,16 @@ mod tests {
         assert_eq!(ready_service(&a.pose), "pheromone/w/r0/pose-ready");
         let f = FieldServices::of("f");
         assert_eq!(f.frame_ready, ready_service(&f.frame));
+        assert_eq!(field_of_frame_service(&f.frame), Some("f"));
+        for other in [
+            &f.frame_ready,
+            &f.deposit,
+            &a.pose,
+            "pheromone//frame",
+            "x/f/frame",
+        ] {
+            assert_eq!(field_of_frame_service(other), None, "{other}");
+        }
         for (s, r) in graph_services("g") {
             assert_eq!(r, ready_service(&s));
         }

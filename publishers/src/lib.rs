@@ -4,6 +4,7 @@
 //! follower. Each is a library type, deterministic for a seed and testable in-process, plus a
 //! short process loop.
 
+pub mod export;
 pub mod gateway;
 pub mod graph;
 pub mod messages;

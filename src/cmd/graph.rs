@@ -191,6 +191,7 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
         (a.constant, "--constant"),
         (a.trials.is_some(), "--trials"),
         (a.slam, "--slam"),
+        (a.map.is_some(), "--map"),
     ] {
         if set {
             return Err(bad(format!(

@@ -1,9 +1,11 @@
 //! One module per subcommand: argument parsing and a short loop over library types.
 
 pub mod bench;
+pub mod export;
 pub mod field;
 pub mod gateway;
 pub mod graph;
+pub mod list;
 pub mod probe;
 pub mod roles;
 pub mod sim;

@@ -5,15 +5,18 @@ use std::time::Duration;
 
 use clap::Args;
 use field::messages::KernelParams;
-use field::shm::{create_node, DepositPublisher, FieldReader};
+use field::shm::{create_node, DepositPublisher, FieldReader, Frame, Svc};
 use field::{DepositMsg, KernelKind};
+use iceoryx2::prelude::Node;
 
 use super::bad;
 
 /// Read a running field: wait for a frame, print its header and the value at a point.
 ///
 /// With --above or --below it waits (up to --timeout) until the value at the point crosses that
-/// level, and exits with status 1 if it never does.
+/// level, and exits with status 1 if it never does. With --follow it prints a line (the
+/// header and the value) --rate-hz times a second, from the newest frame, until Ctrl-C, like
+/// `ros2 topic echo`.
 #[derive(Args, Debug)]
 pub struct ProbeArgs {
     /// Field name.
@@ -38,14 +41,30 @@ pub struct ProbeArgs {
     #[arg(long, default_value_t = 10.0)]
     pub timeout: f64,
     /// Print one JSON object on stdout.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "follow")]
     pub json: bool,
+    /// Print the newest frame's header and value at the point --rate-hz times a second until
+    /// Ctrl-C (exit status 0).
+    #[arg(long, conflicts_with_all = ["above", "below"])]
+    pub follow: bool,
+    /// Lines per second with --follow.
+    #[arg(long, default_value_t = 10.0, value_name = "R", requires = "follow")]
+    pub rate_hz: f64,
 }
 
 pub fn run_probe(a: ProbeArgs) -> anyhow::Result<()> {
+    if a.follow && !(a.rate_hz.is_finite() && a.rate_hz > 0.0 && a.rate_hz <= 10_000.0) {
+        return Err(bad(format!(
+            "--rate-hz {}: must be a number of lines per second in (0, 10000]",
+            a.rate_hz
+        )));
+    }
     let node = create_node(&format!("probe-{}", std::process::id()))?;
     let timeout = Duration::from_secs_f64(a.timeout);
     let mut reader = FieldReader::attach_within(&node, &a.field, timeout)?;
+    if a.follow {
+        return follow(&a, &node, reader);
+    }
     let (x, y, ch) = (a.x, a.y, a.channel);
     let pred = |v: f32| match (a.above, a.below) {
         (Some(l), _) => v > l,
@@ -104,20 +123,53 @@ pub fn run_probe(a: ProbeArgs) -> anyhow::Result<()> {
             })
         );
     } else {
-        println!(
-            "frame {} at t = {:.2} s ({}×{}×{}, {} m): value at ({x}, {y}) channel {ch} = {value}; \
-             deposits {} applied, {} rejected",
-            h.sequence,
-            h.sim_time_s,
-            h.width,
-            h.height,
-            h.channels,
-            h.cell_size_m,
-            h.deposits_applied,
-            h.deposits_rejected_total()
-        );
+        println!("{}", probe_line(&frame, x, y, ch));
     }
     Ok(())
+}
+
+/// One line of `probe`: the frame's header and the value at (x, y) of channel `ch`.
+fn probe_line(frame: &Frame<'_>, x: f32, y: f32, ch: usize) -> String {
+    let h = frame.header;
+    format!(
+        "frame {} at t = {:.2} s ({}×{}×{}, {} m): value at ({x}, {y}) channel {ch} = {}; \
+         deposits {} applied, {} rejected",
+        h.sequence,
+        h.sim_time_s,
+        h.width,
+        h.height,
+        h.channels,
+        h.cell_size_m,
+        frame.view.value(ch, x, y),
+        h.deposits_applied,
+        h.deposits_rejected_total()
+    )
+}
+
+/// `probe --follow`: a line from the newest frame every 1/rate s, waiting on the node (which
+/// returns on Ctrl-C or SIGTERM: exit status 0), as iceoryx2's examples loop.
+fn follow(a: &ProbeArgs, node: &Node<Svc>, mut reader: FieldReader) -> anyhow::Result<()> {
+    let period = Duration::from_secs_f64(1.0 / a.rate_hz);
+    let (x, y, ch) = (a.x, a.y, a.channel);
+    if reader.frame().is_none() {
+        reader.wait_frame(Duration::from_secs_f64(a.timeout))?;
+    }
+    loop {
+        reader.update()?;
+        match reader.frame() {
+            Some(frame) if ch >= frame.view.channels => {
+                return Err(bad(format!(
+                    "--channel {ch}: the field has {} channel(s)",
+                    frame.view.channels
+                )));
+            }
+            Some(frame) => println!("{}", probe_line(&frame, x, y, ch)),
+            None => eprintln!("field '{}': no frame yet", a.field),
+        }
+        if node.wait(period).is_err() {
+            return Ok(());
+        }
+    }
 }
 
 /// Send one deposit to a running field.

@@ -38,6 +38,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             duration_s: a.duration,
             strategy: follower_strategy(&a)?,
             constant: a.constant,
+            map: a.map.clone(),
         })
         .map_err(|e| bad_in(a.scenario.as_str(), e))?;
     if let Some(t) = a.trials {

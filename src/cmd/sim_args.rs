@@ -79,6 +79,10 @@ pub struct SimArgs {
     /// exploration (scenarios with an exploration metric).
     #[arg(long, value_name = "T")]
     pub trials: Option<u32>,
+    /// Run on a ROS map_server map (map.yaml + its PGM): its occupied cells replace the
+    /// scenario's walls, and the field and the exploration sectors cover the map.
+    #[arg(long, value_name = "FILE.yaml")]
+    pub map: Option<PathBuf>,
     /// EKF-SLAM localizers (the map of landmarks is not given to them).
     #[arg(long)]
     pub slam: bool,

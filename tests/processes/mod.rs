@@ -61,7 +61,7 @@ fn sim_json(args: &[&str]) -> Value {
 }
 
 /// Runs `scenario` both ways and asserts the metrics agree key by key.
-fn assert_same_in_both_modes(scenario: &str, extra: &[&str]) -> Value {
+pub(crate) fn assert_same_in_both_modes(scenario: &str, extra: &[&str]) -> Value {
     let mut args = vec!["sim", scenario, "--no-out", "--json"];
     args.extend_from_slice(extra);
     let processes = sim_json(&args);

@@ -22,13 +22,15 @@
 //! field and becomes its publisher when the primary dies.
 //!
 //! Submodules: `server` (`FieldServer`), `reader` (`FieldReader`), `deposit`
-//! (`DepositPublisher`) and `standby` (`Standby`), all re-exported here; this file holds what
+//! (`DepositPublisher`), `standby` (`Standby`) and `survey` (the fields of a host, for
+//! `pheromone list`), all re-exported here; this file holds what
 //! they share (errors, names, nodes, service builders, frame pool sizing).
 
 mod deposit;
 mod reader;
 mod server;
 mod standby;
+mod survey;
 
 use std::time::Duration;
 
@@ -45,6 +47,7 @@ pub use deposit::DepositPublisher;
 pub use reader::{FieldReader, Frame};
 pub use server::{FieldServer, TickOutcome};
 pub use standby::{Standby, StandbyEvent, Takeover};
+pub use survey::{field_names, survey, FieldInfo};
 
 /// iceoryx2 service flavour used everywhere: inter-process.
 pub type Svc = ipc::Service;

@@ -58,6 +58,9 @@ pub enum ReportError {
     /// A snapshot's size does not match its plane data.
     #[error("field snapshot at t = {t_s} s: {detail}")]
     BadSnapshot { t_s: f64, detail: String },
+    /// Writing `field_final.npy` failed.
+    #[error(transparent)]
+    Export(#[from] crate::export::ExportError),
 }
 
 /// Header of `robot_<id>.csv`.
@@ -68,8 +71,9 @@ est_theta_rad,est_sigma_m,v_m_per_s,omega_rad_per_s,state,sensed_level";
 pub const PROBES_CSV_HEADER: &str = "t_s,x_m,y_m,channel,value";
 /// Writes every output of a run into `dir` (created if needed) and returns the paths written:
 /// `metrics.json`, `robot_<id>.csv` per robot, `probes.csv` if there are probes, one
-/// `field_<channel>_t<sss.s>s.png` per snapshot and channel, and `field_final.png` (the last
-/// snapshot's first channel).
+/// `field_<channel>_t<sss.s>s.png` per snapshot and channel, `field_final.png` (the last
+/// snapshot's first channel) and `field_final.npy` (the last snapshot, every channel:
+/// `crate::export::npy`).
 pub fn write_outputs(
     dir: &Path,
     rec: &Recording,
@@ -134,6 +138,9 @@ pub fn write_outputs(
             source,
         })?;
         written.push(path);
+    }
+    if let Some(last) = rec.snapshots.last() {
+        written.push(crate::export::npy::write_snapshot(dir, last)?);
     }
     Ok(written)
 }

@@ -8,5 +8,6 @@ pub mod processes;
 pub mod record;
 pub mod scenario;
 mod scenario_error;
+mod scenario_map;
 pub mod single;
 pub mod supervisor;

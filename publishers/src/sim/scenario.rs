@@ -185,6 +185,9 @@ pub struct Overrides {
     pub strategy: Option<StrategyKind>,
     /// Every depositor deposits with `constant` strength (seed 000's baseline).
     pub constant: bool,
+    /// A ROS map_server map (`map.yaml`) whose walls replace the scenario's; the field and the
+    /// exploration sectors are fitted to it (`sim/scenario_map.rs`).
+    pub map: Option<std::path::PathBuf>,
 }
 
 /// What runs for one robot: a localizer always, a depositor and a follower if configured.
@@ -310,7 +313,8 @@ impl Scenario {
                 origin: path.display().to_string(),
                 source,
             })?;
-            return Self::parse(&text, &path.display().to_string());
+            let dir = path.parent().unwrap_or_else(|| Path::new("."));
+            return Self::parse_in(&text, &path.display().to_string(), dir);
         }
         match BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
             Some((n, text)) => Self::parse(text, &format!("built-in scenario '{n}'")),
@@ -318,16 +322,24 @@ impl Scenario {
         }
     }
 
-    /// Parses and validates; `origin` names the source in errors.
+    /// Parses and validates; `origin` names the source in errors. A relative `[world] map` is
+    /// relative to the current directory.
     pub fn parse(text: &str, origin: &str) -> Result<Self, ScenarioError> {
-        let s: Scenario = toml::from_str(text).map_err(|e| ScenarioError::Parse {
+        Self::parse_in(text, origin, Path::new("."))
+    }
+
+    /// Parses, loads `[world] map` (relative to `base_dir`) and validates.
+    pub fn parse_in(text: &str, origin: &str, base_dir: &Path) -> Result<Self, ScenarioError> {
+        let mut s: Scenario = toml::from_str(text).map_err(|e| ScenarioError::Parse {
             origin: origin.to_string(),
             source: Box::new(e),
         })?;
-        s.validate().map_err(|e| ScenarioError::Invalid {
-            origin: origin.to_string(),
-            source: Box::new(e),
-        })?;
+        s.load_world_map(base_dir)
+            .and_then(|()| s.validate())
+            .map_err(|e| ScenarioError::Invalid {
+                origin: origin.to_string(),
+                source: Box::new(e),
+            })?;
         Ok(s)
     }
 
@@ -454,6 +466,9 @@ impl Scenario {
 
     /// Applies `pheromone sim`'s flags and re-validates. Keeps only the active robots.
     pub fn apply(&mut self, o: &Overrides) -> Result<(), ScenarioError> {
+        if let Some(map) = &o.map {
+            self.use_map(map)?;
+        }
         if let Some(seed) = o.seed {
             self.seed = seed;
         }

@@ -7,7 +7,7 @@ use field::ConfigError;
 use crate::roles::depositor::DepositorConfigError;
 use crate::roles::follower::FollowerConfigError;
 use crate::roles::localizer::LocalizerError;
-use crate::roles::world::WorldError;
+use crate::roles::world::{MapError, WorldError};
 
 /// Why a scenario could not be loaded, validated or changed.
 #[derive(Debug, thiserror::Error)]
@@ -118,6 +118,14 @@ pub enum ScenarioError {
     Metric { metric: String, reason: String },
     #[error("{0}")]
     Serialize(#[source] toml::ser::Error),
+    /// `[world] map` or `--map` cannot be loaded; the error names the file and the line (YAML)
+    /// or byte (PGM).
+    #[error("{key}: {source}")]
+    Map {
+        key: &'static str,
+        #[source]
+        source: MapError,
+    },
 }
 
 /// Why a scripted deposit (`[[deposit]]`, `mark_walls`) cannot be turned into messages.

@@ -8,7 +8,8 @@ use thiserror::Error;
 
 use super::WallConfig;
 
-/// Why a ROS map could not be loaded.
+/// Why a ROS map could not be loaded. [`OccupancyMap::load`] names the file
+/// ([`MapError::File`]); the causes name the line of the YAML or the byte of the PGM.
 #[derive(Debug, Error)]
 pub enum MapError {
     #[error("cannot read {path}: {source}")]
@@ -16,18 +17,36 @@ pub enum MapError {
         path: PathBuf,
         source: std::io::Error,
     },
+    /// A problem in file `path` (the YAML or the image it names).
+    #[error("{}: {source}", path.display())]
+    File {
+        path: PathBuf,
+        #[source]
+        source: Box<MapError>,
+    },
     #[error("map yaml line {line}: {reason}")]
     Yaml { line: usize, reason: String },
     #[error("map yaml: missing key `{0}`")]
     MissingKey(&'static str),
-    #[error("map yaml: `{key}` = {value} is invalid ({expected})")]
+    #[error("map yaml line {line}: `{key}` = {value} is invalid ({expected})")]
     InvalidValue {
+        line: usize,
         key: &'static str,
         value: f64,
         expected: &'static str,
     },
-    #[error("pgm image: {0}")]
-    Pgm(String),
+    /// The image, at byte offset `byte` of the PGM file.
+    #[error("pgm image byte {byte}: {reason}")]
+    Pgm { byte: usize, reason: String },
+}
+
+impl MapError {
+    fn in_file(self, path: &Path) -> Self {
+        MapError::File {
+            path: path.to_path_buf(),
+            source: Box::new(self),
+        }
+    }
 }
 
 /// An occupancy grid read from a ROS map_server map (YAML + PGM image).
@@ -53,13 +72,14 @@ struct MapYaml {
 }
 
 impl OccupancyMap {
-    /// Loads `map.yaml` and the image it names (relative to the YAML's directory).
+    /// Loads `map.yaml` and the image it names (a relative `image` is relative to the YAML's
+    /// directory). Errors name the file ([`MapError::File`]) and the line or byte.
     pub fn load(yaml_path: &Path) -> Result<Self, MapError> {
         let text = std::fs::read_to_string(yaml_path).map_err(|source| MapError::Io {
             path: yaml_path.to_path_buf(),
             source,
         })?;
-        let yaml = parse_map_yaml(&text)?;
+        let yaml = parse_map_yaml(&text).map_err(|e| e.in_file(yaml_path))?;
         let image_path = yaml_path
             .parent()
             .unwrap_or_else(|| Path::new("."))
@@ -68,15 +88,34 @@ impl OccupancyMap {
             path: image_path.clone(),
             source,
         })?;
-        Self::from_parts(&text, &bytes)
+        let image = parse_pgm(&bytes).map_err(|e| e.in_file(&image_path))?;
+        Ok(Self::from_yaml_and_image(&yaml, image))
+    }
+
+    /// The world rectangle the map covers: `[min_x, min_y]`, `[max_x, max_y]` (m).
+    pub fn extent_m(&self) -> ([f64; 2], [f64; 2]) {
+        let [x0, y0] = self.origin_m;
+        (
+            [x0, y0],
+            [
+                x0 + self.width as f64 * self.resolution_m,
+                y0 + self.height as f64 * self.resolution_m,
+            ],
+        )
     }
 
     /// Builds a map from the YAML text and the PGM bytes (P5 binary or P2 ASCII). A cell is
     /// occupied when its occupancy probability exceeds `occupied_thresh` (map_server "trinary"
-    /// reading: p = (max − value)/max, or value/max with `negate: 1`).
+    /// reading: p = (max − value)/max, or value/max with `negate: 1`); free cells (p <
+    /// `free_thresh`) and unknown ones are open space for the simulator. `free_thresh` is
+    /// checked (in [0, 1], at most `occupied_thresh`).
     pub fn from_parts(yaml_text: &str, pgm_bytes: &[u8]) -> Result<Self, MapError> {
         let yaml = parse_map_yaml(yaml_text)?;
-        let (width, height, maxval, pixels) = parse_pgm(pgm_bytes)?;
+        Ok(Self::from_yaml_and_image(&yaml, parse_pgm(pgm_bytes)?))
+    }
+
+    fn from_yaml_and_image(yaml: &MapYaml, image: (usize, usize, u16, Vec<u16>)) -> Self {
+        let (width, height, maxval, pixels) = image;
         let mut occupied = vec![false; width * height];
         for row in 0..height {
             // The image's first row is the top of the map.
@@ -87,13 +126,13 @@ impl OccupancyMap {
                 occupied[y * width + x] = p > yaml.occupied_thresh;
             }
         }
-        Ok(Self {
+        Self {
             width,
             height,
             resolution_m: yaml.resolution_m,
             origin_m: [yaml.origin[0], yaml.origin[1]],
             occupied,
-        })
+        }
     }
 
     /// Occupied cells merged into rectangles: runs along each row, then identical runs of
@@ -147,7 +186,8 @@ fn parse_map_yaml(text: &str) -> Result<MapYaml, MapError> {
     let mut resolution = None;
     let mut origin = None;
     let mut negate = false;
-    let mut occupied_thresh = 0.65;
+    let mut occupied_thresh = (0.65, 0);
+    let mut free_thresh = (0.196, 0);
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
         let line = raw.split('#').next().unwrap_or("").trim();
@@ -168,8 +208,14 @@ fn parse_map_yaml(text: &str) -> Result<MapYaml, MapError> {
                 .map_err(|_| yaml_err(format!("`{}` is not a number", v.trim())))
         };
         match key.trim() {
-            "image" => image = Some(value.trim_matches(['"', '\'']).to_string()),
-            "resolution" => resolution = Some(number(value)?),
+            "image" => {
+                let name = value.trim_matches(['"', '\'']);
+                if name.is_empty() {
+                    return Err(yaml_err("`image` is empty".into()));
+                }
+                image = Some(name.to_string());
+            }
+            "resolution" => resolution = Some((number(value)?, line_no)),
             "origin" => {
                 let inner = value
                     .strip_prefix('[')
@@ -179,13 +225,14 @@ fn parse_map_yaml(text: &str) -> Result<MapYaml, MapError> {
                 if parts.len() != 3 {
                     return Err(yaml_err("origin must be `[x, y, yaw]`".into()));
                 }
-                origin = Some([number(parts[0])?, number(parts[1])?, number(parts[2])?]);
+                origin = Some((
+                    [number(parts[0])?, number(parts[1])?, number(parts[2])?],
+                    line_no,
+                ));
             }
             "negate" => negate = number(value)? != 0.0,
-            "occupied_thresh" => occupied_thresh = number(value)?,
-            "free_thresh" => {
-                number(value)?;
-            }
+            "occupied_thresh" => occupied_thresh = (number(value)?, line_no),
+            "free_thresh" => free_thresh = (number(value)?, line_no),
             "mode" => {
                 if value.trim_matches(['"', '\'']) != "trinary" {
                     return Err(yaml_err(format!(
@@ -196,34 +243,51 @@ fn parse_map_yaml(text: &str) -> Result<MapYaml, MapError> {
             other => return Err(yaml_err(format!("unknown key `{other}`"))),
         }
     }
-    let resolution_m = resolution.ok_or(MapError::MissingKey("resolution"))?;
+    let (resolution_m, line) = resolution.ok_or(MapError::MissingKey("resolution"))?;
     if !(resolution_m.is_finite() && resolution_m > 0.0) {
         return Err(MapError::InvalidValue {
+            line,
             key: "resolution",
             value: resolution_m,
             expected: "finite and > 0",
         });
     }
-    let origin = origin.ok_or(MapError::MissingKey("origin"))?;
-    if !origin.iter().all(|v| v.is_finite()) {
+    let (origin, line) = origin.ok_or(MapError::MissingKey("origin"))?;
+    if let Some(v) = origin.iter().find(|v| !v.is_finite()) {
         return Err(MapError::InvalidValue {
+            line,
             key: "origin",
-            value: f64::NAN,
+            value: *v,
             expected: "finite",
         });
     }
     if origin[2].abs() > 1e-9 {
         return Err(MapError::InvalidValue {
+            line,
             key: "origin",
             value: origin[2],
             expected: "yaw 0: walls are axis-aligned",
         });
     }
-    if !(0.0..=1.0).contains(&occupied_thresh) {
+    for (key, (v, line)) in [
+        ("occupied_thresh", occupied_thresh),
+        ("free_thresh", free_thresh),
+    ] {
+        if !(0.0..=1.0).contains(&v) {
+            return Err(MapError::InvalidValue {
+                line,
+                key,
+                value: v,
+                expected: "in [0, 1]",
+            });
+        }
+    }
+    if free_thresh.0 > occupied_thresh.0 {
         return Err(MapError::InvalidValue {
-            key: "occupied_thresh",
-            value: occupied_thresh,
-            expected: "in [0, 1]",
+            line: free_thresh.1,
+            key: "free_thresh",
+            value: free_thresh.0,
+            expected: "at most occupied_thresh",
         });
     }
     Ok(MapYaml {
@@ -231,17 +295,21 @@ fn parse_map_yaml(text: &str) -> Result<MapYaml, MapError> {
         resolution_m,
         origin,
         negate,
-        occupied_thresh,
+        occupied_thresh: occupied_thresh.0,
     })
 }
 
 /// Parses a PGM image (P5 binary with maxval < 256 or ≥ 256, or P2 ASCII) into
-/// `(width, height, maxval, pixels)`, pixels row-major from the top row.
+/// `(width, height, maxval, pixels)`, pixels row-major from the top row. Errors carry the byte
+/// offset where the problem is.
 fn parse_pgm(bytes: &[u8]) -> Result<(usize, usize, u16, Vec<u16>), MapError> {
-    let err = |m: &str| MapError::Pgm(m.to_string());
+    let err = |byte: usize, m: &str| MapError::Pgm {
+        byte,
+        reason: m.to_string(),
+    };
     let mut pos = 0;
-    // Header tokens, skipping whitespace and `#` comments.
-    let next_token = |pos: &mut usize| -> Option<String> {
+    // Header tokens, skipping whitespace and `#` comments: (offset, text).
+    let next_token = |pos: &mut usize| -> (usize, Option<String>) {
         loop {
             while *pos < bytes.len() && bytes[*pos].is_ascii_whitespace() {
                 *pos += 1;
@@ -258,59 +326,77 @@ fn parse_pgm(bytes: &[u8]) -> Result<(usize, usize, u16, Vec<u16>), MapError> {
         while *pos < bytes.len() && !bytes[*pos].is_ascii_whitespace() {
             *pos += 1;
         }
-        (start < *pos).then(|| String::from_utf8_lossy(&bytes[start..*pos]).into_owned())
+        (
+            start,
+            (start < *pos).then(|| String::from_utf8_lossy(&bytes[start..*pos]).into_owned()),
+        )
     };
-    let magic = next_token(&mut pos).ok_or_else(|| err("empty file"))?;
-    let mut header_num = |name: &str| -> Result<usize, MapError> {
-        next_token(&mut pos)
-            .and_then(|t| t.parse::<usize>().ok())
-            .ok_or_else(|| MapError::Pgm(format!("bad or missing {name}")))
+    let (at, magic) = next_token(&mut pos);
+    let magic = magic.ok_or_else(|| err(at, "empty file"))?;
+    if magic != "P5" && magic != "P2" {
+        return Err(err(at, &format!("unsupported magic `{magic}` (P5 or P2)")));
+    }
+    let mut header_num = |name: &str| -> Result<(usize, usize), MapError> {
+        let (at, t) = next_token(&mut pos);
+        t.and_then(|t| t.parse::<usize>().ok())
+            .map(|v| (v, at))
+            .ok_or_else(|| err(at, &format!("bad or missing {name}")))
     };
-    let width = header_num("width")?;
-    let height = header_num("height")?;
-    let maxval = header_num("maxval")?;
-    if width == 0 || height == 0 || !(1..=65535).contains(&maxval) {
-        return Err(err("width, height must be > 0 and maxval in 1..=65535"));
+    let (width, at_w) = header_num("width")?;
+    let (height, at_h) = header_num("height")?;
+    let (maxval, at_m) = header_num("maxval")?;
+    if width == 0 {
+        return Err(err(at_w, "width must be > 0"));
+    }
+    if height == 0 {
+        return Err(err(at_h, "height must be > 0"));
+    }
+    if !(1..=65535).contains(&maxval) {
+        return Err(err(at_m, "maxval must be in 1..=65535"));
     }
     let n = width
         .checked_mul(height)
-        .ok_or_else(|| err("image too large"))?;
+        .ok_or_else(|| err(at_w, "image too large"))?;
     // Never reserve more than the file can hold: a header may claim any size.
     let mut pixels = Vec::with_capacity(n.min(bytes.len()));
-    match magic.as_str() {
-        "P5" => {
-            pos += 1; // single whitespace after maxval
-            let bpp = if maxval < 256 { 1 } else { 2 };
-            let data = n
-                .checked_mul(bpp)
-                .and_then(|len| pos.checked_add(len))
-                .and_then(|end| bytes.get(pos..end))
-                .ok_or_else(|| err("truncated pixel data"))?;
-            if bpp == 1 {
-                pixels.extend(data.iter().map(|&b| u16::from(b)));
-            } else {
-                pixels.extend(
-                    data.chunks_exact(2)
-                        .map(|c| u16::from_be_bytes([c[0], c[1]])),
-                );
+    if magic == "P5" {
+        pos += 1; // single whitespace after maxval
+        let bpp = if maxval < 256 { 1 } else { 2 };
+        let data = n
+            .checked_mul(bpp)
+            .and_then(|len| pos.checked_add(len))
+            .and_then(|end| bytes.get(pos..end))
+            .ok_or_else(|| {
+                err(
+                    bytes.len(),
+                    &format!(
+                        "truncated pixel data: {width}×{height} pixels need {} bytes from byte {pos}",
+                        n.saturating_mul(bpp)
+                    ),
+                )
+            })?;
+        if bpp == 1 {
+            pixels.extend(data.iter().map(|&b| u16::from(b)));
+        } else {
+            pixels.extend(
+                data.chunks_exact(2)
+                    .map(|c| u16::from_be_bytes([c[0], c[1]])),
+            );
+        }
+        if let Some(i) = pixels.iter().position(|&v| usize::from(v) > maxval) {
+            return Err(err(pos + i * bpp, "pixel above maxval"));
+        }
+    } else {
+        for _ in 0..n {
+            let (at, t) = next_token(&mut pos);
+            let v = t
+                .and_then(|t| t.parse::<u16>().ok())
+                .ok_or_else(|| err(at, "truncated or bad ASCII pixel data"))?;
+            if usize::from(v) > maxval {
+                return Err(err(at, "pixel above maxval"));
             }
+            pixels.push(v);
         }
-        "P2" => {
-            for _ in 0..n {
-                let v = next_token(&mut pos)
-                    .and_then(|t| t.parse::<u16>().ok())
-                    .ok_or_else(|| err("truncated or bad ASCII pixel data"))?;
-                pixels.push(v);
-            }
-        }
-        other => {
-            return Err(MapError::Pgm(format!(
-                "unsupported magic `{other}` (P5 or P2)"
-            )))
-        }
-    }
-    if pixels.iter().any(|&v| usize::from(v) > maxval) {
-        return Err(err("pixel above maxval"));
     }
     Ok((width, height, maxval as u16, pixels))
 }
@@ -369,7 +455,7 @@ mod tests {
         assert_eq!(map.occupied, vec![true, false, false, true]);
         assert!(matches!(
             OccupancyMap::from_parts(MAP_YAML, b"P5 2 2 255\n\x00"),
-            Err(MapError::Pgm(_))
+            Err(MapError::Pgm { .. })
         ));
         assert!(matches!(
             OccupancyMap::from_parts("image: a.pgm\nresolution: 0.1\n", &pgm),
@@ -379,5 +465,82 @@ mod tests {
             OccupancyMap::from_parts(&format!("{MAP_YAML}bogus: 1\n"), &pgm),
             Err(MapError::Yaml { line: 7, .. })
         ));
+    }
+
+    fn example_map() -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/maps/rooms.yaml")
+    }
+
+    #[test]
+    fn the_example_map_gives_its_rooms_walls() {
+        let map = OccupancyMap::load(&example_map()).unwrap();
+        assert_eq!((map.width, map.height, map.resolution_m), (150, 100, 0.2));
+        assert_eq!(map.extent_m(), ([0.0, 0.0], [30.0, 20.0]));
+        // Outer walls, three inner walls with their doors, a 4 × 4-cell pillar.
+        assert_eq!(map.occupied.iter().filter(|&&o| o).count(), 756);
+        let walls = map.to_walls();
+        let near = |a: f64, b: f64| (a - b).abs() < 1e-9;
+        assert!(
+            walls.iter().any(|w| matches!(w, WallConfig::Rect { min_x_m, max_x_m, min_y_m, max_y_m }
+                if near(*min_x_m, 15.6) && near(*max_x_m, 16.4) && near(*min_y_m, 9.6) && near(*max_y_m, 10.4))),
+            "the pillar: {walls:?}"
+        );
+        let mut cfg = one_robot(WorldPose::new(2.5, 2.5, 0.0));
+        cfg.walls = walls;
+        let world = World::new(cfg, 0).unwrap();
+        // Rooms, doors and the hall are free; walls and the pillar are not.
+        for (x, y) in [
+            (2.5, 2.5),
+            (6.0, 10.1),
+            (12.1, 4.0),
+            (12.1, 16.0),
+            (20.1, 9.0),
+            (20.1, 11.0),
+            (25.0, 10.1),
+            (15.0, 7.5),
+        ] {
+            assert!(world.is_free(x, y), "({x}, {y}) should be free");
+        }
+        for (x, y) in [
+            (12.1, 8.0),
+            (20.1, 3.0),
+            (2.0, 10.1),
+            (16.0, 10.0),
+            (0.1, 5.0),
+            (29.9, 19.9),
+        ] {
+            assert!(!world.is_free(x, y), "({x}, {y}) should be a wall");
+        }
+    }
+
+    #[test]
+    fn a_malformed_map_names_the_file_and_the_line_or_byte() {
+        let dir = std::env::temp_dir().join(format!("pheromone-map-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let yaml = dir.join("m.yaml");
+        std::fs::write(&yaml, "image: m.pgm\nresolution: 0.1\norigin: [0, 0, x]\n").unwrap();
+        let e = OccupancyMap::load(&yaml).unwrap_err().to_string();
+        assert!(
+            e.contains("m.yaml") && e.contains("line 3") && e.contains("`x`"),
+            "{e}"
+        );
+        std::fs::write(&yaml, "image: m.pgm\nresolution: -0.1\norigin: [0, 0, 0]\n").unwrap();
+        let e = OccupancyMap::load(&yaml).unwrap_err().to_string();
+        assert!(
+            e.contains("m.yaml") && e.contains("line 2") && e.contains("resolution"),
+            "{e}"
+        );
+        std::fs::write(&yaml, "image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n").unwrap();
+        // 2 × 2 pixels announced, 3 given: the error is at the end of the file (byte 14).
+        std::fs::write(dir.join("m.pgm"), b"P5\n2 2\n255\n\x00\xff\x00").unwrap();
+        let e = OccupancyMap::load(&yaml).unwrap_err().to_string();
+        assert!(
+            e.contains("m.pgm") && e.contains("byte 14") && e.contains("truncated"),
+            "{e}"
+        );
+        std::fs::write(dir.join("m.pgm"), b"P2\n2 2\n255\n0 255 9 x\n").unwrap();
+        let e = OccupancyMap::load(&yaml).unwrap_err().to_string();
+        assert!(e.contains("m.pgm") && e.contains("byte 19"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

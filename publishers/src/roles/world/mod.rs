@@ -196,6 +196,11 @@ pub struct WorldConfig {
     pub robots: Vec<RobotConfig>,
     pub walls: Vec<WallConfig>,
     pub landmarks: Vec<Landmark>,
+    /// A ROS map_server map (`map.yaml` + its PGM) whose occupied cells are walls too. A
+    /// scenario loads it (`Scenario::load`, relative to the scenario file), adds its walls to
+    /// `walls` and clears this key, so a [`World`] never sees it set.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub map: Option<String>,
 }
 
 impl Default for WorldConfig {
@@ -213,6 +218,7 @@ impl Default for WorldConfig {
             robots: Vec::new(),
             walls: Vec::new(),
             landmarks: Vec::new(),
+            map: None,
         }
     }
 }
@@ -236,6 +242,9 @@ pub enum WorldError {
     /// A wall is degenerate or not finite.
     #[error("world config: wall {index} is invalid: {reason}")]
     InvalidWall { index: usize, reason: &'static str },
+    /// `map` is still set: its walls were never loaded (a scenario loads them).
+    #[error("world config: map {path} was not loaded (load the scenario with Scenario::load)")]
+    UnloadedMap { path: String },
 }
 
 /// What one robot produced in one step.
@@ -261,6 +270,9 @@ pub struct World {
 impl World {
     /// Builds a world from a validated config; `seed` fixes every noise draw.
     pub fn new(config: WorldConfig, seed: u64) -> Result<Self, WorldError> {
+        if let Some(path) = &config.map {
+            return Err(WorldError::UnloadedMap { path: path.clone() });
+        }
         validate_config(&config)?;
         let segments = wall_segments(&config.walls)?;
         let walls = SegmentIndex::new(segments, config.robot_radius_m.max(0.5));

@@ -1,0 +1,125 @@
+//! The fields running on a host (`pheromone list`): found through iceoryx2's service listing
+//! (`ipc::Service::list`, frame services named `pheromone/F/frame`, [`wire::field_of_frame_service`]),
+//! then attached to for a window of time to measure the tick rate and read the port counts.
+
+use std::time::{Duration, Instant};
+
+use iceoryx2::prelude::*;
+use iceoryx2::service::static_config::messaging_pattern::MessagingPattern;
+
+use super::{service_err, FieldReader, FieldWatch, Iceoryx, ShmError, Svc};
+use crate::wire;
+
+/// What `pheromone list` shows of one field.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct FieldInfo {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    pub channels: u32,
+    pub cell_size_m: f32,
+    /// Sequence of the newest frame seen.
+    pub sequence: u64,
+    /// Field time of the newest frame (s).
+    pub sim_time_s: f64,
+    /// Frames published per second over the window: the sequence difference between the first
+    /// and the last frame seen over the difference of their publish stamps.
+    pub tick_hz: f64,
+    /// Readers: subscribers of the frame service, without the field's own subscription, a
+    /// standby's, and the survey's.
+    pub readers: usize,
+    /// Depositors: publishers of the deposit service.
+    pub depositors: usize,
+    /// A new frame came during the window ("alive"); otherwise "stale" (the field died, or it
+    /// is paused, e.g. waiting for its clock).
+    pub alive: bool,
+    /// A live process publishes the frames.
+    pub publisher_alive: bool,
+}
+
+/// Names of the fields whose frame service exists on this host, sorted.
+pub fn field_names(config: &Config) -> Result<Vec<String>, ShmError> {
+    let mut names = Vec::new();
+    Svc::list(config, |s| {
+        if matches!(
+            s.static_details.messaging_pattern(),
+            MessagingPattern::PublishSubscribe(_)
+        ) {
+            if let Some(f) = wire::field_of_frame_service(s.static_details.name().as_str()) {
+                names.push(f.to_string());
+            }
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| service_err("*", "list services", Iceoryx(e)))?;
+    names.sort();
+    names.dedup();
+    Ok(names)
+}
+
+/// Attaches to every field on the host, waits for each one's first frame (a new subscriber
+/// gets the current frame with the publisher's next send; at most `window`), then waits
+/// `window` on the node (Ctrl-C ends the wait early) and reports each one, its rate over the
+/// time between its first frame and the end. A field that goes away while it is being attached
+/// to, or that publishes no frame at all, is left out.
+pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmError> {
+    let mut open = Vec::new();
+    for name in field_names(node.config())? {
+        match (
+            FieldReader::attach(node, &name),
+            FieldWatch::open(node, &name),
+        ) {
+            (Ok(reader), Ok(watch)) => open.push((name, reader, watch, None)),
+            (Err(ShmError::NoField { .. }), _) | (_, Err(ShmError::NoField { .. })) => {}
+            (Err(e), _) | (_, Err(e)) => return Err(e),
+        }
+    }
+    let started = Instant::now();
+    for (_, reader, _, first) in &mut open {
+        let left = window.saturating_sub(started.elapsed());
+        if reader.frame().is_none() {
+            reader.wait_frame(left)?;
+        }
+        *first = reader
+            .frame()
+            .map(|f| (f.header.sequence, f.header.stamp_ns, Instant::now()));
+    }
+    let _ = node.wait(window);
+    let mut out = Vec::with_capacity(open.len());
+    for (name, mut reader, watch, first) in open {
+        reader.update()?;
+        let status = watch.status();
+        let publisher_alive = reader.field_alive();
+        let (Some(frame), Some((first_seq, first_stamp_ns, first_at))) = (reader.frame(), first)
+        else {
+            continue;
+        };
+        let h = frame.header;
+        let ticks = h.sequence.saturating_sub(first_seq);
+        // Over the frames' own publish stamps when they advanced (no rounding to whole ticks
+        // within the window), else over the wall time waited.
+        let stamped_s = h.stamp_ns.saturating_sub(first_stamp_ns) as f64 * 1e-9;
+        let elapsed_s = if ticks > 0 && stamped_s > 0.0 {
+            stamped_s
+        } else {
+            first_at.elapsed().as_secs_f64().max(1e-9)
+        };
+        // The field and a standby each hold one frame subscriber and one deposit subscriber.
+        let own = status.deposit_subscribers + 1;
+        out.push(FieldInfo {
+            name,
+            width: h.width,
+            height: h.height,
+            channels: h.channels,
+            cell_size_m: h.cell_size_m,
+            sequence: h.sequence,
+            sim_time_s: h.sim_time_s,
+            tick_hz: ticks as f64 / elapsed_s,
+            readers: status.subscribers.saturating_sub(own),
+            depositors: status.depositors,
+            alive: ticks > 0,
+            publisher_alive,
+        });
+    }
+    Ok(out)
+}

@@ -1,0 +1,168 @@
+//! `pheromone export`: the next frame of a running field as a NumPy `.npy` file (every
+//! channel) or as a ROS map_server map (one channel, PGM + YAML). The writers are
+//! `publishers::export`.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use field::shm::{create_node, FieldReader};
+use publishers::export::npy::write_npy;
+use publishers::export::ros_map::{write_ros_map, PlaneRef};
+
+use super::{bad, seconds};
+
+/// Save the next frame of a running field: `--out frame.npy` writes every channel as a
+/// `(channels, height, width)` little-endian float32 NumPy array (`numpy.load`); `--out
+/// map.yaml` writes one channel (`--channel`) as a ROS map_server map, `map.pgm` beside it,
+/// scaled to 0–255 (the scale is in the YAML's comments), with the field's cell size as
+/// `resolution` and its lower-left corner as `origin`, for RViz or map_server.
+///
+/// It waits up to --timeout-s for the field and then for a frame newer than the one it finds;
+/// a field that publishes none in that time (paused, or waiting for its clock) is exported as
+/// its current frame.
+#[derive(Args, Debug)]
+pub struct ExportArgs {
+    /// Field name.
+    #[arg(long, default_value = "main")]
+    pub field: String,
+    /// Output file: `*.npy`, or `*.yaml` / `*.yml` (a map_server map; the PGM gets the same
+    /// name with `.pgm`).
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// Channel of a map_server map.
+    #[arg(long, default_value_t = 0)]
+    pub channel: usize,
+    /// The value that becomes pixel 0 of a map [default: min(0, the channel's smallest)].
+    #[arg(long, allow_negative_numbers = true)]
+    pub min: Option<f32>,
+    /// The value that becomes pixel 255 of a map [default: the channel's largest].
+    #[arg(long, allow_negative_numbers = true)]
+    pub max: Option<f32>,
+    /// Seconds to wait for the field, and then for its next frame.
+    #[arg(long, default_value_t = 5.0, value_name = "SECS")]
+    pub timeout_s: f64,
+    /// Print one JSON object on stdout (what was written, from which frame).
+    #[arg(long)]
+    pub json: bool,
+}
+
+enum Format {
+    Npy,
+    RosMap,
+}
+
+pub fn run(a: ExportArgs) -> anyhow::Result<()> {
+    let format = match a.out.extension().and_then(|e| e.to_str()) {
+        Some("npy") => Format::Npy,
+        Some("yaml" | "yml") => Format::RosMap,
+        _ => {
+            return Err(bad(format!(
+                "--out {}: the file must end in .npy (NumPy) or .yaml (ROS map_server map)",
+                a.out.display()
+            )))
+        }
+    };
+    let timeout = seconds("timeout-s", a.timeout_s)?;
+    let node = create_node(&format!("export-{}", std::process::id()))?;
+    let mut reader = FieldReader::attach_within(&node, &a.field, timeout)?;
+    let held = reader.frame().map(|f| f.header.sequence);
+    let deadline = Instant::now() + timeout;
+    let mut fresh = false;
+    while !fresh {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            break;
+        }
+        reader.wait_frame(left.min(Duration::from_millis(200)))?;
+        fresh = reader
+            .frame()
+            .is_some_and(|f| Some(f.header.sequence) != held);
+        if node.wait(Duration::ZERO).is_err() {
+            anyhow::bail!(
+                "interrupted while waiting for a frame of field '{}'",
+                a.field
+            );
+        }
+    }
+    let Some(frame) = reader.frame() else {
+        anyhow::bail!(
+            "field '{}' published no frame within {} s",
+            a.field,
+            a.timeout_s
+        );
+    };
+    if !fresh {
+        eprintln!(
+            "field '{}' published no new frame within {} s: exporting its current frame {}",
+            a.field, a.timeout_s, frame.header.sequence
+        );
+    }
+    let h = *frame.header;
+    let (c, height, width) = (h.channels as usize, h.height as usize, h.width as usize);
+    let mut report = serde_json::json!({
+        "field": a.field, "out": a.out, "sequence": h.sequence, "sim_time_s": h.sim_time_s,
+        "fresh": fresh, "shape": [c, height, width], "cell_size_m": h.cell_size_m,
+        "origin_m": [h.origin_x_m, h.origin_y_m],
+    });
+    match format {
+        Format::Npy => {
+            write_npy(&a.out, c, height, width, frame.view.cells)?;
+            eprintln!(
+                "frame {} of field '{}' ({c} × {height} × {width} float32) written to {}",
+                h.sequence,
+                a.field,
+                a.out.display()
+            );
+        }
+        Format::RosMap => {
+            if a.channel >= c {
+                return Err(bad(format!(
+                    "--channel {}: field '{}' has {c} channel(s)",
+                    a.channel, a.field
+                )));
+            }
+            let plane = PlaneRef {
+                cells: frame.view.plane(a.channel),
+                width,
+                height,
+                cell_size_m: h.cell_size_m,
+                origin_m: [h.origin_x_m, h.origin_y_m],
+            };
+            let (lo, hi) = publishers::export::ros_map::default_scale(plane.cells);
+            let scale = match (a.min, a.max) {
+                (None, None) => None,
+                (min, max) => Some((min.unwrap_or(lo), max.unwrap_or(hi))),
+            };
+            if let Some((min, max)) = scale {
+                if !(min.is_finite() && max.is_finite() && min < max) {
+                    return Err(bad(format!(
+                        "--min {min} --max {max}: the scale needs finite numbers with min < max"
+                    )));
+                }
+            }
+            let comment = format!(
+                "pheromone export: field '{}', channel {}, frame {} at t = {} s",
+                a.field, a.channel, h.sequence, h.sim_time_s
+            );
+            let w = write_ros_map(&a.out, plane, scale, &comment)?;
+            eprintln!(
+                "channel {} of frame {} of field '{}' written to {} and {} (scale {} … {})",
+                a.channel,
+                h.sequence,
+                a.field,
+                w.yaml.display(),
+                w.pgm.display(),
+                w.scale_min,
+                w.scale_max
+            );
+            report["channel"] = a.channel.into();
+            report["pgm"] = serde_json::json!(w.pgm);
+            report["scale"] = serde_json::json!([w.scale_min, w.scale_max]);
+        }
+    }
+    if a.json {
+        println!("{report}");
+    }
+    Ok(())
+}
