@@ -42,7 +42,7 @@ use crate::messages::{DepositMsg, FrameHeader};
 use crate::wire::{self, LAYOUT_VERSION};
 
 pub use deposit::DepositPublisher;
-pub use reader::{FieldReader, Frame};
+pub use reader::{FieldReader, Frame, WaitPolicy};
 pub use server::{FieldServer, TickOutcome};
 pub use standby::{Standby, StandbyEvent, Takeover};
 
