@@ -5,6 +5,7 @@ mod crash;
 mod gateway;
 mod graph;
 mod harness;
+mod on_deposit;
 mod processes;
 mod reliability;
 mod soak;
