@@ -7,6 +7,7 @@ mod graph;
 mod harness;
 mod inspect;
 mod maps;
+mod on_deposit;
 mod processes;
 mod reliability;
 mod soak;

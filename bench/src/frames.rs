@@ -13,11 +13,13 @@ use field::{ChannelSpec, Evaporation, FieldConfig};
 use iceoryx2::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::peer::{say_ready, say_result, FrameTransport, Launcher, Peer, PeerResult, PeerSpec};
+use crate::peer::{
+    say_ready, say_result, FrameTransport, Launcher, Peer, PeerResult, PeerSpec, ReaderWait,
+};
 use crate::BenchError;
 
 /// Longest a reader waits for the next frame before it gives up.
-const FRAME_TIMEOUT: Duration = Duration::from_secs(20);
+pub(crate) const FRAME_TIMEOUT: Duration = Duration::from_secs(20);
 
 /// One frame-delivery measurement.
 #[derive(Debug, Clone, Copy)]
@@ -26,7 +28,7 @@ pub struct FrameRun {
     /// Cells per side (one f32 channel): 512 = 1 MiB, 2048 = 16 MiB.
     pub width: u32,
     pub readers: usize,
-    pub busy: bool,
+    pub wait: ReaderWait,
     /// Frames each reader records (after `skip`).
     pub count: usize,
     pub skip: usize,
@@ -78,19 +80,19 @@ fn field_config(width: u32, readers: usize) -> FieldConfig {
 }
 
 /// A plane with something in it, so nothing can be compressed away.
-fn test_plane(width: u32) -> Vec<f32> {
+pub(crate) fn test_plane(width: u32) -> Vec<f32> {
     (0..width as usize * width as usize)
         .map(|i| (i % 1013) as f32 * 0.001)
         .collect()
 }
 
 /// Waits `period` on the node (returns early with an error on Ctrl-C).
-fn pause(node: &Node<Svc>, period: Duration) -> Result<(), BenchError> {
+pub(crate) fn pause(node: &Node<Svc>, period: Duration) -> Result<(), BenchError> {
     node.wait(period).map_err(|_| BenchError::Interrupted)
 }
 
 /// Collects every reader's result; `publish` is called once per period until all are in.
-fn drive(
+pub(crate) fn drive(
     node: &Node<Svc>,
     peers: &mut [Peer],
     run: &FrameRun,
@@ -124,7 +126,7 @@ fn drive(
         .collect())
 }
 
-fn spawn_readers(
+pub(crate) fn spawn_readers(
     launcher: &Launcher,
     run: &FrameRun,
     source: &str,
@@ -136,7 +138,7 @@ fn spawn_readers(
             &PeerSpec::FrameReader {
                 transport: run.transport,
                 source: source.to_string(),
-                busy: run.busy,
+                wait: run.wait,
                 skip: run.skip,
                 count: run.count,
                 core: (run.pin && run.readers == 1).then_some(1),
@@ -207,6 +209,7 @@ pub fn measure(launcher: &Launcher, tag: &str, run: FrameRun) -> Result<Vec<u64>
             })
         }
         FrameTransport::Zenoh => zenoh_side::measure(&node, launcher, tag, &run),
+        FrameTransport::RawIceoryx => crate::raw_frames::measure(&node, launcher, tag, &run),
     }
 }
 
@@ -222,7 +225,7 @@ impl Drop for SocketPath {
 
 /// Records frames until `count` are in; `next` waits for one frame and returns its latency
 /// (or `None` for a frame that does not count, e.g. one already seen).
-fn record(
+pub(crate) fn record(
     skip: usize,
     count: usize,
     mut next: impl FnMut() -> Result<Option<u64>, BenchError>,
@@ -248,7 +251,7 @@ fn record(
 pub fn read(
     transport: FrameTransport,
     source: &str,
-    busy: bool,
+    wait: ReaderWait,
     skip: usize,
     count: usize,
 ) -> Result<(), BenchError> {
@@ -258,30 +261,10 @@ pub fn read(
             let mut reader = FieldReader::attach_within(&node, source, Duration::from_secs(10))?;
             let mut last = reader.frame().map(|f| f.header.sequence).unwrap_or(0);
             say_ready();
+            let (mut previous_ns, mut last_ns) = (0, 0);
             record(skip, count, || {
-                let deadline = Instant::now() + FRAME_TIMEOUT;
-                let fresh = if busy {
-                    loop {
-                        if reader.update()? {
-                            break true;
-                        }
-                        if Instant::now() > deadline {
-                            break false;
-                        }
-                        std::hint::spin_loop();
-                    }
-                } else {
-                    // A wake-up can be for a frame already taken: wait again until the deadline.
-                    loop {
-                        let left = deadline.saturating_duration_since(Instant::now());
-                        if reader.wait_frame(left)? {
-                            break true;
-                        }
-                        if left.is_zero() {
-                            break false;
-                        }
-                    }
-                };
+                pause(&node, wait.pause_after(previous_ns, last_ns, now_ns()))?;
+                let fresh = reader.wait_frame_with(wait.policy(), FRAME_TIMEOUT)?;
                 let now = now_ns();
                 if !fresh {
                     return Err(BenchError::Peer(format!(
@@ -293,6 +276,7 @@ pub fn read(
                     return Ok(None);
                 }
                 last = frame.header.sequence;
+                (previous_ns, last_ns) = (last_ns, frame.header.stamp_ns);
                 Ok(Some(now.saturating_sub(frame.header.stamp_ns)))
             })
         }
@@ -321,6 +305,7 @@ pub fn read(
             })
         }
         FrameTransport::Zenoh => zenoh_side::read(source, skip, count),
+        FrameTransport::RawIceoryx => crate::raw_frames::read(source, wait, skip, count),
     }
 }
 

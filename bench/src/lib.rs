@@ -23,6 +23,7 @@ pub mod gateway;
 pub mod hop;
 pub mod machine;
 pub mod peer;
+pub mod raw_frames;
 pub mod stats;
 pub mod tick;
 pub mod visible;
@@ -33,7 +34,7 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 pub use machine::Machine;
-pub use peer::{FrameTransport, Launcher, PeerSpec};
+pub use peer::{FrameTransport, Launcher, PeerSpec, ReaderWait};
 pub use stats::Latency;
 pub use tick::TickRow;
 
@@ -188,6 +189,14 @@ pub struct FrameReport {
     pub readers_8: FrameSet,
     /// Ours with the reader busy-polling instead of waiting for the frame event.
     pub ours_busy_poll: Latency,
+    /// The reference: the same slice over plain iceoryx2 (`raw_frames`), 1 reader, waiting.
+    pub raw_iceoryx2: Latency,
+    pub raw_iceoryx2_busy_poll: Latency,
+    /// A reader paced to the period that wakes half of `spin_us` before the frame is due and
+    /// spins (`WaitPolicy::Spin`): ours and the reference.
+    pub ours_spin: Latency,
+    pub raw_iceoryx2_spin: Latency,
+    pub spin_us: u32,
     pub period_ms: f64,
 }
 
@@ -232,6 +241,9 @@ pub struct Report {
     pub targets: Vec<Target>,
     pub elapsed_s: f64,
 }
+
+/// How long a paced reader spins before it sleeps on the frame event (`ReaderWait::Spin`).
+pub const SPIN_US: u32 = 500;
 
 /// Whether this build has the Zenoh baseline.
 pub const ZENOH_BUILT: bool = cfg!(feature = "zenoh");
@@ -313,16 +325,19 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         ("16MiB", 2048u32, plan.frames_16mib, 100u64),
     ] {
         let period = Duration::from_millis(period_ms);
+        const EVENT: ReaderWait = ReaderWait::Event;
+        const BUSY: ReaderWait = ReaderWait::BusyPoll;
+        let spin = ReaderWait::Spin { spin_us: SPIN_US };
         let mut frames = |transport: FrameTransport,
                           readers: usize,
-                          busy: bool|
+                          wait: ReaderWait|
          -> Result<Option<Latency>, BenchError> {
             if transport == FrameTransport::Zenoh && !ZENOH_BUILT {
                 return Ok(None);
             }
             say(&format!(
-                "frames {key}: {transport:?} to {readers} reader(s){} ({count} frames)",
-                if busy { ", busy-poll" } else { "" }
+                "frames {key}: {transport:?} to {readers} reader(s), {} ({count} frames)",
+                wait.label()
             ));
             let s = frames::measure(
                 &opts.launcher,
@@ -331,7 +346,7 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
                     transport,
                     width,
                     readers,
-                    busy,
+                    wait,
                     count,
                     skip,
                     period,
@@ -344,15 +359,20 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         let report = FrameReport {
             width,
             frame_bytes: width as u64 * width as u64 * 4,
-            ours: need(frames(FrameTransport::Ours, 1, false)?)?,
-            uds_serde: need(frames(FrameTransport::UdsSerde, 1, false)?)?,
-            zenoh: frames(FrameTransport::Zenoh, 1, false)?,
+            ours: need(frames(FrameTransport::Ours, 1, EVENT)?)?,
+            uds_serde: need(frames(FrameTransport::UdsSerde, 1, EVENT)?)?,
+            zenoh: frames(FrameTransport::Zenoh, 1, EVENT)?,
             readers_8: FrameSet {
-                ours: need(frames(FrameTransport::Ours, 8, false)?)?,
-                uds_serde: need(frames(FrameTransport::UdsSerde, 8, false)?)?,
-                zenoh: frames(FrameTransport::Zenoh, 8, false)?,
+                ours: need(frames(FrameTransport::Ours, 8, EVENT)?)?,
+                uds_serde: need(frames(FrameTransport::UdsSerde, 8, EVENT)?)?,
+                zenoh: frames(FrameTransport::Zenoh, 8, EVENT)?,
             },
-            ours_busy_poll: need(frames(FrameTransport::Ours, 1, true)?)?,
+            ours_busy_poll: need(frames(FrameTransport::Ours, 1, BUSY)?)?,
+            raw_iceoryx2: need(frames(FrameTransport::RawIceoryx, 1, EVENT)?)?,
+            raw_iceoryx2_busy_poll: need(frames(FrameTransport::RawIceoryx, 1, BUSY)?)?,
+            ours_spin: need(frames(FrameTransport::Ours, 1, spin)?)?,
+            raw_iceoryx2_spin: need(frames(FrameTransport::RawIceoryx, 1, spin)?)?,
+            spin_us: SPIN_US,
             period_ms: period_ms as f64,
         };
         frame_ns.insert(key.to_string(), report);
@@ -440,20 +460,20 @@ fn target(name: &str, op: &'static str, limit: f64, measured: f64) -> Target {
     }
 }
 
-/// The targets of issue 6, each with the measured value and whether it is met.
+/// The targets of issues 6 and 18, each with the measured value and whether it is met.
 pub fn targets(r: &Report) -> Vec<Target> {
     let mut t = Vec::new();
     for (size, row) in &r.tick_vs_memcpy {
         t.push(target(
             &format!("plain tick / memcpy at {size}"),
             "<=",
-            1.2,
+            1.1,
             row.exponential_ratio,
         ));
         t.push(target(
             &format!("ambient tick / memcpy at {size}"),
             "<=",
-            2.0,
+            1.5,
             row.ambient_ratio,
         ));
     }
@@ -481,6 +501,33 @@ pub fn targets(r: &Report) -> Vec<Target> {
             "<=",
             2.0,
             big.readers_8.ours.p50 / small.readers_8.ours.p50,
+        ));
+        for (size, f) in [("1 MiB", small), ("16 MiB", big)] {
+            t.push(target(
+                &format!("frame p50 ours / raw iceoryx2 at {size} (wait)"),
+                "<=",
+                1.5,
+                f.ours.p50 / f.raw_iceoryx2.p50,
+            ));
+            t.push(target(
+                &format!("frame p50 ours / raw iceoryx2 at {size} (busy-poll)"),
+                "<=",
+                1.5,
+                f.ours_busy_poll.p50 / f.raw_iceoryx2_busy_poll.p50,
+            ));
+            t.push(target(
+                &format!("frame p50 ours / raw iceoryx2 at {size} (paced spin)"),
+                "<=",
+                1.5,
+                f.ours_spin.p50 / f.raw_iceoryx2_spin.p50,
+            ));
+        }
+        t.push(target(
+            "frame p50 16 MiB / 1 MiB: ours / raw iceoryx2's (busy-poll)",
+            "<=",
+            1.0,
+            (big.ours_busy_poll.p50 / small.ours_busy_poll.p50)
+                / (big.raw_iceoryx2_busy_poll.p50 / small.raw_iceoryx2_busy_poll.p50),
         ));
         t.push(target(
             "16 MiB frame p50: UDS+serde / ours (1 reader)",
@@ -551,13 +598,13 @@ pub fn run_peer(spec_json: &str) -> Result<(), BenchError> {
         PeerSpec::FrameReader {
             transport,
             source,
-            busy,
+            wait,
             skip,
             count,
             core,
         } => {
             place(core);
-            frames::read(transport, &source, busy, skip, count)
+            frames::read(transport, &source, wait, skip, count)
         }
         PeerSpec::Field {
             name,

@@ -27,6 +27,56 @@ pub enum FrameTransport {
     UdsSerde,
     /// The plane as bytes over Zenoh on loopback TCP.
     Zenoh,
+    /// The reference: the same `[f32]` slice over plain iceoryx2 (`raw_frames`).
+    RawIceoryx,
+}
+
+/// How a frame reader waits for the next frame (`field::shm::WaitPolicy` on the wire).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ReaderWait {
+    /// Sleeps on the frame event.
+    Event,
+    /// A reader paced to the frames, as a controller running at the field's rate: after each
+    /// frame it sleeps until half the spin before the next frame is due (one interval between
+    /// the last two stamps after the last), then polls for up to `spin_us`, then sleeps on the
+    /// event.
+    Spin { spin_us: u32 },
+    /// Polls until the frame comes.
+    BusyPoll,
+}
+
+impl ReaderWait {
+    pub fn policy(self) -> field::shm::WaitPolicy {
+        match self {
+            ReaderWait::Event => field::shm::WaitPolicy::Event,
+            ReaderWait::Spin { spin_us, .. } => {
+                field::shm::WaitPolicy::Spin(Duration::from_micros(spin_us as u64))
+            }
+            ReaderWait::BusyPoll => field::shm::WaitPolicy::BusyPoll,
+        }
+    }
+
+    /// For a paced reader: how long to sleep, now (`now_ns`), after frames stamped
+    /// `previous_ns` and then `last_ns`, before it starts to spin for the next one.
+    pub fn pause_after(self, previous_ns: u64, last_ns: u64, now_ns: u64) -> Duration {
+        match self {
+            ReaderWait::Spin { spin_us } if previous_ns > 0 && last_ns > previous_ns => {
+                let due_ns = last_ns + (last_ns - previous_ns);
+                let start_ns = due_ns.saturating_sub(spin_us as u64 * 500);
+                Duration::from_nanos(start_ns.saturating_sub(now_ns))
+            }
+            _ => Duration::ZERO,
+        }
+    }
+
+    /// For progress lines.
+    pub fn label(self) -> String {
+        match self {
+            ReaderWait::Event => "wait".into(),
+            ReaderWait::Spin { spin_us, .. } => format!("paced, spin {spin_us} µs then wait"),
+            ReaderWait::BusyPoll => "busy-poll".into(),
+        }
+    }
 }
 
 /// What a peer process does.
@@ -47,7 +97,7 @@ pub enum PeerSpec {
         transport: FrameTransport,
         /// Field name, socket path or Zenoh endpoint.
         source: String,
-        busy: bool,
+        wait: ReaderWait,
         skip: usize,
         count: usize,
         core: Option<usize>,

@@ -309,6 +309,25 @@ impl Stepper {
     /// deposits. Each cell of `prev` is read once and each cell of `next` written once by the
     /// evaporation pass; deposits then touch only their kernel's cells.
     pub fn step(&mut self, prev: &[f32], next: &mut [f32]) -> TickReport {
+        let dt = self.config.dt_s();
+        self.step_by(prev, next, dt, 1.0 / self.config.tick_hz as f64)
+    }
+
+    /// As `step`, over `dt_s` seconds instead of one tick period (a field that publishes as
+    /// soon as deposits arrive): evaporation by its closed form in `dt_s`, diffusion by
+    /// κ = D·dt/h². `dt_s` must lie in (0, tick period]: a shorter step keeps the diffusion
+    /// stable (κ only shrinks), a longer one is clamped to the period.
+    pub fn step_dt(&mut self, prev: &[f32], next: &mut [f32], dt_s: f32) -> TickReport {
+        let period = self.config.dt_s();
+        let dt = if dt_s.is_finite() && dt_s > 0.0 {
+            dt_s.min(period)
+        } else {
+            period
+        };
+        self.step_by(prev, next, dt, dt as f64)
+    }
+
+    fn step_by(&mut self, prev: &[f32], next: &mut [f32], dt: f32, dt_time_s: f64) -> TickReport {
         let n = self.geometry.cells();
         assert_eq!(
             prev.len(),
@@ -316,10 +335,10 @@ impl Stepper {
             "previous frame has the wrong length"
         );
         assert_eq!(next.len(), prev.len(), "next frame has the wrong length");
-        let dt = self.config.dt_s();
         let h = self.geometry.cell_size_m;
+        let tick_dt = self.config.dt_s();
         for (c, spec) in self.config.channels.iter().enumerate() {
-            let plan = PlanePlan::for_tick(spec, self.sim_time_s, dt, h);
+            let plan = PlanePlan::for_dt(spec, self.sim_time_s, dt, tick_dt, h);
             let kappa = spec.diffusion_m2_per_s * dt / (h * h);
             step_plane(
                 plan,
@@ -347,7 +366,7 @@ impl Stepper {
             report.deposits_applied += 1;
         }
         self.counters.applied += report.deposits_applied as u64;
-        self.sim_time_s += 1.0 / self.config.tick_hz as f64;
+        self.sim_time_s += dt_time_s;
         self.sequence += 1;
         report
     }

@@ -227,6 +227,9 @@ pub struct FrameHeader {
     pub cell_size_m: f32,
     pub origin_x_m: f32,
     pub origin_y_m: f32,
+    /// The regular tick period (s), part of the field's configuration. A field that publishes
+    /// on deposit also publishes frames between ticks, each stepped by the real elapsed time:
+    /// the step of a frame is the difference of `sim_time_s` to the previous one.
     pub dt_s: f32,
     /// Compute time of the tick that produced this frame (ns).
     pub tick_compute_ns: u64,

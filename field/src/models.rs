@@ -188,6 +188,21 @@ pub enum PlanePlan {
 impl PlanePlan {
     /// The plan for a tick of `dt_s` that starts at field time `t_s`.
     pub fn for_tick(spec: &ChannelSpec, t_s: f64, dt_s: f32, cell_size_m: f32) -> Self {
+        Self::for_dt(spec, t_s, dt_s, dt_s, cell_size_m)
+    }
+
+    /// The plan for a step of any length `dt_s` from field time `t_s`, in a field whose regular
+    /// tick is `tick_dt_s` (a field that publishes on deposit steps by the real elapsed time).
+    /// Every model is closed-form in dt: exponential and ambient decay by e^(−λ·dt), the
+    /// saturating model by (1 − ρ)^(dt / tick_dt) (ρ is per regular tick), the quantum model
+    /// subtracts one quantum per whole τ crossed.
+    pub fn for_dt(
+        spec: &ChannelSpec,
+        t_s: f64,
+        dt_s: f32,
+        tick_dt_s: f32,
+        cell_size_m: f32,
+    ) -> Self {
         match spec.evaporation {
             Evaporation::None => PlanePlan::Scale { factor: 1.0 },
             Evaporation::Exponential { decay_per_s } => PlanePlan::Scale {
@@ -203,7 +218,11 @@ impl PlanePlan {
                 radius_cells: (radius_m / cell_size_m).round() as u32,
             },
             Evaporation::Saturating { rho_per_tick } => PlanePlan::Scale {
-                factor: 1.0 - rho_per_tick,
+                factor: if dt_s == tick_dt_s {
+                    1.0 - rho_per_tick
+                } else {
+                    ((1.0 - rho_per_tick as f64).powf(dt_s as f64 / tick_dt_s as f64)) as f32
+                },
             },
             Evaporation::Quantum { quantum, tau_s } => {
                 let tau = tau_s as f64;

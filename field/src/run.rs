@@ -34,6 +34,9 @@ pub struct FieldRunOptions {
     pub restore: Option<(PathBuf, Checkpoint)>,
     /// Mirror the running field of this name and take over when its process dies.
     pub standby: bool,
+    /// Publish a frame as soon as deposits arrive, no sooner than this after the last frame
+    /// (wall-time fields only); every frame then steps by the real elapsed time.
+    pub publish_on_deposit: Option<Duration>,
 }
 
 /// Why a field process stopped with an error.
@@ -99,6 +102,9 @@ pub struct FieldRunSummary {
     pub standby: Option<StandbySummary>,
     /// Wall time from the start to the stop (s).
     pub wall_time_s: f64,
+    /// Frames published between ticks because deposits arrived (`publish_on_deposit`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames_on_deposit: Option<u64>,
 }
 
 /// Runs a field until its end (ticks, duration, the world's end, Ctrl-C/SIGTERM); `Ok(None)`
@@ -181,6 +187,11 @@ pub fn run_field(
     let mut dead_nodes_cleaned = 0u64;
     let mut last_clock_step: Option<u64> = None;
     let mut last_frame_at = Instant::now();
+    let deposit_wake = match (o.publish_on_deposit, &clock) {
+        (Some(min_interval), None) => Some(DepositWake::new(node, &o.name, config, min_interval)?),
+        _ => None,
+    };
+    let mut early_frames = 0u64;
     loop {
         if let Some(clock) = &clock {
             // Lockstep: one tick per world step, acknowledged once published.
@@ -204,6 +215,17 @@ pub fn run_field(
                     continue;
                 }
             }
+        } else if let Some(wake) = &deposit_wake {
+            match wake.wait(node, &server, deadline, last_frame_at)? {
+                Wake::Stop => break,
+                Wake::Deposit => early_frames += 1,
+                Wake::Tick => {
+                    deadline += period;
+                    if deadline + period < Instant::now() {
+                        deadline = Instant::now() + period;
+                    }
+                }
+            }
         } else {
             let wait = deadline.saturating_duration_since(Instant::now());
             if node.wait(wait).is_err() {
@@ -217,7 +239,12 @@ pub fn run_field(
         if clock.is_some() && node.wait(Duration::ZERO).is_err() {
             break;
         }
-        let out = server.tick()?;
+        let out = if deposit_wake.is_some() {
+            // Stepped by the real time since the last frame (at most one period).
+            server.tick_dt(last_frame_at.elapsed().as_secs_f32())?
+        } else {
+            server.tick()?
+        };
         if let (Some(clock), Some(step)) = (&clock, last_clock_step) {
             clock.ack(step, lockstep::role::FIELD, 0)?;
         }
@@ -284,6 +311,7 @@ pub fn run_field(
         total_mass,
         max,
         max_tick_compute_ms: max_compute_ns as f64 / 1e6,
+        frames_on_deposit: deposit_wake.as_ref().map(|_| early_frames),
         longest_tick_gap_ms: longest_gap_ns as f64 / 1e6,
         dead_nodes_cleaned,
         restored_sequence: o.restore.as_ref().map(|(_, c)| c.header.sequence),
@@ -444,4 +472,96 @@ impl Window {
             }
         );
     }
+}
+
+/// Longest wait of a field that publishes on deposit before it serves readers that attached.
+const IDLE_SLICE: Duration = Duration::from_millis(100);
+
+/// What woke a field that publishes on deposit.
+enum Wake {
+    /// The regular tick is due.
+    Tick,
+    /// Deposits wait and the minimum interval since the last frame has passed.
+    Deposit,
+    /// Ctrl-C / SIGTERM.
+    Stop,
+}
+
+/// Waits for the next tick or, sooner, for deposits (`FieldRunOptions::publish_on_deposit`):
+/// depositors notify the field's `deposit-ready` event after each deposit.
+struct DepositWake {
+    listener: iceoryx2::port::listener::Listener<Svc>,
+    min_interval: Duration,
+}
+
+impl DepositWake {
+    fn new(
+        node: &Node<Svc>,
+        field: &str,
+        config: &FieldConfig,
+        min_interval: Duration,
+    ) -> Result<Self, ShmError> {
+        let names = crate::shm::FieldServices::new(field)?;
+        let listener = crate::shm::deposit_ready_service(node, &names, Some(config))?
+            .listener_builder()
+            .create()
+            .map_err(|e| crate::shm::service_err(&names.deposit_ready, "create listener", e))?;
+        Ok(Self {
+            listener,
+            min_interval,
+        })
+    }
+
+    fn wait(
+        &self,
+        node: &Node<Svc>,
+        server: &FieldServer,
+        deadline: Instant,
+        last_frame_at: Instant,
+    ) -> Result<Wake, ShmError> {
+        loop {
+            if node.wait(Duration::ZERO).is_err() {
+                return Ok(Wake::Stop);
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(Wake::Tick);
+            }
+            // Events can coalesce or come from deposits already taken: the queue decides.
+            if server.deposits_waiting()? {
+                let earliest = last_frame_at + self.min_interval;
+                if now < earliest {
+                    if earliest >= deadline {
+                        continue_until(node, deadline)?;
+                        return Ok(Wake::Tick);
+                    }
+                    continue_until(node, earliest)?;
+                }
+                // Drain the events that woke us; the deposits go into this frame.
+                let _ = self.listener.try_wait(|_| {});
+                return Ok(Wake::Deposit);
+            }
+            // In slices of at most 100 ms: readers that attached meanwhile get the current frame
+            // without waiting for a tick (which can be far off at a low tick rate).
+            let slice = deadline.saturating_duration_since(now).min(IDLE_SLICE);
+            match self.listener.timed_wait(|_| {}, slice) {
+                Ok(0) => server.serve_new_readers()?,
+                Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
+                Err(e) => {
+                    return Err(crate::shm::service_err(
+                        "deposit-ready",
+                        "wait",
+                        crate::shm::Iceoryx(e),
+                    ))
+                }
+            }
+        }
+    }
+}
+
+/// Waits on the node until `until` (a termination request ends it early; the caller's next
+/// check sees it).
+fn continue_until(node: &Node<Svc>, until: Instant) -> Result<(), ShmError> {
+    let _ = node.wait(until.saturating_duration_since(Instant::now()));
+    Ok(())
 }

@@ -128,6 +128,9 @@ pub struct FieldServices {
     pub frame: String,
     pub frame_ready: String,
     pub deposit: String,
+    /// The event depositors notify after each deposit; created only by a field that publishes
+    /// on deposit (`pheromone field --publish-on-deposit-ms`).
+    pub deposit_ready: String,
 }
 
 impl FieldServices {
@@ -137,6 +140,7 @@ impl FieldServices {
             frame: format!("pheromone/{field}/frame"),
             frame_ready: format!("pheromone/{field}/frame-ready"),
             deposit: format!("pheromone/{field}/deposit"),
+            deposit_ready: format!("pheromone/{field}/deposit-ready"),
         }
     }
 }
@@ -169,6 +173,11 @@ pub const DEPOSIT_SUBSCRIBERS: usize = 2;
 /// Deposits a subscriber (the field, a standby) receives from before it connected: none (a
 /// deposit counts once).
 pub const DEPOSIT_HISTORY: usize = 0;
+
+/// Listeners of `deposit-ready`: the field and a standby.
+pub const DEPOSIT_READY_LISTENERS: usize = 2;
+/// Notifiers of `deposit-ready` beyond the field's `max_depositors` (a gateway, spares).
+pub const DEPOSIT_READY_EXTRA_NOTIFIERS: usize = 4;
 
 // ---- world `W` (lockstep runs) --------------------------------------------------------------
 

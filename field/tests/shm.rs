@@ -238,3 +238,69 @@ fn a_node_directory_left_by_a_killed_process_is_removed_and_a_live_ones_kept() {
         "a node of a live process (being created) is kept"
     );
 }
+
+/// Every wait policy sees a frame the field publishes while the reader waits, and ends at its
+/// timeout when none comes.
+#[test]
+fn every_wait_policy_sees_the_next_frame_and_honours_its_timeout() {
+    use field::shm::WaitPolicy;
+    field::shm::set_verbose(false);
+    let name = unique("waitpolicy");
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (started_tx, started_rx) = std::sync::mpsc::channel();
+    let ticking = {
+        let (name, stop) = (name.clone(), stop.clone());
+        std::thread::spawn(move || {
+            let node = create_node(&format!("{name}-field")).unwrap();
+            let mut server = FieldServer::start(
+                &node,
+                &name,
+                small_config(Evaporation::Exponential { decay_per_s: 1.0 }),
+                None,
+            )
+            .unwrap();
+            started_tx.send(()).unwrap();
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                server.tick().unwrap();
+                // Node wait: 5 ms between frames.
+                let _ = node.wait(Duration::from_millis(5));
+            }
+        })
+    };
+    started_rx.recv_timeout(Duration::from_secs(10)).unwrap();
+    let node = create_node(&format!("{name}-reader")).unwrap();
+    let mut reader = FieldReader::attach_within(&node, &name, Duration::from_secs(5)).unwrap();
+    for policy in [
+        WaitPolicy::Event,
+        WaitPolicy::Spin(Duration::from_micros(200)),
+        WaitPolicy::Spin(Duration::from_millis(50)),
+        WaitPolicy::BusyPoll,
+    ] {
+        for _ in 0..5 {
+            let before = reader.frame().map(|f| f.header.sequence).unwrap_or(0);
+            assert!(
+                reader
+                    .wait_frame_with(policy, Duration::from_secs(5))
+                    .unwrap(),
+                "{policy:?}: no frame within 5 s"
+            );
+            let after = reader.frame().unwrap().header.sequence;
+            assert!(after > before, "{policy:?}: {before} -> {after}");
+        }
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    ticking.join().unwrap();
+    // The field is gone: no frame comes, and each policy returns at its timeout.
+    reader.update().unwrap();
+    for policy in [
+        WaitPolicy::Event,
+        WaitPolicy::Spin(Duration::from_millis(1)),
+        WaitPolicy::BusyPoll,
+    ] {
+        let t = std::time::Instant::now();
+        assert!(!reader
+            .wait_frame_with(policy, Duration::from_millis(30))
+            .unwrap());
+        assert!(t.elapsed() >= Duration::from_millis(30), "{policy:?}");
+    }
+}

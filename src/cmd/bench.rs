@@ -135,9 +135,9 @@ fn print_tables(r: &Report) {
         "raw iceoryx2, busy     {}",
         lat(&h.busy_poll.raw_iceoryx2, 1e-3, "µs")
     );
-    println!("\nframe delivery                   p50       p99     p99.9       max");
+    println!("\nframe delivery                       p50       p99     p99.9       max");
     for (size, f) in &r.frame_ns {
-        let rows: [(&str, Option<&Latency>); 7] = [
+        let rows: [(&str, Option<&Latency>); 11] = [
             ("ours, 1 reader", Some(&f.ours)),
             ("UDS+serde, 1 reader", Some(&f.uds_serde)),
             ("Zenoh, 1 reader", f.zenoh.as_ref()),
@@ -145,11 +145,15 @@ fn print_tables(r: &Report) {
             ("UDS+serde, 8 readers", Some(&f.readers_8.uds_serde)),
             ("Zenoh, 8 readers", f.readers_8.zenoh.as_ref()),
             ("ours, busy-poll", Some(&f.ours_busy_poll)),
+            ("raw iceoryx2, wait", Some(&f.raw_iceoryx2)),
+            ("raw iceoryx2, busy", Some(&f.raw_iceoryx2_busy_poll)),
+            ("ours, paced spin", Some(&f.ours_spin)),
+            ("raw, paced spin", Some(&f.raw_iceoryx2_spin)),
         ];
         for (what, l) in rows {
             match l {
-                Some(l) => println!("{size:>5} {what:<16} {}", lat(l, 1e-6, "ms")),
-                None => println!("{size:>5} {what:<16} (not built: --features zenoh)"),
+                Some(l) => println!("{size:>5} {what:<20} {}", lat(l, 1e-3, "µs")),
+                None => println!("{size:>5} {what:<20} (not built: --features zenoh)"),
             }
         }
     }

@@ -137,6 +137,12 @@ pub struct FieldArgs {
     /// last frame, losing at most one tick of deposits. Give it the primary's configuration.
     #[arg(long, conflicts_with_all = ["restore", "clock"])]
     pub standby: bool,
+    /// Publish a frame as soon as deposits arrive, no sooner than MS milliseconds after the last
+    /// frame, instead of waiting for the next tick (depositors wake the field through
+    /// pheromone/<NAME>/deposit-ready). Every frame then steps evaporation by the real elapsed
+    /// time (at most one tick period); regular ticks go on between deposits. Not with --clock.
+    #[arg(long, value_name = "MS", conflicts_with = "clock")]
+    pub publish_on_deposit_ms: Option<f64>,
     /// At exit, print one JSON summary object on stdout.
     #[arg(long)]
     pub json: bool,
@@ -264,6 +270,14 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         }
         d => d.map(Duration::from_secs_f64),
     };
+    let publish_on_deposit = match a.publish_on_deposit_ms {
+        Some(ms) if !(ms.is_finite() && ms >= 0.0) => {
+            return Err(bad(format!(
+                "--publish-on-deposit-ms {ms}: must be a non-negative number of milliseconds"
+            )))
+        }
+        ms => ms.map(|ms| Duration::from_secs_f64(ms / 1e3)),
+    };
     let restore = match &a.restore {
         Some(path) => {
             let cp = checkpoint::read(path).map_err(bad_from)?;
@@ -295,6 +309,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         checkpoint_every: Duration::from_secs_f64(every),
         restore,
         standby: a.standby,
+        publish_on_deposit,
     };
     let summary = match run_field(&node, &options) {
         Ok(s) => s,

@@ -77,7 +77,15 @@ fn bench_smoke_run_reports_every_figure_as_one_json_object() {
     assert_eq!(zenoh_built, cfg!(feature = "zenoh"));
     for size in ["1MiB", "16MiB"] {
         let f = &r["frame_ns"][size];
-        for k in ["ours", "uds_serde", "ours_busy_poll"] {
+        for k in [
+            "ours",
+            "uds_serde",
+            "ours_busy_poll",
+            "raw_iceoryx2",
+            "raw_iceoryx2_busy_poll",
+            "ours_spin",
+            "raw_iceoryx2_spin",
+        ] {
             check_latency(&f[k], &format!("frame_ns.{size}.{k}"));
         }
         for k in ["ours", "uds_serde"] {
@@ -126,6 +134,18 @@ fn bench_smoke_run_reports_every_figure_as_one_json_object() {
 
     let targets = r["targets"].as_array().expect("targets");
     assert!(targets.len() >= 6, "{targets:?}");
+    // Issue 18's frame goals, each with a measured value.
+    for name in [
+        "frame p50 ours / raw iceoryx2 at 1 MiB (wait)",
+        "frame p50 ours / raw iceoryx2 at 16 MiB (busy-poll)",
+        "frame p50 16 MiB / 1 MiB: ours / raw iceoryx2's (busy-poll)",
+    ] {
+        let t = targets
+            .iter()
+            .find(|t| t["name"] == name)
+            .unwrap_or_else(|| panic!("no target '{name}' in {targets:?}"));
+        assert!(t["measured"].as_f64().is_some_and(|m| m > 0.0), "{t}");
+    }
     assert!(targets.iter().all(|t| t["met"].is_boolean()));
 }
 

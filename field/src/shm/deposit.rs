@@ -7,8 +7,8 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
 
 use super::{
-    deposit_service, frame_ready_service, now_ns, retry_attach, service_err, FieldServices,
-    ShmError, Svc,
+    deposit_ready_service, deposit_service, frame_ready_service, now_ns, retry_attach, service_err,
+    FieldServices, ShmError, Svc,
 };
 use crate::messages::DepositMsg;
 
@@ -21,6 +21,9 @@ pub struct DepositPublisher {
     names: FieldServices,
     publisher: Publisher<Svc, DepositMsg, ()>,
     frame_ready: iceoryx2::port::listener::Listener<Svc>,
+    /// Wakes a field that publishes on deposit; `None` when the field had no such event when
+    /// this publisher attached (its deposits then wait for the field's next regular tick).
+    deposit_ready: Option<iceoryx2::port::notifier::Notifier<Svc>>,
     robot_id: u32,
     unflushed: bool,
     /// Longest wait in `Drop` for the field to take what was sent.
@@ -39,10 +42,12 @@ impl DepositPublisher {
             .listener_builder()
             .create()
             .map_err(|e| service_err(&names.frame_ready, "create listener", e))?;
+        let deposit_ready = open_deposit_ready(node, &names);
         Ok(Self {
             names,
             publisher,
             frame_ready,
+            deposit_ready,
             robot_id,
             unflushed: false,
             flush_timeout: Duration::from_secs(1),
@@ -102,6 +107,7 @@ impl DepositPublisher {
             }),
             Ok(_) => {
                 self.unflushed = true;
+                self.wake_field();
                 Ok(())
             }
             Err(e) => Err(ShmError::NotDelivered {
@@ -110,6 +116,28 @@ impl DepositPublisher {
             }),
         }
     }
+}
+
+impl DepositPublisher {
+    /// Tells a field that publishes on deposit that one is waiting. A failed notify only delays
+    /// the deposit to the field's next regular tick.
+    fn wake_field(&self) {
+        if let Some(n) = &self.deposit_ready {
+            let _ = n.notify();
+        }
+    }
+}
+
+/// The notifier of the field's `deposit-ready` event, if the field has one.
+fn open_deposit_ready(
+    node: &Node<Svc>,
+    names: &FieldServices,
+) -> Option<iceoryx2::port::notifier::Notifier<Svc>> {
+    deposit_ready_service(node, names, None)
+        .ok()?
+        .notifier_builder()
+        .create()
+        .ok()
 }
 
 impl Drop for DepositPublisher {

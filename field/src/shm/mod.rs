@@ -44,7 +44,7 @@ use crate::messages::{DepositMsg, FrameHeader};
 use crate::wire::{self, LAYOUT_VERSION};
 
 pub use deposit::DepositPublisher;
-pub use reader::{FieldReader, Frame};
+pub use reader::{FieldReader, Frame, WaitPolicy};
 pub use server::{FieldServer, TickOutcome};
 pub use standby::{Standby, StandbyEvent, Takeover};
 pub use survey::{field_names, survey, FieldInfo};
@@ -554,6 +554,30 @@ fn frame_ready_service(
     } else {
         b.open()
             .map_err(|e| service_err(&names.frame_ready, "open", e))
+    }
+}
+
+/// The `deposit-ready` event: created (with room for `max_depositors` notifiers) by a field that
+/// publishes on deposit; opened by depositors, who notify it after each deposit when it exists.
+pub(crate) fn deposit_ready_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+    config: Option<&FieldConfig>,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ShmError> {
+    let name = service_name(&names.deposit_ready)?;
+    let b = node.service_builder(&name).event();
+    match config {
+        Some(c) => {
+            let notifiers = c.max_depositors + wire::DEPOSIT_READY_EXTRA_NOTIFIERS;
+            b.max_listeners(wire::DEPOSIT_READY_LISTENERS)
+                .max_notifiers(notifiers)
+                .max_nodes(wire::DEPOSIT_READY_LISTENERS + notifiers)
+                .open_or_create()
+                .map_err(|e| service_err(&names.deposit_ready, "open or create", e))
+        }
+        None => b
+            .open()
+            .map_err(|e| service_err(&names.deposit_ready, "open", e)),
     }
 }
 

@@ -240,9 +240,26 @@ impl FieldServer {
         })
     }
 
+    /// Whether deposits wait in the queue for the next tick.
+    pub fn deposits_waiting(&self) -> Result<bool, ShmError> {
+        self.deposits
+            .has_samples()
+            .map_err(|e| service_err(&self.names.deposit, "look at the queue", e))
+    }
+
     /// Drains the deposit queue (validating each), computes the next frame from the previous one
     /// straight into a loaned sample, publishes it and wakes the readers.
     pub fn tick(&mut self) -> Result<TickOutcome, ShmError> {
+        self.tick_by(None)
+    }
+
+    /// As `tick`, stepping the field by `dt_s` seconds instead of one tick period (clamped to
+    /// (0, period]; see `Stepper::step_dt`): a field that publishes as soon as deposits arrive.
+    pub fn tick_dt(&mut self, dt_s: f32) -> Result<TickOutcome, ShmError> {
+        self.tick_by(Some(dt_s))
+    }
+
+    fn tick_by(&mut self, dt_s: Option<f32>) -> Result<TickOutcome, ShmError> {
         let mut rejected = 0;
         loop {
             match self.deposits.receive() {
@@ -282,7 +299,12 @@ impl FieldServer {
         // initialized bytes, and every bit pattern is a valid `f32`. `Stepper::step` then
         // overwrites every element before the sample is sent.
         let mut next = unsafe { uninit.assume_init() };
-        let report = self.stepper.step(previous.payload(), next.payload_mut());
+        let report = match dt_s {
+            None => self.stepper.step(previous.payload(), next.payload_mut()),
+            Some(dt) => self
+                .stepper
+                .step_dt(previous.payload(), next.payload_mut(), dt),
+        };
         drop(previous);
         let done = now_ns();
         let compute_ns = done.saturating_sub(started);
