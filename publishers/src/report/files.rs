@@ -62,7 +62,7 @@ pub(super) fn write_png(path: &Path, pic: &Picture) -> Result<(), ReportError> {
         let mut encoder = png::Encoder::new(&mut out, pic.width, pic.height);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
-        encoder.set_compression(png::Compression::Fast);
+        encoder.set_compression(png::Compression::Balanced);
         let mut writer = encoder.write_header().map_err(png_err)?;
         writer.write_image_data(&pic.rgb).map_err(png_err)?;
         writer.finish().map_err(png_err)?;

@@ -19,8 +19,8 @@ const MIN_WIDTH_PX: usize = 800;
 const MAX_SIDE_PX: usize = 2000;
 /// Left of the field: the y axis and its labels (m).
 pub(super) const LEFT_PX: u32 = 48;
-/// Above and right of the field.
-pub(super) const TOP_PX: u32 = 10;
+/// Above the field (the y axis' unit) and right of it.
+pub(super) const TOP_PX: u32 = 28;
 pub(super) const RIGHT_PX: u32 = 24;
 /// Under the field: the x axis and its labels (m).
 pub(super) const AXIS_PX: u32 = 40;
@@ -203,10 +203,18 @@ pub(super) fn render_snapshot(rec: &Recording, snap: &Snapshot, c: usize) -> Res
                 field
                     .draw(&Circle::new(p, 5, colour(rgb).filled()))
                     .map_err(msg)?;
+                // On a dark box, so a label over its own trail stays readable.
+                let name = format!("R{id}");
                 let style = (FONT, 15).into_font().color(&colour(rgb));
+                let (tw, th) = style.font.box_size(&name).map_err(msg)?;
+                let (lx, ly) = (p.0 + 9, p.1 - 24);
                 field
-                    .draw_text(&format!("R{id}"), &style, (p.0 + 9, p.1 - 22))
+                    .draw(&Rectangle::new(
+                        [(lx - 3, ly - 1), (lx + tw as i32 + 3, ly + th as i32 + 3)],
+                        colour(OUTLINE_RGB).mix(0.7).filled(),
+                    ))
                     .map_err(msg)?;
+                field.draw_text(&name, &style, (lx, ly)).map_err(msg)?;
             }
         }
         let strip = root.clone().shrink(
@@ -278,7 +286,7 @@ fn draw_axes(root: &DrawingArea<BitMapBackend<'_>, Shift>, layout: &Layout) -> R
         .draw()
         .map_err(msg)?;
     let style = (FONT, 13).into_font().color(&colour(TEXT_RGB));
-    root.draw_text("y (m)", &style, (4, TOP_PX as i32 - 2))
+    root.draw_text("y (m)", &style, (6, 6))
         .map_err(msg)?;
     Ok(())
 }

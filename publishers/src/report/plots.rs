@@ -83,7 +83,8 @@ pub(super) fn probes_chart(curves: &[ProbeCurve], end_s: f64) -> Result<Picture,
             .map_err(msg)?;
         chart
             .configure_mesh()
-            .light_line_style(RGBColor(235, 235, 235))
+            .light_line_style(WHITE)
+            .bold_line_style(RGBColor(225, 225, 225))
             .label_style(text(14))
             .axis_desc_style(text(15))
             .x_desc("time (s)")
@@ -122,7 +123,7 @@ pub(super) fn probes_chart(curves: &[ProbeCurve], end_s: f64) -> Result<Picture,
                 .label(label)
                 .legend(legend!(rgb, 4));
         }
-        series_labels(&mut chart)?;
+        series_labels(&mut chart, SeriesLabelPosition::UpperRight)?;
         root.present().map_err(msg)?;
     }
     Ok(pic)
@@ -130,6 +131,7 @@ pub(super) fn probes_chart(curves: &[ProbeCurve], end_s: f64) -> Result<Picture,
 
 fn series_labels<'a, 'b: 'a, X, Y>(
     chart: &mut ChartContext<'a, BitMapBackend<'b>, Cartesian2d<X, Y>>,
+    at: SeriesLabelPosition,
 ) -> Result<(), String>
 where
     X: plotters::coord::ranged1d::Ranged,
@@ -137,7 +139,7 @@ where
 {
     chart
         .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
+        .position(at)
         .label_font(text(14))
         .background_style(WHITE.mix(0.9))
         .border_style(RGBColor(150, 150, 150))
@@ -167,7 +169,8 @@ pub(super) fn exploration_chart(s: &ExplorationSeries, end_s: f64) -> Result<Pic
             .map_err(msg)?;
         chart
             .configure_mesh()
-            .light_line_style(RGBColor(235, 235, 235))
+            .light_line_style(WHITE)
+            .bold_line_style(RGBColor(225, 225, 225))
             .label_style(text(14))
             .axis_desc_style(text(15))
             .x_desc("time (s)")
@@ -231,8 +234,8 @@ pub(super) fn path_distance_chart(paths: &[PathDistance], end_s: f64) -> Result<
         let area = titled(
             root,
             "Distance to the path over time",
-            "each robot's distance to its target path; shaded: the metric's window, dashed: its mean \
-             (mean_path_error_m, sampled every 0.2 s)",
+            "each robot's distance to its target path; dashed: the run's mean_path_error_m over its \
+             window (shaded when shorter than the run)",
         )?;
         let mut chart = ChartBuilder::on(&area)
             .x_label_area_size(44)
@@ -241,7 +244,8 @@ pub(super) fn path_distance_chart(paths: &[PathDistance], end_s: f64) -> Result<
             .map_err(msg)?;
         chart
             .configure_mesh()
-            .light_line_style(RGBColor(235, 235, 235))
+            .light_line_style(WHITE)
+            .bold_line_style(RGBColor(225, 225, 225))
             .label_style(text(14))
             .axis_desc_style(text(15))
             .x_desc("time (s)")
@@ -250,13 +254,15 @@ pub(super) fn path_distance_chart(paths: &[PathDistance], end_s: f64) -> Result<
             .map_err(msg)?;
         for (i, p) in paths.iter().enumerate() {
             let rgb = series_rgb(i);
-            let y1 = upper(d_max);
-            chart
-                .draw_series(std::iter::once(Rectangle::new(
-                    [(p.from_s, 0.0), (p.to_s, y1)],
-                    colour(rgb).mix(0.08).filled(),
-                )))
-                .map_err(msg)?;
+            // The window, shaded unless it is the whole run.
+            if p.from_s > 1e-9 || p.to_s < t_max - 1e-9 {
+                chart
+                    .draw_series(std::iter::once(Rectangle::new(
+                        [(p.from_s, 0.0), (p.to_s.min(t_max), upper(d_max))],
+                        colour(rgb).mix(0.08).filled(),
+                    )))
+                    .map_err(msg)?;
+            }
             chart
                 .draw_series(LineSeries::new(
                     p.points.iter().copied(),
@@ -282,7 +288,7 @@ pub(super) fn path_distance_chart(paths: &[PathDistance], end_s: f64) -> Result<
                     .map_err(msg)?;
             }
         }
-        series_labels(&mut chart)?;
+        series_labels(&mut chart, SeriesLabelPosition::UpperRight)?;
         root.present().map_err(msg)?;
     }
     Ok(pic)
@@ -322,7 +328,8 @@ pub(super) fn leader_deposits_chart(d: &LeaderDeposits) -> Result<Picture, Strin
             .map_err(msg)?;
         chart
             .configure_mesh()
-            .light_line_style(RGBColor(235, 235, 235))
+            .light_line_style(WHITE)
+            .bold_line_style(RGBColor(225, 225, 225))
             .label_style(text(14))
             .axis_desc_style(text(15))
             .x_desc("distance along the leader's path (m)")
@@ -381,7 +388,7 @@ pub(super) fn leader_deposits_chart(d: &LeaderDeposits) -> Result<Picture, Strin
                 .label(format!("{what}: {m:.2} m, t = {s:.1} s"))
                 .legend(legend!(mark_rgb, 0));
         }
-        series_labels(&mut chart)?;
+        series_labels(&mut chart, SeriesLabelPosition::LowerLeft)?;
         root.present().map_err(msg)?;
     }
     Ok(pic)

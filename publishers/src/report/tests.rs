@@ -166,31 +166,31 @@ fn png_has_the_expected_size_trajectories_and_top_of_the_colour_map() {
     let layout = Layout::for_grid(100, 50, 0.1);
     assert_eq!(layout.scale, 8);
     assert_eq!((img.0, img.1), layout.picture_px());
-    assert_eq!((img.0, img.1), (48 + 800 + 24, 10 + 400 + 40 + 64));
+    assert_eq!((img.0, img.1), (48 + 800 + 24, 28 + 400 + 40 + 64));
 
     // Robot 0's true trajectory (y = 1 m) passes through x = 3 m: the middle of its 3 px line.
     let (x, y) = layout.pixel_from_world(3.0, 1.0);
-    assert_eq!((x, y), (48.0 + 240.0, 10.0 + 320.0));
-    assert_eq!(pixel(&img, 288, 330), ROBOT_RGB[0]);
-    // Robot 1's estimate (y = 2.5 m, row 210) is dashed in a lighter shade of its colour.
-    let est: Vec<Rgb> = (150..450).map(|x| pixel(&img, x, 210)).collect();
+    assert_eq!((x, y), (48.0 + 240.0, 28.0 + 320.0));
+    assert_eq!(pixel(&img, 288, 348), ROBOT_RGB[0]);
+    // Robot 1's estimate (y = 2.5 m, row 228) is dashed in a lighter shade of its colour.
+    let est: Vec<Rgb> = (150..450).map(|x| pixel(&img, x, 228)).collect();
     assert!(est.contains(&lighter(ROBOT_RGB[1])));
     assert!(est.iter().any(|&c| c == VIRIDIS[0]), "dashes have gaps");
     assert_eq!(
-        pixel(&img, 288, 170),
+        pixel(&img, 288, 188),
         ROBOT_RGB[1],
         "true path of robot 1 (y = 3 m)"
     );
 
     // The max cell (80, 40) is drawn at the top of the colour map, y up: block row
-    // 50 − 1 − 40 = 9 from the top of the field, i.e. picture rows 82..90, columns 688..696.
-    assert_eq!(pixel(&img, 692, 86), VIRIDIS[9]);
-    assert_eq!(pixel(&img, 692, 94), VIRIDIS[0]);
-    assert_eq!(pixel(&img, 692, 10 + 400 - 76), VIRIDIS[0]);
+    // 50 − 1 − 40 = 9 from the top of the field, i.e. picture rows 100..108, columns 688..696.
+    assert_eq!(pixel(&img, 692, 104), VIRIDIS[9]);
+    assert_eq!(pixel(&img, 692, 112), VIRIDIS[0]);
+    assert_eq!(pixel(&img, 692, 28 + 400 - 76), VIRIDIS[0]);
     // A zero cell away from every line is the bottom of the map.
-    assert_eq!(pixel(&img, 98, 60), VIRIDIS[0]);
+    assert_eq!(pixel(&img, 98, 78), VIRIDIS[0]);
     // The strip has text and the colour bar: its top colour is there, at the right.
-    let strip_top = 10 + 400 + 40;
+    let strip_top = 28 + 400 + 40;
     let bar: Vec<Rgb> = (436..872).map(|x| pixel(&img, x, strip_top + 30)).collect();
     assert!(bar.contains(&VIRIDIS[9]) && bar.contains(&VIRIDIS[0]), "colour bar");
     let text: usize = (strip_top..img.1 as usize)
@@ -209,12 +209,12 @@ fn nan_cells_get_their_own_colour_without_panicking() {
     let written = write_outputs(&tmp.0, &rec, &serde_json::json!({})).unwrap();
     assert!(written.iter().any(|p| p.ends_with("field_final.png")));
     let img = decode(&tmp.0.join("field_final.png"));
-    // Cell (10, 10): columns 48 + 80..88, rows 10 + (49 − 10)·8 = 322..330.
-    assert_eq!(pixel(&img, 132, 325), NAN_RGB);
+    // Cell (10, 10): columns 48 + 80..88, rows 28 + (49 − 10)·8 = 340..348.
+    assert_eq!(pixel(&img, 132, 343), NAN_RGB);
     assert!(!VIRIDIS.contains(&NAN_RGB) && !ROBOT_RGB.contains(&NAN_RGB));
     // NaN and ∞ do not spoil the scale: the finite max is still the top of the map.
-    assert_eq!(pixel(&img, 692, 86), VIRIDIS[9]);
-    assert_eq!(pixel(&img, 132, 317), VIRIDIS[9], "+inf clamps to the top");
+    assert_eq!(pixel(&img, 692, 104), VIRIDIS[9]);
+    assert_eq!(pixel(&img, 132, 335), VIRIDIS[9], "+inf clamps to the top");
 }
 #[test]
 fn file_names_and_bad_snapshots() {
