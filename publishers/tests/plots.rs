@@ -51,7 +51,13 @@ fn run(name: &str, duration_s: Option<f64>) -> (Scenario, Recording, serde_json:
 }
 
 /// Writes what `pheromone sim` writes and returns the chart's path, after checking it is listed.
-fn write_all(dir: &Path, s: &Scenario, rec: &Recording, m: &serde_json::Value, chart: &str) -> PathBuf {
+fn write_all(
+    dir: &Path,
+    s: &Scenario,
+    rec: &Recording,
+    m: &serde_json::Value,
+    chart: &str,
+) -> PathBuf {
     write_outputs(dir, rec, m).unwrap();
     let written = write_plots(dir, s, rec).unwrap();
     let path = dir.join(chart);
@@ -67,7 +73,12 @@ fn assert_chart(path: &Path) {
     let mut buf = vec![0u8; reader.output_buffer_size().unwrap()];
     let info = reader.next_frame(&mut buf).unwrap();
     assert_eq!(info.color_type, png::ColorType::Rgb, "{}", path.display());
-    assert_eq!((info.width, info.height), (PLOT_W_PX, PLOT_H_PX), "{}", path.display());
+    assert_eq!(
+        (info.width, info.height),
+        (PLOT_W_PX, PLOT_H_PX),
+        "{}",
+        path.display()
+    );
     let pixels: Vec<[u8; 3]> = buf[..info.buffer_size()]
         .chunks(3)
         .map(|p| [p[0], p[1], p[2]])
@@ -127,7 +138,11 @@ fn evaporation_chart_draws_each_probe_against_its_closed_form() {
         // …and the run follows it (seed 000 Figs. 6–8).
         for &(t, v) in &c.readings {
             let err = (v as f64 - f.at(t)).abs();
-            assert!(err < 0.05 + 2e-3 * f.at(t), "{c:?} at {t} s: {v} vs {}", f.at(t));
+            assert!(
+                err < 0.05 + 2e-3 * f.at(t),
+                "{c:?} at {t} s: {v} vs {}",
+                f.at(t)
+            );
         }
     }
     let tmp = TempDir::new("evaporation");
@@ -143,8 +158,14 @@ fn exploration_chart_ends_at_the_run_metric() {
     assert_eq!(series.per_robot.len(), rec.robots.len());
     for (k, (id, points)) in series.per_robot.iter().enumerate() {
         assert_eq!(points.len(), rec.robots[id].len(), "one point per step");
-        assert!(points.windows(2).all(|p| p[1].1 >= p[0].1), "never decreases");
-        assert_eq!(points.last().unwrap().1, e["per_robot"][k].as_f64().unwrap());
+        assert!(
+            points.windows(2).all(|p| p[1].1 >= p[0].1),
+            "never decreases"
+        );
+        assert_eq!(
+            points.last().unwrap().1,
+            e["per_robot"][k].as_f64().unwrap()
+        );
     }
     let team = series.team.last().unwrap().1;
     assert_eq!(team, e["team"].as_f64().unwrap());
@@ -168,7 +189,10 @@ fn exploration_chart_ends_at_the_run_metric() {
     let last = rows.last().unwrap();
     assert_eq!(last.last().unwrap().parse::<f64>().unwrap(), team);
     for (k, v) in last[1..last.len() - 1].iter().enumerate() {
-        assert_eq!(v.parse::<f64>().unwrap(), e["per_robot"][k].as_f64().unwrap());
+        assert_eq!(
+            v.parse::<f64>().unwrap(),
+            e["per_robot"][k].as_f64().unwrap()
+        );
     }
 }
 
@@ -198,13 +222,20 @@ fn path_distance_chart_draws_the_trajectories_and_the_metric() {
             .filter(|q| q.0 >= p.from_s && q.0 <= p.to_s)
             .map(|q| q.1)
             .collect();
-        assert!(!inside.is_empty() && inside.iter().all(|d| *d < 0.5), "{}", p.name);
+        assert!(
+            !inside.is_empty() && inside.iter().all(|d| *d < 0.5),
+            "{}",
+            p.name
+        );
     }
     let tmp = TempDir::new("trail-following");
     assert_chart(&write_all(&tmp.0, &s, &rec, &m, "path_distance.png"));
     let (header, rows) = csv_rows(&tmp.0.join("path_distance.csv"));
     assert_eq!(header, ["t_s", "path", "robot", "distance_m"]);
-    assert_eq!(rows.len(), paths.iter().map(|p| p.points.len()).sum::<usize>());
+    assert_eq!(
+        rows.len(),
+        paths.iter().map(|p| p.points.len()).sum::<usize>()
+    );
 }
 
 #[test]
@@ -214,7 +245,11 @@ fn leader_deposit_chart_shows_the_deposits_fade_where_the_leader_got_lost() {
     let d = leader_deposits(&s, metric, &rec);
     let b = &m["metrics"]["blind_leader"];
     let lost_m = b["leader_lost_at_m"].as_f64().unwrap();
-    assert_eq!(d.metric.leader_lost_at_m, Some(lost_m), "the mark is the run's metric");
+    assert_eq!(
+        d.metric.leader_lost_at_m,
+        Some(lost_m),
+        "the mark is the run's metric"
+    );
     assert_eq!(
         d.metric.follower_abandoned_at_m,
         b["follower_abandoned_at_m"].as_f64()
@@ -235,10 +270,23 @@ fn leader_deposit_chart_shows_the_deposits_fade_where_the_leader_got_lost() {
     assert!(drawn.len() > 20, "{} deposits", drawn.len());
     // What the chart shows: well localized, the leader deposits at the cap (γmax = 100); two
     // metres past the loss, a small fraction of it.
-    let before: Vec<f32> = d.deposits.iter().filter(|p| p.0 < lost_m - 1.0).map(|p| p.1).collect();
-    let after: Vec<f32> = d.deposits.iter().filter(|p| p.0 > lost_m + 2.0).map(|p| p.1).collect();
+    let before: Vec<f32> = d
+        .deposits
+        .iter()
+        .filter(|p| p.0 < lost_m - 1.0)
+        .map(|p| p.1)
+        .collect();
+    let after: Vec<f32> = d
+        .deposits
+        .iter()
+        .filter(|p| p.0 > lost_m + 2.0)
+        .map(|p| p.1)
+        .collect();
     assert!(!before.is_empty() && !after.is_empty());
     let mean = |v: &[f32]| v.iter().map(|x| *x as f64).sum::<f64>() / v.len() as f64;
     assert!(mean(&before) > 50.0, "before the loss: {before:?}");
-    assert!(mean(&after) < 0.2 * mean(&before), "after the loss: {after:?}");
+    assert!(
+        mean(&after) < 0.2 * mean(&before),
+        "after the loss: {after:?}"
+    );
 }

@@ -162,7 +162,10 @@ fn the_leader_deposits_chart_draws_the_same_deposits_as_processes_and_in_one_pro
         assert!(o.status.success(), "{args:?}: {}", stderr(&o));
         assert!(dir.join("leader_deposits.png").is_file(), "{args:?}");
     }
-    let (pa, pb) = (deposits_in(&a.join("robot_0.csv")), deposits_in(&b.join("robot_0.csv")));
+    let (pa, pb) = (
+        deposits_in(&a.join("robot_0.csv")),
+        deposits_in(&b.join("robot_0.csv")),
+    );
     assert!(pa.len() > 20, "{} deposits", pa.len());
     assert_eq!(pa, pb);
     let _ = std::fs::remove_dir_all(&base);

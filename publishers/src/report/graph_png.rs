@@ -90,15 +90,18 @@ pub fn write_graph_png(
             } else {
                 [230, 240, 200]
             };
-            root.draw(&Rectangle::new([(px0, py0), (px1, py1)], colour(fill).filled()))
-                .map_err(msg)?;
+            root.draw(&Rectangle::new(
+                [(px0, py0), (px1, py1)],
+                colour(fill).filled(),
+            ))
+            .map_err(msg)?;
             let holders: Vec<String> = area.held_by.iter().map(|i| format!("R{i}")).collect();
             let label = if holders.is_empty() {
                 r.name.clone()
             } else {
                 format!("{} {}", r.name, holders.join(" "))
             };
-            root.draw_text(&label, &text, (px0 + 4, py0 + 4))
+            root.draw_text(&label, &text, (px0 + 4, py0 + 10))
                 .map_err(msg)?;
         }
         for n in nodes {
@@ -111,8 +114,13 @@ pub fn write_graph_png(
                 let v = value_of(&n.name, dir).unwrap_or(link.value);
                 if v == f32::NEG_INFINITY {
                     let style = colour([0, 0, 0]).stroke_width(4);
-                    root.draw(&DashedPathElement::new(vec![a, mid].into_iter(), 8, 6, style))
-                        .map_err(msg)?;
+                    root.draw(&DashedPathElement::new(
+                        vec![a, mid].into_iter(),
+                        8,
+                        6,
+                        style,
+                    ))
+                    .map_err(msg)?;
                 } else {
                     let t = (v.abs() / max_abs).clamp(0.0, 1.0) as f64;
                     let mix = |base: f64, full: f64| (base + (full - base) * t).round() as u8;
@@ -149,10 +157,12 @@ pub fn write_graph_png(
             report.robots,
             report
                 .finish_s
-                .map_or("goal not reached".to_string(), |t| format!("goal at {t:.1} s")),
+                .map_or("goal not reached".to_string(), |t| format!(
+                    "goal at {t:.1} s"
+                )),
         );
         let style = (FONT, 20).into_font().color(&colour(GRAPH_TEXT_RGB));
-        root.draw_text(&title, &style, (8, 6)).map_err(msg)
+        root.draw_text(&title, &style, (8, 14)).map_err(msg)
     })
     .map_err(|detail| ReportError::Draw {
         path: path.to_path_buf(),

@@ -137,7 +137,11 @@ fn coord((x, y): (f64, f64)) -> Option<(i32, i32)> {
 
 /// The picture of channel `c` of `snap`, with walls and the robots' trajectories up to the
 /// snapshot's time.
-pub(super) fn render_snapshot(rec: &Recording, snap: &Snapshot, c: usize) -> Result<Picture, String> {
+pub(super) fn render_snapshot(
+    rec: &Recording,
+    snap: &Snapshot,
+    c: usize,
+) -> Result<Picture, String> {
     let layout = Layout::for_grid(snap.width, snap.height, snap.cell_size_m);
     let plane = snap.plane(c);
     let map = ColourMap::for_plane(plane);
@@ -159,7 +163,9 @@ pub(super) fn render_snapshot(rec: &Recording, snap: &Snapshot, c: usize) -> Res
         for (a, b) in &rec.walls {
             if let (Some(a), Some(b)) = (px(a[0], a[1]), px(b[0], b[1])) {
                 let style = colour(WALL_RGB).stroke_width(WALL_PX);
-                field.draw(&PathElement::new(vec![a, b], style)).map_err(msg)?;
+                field
+                    .draw(&PathElement::new(vec![a, b], style))
+                    .map_err(msg)?;
             }
         }
         let mut markers = Vec::new();
@@ -210,7 +216,7 @@ pub(super) fn render_snapshot(rec: &Recording, snap: &Snapshot, c: usize) -> Res
                 let (lx, ly) = (p.0 + 9, p.1 - 24);
                 field
                     .draw(&Rectangle::new(
-                        [(lx - 3, ly - 1), (lx + tw as i32 + 3, ly + th as i32 + 3)],
+                        [(lx - 3, ly - 6), (lx + tw as i32 + 3, ly + th as i32)],
                         colour(OUTLINE_RGB).mix(0.7).filled(),
                     ))
                     .map_err(msg)?;
@@ -286,8 +292,7 @@ fn draw_axes(root: &DrawingArea<BitMapBackend<'_>, Shift>, layout: &Layout) -> R
         .draw()
         .map_err(msg)?;
     let style = (FONT, 13).into_font().color(&colour(TEXT_RGB));
-    root.draw_text("y (m)", &style, (6, 6))
-        .map_err(msg)?;
+    root.draw_text("y (m)", &style, (6, 6)).map_err(msg)?;
     Ok(())
 }
 

@@ -70,7 +70,10 @@ fn paths_are_anti_aliased() {
         }
     }
     assert!(full >= 40, "{full} pixels of the path's own colour");
-    assert!(blends >= 40, "{blends} blended pixels: the path is not anti-aliased");
+    assert!(
+        blends >= 40,
+        "{blends} blended pixels: the path is not anti-aliased"
+    );
 }
 
 #[test]
@@ -130,7 +133,10 @@ fn colour_bar_ticks_are_round_include_the_ends_and_never_overlap() {
             assert!(p[1] > p[0], "{ticks:?}");
             if ticks.len() > 2 {
                 let half = (text_width(&fmt_sig(p[0])) + text_width(&fmt_sig(p[1]))) as f64 / 2.0;
-                assert!(px(p[1]) - px(p[0]) > half, "{lo}…{hi} in {width} px: {ticks:?}");
+                assert!(
+                    px(p[1]) - px(p[0]) > half,
+                    "{lo}…{hi} in {width} px: {ticks:?}"
+                );
             }
         }
     }

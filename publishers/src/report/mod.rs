@@ -194,7 +194,10 @@ pub fn write_plots(
         let path = dir.join("exploration.csv");
         write_file(&path, exploration_csv(&s).as_bytes())?;
         written.push(path);
-        written.push(draw("exploration.png", plots::exploration_chart(&s, end_s))?);
+        written.push(draw(
+            "exploration.png",
+            plots::exploration_chart(&s, end_s),
+        )?);
     }
     if !scenario.metrics.paths.is_empty() {
         let paths = series::path_distances(scenario, rec);
@@ -209,11 +212,17 @@ pub fn write_plots(
         let path = dir.join("path_distance.csv");
         write_file(&path, text.as_bytes())?;
         written.push(path);
-        written.push(draw("path_distance.png", plots::path_distance_chart(&paths, end_s))?);
+        written.push(draw(
+            "path_distance.png",
+            plots::path_distance_chart(&paths, end_s),
+        )?);
     }
     if let Some(m) = &scenario.metrics.blind_leader {
         let d = series::leader_deposits(scenario, m, rec);
-        written.push(draw("leader_deposits.png", plots::leader_deposits_chart(&d))?);
+        written.push(draw(
+            "leader_deposits.png",
+            plots::leader_deposits_chart(&d),
+        )?);
     }
     Ok(written)
 }

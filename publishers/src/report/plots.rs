@@ -357,7 +357,11 @@ pub(super) fn leader_deposits_chart(d: &LeaderDeposits) -> Result<Picture, Strin
                     .map(|&p| Circle::new(p, 3, colour(rgb).filled())),
             )
             .map_err(msg)?
-            .label(format!("R{}: one dot per deposit ({})", d.leader, points.len()))
+            .label(format!(
+                "R{}: one dot per deposit ({})",
+                d.leader,
+                points.len()
+            ))
             .legend(legend!(rgb, 4));
         let marks = [
             (

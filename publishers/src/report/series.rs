@@ -94,9 +94,7 @@ fn closed_form(scenario: &Scenario, rec: &Recording, c: &ProbeCurve) -> Option<C
     let (ambient, decay_per_s) = match spec.evaporation {
         Evaporation::None => (0.0, 0.0),
         Evaporation::Exponential { decay_per_s } => (0.0, decay_per_s as f64),
-        Evaporation::Saturating { rho_per_tick } => {
-            (0.0, -(1.0 - rho_per_tick as f64).ln() / dt_s)
-        }
+        Evaporation::Saturating { rho_per_tick } => (0.0, -(1.0 - rho_per_tick as f64).ln() / dt_s),
         Evaporation::Quantum { .. } => return None,
         Evaporation::Ambient {
             decay_per_s,
@@ -240,7 +238,11 @@ pub struct LeaderDeposits {
     pub metric: BlindLeader,
 }
 
-pub fn leader_deposits(scenario: &Scenario, m: &BlindLeaderMetric, rec: &Recording) -> LeaderDeposits {
+pub fn leader_deposits(
+    scenario: &Scenario,
+    m: &BlindLeaderMetric,
+    rec: &Recording,
+) -> LeaderDeposits {
     let mut deposits = Vec::new();
     if let Some(rows) = rec.robots.get(&m.leader) {
         let mut walked = 0.0;

@@ -177,7 +177,10 @@ impl Picture {
     /// on it when done.
     pub(super) fn area(&mut self) -> Result<DrawingArea<BitMapBackend<'_>, Shift>, String> {
         register_font()?;
-        Ok(BitMapBackend::with_buffer(&mut self.rgb, (self.width, self.height)).into_drawing_area())
+        Ok(
+            BitMapBackend::with_buffer(&mut self.rgb, (self.width, self.height))
+                .into_drawing_area(),
+        )
     }
 
     /// Draws on the picture with plotters (the font registered first); the error is plotters'

@@ -192,7 +192,10 @@ fn png_has_the_expected_size_trajectories_and_top_of_the_colour_map() {
     // The strip has text and the colour bar: its top colour is there, at the right.
     let strip_top = 28 + 400 + 40;
     let bar: Vec<Rgb> = (436..872).map(|x| pixel(&img, x, strip_top + 30)).collect();
-    assert!(bar.contains(&VIRIDIS[9]) && bar.contains(&VIRIDIS[0]), "colour bar");
+    assert!(
+        bar.contains(&VIRIDIS[9]) && bar.contains(&VIRIDIS[0]),
+        "colour bar"
+    );
     let text: usize = (strip_top..img.1 as usize)
         .flat_map(|y| (0..436).map(move |x| (x, y)))
         .filter(|&(x, y)| pixel(&img, x, y as usize)[0] > 200)

@@ -20,8 +20,8 @@ use field::wire::{ready_service as wake, ROBOT_LINK};
 use iceoryx2::node::Node;
 
 use crate::messages::{CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, TruthMsg};
-use crate::roles::RobotServices;
 use crate::roles::depositor::Depositor;
+use crate::roles::RobotServices;
 use crate::sim::record::{deposit_peak, Recording, RobotSample};
 use crate::sim::scenario::Scenario;
 use crate::sim::single::{sigma_max_m, FrameSchedule};
