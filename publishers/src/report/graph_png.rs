@@ -114,13 +114,8 @@ pub fn write_graph_png(
                 let v = value_of(&n.name, dir).unwrap_or(link.value);
                 if v == f32::NEG_INFINITY {
                     let style = colour([0, 0, 0]).stroke_width(4);
-                    root.draw(&DashedPathElement::new(
-                        vec![a, mid].into_iter(),
-                        8,
-                        6,
-                        style,
-                    ))
-                    .map_err(msg)?;
+                    root.draw(&DashedPathElement::new(vec![a, mid], 8, 6, style))
+                        .map_err(msg)?;
                 } else {
                     let t = (v.abs() / max_abs).clamp(0.0, 1.0) as f64;
                     let mix = |base: f64, full: f64| (base + (full - base) * t).round() as u8;

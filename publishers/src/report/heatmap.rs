@@ -189,7 +189,7 @@ pub(super) fn render_snapshot(
             for run in runs(&est) {
                 let style = colour(lighter(rgb)).stroke_width(PATH_PX);
                 field
-                    .draw(&DashedPathElement::new(run.into_iter(), 7, 5, style))
+                    .draw(&DashedPathElement::new(run, 7, 5, style))
                     .map_err(msg)?;
             }
             if let Some(last) = rows.last() {
@@ -365,7 +365,7 @@ fn draw_strip(
         x += label(strip, "true", x, y - 8, TEXT_RGB)? + 14;
         strip
             .draw(&DashedPathElement::new(
-                vec![(x, y), (x + 28, y)].into_iter(),
+                vec![(x, y), (x + 28, y)],
                 7,
                 5,
                 white,

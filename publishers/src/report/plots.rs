@@ -12,6 +12,8 @@ use super::style::{colour, msg, robot_rgb, series_rgb, Picture, Rgb, FONT};
 /// Size of every chart (px).
 pub const PLOT_W_PX: u32 = 960;
 pub const PLOT_H_PX: u32 = 540;
+/// Robots named in a legend.
+const MAX_LEGEND_ROBOTS: usize = 8;
 /// Points of a closed-form curve.
 const CURVE_POINTS: usize = 240;
 
@@ -189,19 +191,22 @@ pub(super) fn exploration_chart(s: &ExplorationSeries, end_s: f64) -> Result<Pic
                 100.0 * s.team.last().map_or(0.0, |p| p.1)
             ))
             .legend(legend!(team_rgb, 0));
-        for (&id, points) in &s.per_robot {
+        for (k, (&id, points)) in s.per_robot.iter().enumerate() {
             let rgb = robot_rgb(id);
-            chart
+            let anno = chart
                 .draw_series(LineSeries::new(
                     points.iter().map(|&(t, v)| (t, 100.0 * v)),
                     colour(rgb).stroke_width(2),
                 ))
-                .map_err(msg)?
-                .label(format!(
+                .map_err(msg)?;
+            // The legend names the first robots only; the rest would cover the chart.
+            if k < MAX_LEGEND_ROBOTS {
+                anno.label(format!(
                     "R{id}: {:.0} %",
                     100.0 * points.last().map_or(0.0, |p| p.1)
                 ))
                 .legend(legend!(rgb, 0));
+            }
         }
         chart
             .configure_series_labels()
@@ -280,7 +285,7 @@ pub(super) fn path_distance_chart(paths: &[PathDistance], end_s: f64) -> Result<
             if let Some(m) = p.mean_m {
                 chart
                     .draw_series(std::iter::once(DashedPathElement::new(
-                        vec![(p.from_s, m), (p.to_s, m)].into_iter(),
+                        vec![(p.from_s, m), (p.to_s, m)],
                         8,
                         5,
                         colour(rgb).stroke_width(2),
@@ -383,7 +388,7 @@ pub(super) fn leader_deposits_chart(d: &LeaderDeposits) -> Result<Picture, Strin
             };
             chart
                 .draw_series(std::iter::once(DashedPathElement::new(
-                    vec![(m, lo), (m, hi)].into_iter(),
+                    vec![(m, lo), (m, hi)],
                     8,
                     5,
                     colour(mark_rgb).stroke_width(2),

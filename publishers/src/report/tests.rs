@@ -198,7 +198,7 @@ fn png_has_the_expected_size_trajectories_and_top_of_the_colour_map() {
     );
     let text: usize = (strip_top..img.1 as usize)
         .flat_map(|y| (0..436).map(move |x| (x, y)))
-        .filter(|&(x, y)| pixel(&img, x, y as usize)[0] > 200)
+        .filter(|&(x, y)| pixel(&img, x, y)[0] > 200)
         .count();
     assert!(text > 300, "{text} light pixels: no title or legend");
 }
