@@ -1,7 +1,8 @@
 //! `pheromone sim`: runs a whole scenario — by default as separate processes (field, world, and
 //! each robot's localizer, depositor and follower), or in one process (`--single-process`) —
 //! and reports what happened: a summary on stderr, `--json` metrics on stdout, and with
-//! `--out DIR` pictures of the field, a CSV per robot and `metrics.json`.
+//! `--out DIR` pictures of the field, the scenario's charts, a CSV per robot and
+//! `metrics.json`.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -100,7 +101,8 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     }
     print_summary(&metrics);
     if let Some(dir) = out_dir(&a, &scenario) {
-        let files = publishers::report::write_outputs(&dir, &rec, &metrics)?;
+        let mut files = publishers::report::write_outputs(&dir, &rec, &metrics)?;
+        files.extend(publishers::report::write_plots(&dir, &scenario, &rec)?);
         eprintln!(
             "wrote {} file(s) to {} (the picture: {})",
             files.len(),

@@ -135,6 +135,42 @@ fn ias_ss_with_eight_robots_runs_as_25_processes_with_the_single_process_answer(
     assert!(explored.is_some_and(|v| v.len() == 8), "{m}");
 }
 
+/// The `t_s` and `deposit_peak` columns of a robot CSV, rows with a deposit only.
+fn deposits_in(csv: &Path) -> Vec<(String, String)> {
+    let text = std::fs::read_to_string(csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = header.iter().position(|h| *h == "deposit_peak").unwrap();
+    lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|r| !r[col].is_empty())
+        .map(|r| (r[0].to_string(), r[col].to_string()))
+        .collect()
+}
+
+#[test]
+fn the_leader_deposits_chart_draws_the_same_deposits_as_processes_and_in_one_process() {
+    // As processes the observer records what each depositor sent by running a copy of it on
+    // the same poses: the leader's deposits, and so its chart, equal the single-process run's.
+    let base = std::env::temp_dir().join(unique("plots-modes"));
+    let (a, b) = (base.join("processes"), base.join("single"));
+    for (dir, extra) in [(&a, None), (&b, Some("--single-process"))] {
+        let d = dir.display().to_string();
+        let mut args = vec!["sim", "blind-leader", "--duration", "30", "--out", &d];
+        args.extend(extra);
+        let o = run(&args);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        assert!(dir.join("leader_deposits.png").is_file(), "{args:?}");
+    }
+    let (pa, pb) = (
+        deposits_in(&a.join("robot_0.csv")),
+        deposits_in(&b.join("robot_0.csv")),
+    );
+    assert!(pa.len() > 20, "{} deposits", pa.len());
+    assert_eq!(pa, pb);
+    let _ = std::fs::remove_dir_all(&base);
+}
+
 /// A scenario file whose robot 0 localizer is refused by `--slam` (a landmark region restricts
 /// a map that EKF-SLAM does not have): that process exits with an error at once.
 fn failing_scenario(run: &Run) -> String {

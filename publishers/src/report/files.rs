@@ -1,12 +1,12 @@
 //! Writing the files of a run: a whole file at once, the CSV time series of one robot, and a
-//! canvas as an 8-bit RGB PNG.
+//! picture as an 8-bit RGB PNG.
 
 use std::fmt::Write as _;
 use std::fs::{self, File};
 use std::io::{BufWriter, Write as _};
 use std::path::Path;
 
-use super::raster::Canvas;
+use super::style::Picture;
 use super::{ReportError, ROBOT_CSV_HEADER};
 use crate::sim::record::RobotSample;
 
@@ -29,7 +29,7 @@ pub(super) fn robot_csv(rows: &[RobotSample]) -> String {
         // Writing into a String cannot fail.
         let _ = writeln!(
             text,
-            "{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.t_s,
             r.true_pose[0],
             r.true_pose[1],
@@ -42,12 +42,13 @@ pub(super) fn robot_csv(rows: &[RobotSample]) -> String {
             r.omega_rad_per_s,
             r.state.map(|s| s.name()).unwrap_or(""),
             opt(r.sensed_level),
+            opt(r.deposit_peak),
         );
     }
     text
 }
 
-pub(super) fn write_png(path: &Path, canvas: &Canvas) -> Result<(), ReportError> {
+pub(super) fn write_png(path: &Path, pic: &Picture) -> Result<(), ReportError> {
     let png_err = |source| ReportError::Png {
         path: path.to_path_buf(),
         source,
@@ -58,12 +59,12 @@ pub(super) fn write_png(path: &Path, canvas: &Canvas) -> Result<(), ReportError>
     })?;
     let mut out = BufWriter::new(file);
     {
-        let mut encoder = png::Encoder::new(&mut out, canvas.width as u32, canvas.height as u32);
+        let mut encoder = png::Encoder::new(&mut out, pic.width, pic.height);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
-        encoder.set_compression(png::Compression::Fast);
+        encoder.set_compression(png::Compression::Balanced);
         let mut writer = encoder.write_header().map_err(png_err)?;
-        writer.write_image_data(&canvas.rgb).map_err(png_err)?;
+        writer.write_image_data(&pic.rgb).map_err(png_err)?;
         writer.finish().map_err(png_err)?;
     }
     out.flush().map_err(|source| ReportError::Io {

@@ -4,10 +4,15 @@
 use std::fs;
 use std::path::Path;
 
+use plotters::element::DashedPathElement;
+use plotters::prelude::*;
+
 use super::files::write_png;
-use super::font::draw_text;
-use super::raster::{Canvas, Pen, TEXT_RGB};
+use super::style::{colour, msg, Picture, FONT};
 use super::ReportError;
+
+/// Text on the graph's light background.
+const GRAPH_TEXT_RGB: [u8; 3] = [30, 30, 35];
 
 /// Writes a picture of a node-graph run: regions (green while held, grey once served, labelled
 /// with their holders), links coloured by their final value (red anti-pheromone, blue
@@ -44,43 +49,13 @@ pub fn write_graph_png(
     let px_per_m = (1200.0 / span_m).clamp(10.0, 120.0);
     let w = ((x1 - x0 + 2.0 * margin_m) * px_per_m).ceil() as usize;
     let h = ((y1 - y0 + 2.0 * margin_m) * px_per_m).ceil() as usize;
-    let (wf, hf) = (w as f64, h as f64);
+    let hf = h as f64;
     let to_px = |x: f64, y: f64| {
         (
-            (x - x0 + margin_m) * px_per_m,
-            hf - (y - y0 + margin_m) * px_per_m,
+            ((x - x0 + margin_m) * px_per_m).round() as i32,
+            (hf - (y - y0 + margin_m) * px_per_m).round() as i32,
         )
     };
-    let mut canvas = Canvas::new(w, h, [250, 250, 250]);
-    let label = |c: &mut Canvas, x: f64, y: f64, text: &str| {
-        draw_text(c, x as i64, y as i64, text, 2, TEXT_RGB, true);
-    };
-    for (r, area) in regions.iter().zip(&report.areas) {
-        let [a, b, c, d] = r.shape.bbox_m();
-        let (px0, py1) = to_px(a as f64, b as f64);
-        let (px1, py0) = to_px(c as f64, d as f64);
-        let fill = if !area.held_by.is_empty() {
-            [170, 220, 170]
-        } else if area.served {
-            [205, 205, 205]
-        } else {
-            [230, 240, 200]
-        };
-        canvas.fill_rect(
-            px0 as i64,
-            py0 as i64,
-            (px1 - px0) as i64,
-            (py1 - py0) as i64,
-            fill,
-        );
-        let holders: Vec<String> = area.held_by.iter().map(|i| format!("R{i}")).collect();
-        let text = if holders.is_empty() {
-            r.name.clone()
-        } else {
-            format!("{} {}", r.name, holders.join(" "))
-        };
-        label(&mut canvas, px0 + 4.0, py0 + 4.0, &text);
-    }
     let value_of = |node: &str, dir: crate::graph::Dir| -> Option<f32> {
         let row = report.links.iter().find(|l| l.node == node)?;
         let text = match dir {
@@ -101,58 +76,98 @@ pub fn write_graph_png(
         .filter_map(|t| t.parse::<f32>().ok())
         .filter(|v| v.is_finite())
         .fold(1.0f32, |m, v| m.max(v.abs()));
-    for n in nodes {
-        for (dir, link) in n.links() {
-            let to = &nodes[link.to];
-            let a = to_px(n.x_m as f64, n.y_m as f64);
-            let b = to_px(to.x_m as f64, to.y_m as f64);
-            // Each direction draws its half of the passage, so both values show.
-            let mid = ((a.0 + b.0) / 2.0, (a.1 + b.1) / 2.0);
-            let v = value_of(&n.name, dir).unwrap_or(link.value);
-            let mut pen = if v == f32::NEG_INFINITY {
-                Pen::dashed(4, [0, 0, 0], 8, 6)
+    let mut pic = Picture::new(w as u32, h as u32, [250, 250, 250]);
+    pic.draw(|root| {
+        let text = (FONT, 16).into_font().color(&colour(GRAPH_TEXT_RGB));
+        for (r, area) in regions.iter().zip(&report.areas) {
+            let [a, b, c, d] = r.shape.bbox_m();
+            let (px0, py1) = to_px(a as f64, b as f64);
+            let (px1, py0) = to_px(c as f64, d as f64);
+            let fill = if !area.held_by.is_empty() {
+                [170, 220, 170]
+            } else if area.served {
+                [205, 205, 205]
             } else {
-                let t = (v.abs() / max_abs).clamp(0.0, 1.0) as f64;
-                let mix = |base: f64, full: f64| (base + (full - base) * t).round() as u8;
-                let colour = if v < 0.0 {
-                    [mix(160.0, 215.0), mix(160.0, 25.0), mix(160.0, 25.0)]
-                } else if v > 0.0 {
-                    [mix(160.0, 30.0), mix(160.0, 90.0), mix(160.0, 220.0)]
-                } else {
-                    [160, 160, 160]
-                };
-                Pen::solid(4, colour)
+                [230, 240, 200]
             };
-            pen.line(&mut canvas, a, mid, wf, hf);
+            root.draw(&Rectangle::new(
+                [(px0, py0), (px1, py1)],
+                colour(fill).filled(),
+            ))
+            .map_err(msg)?;
+            let holders: Vec<String> = area.held_by.iter().map(|i| format!("R{i}")).collect();
+            let label = if holders.is_empty() {
+                r.name.clone()
+            } else {
+                format!("{} {}", r.name, holders.join(" "))
+            };
+            root.draw_text(&label, &text, (px0 + 4, py0 + 10))
+                .map_err(msg)?;
         }
-    }
-    for (i, n) in nodes.iter().enumerate() {
-        let (x, y) = to_px(n.x_m as f64, n.y_m as f64);
-        let colour = if i == dock {
-            [245, 150, 30]
-        } else if n.terminal {
-            [210, 40, 40]
-        } else {
-            [40, 160, 70]
-        };
-        canvas.disc(x as i64, y as i64, 7, colour);
-        label(&mut canvas, x + 9.0, y + 6.0, &n.name);
-    }
-    let title = format!(
-        "{} {} {} robots: {}",
-        report.scenario,
-        report.strategy.name(),
-        report.robots,
-        report
-            .finish_s
-            .map_or("goal not reached".to_string(), |t| format!("{t:.1} s")),
-    );
-    label(&mut canvas, 6.0, 6.0, &title);
+        for n in nodes {
+            for (dir, link) in n.links() {
+                let to = &nodes[link.to];
+                let a = to_px(n.x_m as f64, n.y_m as f64);
+                let b = to_px(to.x_m as f64, to.y_m as f64);
+                // Each direction draws its half of the passage, so both values show.
+                let mid = ((a.0 + b.0) / 2, (a.1 + b.1) / 2);
+                let v = value_of(&n.name, dir).unwrap_or(link.value);
+                if v == f32::NEG_INFINITY {
+                    let style = colour([0, 0, 0]).stroke_width(4);
+                    root.draw(&DashedPathElement::new(vec![a, mid], 8, 6, style))
+                        .map_err(msg)?;
+                } else {
+                    let t = (v.abs() / max_abs).clamp(0.0, 1.0) as f64;
+                    let mix = |base: f64, full: f64| (base + (full - base) * t).round() as u8;
+                    let rgb = if v < 0.0 {
+                        [mix(160.0, 215.0), mix(160.0, 25.0), mix(160.0, 25.0)]
+                    } else if v > 0.0 {
+                        [mix(160.0, 30.0), mix(160.0, 90.0), mix(160.0, 220.0)]
+                    } else {
+                        [160, 160, 160]
+                    };
+                    root.draw(&PathElement::new(vec![a, mid], colour(rgb).stroke_width(4)))
+                        .map_err(msg)?;
+                }
+            }
+        }
+        for (i, n) in nodes.iter().enumerate() {
+            let p = to_px(n.x_m as f64, n.y_m as f64);
+            let rgb = if i == dock {
+                [245, 150, 30]
+            } else if n.terminal {
+                [210, 40, 40]
+            } else {
+                [40, 160, 70]
+            };
+            root.draw(&Circle::new(p, 7, colour(rgb).filled()))
+                .map_err(msg)?;
+            root.draw_text(&n.name, &text, (p.0 + 9, p.1 + 6))
+                .map_err(msg)?;
+        }
+        let title = format!(
+            "{}: {}, {} robots, {}",
+            report.scenario,
+            report.strategy.name(),
+            report.robots,
+            report
+                .finish_s
+                .map_or("goal not reached".to_string(), |t| format!(
+                    "goal at {t:.1} s"
+                )),
+        );
+        let style = (FONT, 20).into_font().color(&colour(GRAPH_TEXT_RGB));
+        root.draw_text(&title, &style, (8, 14)).map_err(msg)
+    })
+    .map_err(|detail| ReportError::Draw {
+        path: path.to_path_buf(),
+        detail,
+    })?;
     if let Some(dir) = path.parent() {
         fs::create_dir_all(dir).map_err(|source| ReportError::Io {
             path: dir.to_path_buf(),
             source,
         })?;
     }
-    write_png(path, &canvas)
+    write_png(path, &pic)
 }

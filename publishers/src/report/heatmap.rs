@@ -1,19 +1,34 @@
 //! The heat-map picture of one channel of a field snapshot: where the grid lands in the picture
-//! (`Layout`), the cells, walls, trajectories and robot markers, and the strip under the field
-//! with the title, colour bar, scale bar and legend.
+//! (`Layout`), the cells (one colour per cell, upscaled by a whole factor), and, drawn over them
+//! with plotters, the axes in metres, walls, anti-aliased trajectories (true solid, estimated
+//! dashed), robot markers, and the strip under the field with the title, legend and colour bar.
 
-use super::font::{draw_text, text_width};
-use super::raster::{
-    lighter, robot_rgb, Canvas, ColourMap, Pen, OUTLINE_RGB, STRIP_RGB, TEXT_RGB, WALL_RGB,
+use plotters::coord::Shift;
+use plotters::element::DashedPathElement;
+use plotters::prelude::*;
+
+use super::style::{
+    colour, lighter, msg, robot_rgb, ColourMap, Picture, Rgb, FONT, OUTLINE_RGB, STRIP_RGB,
+    TEXT_RGB, WALL_RGB,
 };
 use crate::sim::record::{Recording, RobotSample, Snapshot};
 
-/// The picture's width is at least this many pixels (if the cap below allows it).
+/// The field part of the picture is at least this many pixels wide (if the cap below allows it).
 const MIN_WIDTH_PX: usize = 800;
 /// Neither side of the field part of the picture exceeds this many pixels.
 const MAX_SIDE_PX: usize = 2000;
-/// Height of the strip under the field with the title, colour bar, scale bar and legend.
-pub(super) const STRIP_HEIGHT_PX: usize = 52;
+/// Left of the field: the y axis and its labels (m).
+pub(super) const LEFT_PX: u32 = 48;
+/// Above the field (the y axis' unit) and right of it.
+pub(super) const TOP_PX: u32 = 28;
+pub(super) const RIGHT_PX: u32 = 24;
+/// Under the field: the x axis and its labels (m).
+pub(super) const AXIS_PX: u32 = 40;
+/// Under the axis: title, legend and colour bar.
+pub(super) const STRIP_PX: u32 = 64;
+/// Stroke widths (px): trajectories, walls.
+const PATH_PX: u32 = 3;
+const WALL_PX: u32 = 3;
 
 /// Where the grid lands in the picture.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -51,19 +66,27 @@ impl Layout {
         }
     }
 
-    fn field_w_px(&self) -> usize {
+    pub(super) fn field_w_px(&self) -> usize {
         self.blocks_w * self.scale
     }
 
-    fn field_h_px(&self) -> usize {
+    pub(super) fn field_h_px(&self) -> usize {
         self.blocks_h * self.scale
+    }
+
+    /// The whole picture (px).
+    pub(super) fn picture_px(&self) -> (u32, u32) {
+        (
+            LEFT_PX + self.field_w_px() as u32 + RIGHT_PX,
+            TOP_PX + self.field_h_px() as u32 + AXIS_PX + STRIP_PX,
+        )
     }
 
     /// Picture coordinates (pixels, y down) of a world point (metres, y up).
     pub(super) fn pixel_from_world(&self, x_m: f64, y_m: f64) -> (f64, f64) {
         (
-            x_m * self.px_per_m,
-            self.field_h_px() as f64 - y_m * self.px_per_m,
+            LEFT_PX as f64 + x_m * self.px_per_m,
+            TOP_PX as f64 + self.field_h_px() as f64 - y_m * self.px_per_m,
         )
     }
 
@@ -89,6 +112,14 @@ impl Layout {
         }
         m
     }
+
+    /// The world extent drawn (m).
+    fn extent_m(&self) -> (f64, f64) {
+        (
+            self.field_w_px() as f64 / self.px_per_m,
+            self.field_h_px() as f64 / self.px_per_m,
+        )
+    }
 }
 
 /// The f64 closest to the decimal an f32 prints as (0.1f32 → 0.1, not 0.100000001490116): the
@@ -98,167 +129,349 @@ fn f64_from_decimal(v: f32) -> f64 {
     v.to_string().parse().unwrap_or(v as f64)
 }
 
+/// A backend coordinate, or None when it is not finite or absurdly far out.
+fn coord((x, y): (f64, f64)) -> Option<(i32, i32)> {
+    (x.is_finite() && y.is_finite() && x.abs() < 1e7 && y.abs() < 1e7)
+        .then(|| (x.round() as i32, y.round() as i32))
+}
+
 /// The picture of channel `c` of `snap`, with walls and the robots' trajectories up to the
 /// snapshot's time.
-pub(super) fn render_snapshot(rec: &Recording, snap: &Snapshot, c: usize) -> Canvas {
+pub(super) fn render_snapshot(
+    rec: &Recording,
+    snap: &Snapshot,
+    c: usize,
+) -> Result<Picture, String> {
     let layout = Layout::for_grid(snap.width, snap.height, snap.cell_size_m);
     let plane = snap.plane(c);
     let map = ColourMap::for_plane(plane);
-    let (fw, fh) = (layout.field_w_px(), layout.field_h_px());
-    let mut canvas = Canvas::new(fw, fh + STRIP_HEIGHT_PX, STRIP_RGB);
-
-    // The field: one picture row of blocks, repeated `scale` times; block row 0 (y = 0) at the
-    // bottom.
-    let row_bytes = fw * 3;
-    let mut row = vec![0u8; row_bytes];
-    for by in 0..layout.blocks_h {
-        for bx in 0..layout.blocks_w {
-            let colour = map.colour(layout.block_value(plane, bx, by));
-            for k in 0..layout.scale {
-                let i = (bx * layout.scale + k) * 3;
-                row[i..i + 3].copy_from_slice(&colour);
+    let (w, h) = layout.picture_px();
+    let mut pic = Picture::new(w, h, STRIP_RGB);
+    fill_cells(&mut pic, &layout, plane, &map);
+    pic.draw(|root| {
+        draw_axes(root, &layout)?;
+        let (x0, y0) = (LEFT_PX as i32, TOP_PX as i32);
+        let field = root.clone().shrink(
+            (x0, y0),
+            (layout.field_w_px() as u32, layout.field_h_px() as u32),
+        );
+        // Coordinates within the field area: the picture's, shifted.
+        let px = |x_m: f64, y_m: f64| {
+            let (x, y) = layout.pixel_from_world(x_m, y_m);
+            coord((x - x0 as f64, y - y0 as f64))
+        };
+        for (a, b) in &rec.walls {
+            if let (Some(a), Some(b)) = (px(a[0], a[1]), px(b[0], b[1])) {
+                let style = colour(WALL_RGB).stroke_width(WALL_PX);
+                field
+                    .draw(&PathElement::new(vec![a, b], style))
+                    .map_err(msg)?;
             }
         }
-        let top = (layout.blocks_h - 1 - by) * layout.scale;
-        for r in top..top + layout.scale {
-            canvas.rgb[r * row_bytes..(r + 1) * row_bytes].copy_from_slice(&row);
-        }
-    }
-
-    let (wf, hf) = (fw as f64, fh as f64);
-    let mut wall_pen = Pen::solid(3, WALL_RGB);
-    for (a, b) in &rec.walls {
-        wall_pen.line(
-            &mut canvas,
-            layout.pixel_from_world(a[0], a[1]),
-            layout.pixel_from_world(b[0], b[1]),
-            wf,
-            hf,
-        );
-    }
-
-    // Trajectories up to the snapshot's time: true solid, estimated dashed in a lighter shade.
-    let mut markers = Vec::new();
-    for (&id, rows) in &rec.robots {
-        let rows: Vec<&RobotSample> = rows.iter().filter(|r| r.t_s <= snap.t_s + 1e-9).collect();
-        let colour = robot_rgb(id);
-        Pen::solid(2, colour).path(
-            &mut canvas,
-            rows.iter()
-                .map(|r| Some(layout.pixel_from_world(r.true_pose[0], r.true_pose[1]))),
-            wf,
-            hf,
-        );
-        // A gap in the estimates (None) breaks the line; it starts again at the next one.
-        Pen::dashed(2, lighter(colour), 6, 5).path(
-            &mut canvas,
-            rows.iter()
-                .map(|r| r.est_pose.map(|e| layout.pixel_from_world(e[0], e[1]))),
-            wf,
-            hf,
-        );
-        if let Some(last) = rows.last() {
-            markers.push((id, colour, last.true_pose, last.est_pose));
-        }
-    }
-    // Markers last, so no trajectory hides them.
-    for (id, colour, pose, est) in markers {
-        if let Some(e) = est {
-            let (x, y) = layout.pixel_from_world(e[0], e[1]);
-            if x.is_finite() && y.is_finite() {
-                canvas.ring(x as i64, y as i64, 4, 6, lighter(colour));
+        let mut markers = Vec::new();
+        for (&id, rows) in &rec.robots {
+            let rows: Vec<&RobotSample> =
+                rows.iter().filter(|r| r.t_s <= snap.t_s + 1e-9).collect();
+            let rgb = robot_rgb(id);
+            let truth: Vec<Option<(i32, i32)>> = rows
+                .iter()
+                .map(|r| px(r.true_pose[0], r.true_pose[1]))
+                .collect();
+            for run in runs(&truth) {
+                let style = colour(rgb).stroke_width(PATH_PX);
+                field.draw(&PathElement::new(run, style)).map_err(msg)?;
+            }
+            // A gap in the estimates (None) breaks the dashed line; it starts again at the next.
+            let est: Vec<Option<(i32, i32)>> = rows
+                .iter()
+                .map(|r| r.est_pose.and_then(|e| px(e[0], e[1])))
+                .collect();
+            for run in runs(&est) {
+                let style = colour(lighter(rgb)).stroke_width(PATH_PX);
+                field
+                    .draw(&DashedPathElement::new(run, 7, 5, style))
+                    .map_err(msg)?;
+            }
+            if let Some(last) = rows.last() {
+                markers.push((id, rgb, last.true_pose, last.est_pose));
             }
         }
-        let (x, y) = layout.pixel_from_world(pose[0], pose[1]);
-        if x.is_finite() && y.is_finite() && x.abs() < 1e9 && y.abs() < 1e9 {
-            let (x, y) = (x.floor() as i64, y.floor() as i64);
-            canvas.disc(x, y, 7, OUTLINE_RGB);
-            canvas.disc(x, y, 5, colour);
-            let label = format!("R{id}");
-            draw_text(&mut canvas, x + 10, y - 22, &label, 2, colour, true);
+        // Markers last, so no trajectory hides them.
+        for (id, rgb, pose, est) in markers {
+            if let Some(e) = est.and_then(|e| px(e[0], e[1])) {
+                let ring = colour(lighter(rgb)).stroke_width(2);
+                field.draw(&Circle::new(e, 5, ring)).map_err(msg)?;
+            }
+            if let Some(p) = px(pose[0], pose[1]) {
+                field
+                    .draw(&Circle::new(p, 7, colour(OUTLINE_RGB).filled()))
+                    .map_err(msg)?;
+                field
+                    .draw(&Circle::new(p, 5, colour(rgb).filled()))
+                    .map_err(msg)?;
+                // On a dark box, so a label over its own trail stays readable.
+                let name = format!("R{id}");
+                let style = (FONT, 15).into_font().color(&colour(rgb));
+                let (tw, th) = style.font.box_size(&name).map_err(msg)?;
+                let (lx, ly) = (p.0 + 9, p.1 - 24);
+                field
+                    .draw(&Rectangle::new(
+                        [(lx - 3, ly - 6), (lx + tw as i32 + 3, ly + th as i32)],
+                        colour(OUTLINE_RGB).mix(0.7).filled(),
+                    ))
+                    .map_err(msg)?;
+                field.draw_text(&name, &style, (lx, ly)).map_err(msg)?;
+            }
         }
-    }
-
-    draw_strip(&mut canvas, &layout, &map, &snap.channels[c], snap.t_s, rec);
-    canvas
+        let strip = root.clone().shrink(
+            (0, (TOP_PX + layout.field_h_px() as u32 + AXIS_PX) as i32),
+            (w, STRIP_PX),
+        );
+        draw_strip(&strip, &map, &snap.channels[c], snap.t_s, rec)
+    })?;
+    Ok(pic)
 }
 
-/// The strip under the field: title and time, colour bar with its range, scale bar, legend.
+/// The cells: one colour per block, `scale` × `scale` pixels each, block row 0 (y = 0) at the
+/// bottom of the field area.
+fn fill_cells(pic: &mut Picture, layout: &Layout, plane: &[f32], map: &ColourMap) {
+    let row_bytes = pic.width as usize * 3;
+    let mut row = vec![0u8; layout.field_w_px() * 3];
+    let x0 = LEFT_PX as usize * 3;
+    for by in 0..layout.blocks_h {
+        for bx in 0..layout.blocks_w {
+            let c = map.colour(layout.block_value(plane, bx, by));
+            for k in 0..layout.scale {
+                let i = (bx * layout.scale + k) * 3;
+                row[i..i + 3].copy_from_slice(&c);
+            }
+        }
+        let top = TOP_PX as usize + (layout.blocks_h - 1 - by) * layout.scale;
+        for r in top..top + layout.scale {
+            let at = r * row_bytes + x0;
+            pic.rgb[at..at + row.len()].copy_from_slice(&row);
+        }
+    }
+}
+
+/// The axes around the field, in metres; the field area itself is left as it is.
+fn draw_axes(root: &DrawingArea<BitMapBackend<'_>, Shift>, layout: &Layout) -> Result<(), String> {
+    let (w_m, h_m) = layout.extent_m();
+    let mut chart = ChartBuilder::on(root)
+        .margin_top(TOP_PX)
+        .margin_right(RIGHT_PX)
+        .margin_bottom(STRIP_PX)
+        .x_label_area_size(AXIS_PX)
+        .y_label_area_size(LEFT_PX)
+        .build_cartesian_2d(0.0..w_m, 0.0..h_m)
+        .map_err(msg)?;
+    let (xr, yr) = chart.plotting_area().get_pixel_range();
+    let expected = (
+        LEFT_PX as i32..(LEFT_PX as usize + layout.field_w_px()) as i32,
+        TOP_PX as i32..(TOP_PX as usize + layout.field_h_px()) as i32,
+    );
+    if (xr.clone(), yr.clone()) != expected {
+        return Err(format!(
+            "the axes' area {xr:?} × {yr:?} px is not the field's {expected:?}"
+        ));
+    }
+    let text = (FONT, 13).into_font().color(&colour(TEXT_RGB));
+    let x_ticks = (layout.field_w_px() / 90).clamp(2, 20);
+    let y_ticks = (layout.field_h_px() / 40).clamp(2, 12);
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .axis_style(colour(TEXT_RGB))
+        .label_style(text.clone())
+        .axis_desc_style(text)
+        .x_labels(x_ticks)
+        .y_labels(y_ticks)
+        .x_desc("x (m)")
+        .x_label_formatter(&|v| trim(*v))
+        .y_label_formatter(&|v| trim(*v))
+        .draw()
+        .map_err(msg)?;
+    let style = (FONT, 13).into_font().color(&colour(TEXT_RGB));
+    root.draw_text("y (m)", &style, (6, 6)).map_err(msg)?;
+    Ok(())
+}
+
+/// A tick label: as short as it can be (`2`, `1.5`, `0.25`).
+fn trim(v: f64) -> String {
+    let s = format!("{v:.3}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" {
+        "0".into()
+    } else {
+        s.into()
+    }
+}
+
+/// The unbroken stretches of a path whose points may be missing.
+fn runs(points: &[Option<(i32, i32)>]) -> Vec<Vec<(i32, i32)>> {
+    let mut out = Vec::new();
+    let mut cur: Vec<(i32, i32)> = Vec::new();
+    for p in points {
+        match p {
+            Some(p) => {
+                if cur.last() != Some(p) {
+                    cur.push(*p);
+                }
+            }
+            None => {
+                if !cur.is_empty() {
+                    out.push(std::mem::take(&mut cur));
+                }
+            }
+        }
+    }
+    if !cur.is_empty() {
+        out.push(cur);
+    }
+    out
+}
+
+/// Width of the colour bar's part of the strip: the right half.
+pub(super) fn bar_span_px(strip_w: u32) -> (i32, i32) {
+    ((strip_w / 2) as i32 + 40, strip_w as i32 - RIGHT_PX as i32)
+}
+
+/// The strip under the field: the title and legend on the left half, the colour bar with its
+/// caption (channel and unit) and ticks on the right half; the halves never overlap.
 fn draw_strip(
-    canvas: &mut Canvas,
-    layout: &Layout,
+    strip: &DrawingArea<BitMapBackend<'_>, Shift>,
     map: &ColourMap,
     channel: &str,
     t_s: f64,
     rec: &Recording,
-) {
-    let y0 = layout.field_h_px() as i64;
-    let w = canvas.width as i64;
-    let (row1, row2) = (y0 + 8, y0 + 30);
+) -> Result<(), String> {
+    let (w, _) = strip.dim_in_pixel();
+    let text = |size: u32| (FONT, size).into_font().color(&colour(TEXT_RGB));
+    strip
+        .draw_text(&format!("{channel}, t = {t_s:.1} s"), &text(18), (12, 6))
+        .map_err(msg)?;
 
-    let title = format!("{channel}  t={t_s:.1} s");
-    draw_text(canvas, 10, row1, &title, 2, TEXT_RGB, false);
-
-    // Colour bar on the right half, its range under it.
-    let bar_x0 = (w * 11 / 20).max(10);
-    let bar_x1 = w - 16;
-    if bar_x1 > bar_x0 + 20 {
-        let n = (bar_x1 - bar_x0) as f64;
-        for x in bar_x0..bar_x1 {
-            let c = map.bar_colour((x - bar_x0) as f64 / n);
-            canvas.fill_rect(x, row1, 1, 14, c);
-        }
-        let max = fmt_sig(map.max as f64);
-        let (lo, hi) = if map.signed {
-            (format!("-{max}"), max)
-        } else {
-            ("0".to_string(), max)
-        };
-        draw_text(canvas, bar_x0, row2, &lo, 2, TEXT_RGB, false);
-        if map.signed {
-            let mid = (bar_x0 + bar_x1) / 2;
-            draw_text(canvas, mid - 5, row2, "0", 2, TEXT_RGB, false);
-        }
-        let hi_w = text_width(&hi, 2);
-        draw_text(canvas, bar_x1 - hi_w, row2, &hi, 2, TEXT_RGB, false);
-    }
-
-    // Scale bar: a round length close to a sixth of the picture.
-    let target_m = layout.field_w_px() as f64 / 6.0 / layout.px_per_m;
-    let mut x = 10i64;
-    if target_m.is_finite() && target_m > 0.0 {
-        let exp = target_m.log10().floor();
-        let base = 10f64.powf(exp);
-        let len_m = [5.0, 2.0, 1.0]
-            .into_iter()
-            .map(|k| k * base)
-            .find(|&l| l <= target_m)
-            .unwrap_or(base);
-        let len_px = (len_m * layout.px_per_m).round() as i64;
-        canvas.fill_rect(x, row2 + 5, len_px, 4, TEXT_RGB);
-        canvas.fill_rect(x, row2 + 1, 2, 12, TEXT_RGB);
-        canvas.fill_rect(x + len_px - 2, row2 + 1, 2, 12, TEXT_RGB);
-        let decimals = (-exp).max(0.0) as usize;
-        let label = format!("{len_m:.decimals$} m");
-        x += len_px + 10;
-        x += draw_text(canvas, x, row2, &label, 2, TEXT_RGB, false) + 20;
-    }
-
-    // Legend: line styles, then one coloured label per robot.
+    // Legend, left half: line styles, then a coloured name per robot, as many as fit.
+    let (bar_x0, bar_x1) = bar_span_px(w);
+    let legend_end = bar_x0 - 40;
     if !rec.robots.is_empty() {
-        let mut pen = Pen::solid(2, TEXT_RGB);
-        let (wc, hc) = (canvas.width as f64, canvas.height as f64);
-        let ly = (row2 + 7) as f64;
-        pen.line(canvas, (x as f64, ly), ((x + 27) as f64, ly), wc, hc);
+        let y = 44;
+        let mut x = 12;
+        let white = colour(TEXT_RGB).stroke_width(PATH_PX);
+        strip
+            .draw(&PathElement::new(vec![(x, y), (x + 28, y)], white))
+            .map_err(msg)?;
         x += 34;
-        x += draw_text(canvas, x, row2, "true", 2, TEXT_RGB, false) + 14;
-        let mut pen = Pen::dashed(2, TEXT_RGB, 6, 5);
-        pen.line(canvas, (x as f64, ly), ((x + 27) as f64, ly), wc, hc);
+        x += label(strip, "true", x, y - 8, TEXT_RGB)? + 14;
+        strip
+            .draw(&DashedPathElement::new(
+                vec![(x, y), (x + 28, y)],
+                7,
+                5,
+                white,
+            ))
+            .map_err(msg)?;
         x += 34;
-        x += draw_text(canvas, x, row2, "est", 2, TEXT_RGB, false) + 14;
-        for &id in rec.robots.keys() {
-            x += draw_text(canvas, x, row2, &format!("R{id}"), 2, robot_rgb(id), false) + 12;
+        x += label(strip, "estimated", x, y - 8, TEXT_RGB)? + 16;
+        let ids: Vec<u32> = rec.robots.keys().copied().collect();
+        for (i, &id) in ids.iter().enumerate() {
+            let name = format!("R{id}");
+            let left = ids.len() - i;
+            let need = text_width(&name) + if left > 1 { text_width(" …") + 10 } else { 0 };
+            if x + need > legend_end {
+                label(strip, "…", x, y - 8, TEXT_RGB)?;
+                break;
+            }
+            x += label(strip, &name, x, y - 8, robot_rgb(id))? + 10;
         }
+    }
+
+    // Colour bar, right half: caption above, ticks under it.
+    let (lo, hi) = map.range();
+    let bar_y = 24;
+    let bar_h = 14;
+    let n = (bar_x1 - bar_x0).max(1);
+    for i in 0..n {
+        let c = colour(map.bar_colour(i as f64 / (n - 1).max(1) as f64));
+        strip
+            .draw(&Rectangle::new(
+                [(bar_x0 + i, bar_y), (bar_x0 + i + 1, bar_y + bar_h)],
+                c.filled(),
+            ))
+            .map_err(msg)?;
+    }
+    let caption = format!("{channel} level (pheromone units)");
+    let cw = text_width(&caption);
+    label(strip, &caption, bar_x1 - cw, 4, TEXT_RGB)?;
+    let ticks = bar_ticks(lo, hi, bar_x1 - bar_x0);
+    for v in ticks {
+        let x = bar_x0 + ((v - lo) / (hi - lo) * (n - 1) as f64).round() as i32;
+        strip
+            .draw(&PathElement::new(
+                vec![(x, bar_y + bar_h), (x, bar_y + bar_h + 4)],
+                colour(TEXT_RGB),
+            ))
+            .map_err(msg)?;
+        let s = fmt_sig(v);
+        let tw = text_width(&s);
+        label(strip, &s, x - tw / 2, bar_y + bar_h + 6, TEXT_RGB)?;
+    }
+    Ok(())
+}
+
+/// Draws `s` at (x, y) in the strip's 14 px text and returns its width.
+fn label(
+    area: &DrawingArea<BitMapBackend<'_>, Shift>,
+    s: &str,
+    x: i32,
+    y: i32,
+    rgb: Rgb,
+) -> Result<i32, String> {
+    let style = (FONT, 14).into_font().color(&colour(rgb));
+    area.draw_text(s, &style, (x, y)).map_err(msg)?;
+    Ok(text_width(s))
+}
+
+/// Width (px) of `s` in the 14 px text.
+pub(super) fn text_width(s: &str) -> i32 {
+    (FONT, 14)
+        .into_font()
+        .box_size(s)
+        .map(|(w, _)| w as i32)
+        .unwrap_or(8 * s.chars().count() as i32)
+}
+
+/// Round tick values on the bar from `lo` to `hi`, as many as fit `width_px` without two labels
+/// closer than their widths (plotters' key points; the ends always among them).
+pub(super) fn bar_ticks(lo: f64, hi: f64, width_px: i32) -> Vec<f64> {
+    use plotters::coord::ranged1d::Ranged;
+    use plotters::coord::types::RangedCoordf64;
+    let range: RangedCoordf64 = (lo..hi).into();
+    let mut n = 11usize;
+    loop {
+        let mut v: Vec<f64> = range.key_points(n);
+        if v.first().is_none_or(|f| (*f - lo).abs() > 1e-9 * (hi - lo)) {
+            v.insert(0, lo);
+        }
+        if v.last().is_none_or(|l| (*l - hi).abs() > 1e-9 * (hi - lo)) {
+            // The top of the scale replaces a round tick too close to it.
+            while v
+                .last()
+                .is_some_and(|l| (hi - *l) / (hi - lo) * (width_px as f64) < 60.0)
+            {
+                v.pop();
+            }
+            v.push(hi);
+        }
+        let px = |t: f64| (t - lo) / (hi - lo) * width_px as f64;
+        let fits = v.windows(2).all(|p| {
+            let half = (text_width(&fmt_sig(p[0])) + text_width(&fmt_sig(p[1]))) as f64 / 2.0;
+            px(p[1]) - px(p[0]) > half + 12.0
+        });
+        if fits || n <= 2 {
+            return v;
+        }
+        n -= 1;
     }
 }
 
@@ -272,81 +485,14 @@ pub(super) fn fmt_sig(v: f64) -> String {
         return format!("{v:.2e}");
     }
     let decimals = (2.0 - mag).max(0.0) as usize;
-    format!("{v:.decimals$}")
+    let s = format!("{v:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::super::raster::{lighter, Rgb, OUTLINE_RGB, ROBOT_RGB, VIRIDIS};
-    use super::super::tests::scene;
-    use super::*;
-
-    #[test]
-    fn trajectories_stop_at_the_snapshot_time() {
-        let mut rec = scene();
-        rec.snapshots[0].t_s = 4.0; // robot 0 is at x = 3 m then
-        let canvas = render_snapshot(&rec, &rec.snapshots[0], 0);
-        let layout = Layout::for_grid(100, 50, 0.1);
-        let (x, y) = layout.pixel_from_world(2.0, 1.0);
-        assert_eq!(canvas.get(x as usize, y as usize), ROBOT_RGB[0]);
-        let (x, y) = layout.pixel_from_world(5.0, 1.0);
-        assert_eq!(canvas.get(x as usize, y as usize), VIRIDIS[0]);
-        // The marker sits at the position at t = 4 s.
-        let (x, y) = layout.pixel_from_world(3.0, 1.0);
-        assert_eq!(canvas.get(x as usize, y as usize), ROBOT_RGB[0]);
-        assert_eq!(canvas.get(x as usize + 6, y as usize), OUTLINE_RGB);
-    }
-
-    #[test]
-    fn a_gap_in_the_estimates_breaks_the_dashed_line() {
-        let mut rec = scene();
-        let rows = rec.robots.get_mut(&1).unwrap();
-        for r in &mut rows[4..=6] {
-            r.est_pose = None; // x = 3 … 4 m
-        }
-        let canvas = render_snapshot(&rec, &rec.snapshots[0], 0);
-        let layout = Layout::for_grid(100, 50, 0.1);
-        let row = |x0_m: f64, x1_m: f64| -> Vec<Rgb> {
-            let (x0, y) = layout.pixel_from_world(x0_m, 2.5);
-            let (x1, _) = layout.pixel_from_world(x1_m, 2.5);
-            (x0 as usize..x1 as usize)
-                .map(|x| canvas.get(x, y as usize))
-                .collect()
-        };
-        let shade = lighter(ROBOT_RGB[1]);
-        assert!(row(1.0, 2.5).contains(&shade));
-        assert!(row(4.5, 6.0).contains(&shade));
-        assert!(row(2.6, 4.4).iter().all(|&c| c == VIRIDIS[0]));
-    }
-    #[test]
-    fn picture_size_stays_between_800_and_2000_pixels() {
-        for (w, h) in [
-            (30, 20),
-            (100, 50),
-            (600, 400),
-            (512, 512),
-            (1500, 900),
-            (10, 1000),
-        ] {
-            let l = Layout::for_grid(w, h, 0.05);
-            assert_eq!(l.decimate, 1);
-            assert!(
-                l.field_w_px().max(l.field_h_px()) <= MAX_SIDE_PX,
-                "{w}×{h}: {l:?}"
-            );
-            if (h as usize) * MIN_WIDTH_PX.div_ceil(w as usize) <= MAX_SIDE_PX {
-                assert!(l.field_w_px() >= MIN_WIDTH_PX, "{w}×{h}: {l:?}");
-            }
-        }
-        // A grid larger than the cap is reduced by whole blocks, keeping each block's max.
-        let l = Layout::for_grid(5000, 7, 0.05);
-        assert_eq!(
-            (l.decimate, l.blocks_w, l.blocks_h, l.scale),
-            (3, 1667, 3, 1)
-        );
-        let mut plane = vec![0.0f32; 5000 * 7];
-        plane[6 * 5000 + 4999] = 2.0; // the last, partial block
-        assert_eq!(l.block_value(&plane, 1666, 2), 2.0);
-        assert_eq!(l.block_value(&plane, 0, 0), 0.0);
-    }
-}
+#[path = "heatmap_tests.rs"]
+mod tests;

@@ -1,35 +1,40 @@
 //! The files a simulation run leaves behind (`pheromone sim --out DIR`): the metrics object, one
-//! CSV time series per robot, the probe readings, and a heat-map picture of every channel of every
-//! field snapshot with the robots' trajectories drawn over it.
+//! CSV time series per robot, the probe readings, a heat-map picture of every channel of every
+//! field snapshot with the robots' trajectories drawn over it, and the charts the scenario's
+//! records call for.
 //!
-//! The pictures are drawn here without a plotting crate: a small colour-map lookup table
-//! (viridis for unsigned channels, a dark-centred blue/orange diverging map for signed ones),
-//! nearest-neighbour upscaling by an integer factor, Bresenham lines with Liang–Barsky clipping,
-//! and a built-in 5×7 pixel font for the labels. y points up: row 0 of a plane (y = 0) is the
-//! bottom row of the picture.
+//! Everything is drawn with plotters (its bitmap backend, no image codec: the `png` crate
+//! encodes the buffer) and DejaVu Sans, embedded in the binary. Heat maps: a colour-map lookup
+//! table (viridis for unsigned channels, a dark-centred blue/orange diverging map for signed
+//! ones), nearest-neighbour upscaling by a whole factor, axes in metres, anti-aliased
+//! trajectories (true solid, estimated dashed), a legend and a colour bar with its unit. y points
+//! up: row 0 of a plane (y = 0) is the bottom row of the field in the picture.
 //!
 //! The snapshot carries no grid origin, so the field is drawn with its origin at (0, 0) m, the
 //! default of every scenario.
 //!
-//! Submodules: `heatmap` lays out and draws a snapshot's picture, `raster` holds the canvas,
-//! the line pens and the colour maps, `font` the pixel font, `graph_png` the picture of a
-//! node-graph run, and `files` writes the CSV and PNG files.
+//! Submodules: `style` the font, palette, colour maps and picture buffer; `heatmap` a snapshot's
+//! picture; `series` the data of the charts, from the run; `plots` the charts; `graph_png` the
+//! picture of a node-graph run; `files` writes the CSV and PNG files.
 
 mod files;
-mod font;
 mod graph_png;
 mod heatmap;
-mod raster;
+mod plots;
+pub mod series;
+mod style;
 
 use std::fmt::Write as _;
 use std::fs;
 use std::path::{Path, PathBuf};
 
 use crate::sim::record::{Recording, Snapshot};
+use crate::sim::scenario::Scenario;
 use files::{robot_csv, write_file, write_png};
 use heatmap::render_snapshot;
 
 pub use graph_png::write_graph_png;
+pub use plots::{PLOT_H_PX, PLOT_W_PX};
 
 /// Writing the outputs of a run failed.
 #[derive(Debug, thiserror::Error)]
@@ -55,6 +60,9 @@ pub enum ReportError {
         #[source]
         source: serde_json::Error,
     },
+    /// Drawing a picture failed (plotters' message).
+    #[error("{}: cannot draw: {detail}", path.display())]
+    Draw { path: PathBuf, detail: String },
     /// A snapshot's size does not match its plane data.
     #[error("field snapshot at t = {t_s} s: {detail}")]
     BadSnapshot { t_s: f64, detail: String },
@@ -65,7 +73,7 @@ pub enum ReportError {
 
 /// Header of `robot_<id>.csv`.
 pub const ROBOT_CSV_HEADER: &str = "t_s,true_x_m,true_y_m,true_theta_rad,est_x_m,est_y_m,\
-est_theta_rad,est_sigma_m,v_m_per_s,omega_rad_per_s,state,sensed_level";
+est_theta_rad,est_sigma_m,v_m_per_s,omega_rad_per_s,state,sensed_level,deposit_peak";
 
 /// Header of `probes.csv`.
 pub const PROBES_CSV_HEADER: &str = "t_s,x_m,y_m,channel,value";
@@ -122,9 +130,12 @@ pub fn write_outputs(
     let mut final_png = None;
     for snap in &rec.snapshots {
         for (c, name) in snap.channels.iter().enumerate() {
-            let canvas = render_snapshot(rec, snap, c);
             let path = dir.join(snapshot_file_name(name, snap.t_s));
-            write_png(&path, &canvas)?;
+            let pic = render_snapshot(rec, snap, c).map_err(|detail| ReportError::Draw {
+                path: path.clone(),
+                detail,
+            })?;
+            write_png(&path, &pic)?;
             if c == 0 {
                 final_png = Some(path.clone());
             }
@@ -143,6 +154,111 @@ pub fn write_outputs(
         written.push(crate::export::npy::write_snapshot(dir, last)?);
     }
     Ok(written)
+}
+
+/// Header of `exploration.csv`: then one `r<id>` column per robot, then `team`.
+pub const EXPLORATION_CSV_HEADER: &str = "t_s";
+/// Header of `path_distance.csv`.
+pub const PATH_DISTANCE_CSV_HEADER: &str = "t_s,path,robot,distance_m";
+
+/// Writes the charts the scenario's records call for into `dir` (created if needed), with the
+/// time series they draw, and returns the paths written:
+/// - probes (seed 000 Figs. 6–8, `evaporation`): `probes.png`, each probe's readings against its
+///   closed form;
+/// - an exploration metric (seed 004, `ias-ss`): `exploration.png` and `exploration.csv`, the
+///   share of sectors visited over time per robot and for the team;
+/// - path metrics (seed 002, `trail-following`): `path_distance.png` and `path_distance.csv`,
+///   each robot's distance to its path over time;
+/// - a blind-leader metric (seed 000, `blind-leader`): `leader_deposits.png`, the peak of each
+///   of the leader's deposits along its path (`deposit_peak` in `robot_<id>.csv`), the point of
+///   loss marked.
+pub fn write_plots(
+    dir: &Path,
+    scenario: &Scenario,
+    rec: &Recording,
+) -> Result<Vec<PathBuf>, ReportError> {
+    fs::create_dir_all(dir).map_err(|source| ReportError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut written = Vec::new();
+    let end_s = scenario.duration_s;
+    let draw = |name: &str, pic: Result<style::Picture, String>| -> Result<PathBuf, ReportError> {
+        let path = dir.join(name);
+        let pic = pic.map_err(|detail| ReportError::Draw {
+            path: path.clone(),
+            detail,
+        })?;
+        write_png(&path, &pic)?;
+        Ok(path)
+    };
+    if !rec.probes.is_empty() {
+        let curves = series::probe_curves(scenario, rec);
+        written.push(draw("probes.png", plots::probes_chart(&curves, end_s))?);
+    }
+    if let Some(m) = &scenario.metrics.exploration {
+        let s = series::exploration_over_time(m, rec);
+        let path = dir.join("exploration.csv");
+        write_file(&path, exploration_csv(&s).as_bytes())?;
+        written.push(path);
+        written.push(draw(
+            "exploration.png",
+            plots::exploration_chart(&s, end_s),
+        )?);
+    }
+    if !scenario.metrics.paths.is_empty() {
+        let paths = series::path_distances(scenario, rec);
+        let mut text = String::from(PATH_DISTANCE_CSV_HEADER);
+        text.push('\n');
+        for p in &paths {
+            for (t, d) in &p.points {
+                // Writing into a String cannot fail.
+                let _ = writeln!(text, "{t},{},{},{d}", p.name, p.robot);
+            }
+        }
+        let path = dir.join("path_distance.csv");
+        write_file(&path, text.as_bytes())?;
+        written.push(path);
+        written.push(draw(
+            "path_distance.png",
+            plots::path_distance_chart(&paths, end_s),
+        )?);
+    }
+    if let Some(m) = &scenario.metrics.blind_leader {
+        let d = series::leader_deposits(scenario, m, rec);
+        written.push(draw(
+            "leader_deposits.png",
+            plots::leader_deposits_chart(&d),
+        )?);
+    }
+    Ok(written)
+}
+
+/// `exploration.csv`: one row per time any robot recorded; a robot's share is empty before its
+/// first sample.
+fn exploration_csv(s: &series::ExplorationSeries) -> String {
+    let mut text = String::from(EXPLORATION_CSV_HEADER);
+    for id in s.per_robot.keys() {
+        let _ = write!(text, ",r{id}");
+    }
+    text.push_str(",team\n");
+    let mut at: Vec<usize> = vec![0; s.per_robot.len()];
+    for &(t, team) in &s.team {
+        let _ = write!(text, "{t}");
+        for (k, points) in s.per_robot.values().enumerate() {
+            while at[k] + 1 < points.len() && points[at[k] + 1].0 <= t {
+                at[k] += 1;
+            }
+            match points.get(at[k]).filter(|p| p.0 <= t) {
+                Some(p) => {
+                    let _ = write!(text, ",{}", p.1);
+                }
+                None => text.push(','),
+            }
+        }
+        let _ = writeln!(text, ",{team}");
+    }
+    text
 }
 
 /// `field_<channel>_t<seconds>s.png`, seconds with one decimal and at least three integer
@@ -193,248 +309,4 @@ fn check_snapshot(snap: &Snapshot) -> Result<(), ReportError> {
 }
 
 #[cfg(test)]
-mod tests {
-    use std::io::BufReader;
-    use std::sync::atomic::{AtomicU32, Ordering};
-
-    use super::*;
-    use crate::messages::FollowerState;
-    use crate::sim::record::ProbeReading;
-    use std::fs::File;
-
-    use super::heatmap::{fmt_sig, Layout, STRIP_HEIGHT_PX};
-    use super::raster::{lighter, Rgb, NAN_RGB, ROBOT_RGB, VIRIDIS};
-    use crate::sim::record::RobotSample;
-
-    /// A directory under the system temp dir, unique per test and process, removed on drop.
-    struct TempDir(PathBuf);
-
-    impl TempDir {
-        fn new(tag: &str) -> TempDir {
-            static COUNTER: AtomicU32 = AtomicU32::new(0);
-            let nanos = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map(|d| d.subsec_nanos())
-                .unwrap_or(0);
-            let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-            TempDir(std::env::temp_dir().join(format!(
-                "pheromone-report-{tag}-{}-{nanos}-{n}",
-                std::process::id()
-            )))
-        }
-    }
-
-    impl Drop for TempDir {
-        fn drop(&mut self) {
-            let _ = fs::remove_dir_all(&self.0);
-        }
-    }
-
-    fn sample(t_s: f64, x: f64, y: f64) -> RobotSample {
-        RobotSample {
-            t_s,
-            true_pose: [x, y, 0.0],
-            est_pose: None,
-            est_sigma_m: None,
-            v_m_per_s: 0.5,
-            omega_rad_per_s: 0.0,
-            state: None,
-            sensed_level: None,
-        }
-    }
-
-    /// 100 × 50 cells of 0.1 m, channel "trail", zero except `(80, 40)` = 7 (the max). Robot 0
-    /// drives along y = 1 m from x = 1 to 6 m without estimates; robot 1 drives along y = 3 m
-    /// with estimates 0.5 m below its true path.
-    pub(super) fn scene() -> Recording {
-        let (w, h) = (100u32, 50u32);
-        let mut planes = vec![0.0f32; (w * h) as usize];
-        planes[(40 * w + 80) as usize] = 7.0;
-        let mut rec = Recording::default();
-        rec.snapshots.push(Snapshot {
-            t_s: 10.0,
-            width: w,
-            height: h,
-            cell_size_m: 0.1,
-            channels: vec!["trail".into()],
-            planes,
-        });
-        rec.robots.insert(
-            0,
-            (0..=10)
-                .map(|i| sample(i as f64, 1.0 + 0.5 * i as f64, 1.0))
-                .collect(),
-        );
-        rec.robots.insert(
-            1,
-            (0..=10)
-                .map(|i| {
-                    let mut s = sample(i as f64, 1.0 + 0.5 * i as f64, 3.0);
-                    s.est_pose = Some([1.0 + 0.5 * i as f64, 2.5, 0.0]);
-                    s
-                })
-                .collect(),
-        );
-        rec
-    }
-
-    fn decode(path: &Path) -> (u32, u32, Vec<u8>) {
-        let file = File::open(path).unwrap();
-        let mut reader = png::Decoder::new(BufReader::new(file)).read_info().unwrap();
-        let mut buf = vec![0u8; reader.output_buffer_size().unwrap()];
-        let info = reader.next_frame(&mut buf).unwrap();
-        assert_eq!(info.color_type, png::ColorType::Rgb);
-        assert_eq!(info.bit_depth, png::BitDepth::Eight);
-        buf.truncate(info.buffer_size());
-        (info.width, info.height, buf)
-    }
-
-    fn pixel(img: &(u32, u32, Vec<u8>), x: usize, y: usize) -> Rgb {
-        let i = (y * img.0 as usize + x) * 3;
-        [img.2[i], img.2[i + 1], img.2[i + 2]]
-    }
-
-    #[test]
-    fn robot_csv_has_a_row_per_sample_and_empty_cells_for_none() {
-        let tmp = TempDir::new("csv");
-        let mut rec = Recording::default();
-        let mut full = sample(0.5, 1.25, -2.0);
-        full.est_pose = Some([1.0, -2.5, 0.25]);
-        full.est_sigma_m = Some(0.125);
-        full.state = Some(FollowerState::TrailAbandoned);
-        full.sensed_level = Some(3.5);
-        rec.robots.insert(
-            3,
-            vec![sample(0.0, 1.0, -2.0), full, sample(1.0, 1.5, -2.0)],
-        );
-        rec.probes.push(ProbeReading {
-            t_s: 2.0,
-            x_m: 1.5,
-            y_m: 0.5,
-            channel: 0,
-            value: 0.25,
-        });
-        let metrics = serde_json::json!({"robots": 1, "distance_m": 0.5});
-        let written = write_outputs(&tmp.0, &rec, &metrics).unwrap();
-        let names: Vec<String> = written
-            .iter()
-            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
-            .collect();
-        assert_eq!(names, ["metrics.json", "robot_3.csv", "probes.csv"]);
-
-        let text = fs::read_to_string(tmp.0.join("robot_3.csv")).unwrap();
-        let lines: Vec<&str> = text.lines().collect();
-        assert_eq!(lines.len(), 1 + 3);
-        assert_eq!(lines[0], ROBOT_CSV_HEADER);
-        let columns = lines[0].split(',').count();
-        assert_eq!(columns, 12);
-        for line in &lines[1..] {
-            assert_eq!(line.split(',').count(), columns, "{line}");
-        }
-        assert_eq!(lines[1], "0,1,-2,0,,,,,0.5,0,,");
-        assert_eq!(
-            lines[2],
-            "0.5,1.25,-2,0,1,-2.5,0.25,0.125,0.5,0,trail_abandoned,3.5"
-        );
-
-        let probes = fs::read_to_string(tmp.0.join("probes.csv")).unwrap();
-        assert_eq!(probes, format!("{PROBES_CSV_HEADER}\n2,1.5,0.5,0,0.25\n"));
-        let back: serde_json::Value =
-            serde_json::from_str(&fs::read_to_string(tmp.0.join("metrics.json")).unwrap()).unwrap();
-        assert_eq!(back, metrics);
-    }
-
-    #[test]
-    fn png_has_the_expected_size_trajectories_and_top_of_the_colour_map() {
-        let tmp = TempDir::new("png");
-        let rec = scene();
-        let written = write_outputs(&tmp.0, &rec, &serde_json::json!({})).unwrap();
-        let final_png = tmp.0.join("field_final.png");
-        let snap_png = tmp.0.join("field_trail_t010.0s.png");
-        assert!(written.contains(&snap_png), "{written:?}");
-        assert!(written.contains(&final_png), "{written:?}");
-        assert_eq!(fs::read(&snap_png).unwrap(), fs::read(&final_png).unwrap());
-
-        let img = decode(&snap_png);
-        // 100 cells × 8 px wide; 50 cells × 8 px high plus the strip.
-        assert_eq!((img.0, img.1), (800, 400 + STRIP_HEIGHT_PX as u32));
-        let layout = Layout::for_grid(100, 50, 0.1);
-        assert_eq!(layout.scale, 8);
-
-        // Robot 0's true trajectory (y = 1 m) passes through x = 3 m: pixel (240, 320).
-        let (x, y) = layout.pixel_from_world(3.0, 1.0);
-        assert_eq!((x, y), (240.0, 320.0));
-        assert_eq!(pixel(&img, 240, 320), ROBOT_RGB[0]);
-        // Robot 1's estimate (y = 2.5 m, row 200) is dashed in a lighter shade of its colour.
-        let est: Vec<Rgb> = (100..400).map(|x| pixel(&img, x, 200)).collect();
-        assert!(est.contains(&lighter(ROBOT_RGB[1])));
-        assert!(est.iter().any(|&c| c == VIRIDIS[0]), "dashes have gaps");
-        assert_eq!(
-            pixel(&img, 240, 160),
-            ROBOT_RGB[1],
-            "true path of robot 1 (y = 3 m)"
-        );
-
-        // The max cell (80, 40) is drawn at the top of the colour map, y up: block row
-        // 50 − 1 − 40 = 9 from the top, i.e. picture rows 72..80, columns 640..648.
-        assert_eq!(pixel(&img, 644, 76), VIRIDIS[9]);
-        assert_eq!(pixel(&img, 644, 84), VIRIDIS[0]);
-        assert_eq!(pixel(&img, 644, 400 - 76), VIRIDIS[0]);
-        // A zero cell away from every line is the bottom of the map.
-        assert_eq!(pixel(&img, 50, 50), VIRIDIS[0]);
-    }
-    #[test]
-    fn nan_cells_get_their_own_colour_without_panicking() {
-        let tmp = TempDir::new("nan");
-        let mut rec = scene();
-        let w = rec.snapshots[0].width as usize;
-        rec.snapshots[0].planes[10 * w + 10] = f32::NAN;
-        rec.snapshots[0].planes[11 * w + 10] = f32::INFINITY;
-        let written = write_outputs(&tmp.0, &rec, &serde_json::json!({})).unwrap();
-        assert!(written.iter().any(|p| p.ends_with("field_final.png")));
-        let img = decode(&tmp.0.join("field_final.png"));
-        // Cell (10, 10): columns 80..88, rows (49 − 10)·8 = 312..320.
-        assert_eq!(pixel(&img, 84, 316), NAN_RGB);
-        assert!(!VIRIDIS.contains(&NAN_RGB) && !ROBOT_RGB.contains(&NAN_RGB));
-        // NaN and ∞ do not spoil the scale: the finite max is still the top of the map.
-        assert_eq!(pixel(&img, 644, 76), VIRIDIS[9]);
-        assert_eq!(pixel(&img, 84, 308), VIRIDIS[9], "+inf clamps to the top");
-    }
-    #[test]
-    fn file_names_and_bad_snapshots() {
-        assert_eq!(snapshot_file_name("trail", 12.0), "field_trail_t012.0s.png");
-        assert_eq!(
-            snapshot_file_name("anti trail", 3.26),
-            "field_anti_trail_t003.3s.png"
-        );
-        assert_eq!(snapshot_file_name("x", 1234.5), "field_x_t1234.5s.png");
-        let mut rec = scene();
-        rec.snapshots[0].planes.pop();
-        let tmp = TempDir::new("bad");
-        let err = write_outputs(&tmp.0, &rec, &serde_json::json!({})).unwrap_err();
-        let msg = err.to_string();
-        assert!(
-            msg.contains("t = 10 s") && msg.contains("4999 values"),
-            "{msg}"
-        );
-        assert!(!tmp.0.exists(), "nothing written for a bad recording");
-        assert_eq!(fmt_sig(35.26), "35.3");
-        assert_eq!(fmt_sig(0.012345), "0.0123");
-        assert_eq!(fmt_sig(1.5e-5), "1.50e-5");
-    }
-
-    #[test]
-    fn io_errors_name_the_path() {
-        let tmp = TempDir::new("io");
-        fs::create_dir_all(&tmp.0).unwrap();
-        let blocker = tmp.0.join("file");
-        fs::write(&blocker, b"not a directory").unwrap();
-        let dir = blocker.join("out");
-        let err = write_outputs(&dir, &scene(), &serde_json::json!({})).unwrap_err();
-        assert!(matches!(err, ReportError::Io { .. }), "{err:?}");
-        assert!(
-            err.to_string().contains(&dir.display().to_string()),
-            "{err}"
-        );
-    }
-}
+mod tests;

@@ -5,6 +5,10 @@
 //! It takes part in the lockstep (`field::lockstep`): it joins the run, and acknowledges each
 //! frame once it has recorded it, so it sees every frame, and takes probes and snapshots from
 //! the same frames a single-process run does ([`FrameSchedule`]).
+//!
+//! What each depositor sent is not on any service the observer reads: it runs a copy of each
+//! robot's [`Depositor`] (the same library type, deterministic) on the poses it receives, which
+//! are the depositor process's input, and records the peak of each deposit that copy makes.
 
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -16,8 +20,9 @@ use field::wire::{ready_service as wake, ROBOT_LINK};
 use iceoryx2::node::Node;
 
 use crate::messages::{CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, TruthMsg};
+use crate::roles::depositor::Depositor;
 use crate::roles::RobotServices;
-use crate::sim::record::{Recording, RobotSample};
+use crate::sim::record::{deposit_peak, Recording, RobotSample};
 use crate::sim::scenario::Scenario;
 use crate::sim::single::{sigma_max_m, FrameSchedule};
 
@@ -27,6 +32,8 @@ struct RobotLinks {
     pose: Receiver<PoseMsg>,
     cmd: Receiver<CmdMsg>,
     status: Receiver<FollowerStatusMsg>,
+    /// A copy of the robot's depositor, fed the same poses, for the deposits' peaks.
+    depositor: Option<Depositor>,
     /// Rows by step, filled as the messages of that step arrive.
     rows: BTreeMap<u64, RobotSample>,
 }
@@ -65,6 +72,12 @@ impl Observer {
                 pose: Receiver::create(node, &s.pose, &wake(&s.pose), options)?,
                 cmd: Receiver::create(node, &s.cmd, &wake(&s.cmd), options)?,
                 status: Receiver::create(node, &s.status, &wake(&s.status), options)?,
+                // Settings a depositor refuses fail the run when its process starts (and the
+                // single-process run before it starts): no copy is needed then.
+                depositor: scenario
+                    .roles(r.id)
+                    .and_then(|x| x.depositor.clone())
+                    .and_then(|c| Depositor::new(c).ok()),
                 rows: BTreeMap::new(),
             });
         }
@@ -103,6 +116,9 @@ impl Observer {
                 let row = r.rows.entry(p.step).or_insert_with(|| empty_row(f64::NAN));
                 row.est_pose = Some([p.x_m, p.y_m, p.theta_rad]);
                 row.est_sigma_m = Some(sigma_max_m(&p));
+                if let Some(d) = r.depositor.as_mut() {
+                    row.deposit_peak = d.process(&p).ok().flatten().map(|m| deposit_peak(&m));
+                }
             }
             while let Some(c) = r.cmd.try_recv()? {
                 let row = r.rows.entry(c.step).or_insert_with(|| empty_row(f64::NAN));
@@ -179,5 +195,6 @@ fn empty_row(t_s: f64) -> RobotSample {
         omega_rad_per_s: 0.0,
         state: None,
         sensed_level: None,
+        deposit_peak: None,
     }
 }

@@ -25,6 +25,24 @@ pub struct RobotSample {
     /// The follower's state and the level it sensed, if the robot has a follower.
     pub state: Option<FollowerState>,
     pub sensed_level: Option<f32>,
+    /// The peak of the deposit the robot's depositor sent at this step, if it sent one:
+    /// γ = τ/det Σxy capped at γmax for the ellipse kernels (seed 000 eq. 12), ρt for a
+    /// saturating deposit, the amount for a Z-shape ([`deposit_peak`]).
+    pub deposit_peak: Option<f32>,
+}
+
+/// The value a deposit adds at its centre, before any saturation by what the cell holds: γ of
+/// seed 000 eq. 12 (as the field computes it) for the ellipse kernels, the amount otherwise.
+pub fn deposit_peak(m: &field::DepositMsg) -> f32 {
+    use field::deposit::{gamma, ErrorEllipse};
+    match field::KernelKind::from_code(m.kernel) {
+        Some(field::KernelKind::Ellipse | field::KernelKind::Paper) => gamma(
+            m.amount,
+            ErrorEllipse::from_cov(m.cov_xx, m.cov_xy, m.cov_yy).det(),
+            m.gamma_max,
+        ),
+        _ => m.amount,
+    }
 }
 
 /// A copy of the field at one time (planes `channel, y, x`, as in shared memory).

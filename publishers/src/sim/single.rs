@@ -21,7 +21,7 @@ use crate::roles::depositor::Depositor;
 use crate::roles::follower::{Follower, PoseSource};
 use crate::roles::world::World;
 use crate::roles::{Filter, ProcessError};
-use crate::sim::record::{ProbeReading, Recording, RobotSample, Snapshot};
+use crate::sim::record::{deposit_peak, ProbeReading, Recording, RobotSample, Snapshot};
 use crate::sim::scenario::{ProbeSpec, Scenario};
 
 /// What a run ends with, whichever way it ran.
@@ -130,6 +130,8 @@ struct Robot {
     depositor: Option<Depositor>,
     follower: Option<(Follower, PoseSource)>,
     pose: Option<PoseMsg>,
+    /// The peak of this step's deposit, if the depositor sent one.
+    deposit_peak: Option<f32>,
     collisions: u64,
 }
 
@@ -169,6 +171,7 @@ pub fn run_single_process(
             depositor,
             follower,
             pose: None,
+            deposit_peak: None,
             collisions: 0,
         });
     }
@@ -200,8 +203,10 @@ pub fn run_single_process(
             // Simulated time as the stamp: deterministic, and what interval_s measures.
             p.stamp_ns = (t * 1e9).round() as u64;
             r.pose = Some(p);
+            r.deposit_peak = None;
             if let Some(d) = r.depositor.as_mut() {
                 if let Ok(Some(m)) = d.process(&p) {
+                    r.deposit_peak = Some(deposit_peak(&m));
                     // A rejection is counted by the field.
                     let _ = field.offer(&m);
                 }
@@ -238,6 +243,7 @@ pub fn run_single_process(
                 omega_rad_per_s: cmd.1,
                 state,
                 sensed_level: level,
+                deposit_peak: r.deposit_peak,
             });
         }
         if let Some(p) = options.progress.as_mut() {
