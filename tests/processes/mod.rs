@@ -249,11 +249,12 @@ fn a_sigkilled_child_stops_the_whole_run_with_a_clear_error_and_no_leftovers() {
     eventually(WAIT, "the run to step", || {
         run.log("sim").contains("separate processes").then_some(())
     });
-    let children = children_with(sim_pid, "");
-    assert!(
-        children.len() >= 10,
-        "field, world, 3 × 3 roles: {children:?}"
-    );
+    // The sim starts its children one after another: wait until all are there (robot 2's roles
+    // may still be starting when robot 1's follower already steers).
+    let children = eventually(WAIT, "field, world and 3 × 3 roles", || {
+        let c = children_with(sim_pid, "");
+        (c.len() >= 10).then_some(c)
+    });
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(follower as i32),
         nix::sys::signal::Signal::SIGKILL,
