@@ -67,7 +67,7 @@ pub struct GatewayReport {
 }
 
 /// The process's CPU time (user + system) so far, from `/proc/PID/schedstat` (ns).
-fn cpu_ns(pid: u32) -> Result<u64, BenchError> {
+pub(crate) fn cpu_ns(pid: u32) -> Result<u64, BenchError> {
     let path = format!("/proc/{pid}/schedstat");
     let text = std::fs::read_to_string(&path).map_err(|source| BenchError::Io {
         what: format!("read {path}"),
@@ -104,6 +104,7 @@ pub fn measure(
             width,
             tick_hz: 100.0,
             core: run.pin.then_some(1),
+            on_deposit: false,
         },
     )?;
     field.wait_ready(Duration::from_secs(20))?;

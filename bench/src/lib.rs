@@ -87,6 +87,8 @@ struct Plan {
     frames_1mib: (usize, usize),
     frames_16mib: (usize, usize),
     visible_count: usize,
+    /// How long the field's CPU is measured at each deposit rate.
+    cpu_window: Duration,
     /// (PIRs timed, warm-up) and how long the gateway is flooded.
     pir_count: (usize, usize),
     flood: Duration,
@@ -103,6 +105,7 @@ impl Mode {
                 frames_1mib: (300, 5),
                 frames_16mib: (100, 3),
                 visible_count: 1_000,
+                cpu_window: Duration::from_secs(3),
                 pir_count: (20_000, 1_000),
                 flood: Duration::from_secs(5),
             },
@@ -114,6 +117,7 @@ impl Mode {
                 frames_1mib: (60, 3),
                 frames_16mib: (15, 2),
                 visible_count: 200,
+                cpu_window: Duration::from_secs(1),
                 pir_count: (5_000, 500),
                 flood: Duration::from_secs(2),
             },
@@ -125,6 +129,7 @@ impl Mode {
                 frames_1mib: (4, 1),
                 frames_16mib: (3, 1),
                 visible_count: 20,
+                cpu_window: Duration::from_millis(200),
                 pir_count: (100, 10),
                 flood: Duration::from_millis(200),
             },
@@ -209,8 +214,12 @@ pub struct VisibleReport {
     pub width: u32,
     /// The field's tick compute time, µs.
     pub tick_compute_us: Latency,
-    /// The target for p99: one tick period + 1.2 × the tick compute (p99) + 50 µs.
+    /// The target for p99: one tick period + 1.2 × the tick compute (p99) + 50 µs; publishing
+    /// on deposit, the tick compute (p99) + 100 µs.
     pub target_p99_us: f64,
+    /// The field process's CPU (share of one core) while deposits arrive at 10, 100 and 1000
+    /// per second.
+    pub field_cpu: Vec<visible::CpuAtRate>,
 }
 
 /// One target of issue 6, with what was measured.
@@ -237,6 +246,8 @@ pub struct Report {
     /// Keyed `"1MiB"` and `"16MiB"`.
     pub frame_ns: BTreeMap<String, FrameReport>,
     pub deposit_to_visible_us: VisibleReport,
+    /// The same with the field publishing as soon as deposits arrive (issue 18).
+    pub deposit_to_visible_on_deposit_us: VisibleReport,
     pub gateway_pir: gateway::GatewayReport,
     pub targets: Vec<Target>,
     pub elapsed_s: f64,
@@ -384,17 +395,16 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         plan.visible_count,
         w = opts.visible_width
     ));
-    let v = visible::measure(
-        &opts.launcher,
-        &tag(),
-        visible::VisibleRun {
-            width: opts.visible_width,
-            tick_hz: opts.tick_hz,
-            warmup: (plan.visible_count / 20).max(2),
-            count: plan.visible_count,
-            pin,
-        },
-    )?;
+    let visible_run = visible::VisibleRun {
+        width: opts.visible_width,
+        tick_hz: opts.tick_hz,
+        warmup: (plan.visible_count / 20).max(2),
+        count: plan.visible_count,
+        pin,
+        on_deposit: false,
+        cpu_window: plan.cpu_window,
+    };
+    let v = visible::measure(&opts.launcher, &tag(), visible_run)?;
     let compute = Latency::from_ns_as_us(&v.compute_ns)
         .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?;
     let deposit_to_visible_us = VisibleReport {
@@ -404,6 +414,32 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         width: opts.visible_width,
         target_p99_us: 1e6 / opts.tick_hz as f64 + 1.2 * compute.p99 + 50.0,
         tick_compute_us: compute,
+        field_cpu: v.cpu,
+    };
+    say(&format!(
+        "deposit to visible, publishing on deposit: {w}x{w} field ({} deposits), then its CPU \
+         at 10, 100 and 1000 deposits/s",
+        plan.visible_count,
+        w = opts.visible_width
+    ));
+    let v = visible::measure(
+        &opts.launcher,
+        &tag(),
+        visible::VisibleRun {
+            on_deposit: true,
+            ..visible_run
+        },
+    )?;
+    let compute = Latency::from_ns_as_us(&v.compute_ns)
+        .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?;
+    let deposit_to_visible_on_deposit_us = VisibleReport {
+        latency: Latency::from_ns_as_us(&v.samples_ns)
+            .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?,
+        tick_hz: opts.tick_hz,
+        width: opts.visible_width,
+        target_p99_us: compute.p99 + 100.0,
+        tick_compute_us: compute,
+        field_cpu: v.cpu,
     };
     say(&format!(
         "gateway: {} PIR round trips over UDP loopback, {} direct reads, {:.1} s flood",
@@ -435,6 +471,7 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         hop_ns,
         frame_ns,
         deposit_to_visible_us,
+        deposit_to_visible_on_deposit_us,
         gateway_pir,
         targets: Vec::new(),
         elapsed_s: 0.0,
@@ -551,6 +588,13 @@ pub fn targets(r: &Report) -> Vec<Target> {
         v.target_p99_us,
         v.latency.p99,
     ));
+    let v = &r.deposit_to_visible_on_deposit_us;
+    t.push(target(
+        "deposit-to-visible p99 µs, publishing on deposit (limit: tick compute p99 + 100 µs)",
+        "<=",
+        v.target_p99_us,
+        v.latency.p99,
+    ));
     // Issue 14: a PIR answered well inside a 10 Hz robot's step, and one gateway core serving
     // 1000 robots at 10 Hz (seed 002's server load grows with N² per axis; ours is O(1) per PIR).
     let g = &r.gateway_pir;
@@ -611,9 +655,10 @@ pub fn run_peer(spec_json: &str) -> Result<(), BenchError> {
             width,
             tick_hz,
             core,
+            on_deposit,
         } => {
             place(core);
-            visible::field(&name, width, tick_hz)
+            visible::field(&name, width, tick_hz, on_deposit)
         }
     }
 }

@@ -108,6 +108,10 @@ pub enum PeerSpec {
         width: u32,
         tick_hz: f32,
         core: Option<usize>,
+        /// Run `field::run::run_field` with `publish_on_deposit` (0 ms): a frame as soon as
+        /// deposits arrive.
+        #[serde(default)]
+        on_deposit: bool,
     },
 }
 
@@ -145,6 +149,11 @@ impl Peer {
         args.push(json);
         let id = sup.spawn(ChildSpec::new(&format!("peer {}", spec.kind()), None, args))?;
         Ok(Self { sup, id })
+    }
+
+    /// The peer's process id.
+    pub fn pid(&self) -> u32 {
+        self.sup.pid(self.id)
     }
 
     /// The peer's next stdout line, waiting until `deadline`.

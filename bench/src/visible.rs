@@ -1,10 +1,14 @@
 //! Deposit-to-visible latency: a deposit is published (this process), the field (a separate
 //! process ticking at a fixed rate) applies it in its next tick, and a follower (this process's
-//! `FieldReader`) holds a frame that contains it.
+//! `FieldReader`) holds a frame that contains it. With `on_deposit`, the field is
+//! `field::run::run_field` publishing as soon as deposits arrive (`--publish-on-deposit-ms 0`),
+//! and its CPU time (`/proc/PID/schedstat`) is measured while deposits arrive at 10, 100 and
+//! 1000 per second.
 
 use std::time::{Duration, Instant};
 
 use field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
+use field::run::run_field;
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
 
 use crate::peer::{say_ready, say_result, Launcher, Peer, PeerResult, PeerSpec};
@@ -18,6 +22,20 @@ pub struct VisibleRun {
     pub count: usize,
     /// Pin the field process to core 1 (this process is on core 0).
     pub pin: bool,
+    /// The field publishes as soon as deposits arrive.
+    pub on_deposit: bool,
+    /// How long the field's CPU is measured at each deposit rate.
+    pub cpu_window: Duration,
+}
+
+/// The field process's CPU while deposits arrive at a rate.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct CpuAtRate {
+    pub deposits_per_s: f64,
+    /// CPU time of the field process over the window / the window (1.0 = one core).
+    pub cpu_share: f64,
+    /// Frames the field published over the window per second.
+    pub frames_per_s: f64,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -26,6 +44,7 @@ pub struct VisibleResult {
     pub samples_ns: Vec<u64>,
     /// The field's tick compute time of the frames that carried the deposits, ns.
     pub compute_ns: Vec<u64>,
+    pub cpu: Vec<CpuAtRate>,
 }
 
 fn config(width: u32, tick_hz: f32) -> FieldConfig {
@@ -58,9 +77,11 @@ pub fn measure(
             width: run.width,
             tick_hz: run.tick_hz,
             core: run.pin.then_some(1),
+            on_deposit: run.on_deposit,
         },
     )?;
     field.wait_ready(Duration::from_secs(20))?;
+    let field_pid = field.pid();
     let mut reader = FieldReader::attach_within(&node, &name, Duration::from_secs(10))?;
     let mut depositor = DepositPublisher::attach_within(&node, &name, 1, Duration::from_secs(10))?;
     let period = Duration::from_secs_f32(1.0 / run.tick_hz);
@@ -110,14 +131,97 @@ pub fn measure(
             result.compute_ns.push(frame.header.tick_compute_ns);
         }
     }
+    for rate in [10.0, 100.0, 1000.0] {
+        result.cpu.push(cpu_at_rate(
+            &node,
+            &mut reader,
+            &mut depositor,
+            field_pid,
+            rate,
+            run.cpu_window,
+            (x_m, y_m),
+        )?);
+    }
     drop(depositor);
     drop(field);
     Ok(result)
 }
 
-/// The field process: ticks at `tick_hz` until terminated.
-pub fn field(name: &str, width: u32, tick_hz: f32) -> Result<(), BenchError> {
+/// Sends deposits at `rate` per second for `window` and measures the field's CPU meanwhile.
+fn cpu_at_rate(
+    node: &iceoryx2::prelude::Node<field::shm::Svc>,
+    reader: &mut FieldReader,
+    depositor: &mut DepositPublisher,
+    field_pid: u32,
+    rate: f64,
+    window: Duration,
+    (x_m, y_m): (f32, f32),
+) -> Result<CpuAtRate, BenchError> {
+    reader.update()?;
+    let seq0 = reader.frame().map(|f| f.header.sequence).unwrap_or(0);
+    let cpu0 = crate::gateway::cpu_ns(field_pid)?;
+    let started = Instant::now();
+    let interval = Duration::from_secs_f64(1.0 / rate);
+    let mut next = started;
+    while started.elapsed() < window {
+        depositor.send(DepositMsg::ellipse(
+            0,
+            x_m,
+            y_m,
+            0.001,
+            [0.01, 0.0, 0.01],
+            0.5,
+            100.0,
+        ))?;
+        next += interval;
+        let now = Instant::now();
+        if next > now {
+            node.wait(next - now).map_err(|_| BenchError::Interrupted)?;
+        }
+    }
+    let elapsed_s = started.elapsed().as_secs_f64();
+    let cpu_s = crate::gateway::cpu_ns(field_pid)?.saturating_sub(cpu0) as f64 * 1e-9;
+    reader.update()?;
+    let seq1 = reader.frame().map(|f| f.header.sequence).unwrap_or(seq0);
+    Ok(CpuAtRate {
+        deposits_per_s: rate,
+        cpu_share: cpu_s / elapsed_s,
+        frames_per_s: (seq1 - seq0) as f64 / elapsed_s,
+    })
+}
+
+/// The field process: ticks at `tick_hz` until terminated (with `on_deposit`, also publishes
+/// as soon as deposits arrive: `field::run::run_field` as `pheromone field` runs it).
+pub fn field(name: &str, width: u32, tick_hz: f32, on_deposit: bool) -> Result<(), BenchError> {
     let node = create_node(&format!("bench-field-{}", std::process::id()))?;
+    if on_deposit {
+        let options = field::run::FieldRunOptions {
+            name: name.to_string(),
+            config: config(width, tick_hz),
+            clock: None,
+            ticks: None,
+            duration: None,
+            checkpoint: None,
+            checkpoint_every: Duration::from_secs(10),
+            restore: None,
+            standby: false,
+            publish_on_deposit: Some(Duration::ZERO),
+        };
+        // The services exist once the first frame is out; say ready from a thread that sees it.
+        let ready_name = name.to_string();
+        let announcer = std::thread::spawn(move || -> Result<(), BenchError> {
+            let node = create_node(&format!("bench-field-ready-{}", std::process::id()))?;
+            FieldReader::attach_within(&node, &ready_name, Duration::from_secs(20))?;
+            say_ready();
+            Ok(())
+        });
+        run_field(&node, &options).map_err(|e| BenchError::Peer(format!("field: {e}")))?;
+        announcer
+            .join()
+            .map_err(|_| BenchError::Peer("the field's ready announcer panicked".into()))??;
+        say_result(&PeerResult::default());
+        return Ok(());
+    }
     let mut server = FieldServer::start(&node, name, config(width, tick_hz), None)?;
     say_ready();
     let period = Duration::from_secs_f32(1.0 / tick_hz);

@@ -164,6 +164,19 @@ fn print_tables(r: &Report) {
         lat(&v.latency, 1e-3, "ms"),
         w = v.width
     );
+    let o = &r.deposit_to_visible_on_deposit_us;
+    println!(
+        "  publishing on deposit            {}   (tick compute p50 {:.0} µs)",
+        lat(&o.latency, 1.0, "µs"),
+        o.tick_compute_us.p50
+    );
+    println!("field CPU (share of a core)   deposits/s  ticking  on deposit  frames/s");
+    for (t, d) in v.field_cpu.iter().zip(&o.field_cpu) {
+        println!(
+            "                              {:>10.0} {:>8.3} {:>10.3} {:>9.0}",
+            t.deposits_per_s, t.cpu_share, d.cpu_share, d.frames_per_s
+        );
+    }
     let g = &r.gateway_pir;
     println!("\ngateway (seed 002 PIR)           p50       p99     p99.9       max");
     println!(
