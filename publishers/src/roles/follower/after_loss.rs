@@ -118,21 +118,21 @@ mod tests {
         assert_eq!((s.name(), s.channel()), ("gradient", 0));
         let g = GridGeometry::new(40, 40, 0.1).unwrap();
         let pose = SamplePose::new(2.0, 2.0, 0.0);
-        let mut at = |level: f32| {
+        let at = |s: &mut Box<dyn FollowerStrategy>, level: f32| {
             let cells = vec![level; g.cells()];
             s.decide(&FrameView::new(g, 1, &cells), pose, 0.1)
         };
-        assert_eq!(at(1.0).state, FollowerState::Exploring);
-        assert_eq!(at(20.0).state, FollowerState::Following);
+        assert_eq!(at(&mut s, 1.0).state, FollowerState::Exploring);
+        assert_eq!(at(&mut s, 20.0).state, FollowerState::Following);
         // The trail fades below 5: the gradient strategy alone would stop (v = 0); here the
         // sector strategy drives on at its speed, and it stays so when the trail comes back.
         for level in [2.0, 0.0, 20.0] {
-            let d = at(level);
+            let d = at(&mut s, level);
             assert_eq!(d.state, FollowerState::LeaderLost, "level {level}");
             assert_eq!(d.v_m_per_s, cfg.sectors.v_m_per_s);
         }
         s.reset();
-        assert_eq!(at(20.0).state, FollowerState::Following);
+        assert_eq!(at(&mut s, 20.0).state, FollowerState::Following);
     }
 
     #[test]

@@ -604,19 +604,22 @@ mod tests {
 
     #[test]
     fn gradient_can_stop_at_a_trail_end_and_wait_there() {
+        // A trail of σ = 0.1 m deposits along y = 5 that ends at x = 10 (a deposit's edge).
         let (g, cells) = synth(16.0, 10.0, 0.05, |x, y| {
-            let along = if (2.0..=10.0).contains(&x) { 1.0 } else { 0.0 };
-            along * gaussian_ridge(y - 5.0, 80.0, 0.2)
+            let end = (-(x - 10.0).max(0.0).powi(2) / (2.0 * 0.1 * 0.1)).exp();
+            end * gaussian_ridge(y - 5.0, 80.0, 0.1)
         });
         let frame = FrameView::new(g, 1, &cells);
         let cfg = GradientConfig {
+            abandon_below: 2.0,
             turn_back_margin: 0.9,
             stop_at_trail_end: true,
+            fan_half_angle_deg: 60.0,
             ..GradientConfig::default()
         };
-        let trace = ridge_run(cfg, &frame, Robot::new(6.0, 5.0, 0.0), 300);
+        let trace = ridge_run(cfg, &frame, Robot::new(6.0, 5.05, 0.0), 300);
         let (last, d) = trace.last().unwrap();
-        assert!((9.4..10.3).contains(&last.x), "stopped at x = {:.2}", last.x);
+        assert!((9.9..10.4).contains(&last.x), "stopped at x = {:.2}", last.x);
         assert_eq!((d.state, d.v_m_per_s, d.omega_rad_per_s), (FollowerState::Following, 0.0, 0.0));
         assert!(trace.iter().all(|(r, _)| r.x <= last.x + 1e-9), "it turned back");
     }
