@@ -76,7 +76,10 @@ fn with_uncertainty_aware_deposits_the_followers_leave_the_trail_near_the_loss_a
         let alice = &w["followers"][0];
         // "Leader lost" within a few metres of where the leader got lost, then exploring.
         let d = f64_at(alice, "abandoned_from_loss_m");
-        assert!(d < 4.0, "seed {seed}: gave up {d:.2} m from the loss: {alice}");
+        assert!(
+            d < 4.0,
+            "seed {seed}: gave up {d:.2} m from the loss: {alice}"
+        );
         assert_eq!(
             alice["exploring_from_s"], alice["abandoned_at_s"],
             "seed {seed}: {alice}"
@@ -88,6 +91,40 @@ fn with_uncertainty_aware_deposits_the_followers_leave_the_trail_near_the_loss_a
             assert!(f["reached_b"].as_bool().unwrap(), "seed {seed}: {f}");
         }
         // Carol followed Alice, who was never lost: she kept to the trail all the way.
-        assert!(w["followers"][1]["abandoned_at_s"].is_null(), "seed {seed}: {w}");
+        assert!(
+            w["followers"][1]["abandoned_at_s"].is_null(),
+            "seed {seed}: {w}"
+        );
     }
+}
+
+#[test]
+fn a_bad_explorer_channel_or_area_is_refused_naming_the_key_and_value() {
+    let mut s = Scenario::load("wrong-area").unwrap();
+    let a = s.robots[1].follower.as_mut().unwrap().after_loss.as_mut();
+    a.unwrap().channel = Some(7);
+    let e = s.validate().unwrap_err().to_string();
+    assert!(
+        e.contains("robot 1: follower after_loss.channel") && e.contains('7'),
+        "{e}"
+    );
+    let mut s = Scenario::load("wrong-area").unwrap();
+    let w = s.metrics.wrong_area.as_mut().unwrap();
+    w.a_max_m = [10.0, 1.0];
+    let e = s.validate().unwrap_err().to_string();
+    assert!(
+        e.contains("metrics.wrong_area") && e.contains("[10.0, 1.0]"),
+        "{e}"
+    );
+    let text = include_str!("../../examples/scenarios/wrong-area.toml").replacen(
+        "after_loss = { strategy = \"inverse\", channel = 0 }",
+        "after_loss = { strategy = \"route\", channel = 0 }",
+        1,
+    );
+    let e = Scenario::parse(&text, "wa.toml").unwrap_err();
+    let all = format!("{e} {:?}", std::error::Error::source(&e));
+    assert!(
+        all.contains("wa.toml") && all.contains("after_loss.strategy"),
+        "{all}"
+    );
 }

@@ -87,10 +87,7 @@ impl Recording {
     /// on its own as `leader_lost`), if ever.
     pub fn trail_abandoned_at_s(&self, robot: u32) -> Option<f64> {
         self.first_in_state(robot, |s| {
-            matches!(
-                s,
-                FollowerState::TrailAbandoned | FollowerState::LeaderLost
-            )
+            matches!(s, FollowerState::TrailAbandoned | FollowerState::LeaderLost)
         })
         .map(|r| r.t_s)
     }

@@ -497,7 +497,10 @@ impl Scenario {
         for r in &self.robots {
             let Some(f) = &r.follower else { continue };
             let explorer = f.after_loss.as_ref().and_then(|a| a.channel);
-            for (key, ch) in [("channel", Some(f.channel)), ("after_loss.channel", explorer)] {
+            for (key, ch) in [
+                ("channel", Some(f.channel)),
+                ("after_loss.channel", explorer),
+            ] {
                 match ch {
                     Some(c) if c >= channels => {
                         return Err(ScenarioError::Channel {

@@ -132,10 +132,7 @@ pub fn wrong_area(scenario: &Scenario, m: &WrongAreaMetric, rec: &Recording) -> 
             let final_m = f.last().map(|r| xy(r.true_pose));
             let reached_b_at_s = f.iter().find(|r| m.in_b(xy(r.true_pose))).map(|r| r.t_s);
             let abandoned = rec.first_in_state(id, |s| {
-                matches!(
-                    s,
-                    FollowerState::TrailAbandoned | FollowerState::LeaderLost
-                )
+                matches!(s, FollowerState::TrailAbandoned | FollowerState::LeaderLost)
             });
             let exploring = rec.first_in_state(id, |s| s == FollowerState::LeaderLost);
             let abandoned_at_m = abandoned.map(|r| xy(r.true_pose));

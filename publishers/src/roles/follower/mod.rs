@@ -228,7 +228,8 @@ impl FollowerConfig {
         let primary = self.build_strategy(self.strategy, self.channel)?;
         Ok(match &self.after_loss {
             Some(a) => {
-                let explorer = self.build_strategy(a.strategy, a.channel.unwrap_or(self.channel))?;
+                let explorer =
+                    self.build_strategy(a.strategy, a.channel.unwrap_or(self.channel))?;
                 Box::new(ExploreAfterLoss::new(primary, explorer))
             }
             None => primary,

@@ -560,8 +560,13 @@ mod tests {
                 },
                 ..EkfConfig::default()
             };
-            let mut ekf =
-                Ekf::new(cfg, Vec::new(), WorldPose::new(0.0, 0.0, 0.0), initial_cov()).unwrap();
+            let mut ekf = Ekf::new(
+                cfg,
+                Vec::new(),
+                WorldPose::new(0.0, 0.0, 0.0),
+                initial_cov(),
+            )
+            .unwrap();
             for _ in 0..100 {
                 ekf.predict(0.5, 0.0, 0.1).unwrap();
             }
