@@ -619,15 +619,9 @@ mod tests {
         };
         let trace = ridge_run(cfg, &frame, Robot::new(6.0, 5.05, 0.0), 300);
         let (last, d) = trace.last().unwrap();
-        assert!(
-            (9.9..10.4).contains(&last.x),
-            "stopped at x = {:.2}",
-            last.x
-        );
-        assert_eq!(
-            (d.state, d.v_m_per_s, d.omega_rad_per_s),
-            (FollowerState::Following, 0.0, 0.0)
-        );
+        let stop = (d.state, d.v_m_per_s, d.omega_rad_per_s);
+        assert_eq!(stop, (FollowerState::Following, 0.0, 0.0));
+        assert!((9.9..10.4).contains(&last.x), "stopped at x = {}", last.x);
         assert!(
             trace.iter().all(|(r, _)| r.x <= last.x + 1e-9),
             "it turned back"
