@@ -141,6 +141,8 @@ pub enum FollowerState {
     TrailAbandoned = 1,
     /// Looking for pheromone / exploring.
     Exploring = 2,
+    /// Gave a trail up ("leader lost", seed 000 L12) and explores on its own.
+    LeaderLost = 3,
 }
 
 impl FollowerState {
@@ -149,6 +151,7 @@ impl FollowerState {
             0 => FollowerState::Following,
             1 => FollowerState::TrailAbandoned,
             2 => FollowerState::Exploring,
+            3 => FollowerState::LeaderLost,
             _ => return None,
         })
     }
@@ -158,6 +161,7 @@ impl FollowerState {
             FollowerState::Following => "following",
             FollowerState::TrailAbandoned => "trail_abandoned",
             FollowerState::Exploring => "exploring",
+            FollowerState::LeaderLost => "leader_lost",
         }
     }
 }

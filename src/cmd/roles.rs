@@ -15,8 +15,8 @@ use super::{bad, bad_from, seconds};
 /// Options every robot process shares.
 #[derive(Args, Debug, Clone)]
 pub struct Common {
-    /// Scenario: a built-in name (blind-leader, trail-following, ias-ss, evaporation, trail) or
-    /// a TOML file.
+    /// Scenario: a built-in name (blind-leader, trail-following, ias-ss, evaporation, trail,
+    /// wrong-area) or a TOML file.
     #[arg(long, default_value = publishers::sim::scenario::DEFAULT_SCENARIO)]
     pub scenario: String,
     /// Name of the simulated world (its clock is sim/<WORLD>/clock).

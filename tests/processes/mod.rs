@@ -171,6 +171,18 @@ fn the_leader_deposits_chart_draws_the_same_deposits_as_processes_and_in_one_pro
     let _ = std::fs::remove_dir_all(&base);
 }
 
+#[test]
+fn wrong_area_as_processes_gives_the_single_process_metrics_through_leader_lost_in_both_modes() {
+    // The whole run: the loss at 20 s, Alice's switch to exploring, Carol's arrival at B.
+    let aware = assert_same_in_both_modes("wrong-area", &["--seed", "1"]);
+    let w = &aware["metrics"]["wrong_area"];
+    assert!(w["followers"][0]["exploring_from_s"].is_number(), "{w}");
+    assert_eq!(w["followers_reached_b"], 2, "{w}");
+    let constant = assert_same_in_both_modes("wrong-area", &["--seed", "1", "--constant"]);
+    let w = &constant["metrics"]["wrong_area"];
+    assert_eq!(w["followers_ended_in_a"], 2, "{w}");
+}
+
 /// A scenario file whose robot 0 localizer is refused by `--slam` (a landmark region restricts
 /// a map that EKF-SLAM does not have): that process exits with an error at once.
 fn failing_scenario(run: &Run) -> String {

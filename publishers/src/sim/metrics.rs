@@ -5,6 +5,8 @@
 //! - `exploration` (seed 004): the share of the map's sectors each robot has visited.
 //! - `blind_leader` (seed 000): where the leader got lost, when the follower gave the trail up,
 //!   and how far the follower strayed from the leader's true path.
+//! - `wrong_area` (seed 000 Figs. 1, 24; [`crate::sim::wrong_area`]): whether the followers of a
+//!   lost leader end in the wrong area A or reach B, and where they gave the trail up.
 
 use serde::Serialize;
 
@@ -33,6 +35,13 @@ pub fn scenario_metrics(scenario: &Scenario, rec: &Recording) -> serde_json::Val
         out.insert(
             "blind_leader".into(),
             serde_json::to_value(blind_leader(scenario, b, rec)).unwrap_or_default(),
+        );
+    }
+    if let Some(w) = &scenario.metrics.wrong_area {
+        out.insert(
+            "wrong_area".into(),
+            serde_json::to_value(crate::sim::wrong_area::wrong_area(scenario, w, rec))
+                .unwrap_or_default(),
         );
     }
     serde_json::Value::Object(out)

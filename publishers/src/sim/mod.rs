@@ -1,6 +1,7 @@
 //! Running a scenario: its file format ([`scenario`]), the single-process runner ([`single`]),
 //! the run as separate processes ([`processes`]) with its [`supervisor`] and [`observer`],
-//! what a run records ([`record`]) and the metrics computed from it ([`metrics`]).
+//! what a run records ([`record`]) and the metrics computed from it ([`metrics`], seed 000's
+//! `wrong_area` in [`wrong_area`]).
 
 pub mod metrics;
 pub mod observer;
@@ -11,3 +12,4 @@ mod scenario_error;
 mod scenario_map;
 pub mod single;
 pub mod supervisor;
+pub mod wrong_area;

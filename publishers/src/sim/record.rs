@@ -101,12 +101,23 @@ impl Recording {
             .unwrap_or(0.0)
     }
 
-    /// First time the robot's follower reported the trail abandoned, if ever.
+    /// First time the robot's follower reported the trail abandoned (stopping, or exploring
+    /// on its own as `leader_lost`), if ever.
     pub fn trail_abandoned_at_s(&self, robot: u32) -> Option<f64> {
-        self.robots.get(&robot).and_then(|rows| {
-            rows.iter()
-                .find(|r| r.state == Some(FollowerState::TrailAbandoned))
-                .map(|r| r.t_s)
+        self.first_in_state(robot, |s| {
+            matches!(s, FollowerState::TrailAbandoned | FollowerState::LeaderLost)
         })
+        .map(|r| r.t_s)
+    }
+
+    /// The first sample of the robot whose follower state satisfies `pred`.
+    pub fn first_in_state(
+        &self,
+        robot: u32,
+        pred: impl Fn(FollowerState) -> bool,
+    ) -> Option<&RobotSample> {
+        self.robots
+            .get(&robot)
+            .and_then(|rows| rows.iter().find(|r| r.state.is_some_and(&pred)))
     }
 }

@@ -37,6 +37,10 @@ pub const BUILTIN: &[(&str, &str)] = &[
         "trail",
         include_str!("../../../examples/scenarios/trail.toml"),
     ),
+    (
+        "wrong-area",
+        include_str!("../../../examples/scenarios/wrong-area.toml"),
+    ),
 ];
 
 /// The scenario `pheromone sim` runs when none is named.
@@ -134,6 +138,9 @@ pub struct MetricsConfig {
     pub exploration: Option<ExplorationMetric>,
     /// Seed 000: where the follower of a leader that got lost ends up.
     pub blind_leader: Option<BlindLeaderMetric>,
+    /// Seed 000 Figs. 1 and 24: whether the followers of a lost leader end in the wrong area A
+    /// or reach B, where the leader truly is.
+    pub wrong_area: Option<WrongAreaMetric>,
 }
 
 /// `mean_path_error_m`: the distance from `robot`'s true position to the polyline `points`,
@@ -173,6 +180,49 @@ pub struct ExplorationMetric {
 pub struct BlindLeaderMetric {
     pub leader: u32,
     pub follower: u32,
+}
+
+/// `wrong_area`: the leader, the followers (in chain order), area A (the rectangle where the lost
+/// leader believes it is) and location B (where it truly goes, reached within `b_radius_m`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WrongAreaMetric {
+    pub leader: u32,
+    pub followers: Vec<u32>,
+    /// Area A: corners [x, y] (m), min and max.
+    pub a_min_m: [f64; 2],
+    pub a_max_m: [f64; 2],
+    /// Location B [x, y] (m) and the radius within which a robot has reached it.
+    pub b_m: [f64; 2],
+    pub b_radius_m: f64,
+}
+
+impl WrongAreaMetric {
+    fn validate(&self) -> Result<(), ScenarioError> {
+        let bad = |reason: String| ScenarioError::Metric {
+            metric: "metrics.wrong_area".into(),
+            reason,
+        };
+        let (lo, hi) = (self.a_min_m, self.a_max_m);
+        if !(lo.iter().chain(&hi).all(|v| v.is_finite()) && lo[0] < hi[0] && lo[1] < hi[1]) {
+            return Err(bad(format!(
+                "a_min_m = {lo:?}, a_max_m = {hi:?} is not a rectangle (finite, min < max)"
+            )));
+        }
+        if !(self.b_m.iter().all(|v| v.is_finite())
+            && self.b_radius_m.is_finite()
+            && self.b_radius_m > 0.0)
+        {
+            return Err(bad(format!(
+                "b_m = {:?}, b_radius_m = {} must be finite with a radius > 0",
+                self.b_m, self.b_radius_m
+            )));
+        }
+        if self.followers.is_empty() {
+            return Err(bad("followers = [] names no follower".into()));
+        }
+        Ok(())
+    }
 }
 
 /// Changes `pheromone sim` makes to a scenario from its flags.
@@ -451,6 +501,28 @@ impl Scenario {
                         p.every_s, p.over_s
                     ),
                 });
+            }
+        }
+        if let Some(w) = &self.metrics.wrong_area {
+            w.validate()?;
+        }
+        for r in &self.robots {
+            let Some(f) = &r.follower else { continue };
+            let explorer = f.after_loss.as_ref().and_then(|a| a.channel);
+            for (key, ch) in [
+                ("channel", Some(f.channel)),
+                ("after_loss.channel", explorer),
+            ] {
+                match ch {
+                    Some(c) if c >= channels => {
+                        return Err(ScenarioError::Channel {
+                            key: format!("robot {}: follower {key}", r.id),
+                            channel: c,
+                            channels,
+                        })
+                    }
+                    _ => {}
+                }
             }
         }
         if let Some(e) = &self.metrics.exploration {

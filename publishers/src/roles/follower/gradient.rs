@@ -100,8 +100,13 @@ pub struct GradientConfig {
     /// Turning back toward ∇P is allowed only when the best ray ahead scores below the level
     /// here by more than this fraction of it (default ½: the trail ends ahead). A small margin
     /// also climbs a gentle slope along the trail, but then a dip of a dotted trail (deposits
-    /// far apart for their width) looks like its end.
+    /// far apart for their width) looks like its end. 1 = never turn back (on a channel of
+    /// non-negative levels): at the end of a trail the follower drives on and gives it up.
     pub turn_back_margin: f32,
+    /// Stop where the trail ends ahead (by the `turn_back_margin` test) instead of turning back:
+    /// the end of a trail is where its leader is, as far as a follower can tell (seed 000: Alice
+    /// waits at A). The follower stays `Following` there.
+    pub stop_at_trail_end: bool,
     /// The look-ahead fan spans ± this angle around the heading (degrees, ≤ 180).
     pub fan_half_angle_deg: f64,
     /// Rays in the fan (≥ 1).
@@ -126,6 +131,7 @@ impl Default for GradientConfig {
             lookahead_m: 0.5,
             lookahead_samples: 3,
             turn_back_margin: 0.5,
+            stop_at_trail_end: false,
             fan_half_angle_deg: 90.0,
             fan_rays: 17,
             heading_gain_per_s: 3.0,
@@ -157,11 +163,11 @@ impl GradientConfig {
                 "must be between 1 and 64",
             ));
         }
-        if !(0.0..1.0).contains(&self.turn_back_margin) {
+        if !(0.0..=1.0).contains(&self.turn_back_margin) {
             return Err(invalid(
                 "gradient.turn_back_margin",
                 self.turn_back_margin,
-                "must be within [0, 1)",
+                "must be within [0, 1]",
             ));
         }
         if !(self.fan_half_angle_deg.is_finite()
@@ -266,7 +272,7 @@ impl GradientFollower {
                     self.state = FollowerState::TrailAbandoned;
                 }
             }
-            FollowerState::TrailAbandoned => {
+            FollowerState::TrailAbandoned | FollowerState::LeaderLost => {
                 if !self.config.latch_abandon && acquire {
                     self.state = FollowerState::Following;
                     self.peak_level = level;
@@ -290,6 +296,29 @@ impl GradientFollower {
         sum / m as f32
     }
 
+    /// The directions of the look-ahead fan around the heading `th` (rad).
+    fn fan_angles(&self, th: f64) -> Vec<f64> {
+        let n = self.config.fan_rays;
+        let half = self.config.fan_half_angle_deg.to_radians();
+        if n == 1 {
+            return vec![th];
+        }
+        let step = 2.0 * half / (n - 1) as f64;
+        (0..n).map(|k| th - half + k as f64 * step).collect()
+    }
+
+    /// Whether the trail ends ahead: every ray of the fan scores below the level here by more
+    /// than `turn_back_margin` of it.
+    pub fn trail_ends_ahead(&self, frame: &FrameView<'_>, pose: SamplePose) -> bool {
+        let here = frame.value(self.channel, pose.x_m, pose.y_m);
+        let best = self
+            .fan_angles(pose.theta_rad as f64)
+            .into_iter()
+            .map(|a| self.ray_score(frame, pose, a))
+            .fold(f32::NEG_INFINITY, f32::max);
+        here > 0.0 && best < here - self.config.turn_back_margin * here
+    }
+
     /// The desired heading (rad, world frame), or `None` where the field is flat.
     pub fn desired_heading(&self, frame: &FrameView<'_>, pose: SamplePose) -> Option<f64> {
         let th = pose.theta_rad as f64;
@@ -300,15 +329,7 @@ impl GradientFollower {
         } else {
             0.0
         };
-        let angles: Vec<f64> = (0..n)
-            .map(|k| {
-                if n > 1 {
-                    th - half + k as f64 * step
-                } else {
-                    th
-                }
-            })
-            .collect();
+        let angles = self.fan_angles(th);
         let scores: Vec<f32> = angles
             .iter()
             .map(|&a| self.ray_score(frame, pose, a))
@@ -378,7 +399,11 @@ impl FollowerStrategy for GradientFollower {
     fn decide(&mut self, frame: &FrameView<'_>, pose: SamplePose, _dt_s: f64) -> Decision {
         let level = frame.value(self.channel, pose.x_m, pose.y_m);
         self.update_state(level);
-        if self.state == FollowerState::TrailAbandoned {
+        if self.state == FollowerState::TrailAbandoned
+            || (self.state == FollowerState::Following
+                && self.config.stop_at_trail_end
+                && self.trail_ends_ahead(frame, pose))
+        {
             return Decision::stop(self.state, level);
         }
         let c = &self.config;
@@ -575,6 +600,32 @@ mod tests {
         assert!(trace
             .iter()
             .all(|(r, d)| (r.y - 5.0).abs() < 0.3 && d.state == FollowerState::Following));
+    }
+
+    #[test]
+    fn gradient_can_stop_at_a_trail_end_and_wait_there() {
+        // A trail of σ = 0.1 m deposits along y = 5 that ends at x = 10 (a deposit's edge).
+        let (g, cells) = synth(16.0, 10.0, 0.05, |x, y| {
+            let end = (-(x - 10.0).max(0.0).powi(2) / (2.0 * 0.1 * 0.1)).exp();
+            end * gaussian_ridge(y - 5.0, 80.0, 0.1)
+        });
+        let frame = FrameView::new(g, 1, &cells);
+        let cfg = GradientConfig {
+            abandon_below: 2.0,
+            turn_back_margin: 0.9,
+            stop_at_trail_end: true,
+            fan_half_angle_deg: 60.0,
+            ..GradientConfig::default()
+        };
+        let trace = ridge_run(cfg, &frame, Robot::new(6.0, 5.05, 0.0), 300);
+        let (last, d) = trace.last().unwrap();
+        let stop = (d.state, d.v_m_per_s, d.omega_rad_per_s);
+        assert_eq!(stop, (FollowerState::Following, 0.0, 0.0));
+        assert!((9.9..10.4).contains(&last.x), "stopped at x = {}", last.x);
+        assert!(
+            trace.iter().all(|(r, _)| r.x <= last.x + 1e-9),
+            "it turned back"
+        );
     }
 
     #[test]

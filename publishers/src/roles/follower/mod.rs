@@ -16,11 +16,14 @@
 //!   planned leader of seed 000); it ignores the field.
 //!
 //! [`Follower`] wraps a strategy and produces the `CmdMsg` and `FollowerStatusMsg` a process
-//! loop publishes.
+//! loop publishes. With `after_loss` set, [`ExploreAfterLoss`] (`after_loss.rs`) makes a
+//! follower that gives its trail up ("leader lost", seed 000) explore with `inverse` or
+//! `uniform` instead of stopping.
 //!
 //! Each strategy lives in its own file (`gradient.rs`, `antenna.rs`, `route.rs`, `sector.rs`,
 //! all re-exported here); this module holds the shared types, the configuration and the wrapper.
 
+mod after_loss;
 mod antenna;
 pub mod antenna_source;
 mod gradient;
@@ -39,6 +42,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::messages::{CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg};
 
+pub use after_loss::{AfterLossConfig, ExploreAfterLoss};
 pub use antenna::{AntennaConfig, AntennaFollower};
 pub use gradient::{
     speed_for_level, table2_speed_bands, GradientConfig, GradientFollower, SpeedBand,
@@ -195,6 +199,9 @@ pub struct FollowerConfig {
     /// Which pose the strategy steers by: the localizer's estimate (default) or, for a leader
     /// driven by an operator who sees the robot, the world's true pose.
     pub steer_by: PoseSource,
+    /// What the follower does once it gives its trail up: explore with this strategy
+    /// ("leader lost", seed 000) instead of stopping. Unset = stop.
+    pub after_loss: Option<AfterLossConfig>,
 }
 
 /// Where a follower takes its pose from.
@@ -212,14 +219,34 @@ impl FollowerConfig {
         self.gradient.validate()?;
         self.antenna.validate()?;
         self.sectors.validate()?;
+        if let Some(a) = &self.after_loss {
+            a.validate()?;
+        }
         self.route.validate()
     }
 
     /// The selected strategy.
     pub fn build(&self) -> Result<Box<dyn FollowerStrategy>, FollowerConfigError> {
+        let primary = self.build_strategy(self.strategy, self.channel)?;
+        Ok(match &self.after_loss {
+            Some(a) => {
+                let explorer =
+                    self.build_strategy(a.strategy, a.channel.unwrap_or(self.channel))?;
+                Box::new(ExploreAfterLoss::new(primary, explorer))
+            }
+            None => primary,
+        })
+    }
+
+    /// Strategy `kind` on `channel`, with this configuration's settings.
+    fn build_strategy(
+        &self,
+        kind: StrategyKind,
+        channel: u32,
+    ) -> Result<Box<dyn FollowerStrategy>, FollowerConfigError> {
         self.validate()?;
-        let ch = self.channel as usize;
-        Ok(match self.strategy {
+        let ch = channel as usize;
+        Ok(match kind {
             StrategyKind::Gradient => Box::new(GradientFollower::new(ch, self.gradient.clone())?),
             StrategyKind::Antenna => Box::new(AntennaFollower::new(ch, self.antenna.clone())?),
             StrategyKind::Inverse => Box::new(SectorStrategy::inverse(

@@ -218,8 +218,15 @@ impl CheckedFilter for Ekf {
     }
 
     fn predict_unchecked(&mut self, v: f64, w: f64, dt: f64) {
+        let lost = self.is_lost();
+        // While lost, the turn rate is read with the configured drift (LossConfig).
+        let w = if lost {
+            w + self.config.loss.heading_drift_rad_per_s
+        } else {
+            w
+        };
         let (delta, g, vj) = velocity_motion(self.mean.z, v, w, dt);
-        let inflation = if self.is_lost() {
+        let inflation = if lost {
             self.config.loss.noise_inflation
         } else {
             1.0
@@ -540,6 +547,48 @@ mod tests {
     }
 
     #[test]
+    fn a_heading_drift_while_lost_curves_the_estimate_away_from_a_straight_path() {
+        // Straight odometry at 0.5 m/s for 10 s, no landmarks: lost from 2 s on with a drift of
+        // 0.1 rad/s, the estimate turns 0.8 rad on an arc of radius 5 m; unlost, it goes straight.
+        let run = |after_s: Option<f64>| {
+            let cfg = EkfConfig {
+                loss: LossConfig {
+                    after_s,
+                    heading_drift_rad_per_s: 0.1,
+                    noise_inflation: 1.0,
+                    ..LossConfig::default()
+                },
+                ..EkfConfig::default()
+            };
+            let mut ekf = Ekf::new(
+                cfg,
+                Vec::new(),
+                WorldPose::new(0.0, 0.0, 0.0),
+                initial_cov(),
+            )
+            .unwrap();
+            for _ in 0..100 {
+                ekf.predict(0.5, 0.0, 0.1).unwrap();
+            }
+            ekf.mean()
+        };
+        let lost = run(Some(1.95));
+        let (phi, r) = (0.8f64, 5.0f64);
+        assert!((lost.z - phi).abs() < 1e-9, "heading {}", lost.z);
+        let (x, y) = (1.0 + r * phi.sin(), r * (1.0 - phi.cos()));
+        assert!(
+            (lost.x - x).abs() < 0.01 && (lost.y - y).abs() < 0.01,
+            "{lost:?} vs ({x:.3}, {y:.3})"
+        );
+        let never = run(None);
+        assert!((never.x - 5.0).abs() < 1e-9 && never.y.abs() < 1e-9 && never.z == 0.0);
+        let mut bad = EkfConfig::default();
+        bad.loss.heading_drift_rad_per_s = f64::NAN;
+        let e = bad.validate().unwrap_err().to_string();
+        assert!(e.contains("loss.heading_drift_rad_per_s"), "{e}");
+    }
+
+    #[test]
     fn loss_dropout_drops_the_configured_share() {
         let cfg = EkfConfig {
             loss: LossConfig {
@@ -547,6 +596,7 @@ mod tests {
                 landmark_dropout: 0.5,
                 noise_inflation: 1.0,
                 ambiguous_signatures: false,
+                heading_drift_rad_per_s: 0.0,
             },
             ..EkfConfig::default()
         };

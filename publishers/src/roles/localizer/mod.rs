@@ -85,6 +85,11 @@ pub struct LossConfig {
     /// While lost, the kept observations lose their signatures (association by likelihood
     /// only, so wrong matches become possible).
     pub ambiguous_signatures: bool,
+    /// While lost, the filter integrates the odometry's turn rate with this bias (rad/s,
+    /// counter-clockwise positive): an uncalibrated gyro or a wheel that slips, which the
+    /// landmarks corrected before. The estimate then curves away from the true path, so the
+    /// robot believes it is somewhere else (seed 000 Fig. 1: Bob estimates A, truly at B).
+    pub heading_drift_rad_per_s: f64,
 }
 
 impl Default for LossConfig {
@@ -94,6 +99,7 @@ impl Default for LossConfig {
             landmark_dropout: 1.0,
             noise_inflation: 10.0,
             ambiguous_signatures: false,
+            heading_drift_rad_per_s: 0.0,
         }
     }
 }
@@ -154,6 +160,13 @@ impl EkfConfig {
                 "loss.noise_inflation",
                 loss.noise_inflation,
                 "finite and >= 1",
+            ));
+        }
+        if !loss.heading_drift_rad_per_s.is_finite() {
+            return Err(invalid(
+                "loss.heading_drift_rad_per_s",
+                loss.heading_drift_rad_per_s,
+                "finite",
             ));
         }
         if let Some(region) = self.landmark_region_m {
