@@ -7,8 +7,8 @@
 
 use std::time::{Duration, Instant};
 
-use field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
 use field::run::run_field;
+use field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
 
 use crate::peer::{say_ready, say_result, Launcher, Peer, PeerResult, PeerSpec};

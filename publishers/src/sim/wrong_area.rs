@@ -200,6 +200,7 @@ mod tests {
             omega_rad_per_s: 0.0,
             state: Some(state),
             sensed_level: Some(0.0),
+            deposit_peak: None,
         }
     }
 
