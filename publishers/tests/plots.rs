@@ -58,7 +58,7 @@ fn write_all(
     m: &serde_json::Value,
     chart: &str,
 ) -> PathBuf {
-    write_outputs(dir, rec, m).unwrap();
+    write_outputs(dir, rec, m, &publishers::report::marks(s, rec)).unwrap();
     let written = write_plots(dir, s, rec).unwrap();
     let path = dir.join(chart);
     assert!(written.contains(&path), "{chart} not in {written:?}");

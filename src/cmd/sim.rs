@@ -101,7 +101,12 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     }
     print_summary(&metrics);
     if let Some(dir) = out_dir(&a, &scenario) {
-        let mut files = publishers::report::write_outputs(&dir, &rec, &metrics)?;
+        let mut files = publishers::report::write_outputs(
+            &dir,
+            &rec,
+            &metrics,
+            &publishers::report::marks(&scenario, &rec),
+        )?;
         files.extend(publishers::report::write_plots(&dir, &scenario, &rec)?);
         eprintln!(
             "wrote {} file(s) to {} (the picture: {})",

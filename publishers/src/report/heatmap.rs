@@ -1,12 +1,15 @@
 //! The heat-map picture of one channel of a field snapshot: where the grid lands in the picture
 //! (`Layout`), the cells (one colour per cell, upscaled by a whole factor), and, drawn over them
 //! with plotters, the axes in metres, walls, anti-aliased trajectories (true solid, estimated
-//! dashed), robot markers, and the strip under the field with the title, legend and colour bar.
+//! dashed), robot markers, the places the scenario's metrics name (`marks`: area A, location
+//! B, where a follower explored from), and the strip under the field with the title, legend and
+//! colour bar.
 
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
+use super::marks::{Mark, Shape};
 use super::style::{
     colour, lighter, msg, robot_rgb, ColourMap, Picture, Rgb, FONT, OUTLINE_RGB, STRIP_RGB,
     TEXT_RGB, WALL_RGB,
@@ -135,12 +138,14 @@ fn coord((x, y): (f64, f64)) -> Option<(i32, i32)> {
         .then(|| (x.round() as i32, y.round() as i32))
 }
 
-/// The picture of channel `c` of `snap`, with walls and the robots' trajectories up to the
-/// snapshot's time.
+/// The picture of channel `c` of `snap`, with walls, the robots' trajectories up to the
+/// snapshot's time and the `marks` due by then (outlines under the trajectories, labels and
+/// crosses over them, robot markers over everything).
 pub(super) fn render_snapshot(
     rec: &Recording,
     snap: &Snapshot,
     c: usize,
+    marks: &[Mark],
 ) -> Result<Picture, String> {
     let layout = Layout::for_grid(snap.width, snap.height, snap.cell_size_m);
     let plane = snap.plane(c);
@@ -167,6 +172,13 @@ pub(super) fn render_snapshot(
                     .draw(&PathElement::new(vec![a, b], style))
                     .map_err(msg)?;
             }
+        }
+        let marks: Vec<&Mark> = marks
+            .iter()
+            .filter(|m| m.from_s <= snap.t_s + 1e-9)
+            .collect();
+        for m in &marks {
+            draw_outline(&field, &layout, m, &px)?;
         }
         let mut markers = Vec::new();
         for (&id, rows) in &rec.robots {
@@ -196,6 +208,9 @@ pub(super) fn render_snapshot(
                 markers.push((id, rgb, last.true_pose, last.est_pose));
             }
         }
+        for m in &marks {
+            draw_mark_label(&field, &layout, m, &px)?;
+        }
         // Markers last, so no trajectory hides them.
         for (id, rgb, pose, est) in markers {
             if let Some(e) = est.and_then(|e| px(e[0], e[1])) {
@@ -209,18 +224,7 @@ pub(super) fn render_snapshot(
                 field
                     .draw(&Circle::new(p, 5, colour(rgb).filled()))
                     .map_err(msg)?;
-                // On a dark box, so a label over its own trail stays readable.
-                let name = format!("R{id}");
-                let style = (FONT, 15).into_font().color(&colour(rgb));
-                let (tw, th) = style.font.box_size(&name).map_err(msg)?;
-                let (lx, ly) = (p.0 + 9, p.1 - 24);
-                field
-                    .draw(&Rectangle::new(
-                        [(lx - 3, ly - 6), (lx + tw as i32 + 3, ly + th as i32)],
-                        colour(OUTLINE_RGB).mix(0.7).filled(),
-                    ))
-                    .map_err(msg)?;
-                field.draw_text(&name, &style, (lx, ly)).map_err(msg)?;
+                boxed_label(&field, &format!("R{id}"), (p.0 + 9, p.1 - 24), rgb)?;
             }
         }
         let strip = root.clone().shrink(
@@ -230,6 +234,112 @@ pub(super) fn render_snapshot(
         draw_strip(&strip, &map, &snap.channels[c], snap.t_s, rec)
     })?;
     Ok(pic)
+}
+
+type Field<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+
+/// Stroke width (px) of the marks' outlines and crosses.
+const MARK_PX: u32 = 3;
+
+/// `s` in 15 px text of colour `rgb` at `at`, on a dark box, so that it stays readable over a
+/// trail or a path.
+fn boxed_label(area: &Field<'_>, s: &str, at: (i32, i32), rgb: Rgb) -> Result<(), String> {
+    let style = (FONT, 15).into_font().color(&colour(rgb));
+    let (tw, th) = style.font.box_size(s).map_err(msg)?;
+    let (lx, ly) = at;
+    area.draw(&Rectangle::new(
+        [(lx - 3, ly - 6), (lx + tw as i32 + 3, ly + th as i32)],
+        colour(OUTLINE_RGB).mix(0.7).filled(),
+    ))
+    .map_err(msg)?;
+    area.draw_text(s, &style, (lx, ly)).map_err(msg)
+}
+
+/// A mark's outline: a rectangle's or circle's, in its colour over a dark edge so that it stays
+/// visible on the heat map's bright parts. Crosses are drawn with the labels.
+fn draw_outline(
+    field: &Field<'_>,
+    layout: &Layout,
+    m: &Mark,
+    px: &impl Fn(f64, f64) -> Option<(i32, i32)>,
+) -> Result<(), String> {
+    let styles = [
+        colour(OUTLINE_RGB).stroke_width(MARK_PX + 2),
+        colour(m.rgb).stroke_width(MARK_PX),
+    ];
+    match m.shape {
+        Shape::Rect { min_m, max_m } => {
+            let corners = [
+                px(min_m[0], min_m[1]),
+                px(max_m[0], min_m[1]),
+                px(max_m[0], max_m[1]),
+                px(min_m[0], max_m[1]),
+                px(min_m[0], min_m[1]),
+            ];
+            if let Some(ring) = corners.into_iter().collect::<Option<Vec<_>>>() {
+                for style in styles {
+                    field
+                        .draw(&PathElement::new(ring.clone(), style))
+                        .map_err(msg)?;
+                }
+            }
+        }
+        Shape::Circle { centre_m, radius_m } => {
+            let r = radius_m * layout.px_per_m;
+            if let (Some(c), true) = (px(centre_m[0], centre_m[1]), r.is_finite() && r < 1e6) {
+                for style in styles {
+                    field
+                        .draw(&Circle::new(c, r.round() as i32, style))
+                        .map_err(msg)?;
+                }
+            }
+        }
+        Shape::Point { .. } => {}
+    }
+    Ok(())
+}
+
+/// A mark's label, kept inside the field: inside a rectangle's top-left corner, above a circle
+/// (under it if there is no room), right of a cross (drawn here, over the trajectories).
+fn draw_mark_label(
+    field: &Field<'_>,
+    layout: &Layout,
+    m: &Mark,
+    px: &impl Fn(f64, f64) -> Option<(i32, i32)>,
+) -> Result<(), String> {
+    let (tw, th) = (FONT, 15).into_font().box_size(&m.label).map_err(msg)?;
+    let (tw, th) = (tw as i32, th as i32);
+    let (fw, fh) = (layout.field_w_px() as i32, layout.field_h_px() as i32);
+    let at = match m.shape {
+        Shape::Rect { min_m, max_m } => px(min_m[0], max_m[1]).map(|p| (p.0 + 10, p.1 + 14)),
+        Shape::Circle { centre_m, radius_m } => px(centre_m[0], centre_m[1]).map(|c| {
+            let r = (radius_m * layout.px_per_m).min(1e6) as i32;
+            let above = c.1 - r - th - 8;
+            (c.0 - tw / 2, if above >= 8 { above } else { c.1 + r + 12 })
+        }),
+        Shape::Point { at_m } => match px(at_m[0], at_m[1]) {
+            Some(p) => {
+                let d = 6;
+                for (w, rgb) in [(MARK_PX + 2, OUTLINE_RGB), (MARK_PX, m.rgb)] {
+                    for seg in [
+                        [(p.0 - d, p.1 - d), (p.0 + d, p.1 + d)],
+                        [(p.0 - d, p.1 + d), (p.0 + d, p.1 - d)],
+                    ] {
+                        let style = colour(rgb).stroke_width(w);
+                        field.draw(&PathElement::new(seg, style)).map_err(msg)?;
+                    }
+                }
+                Some((p.0 + 12, p.1 + 8))
+            }
+            None => None,
+        },
+    };
+    if let Some((x, y)) = at {
+        let x = x.clamp(6, (fw - tw - 6).max(6));
+        let y = y.clamp(8, (fh - th - 4).max(8));
+        boxed_label(field, &m.label, (x, y), m.rgb)?;
+    }
+    Ok(())
 }
 
 /// The cells: one colour per block, `scale` × `scale` pixels each, block row 0 (y = 0) at the

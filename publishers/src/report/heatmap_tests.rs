@@ -1,12 +1,15 @@
+use super::super::marks::{marks, AREA_A_RGB, AREA_B_RGB};
 use super::super::style::{lighter, Rgb, OUTLINE_RGB, ROBOT_RGB, VIRIDIS};
 use super::super::tests::scene;
 use super::*;
+use crate::messages::FollowerState;
+use crate::sim::scenario::Scenario;
 
 #[test]
 fn trajectories_stop_at_the_snapshot_time() {
     let mut rec = scene();
     rec.snapshots[0].t_s = 4.0; // robot 0 is at x = 3 m then
-    let pic = render_snapshot(&rec, &rec.snapshots[0], 0).unwrap();
+    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &[]).unwrap();
     let layout = Layout::for_grid(100, 50, 0.1);
     let at = |x_m: f64, y_m: f64| {
         let (x, y) = layout.pixel_from_world(x_m, y_m);
@@ -26,7 +29,7 @@ fn a_gap_in_the_estimates_breaks_the_dashed_line() {
     for r in &mut rows[4..=6] {
         r.est_pose = None; // x = 3 … 4 m
     }
-    let pic = render_snapshot(&rec, &rec.snapshots[0], 0).unwrap();
+    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &[]).unwrap();
     let layout = Layout::for_grid(100, 50, 0.1);
     let row = |x0_m: f64, x1_m: f64| -> Vec<Rgb> {
         let (x0, y) = layout.pixel_from_world(x0_m, 2.5);
@@ -49,7 +52,7 @@ fn paths_are_anti_aliased() {
     for (i, r) in rows.iter_mut().enumerate() {
         r.true_pose = [1.0 + 0.3 * i as f64, 0.5 + 0.2 * i as f64, 0.0];
     }
-    let pic = render_snapshot(&rec, &rec.snapshots[0], 0).unwrap();
+    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &[]).unwrap();
     let layout = Layout::for_grid(100, 50, 0.1);
     let (a, b) = (ROBOT_RGB[0], VIRIDIS[0]);
     let mut full = 0;
@@ -143,4 +146,93 @@ fn colour_bar_ticks_are_round_include_the_ends_and_never_overlap() {
     // The bar sits right of the legend's half of the strip.
     let (x0, x1) = bar_span_px(800);
     assert!(x0 > 400 && x1 <= 800 - RIGHT_PX as i32);
+}
+
+/// A recording of `scenario`'s grid (zero everywhere) at `t_s`, with robot 1 in the corridor,
+/// "leader lost" from t = 30 s at x = 15 m, at x = 16 m by t = 31 s.
+fn blank_run(scenario: &Scenario, t_s: f64) -> Recording {
+    let f = &scenario.field;
+    let mut rec = Recording::default();
+    rec.snapshots.push(Snapshot {
+        t_s,
+        width: f.width,
+        height: f.height,
+        cell_size_m: f.cell_size_m,
+        channels: vec!["leader".into()],
+        planes: vec![0.0; (f.width * f.height) as usize],
+    });
+    let mut lost = super::super::tests::sample(30.0, 15.0, 1.5);
+    lost.state = Some(FollowerState::LeaderLost);
+    let mut before = super::super::tests::sample(29.9, 14.95, 1.5);
+    before.state = Some(FollowerState::Following);
+    let mut after = super::super::tests::sample(31.0, 16.0, 1.5);
+    after.state = Some(FollowerState::LeaderLost);
+    rec.robots.insert(1, vec![before, lost, after]);
+    rec
+}
+
+#[test]
+fn wrong_area_marks_a_b_and_where_a_follower_explored() {
+    let s = Scenario::load("wrong-area").unwrap();
+    let w = s.metrics.wrong_area.clone().unwrap();
+    let layout = Layout::for_grid(s.field.width, s.field.height, s.field.cell_size_m);
+    let draw = |t_s: f64| {
+        let rec = blank_run(&s, t_s);
+        render_snapshot(&rec, &rec.snapshots[0], 0, &marks(&s, &rec)).unwrap()
+    };
+    let pic = draw(80.0);
+    let at = |x_m: f64, y_m: f64| {
+        let (x, y) = layout.pixel_from_world(x_m, y_m);
+        pic.get(x.round() as usize, y.round() as usize)
+    };
+    // A's outline, at 39 points along each of its four sides.
+    let ([x0, y0], [x1, y1]) = (w.a_min_m, w.a_max_m);
+    for k in 1..40 {
+        let f = k as f64 / 40.0;
+        let (x, y) = (x0 + f * (x1 - x0), y0 + f * (y1 - y0));
+        for (px, py) in [(x, y0), (x, y1), (x0, y), (x1, y)] {
+            assert_eq!(
+                at(px, py),
+                AREA_A_RGB,
+                "A's outline at ({px:.2}, {py:.2}) m"
+            );
+        }
+    }
+    // Inside A, off its outline and label: the cells.
+    assert_eq!(at(20.5, 5.0), VIRIDIS[0]);
+    // B: a circle of b_radius_m around b_m, its centre left as it is.
+    let (bx, by, r) = (w.b_m[0], w.b_m[1], w.b_radius_m);
+    for deg in [0.0f64, 30.0, 60.0, 120.0, 150.0, 180.0, 210.0, 330.0] {
+        let (x, y) = (
+            bx + r * deg.to_radians().cos(),
+            by + r * deg.to_radians().sin(),
+        );
+        assert_eq!(at(x, y), AREA_B_RGB, "B's circle at {deg}°");
+    }
+    assert_eq!(at(bx, by), VIRIDIS[0]);
+    // Robot 1's colour on the cross where it started exploring, from then on only.
+    assert_eq!(at(15.0 + 0.1, 1.5 + 0.1), ROBOT_RGB[1]);
+    let early = draw(20.0);
+    let (x, y) = layout.pixel_from_world(15.1, 1.6);
+    assert_eq!(
+        early.get(x.round() as usize, y.round() as usize),
+        VIRIDIS[0]
+    );
+
+    // A scenario without `wrong_area` marks nothing: neither colour anywhere.
+    let plain = Scenario::load("blind-leader").unwrap();
+    assert!(plain.metrics.wrong_area.is_none());
+    let rec = blank_run(&plain, 80.0);
+    assert!(marks(&plain, &rec).is_empty());
+    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &marks(&plain, &rec)).unwrap();
+    let (pw, ph) = (pic.width as usize, pic.height as usize);
+    for y in 0..ph {
+        for x in 0..pw {
+            let c = pic.get(x, y);
+            assert!(
+                c != AREA_A_RGB && c != AREA_B_RGB,
+                "a mark's colour at ({x}, {y})"
+            );
+        }
+    }
 }

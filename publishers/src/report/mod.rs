@@ -14,12 +14,13 @@
 //! default of every scenario.
 //!
 //! Submodules: `style` the font, palette, colour maps and picture buffer; `heatmap` a snapshot's
-//! picture; `series` the data of the charts, from the run; `plots` the charts; `graph_png` the
+//! picture; `marks` the places it marks (from the scenario's metrics: `wrong_area`'s A and B); `series` the data of the charts, from the run; `plots` the charts; `graph_png` the
 //! picture of a node-graph run; `files` writes the CSV and PNG files.
 
 mod files;
 mod graph_png;
 mod heatmap;
+mod marks;
 mod plots;
 pub mod series;
 mod style;
@@ -34,6 +35,7 @@ use files::{robot_csv, write_file, write_png};
 use heatmap::render_snapshot;
 
 pub use graph_png::write_graph_png;
+pub use marks::{marks, Mark, Shape};
 pub use plots::{PLOT_H_PX, PLOT_W_PX};
 
 /// Writing the outputs of a run failed.
@@ -81,11 +83,13 @@ pub const PROBES_CSV_HEADER: &str = "t_s,x_m,y_m,channel,value";
 /// `metrics.json`, `robot_<id>.csv` per robot, `probes.csv` if there are probes, one
 /// `field_<channel>_t<sss.s>s.png` per snapshot and channel, `field_final.png` (the last
 /// snapshot's first channel) and `field_final.npy` (the last snapshot, every channel:
-/// `crate::export::npy`).
+/// `crate::export::npy`). The heat maps draw `marks` (from [`marks`]: the places the
+/// scenario's metrics name, such as `wrong_area`'s A and B).
 pub fn write_outputs(
     dir: &Path,
     rec: &Recording,
     metrics: &serde_json::Value,
+    marks: &[Mark],
 ) -> Result<Vec<PathBuf>, ReportError> {
     for snap in &rec.snapshots {
         check_snapshot(snap)?;
@@ -131,7 +135,7 @@ pub fn write_outputs(
     for snap in &rec.snapshots {
         for (c, name) in snap.channels.iter().enumerate() {
             let path = dir.join(snapshot_file_name(name, snap.t_s));
-            let pic = render_snapshot(rec, snap, c).map_err(|detail| ReportError::Draw {
+            let pic = render_snapshot(rec, snap, c, marks).map_err(|detail| ReportError::Draw {
                 path: path.clone(),
                 detail,
             })?;

@@ -34,7 +34,7 @@ impl Drop for TempDir {
     }
 }
 
-fn sample(t_s: f64, x: f64, y: f64) -> RobotSample {
+pub(super) fn sample(t_s: f64, x: f64, y: f64) -> RobotSample {
     RobotSample {
         t_s,
         true_pose: [x, y, 0.0],
@@ -121,7 +121,7 @@ fn robot_csv_has_a_row_per_sample_and_empty_cells_for_none() {
         value: 0.25,
     });
     let metrics = serde_json::json!({"robots": 1, "distance_m": 0.5});
-    let written = write_outputs(&tmp.0, &rec, &metrics).unwrap();
+    let written = write_outputs(&tmp.0, &rec, &metrics, &[]).unwrap();
     let names: Vec<String> = written
         .iter()
         .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
@@ -154,7 +154,7 @@ fn robot_csv_has_a_row_per_sample_and_empty_cells_for_none() {
 fn png_has_the_expected_size_trajectories_and_top_of_the_colour_map() {
     let tmp = TempDir::new("png");
     let rec = scene();
-    let written = write_outputs(&tmp.0, &rec, &serde_json::json!({})).unwrap();
+    let written = write_outputs(&tmp.0, &rec, &serde_json::json!({}), &[]).unwrap();
     let final_png = tmp.0.join("field_final.png");
     let snap_png = tmp.0.join("field_trail_t010.0s.png");
     assert!(written.contains(&snap_png), "{written:?}");
@@ -209,7 +209,7 @@ fn nan_cells_get_their_own_colour_without_panicking() {
     let w = rec.snapshots[0].width as usize;
     rec.snapshots[0].planes[10 * w + 10] = f32::NAN;
     rec.snapshots[0].planes[11 * w + 10] = f32::INFINITY;
-    let written = write_outputs(&tmp.0, &rec, &serde_json::json!({})).unwrap();
+    let written = write_outputs(&tmp.0, &rec, &serde_json::json!({}), &[]).unwrap();
     assert!(written.iter().any(|p| p.ends_with("field_final.png")));
     let img = decode(&tmp.0.join("field_final.png"));
     // Cell (10, 10): columns 48 + 80..88, rows 28 + (49 − 10)·8 = 340..348.
@@ -230,7 +230,7 @@ fn file_names_and_bad_snapshots() {
     let mut rec = scene();
     rec.snapshots[0].planes.pop();
     let tmp = TempDir::new("bad");
-    let err = write_outputs(&tmp.0, &rec, &serde_json::json!({})).unwrap_err();
+    let err = write_outputs(&tmp.0, &rec, &serde_json::json!({}), &[]).unwrap_err();
     let msg = err.to_string();
     assert!(
         msg.contains("t = 10 s") && msg.contains("4999 values"),
@@ -251,7 +251,7 @@ fn io_errors_name_the_path() {
     let blocker = tmp.0.join("file");
     fs::write(&blocker, b"not a directory").unwrap();
     let dir = blocker.join("out");
-    let err = write_outputs(&dir, &scene(), &serde_json::json!({})).unwrap_err();
+    let err = write_outputs(&dir, &scene(), &serde_json::json!({}), &[]).unwrap_err();
     assert!(matches!(err, ReportError::Io { .. }), "{err:?}");
     assert!(
         err.to_string().contains(&dir.display().to_string()),
