@@ -58,6 +58,12 @@ def deposit_service(field: str) -> str:
     return f"pheromone/{field}/deposit"
 
 
+def deposit_ready_service(field: str) -> str:
+    """The event a field started with `--publish-on-deposit-ms` listens on: depositors notify
+    it after each deposit, and the field publishes a frame with it at once."""
+    return f"pheromone/{field}/deposit-ready"
+
+
 def check_name(name: str) -> None:
     """Field names: 1–64 characters of `[A-Za-z0-9_-]` (`shm::check_name`)."""
     ok = (

@@ -207,7 +207,7 @@ class Field:
         self.flush_timeout_s = 1.0
         self._header_type = header_type
         self._latest: Optional[Frame] = None
-        self._subscriber = self._listener = self._publisher = None
+        self._subscriber = self._listener = self._publisher = self._deposit_ready = None
         self._frames = self._ready = self._deposits = None
         self._unflushed_after = None
         self._frame_service = _wire.frame_service(name)
@@ -453,6 +453,12 @@ class Field:
                 f"deposit not delivered: no field is subscribed to '{self._deposit_service}' "
                 "or its deposit buffer is full"
             )
+        if self._deposit_ready is not None:
+            try:
+                self._deposit_ready.notify()
+            except Exception:
+                # A failed wake-up only delays the deposit to the field's next tick.
+                pass
         # The field takes it at its next tick: two frames after the newest one held.
         self.update()
         seq = self._latest.header.sequence if self._latest is not None else 0
@@ -483,6 +489,18 @@ class Field:
             .backpressure_strategy(iox2.BackpressureStrategy.DiscardData)
             .create()
         )
+        # A field that publishes on deposit has this event; any other field has not, and its
+        # deposits wait for the next tick (as `DepositPublisher` does in Rust).
+        try:
+            self._deposit_ready = (
+                self._node.service_builder(iox2.ServiceName.new(_wire.deposit_ready_service(self.name)))
+                .event()
+                .open()
+                .notifier_builder()
+                .create()
+            )
+        except iox2.EventOpenError:
+            self._deposit_ready = None
 
     def flush(self, timeout_s: float = 1.0) -> bool:
         """Waits (at most `timeout_s`) until the field has taken every deposit sent so far: two
@@ -523,10 +541,10 @@ class Field:
         if self._latest is not None:
             self._latest.close()
             self._latest = None
-        for port in (self._publisher, self._subscriber, self._listener):
+        for port in (self._publisher, self._subscriber, self._listener, self._deposit_ready):
             if port is not None:
                 port.delete()
-        self._publisher = self._subscriber = self._listener = None
+        self._publisher = self._subscriber = self._listener = self._deposit_ready = None
         self._frames = self._ready = self._deposits = None
         self._node = None
 

@@ -289,3 +289,22 @@ def test_watch_example_prints_a_line_per_frame_until_ctrl_c(start_field):
     assert p.returncode == 0, err
     # "frame <seq> max <value> at channel 0 cell (x, y) = (… m, … m)"
     assert "max 30" in lines[-1] and "cell (20, 15)" in lines[-1], lines
+
+
+def test_a_python_deposit_wakes_a_field_that_publishes_on_deposit(start_field):
+    """`pheromone field --publish-on-deposit-ms`: a Python deposit notifies the field's
+    `deposit-ready` event, so it is in a frame long before the next tick (one every 50 s)."""
+    f = start_field("od", *CELLS, "--tick-hz", "0.02", "--publish-on-deposit-ms", "0",
+                    "--model", "none")
+    with attach(f) as field:
+        for _ in deadline_loop(10, "the first frame"):
+            field.wait_frame(0.2)
+            if field.frame() is not None:
+                break
+        first = field.frame().header
+        field.deposit(1.25, 0.75, 0.005, cov=(0.01, 0.0, 0.01))
+        frame = wait_applied(field, 1, timeout_s=20)
+        assert frame.header.sequence == first.sequence + 1
+        assert frame.sample(1.25, 0.75) > 0
+        # Stepped by the real time since the last frame, not by the 50 s period.
+        assert frame.header.sim_time_s < 20, frame.header.sim_time_s
