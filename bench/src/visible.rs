@@ -111,15 +111,7 @@ pub fn measure(
             .map(|f| f.header.deposits_applied)
             .unwrap_or(0);
         let sent = now_ns();
-        depositor.send(DepositMsg::ellipse(
-            0,
-            x_m,
-            y_m,
-            0.001,
-            [0.01, 0.0, 0.01],
-            0.5,
-            100.0,
-        ))?;
+        depositor.send(small_deposit(x_m, y_m))?;
         let frame = reader
             .wait_until(timeout, |f| f.header.deposits_applied > before)?
             .ok_or_else(|| {
@@ -147,6 +139,11 @@ pub fn measure(
     Ok(result)
 }
 
+/// The deposit both measurements send: small, at the field's centre.
+fn small_deposit(x_m: f32, y_m: f32) -> DepositMsg {
+    DepositMsg::ellipse(0, x_m, y_m, 0.001, [0.01, 0.0, 0.01], 0.5, 100.0)
+}
+
 /// Sends deposits at `rate` per second for `window` and measures the field's CPU meanwhile.
 fn cpu_at_rate(
     node: &iceoryx2::prelude::Node<field::shm::Svc>,
@@ -164,15 +161,7 @@ fn cpu_at_rate(
     let interval = Duration::from_secs_f64(1.0 / rate);
     let mut next = started;
     while started.elapsed() < window {
-        depositor.send(DepositMsg::ellipse(
-            0,
-            x_m,
-            y_m,
-            0.001,
-            [0.01, 0.0, 0.01],
-            0.5,
-            100.0,
-        ))?;
+        depositor.send(small_deposit(x_m, y_m))?;
         next += interval;
         let now = Instant::now();
         if next > now {

@@ -532,10 +532,10 @@ impl DepositWake {
                 let earliest = last_frame_at + self.min_interval;
                 if now < earliest {
                     if earliest >= deadline {
-                        continue_until(node, deadline)?;
+                        continue_until(node, deadline);
                         return Ok(Wake::Tick);
                     }
-                    continue_until(node, earliest)?;
+                    continue_until(node, earliest);
                 }
                 // Drain the events that woke us; the deposits go into this frame.
                 let _ = self.listener.try_wait(|_| {});
@@ -561,7 +561,7 @@ impl DepositWake {
 
 /// Waits on the node until `until` (a termination request ends it early; the caller's next
 /// check sees it).
-fn continue_until(node: &Node<Svc>, until: Instant) -> Result<(), ShmError> {
+fn continue_until(node: &Node<Svc>, until: Instant) {
+    // Interrupted or not, the caller's next `node.wait(ZERO)` sees a termination request.
     let _ = node.wait(until.saturating_duration_since(Instant::now()));
-    Ok(())
 }
