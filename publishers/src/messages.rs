@@ -182,3 +182,119 @@ pub struct FollowerStatusMsg {
 
 // repr(C): numbers and arrays of numbers only.
 field::wire_type!(FollowerStatusMsg, "FollowerStatusMsg", size = 32, align = 8);
+
+/// Most rays one [`ScanMsg`] carries (seed 004's range sensor).
+pub const MAX_RAYS: usize = 64;
+
+/// One range scan of a robot (seed 004, `[mapping]`): `count` rays from `angle_min_rad` (relative
+/// to the heading) every `angle_step_rad`; ray `i` measured `ranges_m[i]` and hit a wall when bit
+/// `i` of `hits` is set (otherwise the ray saw nothing within `range_max_m` and
+/// `ranges_m[i] = range_max_m`). Published by the world on `sim/W/r<ID>/scan` when the scenario
+/// maps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C)]
+pub struct ScanMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// Valid entries of `ranges_m`.
+    pub count: u32,
+    pub angle_min_rad: f32,
+    pub angle_step_rad: f32,
+    pub range_max_m: f32,
+    pub _pad: u32,
+    /// Bit i: ray i hit a wall.
+    pub hits: u64,
+    pub ranges_m: [f32; MAX_RAYS],
+}
+
+// repr(C): numbers and an array of numbers only.
+field::wire_type!(ScanMsg, "ScanMsg", size = 48 + 4 * MAX_RAYS, align = 8);
+
+impl Default for ScanMsg {
+    fn default() -> Self {
+        Self {
+            stamp_ns: 0,
+            step: 0,
+            robot_id: 0,
+            count: 0,
+            angle_min_rad: 0.0,
+            angle_step_rad: 0.0,
+            range_max_m: 0.0,
+            _pad: 0,
+            hits: 0,
+            ranges_m: [0.0; MAX_RAYS],
+        }
+    }
+}
+
+impl ScanMsg {
+    /// The valid rays as (bearing relative to the heading, range, hit).
+    pub fn rays(&self) -> impl Iterator<Item = (f32, f32, bool)> + '_ {
+        let n = (self.count as usize).min(MAX_RAYS);
+        (0..n).map(move |i| {
+            (
+                self.angle_min_rad + i as f32 * self.angle_step_rad,
+                self.ranges_m[i],
+                self.hits >> i & 1 == 1,
+            )
+        })
+    }
+}
+
+/// Most robots one [`RendezvousMsg`] lists.
+pub const MAX_PEERS: usize = 16;
+
+/// A robot within R_C as the observer measures it (noisy): distance d_ij, the bearing of the
+/// peer relative to the observer's heading, and the peer's heading relative to the observer's.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C)]
+pub struct PeerObs {
+    pub robot_id: u32,
+    pub _pad: u32,
+    pub range_m: f64,
+    pub bearing_rad: f64,
+    pub heading_rad: f64,
+}
+
+// repr(C): numbers only.
+field::wire_type!(PeerObs, "PeerObs", size = 32, align = 8);
+
+/// The robots within R_C of one robot after a step (seed 004's rendezvous measurement),
+/// published by the world on `sim/W/r<ID>/rendezvous` when the scenario maps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C)]
+pub struct RendezvousMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// Valid entries of `peers`, by robot id.
+    pub count: u32,
+    pub peers: [PeerObs; MAX_PEERS],
+}
+
+// repr(C): numbers and an array of `PeerObs` only.
+field::wire_type!(
+    RendezvousMsg,
+    "RendezvousMsg",
+    size = 24 + 32 * MAX_PEERS,
+    align = 8
+);
+
+impl Default for RendezvousMsg {
+    fn default() -> Self {
+        Self {
+            stamp_ns: 0,
+            step: 0,
+            robot_id: 0,
+            count: 0,
+            peers: [PeerObs::default(); MAX_PEERS],
+        }
+    }
+}
+
+impl RendezvousMsg {
+    pub fn peers(&self) -> &[PeerObs] {
+        &self.peers[..(self.count as usize).min(MAX_PEERS)]
+    }
+}

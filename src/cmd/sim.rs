@@ -40,6 +40,8 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             strategy: follower_strategy(&a)?,
             constant: a.constant,
             map: a.map.clone(),
+            merge: a.merge_flag(),
+            rc_m: a.rc_m,
         })
         .map_err(|e| bad_in(a.scenario.as_str(), e))?;
     if let Some(t) = a.trials {

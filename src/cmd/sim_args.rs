@@ -83,6 +83,18 @@ pub struct SimArgs {
     /// scenario's walls, and the field and the exploration sectors cover the map.
     #[arg(long, value_name = "FILE.yaml")]
     pub map: Option<PathBuf>,
+    /// Seed 004's local maps with integration: every robot maps with its range sensor and
+    /// merges the maps of the robots it meets within R_C (`[mapping]`); adds
+    /// `exploration_known` (sectors a robot knows, visited or merged) and the merge figures to
+    /// the metrics.
+    #[arg(long, conflicts_with = "no_merge")]
+    pub merge: bool,
+    /// Seed 004's local maps without integration: every robot maps, none exchanges.
+    #[arg(long)]
+    pub no_merge: bool,
+    /// The communication radius R_C of --merge (m, finite and > 0).
+    #[arg(long, value_name = "R", allow_negative_numbers = true)]
+    pub rc_m: Option<f64>,
     /// EKF-SLAM localizers (the map of landmarks is not given to them).
     #[arg(long)]
     pub slam: bool,
@@ -96,4 +108,15 @@ pub struct SimArgs {
     /// Seconds a lockstep step may make no progress before the run fails (separate processes).
     #[arg(long, default_value_t = 30.0, value_name = "SECS")]
     pub stall_timeout: f64,
+}
+
+impl SimArgs {
+    /// `--merge` → Some(true), `--no-merge` → Some(false), neither → None.
+    pub fn merge_flag(&self) -> Option<bool> {
+        match (self.merge, self.no_merge) {
+            (true, _) => Some(true),
+            (_, true) => Some(false),
+            _ => None,
+        }
+    }
 }

@@ -7,6 +7,7 @@
 pub mod depositor;
 pub mod follower;
 pub mod localizer;
+pub mod mapper;
 pub mod role_loop;
 pub mod world;
 

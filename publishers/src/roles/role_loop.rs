@@ -46,6 +46,8 @@ pub enum ProcessError {
     },
     #[error("scenario: {0}")]
     Localizer(#[source] LocalizerError),
+    #[error("scenario: mapping: {0}")]
+    Mapping(#[source] crate::roles::mapper::MapError),
     #[error("scenario: robot {robot} has no [[robot]] entry")]
     NoRoles { robot: u32 },
     #[error("scenario: robot {robot} is not in the world")]

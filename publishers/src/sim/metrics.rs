@@ -7,6 +7,10 @@
 //!   and how far the follower strayed from the leader's true path.
 //! - `wrong_area` (seed 000 Figs. 1, 24; [`crate::sim::wrong_area`]): whether the followers of a
 //!   lost leader end in the wrong area A or reach B, and where they gave the trail up.
+//! - with `[mapping]` on (seed 004, [`crate::sim::exploration::mapping_metrics`]):
+//!   `exploration_known` (sectors known, visited or merged: `sectors`, `per_robot`, `mean`,
+//!   `team`), `known_threshold`, `known_logodds`, `merge`, `rc_m`, `merges`, `merges_rejected`,
+//!   `exchanges_refused_lost`, `merge_alignment_error_m` (`mean`, `max`).
 
 use serde::Serialize;
 
@@ -43,6 +47,9 @@ pub fn scenario_metrics(scenario: &Scenario, rec: &Recording) -> serde_json::Val
             serde_json::to_value(crate::sim::wrong_area::wrong_area(scenario, w, rec))
                 .unwrap_or_default(),
         );
+    }
+    if let Some(m) = &rec.mapping {
+        out.extend(crate::sim::exploration::mapping_metrics(scenario, m));
     }
     serde_json::Value::Object(out)
 }

@@ -3,6 +3,8 @@
 //! what a run records ([`record`]) and the metrics computed from it ([`metrics`], seed 000's
 //! `wrong_area` in [`wrong_area`]).
 
+pub mod exploration;
+pub mod mapping;
 pub mod metrics;
 pub mod observer;
 pub mod processes;
@@ -10,6 +12,7 @@ pub mod record;
 pub mod scenario;
 mod scenario_error;
 mod scenario_map;
+mod scenario_mapping;
 pub mod single;
 pub mod supervisor;
 pub mod wrong_area;

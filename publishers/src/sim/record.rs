@@ -83,6 +83,8 @@ pub struct Recording {
     pub probes: Vec<ProbeReading>,
     /// Wall segments of the world, ([x0, y0], [x1, y1]) in metres, to draw on the pictures.
     pub walls: Vec<([f64; 2], [f64; 2])>,
+    /// Seed 004's final local maps and merges, when the scenario maps.
+    pub mapping: Option<crate::sim::mapping::MappingRecord>,
 }
 
 impl Recording {

@@ -91,6 +91,9 @@ pub struct Scenario {
     /// Scenario-specific metrics.
     #[serde(default)]
     pub metrics: MetricsConfig,
+    /// Seed 004's local maps and their merging (`sim/scenario_mapping.rs`); off by default.
+    #[serde(default)]
+    pub mapping: crate::roles::mapper::MappingConfig,
 }
 
 /// `mark_walls`: deposits every `spacing_m` along every wall segment.
@@ -238,6 +241,11 @@ pub struct Overrides {
     /// A ROS map_server map (`map.yaml`) whose walls replace the scenario's; the field and the
     /// exploration sectors are fitted to it (`sim/scenario_map.rs`).
     pub map: Option<std::path::PathBuf>,
+    /// `--merge` (true) / `--no-merge` (false): turn seed 004's mapping on, with or without
+    /// exchanges at rendezvous (`sim/scenario_mapping.rs`).
+    pub merge: Option<bool>,
+    /// `--rc-m R`: the communication radius R_C (m) of the exchanges.
+    pub rc_m: Option<f64>,
 }
 
 /// What runs for one robot: a localizer always, a depositor and a follower if configured.
@@ -525,6 +533,7 @@ impl Scenario {
                 }
             }
         }
+        self.validate_mapping()?;
         if let Some(e) = &self.metrics.exploration {
             if e.cols == 0 || e.rows == 0 || e.max_m[0] <= e.min_m[0] || e.max_m[1] <= e.min_m[1] {
                 return Err(ScenarioError::Metric {
@@ -554,6 +563,7 @@ impl Scenario {
             }
             self.duration_s = d;
         }
+        self.apply_mapping(o)?;
         if let Some(n) = o.robots {
             if n == 0 || n > self.world.robots.len() {
                 return Err(ScenarioError::Robots {

@@ -34,6 +34,9 @@ pub enum ScenarioError {
     },
     #[error("unknown scenario '{0}': not a file, and not a built-in ({builtins})", builtins = super::scenario::builtin_names())]
     Unknown(String),
+    /// `[mapping]` is refused.
+    #[error("{0}")]
+    Mapping(#[source] crate::roles::mapper::MappingConfigError),
     /// `[field]` is refused.
     #[error("field: {0}")]
     Field(#[source] ConfigError),

@@ -21,6 +21,7 @@ use crate::roles::depositor::Depositor;
 use crate::roles::follower::{Follower, PoseSource};
 use crate::roles::world::World;
 use crate::roles::{Filter, ProcessError};
+use crate::sim::mapping::MappingTeam;
 use crate::sim::record::{deposit_peak, ProbeReading, Recording, RobotSample, Snapshot};
 use crate::sim::scenario::{ProbeSpec, Scenario};
 
@@ -142,6 +143,10 @@ pub fn run_single_process(
 ) -> Result<(RunSummary, Recording), ProcessError> {
     let mut world =
         World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::World)?;
+    if let Some(m) = scenario.mapping() {
+        world.enable_mapping(m, scenario.seed);
+    }
+    let mut mapping = MappingTeam::new(scenario).map_err(ProcessError::Mapping)?;
     let mut field = OwnedField::new(scenario.field.clone()).map_err(ProcessError::Field)?;
     let mut scripted = std::collections::VecDeque::from(scenario.scripted(world.wall_segments())?);
     let scripted_total = scripted.len() as u64;
@@ -189,6 +194,7 @@ pub fn run_single_process(
     let mut commands = vec![(0.0, 0.0); robots.len()];
     for k in 0..steps {
         let outputs = world.step(&commands);
+        let sensed = world.mapping_outputs();
         let t = world.sim_time_s();
         while scripted.front().is_some_and(|(ts, _)| *ts <= t + 1e-9) {
             let (_, m) = scripted.pop_front().expect("checked");
@@ -211,6 +217,10 @@ pub fn run_single_process(
                     let _ = field.offer(&m);
                 }
             }
+        }
+        if let Some(team) = mapping.as_mut() {
+            let poses: Vec<PoseMsg> = robots.iter().map(|r| r.pose.expect("set above")).collect();
+            team.step(world.step_count(), &poses, &sensed);
         }
         field.tick();
         let ft = field.stepper.sim_time_s;
@@ -251,6 +261,7 @@ pub fn run_single_process(
         }
     }
     frames.finish(&mut rec, field.stepper.sim_time_s, field.cells());
+    rec.mapping = mapping.map(MappingTeam::finish);
     let counters = &field.stepper.counters;
     let summary = RunSummary {
         steps: world.step_count(),

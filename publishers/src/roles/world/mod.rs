@@ -17,6 +17,7 @@
 
 mod map;
 pub mod run;
+mod scan;
 mod sensors;
 #[cfg(test)]
 mod test_support;
@@ -265,6 +266,8 @@ pub struct World {
     rng: ChaCha8Rng,
     step: u64,
     rejected_commands: u64,
+    /// Seed 004's range sensor and rendezvous measurement, when the scenario maps (`scan.rs`).
+    mapping: Option<scan::MappingSensors>,
 }
 
 impl World {
@@ -301,6 +304,7 @@ impl World {
             rng: ChaCha8Rng::seed_from_u64(seed),
             step: 0,
             rejected_commands: 0,
+            mapping: None,
         })
     }
 

@@ -136,7 +136,12 @@ fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
 }
 
 /// Parameter t ∈ [0, 1] along p→p2 where it meets q→q2, if the segments properly cross or touch.
-fn segment_intersection(p: [f64; 2], p2: [f64; 2], q: [f64; 2], q2: [f64; 2]) -> Option<f64> {
+pub(super) fn segment_intersection(
+    p: [f64; 2],
+    p2: [f64; 2],
+    q: [f64; 2],
+    q2: [f64; 2],
+) -> Option<f64> {
     let d = sub(p2, p);
     let e = sub(q2, q);
     let denom = cross(d, e);
@@ -243,7 +248,12 @@ impl SegmentIndex {
 
     /// Calls `f` on every segment whose cell overlaps the box (a segment may repeat); stops
     /// and returns true as soon as `f` does.
-    fn any_near(&self, lo: [f64; 2], hi: [f64; 2], mut f: impl FnMut(&Segment) -> bool) -> bool {
+    pub(super) fn any_near(
+        &self,
+        lo: [f64; 2],
+        hi: [f64; 2],
+        mut f: impl FnMut(&Segment) -> bool,
+    ) -> bool {
         if self.cells.is_empty() {
             return false;
         }
