@@ -244,6 +244,10 @@ pub struct RobotServices {
     pub pose: String,
     pub cmd: String,
     pub status: String,
+    /// Seed 004's range scan and rendezvous measurement (world → observer), when the scenario
+    /// maps.
+    pub scan: String,
+    pub rendezvous: String,
 }
 
 impl RobotServices {
@@ -254,6 +258,8 @@ impl RobotServices {
             pose: format!("pheromone/{world}/r{robot}/pose"),
             cmd: format!("pheromone/{world}/r{robot}/cmd"),
             status: format!("pheromone/{world}/r{robot}/status"),
+            scan: format!("sim/{world}/r{robot}/scan"),
+            rendezvous: format!("sim/{world}/r{robot}/rendezvous"),
         }
     }
 }
@@ -326,6 +332,8 @@ mod tests {
         assert_ne!(a, b);
         assert_ne!(a, c);
         assert_eq!(ready_service(&a.pose), "pheromone/w/r0/pose-ready");
+        assert_eq!(ready_service(&a.scan), "sim/w/r0/scan-ready");
+        assert_ne!(a.rendezvous, b.rendezvous);
         let f = FieldServices::of("f");
         assert_eq!(f.frame_ready, ready_service(&f.frame));
         assert_eq!(field_of_frame_service(&f.frame), Some("f"));

@@ -290,3 +290,31 @@ fn a_sigkilled_child_stops_the_whole_run_with_a_clear_error_and_no_leftovers() {
     run.wait_nodes_gone(WAIT);
     assert_eq!(run.shm_entries(), Vec::<String>::new(), "{err}");
 }
+
+#[test]
+fn ias_ss_with_merging_as_processes_gives_the_single_process_metrics() {
+    // Exchanges start after iteration 100 (100 s): 130 s leaves three chances per pair.
+    let m = assert_same_in_both_modes(
+        "ias-ss",
+        &[
+            "--merge",
+            "--rc-m",
+            "30",
+            "--robots",
+            "4",
+            "--duration",
+            "130",
+        ],
+    );
+    let metrics = &m["metrics"];
+    assert!(
+        metrics["merges"].as_u64().is_some_and(|n| n > 0),
+        "{metrics}"
+    );
+    assert!(
+        metrics["exploration_known"]["mean"]
+            .as_f64()
+            .is_some_and(|e| e > 0.0),
+        "{metrics}"
+    );
+}

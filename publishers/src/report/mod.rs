@@ -20,6 +20,7 @@
 mod files;
 mod graph_png;
 mod heatmap;
+mod maps;
 mod marks;
 mod plots;
 pub mod series;
@@ -175,7 +176,10 @@ pub const PATH_DISTANCE_CSV_HEADER: &str = "t_s,path,robot,distance_m";
 ///   each robot's distance to its path over time;
 /// - a blind-leader metric (seed 000, `blind-leader`): `leader_deposits.png`, the peak of each
 ///   of the leader's deposits along its path (`deposit_peak` in `robot_<id>.csv`), the point of
-///   loss marked.
+///   loss marked;
+/// - seed 004's mapping (`[mapping]` on): `map_r<ID>.png` and `map_r<ID>_world.png`, each
+///   robot's final map in its own frame and placed in the world over the true walls
+///   (`maps.rs`).
 pub fn write_plots(
     dir: &Path,
     scenario: &Scenario,
@@ -234,6 +238,18 @@ pub fn write_plots(
             "leader_deposits.png",
             plots::leader_deposits_chart(&d),
         )?);
+    }
+    if let Some(mapping) = &rec.mapping {
+        for (id, map) in &mapping.maps {
+            written.push(draw(
+                &format!("map_r{id}.png"),
+                Ok(maps::own_frame(map, 2)),
+            )?);
+            written.push(draw(
+                &format!("map_r{id}_world.png"),
+                Ok(maps::world_frame(map, rec, *id)),
+            )?);
+        }
     }
     Ok(written)
 }

@@ -9,6 +9,10 @@
 //! What each depositor sent is not on any service the observer reads: it runs a copy of each
 //! robot's [`Depositor`] (the same library type, deterministic) on the poses it receives, which
 //! are the depositor process's input, and records the peak of each deposit that copy makes.
+//!
+//! When the scenario maps (seed 004), it also receives each robot's scan and rendezvous
+//! measurement from the world and, at the end, runs the run's [`MappingTeam`] on them and on the
+//! poses, step by step, as the single-process runner does.
 
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -19,9 +23,12 @@ use field::shm::{FieldReader, ShmError, Svc};
 use field::wire::{ready_service as wake, ROBOT_LINK};
 use iceoryx2::node::Node;
 
-use crate::messages::{CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, TruthMsg};
+use crate::messages::{
+    CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, RendezvousMsg, ScanMsg, TruthMsg,
+};
 use crate::roles::depositor::Depositor;
 use crate::roles::RobotServices;
+use crate::sim::mapping::MappingTeam;
 use crate::sim::record::{deposit_peak, Recording, RobotSample};
 use crate::sim::scenario::Scenario;
 use crate::sim::single::{sigma_max_m, FrameSchedule};
@@ -36,6 +43,11 @@ struct RobotLinks {
     depositor: Option<Depositor>,
     /// Rows by step, filled as the messages of that step arrive.
     rows: BTreeMap<u64, RobotSample>,
+    /// Seed 004's inputs by step, when the scenario maps: the scan and rendezvous links, and
+    /// per step the pose, the scan and the rendezvous measurement.
+    mapping: Option<(Receiver<ScanMsg>, Receiver<RendezvousMsg>)>,
+    poses: BTreeMap<u64, PoseMsg>,
+    sensed: BTreeMap<u64, (Option<ScanMsg>, Option<RendezvousMsg>)>,
 }
 
 /// The observer of one run.
@@ -44,6 +56,8 @@ pub struct Observer {
     field: FieldReader,
     lockstep: Participant,
     frames: FrameSchedule,
+    /// Seed 004's mappers, run at the end on what the world and the localizers sent.
+    team: Option<MappingTeam>,
     rec: Recording,
     /// Sequence of the newest frame recorded.
     last_sequence: Option<u64>,
@@ -79,8 +93,23 @@ impl Observer {
                     .and_then(|x| x.depositor.clone())
                     .and_then(|c| Depositor::new(c).ok()),
                 rows: BTreeMap::new(),
+                mapping: match scenario.mapping() {
+                    Some(_) => Some((
+                        Receiver::create(node, &s.scan, &wake(&s.scan), options)?,
+                        Receiver::create(node, &s.rendezvous, &wake(&s.rendezvous), options)?,
+                    )),
+                    None => None,
+                },
+                poses: BTreeMap::new(),
+                sensed: BTreeMap::new(),
             });
         }
+        // `[mapping]` was validated with the scenario; a team that still cannot be built leaves
+        // the run without its mapping metrics, and says so.
+        let team = MappingTeam::new(scenario).unwrap_or_else(|e| {
+            eprintln!("observer: mapping: {e}");
+            None
+        });
         let field = FieldReader::attach_within(node, field, timeout)?;
         let lockstep = Participant::join(node, world)?;
         Ok(Self {
@@ -88,6 +117,7 @@ impl Observer {
             field,
             lockstep,
             frames: FrameSchedule::new(scenario),
+            team,
             rec: Recording::default(),
             last_sequence: None,
             last_frame_time_s: -1.0,
@@ -113,11 +143,22 @@ impl Observer {
                 row.true_pose = [t.x_m, t.y_m, t.theta_rad];
             }
             while let Some(p) = r.pose.try_recv()? {
+                if r.mapping.is_some() {
+                    r.poses.insert(p.step, p);
+                }
                 let row = r.rows.entry(p.step).or_insert_with(|| empty_row(f64::NAN));
                 row.est_pose = Some([p.x_m, p.y_m, p.theta_rad]);
                 row.est_sigma_m = Some(sigma_max_m(&p));
                 if let Some(d) = r.depositor.as_mut() {
                     row.deposit_peak = d.process(&p).ok().flatten().map(|m| deposit_peak(&m));
+                }
+            }
+            if let Some((scans, rvs)) = &r.mapping {
+                while let Some(m) = scans.try_recv()? {
+                    r.sensed.entry(m.step).or_default().0 = Some(m);
+                }
+                while let Some(m) = rvs.try_recv()? {
+                    r.sensed.entry(m.step).or_default().1 = Some(m);
                 }
             }
             while let Some(c) = r.cmd.try_recv()? {
@@ -170,6 +211,35 @@ impl Observer {
         if let Some(frame) = self.field.frame() {
             self.frames
                 .finish(&mut self.rec, frame.header.sim_time_s, frame.view.cells);
+        }
+        if let Some(mut team) = self.team.take() {
+            // Steps are numbered from 0 on the links; the single-process runner counts the
+            // world's steps from 1.
+            let steps: Vec<u64> = self
+                .robots
+                .first()
+                .map(|r| r.sensed.keys().copied().collect())
+                .unwrap_or_default();
+            for k in steps {
+                let mut poses = Vec::new();
+                let mut sensed = Vec::new();
+                for r in &self.robots {
+                    let (Some(p), Some((Some(scan), Some(rv)))) =
+                        (r.poses.get(&k), r.sensed.get(&k))
+                    else {
+                        break;
+                    };
+                    poses.push(*p);
+                    sensed.push((*scan, *rv));
+                }
+                if poses.len() == self.robots.len() {
+                    team.step(k + 1, &poses, &sensed);
+                } else {
+                    eprintln!("observer: step {k}: a robot's pose, scan or rendezvous is missing; mapping stops there");
+                    break;
+                }
+            }
+            self.rec.mapping = Some(team.finish());
         }
         self.rec
     }

@@ -73,9 +73,6 @@ pub enum ProcessRunError {
         #[source]
         source: std::io::Error,
     },
-    /// Seed 004's mapping (`--merge`, `--no-merge`) runs in one process only, for now.
-    #[error("scenario '{scenario}': [mapping] (--merge / --no-merge) runs with --single-process only: the mapper processes are not part of a run as processes yet")]
-    MappingNeedsSingleProcess { scenario: String },
     #[error("the field of the run did not come up within {timeout_s:.1} s")]
     NoField { timeout_s: f64 },
     #[error("the gateway of the run did not serve within {timeout_s:.1} s; its last output:\n{stderr_tail}")]
@@ -177,11 +174,6 @@ pub fn run_as_processes(
     scenario: &Scenario,
     o: ProcessRunOptions<'_>,
 ) -> Result<(RunSummary, Recording, ProcessRunInfo), ProcessRunError> {
-    if scenario.mapping().is_some() {
-        return Err(ProcessRunError::MappingNeedsSingleProcess {
-            scenario: scenario.name.clone(),
-        });
-    }
     let tag = run_tag();
     let file = ScenarioFile::write(scenario, &tag)?;
     let mut sup = Supervisor::new(&o.exe);

@@ -6,7 +6,7 @@ use field::lockstep::{self, Conductor, LockstepError};
 use field::shm::{now_ns, DepositPublisher, Svc};
 use iceoryx2::node::Node;
 
-use crate::messages::{CmdMsg, SensorMsg, TruthMsg};
+use crate::messages::{CmdMsg, RendezvousMsg, ScanMsg, SensorMsg, TruthMsg};
 use crate::roles::world::World;
 use crate::roles::{receiver, sender, ProcessError, RobotServices};
 use crate::sim::scenario::Scenario;
@@ -82,15 +82,26 @@ pub fn run_world(
     let started = Instant::now();
     let mut world =
         World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::World)?;
+    if let Some(m) = scenario.mapping() {
+        world.enable_mapping(m, scenario.seed);
+    }
     let ids: Vec<u32> = scenario.world.robots.iter().map(|r| r.id).collect();
     let mut conductor = Conductor::create(node, &o.world, !o.realtime)?;
     let mut sensors = Vec::new();
     let mut truths = Vec::new();
     let mut cmds = Vec::new();
+    // Seed 004's scan and rendezvous of each robot, when the scenario maps.
+    let mut mapping = Vec::new();
     for &id in &ids {
         let s = RobotServices::new(&o.world, id);
         sensors.push(sender::<SensorMsg>(node, &s.sensors)?);
         truths.push(sender::<TruthMsg>(node, &s.truth)?);
+        if scenario.mapping().is_some() {
+            mapping.push((
+                sender::<ScanMsg>(node, &s.scan)?,
+                sender::<RendezvousMsg>(node, &s.rendezvous)?,
+            ));
+        }
         // Only a robot with a follower sends commands; the others stand still.
         let driven = scenario.roles(id).is_some_and(|r| r.follower.is_some());
         cmds.push(if driven {
@@ -157,6 +168,7 @@ pub fn run_world(
     let mut run = || -> Result<(), ProcessError> {
         for k in 0..steps {
             let outputs = world.step(&commands);
+            let sensed = world.mapping_outputs();
             for (i, p) in world.poses().iter().enumerate() {
                 distance[i] += ((p.x_m - last_pose[i].x_m).powi(2)
                     + (p.y_m - last_pose[i].y_m).powi(2))
@@ -185,6 +197,18 @@ pub fn run_world(
                 t.stamp_ns = stamp;
                 t.step = k;
                 truths[i].send(t)?;
+            }
+            for ((scan_tx, rv_tx), (scan, rv)) in mapping.iter_mut().zip(&sensed) {
+                scan_tx.send(ScanMsg {
+                    stamp_ns: stamp,
+                    step: k,
+                    ..*scan
+                })?;
+                rv_tx.send(RendezvousMsg {
+                    stamp_ns: stamp,
+                    step: k,
+                    ..*rv
+                })?;
             }
             if o.realtime {
                 conductor.tick(k, world.sim_time_s(), dt)?;

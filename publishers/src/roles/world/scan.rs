@@ -199,7 +199,7 @@ mod tests {
         assert!((peers[0].range_m - 2f64.sqrt()).abs() < 1e-9);
         assert!((peers[0].bearing_rad - std::f64::consts::FRAC_PI_4).abs() < 1e-9);
         assert!((peers[0].heading_rad - 1.0).abs() < 1e-9);
-        assert_eq!(out[1].1.peers()[0].robot_id, 0);
+        assert_eq!(out[1].1.peers()[0].robot_id, w.config().robots[0].id);
     }
 
     #[test]
