@@ -25,7 +25,7 @@ fn patterned(extent_m: f32, salt: u32) -> LocalMap {
     let mut m = empty(extent_m);
     for (i, (o, p)) in m.occupancy.iter_mut().zip(&mut m.pheromone).enumerate() {
         let h = (i as u32).wrapping_mul(2_654_435_761).wrapping_add(salt) >> 24;
-        if h % 3 != 0 {
+        if !h.is_multiple_of(3) {
             *o = (h as f32 - 128.0) / 40.0 + 0.01;
             *p = (h % 7) as f32 / 7.0;
         }
