@@ -16,6 +16,11 @@ struct Cli {
     /// Show iceoryx2's own log output.
     #[arg(long, global = true)]
     verbose: bool,
+    /// iceoryx2 domain: services and nodes use the prefix `<D>_iox2_` instead of `iox2_`, so
+    /// processes of two domains on one host share nothing (as on two hosts). Also taken from
+    /// the environment variable PHEROMONE_IOX_DOMAIN, which children inherit.
+    #[arg(long, global = true, value_name = "D")]
+    iox_domain: Option<String>,
     #[command(subcommand)]
     command: Command,
 }
@@ -24,6 +29,8 @@ struct Cli {
 enum Command {
     /// Run a whole scenario as separate processes and report what happened.
     Sim(cmd::sim::SimArgs),
+    /// Run seed 004's grid of experiments on all cores: exploration vs robots, R_C, merging.
+    Sweep(cmd::sweep::SweepArgs),
     /// Run a field process: owns the grid, ticks, publishes frames, applies deposits.
     Field(Box<cmd::field::FieldArgs>),
     /// Closed-form tuning of the evaporation rate (seed 000 eqs. 23 and 26).
@@ -32,6 +39,8 @@ enum Command {
     World(cmd::roles::WorldArgs),
     /// Run the localizer (EKF) of one robot.
     Localizer(cmd::roles::LocalizerArgs),
+    /// Run the mapper of one robot: its occupancy + pheromone map, published as a field frame.
+    Mapper(cmd::roles::MapperArgs),
     /// Run the depositor of one robot.
     Depositor(cmd::roles::DepositorArgs),
     /// Run the follower of one robot.
@@ -52,6 +61,8 @@ enum Command {
     Gateway(cmd::gateway::GatewayArgs),
     /// Serve a live web page of a running field: heat map, robots, statistics.
     View(cmd::view::ViewArgs),
+    /// Publish a field's inputs on Zenoh for mirrors on other hosts (and frames for dashboards).
+    Bridge(cmd::bridge::BridgeArgs),
     /// Measure latency and throughput side by side with raw iceoryx2, a Unix socket and Zenoh.
     Bench(cmd::bench::BenchArgs),
     /// One peer process of `pheromone bench` (started by it).
@@ -62,12 +73,18 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     field::shm::set_verbose(cli.verbose);
+    if let Some(d) = &cli.iox_domain {
+        // Single-threaded here: every node this process creates reads it (`domain_config`).
+        std::env::set_var(field::shm::IOX_DOMAIN_ENV, d);
+    }
     let result = match cli.command {
         Command::Sim(a) => cmd::sim::run(a),
+        Command::Sweep(a) => cmd::sweep::run(a),
         Command::Field(a) => cmd::field::run(*a),
         Command::Tune(a) => cmd::tune::run(a),
         Command::World(a) => cmd::roles::run_world_cmd(a),
         Command::Localizer(a) => cmd::roles::run_localizer_cmd(a),
+        Command::Mapper(a) => cmd::roles::run_mapper_cmd(a),
         Command::Depositor(a) => cmd::roles::run_depositor_cmd(a),
         Command::Follower(a) => cmd::roles::run_follower_cmd(a),
         Command::Graph(a) => cmd::graph::run_writer(a),
@@ -78,6 +95,7 @@ fn main() -> ExitCode {
         Command::Export(a) => cmd::export::run(a),
         Command::Gateway(a) => cmd::gateway::run(a),
         Command::View(a) => cmd::view::run(a),
+        Command::Bridge(a) => cmd::bridge::run(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::BenchPeer(a) => cmd::bench::run_peer(a),
     };

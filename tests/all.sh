@@ -7,19 +7,33 @@ cd "$(dirname "$0")/.."
 echo "== cargo test --workspace"
 cargo test --workspace
 
-echo "== python: venv .venv, pip install ./python pytest"
+# Field mirrors over Zenoh (feature `zenoh`): only the mirror tests, so the rest of the suite is
+# not built twice (the feature adds zenoh, zstd and xxhash-rust to the binary).
+echo "== cargo test --test cli --features zenoh mirror::"
+cargo test --test cli --features zenoh mirror::
+
+# The bridge's codec, bridge and mirror unit tests (the envelope checks byte by byte).
+echo "== cargo test -p pheromone-publishers --features zenoh --lib bridge::"
+cargo test -p pheromone-publishers --features zenoh --lib bridge::
+
+# The `zenoh` extra (eclipse-zenoh 1.10.2, as the Rust zenoh crate in Cargo.lock; zstandard,
+# xxhash) is for python/tests/test_zenoh_frames.py: a bridge's --frames decoded in Python.
+echo "== python: venv .venv, pip install ./python[zenoh] pytest"
 if [ ! -x .venv/bin/python ]; then
     python3 -m venv .venv
 fi
-.venv/bin/python -m pip install -q --upgrade ./python pytest
+.venv/bin/python -m pip install -q --upgrade './python[zenoh]' pytest
 
-# `cargo test --workspace` has just built target/debug/pheromone for the integration tests; a
-# plain `cargo build` would resolve other features (no dev-dependencies) and rebuild everything.
+# The mirror tests above have just built target/debug/pheromone with `--features zenoh` (the
+# binary of the integration tests, `bridge` included), which test_zenoh_frames.py needs; a plain
+# `cargo build` would resolve other features (no dev-dependencies) and rebuild everything.
 export PHEROMONE_BIN="${PHEROMONE_BIN:-${CARGO_TARGET_DIR:-target}/debug/pheromone}"
 if [ ! -x "$PHEROMONE_BIN" ]; then
     echo "== python: pheromone binary"
-    cargo build --bin pheromone
+    cargo build --bin pheromone --features zenoh
 fi
+# Here a binary without `bridge` or a missing package fails the Zenoh test instead of skipping it.
+export PHEROMONE_REQUIRE_ZENOH="${PHEROMONE_REQUIRE_ZENOH:-1}"
 
 echo "== python: pytest python/tests"
 .venv/bin/python -m pytest -q python/tests

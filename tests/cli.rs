@@ -7,10 +7,13 @@ mod graph;
 mod harness;
 mod inspect;
 mod maps;
+#[cfg(feature = "zenoh")]
+mod mirror;
 mod on_deposit;
 mod processes;
 mod reliability;
 mod soak;
+mod sweep;
 mod view;
 
 use std::time::Duration;
@@ -260,6 +263,43 @@ fn a_malformed_config_exits_2_naming_file_line_and_key() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("unstable"), "{}", stderr(&o));
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn field_threads_are_checked_and_a_threaded_ambient_field_ticks() {
+    for bad in ["0", "257"] {
+        let o = run(&[
+            "field",
+            "--name",
+            &unique("thr"),
+            "--threads",
+            bad,
+            "--ticks",
+            "1",
+        ]);
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        let e = stderr(&o);
+        assert!(e.contains(&format!("--threads {bad}")), "{e}");
+    }
+    let o = run(&[
+        "field",
+        "--name",
+        &unique("thr"),
+        "--width",
+        "300",
+        "--height",
+        "200",
+        "--model",
+        "ambient",
+        "--threads",
+        "2",
+        "--ticks",
+        "5",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(summary["ticks"], 5, "{summary}");
 }
 
 #[test]

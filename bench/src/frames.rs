@@ -91,13 +91,23 @@ pub(crate) fn pause(node: &Node<Svc>, period: Duration) -> Result<(), BenchError
     node.wait(period).map_err(|_| BenchError::Interrupted)
 }
 
+/// What the readers of one frame-delivery measurement recorded.
+#[derive(Debug, Clone, Default)]
+pub struct FrameSamples {
+    /// Every reader's latencies (ns), pooled.
+    pub samples_ns: Vec<u64>,
+    /// The readers' mean CPU share of one core while they recorded (their wait policy's cost),
+    /// where they measured it.
+    pub reader_cpu_share: Option<f64>,
+}
+
 /// Collects every reader's result; `publish` is called once per period until all are in.
 pub(crate) fn drive(
     node: &Node<Svc>,
     peers: &mut [Peer],
     run: &FrameRun,
     mut publish: impl FnMut() -> Result<(), BenchError>,
-) -> Result<Vec<u64>, BenchError> {
+) -> Result<FrameSamples, BenchError> {
     let frames = run.skip + run.count;
     // Generous: every frame may take a whole period plus a second of slack, and some are lost.
     let deadline = Instant::now()
@@ -119,11 +129,13 @@ pub(crate) fn drive(
             }
         }
     }
-    Ok(results
-        .into_iter()
-        .flatten()
-        .flat_map(|r| r.samples_ns)
-        .collect())
+    let results: Vec<PeerResult> = results.into_iter().flatten().collect();
+    let shares: Vec<f64> = results.iter().filter_map(|r| r.cpu_share).collect();
+    Ok(FrameSamples {
+        reader_cpu_share: (!shares.is_empty())
+            .then(|| shares.iter().sum::<f64>() / shares.len() as f64),
+        samples_ns: results.into_iter().flat_map(|r| r.samples_ns).collect(),
+    })
 }
 
 pub(crate) fn spawn_readers(
@@ -151,8 +163,9 @@ pub(crate) fn spawn_readers(
     Ok(peers)
 }
 
-/// Runs one frame-delivery measurement; returns every reader's latencies (ns), pooled.
-pub fn measure(launcher: &Launcher, tag: &str, run: FrameRun) -> Result<Vec<u64>, BenchError> {
+/// Runs one frame-delivery measurement; returns every reader's latencies (ns), pooled, and the
+/// readers' CPU share.
+pub fn measure(launcher: &Launcher, tag: &str, run: FrameRun) -> Result<FrameSamples, BenchError> {
     let node = create_node(&format!("bench-frames-{tag}"))?;
     match run.transport {
         FrameTransport::Ours => {
@@ -224,7 +237,9 @@ impl Drop for SocketPath {
 }
 
 /// Records frames until `count` are in; `next` waits for one frame and returns its latency
-/// (or `None` for a frame that does not count, e.g. one already seen).
+/// (or `None` for a frame that does not count, e.g. one already seen). Also measures this
+/// process's CPU time (`/proc/PID/schedstat`) over the wall time from the first counted frame to
+/// the last: the cost of the reader's wait policy, as a share of one core.
 pub(crate) fn record(
     skip: usize,
     count: usize,
@@ -232,17 +247,31 @@ pub(crate) fn record(
 ) -> Result<(), BenchError> {
     let mut samples = Vec::with_capacity(count);
     let mut skipped = 0;
+    let me = std::process::id();
+    let mut since: Option<(Instant, u64)> = None;
     while samples.len() < count {
         if let Some(latency_ns) = next()? {
             if skipped < skip {
                 skipped += 1;
             } else {
+                if since.is_none() {
+                    since = Some((Instant::now(), crate::gateway::cpu_ns(me)?));
+                }
                 samples.push(latency_ns);
             }
         }
     }
+    let cpu_share = match since {
+        Some((t0, cpu0)) if samples.len() > 1 => {
+            let wall_ns = t0.elapsed().as_nanos() as f64;
+            let cpu = crate::gateway::cpu_ns(me)?.saturating_sub(cpu0) as f64;
+            (wall_ns > 0.0).then(|| ((cpu / wall_ns) * 1000.0).round() / 1000.0)
+        }
+        _ => None,
+    };
     say_result(&PeerResult {
         samples_ns: samples,
+        cpu_share,
     });
     Ok(())
 }
@@ -356,7 +385,7 @@ mod zenoh_side {
         launcher: &Launcher,
         tag: &str,
         run: &FrameRun,
-    ) -> Result<Vec<u64>, BenchError> {
+    ) -> Result<FrameSamples, BenchError> {
         let endpoint = format!("tcp/127.0.0.1:{}", free_port()?);
         let key = format!("pheromone/bench/{tag}/frame");
         let session = zenoh::open(config("peer", std::slice::from_ref(&endpoint), &[])?)
@@ -430,7 +459,7 @@ mod zenoh_side {
         _launcher: &Launcher,
         _tag: &str,
         _run: &FrameRun,
-    ) -> Result<Vec<u64>, BenchError> {
+    ) -> Result<FrameSamples, BenchError> {
         Err(BenchError::NoZenoh)
     }
 

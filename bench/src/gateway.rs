@@ -79,7 +79,7 @@ pub(crate) fn cpu_ns(pid: u32) -> Result<u64, BenchError> {
         .ok_or_else(|| BenchError::Peer(format!("{path}: '{}' has no CPU time", text.trim())))
 }
 
-fn pin_pid(pid: u32, core: usize) {
+pub(crate) fn pin_pid(pid: u32, core: usize) {
     use nix::sched::{sched_setaffinity, CpuSet};
     use nix::unistd::Pid;
     let mut set = CpuSet::new();

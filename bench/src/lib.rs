@@ -12,7 +12,12 @@
 //!   the field ticking as its own process;
 //! - `gateway_pir`: seed 002's PIR round trip over UDP loopback to a `pheromone gateway` process
 //!   beside a direct shared-memory read of the same two antenna values, and the PIRs per second
-//!   one gateway serves (flooded by one client) with its CPU time.
+//!   one gateway serves (flooded by one client) with its CPU time;
+//! - `mirror` (feature `zenoh`): a field mirrored over Zenoh to a second iceoryx2 domain — bytes
+//!   on the wire against raw frames at 10 and 1000 deposits/s, origin-to-mirror lag, keyframe size
+//!   and catch-up.
+//!
+//! `Options::only` runs a subset of these sections (`pheromone bench --only mirror`).
 //!
 //! Percentiles come from HdrHistogram. Performance is measured and reported, never asserted.
 //! The processes are started through a [`peer::Launcher`] (the `pheromone` binary passes itself
@@ -22,9 +27,12 @@ pub mod frames;
 pub mod gateway;
 pub mod hop;
 pub mod machine;
+#[cfg(feature = "zenoh")]
+pub mod mirror;
 pub mod peer;
 pub mod raw_frames;
 pub mod stats;
+pub mod targets;
 pub mod tick;
 pub mod visible;
 
@@ -92,6 +100,9 @@ struct Plan {
     /// (PIRs timed, warm-up) and how long the gateway is flooded.
     pir_count: (usize, usize),
     flood: Duration,
+    /// The mirror's field side and how long deposits go at each rate.
+    mirror_width: u32,
+    mirror_window: Duration,
 }
 
 impl Mode {
@@ -108,6 +119,8 @@ impl Mode {
                 cpu_window: Duration::from_secs(3),
                 pir_count: (20_000, 1_000),
                 flood: Duration::from_secs(5),
+                mirror_width: 1024,
+                mirror_window: Duration::from_secs(10),
             },
             Mode::Quick => Plan {
                 tick_widths: &[512, 1024, 2048, 4096],
@@ -120,6 +133,8 @@ impl Mode {
                 cpu_window: Duration::from_secs(1),
                 pir_count: (5_000, 500),
                 flood: Duration::from_secs(2),
+                mirror_width: 1024,
+                mirror_window: Duration::from_secs(3),
             },
             Mode::Smoke => Plan {
                 tick_widths: &[512],
@@ -132,15 +147,48 @@ impl Mode {
                 cpu_window: Duration::from_millis(200),
                 pir_count: (100, 10),
                 flood: Duration::from_millis(200),
+                mirror_width: 256,
+                mirror_window: Duration::from_millis(400),
             },
         }
     }
+}
+
+/// A part of the run (`pheromone bench --only SECTION,…`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Section {
+    /// `tick_vs_memcpy`.
+    Tick,
+    /// `hop_ns`.
+    Hop,
+    /// `frame_ns`.
+    Frames,
+    /// `deposit_to_visible_us` and `deposit_to_visible_on_deposit_us`.
+    Visible,
+    /// `gateway_pir`.
+    Gateway,
+    /// `mirror` (a build with `--features zenoh`).
+    Mirror,
+}
+
+impl Section {
+    pub const ALL: [Section; 6] = [
+        Section::Tick,
+        Section::Hop,
+        Section::Frames,
+        Section::Visible,
+        Section::Gateway,
+        Section::Mirror,
+    ];
 }
 
 /// Options of one run.
 #[derive(Debug, Clone)]
 pub struct Options {
     pub mode: Mode,
+    /// The sections to run; empty: all of them.
+    pub only: Vec<Section>,
     /// Pin this process to core 0 and single peers to core 1 (when there are 2 cores or more).
     pub pin: bool,
     /// Tick rate of the field in the deposit-to-visible measurement.
@@ -203,6 +251,20 @@ pub struct FrameReport {
     pub raw_iceoryx2_spin: Latency,
     pub spin_us: u32,
     pub period_ms: f64,
+    /// What each wait policy costs the reader: its process's CPU time over the wall time of its
+    /// recording, as a share of one core (1 reader).
+    pub reader_cpu_share: ReaderCpu,
+}
+
+/// A frame reader's CPU (share of one core) under each wait policy, ours and the reference.
+#[derive(Debug, Clone, Serialize)]
+pub struct ReaderCpu {
+    pub ours_wait: Option<f64>,
+    pub ours_spin: Option<f64>,
+    pub ours_busy_poll: Option<f64>,
+    pub raw_iceoryx2_wait: Option<f64>,
+    pub raw_iceoryx2_spin: Option<f64>,
+    pub raw_iceoryx2_busy_poll: Option<f64>,
 }
 
 /// Deposit-to-visible latency, µs.
@@ -222,16 +284,7 @@ pub struct VisibleReport {
     pub field_cpu: Vec<visible::CpuAtRate>,
 }
 
-/// One target of issue 6, with what was measured.
-#[derive(Debug, Clone, Serialize)]
-pub struct Target {
-    pub name: String,
-    /// `"<="` or `">="`.
-    pub op: &'static str,
-    pub limit: f64,
-    pub measured: f64,
-    pub met: bool,
-}
+pub use targets::{targets, Target};
 
 /// The whole run: what `--json` prints.
 #[derive(Debug, Clone, Serialize)]
@@ -240,15 +293,19 @@ pub struct Report {
     pub mode: Mode,
     pub pinned: bool,
     pub zenoh_built: bool,
+    /// The sections this run measured (`--only`); a section left out is empty or null.
+    pub sections: Vec<Section>,
     /// Keyed by the grid size, e.g. `"1024x1024"`.
     pub tick_vs_memcpy: BTreeMap<String, TickRow>,
-    pub hop_ns: HopReport,
+    pub hop_ns: Option<HopReport>,
     /// Keyed `"1MiB"` and `"16MiB"`.
     pub frame_ns: BTreeMap<String, FrameReport>,
-    pub deposit_to_visible_us: VisibleReport,
+    pub deposit_to_visible_us: Option<VisibleReport>,
     /// The same with the field publishing as soon as deposits arrive (issue 18).
-    pub deposit_to_visible_on_deposit_us: VisibleReport,
-    pub gateway_pir: gateway::GatewayReport,
+    pub deposit_to_visible_on_deposit_us: Option<VisibleReport>,
+    pub gateway_pir: Option<gateway::GatewayReport>,
+    /// Issue 15's field mirror over Zenoh; null in a build without Zenoh.
+    pub mirror: Option<MirrorSection>,
     pub targets: Vec<Target>,
     pub elapsed_s: f64,
 }
@@ -258,6 +315,13 @@ pub const SPIN_US: u32 = 500;
 
 /// Whether this build has the Zenoh baseline.
 pub const ZENOH_BUILT: bool = cfg!(feature = "zenoh");
+
+#[cfg(feature = "zenoh")]
+pub use mirror::MirrorReport as MirrorSection;
+/// A build without Zenoh has no mirror section (always `None`).
+#[cfg(not(feature = "zenoh"))]
+#[derive(Debug, Clone, Serialize)]
+pub enum MirrorSection {}
 
 fn latency(samples: &[u64], what: &str) -> Result<Latency, BenchError> {
     Latency::from_ns(samples).ok_or_else(|| BenchError::Peer(format!("{what}: no samples")))
@@ -286,8 +350,10 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         if pin { ", pinned" } else { "" }
     ));
 
+    let runs = |s: Section| opts.only.is_empty() || opts.only.contains(&s);
+    let sections: Vec<Section> = Section::ALL.into_iter().filter(|s| runs(*s)).collect();
     let mut tick_vs_memcpy = BTreeMap::new();
-    for &w in plan.tick_widths {
+    for &w in plan.tick_widths.iter().filter(|_| runs(Section::Tick)) {
         say(&format!("tick vs memcpy at {w}x{w}"));
         tick_vs_memcpy.insert(format!("{w}x{w}"), tick::measure(w, plan.tick_reps)?);
     }
@@ -316,29 +382,37 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         )?;
         latency(&s, "hop")
     };
-    let hop_ns = HopReport {
-        ours: hop(false, false)?,
-        raw_iceoryx2: hop(true, false)?,
-        busy_poll: HopPair {
-            ours: hop(false, true)?,
-            raw_iceoryx2: hop(true, true)?,
-        },
-        message_bytes: HopBytes {
-            ours: std::mem::size_of::<publishers::messages::PoseMsg>(),
-            raw_iceoryx2: std::mem::size_of::<u64>(),
-        },
-        method: "ping-pong between two processes, one-way = round trip / 2",
+    let hop_ns = if runs(Section::Hop) {
+        Some(HopReport {
+            ours: hop(false, false)?,
+            raw_iceoryx2: hop(true, false)?,
+            busy_poll: HopPair {
+                ours: hop(false, true)?,
+                raw_iceoryx2: hop(true, true)?,
+            },
+            message_bytes: HopBytes {
+                ours: std::mem::size_of::<publishers::messages::PoseMsg>(),
+                raw_iceoryx2: std::mem::size_of::<u64>(),
+            },
+            method: "ping-pong between two processes, one-way = round trip / 2",
+        })
+    } else {
+        None
     };
 
     let mut frame_ns = BTreeMap::new();
-    for (key, width, (count, skip), period_ms) in [
+    let frame_sizes = [
         ("1MiB", 512u32, plan.frames_1mib, 20u64),
         ("16MiB", 2048u32, plan.frames_16mib, 100u64),
-    ] {
+    ];
+    for (key, width, (count, skip), period_ms) in
+        frame_sizes.into_iter().filter(|_| runs(Section::Frames))
+    {
         let period = Duration::from_millis(period_ms);
         const EVENT: ReaderWait = ReaderWait::Event;
         const BUSY: ReaderWait = ReaderWait::BusyPoll;
         let spin = ReaderWait::Spin { spin_us: SPIN_US };
+        let mut cpu: BTreeMap<(FrameTransport, ReaderWait), f64> = BTreeMap::new();
         let mut frames = |transport: FrameTransport,
                           readers: usize,
                           wait: ReaderWait|
@@ -364,7 +438,10 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
                     pin,
                 },
             )?;
-            latency(&s, "frames").map(Some)
+            if let (1, Some(share)) = (readers, s.reader_cpu_share) {
+                cpu.insert((transport, wait), share);
+            }
+            latency(&s.samples_ns, "frames").map(Some)
         };
         let need = |l: Option<Latency>| l.ok_or(BenchError::NoZenoh);
         let report = FrameReport {
@@ -385,79 +462,105 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
             raw_iceoryx2_spin: need(frames(FrameTransport::RawIceoryx, 1, spin)?)?,
             spin_us: SPIN_US,
             period_ms: period_ms as f64,
+            reader_cpu_share: ReaderCpu {
+                ours_wait: cpu.get(&(FrameTransport::Ours, EVENT)).copied(),
+                ours_spin: cpu.get(&(FrameTransport::Ours, spin)).copied(),
+                ours_busy_poll: cpu.get(&(FrameTransport::Ours, BUSY)).copied(),
+                raw_iceoryx2_wait: cpu.get(&(FrameTransport::RawIceoryx, EVENT)).copied(),
+                raw_iceoryx2_spin: cpu.get(&(FrameTransport::RawIceoryx, spin)).copied(),
+                raw_iceoryx2_busy_poll: cpu.get(&(FrameTransport::RawIceoryx, BUSY)).copied(),
+            },
         };
         frame_ns.insert(key.to_string(), report);
     }
 
-    say(&format!(
-        "deposit to visible: {w}x{w} field at {} Hz ({} deposits)",
-        opts.tick_hz,
-        plan.visible_count,
-        w = opts.visible_width
-    ));
-    let visible_run = visible::VisibleRun {
-        width: opts.visible_width,
-        tick_hz: opts.tick_hz,
-        warmup: (plan.visible_count / 20).max(2),
-        count: plan.visible_count,
-        pin,
-        on_deposit: false,
-        cpu_window: plan.cpu_window,
-    };
-    let v = visible::measure(&opts.launcher, &tag(), visible_run)?;
-    let compute = Latency::from_ns_as_us(&v.compute_ns)
-        .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?;
-    let deposit_to_visible_us = VisibleReport {
-        latency: Latency::from_ns_as_us(&v.samples_ns)
-            .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?,
-        tick_hz: opts.tick_hz,
-        width: opts.visible_width,
-        target_p99_us: 1e6 / opts.tick_hz as f64 + 1.2 * compute.p99 + 50.0,
-        tick_compute_us: compute,
-        field_cpu: v.cpu,
-    };
-    say(&format!(
-        "deposit to visible, publishing on deposit: {w}x{w} field ({} deposits), then its CPU \
-         at 10, 100 and 1000 deposits/s",
-        plan.visible_count,
-        w = opts.visible_width
-    ));
-    let v = visible::measure(
-        &opts.launcher,
-        &tag(),
-        visible::VisibleRun {
-            on_deposit: true,
-            ..visible_run
-        },
-    )?;
-    let compute = Latency::from_ns_as_us(&v.compute_ns)
-        .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?;
-    let deposit_to_visible_on_deposit_us = VisibleReport {
-        latency: Latency::from_ns_as_us(&v.samples_ns)
-            .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?,
-        tick_hz: opts.tick_hz,
-        width: opts.visible_width,
-        target_p99_us: compute.p99 + 100.0,
-        tick_compute_us: compute,
-        field_cpu: v.cpu,
-    };
-    say(&format!(
-        "gateway: {} PIR round trips over UDP loopback, {} direct reads, {:.1} s flood",
-        plan.pir_count.0,
-        plan.pir_count.0,
-        plan.flood.as_secs_f64()
-    ));
-    let gateway_pir = gateway::measure(
-        &opts.launcher,
-        &tag(),
-        gateway::GatewayRun {
-            warmup: plan.pir_count.1,
-            count: plan.pir_count.0,
-            flood: plan.flood,
-            window: 32,
+    let (deposit_to_visible_us, deposit_to_visible_on_deposit_us) = if runs(Section::Visible) {
+        say(&format!(
+            "deposit to visible: {w}x{w} field at {} Hz ({} deposits)",
+            opts.tick_hz,
+            plan.visible_count,
+            w = opts.visible_width
+        ));
+        let visible_run = visible::VisibleRun {
+            width: opts.visible_width,
+            tick_hz: opts.tick_hz,
+            warmup: (plan.visible_count / 20).max(2),
+            count: plan.visible_count,
             pin,
-        },
-    )?;
+            on_deposit: false,
+            cpu_window: plan.cpu_window,
+        };
+        let v = visible::measure(&opts.launcher, &tag(), visible_run)?;
+        let compute = Latency::from_ns_as_us(&v.compute_ns)
+            .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?;
+        let deposit_to_visible_us = VisibleReport {
+            latency: Latency::from_ns_as_us(&v.samples_ns)
+                .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?,
+            tick_hz: opts.tick_hz,
+            width: opts.visible_width,
+            target_p99_us: 1e6 / opts.tick_hz as f64 + 1.2 * compute.p99 + 50.0,
+            tick_compute_us: compute,
+            field_cpu: v.cpu,
+        };
+        say(&format!(
+            "deposit to visible, publishing on deposit: {w}x{w} field ({} deposits), then its CPU \
+             at 10, 100 and 1000 deposits/s",
+            plan.visible_count,
+            w = opts.visible_width
+        ));
+        let v = visible::measure(
+            &opts.launcher,
+            &tag(),
+            visible::VisibleRun {
+                on_deposit: true,
+                ..visible_run
+            },
+        )?;
+        let compute = Latency::from_ns_as_us(&v.compute_ns)
+            .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?;
+        let deposit_to_visible_on_deposit_us = VisibleReport {
+            latency: Latency::from_ns_as_us(&v.samples_ns)
+                .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?,
+            tick_hz: opts.tick_hz,
+            width: opts.visible_width,
+            target_p99_us: compute.p99 + 100.0,
+            tick_compute_us: compute,
+            field_cpu: v.cpu,
+        };
+        (
+            Some(deposit_to_visible_us),
+            Some(deposit_to_visible_on_deposit_us),
+        )
+    } else {
+        (None, None)
+    };
+    let gateway_pir = if runs(Section::Gateway) {
+        say(&format!(
+            "gateway: {} PIR round trips over UDP loopback, {} direct reads, {:.1} s flood",
+            plan.pir_count.0,
+            plan.pir_count.0,
+            plan.flood.as_secs_f64()
+        ));
+        let gateway_pir = gateway::measure(
+            &opts.launcher,
+            &tag(),
+            gateway::GatewayRun {
+                warmup: plan.pir_count.1,
+                count: plan.pir_count.0,
+                flood: plan.flood,
+                window: 32,
+                pin,
+            },
+        )?;
+        Some(gateway_pir)
+    } else {
+        None
+    };
+    let mirror = if runs(Section::Mirror) {
+        measure_mirror(opts, &plan, pin, &mut tag, &say)?
+    } else {
+        None
+    };
     if pin {
         machine::unpin();
     }
@@ -467,12 +570,14 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         mode: opts.mode,
         pinned: pin,
         zenoh_built: ZENOH_BUILT,
+        sections,
         tick_vs_memcpy,
         hop_ns,
         frame_ns,
         deposit_to_visible_us,
         deposit_to_visible_on_deposit_us,
         gateway_pir,
+        mirror,
         targets: Vec::new(),
         elapsed_s: 0.0,
     };
@@ -482,135 +587,49 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
     Ok(report)
 }
 
-fn target(name: &str, op: &'static str, limit: f64, measured: f64) -> Target {
-    let round = |v: f64| (v * 100.0).round() / 100.0;
-    Target {
-        name: name.into(),
-        op,
-        limit: round(limit),
-        measured: round(measured),
-        met: if op == ">=" {
-            measured >= limit
-        } else {
-            measured <= limit
+/// The `mirror` section: an origin of `plan.mirror_width`² at 100 Hz, a bridge and a mirror.
+#[cfg(feature = "zenoh")]
+fn measure_mirror(
+    opts: &Options,
+    plan: &Plan,
+    pin: bool,
+    tag: &mut impl FnMut() -> String,
+    say: &impl Fn(&str),
+) -> Result<Option<MirrorSection>, BenchError> {
+    let w = plan.mirror_width;
+    say(&format!(
+        "mirror: {w}x{w} origin at 100 Hz, bridge and mirror over Zenoh on loopback, \
+         {:.1} s at 10 and at 1000 deposits/s, then a mirror started afresh",
+        plan.mirror_window.as_secs_f64()
+    ));
+    mirror::measure(
+        &opts.launcher,
+        &tag(),
+        mirror::MirrorRun {
+            width: w,
+            tick_hz: 100.0,
+            window: plan.mirror_window,
+            keyframe_every: Duration::from_secs(5),
+            pin,
         },
-    }
+    )
+    .map(Some)
 }
 
-/// The targets of issues 6 and 18, each with the measured value and whether it is met.
-pub fn targets(r: &Report) -> Vec<Target> {
-    let mut t = Vec::new();
-    for (size, row) in &r.tick_vs_memcpy {
-        t.push(target(
-            &format!("plain tick / memcpy at {size}"),
-            "<=",
-            1.1,
-            row.exponential_ratio,
-        ));
-        t.push(target(
-            &format!("ambient tick / memcpy at {size}"),
-            "<=",
-            1.5,
-            row.ambient_ratio,
-        ));
-    }
-    t.push(target(
-        "hop p50 ours / raw iceoryx2 (wait)",
-        "<=",
-        1.5,
-        r.hop_ns.ours.p50 / r.hop_ns.raw_iceoryx2.p50,
+#[cfg(not(feature = "zenoh"))]
+fn measure_mirror(
+    _opts: &Options,
+    plan: &Plan,
+    _pin: bool,
+    _tag: &mut impl FnMut() -> String,
+    say: &impl Fn(&str),
+) -> Result<Option<MirrorSection>, BenchError> {
+    say(&format!(
+        "mirror ({w}x{w}, {:.1} s per deposit rate): not built (--features zenoh)",
+        plan.mirror_window.as_secs_f64(),
+        w = plan.mirror_width
     ));
-    t.push(target(
-        "hop p50 ours / raw iceoryx2 (busy-poll)",
-        "<=",
-        1.5,
-        r.hop_ns.busy_poll.ours.p50 / r.hop_ns.busy_poll.raw_iceoryx2.p50,
-    ));
-    if let (Some(small), Some(big)) = (r.frame_ns.get("1MiB"), r.frame_ns.get("16MiB")) {
-        t.push(target(
-            "frame p50 16 MiB / 1 MiB (ours, 1 reader)",
-            "<=",
-            2.0,
-            big.ours.p50 / small.ours.p50,
-        ));
-        t.push(target(
-            "frame p50 16 MiB / 1 MiB (ours, 8 readers)",
-            "<=",
-            2.0,
-            big.readers_8.ours.p50 / small.readers_8.ours.p50,
-        ));
-        for (size, f) in [("1 MiB", small), ("16 MiB", big)] {
-            t.push(target(
-                &format!("frame p50 ours / raw iceoryx2 at {size} (wait)"),
-                "<=",
-                1.5,
-                f.ours.p50 / f.raw_iceoryx2.p50,
-            ));
-            t.push(target(
-                &format!("frame p50 ours / raw iceoryx2 at {size} (busy-poll)"),
-                "<=",
-                1.5,
-                f.ours_busy_poll.p50 / f.raw_iceoryx2_busy_poll.p50,
-            ));
-            t.push(target(
-                &format!("frame p50 ours / raw iceoryx2 at {size} (paced spin)"),
-                "<=",
-                1.5,
-                f.ours_spin.p50 / f.raw_iceoryx2_spin.p50,
-            ));
-        }
-        t.push(target(
-            "frame p50 16 MiB / 1 MiB: ours / raw iceoryx2's (busy-poll)",
-            "<=",
-            1.0,
-            (big.ours_busy_poll.p50 / small.ours_busy_poll.p50)
-                / (big.raw_iceoryx2_busy_poll.p50 / small.raw_iceoryx2_busy_poll.p50),
-        ));
-        t.push(target(
-            "16 MiB frame p50: UDS+serde / ours (1 reader)",
-            ">=",
-            100.0,
-            big.uds_serde.p50 / big.ours.p50,
-        ));
-        if let Some(z) = big.zenoh {
-            t.push(target(
-                "16 MiB frame p50: Zenoh / ours (1 reader)",
-                ">=",
-                20.0,
-                z.p50 / big.ours.p50,
-            ));
-        }
-    }
-    let v = &r.deposit_to_visible_us;
-    t.push(target(
-        "deposit-to-visible p99 µs (limit: period + 1.2 x tick compute p99 + 50 µs)",
-        "<=",
-        v.target_p99_us,
-        v.latency.p99,
-    ));
-    let v = &r.deposit_to_visible_on_deposit_us;
-    t.push(target(
-        "deposit-to-visible p99 µs, publishing on deposit (limit: tick compute p99 + 100 µs)",
-        "<=",
-        v.target_p99_us,
-        v.latency.p99,
-    ));
-    // Issue 14: a PIR answered well inside a 10 Hz robot's step, and one gateway core serving
-    // 1000 robots at 10 Hz (seed 002's server load grows with N² per axis; ours is O(1) per PIR).
-    let g = &r.gateway_pir;
-    t.push(target(
-        "PIR round trip p99 µs over UDP loopback",
-        "<=",
-        1000.0,
-        g.pir_round_trip_ns.p99 / 1e3,
-    ));
-    t.push(target(
-        "PIRs per second of gateway CPU (one core)",
-        ">=",
-        10_000.0,
-        g.flood.pirs_per_cpu_s,
-    ));
-    t
+    Ok(None)
 }
 
 /// What the hidden `bench-peer` subcommand runs: one peer process of a measurement.

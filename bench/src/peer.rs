@@ -19,7 +19,7 @@ pub struct Launcher {
 }
 
 /// Transport a frame reader receives on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 pub enum FrameTransport {
     /// `field::shm::FieldReader`: the frame in shared memory, no copy.
     Ours,
@@ -32,7 +32,7 @@ pub enum FrameTransport {
 }
 
 /// How a frame reader waits for the next frame (`field::shm::WaitPolicy` on the wire).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 pub enum ReaderWait {
     /// Sleeps on the frame event.
     Event,
@@ -130,6 +130,10 @@ impl PeerSpec {
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct PeerResult {
     pub samples_ns: Vec<u64>,
+    /// The peer's CPU time over the wall time of its recording (share of one core), where it
+    /// measured it (frame readers: what a wait policy costs).
+    #[serde(default)]
+    pub cpu_share: Option<f64>,
 }
 
 /// One peer process, under the project's supervisor (`publishers::sim::supervisor`): stopped with

@@ -13,7 +13,9 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
-use crate::frames::{drive, pause, record, spawn_readers, test_plane, FrameRun, FRAME_TIMEOUT};
+use crate::frames::{
+    drive, pause, record, spawn_readers, test_plane, FrameRun, FrameSamples, FRAME_TIMEOUT,
+};
 use crate::peer::{Launcher, ReaderWait};
 use crate::BenchError;
 
@@ -61,7 +63,7 @@ pub fn measure(
     launcher: &Launcher,
     tag: &str,
     run: &FrameRun,
-) -> Result<Vec<u64>, BenchError> {
+) -> Result<FrameSamples, BenchError> {
     let name = format!("pheromone-bench/raw-frames/{tag}");
     let (pubsub, event) = services(node, &name, run.readers)?;
     let cells = test_plane(run.width);

@@ -17,8 +17,27 @@ pub struct TickRow {
     pub exponential_us: f64,
     pub ambient_us: f64,
     pub exponential_ratio: f64,
+    /// The ambient model at radius 0.5 m (10 cells of 5 cm).
+    pub ambient_ratio: f64,
+    /// The ambient model at several radii (`AMBIENT_RADII_M`), one thread.
+    pub ambient_by_radius: Vec<RadiusRow>,
+    /// The ambient tick (radius 0.5 m) on 2 threads, and 1-thread time / 2-thread time.
+    pub ambient_2_threads_us: f64,
+    pub ambient_thread_speedup: f64,
+    /// The kernel instantiation the tick ran (`"avx2"` or `"portable"`).
+    pub kernels: &'static str,
+}
+
+/// One radius of the ambient model.
+#[derive(Debug, Clone, Serialize)]
+pub struct RadiusRow {
+    pub radius_cells: u32,
+    pub ambient_us: f64,
     pub ambient_ratio: f64,
 }
+
+/// The radii of the by-radius ambient measurement (m, on 5 cm cells: 1, 10 and 40 cells).
+pub const AMBIENT_RADII_M: [f32; 3] = [0.05, 0.5, 2.0];
 
 fn median_ns(reps: usize, mut f: impl FnMut()) -> u64 {
     f();
@@ -62,18 +81,29 @@ pub fn measure(width: u32, reps: usize) -> Result<TickRow, BenchError> {
         exp.step(black_box(&prev), &mut next);
         black_box(&mut next);
     });
-    let mut amb = stepper(
-        width,
-        Evaporation::Ambient {
-            decay_per_s: 0.0057,
-            alpha: 0.5,
-            radius_m: 0.5,
-        },
-    )?;
-    let ambient = median_ns(reps, || {
-        amb.step(black_box(&prev), &mut next);
-        black_box(&mut next);
-    });
+    let ambient_at = |radius_m: f32, threads: usize, next: &mut Vec<f32>| {
+        let mut amb = stepper(
+            width,
+            Evaporation::Ambient {
+                decay_per_s: 0.0057,
+                alpha: 0.5,
+                radius_m,
+            },
+        )?;
+        amb.set_threads(threads)
+            .map_err(|e| BenchError::Peer(format!("tick bench threads: {e}")))?;
+        Ok::<u64, BenchError>(median_ns(reps, || {
+            amb.step(black_box(&prev), next);
+            black_box(&mut *next);
+        }))
+    };
+    let ambient = ambient_at(0.5, 1, &mut next)?;
+    let ambient_2 = ambient_at(0.5, 2, &mut next)?;
+    let mut by_radius = Vec::new();
+    for radius_m in AMBIENT_RADII_M {
+        let ns = ambient_at(radius_m, 1, &mut next)?;
+        by_radius.push((radius_m, ns));
+    }
     let us = |ns: u64| (ns as f64 / 100.0).round() / 10.0;
     let ratio = |ns: u64| ((ns as f64 / memcpy as f64) * 100.0).round() / 100.0;
     Ok(TickRow {
@@ -84,5 +114,16 @@ pub fn measure(width: u32, reps: usize) -> Result<TickRow, BenchError> {
         ambient_us: us(ambient),
         exponential_ratio: ratio(exponential),
         ambient_ratio: ratio(ambient),
+        ambient_by_radius: by_radius
+            .into_iter()
+            .map(|(radius_m, ns)| RadiusRow {
+                radius_cells: (radius_m / FieldConfig::default().cell_size_m).round() as u32,
+                ambient_us: us(ns),
+                ambient_ratio: ratio(ns),
+            })
+            .collect(),
+        ambient_2_threads_us: us(ambient_2),
+        ambient_thread_speedup: ((ambient as f64 / ambient_2 as f64) * 100.0).round() / 100.0,
+        kernels: field::models::Dispatch::detect().name(),
     })
 }

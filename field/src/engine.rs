@@ -13,7 +13,7 @@ use crate::deposit::{
 use crate::error::ConfigError;
 use crate::geometry::GridGeometry;
 use crate::messages::{DepositMsg, FrameHeader, LAYOUT_VERSION};
-use crate::models::{step_plane, ChannelSpec, Evaporation, PlanePlan, Scratch};
+use crate::models::{step_plane_threads, ChannelSpec, Evaporation, PlanePlan, Scratch};
 use crate::sample::FrameView;
 
 /// Largest frame accepted, in bytes (also bounded by the free space of /dev/shm at start).
@@ -234,14 +234,23 @@ fn deposit_order(robot_id: u32, arrival: usize) -> u64 {
     ((robot_id.wrapping_add(1) as u64) << 32) | (arrival as u64 & 0xffff_ffff)
 }
 
+/// Most threads a tick may use (`Stepper::set_threads`).
+pub const MAX_THREADS: usize = 256;
+
 /// Validates deposits and advances frames. Holds no frame itself.
 #[derive(Debug, Clone)]
 pub struct Stepper {
     config: FieldConfig,
     geometry: GridGeometry,
     scratch: Scratch,
+    /// Threads of the evaporation pass (1: the calling thread only).
+    threads: usize,
     /// Validated deposits of the next tick, each with its place in the tick's canonical order.
-    pending: Vec<(u64, PreparedDeposit)>,
+    pending: Vec<(u64, PreparedDeposit, DepositMsg)>,
+    /// The deposits the last step applied, in the order it applied them (`applied`).
+    applied: Vec<DepositMsg>,
+    /// The last step: field time before it (s), its `dt_s` and its `dt_time_s`.
+    last_step: (f64, f32, f64),
     pub counters: DepositCounters,
     /// Field time of the last computed frame (s).
     pub sim_time_s: f64,
@@ -257,7 +266,10 @@ impl Stepper {
             geometry: config.geometry(),
             config,
             scratch: Scratch::default(),
+            threads: 1,
             pending,
+            applied: Vec::new(),
+            last_step: (0.0, 0.0, 0.0),
             counters: DepositCounters::default(),
             sim_time_s: 0.0,
             sequence: 0,
@@ -266,6 +278,26 @@ impl Stepper {
 
     pub fn config(&self) -> &FieldConfig {
         &self.config
+    }
+
+    /// Splits each plane's rows across `threads` threads (the caller's plus `threads − 1` scoped
+    /// ones) in every following step. Frames are bit-identical for every thread count. Errors
+    /// for 0 or more than `MAX_THREADS`.
+    pub fn set_threads(&mut self, threads: usize) -> Result<(), ConfigError> {
+        if threads == 0 || threads > MAX_THREADS {
+            return Err(ConfigError::invalid(
+                "threads",
+                threads,
+                format!("the tick needs between 1 and {MAX_THREADS} threads"),
+            ));
+        }
+        self.threads = threads;
+        Ok(())
+    }
+
+    /// Threads of the evaporation pass.
+    pub fn threads(&self) -> usize {
+        self.threads
     }
 
     pub fn geometry(&self) -> &GridGeometry {
@@ -290,7 +322,7 @@ impl Stepper {
         ) {
             Ok(d) => {
                 let order = deposit_order(msg.robot_id, self.pending.len());
-                self.pending.push((order, d));
+                self.pending.push((order, d, *msg));
                 Ok(())
             }
             Err(r) => {
@@ -309,8 +341,8 @@ impl Stepper {
     /// deposits. Each cell of `prev` is read once and each cell of `next` written once by the
     /// evaporation pass; deposits then touch only their kernel's cells.
     pub fn step(&mut self, prev: &[f32], next: &mut [f32]) -> TickReport {
-        let dt = self.config.dt_s();
-        self.step_by(prev, next, dt, 1.0 / self.config.tick_hz as f64)
+        let (dt, dt_time_s) = self.tick_step();
+        self.step_by(prev, next, dt, dt_time_s)
     }
 
     /// As `step`, over `dt_s` seconds instead of one tick period (a field that publishes as
@@ -327,6 +359,47 @@ impl Stepper {
         self.step_by(prev, next, dt, dt as f64)
     }
 
+    /// The deposits the last step applied, in the order it applied them: what a mirror replays
+    /// (`replay`) to compute the same frame.
+    pub fn applied(&self) -> &[DepositMsg] {
+        &self.applied
+    }
+
+    /// Recomputes a frame of another field (a mirror): `deposits` are the origin's applied list of
+    /// that tick, in order, `sim_time_before_s` its field time before the tick, `dt_s` and
+    /// `dt_time_s` the step it took (`InputsHeader`). The frame is bit-identical to the origin's
+    /// on the same binary and architecture. Returns the report and how many deposits this
+    /// stepper refused (0 unless the configurations differ).
+    pub fn replay(
+        &mut self,
+        prev: &[f32],
+        next: &mut [f32],
+        deposits: &[DepositMsg],
+        sim_time_before_s: f64,
+        dt_s: f32,
+        dt_time_s: f64,
+    ) -> (TickReport, u32) {
+        self.pending.clear();
+        let mut refused = 0;
+        for d in deposits {
+            if self.offer(d).is_err() {
+                refused += 1;
+            }
+        }
+        self.sim_time_s = sim_time_before_s;
+        (self.step_by(prev, next, dt_s, dt_time_s), refused)
+    }
+
+    /// The last step: field time before it (s), its `dt_s` and its field-time increment (s).
+    pub fn last_step(&self) -> (f64, f32, f64) {
+        self.last_step
+    }
+
+    /// The step (`dt_s`, `dt_time_s`) `step` takes: one tick period.
+    pub fn tick_step(&self) -> (f32, f64) {
+        (self.config.dt_s(), 1.0 / self.config.tick_hz as f64)
+    }
+
     fn step_by(&mut self, prev: &[f32], next: &mut [f32], dt: f32, dt_time_s: f64) -> TickReport {
         let n = self.geometry.cells();
         assert_eq!(
@@ -340,20 +413,23 @@ impl Stepper {
         for (c, spec) in self.config.channels.iter().enumerate() {
             let plan = PlanePlan::for_dt(spec, self.sim_time_s, dt, tick_dt, h);
             let kappa = spec.diffusion_m2_per_s * dt / (h * h);
-            step_plane(
+            step_plane_threads(
                 plan,
                 kappa,
                 self.geometry.width as usize,
                 &prev[c * n..(c + 1) * n],
                 &mut next[c * n..(c + 1) * n],
                 &mut self.scratch,
+                self.threads,
             );
         }
         let mut report = TickReport::default();
         // Deposits onto one cell do not commute (saturation, rounding): apply them in one
         // canonical order, whatever order the publishers' messages arrived in.
-        self.pending.sort_unstable_by_key(|(order, _)| *order);
-        for (_, d) in self.pending.drain(..) {
+        self.pending.sort_unstable_by_key(|(order, _, _)| *order);
+        self.applied.clear();
+        for (_, d, msg) in self.pending.drain(..) {
+            self.applied.push(msg);
             let (lo, hi) = self.config.channels[d.channel].value_range();
             let range = d.channel * n..(d.channel + 1) * n;
             report.mass_added += d.apply(
@@ -366,6 +442,7 @@ impl Stepper {
             report.deposits_applied += 1;
         }
         self.counters.applied += report.deposits_applied as u64;
+        self.last_step = (self.sim_time_s, dt, dt_time_s);
         self.sim_time_s += dt_time_s;
         self.sequence += 1;
         report

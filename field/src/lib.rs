@@ -2,8 +2,10 @@
 //!
 //! A virtual pheromone field for several processes on one host: geometry, the models of the
 //! seed papers (MODELS.md M1–M4), the fused tick engine, sampling, the shared-memory message
-//! types and the iceoryx2 service (`shm`, the crate's only `unsafe`).
+//! types and the iceoryx2 service (`shm`, which holds the crate's `unsafe` besides the kernel
+//! dispatch in `simd`).
 
+pub mod ambient;
 pub mod checkpoint;
 pub mod deposit;
 pub mod engine;
@@ -16,6 +18,7 @@ pub mod models;
 pub mod run;
 pub mod sample;
 pub mod shm;
+pub mod simd;
 pub mod tune;
 pub mod wire;
 

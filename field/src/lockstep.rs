@@ -41,6 +41,9 @@ pub mod role {
     pub const DEPOSITOR: u32 = 2;
     /// The observer of `pheromone sim` recorded the step's frame.
     pub const OBSERVER: u32 = 3;
+    /// A mapper (`pheromone mapper`) published its map frame of the step and holds the peer
+    /// frames it merges at the next step.
+    pub const MAPPER: u32 = 4;
 
     /// A role's name in messages.
     pub fn name(role: u32) -> &'static str {
@@ -48,6 +51,7 @@ pub mod role {
             FIELD => "field",
             DEPOSITOR => "depositor",
             OBSERVER => "observer",
+            MAPPER => "mapper",
             _ => "unknown role",
         }
     }
@@ -347,9 +351,9 @@ impl Conductor {
         };
         let early = std::mem::take(early_store);
         for a in early {
-            if a.step == step {
+            if a.step == step && expected.contains(&(a.role, a.robot_id)) {
                 take(&a, &mut missing);
-            } else if a.step > step {
+            } else if a.step >= step {
                 early_store.push(a);
             }
         }
@@ -360,13 +364,17 @@ impl Conductor {
             &mut missing,
             stall,
             |(r, id)| match *r {
-                role::DEPOSITOR => format!("depositor r{id}"),
+                role::DEPOSITOR | role::MAPPER => format!("{} r{id}", role::name(*r)),
                 r => role::name(r).to_string(),
             },
             |timeout| {
                 Ok(match acks.recv_timeout(timeout)? {
-                    Some(a) if a.step == step => Some((a.role, a.robot_id)),
-                    Some(a) if a.step > step => {
+                    Some(a) if a.step == step && expected.contains(&(a.role, a.robot_id)) => {
+                        Some((a.role, a.robot_id))
+                    }
+                    // Of this step, but for the other collection of the step (a mapper that
+                    // acknowledged before every depositor did): kept for it.
+                    Some(a) if a.step >= step => {
                         early_store.push(a);
                         None
                     }
@@ -461,5 +469,69 @@ impl Participant {
     /// The clock's listener, to wait on together with other ports.
     pub fn clock_listener(&self) -> &Listener<Svc> {
         self.clock.listener()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shm::create_node;
+
+    fn world(tag: &str) -> String {
+        format!("lockstep-test-{}-{tag}", std::process::id())
+    }
+
+    const STALL: Duration = Duration::from_secs(10);
+
+    #[test]
+    fn an_ack_for_the_other_collection_of_the_step_is_kept_for_it() {
+        let node = create_node(&format!("lockstep-test-{}-keep", std::process::id())).unwrap();
+        let w = world("keep");
+        let mut conductor = Conductor::create(&node, &w, true).unwrap();
+        let participant = Participant::join(&node, &w).unwrap();
+        // The mapper acknowledges step 3 before the depositor does: the depositors' collection
+        // of step 3 must not lose it.
+        assert!(participant.ack(3, role::MAPPER, 0).unwrap());
+        assert!(participant.ack(3, role::DEPOSITOR, 0).unwrap());
+        conductor
+            .collect(&node, 3, &[(role::DEPOSITOR, 0)], STALL)
+            .unwrap();
+        // Nothing more is sent: the mappers' collection of step 3 completes from the kept ack.
+        conductor
+            .collect(&node, 3, &[(role::MAPPER, 0)], Duration::from_millis(300))
+            .unwrap();
+        // Used once: the same collection again has nothing left and stalls, naming the mapper.
+        let err = conductor
+            .collect(&node, 3, &[(role::MAPPER, 0)], Duration::from_millis(300))
+            .unwrap_err();
+        assert!(
+            matches!(&err, LockstepError::Stalled { step: 3, missing, .. } if missing == "mapper r0"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn an_ack_of_an_earlier_step_is_dropped_and_one_of_a_later_step_kept() {
+        let node = create_node(&format!("lockstep-test-{}-drop", std::process::id())).unwrap();
+        let w = world("drop");
+        let mut conductor = Conductor::create(&node, &w, true).unwrap();
+        let participant = Participant::join(&node, &w).unwrap();
+        assert!(participant.ack(4, role::MAPPER, 1).unwrap()); // stale once step 5 is collected
+        assert!(participant.ack(6, role::MAPPER, 2).unwrap()); // early for step 5
+        assert!(participant.ack(5, role::DEPOSITOR, 0).unwrap());
+        conductor
+            .collect(&node, 5, &[(role::DEPOSITOR, 0)], STALL)
+            .unwrap();
+        let err = conductor
+            .collect(&node, 5, &[(role::MAPPER, 1)], Duration::from_millis(300))
+            .unwrap_err();
+        assert!(
+            matches!(&err, LockstepError::Stalled { step: 5, missing, .. } if missing == "mapper r1"),
+            "{err}"
+        );
+        // Step 6's ack waited through step 5's collections.
+        conductor
+            .collect(&node, 6, &[(role::MAPPER, 2)], Duration::from_millis(300))
+            .unwrap();
     }
 }

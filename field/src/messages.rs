@@ -290,3 +290,32 @@ pub struct ClockMsg {
 
 // repr(C): numbers and arrays of numbers only.
 crate::wire_type!(ClockMsg, "ClockMsg", size = 40, align = 8);
+
+/// The inputs of one published frame (service `pheromone/F/inputs`, user header of a
+/// `[DepositMsg]` slice holding the deposits the tick applied, in the order applied): what a
+/// mirror needs to compute the same frame from the previous one (`Stepper::replay`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C)]
+pub struct InputsHeader {
+    /// Sequence number of the frame these inputs produced (the previous frame is `sequence - 1`).
+    pub sequence: u64,
+    /// An id of this run of the field process (its start time and pid): a restarted field has
+    /// another one, so a mirror knows the sequence started again.
+    pub epoch: u64,
+    /// CLOCK_MONOTONIC (ns) when the frame was published.
+    pub stamp_ns: u64,
+    /// Field time before the tick (s).
+    pub sim_time_before_s: f64,
+    /// Field-time increment of the tick (s): `1 / tick_hz` as f64 for a regular tick.
+    pub dt_time_s: f64,
+    /// Cumulative counters after the tick (the frame header's).
+    pub deposits_applied: u64,
+    pub deposits_rejected_total: u64,
+    /// The step's dt (s, f32) as the evaporation and diffusion used it.
+    pub dt_s: f32,
+    /// Deposits in the slice.
+    pub count: u32,
+}
+
+// repr(C): numbers only.
+crate::wire_type!(InputsHeader, "InputsHeader", size = 64, align = 8);

@@ -1,13 +1,14 @@
 //! Per-channel evaporation / diffusion models and the fused per-plane update pass.
 //!
 //! One pass reads each cell of the previous plane once and writes each cell of the next plane
-//! once (`step_plane`). The ambient mean of the seed 000 model uses running sums: a column-sum
-//! vector updated by one row in and one row out, and a prefix sum along the row, so its cost per
-//! cell does not depend on the radius.
+//! once (`step_plane`). The ambient mean of the seed 000 model uses separable running sums over
+//! bands of rows (`crate::ambient`), so its cost per cell does not depend on the radius.
 
 use serde::{Deserialize, Serialize};
 
+use crate::ambient::{self, BandScratch, Output};
 use crate::error::ConfigError;
+pub use crate::simd::Dispatch;
 
 /// How a channel loses pheromone between ticks.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -240,15 +241,11 @@ impl PlanePlan {
     }
 }
 
-/// Reusable scratch for the ambient mean (O(width), never O(grid)).
+/// Reusable scratch of the plane pass: one `BandScratch` per thread (O(width) each, never
+/// O(grid)).
 #[derive(Debug, Default, Clone)]
 pub struct Scratch {
-    col_sum: Vec<f64>,
-    prefix: Vec<f64>,
-    inv_count_x: Vec<f64>,
-    inv_count: Vec<f64>,
-    ambient: Vec<f32>,
-    diffused: Vec<f32>,
+    workers: Vec<BandScratch>,
 }
 
 /// Computes one plane of the next frame from the previous one: diffusion (if `kappa > 0`,
@@ -262,87 +259,72 @@ pub fn step_plane(
     next: &mut [f32],
     scratch: &mut Scratch,
 ) {
+    step_plane_threads(plan, kappa, width, prev, next, scratch, 1);
+}
+
+/// As `step_plane`, with the rows split across `threads` threads (the caller's and
+/// `threads − 1` scoped ones). The result is bit-identical for every thread count.
+pub fn step_plane_threads(
+    plan: PlanePlan,
+    kappa: f32,
+    width: usize,
+    prev: &[f32],
+    next: &mut [f32],
+    scratch: &mut Scratch,
+    threads: usize,
+) {
+    step_plane_with(
+        plan,
+        kappa,
+        width,
+        prev,
+        next,
+        scratch,
+        threads,
+        Dispatch::detect(),
+    );
+}
+
+/// As `step_plane_threads` with a chosen kernel instantiation (tests compare AVX2 and portable
+/// bit for bit).
+#[allow(clippy::too_many_arguments)]
+pub fn step_plane_with(
+    plan: PlanePlan,
+    kappa: f32,
+    width: usize,
+    prev: &[f32],
+    next: &mut [f32],
+    scratch: &mut Scratch,
+    threads: usize,
+    dispatch: Dispatch,
+) {
     assert_eq!(prev.len(), next.len());
     assert!(width > 0 && prev.len().is_multiple_of(width));
-    let height = prev.len() / width;
-    if kappa == 0.0 {
-        if let PlanePlan::Scale { factor } = plan {
-            scale(prev, next, factor);
-            return;
-        }
-        if let PlanePlan::Subtract { loss } = plan {
-            for (o, &p) in next.iter_mut().zip(prev) {
-                *o = subtract_toward_zero(p, loss);
-            }
-            return;
-        }
-    }
-    let mut ambient = AmbientRows::new(plan, width, height, prev, scratch);
-    let mut diffused = std::mem::take(&mut scratch.diffused);
-    diffused.resize(width, 0.0);
-    for y in 0..height {
-        let row = &prev[y * width..(y + 1) * width];
-        let src: &[f32] = if kappa > 0.0 {
-            let up = if y > 0 {
-                &prev[(y - 1) * width..y * width]
-            } else {
-                row
-            };
-            let down = if y + 1 < height {
-                &prev[(y + 1) * width..(y + 2) * width]
-            } else {
-                row
-            };
-            diffuse_row(row, up, down, kappa, &mut diffused);
-            &diffused
-        } else {
-            row
-        };
-        let out = &mut next[y * width..(y + 1) * width];
-        match plan {
-            PlanePlan::Scale { factor } => scale(src, out, factor),
-            PlanePlan::Subtract { loss } => {
-                for (o, &p) in out.iter_mut().zip(src) {
-                    *o = subtract_toward_zero(p, loss);
-                }
-            }
-            PlanePlan::Ambient { factor, alpha, .. } => {
-                let amb = ambient.row(y, prev);
-                ambient_row(src, amb, out, factor, alpha);
-            }
-        }
-    }
-    scratch.diffused = diffused;
-    ambient.finish(scratch);
+    ambient::plane(
+        Output::Step { plan, kappa },
+        width,
+        prev,
+        next,
+        &mut scratch.workers,
+        threads,
+        dispatch,
+    );
 }
 
 #[inline]
-fn scale(src: &[f32], out: &mut [f32], factor: f32) {
+pub(crate) fn scale(src: &[f32], out: &mut [f32], factor: f32) {
     for (o, &p) in out.iter_mut().zip(src) {
         *o = p * factor;
     }
 }
 
 #[inline]
-fn subtract_toward_zero(p: f32, loss: f32) -> f32 {
+pub(crate) fn subtract_toward_zero(p: f32, loss: f32) -> f32 {
     let m = (p.abs() - loss).max(0.0);
     m.copysign(p)
 }
 
-#[inline]
-fn ambient_row(src: &[f32], amb: &[f32], out: &mut [f32], factor: f32, alpha: f32) {
-    let one_minus = 1.0 - factor;
-    for ((o, &p), &a) in out.iter_mut().zip(src).zip(amb) {
-        // = P·e + (1 − e)·min(P, α·Pa), written so that rounding can never raise the cell:
-        // P − (1 − e)·(P − m) with 0 ≤ m ≤ P gives 0 ≤ P' ≤ P in floating point too. (A plain
-        // compare-select, not f32::min: cells are finite, and it vectorizes to one minps.)
-        let m = alpha * a;
-        let m = if m < p { m } else { p };
-        *o = p - one_minus * (p - m);
-    }
-}
-
-fn diffuse_row(row: &[f32], up: &[f32], down: &[f32], kappa: f32, out: &mut [f32]) {
+pub(crate) fn diffuse_row(row: &[f32], up: &[f32], down: &[f32], kappa: f32, out: &mut [f32]) {
     let w = row.len();
     if w == 1 {
         out[0] = row[0] + kappa * (up[0] + down[0] - 2.0 * row[0]);
@@ -355,228 +337,34 @@ fn diffuse_row(row: &[f32], up: &[f32], down: &[f32], kappa: f32, out: &mut [f32
     out[w - 1] = row[w - 1] + kappa * (row[w - 2] + up[w - 1] + down[w - 1] - 3.0 * row[w - 1]);
 }
 
-/// Streams the ambient mean row by row: `col_sum[x]` holds the sum of `prev` over the rows of the
-/// window of the current row; each new row adds one row and drops one. Along the row, window
-/// sums are differences of a prefix sum padded by the radius on both sides, so every cell takes
-/// the same branch-free, vectorizable path, edges included.
-struct AmbientRows {
-    /// Window half-height, capped at the height (a larger one clips to the same window).
-    radius_y: usize,
-    /// Window half-width, capped at the width.
-    radius_x: usize,
-    width: usize,
-    height: usize,
-    col_sum: Vec<f64>,
-    /// `prefix[j] = Σ col_sum[..clamp(j − radius_x, 0, width)]`, `width + 2·radius_x + 1` long:
-    /// the window sum of cell x is `prefix[x + 2·radius_x + 1] − prefix[x]`.
-    prefix: Vec<f64>,
-    /// 1 / (cells of the window of column x along the row) — no division per cell.
-    inv_count_x: Vec<f64>,
-    /// 1 / (cells of the window of column x) for windows of `inv_count_rows` rows: recomputed
-    /// only when the row count changes (near the top and bottom edges).
-    inv_count: Vec<f64>,
-    inv_count_rows: usize,
-    ambient: Vec<f32>,
-    active: bool,
-}
-
-impl AmbientRows {
-    fn new(
-        plan: PlanePlan,
-        width: usize,
-        height: usize,
-        prev: &[f32],
-        scratch: &mut Scratch,
-    ) -> Self {
-        let (active, radius) = match plan {
-            PlanePlan::Ambient {
-                alpha,
-                radius_cells,
-                ..
-            } => (alpha > 0.0, radius_cells as usize),
-            _ => (false, 0),
-        };
-        let (radius_x, radius_y) = (radius.min(width), radius.min(height));
-        let mut s = Self {
-            radius_y,
-            radius_x,
-            width,
-            height,
-            col_sum: std::mem::take(&mut scratch.col_sum),
-            prefix: std::mem::take(&mut scratch.prefix),
-            inv_count_x: std::mem::take(&mut scratch.inv_count_x),
-            inv_count: std::mem::take(&mut scratch.inv_count),
-            inv_count_rows: 0,
-            ambient: std::mem::take(&mut scratch.ambient),
-            active,
-        };
-        s.ambient.clear();
-        s.ambient.resize(width, 0.0);
-        if active {
-            s.col_sum.clear();
-            s.col_sum.resize(width, 0.0);
-            // The left pad stays 0 (= Σ of nothing); the rest is rewritten every row.
-            s.prefix.clear();
-            s.prefix.resize(width + 2 * radius_x + 1, 0.0);
-            s.inv_count_x.clear();
-            s.inv_count_x.extend((0..width).map(|x| {
-                1.0 / ((x + radius_x + 1).min(width) - x.saturating_sub(radius_x)) as f64
-            }));
-            s.inv_count.clear();
-            s.inv_count.resize(width, 0.0);
-            // Rows 0..=r-1 enter before row 0; row(y) adds row y+r.
-            for y in 0..radius_y {
-                add_row(&mut s.col_sum, &prev[y * width..(y + 1) * width]);
-            }
-        }
-        s
-    }
-
-    /// The ambient mean of every cell of row `y`; rows must be asked for in order 0, 1, 2, ….
-    fn row(&mut self, y: usize, prev: &[f32]) -> &[f32] {
-        if !self.active {
-            return &self.ambient;
-        }
-        let (w, r, rx) = (self.width, self.radius_y, self.radius_x);
-        let row = |i: usize| &prev[i * w..(i + 1) * w];
-        match (y + r < self.height, y > r) {
-            (true, true) => swap_row(&mut self.col_sum, row(y + r), row(y - r - 1)),
-            (true, false) => add_row(&mut self.col_sum, row(y + r)),
-            (false, true) => sub_row(&mut self.col_sum, row(y - r - 1)),
-            (false, false) => {}
-        }
-        let rows_in = (y + r).min(self.height - 1) - y.saturating_sub(r) + 1;
-        if rows_in != self.inv_count_rows {
-            let inv_rows = 1.0 / rows_in as f64;
-            for (c, &cx) in self.inv_count.iter_mut().zip(&self.inv_count_x) {
-                *c = cx * inv_rows;
-            }
-            self.inv_count_rows = rows_in;
-        }
-        prefix_sum(&self.col_sum, &mut self.prefix[rx..=rx + w]);
-        let total = self.prefix[rx + w];
-        self.prefix[rx + w + 1..].fill(total);
-        let span = 2 * rx + 1;
-        for (((a, &hi), &lo), &inv) in self
-            .ambient
-            .iter_mut()
-            .zip(&self.prefix[span..])
-            .zip(&self.prefix[..w])
-            .zip(&self.inv_count)
-        {
-            // Clamped at 0: the cells are non-negative (the ambient model is unsigned-only), but
-            // running sums that add and later drop a large value can end a hair below 0.
-            let sum = hi - lo;
-            let sum = if sum > 0.0 { sum } else { 0.0 };
-            *a = (sum * inv) as f32;
-        }
-        &self.ambient
-    }
-
-    fn finish(self, scratch: &mut Scratch) {
-        scratch.col_sum = self.col_sum;
-        scratch.prefix = self.prefix;
-        scratch.inv_count_x = self.inv_count_x;
-        scratch.inv_count = self.inv_count;
-        scratch.ambient = self.ambient;
-    }
-}
-
-#[inline]
-fn add_row(col_sum: &mut [f64], row: &[f32]) {
-    for (c, &v) in col_sum.iter_mut().zip(row) {
-        *c += v as f64;
-    }
-}
-
-#[inline]
-fn sub_row(col_sum: &mut [f64], row: &[f32]) {
-    for (c, &v) in col_sum.iter_mut().zip(row) {
-        *c -= v as f64;
-    }
-}
-
-/// One row enters the window and one leaves. The difference of two f32 is exact in f64, so this
-/// is one rounding per column instead of two.
-#[inline]
-fn swap_row(col_sum: &mut [f64], row_in: &[f32], row_out: &[f32]) {
-    for ((c, &i), &o) in col_sum.iter_mut().zip(row_in).zip(row_out) {
-        *c += i as f64 - o as f64;
-    }
-}
-
-/// `prefix[i] = Σ col[..i]` (`prefix` is one longer than `col`). The row is cut into four
-/// blocks whose local sums run interleaved, so the adds overlap instead of waiting on each other;
-/// a second, vectorized pass adds to each block the total of the blocks before it.
-fn prefix_sum(col: &[f64], prefix: &mut [f64]) {
-    let n = col.len();
-    assert_eq!(prefix.len(), n + 1);
-    prefix[0] = 0.0;
-    let out = &mut prefix[1..];
-    let q = n / 4;
-    if q < 4 {
-        let mut acc = 0.0;
-        for (p, &c) in out.iter_mut().zip(col) {
-            acc += c;
-            *p = acc;
-        }
-        return;
-    }
-    // Blocks of q cells; the remainder joins the last block.
-    let (c0, rest) = col.split_at(q);
-    let (c1, rest) = rest.split_at(q);
-    let (c2, c3) = rest.split_at(q);
-    let (o0, rest) = out.split_at_mut(q);
-    let (o1, rest) = rest.split_at_mut(q);
-    let (o2, o3) = rest.split_at_mut(q);
-    let (mut a0, mut a1, mut a2, mut a3) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for (((((((&x0, &x1), &x2), &x3), p0), p1), p2), p3) in c0
-        .iter()
-        .zip(c1)
-        .zip(c2)
-        .zip(&c3[..q])
-        .zip(o0.iter_mut())
-        .zip(o1.iter_mut())
-        .zip(o2.iter_mut())
-        .zip(o3[..q].iter_mut())
-    {
-        a0 += x0;
-        a1 += x1;
-        a2 += x2;
-        a3 += x3;
-        *p0 = a0;
-        *p1 = a1;
-        *p2 = a2;
-        *p3 = a3;
-    }
-    for (p, &c) in o3[q..].iter_mut().zip(&c3[q..]) {
-        a3 += c;
-        *p = a3;
-    }
-    for (block, offset) in [(o1, a0), (o2, a0 + a1), (o3, a0 + a1 + a2)] {
-        for p in block.iter_mut() {
-            *p += offset;
-        }
-    }
-}
-
 /// The running-sum ambient mean of every cell of a `width`-wide plane, over the `(2r+1)²` window
-/// around each cell clipped to the grid — the same `AmbientRows` code the tick uses, for tests
-/// and tools (compare with `ambient_mean_brute`).
+/// around each cell clipped to the grid — the same band code the tick uses (`crate::ambient`),
+/// for tests and tools (compare with `ambient_mean_brute`).
 pub fn ambient_mean_plane(prev: &[f32], width: usize, r: usize) -> Vec<f32> {
+    ambient_mean_plane_with(prev, width, r, Dispatch::detect(), 1)
+}
+
+/// As `ambient_mean_plane` with a chosen kernel instantiation and thread count (tests compare
+/// the AVX2 and portable paths and thread counts bit for bit).
+pub fn ambient_mean_plane_with(
+    prev: &[f32],
+    width: usize,
+    r: usize,
+    dispatch: Dispatch,
+    threads: usize,
+) -> Vec<f32> {
     assert!(width > 0 && prev.len().is_multiple_of(width));
-    let height = prev.len() / width;
-    let plan = PlanePlan::Ambient {
-        factor: 1.0,
-        alpha: 1.0,
-        radius_cells: r.min(u32::MAX as usize) as u32,
-    };
-    let mut scratch = Scratch::default();
-    let mut rows = AmbientRows::new(plan, width, height, prev, &mut scratch);
-    let mut out = Vec::with_capacity(prev.len());
-    for y in 0..height {
-        out.extend_from_slice(rows.row(y, prev));
-    }
+    let mut out = vec![0.0f32; prev.len()];
+    let mut workers = Vec::new();
+    ambient::plane(
+        Output::Mean { radius_cells: r },
+        width,
+        prev,
+        &mut out,
+        &mut workers,
+        threads,
+        dispatch,
+    );
     out
 }
 

@@ -37,6 +37,9 @@ pub struct FieldRunOptions {
     /// Publish a frame as soon as deposits arrive, no sooner than this after the last frame
     /// (wall-time fields only); every frame then steps by the real elapsed time.
     pub publish_on_deposit: Option<Duration>,
+    /// Threads of each tick's evaporation pass (1..=`engine::MAX_THREADS`; rows split across
+    /// threads, the frames bit-identical to one thread's).
+    pub threads: usize,
 }
 
 /// Why a field process stopped with an error.
@@ -116,6 +119,16 @@ pub fn run_field(
     let started = Instant::now();
     let config = &o.config;
     let mut standby = None;
+    // The deposit-ready event exists before the deposit service does, so that a depositor that
+    // attaches as soon as it finds the field also finds the event to wake it (a standby creates
+    // it when it takes over, as the primary's is still there until then).
+    let wakes_on_deposit = o.publish_on_deposit.filter(|_| o.clock.is_none());
+    let mut deposit_wake = match wakes_on_deposit {
+        Some(min_interval) if !o.standby => {
+            Some(DepositWake::new(node, &o.name, config, min_interval)?)
+        }
+        _ => None,
+    };
     let (mut server, mut longest_gap_ns) = if o.standby {
         let Some((server, takeover, mirrored)) = run_standby(node, o)? else {
             return Ok(None);
@@ -166,6 +179,14 @@ pub fn run_field(
             0,
         )
     };
+    server
+        .set_threads(o.threads)
+        .map_err(|source| ShmError::Config {
+            field: o.name.clone(),
+            source,
+        })?;
+    // Each frame's inputs, for `pheromone bridge` (mirrors on other hosts).
+    server.publish_inputs(node)?;
     // Lockstep: join the world's run once every port exists.
     let clock = match &o.clock {
         Some(world) => Some(Participant::join(node, world)?),
@@ -187,10 +208,10 @@ pub fn run_field(
     let mut dead_nodes_cleaned = 0u64;
     let mut last_clock_step: Option<u64> = None;
     let mut last_frame_at = Instant::now();
-    let deposit_wake = match (o.publish_on_deposit, &clock) {
-        (Some(min_interval), None) => Some(DepositWake::new(node, &o.name, config, min_interval)?),
-        _ => None,
-    };
+    if let (Some(min_interval), None) = (wakes_on_deposit, &deposit_wake) {
+        deposit_wake = Some(DepositWake::new(node, &o.name, config, min_interval)?);
+    }
+    let deposit_wake = deposit_wake;
     let mut early_frames = 0u64;
     loop {
         if let Some(clock) = &clock {

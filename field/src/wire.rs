@@ -17,6 +17,8 @@
 //! | --- | --- | --- |
 //! | `pheromone/F/frame` (+ event `pheromone/F/frame-ready`) | `[f32]` + `FrameHeader` | field → readers |
 //! | `pheromone/F/deposit` | `DepositMsg` | depositors → field |
+//! | `pheromone/F/inputs` | `[DepositMsg]` + `InputsHeader` | field → bridge (mirrors) |
+//! | `pheromone/F/config` | `[u8]` (TOML, history 1) | field → bridge (mirrors) |
 //! | `sim/W/clock` (+ `-ready`) | `ClockMsg` | world → every role and the field |
 //! | `sim/W/step-done` (+ `-ready`) | `StepAck` | every participant → world |
 //! | `sim/W/attached` (event) | — | every participant → world |
@@ -131,6 +133,10 @@ pub struct FieldServices {
     /// The event depositors notify after each deposit; created only by a field that publishes
     /// on deposit (`pheromone field --publish-on-deposit-ms`).
     pub deposit_ready: String,
+    /// The deposits each frame applied (`[DepositMsg]` + `InputsHeader`), for a bridge.
+    pub inputs: String,
+    /// The field's configuration as TOML (`[u8]`, history 1), for a bridge.
+    pub config: String,
 }
 
 impl FieldServices {
@@ -141,6 +147,8 @@ impl FieldServices {
             frame_ready: format!("pheromone/{field}/frame-ready"),
             deposit: format!("pheromone/{field}/deposit"),
             deposit_ready: format!("pheromone/{field}/deposit-ready"),
+            inputs: format!("pheromone/{field}/inputs"),
+            config: format!("pheromone/{field}/config"),
         }
     }
 }
@@ -151,6 +159,12 @@ pub fn field_of_frame_service(service: &str) -> Option<&str> {
     let field = service.strip_prefix("pheromone/")?.strip_suffix("/frame")?;
     (!field.is_empty() && !field.contains('/')).then_some(field)
 }
+
+/// Inputs lists a subscriber (the bridge) buffers; older ones are dropped (the mirror sees a gap
+/// and asks for a keyframe).
+pub const INPUTS_SUBSCRIBER_BUFFER: usize = 256;
+/// Subscribers (bridges) of the inputs and config services.
+pub const INPUTS_SUBSCRIBERS: usize = 4;
 
 /// Frames each subscriber buffers (a reader only ever wants the newest).
 pub const FRAME_SUBSCRIBER_BUFFER: usize = 1;
@@ -262,6 +276,14 @@ impl RobotServices {
             rendezvous: format!("sim/{world}/r{robot}/rendezvous"),
         }
     }
+}
+
+/// The field under which robot `robot`'s mapper (`pheromone mapper`) publishes its local map in
+/// world `world`: `<world>-map-r<ID>`, a field of two channels (occupancy log-odds, pheromone)
+/// in the robot's own frame (origin = its start pose), one frame per world step (its sequence =
+/// the step). Every field reader reads it (`pheromone probe --field <world>-map-r<ID>`).
+pub fn map_field(world: &str, robot: u32) -> String {
+    format!("{world}-map-r{robot}")
 }
 
 /// The wake-up event of the link `service`.

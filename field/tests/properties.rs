@@ -772,3 +772,154 @@ fn quantum_counts_whole_seconds_at_50_hz() {
         );
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// The banded, dispatched ambient pass (field::ambient, field::simd) and threads.
+
+use field::ambient::{band_rows, BAND_ROWS_MIN};
+use field::models::{ambient_mean_plane_with, step_plane_with, Dispatch, PlanePlan, Scratch};
+
+/// Planes taller than one band, so band restarts are exercised.
+fn tall_plane() -> impl Strategy<Value = (usize, usize, Vec<f32>)> {
+    (1usize..=12, BAND_ROWS_MIN + 1..=2 * BAND_ROWS_MIN + 40)
+        .prop_flat_map(|(w, h)| (Just(w), Just(h), vec(cell_value(), w * h)))
+}
+
+/// The dispatches to compare: portable, and AVX2 where the CPU has it.
+fn dispatches() -> Vec<Dispatch> {
+    let mut d = vec![Dispatch::portable()];
+    d.extend(Dispatch::avx2());
+    d
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// Over several bands, the fast mean equals brute force within the bound of `field::ambient`
+    /// (far below 1e-6 relative here, plus a floor for cancellation against the largest cell),
+    /// never NaN nor negative, and the AVX2 kernels and any thread count give the same bits as
+    /// the portable kernels on one thread.
+    #[test]
+    fn banded_ambient_mean_equals_brute_force_and_is_dispatch_and_thread_independent(
+        (w, h, cells) in tall_plane(),
+        r in prop_oneof![0usize..=2, 0usize..=6],
+        threads in 2usize..=4,
+    ) {
+        prop_assert!(band_rows(h, r) < h, "the plane spans several bands");
+        let base = ambient_mean_plane_with(&cells, w, r, Dispatch::portable(), 1);
+        let max = cells.iter().copied().fold(0.0f32, f32::max) as f64;
+        for y in 0..h {
+            for x in 0..w {
+                let brute = ambient_mean_brute(&cells, w, x, y, r) as f64;
+                let got = base[y * w + x] as f64;
+                prop_assert!(got.is_finite() && got >= 0.0, "({x}, {y}): {got}");
+                prop_assert!(
+                    (got - brute).abs() <= 1e-6 * brute + 1e-12 * max,
+                    "({x}, {y}) of {w}×{h}, r = {r}: fast {got} vs brute {brute}"
+                );
+            }
+        }
+        for d in dispatches() {
+            for t in [1, threads] {
+                let other = ambient_mean_plane_with(&cells, w, r, d, t);
+                prop_assert!(
+                    other.iter().zip(&base).all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{} on {t} threads differs from portable on 1", d.name()
+                );
+            }
+        }
+    }
+
+    /// The fused ambient step never raises a cell, never writes NaN or a negative value, and
+    /// gives the same bits for the AVX2 and portable kernels and for any thread count — with and
+    /// without diffusion.
+    #[test]
+    fn banded_ambient_step_never_increases_and_is_dispatch_and_thread_independent(
+        (w, _h, cells) in tall_plane(),
+        r in 0u32..=6,
+        factor in 0.0f32..=1.0,
+        alpha in prop_oneof![Just(0.0f32), 0.0f32..=1.0, Just(1.0f32)],
+        kappa in prop_oneof![Just(0.0f32), 0.0f32..=0.2],
+        threads in 2usize..=4,
+    ) {
+        let plan = PlanePlan::Ambient { factor, alpha, radius_cells: r };
+        let step = |d: Dispatch, t: usize| {
+            let mut next = vec![f32::NAN; cells.len()];
+            step_plane_with(plan, kappa, w, &cells, &mut next, &mut Scratch::default(), t, d);
+            next
+        };
+        let base = step(Dispatch::portable(), 1);
+        if kappa == 0.0 {
+            for (i, (&n, &p)) in base.iter().zip(&cells).enumerate() {
+                prop_assert!(n.is_finite() && (0.0..=p).contains(&n), "cell {i}: {p} -> {n}");
+            }
+        } else {
+            prop_assert!(base.iter().all(|n| n.is_finite()), "NaN or ∞ in the frame");
+        }
+        for d in dispatches() {
+            for t in [1, threads] {
+                let other = step(d, t);
+                prop_assert!(
+                    other.iter().zip(&base).all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{} on {t} threads differs from portable on 1", d.name()
+                );
+            }
+        }
+    }
+
+    /// A Stepper on N threads produces frames bit-identical to one on 1 thread, for every model,
+    /// with diffusion, over several ticks with deposits.
+    #[test]
+    fn stepper_threads_give_bit_identical_frames(
+        evaporation in evaporation(),
+        diffusion in prop_oneof![Just(0.0f32), 0.0f32..=0.03],
+        (w, h) in (1usize..=24, 1usize..=2 * BAND_ROWS_MIN + 40),
+        threads in 2usize..=5,
+        seed in vec(cell_value(), 24),
+    ) {
+        let signed = matches!(
+            evaporation,
+            Evaporation::Saturating { .. } | Evaporation::Quantum { .. }
+        );
+        let cfg = config(w, h, 0.05, 50.0, vec![channel(evaporation, diffusion, signed)]);
+        let cells: Vec<f32> = (0..w * h).map(|i| seed[i % seed.len()].min(1.0)).collect();
+        let mut one = Stepper::new(cfg.clone()).unwrap();
+        let mut many = Stepper::new(cfg).unwrap();
+        many.set_threads(threads).unwrap();
+        let (mut a, mut b) = (cells.clone(), cells);
+        let (mut na, mut nb) = (vec![0.0f32; a.len()], vec![0.0f32; b.len()]);
+        for tick in 0..3 {
+            let msg = DepositMsg::ellipse(
+                0,
+                (tick as f32 + 0.5) * 0.05,
+                h as f32 * 0.5 * 0.05,
+                0.5,
+                [0.01, 0.0, 0.01],
+                0.15,
+                1.0,
+            );
+            let _ = one.offer(&msg);
+            let _ = many.offer(&msg);
+            one.step(&a, &mut na);
+            many.step(&b, &mut nb);
+            std::mem::swap(&mut a, &mut na);
+            std::mem::swap(&mut b, &mut nb);
+            prop_assert!(
+                a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "tick {tick}: {threads} threads differ from 1"
+            );
+        }
+    }
+}
+
+#[test]
+fn set_threads_refuses_zero_and_absurd_counts() {
+    let mut s = Stepper::new(FieldConfig::default()).unwrap();
+    for bad in [0usize, field::engine::MAX_THREADS + 1, usize::MAX] {
+        let e = s.set_threads(bad).unwrap_err().to_string();
+        assert!(e.contains("threads") && e.contains(&bad.to_string()), "{e}");
+    }
+    assert_eq!(s.threads(), 1);
+    s.set_threads(2).unwrap();
+    assert_eq!(s.threads(), 2);
+}

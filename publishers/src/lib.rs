@@ -4,6 +4,8 @@
 //! follower. Each is a library type, deterministic for a seed and testable in-process, plus a
 //! short process loop.
 
+#[cfg(feature = "zenoh")]
+pub mod bridge;
 pub mod export;
 pub mod gateway;
 pub mod graph;

@@ -3,7 +3,7 @@
 
 use anyhow::Context;
 use clap::Args;
-use pheromone_bench::{Latency, Mode, Options, Report};
+use pheromone_bench::{Latency, Mode, Options, Report, Section};
 
 use super::{bad, bad_from};
 
@@ -13,8 +13,12 @@ use super::{bad, bad_from};
 /// reader processes (ours vs a Unix socket with serde, and Zenoh on loopback in a build with
 /// `--features zenoh`), deposit-to-visible latency, the tick/memcpy ratio at each size, and seed
 /// 002's PIR round trip to a `pheromone gateway` over UDP loopback beside a direct shared-memory
-/// read of the same antennas, with the PIRs per second one gateway core serves.
-/// Progress goes to stderr. The default run takes a few minutes; `--quick` under a minute.
+/// read of the same antennas, with the PIRs per second one gateway core serves. With `--features
+/// zenoh`, a field mirror over Zenoh (a 1024² origin at 100 Hz in one iceoryx2 domain, a bridge,
+/// a mirror in another): bytes on the wire against raw frames at 10 and 1000 deposits/s,
+/// origin-to-mirror lag, keyframe size and catch-up. `--only mirror` (or any list of sections)
+/// runs part of it. Progress goes to stderr. The default run takes a few minutes; `--quick` under
+/// a minute.
 #[derive(Args)]
 pub struct BenchArgs {
     /// Print one JSON object on stdout instead of tables.
@@ -35,6 +39,39 @@ pub struct BenchArgs {
     /// Do not pin processes to cores.
     #[arg(long)]
     no_pin: bool,
+    /// Run only these sections (comma-separated); the others are empty or null in --json.
+    #[arg(long, value_enum, value_delimiter = ',', value_name = "SECTION")]
+    only: Vec<SectionArg>,
+}
+
+/// A section of `pheromone bench` (`--only`).
+#[derive(Clone, Copy, clap::ValueEnum, Debug)]
+enum SectionArg {
+    /// Tick vs memcpy.
+    Tick,
+    /// Hop latency.
+    Hop,
+    /// Frame delivery.
+    Frames,
+    /// Deposit to visible, and the field's CPU.
+    Visible,
+    /// Seed 002's PIR through a gateway.
+    Gateway,
+    /// A field mirror over Zenoh (a build with --features zenoh).
+    Mirror,
+}
+
+impl From<SectionArg> for Section {
+    fn from(s: SectionArg) -> Self {
+        match s {
+            SectionArg::Tick => Section::Tick,
+            SectionArg::Hop => Section::Hop,
+            SectionArg::Frames => Section::Frames,
+            SectionArg::Visible => Section::Visible,
+            SectionArg::Gateway => Section::Gateway,
+            SectionArg::Mirror => Section::Mirror,
+        }
+    }
 }
 
 /// One peer process of a measurement (started by `pheromone bench`).
@@ -57,6 +94,11 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             a.visible_width
         )));
     }
+    if !pheromone_bench::ZENOH_BUILT && a.only.iter().any(|s| matches!(s, SectionArg::Mirror)) {
+        return Err(bad(
+            "--only mirror: this build has no Zenoh: rebuild with `cargo build --release --features zenoh`",
+        ));
+    }
     let program = std::env::current_exe().context("find this executable to start the peers")?;
     let opts = Options {
         mode: if a.smoke {
@@ -66,6 +108,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
         } else {
             Mode::Full
         },
+        only: a.only.iter().map(|s| Section::from(*s)).collect(),
         pin: !a.no_pin,
         tick_hz: a.tick_hz,
         visible_width: a.visible_width,
@@ -113,29 +156,28 @@ fn print_tables(r: &Report) {
             .trim_matches('"'),
         if r.pinned { ", pinned" } else { "" }
     );
-    println!("\ntick / memcpy            memcpy µs   plain µs  ratio   ambient µs  ratio");
-    for (size, t) in &r.tick_vs_memcpy {
+    if !r.tick_vs_memcpy.is_empty() {
+        print_ticks(r);
+    }
+    if let Some(h) = &r.hop_ns {
+        println!("\nhop (one way)                    p50       p99     p99.9       max");
+        println!("ours, wait             {}", lat(&h.ours, 1e-3, "µs"));
         println!(
-            "{size:<22} {:>10.1} {:>10.1} {:>6.2} {:>12.1} {:>6.2}",
-            t.memcpy_us, t.exponential_us, t.exponential_ratio, t.ambient_us, t.ambient_ratio
+            "raw iceoryx2, wait     {}",
+            lat(&h.raw_iceoryx2, 1e-3, "µs")
+        );
+        println!(
+            "ours, busy-poll        {}",
+            lat(&h.busy_poll.ours, 1e-3, "µs")
+        );
+        println!(
+            "raw iceoryx2, busy     {}",
+            lat(&h.busy_poll.raw_iceoryx2, 1e-3, "µs")
         );
     }
-    let h = &r.hop_ns;
-    println!("\nhop (one way)                    p50       p99     p99.9       max");
-    println!("ours, wait             {}", lat(&h.ours, 1e-3, "µs"));
-    println!(
-        "raw iceoryx2, wait     {}",
-        lat(&h.raw_iceoryx2, 1e-3, "µs")
-    );
-    println!(
-        "ours, busy-poll        {}",
-        lat(&h.busy_poll.ours, 1e-3, "µs")
-    );
-    println!(
-        "raw iceoryx2, busy     {}",
-        lat(&h.busy_poll.raw_iceoryx2, 1e-3, "µs")
-    );
-    println!("\nframe delivery                       p50       p99     p99.9       max");
+    if !r.frame_ns.is_empty() {
+        println!("\nframe delivery                       p50       p99     p99.9       max");
+    }
     for (size, f) in &r.frame_ns {
         let rows: [(&str, Option<&Latency>); 11] = [
             ("ours, 1 reader", Some(&f.ours)),
@@ -156,41 +198,59 @@ fn print_tables(r: &Report) {
                 None => println!("{size:>5} {what:<20} (not built: --features zenoh)"),
             }
         }
-    }
-    let v = &r.deposit_to_visible_us;
-    println!(
-        "\ndeposit to visible, {w}x{w} at {} Hz  {}",
-        v.tick_hz,
-        lat(&v.latency, 1e-3, "ms"),
-        w = v.width
-    );
-    let o = &r.deposit_to_visible_on_deposit_us;
-    println!(
-        "  publishing on deposit            {}   (tick compute p50 {:.0} µs)",
-        lat(&o.latency, 1.0, "µs"),
-        o.tick_compute_us.p50
-    );
-    println!("field CPU (share of a core)   deposits/s  ticking  on deposit  frames/s");
-    for (t, d) in v.field_cpu.iter().zip(&o.field_cpu) {
+        let c = &f.reader_cpu_share;
+        let share = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
         println!(
-            "                              {:>10.0} {:>8.3} {:>10.3} {:>9.0}",
-            t.deposits_per_s, t.cpu_share, d.cpu_share, d.frames_per_s
+            "{size:>5} reader CPU (share of a core): ours wait {} spin {} busy {}; raw wait {} spin {} busy {}",
+            share(c.ours_wait),
+            share(c.ours_spin),
+            share(c.ours_busy_poll),
+            share(c.raw_iceoryx2_wait),
+            share(c.raw_iceoryx2_spin),
+            share(c.raw_iceoryx2_busy_poll)
         );
     }
-    let g = &r.gateway_pir;
-    println!("\ngateway (seed 002 PIR)           p50       p99     p99.9       max");
-    println!(
-        "PIR round trip, UDP    {}",
-        lat(&g.pir_round_trip_ns, 1e-3, "µs")
-    );
-    println!(
-        "antennas from shm      {}",
-        lat(&g.shm_antennas_ns, 1e-3, "µs")
-    );
-    println!(
-        "flood: {:.0} PIR/s over {:.1} s, gateway CPU {:.2} s → {:.0} PIR per CPU-second ({} in flight)",
-        g.flood.pirs_per_s, g.flood.wall_s, g.flood.gateway_cpu_s, g.flood.pirs_per_cpu_s, g.flood.window
-    );
+    if let (Some(v), Some(o)) = (
+        &r.deposit_to_visible_us,
+        &r.deposit_to_visible_on_deposit_us,
+    ) {
+        println!(
+            "\ndeposit to visible, {w}x{w} at {} Hz  {}",
+            v.tick_hz,
+            lat(&v.latency, 1e-3, "ms"),
+            w = v.width
+        );
+        println!(
+            "  publishing on deposit            {}   (tick compute p50 {:.0} µs)",
+            lat(&o.latency, 1.0, "µs"),
+            o.tick_compute_us.p50
+        );
+        println!("field CPU (share of a core)   deposits/s  ticking  on deposit  frames/s");
+        for (t, d) in v.field_cpu.iter().zip(&o.field_cpu) {
+            println!(
+                "                              {:>10.0} {:>8.3} {:>10.3} {:>9.0}",
+                t.deposits_per_s, t.cpu_share, d.cpu_share, d.frames_per_s
+            );
+        }
+    }
+    if let Some(g) = &r.gateway_pir {
+        println!("\ngateway (seed 002 PIR)           p50       p99     p99.9       max");
+        println!(
+            "PIR round trip, UDP    {}",
+            lat(&g.pir_round_trip_ns, 1e-3, "µs")
+        );
+        println!(
+            "antennas from shm      {}",
+            lat(&g.shm_antennas_ns, 1e-3, "µs")
+        );
+        println!(
+            "flood: {:.0} PIR/s over {:.1} s, gateway CPU {:.2} s → {:.0} PIR per CPU-second ({} in flight)",
+            g.flood.pirs_per_s, g.flood.wall_s, g.flood.gateway_cpu_s, g.flood.pirs_per_cpu_s, g.flood.window
+        );
+    }
+    if let Some(m) = &r.mirror {
+        print_mirror(m);
+    }
     println!("\ntargets");
     for t in &r.targets {
         println!(
@@ -202,4 +262,73 @@ fn print_tables(r: &Report) {
             t.measured
         );
     }
+}
+
+fn print_ticks(r: &Report) {
+    println!("\ntick / memcpy            memcpy µs   plain µs  ratio   ambient µs  ratio");
+    for (size, t) in &r.tick_vs_memcpy {
+        println!(
+            "{size:<22} {:>10.1} {:>10.1} {:>6.2} {:>12.1} {:>6.2}",
+            t.memcpy_us, t.exponential_us, t.exponential_ratio, t.ambient_us, t.ambient_ratio
+        );
+    }
+    println!(
+        "\nambient by radius ({} kernels)   radius cells: ratio …   2 threads µs  speedup",
+        { r.tick_vs_memcpy.values().next().map_or("-", |t| t.kernels) }
+    );
+    for (size, t) in &r.tick_vs_memcpy {
+        let radii: Vec<String> = t
+            .ambient_by_radius
+            .iter()
+            .map(|b| format!("r{}: {:.2}", b.radius_cells, b.ambient_ratio))
+            .collect();
+        println!(
+            "{size:<22} {:<28} {:>12.1} {:>8.2}",
+            radii.join("  "),
+            t.ambient_2_threads_us,
+            t.ambient_thread_speedup
+        );
+    }
+}
+
+#[cfg(feature = "zenoh")]
+fn print_mirror(m: &pheromone_bench::MirrorSection) {
+    println!(
+        "\nmirror over Zenoh, {w}x{w} x {} channel at {} Hz: raw frames {:.1} MB/s",
+        m.channels,
+        m.tick_hz,
+        m.raw_bytes_per_s / 1e6,
+        w = m.width
+    );
+    println!("deposits/s  frames/s  inputs B/s  other B/s  keyframe B/s  wire B/s  / raw frames");
+    for w in &m.wire {
+        println!(
+            "{:>10.0} {:>9.1} {:>11.0} {:>10.0} {:>13.0} {:>9.0}  {:.2e}",
+            w.deposits_per_s,
+            w.frames_per_s,
+            w.inputs_bytes_per_s,
+            w.other_bytes_per_s,
+            w.keyframe_bytes_per_s,
+            w.wire_bytes_per_s,
+            w.ratio_to_raw
+        );
+    }
+    println!("                                 p50       p99     p99.9       max");
+    println!("origin → mirror publish {}", lat(&m.lag_us, 1e-3, "ms"));
+    println!(
+        "keyframe {} bytes ({:.2} % of a raw frame, every {} s), catch-up {:.1} ms (request → \
+         keyframe published), {:.1} ms from session open to live; checksums {} matched, {} mismatched",
+        m.keyframe_bytes,
+        m.keyframe_ratio * 100.0,
+        m.keyframe_every_s,
+        m.catch_up_ms,
+        m.start_to_live_ms,
+        m.checksums_matched,
+        m.checksum_mismatches
+    );
+}
+
+#[cfg(not(feature = "zenoh"))]
+fn print_mirror(m: &pheromone_bench::MirrorSection) {
+    match *m {}
 }

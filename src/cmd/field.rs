@@ -143,6 +143,24 @@ pub struct FieldArgs {
     /// time (at most one tick period); regular ticks go on between deposits. Not with --clock.
     #[arg(long, value_name = "MS", conflicts_with = "clock")]
     pub publish_on_deposit_ms: Option<f64>,
+    /// Threads of each tick's evaporation pass: the rows are split across N threads, each cell
+    /// still read once and written once, and the frames are bit-identical to one thread's. Worth
+    /// it for large grids with the ambient model; 1 (the default) keeps the tick on the field's
+    /// own thread.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub threads: usize,
+    /// Run as a mirror of the field of the same name on another host: `zenoh:tcp/HOST:PORT`,
+    /// the address of its `pheromone bridge`. The mirror takes the origin's configuration,
+    /// starts from a keyframe, applies each frame's deposits with the same stepper and publishes
+    /// bit-identical frames with the origin's sequence numbers here; deposits made on this host
+    /// go to the origin. It asks for a keyframe on a checksum mismatch, a sequence gap, an
+    /// origin restart or a lost connection, and logs `stale` while it has no origin. Needs a
+    /// build with `--features zenoh`. Grid flags are ignored (the origin's apply).
+    #[arg(long, value_name = "zenoh:ENDPOINT", conflicts_with_all = ["standby", "restore", "clock", "checkpoint"])]
+    pub mirror: Option<String>,
+    /// A mirror is stale after this many seconds without inputs from its origin [default: 1].
+    #[arg(long, value_name = "SECS", requires = "mirror")]
+    pub stale_after_s: Option<f64>,
     /// At exit, print one JSON summary object on stdout.
     #[arg(long)]
     pub json: bool,
@@ -250,6 +268,17 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
 }
 
 pub fn run(a: FieldArgs) -> anyhow::Result<()> {
+    if a.threads == 0 || a.threads > field::engine::MAX_THREADS {
+        return Err(bad(format!(
+            "--threads {}: the tick needs between 1 and {} threads",
+            a.threads,
+            field::engine::MAX_THREADS
+        )));
+    }
+    if let Some(m) = &a.mirror {
+        field::shm::check_name(&a.name).map_err(bad_from)?;
+        return super::bridge::run_mirror(&a, m);
+    }
     let config = config_from_args(&a)?;
     field::shm::check_name(&a.name).map_err(bad_from)?;
     if a.print_config {
@@ -310,6 +339,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         restore,
         standby: a.standby,
         publish_on_deposit,
+        threads: a.threads,
     };
     let summary = match run_field(&node, &options) {
         Ok(s) => s,

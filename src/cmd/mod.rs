@@ -1,6 +1,7 @@
 //! One module per subcommand: argument parsing and a short loop over library types.
 
 pub mod bench;
+pub mod bridge;
 pub mod export;
 pub mod field;
 pub mod gateway;
@@ -10,6 +11,7 @@ pub mod probe;
 pub mod roles;
 pub mod sim;
 pub mod sim_args;
+pub mod sweep;
 pub mod tune;
 pub mod view;
 

@@ -1,4 +1,4 @@
-//! `pheromone world | localizer | depositor | follower`: the robot processes. Each reads the
+//! `pheromone world | localizer | mapper | depositor | follower`: the robot processes. Each reads the
 //! same scenario (a built-in name or a TOML file) and runs its part of it.
 
 use clap::{Args, ValueEnum};
@@ -6,7 +6,7 @@ use field::shm::create_node;
 use publishers::roles::depositor::{DepositMode, DepositorConfig};
 use publishers::roles::follower::{Follower, FollowerConfig, StrategyKind};
 use publishers::roles::{
-    run_depositor, run_follower, run_localizer, run_world, RoleOptions, WorldOptions,
+    run_depositor, run_follower, run_localizer, run_mapper, run_world, RoleOptions, WorldOptions,
 };
 use publishers::sim::scenario::Scenario;
 
@@ -88,6 +88,10 @@ pub struct WorldArgs {
     /// An observer (`pheromone sim`) takes part in the lockstep: wait for it too.
     #[arg(long)]
     pub observed: bool,
+    /// When the scenario maps ([mapping]): one `pheromone mapper` per robot takes part in the
+    /// lockstep: wait for each one's map frame of every step too.
+    #[arg(long)]
+    pub mapped: bool,
 }
 
 pub fn run_world_cmd(a: WorldArgs) -> anyhow::Result<()> {
@@ -107,6 +111,7 @@ pub fn run_world_cmd(a: WorldArgs) -> anyhow::Result<()> {
                 .map(|v| seconds("attach-timeout", v))
                 .transpose()?,
             observed: a.observed,
+            mapped: a.mapped,
         },
     )?;
     eprintln!(
@@ -157,6 +162,41 @@ pub fn run_localizer_cmd(a: LocalizerArgs) -> anyhow::Result<()> {
     eprintln!(
         "localizer r{}: {} steps, {} rejected",
         a.robot, summary.steps, summary.rejected
+    );
+    print_json(a.common.json, &summary)
+}
+
+/// Run the mapper of one robot (seed 004, MODELS.md M4): integrates the robot's range scans
+/// (sim/<WORLD>/r<ID>/scan) at its pose estimate (pheromone/<WORLD>/r<ID>/pose) into an
+/// occupancy grid (log-odds) and keeps its pheromone map, both in the robot's own frame (origin
+/// = its start pose), and publishes them every step as a frame of the field
+/// `<WORLD>-map-r<ID>` (channels: occupancy, pheromone; `pheromone probe --field
+/// <WORLD>-map-r<ID>` reads it). At a rendezvous (sim/<WORLD>/r<ID>/rendezvous) it merges its
+/// peers' maps straight from their frames in shared memory (Algorithm 1: schedule, loss
+/// refusal; a frame whose header disagrees with its length or that holds a non-finite cell is
+/// refused and counted). Settings come from the scenario's `[mapping]`. In lockstep start the
+/// world with --mapped so it waits for every mapper.
+#[derive(Args, Debug)]
+pub struct MapperArgs {
+    #[command(flatten)]
+    pub common: Common,
+    /// Robot id.
+    #[arg(long, default_value_t = 0)]
+    pub robot: u32,
+}
+
+pub fn run_mapper_cmd(a: MapperArgs) -> anyhow::Result<()> {
+    check_names(&a.common)?;
+    let scenario = load_scenario(&a.common.scenario)?;
+    let node = create_node(&format!("mapper-r{}-{}", a.robot, std::process::id()))?;
+    let summary = run_mapper(&node, &scenario, &a.common.role_options(a.robot))?;
+    eprintln!(
+        "mapper r{}: {} steps, {} merges, {} maps refused, {} exchanges refused (lost)",
+        a.robot,
+        summary.role.steps,
+        summary.counters.merges,
+        summary.counters.merges_rejected.values().sum::<u64>(),
+        summary.counters.refused_lost
     );
     print_json(a.common.json, &summary)
 }

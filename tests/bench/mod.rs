@@ -132,6 +132,8 @@ fn bench_smoke_run_reports_every_figure_as_one_json_object() {
         "{names:?}"
     );
 
+    check_mirror(&r, zenoh_built);
+
     let targets = r["targets"].as_array().expect("targets");
     assert!(targets.len() >= 6, "{targets:?}");
     // Issue 18's frame goals, each with a measured value.
@@ -147,6 +149,88 @@ fn bench_smoke_run_reports_every_figure_as_one_json_object() {
         assert!(t["measured"].as_f64().is_some_and(|m| m > 0.0), "{t}");
     }
     assert!(targets.iter().all(|t| t["met"].is_boolean()));
+}
+
+/// A positive finite number at `v[k]`.
+fn positive(v: &Value, k: &str, what: &str) -> f64 {
+    let x = v[k]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{what}.{k} missing or not a number: {v}"));
+    assert!(x.is_finite() && x > 0.0, "{what}.{k} = {x}: {v}");
+    x
+}
+
+/// Issue 15's `mirror` section: present (finite figures) with Zenoh, null without.
+fn check_mirror(r: &Value, zenoh_built: bool) {
+    let m = &r["mirror"];
+    if !zenoh_built {
+        assert!(m.is_null(), "a mirror section without zenoh: {m}");
+        return;
+    }
+    for k in [
+        "raw_frame_bytes",
+        "raw_bytes_per_s",
+        "keyframe_bytes",
+        "keyframe_ratio",
+        "catch_up_ms",
+        "start_to_live_ms",
+        "tick_hz",
+    ] {
+        positive(m, k, "mirror");
+    }
+    let wire = m["wire"].as_array().expect("mirror.wire");
+    let rates: Vec<f64> = wire
+        .iter()
+        .filter_map(|w| w["deposits_per_s"].as_f64())
+        .collect();
+    assert_eq!(rates, [10.0, 1000.0], "{m}");
+    for w in wire {
+        for k in [
+            "frames_per_s",
+            "inputs_bytes_per_s",
+            "keyframe_bytes",
+            "wire_bytes_per_s",
+            "ratio_to_raw",
+        ] {
+            positive(w, k, "mirror.wire");
+        }
+        assert!(
+            w["ratio_to_raw"].as_f64().unwrap() < 1.0,
+            "a mirror sends more than the frames: {w}"
+        );
+    }
+    check_latency(&m["lag_us"], "mirror.lag_us");
+    assert_eq!(m["checksum_mismatches"], 0, "{m}");
+    let names: Vec<&str> = r["targets"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|t| t["name"].as_str())
+        .collect();
+    assert!(
+        names.iter().any(|n| n.starts_with("mirror wire bytes")),
+        "{names:?}"
+    );
+}
+
+#[test]
+fn bench_only_runs_the_sections_it_is_given() {
+    let out = run(&["bench", "--smoke", "--json", "--only", "tick"]);
+    assert!(out.status.success(), "bench failed: {}", stderr(&out));
+    let r = json(&out);
+    assert_eq!(r["sections"], serde_json::json!(["tick"]), "{r}");
+    assert!(!r["tick_vs_memcpy"].as_object().unwrap().is_empty(), "{r}");
+    assert!(r["frame_ns"].as_object().unwrap().is_empty(), "{r}");
+    for k in ["hop_ns", "deposit_to_visible_us", "gateway_pir", "mirror"] {
+        assert!(r[k].is_null(), "{k} measured with --only tick: {r}");
+    }
+    let out = run(&["bench", "--only", "everything"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    if !cfg!(feature = "zenoh") {
+        let out = run(&["bench", "--only", "mirror", "--json"]);
+        assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+        assert!(stderr(&out).contains("zenoh"), "{}", stderr(&out));
+    }
 }
 
 #[test]

@@ -317,4 +317,107 @@ fn ias_ss_with_merging_as_processes_gives_the_single_process_metrics() {
             .is_some_and(|e| e > 0.0),
         "{metrics}"
     );
+    // The mapper processes merged from each other's frames in shared memory: the same merges,
+    // with the same alignment errors, as the single-process mapping team.
+    let mappers: Vec<&Value> = m["processes"]
+        .as_array()
+        .expect("process reports")
+        .iter()
+        .filter(|r| r["role"].as_str().is_some_and(|n| n.starts_with("mapper")))
+        .map(|r| &r["summary"])
+        .collect();
+    assert_eq!(mappers.len(), 4, "{}", m["processes"]);
+    let errors: Vec<f64> = mappers
+        .iter()
+        .flat_map(|s| s["merges"].as_array().expect("merges").iter())
+        .map(|e| e["alignment_error_m"].as_f64().expect("alignment error"))
+        .collect();
+    assert_eq!(Some(errors.len() as u64), metrics["merges"].as_u64());
+    let max = errors.iter().copied().fold(0.0, f64::max);
+    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+    let want = &metrics["merge_alignment_error_m"];
+    assert!(
+        (max - want["max"].as_f64().unwrap()).abs() < 1e-12,
+        "{max} vs {want}"
+    );
+    assert!(
+        (mean - want["mean"].as_f64().unwrap()).abs() < 1e-12,
+        "{mean} vs {want}"
+    );
+    for s in &mappers {
+        assert_eq!(
+            s["counters"]["merges_rejected"],
+            serde_json::json!({}),
+            "{s}"
+        );
+        assert_eq!(s["missing_poses"], 0, "{s}");
+    }
+}
+
+#[test]
+fn a_mapper_map_frame_is_readable_while_it_runs_and_a_sigkilled_mapper_leaves_nothing() {
+    let run = Run::new("m");
+    let sim = run.spawn(
+        &[
+            "sim",
+            "ias-ss",
+            "--merge",
+            "--robots",
+            "2",
+            "--duration",
+            "100000",
+            "--no-out",
+        ],
+        "sim",
+    );
+    let sim_pid = sim.pid();
+    let mapper = eventually(WAIT, "robot 1's mapper process", || {
+        children_with(sim_pid, "mapper").into_iter().find(|&p| {
+            let cmd = std::fs::read(format!("/proc/{p}/cmdline")).unwrap_or_default();
+            String::from_utf8_lossy(&cmd).contains("--robot\u{0}1")
+        })
+    });
+    // The run's tag is `sim<PID>x0`: robot 1's map is field `sim<PID>x0-map-r1`, read by the
+    // ordinary field reader, while the run steps.
+    let map = format!("sim{sim_pid}x0-map-r1");
+    let probe = || run.run(&["probe", "--field", &map, "--json", "--timeout", "30"]);
+    let first = eventually(WAIT, "a frame of the map after step 10", || {
+        let o = probe();
+        let v: Value = serde_json::from_slice(&o.stdout).ok()?;
+        (v["sequence"].as_u64()? > 10).then_some(v)
+    });
+    assert_eq!(first["channels"], 2, "{first}");
+    assert_eq!(first["width"], first["height"], "{first}");
+    let later = eventually(WAIT, "a newer frame of the map", || {
+        let v: Value = serde_json::from_slice(&probe().stdout).ok()?;
+        (v["sequence"].as_u64()? > first["sequence"].as_u64()?).then_some(v)
+    });
+    // At the robot (its frame's origin, where it started) the map knows the cell: its scans
+    // cleared it (log-odds < 0).
+    assert!(
+        later["value"].as_f64().is_some_and(|v| v < 0.0),
+        "occupancy log-odds at the start pose: {later}"
+    );
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(mapper as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .unwrap();
+    let out = sim.wait_exit(Duration::from_secs(60));
+    let err = run.log("sim");
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("mapper r1 failed (killed by SIGKILL)"),
+        "the error names the killed mapper: {err}"
+    );
+    let alive: Vec<u32> = children_with(sim_pid, "")
+        .into_iter()
+        .filter(|p| Path::new(&format!("/proc/{p}")).exists())
+        .collect();
+    assert!(
+        alive.is_empty(),
+        "processes of the run still there: {alive:?}"
+    );
+    run.wait_nodes_gone(WAIT);
+    assert_eq!(run.shm_entries(), Vec::<String>::new(), "{err}");
 }

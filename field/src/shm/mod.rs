@@ -22,15 +22,18 @@
 //! field and becomes its publisher when the primary dies.
 //!
 //! Submodules: `server` (`FieldServer`), `reader` (`FieldReader`), `deposit`
-//! (`DepositPublisher`), `standby` (`Standby`) and `survey` (the fields of a host, for
-//! `pheromone list`), all re-exported here; this file holds what
+//! (`DepositPublisher`), `standby` (`Standby`), `survey` (the fields of a host, for
+//! `pheromone list`) and `writer` (`FrameWriter`, frames computed elsewhere: a mapper's map), all
+//! re-exported here; this file holds what
 //! they share (errors, names, nodes, service builders, frame pool sizing).
 
 mod deposit;
+mod inputs;
 mod reader;
 mod server;
 mod standby;
 mod survey;
+mod writer;
 
 use std::time::Duration;
 
@@ -44,10 +47,15 @@ use crate::messages::{DepositMsg, FrameHeader};
 use crate::wire::{self, LAYOUT_VERSION};
 
 pub use deposit::DepositPublisher;
+pub use inputs::{
+    f32s_from_bytes, wire_bytes, wire_from_bytes, wire_slice_bytes, wire_vec_from_bytes,
+    InputsPublisher, InputsSubscriber,
+};
 pub use reader::{FieldReader, Frame, WaitPolicy};
 pub use server::{FieldServer, TickOutcome};
 pub use standby::{Standby, StandbyEvent, Takeover};
 pub use survey::{field_names, survey, FieldInfo};
+pub use writer::FrameWriter;
 
 /// iceoryx2 service flavour used everywhere: inter-process.
 pub type Svc = ipc::Service;
@@ -216,9 +224,44 @@ pub(crate) fn service_name(name: &str) -> Result<ServiceName, ShmError> {
     })
 }
 
+/// The environment variable naming this process's iceoryx2 domain (`--iox-domain`).
+pub const IOX_DOMAIN_ENV: &str = "PHEROMONE_IOX_DOMAIN";
+
+/// The iceoryx2 configuration of this process's domain: iceoryx2's global configuration, with
+/// the prefix `<D>_iox2_` when `PHEROMONE_IOX_DOMAIN` is `D` (two domains on one host share
+/// nothing, as two hosts would). `D` follows the field-name rules.
+pub fn domain_config() -> Result<Config, ShmError> {
+    domain_config_of(std::env::var(IOX_DOMAIN_ENV).ok().as_deref())
+}
+
+/// The iceoryx2 configuration of domain `domain` (`None` or empty: iceoryx2's own).
+pub fn domain_config_of(domain: Option<&str>) -> Result<Config, ShmError> {
+    let mut config = Config::global_config().clone();
+    if let Some(d) = domain.filter(|d| !d.is_empty()) {
+        check_name(d)?;
+        let prefix = format!("{d}_iox2_");
+        config.global.prefix =
+            FileName::new(prefix.as_bytes()).map_err(|e| ShmError::IceoryxName {
+                name: prefix.clone(),
+                source: Box::new(Iceoryx(e)),
+            })?;
+    }
+    Ok(config)
+}
+
 /// Creates an iceoryx2 node that stops on SIGINT/SIGTERM (`node.wait` then returns an error) and
 /// first removes what dead nodes left behind.
 pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
+    create_node_with(name, domain_config()?)
+}
+
+/// As [`create_node`], in iceoryx2 domain `domain` whatever the environment says (a test that
+/// stands for two hosts).
+pub fn create_node_in(name: &str, domain: Option<&str>) -> Result<Node<Svc>, ShmError> {
+    create_node_with(name, domain_config_of(domain)?)
+}
+
+fn create_node_with(name: &str, domain: Config) -> Result<Node<Svc>, ShmError> {
     let node_name = NodeName::new(name).map_err(|e| ShmError::IceoryxName {
         name: name.to_string(),
         source: Box::new(Iceoryx(e)),
@@ -240,6 +283,7 @@ pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
     .is_ok();
     let node = NodeBuilder::new()
         .name(&node_name)
+        .config(&domain)
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<Svc>()
         .map_err(|e| ShmError::Node {

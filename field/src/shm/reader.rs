@@ -76,6 +76,10 @@ pub struct FieldReader {
     subscriber: FrameSubscriber,
     listener: iceoryx2::port::listener::Listener<Svc>,
     latest: Option<FrameSample>,
+    /// The frame `latest` replaced, released at the start of the next `update`: handing a sample
+    /// back writes to the publisher's shared completion queue, which is better done while no new
+    /// frame is awaited than between a frame's arrival and the reader holding it.
+    replaced: Option<FrameSample>,
 }
 
 impl FieldReader {
@@ -99,6 +103,7 @@ impl FieldReader {
             subscriber,
             listener,
             latest: None,
+            replaced: None,
         };
         reader.update()?;
         Ok(reader)
@@ -129,8 +134,14 @@ impl FieldReader {
 
     /// Takes the newest frame that has arrived (if any); returns whether it is new.
     pub fn update(&mut self) -> Result<bool, ShmError> {
+        // At most `READER_BORROWED_FRAMES` (2) samples are held: `latest` and `replaced`, so the
+        // replaced one goes before each receive.
+        self.replaced = None;
         let mut fresh = false;
         loop {
+            if fresh {
+                self.replaced = None;
+            }
             match self.subscriber.receive() {
                 Ok(Some(s)) => {
                     if s.payload().len() != s.user_header().len() {
@@ -139,7 +150,7 @@ impl FieldReader {
                             expected: s.user_header().len(),
                         });
                     }
-                    self.latest = Some(s);
+                    self.replaced = self.latest.replace(s);
                     fresh = true;
                 }
                 Ok(None) => return Ok(fresh),

@@ -3,13 +3,14 @@
 
 use iceoryx2::prelude::*;
 
+use super::inputs::InputsPublisher;
 use super::{
     check_shm_space, deposit_service, frame_ready_service, frame_service, now_ns, service_err,
     DepositSubscriber, EventFactory, FieldServices, FrameFactory, FramePublisher, FrameSample,
     FrameSubscriber, ShmError, Svc, FRAME_READY,
 };
 use crate::engine::{FieldConfig, Stepper, TickReport};
-use crate::messages::{DepositMsg, FrameHeader};
+use crate::messages::{DepositMsg, FrameHeader, InputsHeader};
 use crate::sample::FrameView;
 
 /// What one `FieldServer::tick` did.
@@ -33,6 +34,8 @@ pub struct FieldServer {
     previous: Option<FrameSample>,
     deposits: DepositSubscriber,
     notifier: iceoryx2::port::notifier::Notifier<Svc>,
+    /// Each frame's inputs for a bridge (`publish_inputs`).
+    inputs: Option<InputsPublisher>,
 }
 
 /// The ports of a running field.
@@ -204,7 +207,144 @@ impl FieldServer {
             previous,
             deposits,
             notifier,
+            inputs: None,
         })
+    }
+
+    /// From now on, publishes each frame's inputs on `pheromone/F/inputs` and the configuration
+    /// on `pheromone/F/config`, for `pheromone bridge`. Returns the run's epoch.
+    pub fn publish_inputs(&mut self, node: &Node<Svc>) -> Result<u64, ShmError> {
+        let config = self.stepper.config();
+        let toml = toml::to_string(config)
+            .map_err(|e| service_err(&self.names.config, "serialize the configuration", e))?;
+        let p = InputsPublisher::create(node, &self.names, &toml, config.deposit_buffer)?;
+        let epoch = p.epoch;
+        self.inputs = Some(p);
+        Ok(epoch)
+    }
+
+    /// Takes the deposits offered on this host without applying them (a mirror forwards them to
+    /// its origin, which applies them and sends them back in its inputs).
+    pub fn take_local_deposits(&mut self) -> Result<Vec<DepositMsg>, ShmError> {
+        let mut out = Vec::new();
+        while let Some(sample) = self
+            .deposits
+            .receive()
+            .map_err(|e| service_err(&self.names.deposit, "receive", e))?
+        {
+            out.push(*sample.payload());
+        }
+        Ok(out)
+    }
+
+    /// A mirror: publishes `cells` with `header`'s sequence and counters (a keyframe), dropping
+    /// whatever frame came before.
+    pub fn reset_to(&mut self, header: &FrameHeader, cells: &[f32]) -> Result<(), ShmError> {
+        let len = self.stepper.config().frame_len();
+        if cells.len() != len {
+            return Err(ShmError::RestoreMismatch {
+                got: cells.len(),
+                expected: len,
+            });
+        }
+        self.stepper.resume_from(header);
+        self.publish_with(|stepper, _prev, next| {
+            next.copy_from_slice(cells);
+            let _ = stepper;
+            TickReport::default()
+        })
+        .map(|_| ())
+    }
+
+    /// A mirror: computes the next frame from the previous one with the origin's inputs of that
+    /// frame (`Stepper::replay`) and publishes it with the origin's sequence. Returns the
+    /// deposits this stepper refused (0 with the origin's configuration).
+    pub fn apply_inputs(
+        &mut self,
+        header: &InputsHeader,
+        deposits: &[DepositMsg],
+    ) -> Result<u32, ShmError> {
+        let mut refused = 0;
+        self.stepper.sequence = header.sequence.wrapping_sub(1);
+        self.publish_with(|stepper, prev, next| {
+            let (report, r) = stepper.replay(
+                prev,
+                next,
+                deposits,
+                header.sim_time_before_s,
+                header.dt_s,
+                header.dt_time_s,
+            );
+            refused = r;
+            report
+        })?;
+        Ok(refused)
+    }
+
+    /// Loans the next frame, lets `compute` fill it from the previous one, publishes it.
+    fn publish_with(
+        &mut self,
+        compute: impl FnOnce(&mut Stepper, &[f32], &mut [f32]) -> TickReport,
+    ) -> Result<(TickReport, u64), ShmError> {
+        let started = now_ns();
+        let len = self.stepper.config().frame_len();
+        let previous = match self.previous.take() {
+            Some(p) => p,
+            None => {
+                return Err(service_err(
+                    &self.names.frame,
+                    "tick",
+                    "the previous frame was lost",
+                ))
+            }
+        };
+        if previous.payload().len() != len {
+            return Err(ShmError::BadFrame {
+                got: previous.payload().len(),
+                expected: len,
+            });
+        }
+        let uninit = self
+            .publisher
+            .loan_slice_uninit(len)
+            .map_err(|e| service_err(&self.names.frame, "loan frame", e))?;
+        // SAFETY: the payload lies in an iceoryx2 shared-memory segment: memory the OS handed out
+        // zero-filled and that only ever held `f32` frames of this service, so every element is
+        // initialized bytes, and every bit pattern is a valid `f32`. `compute` (a `Stepper` step
+        // or a copy of a whole keyframe) overwrites every element before the sample is sent.
+        let mut next = unsafe { uninit.assume_init() };
+        let report = compute(&mut self.stepper, previous.payload(), next.payload_mut());
+        drop(previous);
+        let done = now_ns();
+        let compute_ns = done.saturating_sub(started);
+        *next.user_header_mut() = self.stepper.header(done, compute_ns, &report);
+        next.send()
+            .map_err(|e| service_err(&self.names.frame, "send", e))?;
+        // A failed wake-up only delays readers to their own wait deadline; the frame is out.
+        let _ = self.notifier.notify();
+        self.previous = self
+            .own
+            .receive()
+            .map_err(|e| service_err(&self.names.frame, "receive own frame", e))?;
+        if let Some(inputs) = &self.inputs {
+            let (before, dt_s, dt_time_s) = self.stepper.last_step();
+            let c = &self.stepper.counters;
+            inputs.send(
+                InputsHeader {
+                    sequence: self.stepper.sequence,
+                    epoch: 0,
+                    stamp_ns: done,
+                    sim_time_before_s: before,
+                    dt_time_s,
+                    deposits_applied: c.applied,
+                    deposits_rejected_total: c.rejected_total(),
+                    dt_s,
+                    count: 0,
+                },
+                self.stepper.applied(),
+            )?;
+        }
+        Ok((report, compute_ns))
     }
 
     pub fn field(&self) -> &str {
@@ -217,6 +357,12 @@ impl FieldServer {
 
     pub fn stepper(&self) -> &Stepper {
         &self.stepper
+    }
+
+    /// Threads of each tick's evaporation pass (`Stepper::set_threads`: rows split across
+    /// threads, bit-identical to one thread).
+    pub fn set_threads(&mut self, threads: usize) -> Result<(), crate::ConfigError> {
+        self.stepper.set_threads(threads)
     }
 
     /// Connects readers that attached since the last frame and hands them the current frame
@@ -238,6 +384,11 @@ impl FieldServer {
                 FrameView::new(c.geometry(), c.channels.len(), s.payload()),
             )
         })
+    }
+
+    /// The cells of the last published frame.
+    pub fn latest_cells(&self) -> Option<&[f32]> {
+        self.previous.as_ref().map(|s| s.payload())
     }
 
     /// Whether deposits wait in the queue for the next tick.
@@ -272,51 +423,10 @@ impl FieldServer {
                 Err(e) => return Err(service_err(&self.names.deposit, "receive", e)),
             }
         }
-        let started = now_ns();
-        let len = self.stepper.config().frame_len();
-        let previous = match self.previous.take() {
-            Some(p) => p,
-            None => {
-                return Err(service_err(
-                    &self.names.frame,
-                    "tick",
-                    "the previous frame was lost",
-                ))
-            }
-        };
-        if previous.payload().len() != len {
-            return Err(ShmError::BadFrame {
-                got: previous.payload().len(),
-                expected: len,
-            });
-        }
-        let uninit = self
-            .publisher
-            .loan_slice_uninit(len)
-            .map_err(|e| service_err(&self.names.frame, "loan frame", e))?;
-        // SAFETY: the payload lies in an iceoryx2 shared-memory segment: memory the OS handed out
-        // zero-filled and that only ever held `f32` frames of this service, so every element is
-        // initialized bytes, and every bit pattern is a valid `f32`. `Stepper::step` then
-        // overwrites every element before the sample is sent.
-        let mut next = unsafe { uninit.assume_init() };
-        let report = match dt_s {
-            None => self.stepper.step(previous.payload(), next.payload_mut()),
-            Some(dt) => self
-                .stepper
-                .step_dt(previous.payload(), next.payload_mut(), dt),
-        };
-        drop(previous);
-        let done = now_ns();
-        let compute_ns = done.saturating_sub(started);
-        *next.user_header_mut() = self.stepper.header(done, compute_ns, &report);
-        next.send()
-            .map_err(|e| service_err(&self.names.frame, "send", e))?;
-        // A failed wake-up only delays readers to their own wait deadline; the frame is out.
-        let _ = self.notifier.notify();
-        self.previous = self
-            .own
-            .receive()
-            .map_err(|e| service_err(&self.names.frame, "receive own frame", e))?;
+        let (report, compute_ns) = self.publish_with(|stepper, prev, next| match dt_s {
+            None => stepper.step(prev, next),
+            Some(dt) => stepper.step_dt(prev, next, dt),
+        })?;
         Ok(TickOutcome {
             report,
             sequence: self.stepper.sequence,

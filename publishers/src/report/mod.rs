@@ -15,7 +15,8 @@
 //!
 //! Submodules: `style` the font, palette, colour maps and picture buffer; `heatmap` a snapshot's
 //! picture; `marks` the places it marks (from the scenario's metrics: `wrong_area`'s A and B); `series` the data of the charts, from the run; `plots` the charts; `graph_png` the
-//! picture of a node-graph run; `files` writes the CSV and PNG files.
+//! picture of a node-graph run; `files` writes the CSV and PNG files; `sweep` the files of
+//! `pheromone sweep` (CSV, JSON, exploration against robots and against R_C).
 
 mod files;
 mod graph_png;
@@ -25,6 +26,7 @@ mod marks;
 mod plots;
 pub mod series;
 mod style;
+mod sweep;
 
 use std::fmt::Write as _;
 use std::fs;
@@ -38,6 +40,7 @@ use heatmap::render_snapshot;
 pub use graph_png::write_graph_png;
 pub use marks::{marks, Mark, Shape};
 pub use plots::{PLOT_H_PX, PLOT_W_PX};
+pub use sweep::{sweep_csv, write_sweep, SWEEP_CSV_HEADER};
 
 /// Writing the outputs of a run failed.
 #[derive(Debug, thiserror::Error)]

@@ -17,18 +17,18 @@ const MAX_LEGEND_ROBOTS: usize = 8;
 /// Points of a closed-form curve.
 const CURVE_POINTS: usize = 240;
 
-type Root<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+pub(super) type Root<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
-fn text(size: u32) -> TextStyle<'static> {
+pub(super) fn text(size: u32) -> TextStyle<'static> {
     (FONT, size).into_font().color(&BLACK)
 }
 
-fn blank() -> Picture {
+pub(super) fn blank() -> Picture {
     Picture::new(PLOT_W_PX, PLOT_H_PX, [255, 255, 255])
 }
 
 /// Title and subtitle at the top; the rest of the picture for the chart.
-fn titled<'a>(root: &Root<'a>, title: &str, subtitle: &str) -> Result<Root<'a>, String> {
+pub(super) fn titled<'a>(root: &Root<'a>, title: &str, subtitle: &str) -> Result<Root<'a>, String> {
     root.draw_text(title, &text(22), (16, 10)).map_err(msg)?;
     root.draw_text(subtitle, &text(14).color(&RGBColor(80, 80, 80)), (16, 40))
         .map_err(msg)?;
@@ -131,7 +131,7 @@ pub(super) fn probes_chart(curves: &[ProbeCurve], end_s: f64) -> Result<Picture,
     Ok(pic)
 }
 
-fn series_labels<'a, 'b: 'a, X, Y>(
+pub(super) fn series_labels<'a, 'b: 'a, X, Y>(
     chart: &mut ChartContext<'a, BitMapBackend<'b>, Cartesian2d<X, Y>>,
     at: SeriesLabelPosition,
 ) -> Result<(), String>

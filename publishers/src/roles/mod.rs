@@ -14,8 +14,10 @@ pub mod world;
 pub use depositor::run::run_depositor;
 pub use follower::run::run_follower;
 pub use localizer::run::{run_localizer, Filter};
+pub use mapper::run::{run_mapper, MapperSummary};
 pub(crate) use role_loop::{receiver, role_loop, sender, summary_of};
 pub use role_loop::{sim_stamp_ns, ProcessError, RobotServices, RoleOptions, RoleSummary};
 pub use world::run::{
-    lockstep_participants, run_world, RobotSummary, WorldOptions, WorldSummary, WORLD_DEPOSITOR_ID,
+    lockstep_participants, mapper_robots, run_world, RobotSummary, WorldOptions, WorldSummary,
+    WORLD_DEPOSITOR_ID,
 };

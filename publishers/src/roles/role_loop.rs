@@ -48,6 +48,8 @@ pub enum ProcessError {
     Localizer(#[source] LocalizerError),
     #[error("scenario: mapping: {0}")]
     Mapping(#[source] crate::roles::mapper::MapError),
+    #[error("scenario: robot {robot} has no mapper: the scenario does not map ([mapping]) or the robot is not in the world")]
+    NotMapping { robot: u32 },
     #[error("scenario: robot {robot} has no [[robot]] entry")]
     NoRoles { robot: u32 },
     #[error("scenario: robot {robot} is not in the world")]

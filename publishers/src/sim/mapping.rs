@@ -31,7 +31,7 @@ pub struct RobotMap {
 }
 
 /// One merge: robot `dst` merged the map of `src` at world step `step`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct MergeEvent {
     pub step: u64,
     pub dst: u32,
@@ -187,5 +187,165 @@ impl MappingTeam {
             );
         }
         rec
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::messages::PeerObs;
+    use crate::roles::world::wrap_angle;
+    use crate::sim::scenario::Overrides;
+
+    /// Three robots of `ias-ss` with merging, exchanges from iteration 2 (step 20; 10 steps an
+    /// iteration), the same pair at most every 3 iterations.
+    fn three_robots() -> Scenario {
+        let mut s = Scenario::load("ias-ss").unwrap();
+        s.apply(&Overrides {
+            robots: Some(3),
+            merge: Some(true),
+            ..Overrides::default()
+        })
+        .unwrap();
+        s.mapping.start_iteration = 1;
+        s.mapping.every_iterations = 3;
+        s
+    }
+
+    /// Robot `r` standing at its start pose, with det Σxy = `var_m2`².
+    fn pose(r: &crate::roles::world::RobotConfig, step: u64, var_m2: f64) -> PoseMsg {
+        let mut p = PoseMsg {
+            step,
+            robot_id: r.id,
+            x_m: r.start.x_m,
+            y_m: r.start.y_m,
+            theta_rad: r.start.theta_rad,
+            ..PoseMsg::default()
+        };
+        p.cov[0] = var_m2;
+        p.cov[4] = var_m2;
+        p.cov[8] = 1e-4;
+        p
+    }
+
+    /// A fan of rays, some hitting a wall 2 m away: every map knows cells of its own.
+    fn scan(id: u32, step: u64) -> ScanMsg {
+        let mut s = ScanMsg {
+            step,
+            robot_id: id,
+            count: 9,
+            angle_min_rad: -std::f32::consts::FRAC_PI_2,
+            angle_step_rad: std::f32::consts::PI / 8.0,
+            range_max_m: 3.0,
+            hits: 0b1_0101_0101,
+            ..ScanMsg::default()
+        };
+        s.ranges_m[..9].copy_from_slice(&[2.0, 3.0, 2.0, 3.0, 2.0, 3.0, 2.0, 3.0, 2.0]);
+        s
+    }
+
+    /// Each robot's exact measurement of every other (the world frame is the truth here).
+    fn rendezvous(s: &Scenario, i: usize, step: u64) -> RendezvousMsg {
+        let robots = &s.world.robots;
+        let p = robots[i].start;
+        let mut rv = RendezvousMsg {
+            step,
+            robot_id: robots[i].id,
+            ..RendezvousMsg::default()
+        };
+        for q in robots.iter().filter(|q| q.id != robots[i].id) {
+            let q_start = q.start;
+            rv.peers[rv.count as usize] = PeerObs {
+                robot_id: q.id,
+                _pad: 0,
+                range_m: (q_start.x_m - p.x_m).hypot(q_start.y_m - p.y_m),
+                bearing_rad: wrap_angle(
+                    (q_start.y_m - p.y_m).atan2(q_start.x_m - p.x_m) - p.theta_rad,
+                ),
+                heading_rad: wrap_angle(q_start.theta_rad - p.theta_rad),
+            };
+            rv.count += 1;
+        }
+        rv
+    }
+
+    #[test]
+    fn a_lost_robot_neither_offers_nor_accepts_maps_while_a_localized_pair_merges() {
+        let s = three_robots();
+        let loss = s.mapping().unwrap().loss_det_m4;
+        let (found, lost) = (1e-3, 1.0); // det Σxy 1e-6 and 1 m⁴
+        assert!(found * found <= loss && lost * lost > loss);
+        let mut team = MappingTeam::new(&s).unwrap().expect("maps");
+        let ids: Vec<u32> = s.world.robots.iter().map(|r| r.id).collect();
+        // Robot 0's mapper alone, fed the same inputs: what it maps with no merge.
+        let mut solo = mapper_for(&s, ids[0]).unwrap().unwrap();
+        let feed = |team: &mut MappingTeam,
+                    solo: &mut Mapper,
+                    steps: std::ops::RangeInclusive<u64>,
+                    lost_0: bool| {
+            for k in steps {
+                let poses: Vec<PoseMsg> = s
+                    .world
+                    .robots
+                    .iter()
+                    .enumerate()
+                    .map(|(i, r)| pose(r, k, if i == 0 && lost_0 { lost } else { found }))
+                    .collect();
+                let sensed: Vec<_> = (0..ids.len())
+                    .map(|i| (scan(ids[i], k), rendezvous(&s, i, k)))
+                    .collect();
+                team.step(k, &poses, &sensed);
+                solo.on_step(k, &poses[0], &sensed[0].0);
+            }
+        };
+        // Robot 0 lost through step 20: at step 20, the first exchange step, on the state of
+        // step 19. Localized again from step 21, before the next exchange step (30).
+        feed(&mut team, &mut solo, 1..=20, true);
+        assert!(team.mappers[0].lost() && !team.mappers[1].lost());
+        feed(&mut team, &mut solo, 21..=29, false);
+        assert!(!team.mappers[0].lost());
+        let pairs: Vec<(u64, u32, u32)> =
+            team.merges.iter().map(|e| (e.step, e.dst, e.src)).collect();
+        assert_eq!(pairs, [(20, ids[1], ids[2]), (20, ids[2], ids[1])]);
+        // Robot 0 refused both its peers' maps; each peer refused robot 0's.
+        let c: Vec<&MapperCounters> = team.mappers.iter().map(|m| &m.counters).collect();
+        assert_eq!(
+            [c[0].refused_lost, c[1].refused_lost, c[2].refused_lost],
+            [2, 1, 1]
+        );
+        assert_eq!([c[0].merges, c[1].merges, c[2].merges], [0, 1, 1]);
+        assert!(c.iter().all(|c| c.merges_rejected.is_empty()));
+        // Its map holds only what it mapped itself; the others' maps took each other's.
+        assert_eq!(team.mappers[0].map.occupancy, solo.map.occupancy);
+        assert_eq!(team.mappers[0].map.pheromone, solo.map.pheromone);
+        let mut solo_1 = mapper_for(&s, ids[1]).unwrap().unwrap();
+        for k in 1..=29 {
+            solo_1.on_step(k, &pose(&s.world.robots[1], k, found), &scan(ids[1], k));
+        }
+        assert_ne!(team.mappers[1].map.occupancy, solo_1.map.occupancy);
+
+        // At the next exchange step robot 0 exchanges with both (the refused pairs were not
+        // marked as exchanged); the pair 1–2 waits for its interval.
+        feed(&mut team, &mut solo, 30..=30, false);
+        let pairs: Vec<(u32, u32)> = team.merges[2..].iter().map(|e| (e.dst, e.src)).collect();
+        assert_eq!(
+            pairs,
+            [
+                (ids[0], ids[1]),
+                (ids[0], ids[2]),
+                (ids[1], ids[0]),
+                (ids[2], ids[0])
+            ]
+        );
+        assert!(team.merges[2..].iter().all(|e| e.step == 30));
+        assert_ne!(team.mappers[0].map.occupancy, solo.map.occupancy);
+        let rec = team.finish();
+        assert_eq!(
+            rec.counters[&ids[0]].refused_lost, 2,
+            "no refusal once localized"
+        );
+        let m = crate::sim::exploration::mapping_metrics(&s, &rec);
+        assert_eq!(m["exchanges_refused_lost"], 4, "{m:?}");
+        assert_eq!(m["merges"], 6, "{m:?}");
     }
 }

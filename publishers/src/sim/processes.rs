@@ -13,7 +13,9 @@ use serde::Serialize;
 
 use crate::roles::follower::run_antenna::AntennaRobotSummary;
 use crate::roles::world::World;
-use crate::roles::{lockstep_participants, RoleSummary, WorldOptions, WorldSummary};
+use crate::roles::{
+    lockstep_participants, mapper_robots, MapperSummary, RoleSummary, WorldOptions, WorldSummary,
+};
 use crate::sim::observer::Observer;
 use crate::sim::record::Recording;
 use crate::sim::scenario::{Scenario, ScenarioError};
@@ -196,7 +198,7 @@ fn supervise(
 ) -> Result<(RunSummary, Recording, ProcessRunInfo), ProcessRunError> {
     let (field_name, world_name) = (tag.to_string(), tag.to_string());
     let path = scenario_file.display().to_string();
-    let participants = lockstep_participants(scenario, true);
+    let participants = lockstep_participants(scenario, true, true);
     let attach_timeout = o
         .attach_timeout
         .unwrap_or_else(|| WorldOptions::default_attach_timeout(participants));
@@ -324,10 +326,17 @@ fn supervise(
             roles.push(id);
         }
     }
+    // Seed 004: one mapper per robot when the scenario maps, each publishing its map as field
+    // `<run>-map-r<ID>` and merging its peers' maps from their frames.
+    let mut mappers: Vec<ChildId> = Vec::new();
+    for id in mapper_robots(scenario, true) {
+        mappers.push(sup.spawn(ChildSpec::new("mapper", Some(id), role("mapper", Some(id))))?);
+    }
     let mut world_args = role("world", None);
     if !o.realtime {
         world_args.extend(args(&[
             "--observed",
+            "--mapped",
             "--attach-timeout",
             &attach_timeout.as_secs_f64().to_string(),
             "--stall-timeout",
@@ -393,7 +402,10 @@ fn supervise(
     let end_timeout = Duration::from_secs(15);
     let end_deadline = Instant::now() + end_timeout;
     let mut reports = Vec::new();
-    for id in std::iter::once(field).chain(roles.iter().copied()) {
+    for id in std::iter::once(field)
+        .chain(roles.iter().copied())
+        .chain(mappers.iter().copied())
+    {
         if !sup.wait_exit(id, end_deadline.saturating_duration_since(Instant::now())) {
             return Err(ProcessRunError::NotStopped {
                 who: sup.spec(id).who(),
@@ -412,6 +424,10 @@ fn supervise(
             let s: RoleSummary = sup.summary(id)?;
             reports.push(report(&sup.spec(id).who(), &s));
         }
+    }
+    for &id in &mappers {
+        let s: MapperSummary = sup.summary(id)?;
+        reports.push(report(&sup.spec(id).who(), &s));
     }
     if let Some((id, _)) = gateway {
         // Every robot has gone: stop the gateway as Ctrl-C would, and take its counters.

@@ -6,11 +6,14 @@
 //!
 //! - `config.rs` `[mapping]` ([`MappingConfig`]);
 //! - `map.rs` [`LocalMap`]: scan integration, the robot's own deposits, frames;
-//! - `merge.rs` the transform of eqs. 7–10 ([`MergeTransform`]) and the merge pass.
+//! - `merge.rs` the transform of eqs. 7–10 ([`MergeTransform`]) and the merge pass;
+//! - `run.rs` the process loop (`pheromone mapper`): the map as a frame in shared memory, and
+//!   the exchanges merged zero-copy from the peers' frames.
 
 pub mod config;
 pub mod map;
 pub mod merge;
+pub mod run;
 #[cfg(test)]
 mod tests;
 
@@ -76,8 +79,14 @@ impl MapError {
     }
 }
 
+/// det Σxy of an estimate (m⁴).
+fn det_xy(pose: &PoseMsg) -> f64 {
+    let [xx, xy, yy] = pose.cov_xy();
+    xx * yy - xy * xy
+}
+
 /// What a mapper counted.
-#[derive(Debug, Clone, PartialEq, Default, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct MapperCounters {
     pub scans: u64,
     pub merges: u64,
@@ -141,7 +150,17 @@ impl Mapper {
 
     /// Lost: det Σxy beyond `loss_det_m4` (or no estimate yet, or a non-finite one).
     pub fn lost(&self) -> bool {
-        !matches!(self.pose, Some((_, det)) if det.is_finite() && det <= self.config.loss_det_m4)
+        self.pose.is_none_or(|(_, det)| self.lost_det(det))
+    }
+
+    /// Whether an estimate (this robot's or a peer's, as received) is lost by this mapper's
+    /// threshold: the test [`Mapper::lost`] applies, for the peers of the mapper process.
+    pub fn lost_estimate(&self, pose: &PoseMsg) -> bool {
+        self.lost_det(det_xy(pose))
+    }
+
+    fn lost_det(&self, det_m4: f64) -> bool {
+        !(det_m4.is_finite() && det_m4 <= self.config.loss_det_m4)
     }
 
     /// The iteration world step `step` belongs to.
@@ -171,9 +190,8 @@ impl Mapper {
     /// (if its depositor makes one) goes to the pheromone map, the scan is integrated, and on
     /// an iteration boundary the pheromone map steps. A refused scan is counted in the map.
     pub fn on_step(&mut self, step: u64, pose: &PoseMsg, scan: &ScanMsg) {
-        let [xx, xy, yy] = pose.cov_xy();
         let p = pose_in_frame(self.start, [pose.x_m, pose.y_m, pose.theta_rad]);
-        self.pose = Some((p, xx * yy - xy * xy));
+        self.pose = Some((p, det_xy(pose)));
         if let Some(d) = self.depositor.as_mut() {
             if let Ok(Some(m)) = d.process(pose) {
                 // A deposit the field refuses is refused here too (and counted by the stepper).
@@ -214,6 +232,37 @@ impl Mapper {
                 Err(e)
             }
         }
+    }
+
+    /// Merges a peer's map frame as the mapper process receives it (`header`, `cells`: the
+    /// frame in shared memory, borrowed): a frame whose header disagrees with its length (or
+    /// describes no valid geometry) is refused and counted under its [`MapError::name`] without
+    /// touching the map; a valid one goes through [`Mapper::accept`], which validates it further.
+    pub fn accept_frame(
+        &mut self,
+        step: u64,
+        header: &field::FrameHeader,
+        cells: &[f32],
+        src_pose: Pose2,
+        obs: &PeerObs,
+    ) -> Result<MergeTransform, MapError> {
+        match MapView::from_frame(header, cells) {
+            Ok(view) => self.accept(step, &view, src_pose, obs),
+            Err(e) => {
+                self.count_rejected(e.name());
+                Err(e)
+            }
+        }
+    }
+
+    /// Counts a peer map refused before it reached [`Mapper::accept`] (`reason`: e.g. a frame
+    /// whose header disagrees with its length, [`MapError::name`]).
+    pub fn count_rejected(&mut self, reason: &str) {
+        *self
+            .counters
+            .merges_rejected
+            .entry(reason.to_string())
+            .or_default() += 1;
     }
 
     /// Counts an exchange not made because this robot or its peer is lost (the pair tries again

@@ -171,6 +171,145 @@ fn a_known_rotation_and_translation_is_recovered_within_one_cell() {
     }
 }
 
+/// `true` when a cell within one cell (3 × 3) of (x, y) is occupied in `m`.
+fn wall_near(m: &LocalMap, x: i64, y: i64) -> bool {
+    let g = *m.geometry();
+    (-1..=1).any(|dy| {
+        (-1..=1).any(|dx| {
+            let (u, v) = (x + dx, y + dy);
+            u >= 0
+                && v >= 0
+                && (u as u32) < g.width
+                && (v as u32) < g.height
+                && m.occupancy[g.index(u as u32, v as u32)] > 0.0
+        })
+    })
+}
+
+#[test]
+fn a_known_rotation_and_translation_is_recovered_within_one_cell_under_the_worlds_noise() {
+    use crate::roles::world::{NoiseConfig, RobotConfig, World, WorldConfig, WorldPose};
+    // Robot j (id 0, the destination) and robot i (id 1) stand still at their start poses, the
+    // origins of their frames, so their estimates are exact ([0, 0, 0]): only the rendezvous
+    // measurement is noisy, drawn by the world at the mapping's configured noise.
+    let (sa, sb) = ([0.5, 0.2, 0.3], [2.7, 1.1, 2.1]);
+    let mapping = MappingConfig {
+        enabled: true,
+        ..MappingConfig::default()
+    };
+    let (sd_range, sd_bearing, sd_heading) = (
+        mapping.relpose_range_sigma_m,
+        mapping.relpose_bearing_sigma_rad,
+        mapping.relpose_heading_sigma_rad,
+    );
+    assert!(sd_range > 0.0 && sd_bearing > 0.0 && sd_heading > 0.0);
+    let robot = |id, s: Pose2| RobotConfig {
+        id,
+        start: WorldPose::new(s[0], s[1], s[2]),
+        noise: None,
+    };
+    let mut world = World::new(
+        WorldConfig {
+            robots: vec![robot(0, sa), robot(1, sb)],
+            noise: NoiseConfig::zero(),
+            ..WorldConfig::default()
+        },
+        7,
+    )
+    .unwrap();
+    world.enable_mapping(&mapping, 7);
+    let truth = MergeTransform::between_frames(sb, sa);
+    let d = (sb[0] - sa[0]).hypot(sb[1] - sa[1]);
+    let (b, a) = (walls_map(sb), walls_map(sa));
+    let g = *b.geometry();
+    // Robot i's walls, as points of its frame, with their distance from robot i.
+    let walls: Vec<[f64; 2]> = (0..g.height)
+        .flat_map(|y| (0..g.width).map(move |x| (x, y)))
+        .filter(|&(x, y)| b.occupancy[g.index(x, y)] > 0.0)
+        .map(|(x, y)| {
+            let (px, py) = g.world_from_grid(x, y);
+            [px as f64, py as f64]
+        })
+        .collect();
+    let reach_m = walls.iter().map(|p| p[0].hypot(p[1])).fold(0.0, f64::max);
+    let draws = 300;
+    let (mut sq_origin, mut sq_walls, mut clean_draws) = (0.0, vec![0.0; walls.len()], 0);
+    let (mut merged_walls, mut placed) = (0usize, 0usize);
+    for _ in 0..draws {
+        world.step(&[]);
+        let out = world.mapping_outputs();
+        let obs = out[0].1.peers()[0];
+        assert_eq!(obs.robot_id, 1);
+        let measured = MergeTransform::from_measurement([0.0; 3], [0.0; 3], &obs);
+        // The noise of this draw, and how far it can move a point at distance r from robot i:
+        // |δd| + d·|δα| + r·|δθ| (eqs. 7–10 are a rotation about robot i and a translation).
+        let (dd, da, dt) = (
+            (measured.d_ij_m - truth.d_ij_m).abs(),
+            crate::roles::world::wrap_angle(measured.alpha_ji_rad - truth.alpha_ji_rad).abs(),
+            crate::roles::world::wrap_angle(measured.theta_ij_rad - truth.theta_ij_rad).abs(),
+        );
+        assert!(dd + da + dt > 0.0, "the measurement is noisy");
+        let e0 = measured.displacement_m(&truth, [0.0, 0.0]);
+        assert!(e0 <= dd + d * da + 1e-9, "{e0} {dd} {da}");
+        sq_origin += e0 * e0;
+        for (p, sq) in walls.iter().zip(&mut sq_walls) {
+            let e = measured.displacement_m(&truth, *p);
+            assert!(
+                e <= dd + d * da + p[0].hypot(p[1]) * dt + 1e-9,
+                "{p:?}: {e}"
+            );
+            *sq += e * e;
+        }
+        // The merged map: every wall it places lies within one cell of robot j's own walls.
+        let mut merged = empty(16.0);
+        merged.merge(&b.view(), &measured).unwrap();
+        let (mut here, mut off) = (0usize, 0usize);
+        for y in 0..g.height {
+            for x in 0..g.width {
+                if merged.occupancy[g.index(x, y)] > 0.0 {
+                    here += 1;
+                    off += usize::from(!wall_near(&a, x as i64, y as i64));
+                }
+            }
+        }
+        assert!(here > 50, "{here}");
+        merged_walls += here;
+        placed += here - off;
+        clean_draws += usize::from(off == 0);
+    }
+    let n = draws as f64;
+    // The root mean square error the noise predicts at distance r from robot i:
+    // √(σ_d² + (d·σ_α)² + (r·σ_θ)²) (σ_α: the bearing's, and robot j's estimate is exact).
+    let predicted =
+        |r: f64| (sd_range.powi(2) + (d * sd_bearing).powi(2) + (r * sd_heading).powi(2)).sqrt();
+    let cell = g.cell_size_m as f64;
+    let rms_origin = (sq_origin / n).sqrt();
+    let rms_walls = sq_walls.iter().map(|s| (s / n).sqrt()).fold(0.0, f64::max);
+    eprintln!(
+        "d = {d:.2} m, walls within {reach_m:.2} m of robot i; rms error at robot i {rms_origin:.3} m \
+         (predicted {:.3}), worst wall point {rms_walls:.3} m (predicted {:.3}); \
+         {placed} / {merged_walls} merged wall cells within one cell, {clean_draws} / {draws} draws all",
+        predicted(0.0),
+        predicted(reach_m)
+    );
+    assert!(
+        (rms_origin / predicted(0.0) - 1.0).abs() < 0.2,
+        "{rms_origin}"
+    );
+    assert!(rms_walls < 1.2 * predicted(reach_m), "{rms_walls}");
+    // Within one cell: the alignment error (robot i's position, the metric runs report) is
+    // under half a cell, every wall point's under one cell, in root mean square.
+    assert!(
+        rms_origin < 0.5 * cell && rms_walls < cell,
+        "{rms_origin} {rms_walls}"
+    );
+    assert!(
+        placed as f64 >= 0.99 * merged_walls as f64,
+        "{placed} / {merged_walls}"
+    );
+    assert!(clean_draws as f64 >= 0.9 * n, "{clean_draws} / {draws}");
+}
+
 #[test]
 fn bad_maps_and_transforms_are_rejected_counted_and_never_merged() {
     let src = patterned(6.0, 3);
@@ -187,24 +326,50 @@ fn bad_maps_and_transforms_are_rejected_counted_and_never_merged() {
         ..FrameHeader::default()
     };
     assert!(MapView::from_frame(&header, &cells).is_ok());
-    let e = MapView::from_frame(&header, &cells[1..]).unwrap_err();
-    assert!(matches!(e, MapError::Length { .. }), "{e}");
-    assert!(
-        e.to_string().contains(&(cells.len() - 1).to_string()),
-        "{e}"
-    );
 
+    // A mapper with a map of its own: a merge would average into it.
     let mut m = Mapper::new(0, &config(6.0), [0.0; 3], &channel(), 0.1, None).unwrap();
     m.on_step(1, &PoseMsg::default(), &ScanMsg::default());
+    m.map = patterned(6.0, 9);
     let before = m.map.clone();
-    cells[17] = f32::NAN;
-    let view = MapView::from_frame(&header, &cells).unwrap();
     let obs = PeerObs {
         robot_id: 1,
         range_m: 1.0,
         ..PeerObs::default()
     };
-    let e = m.accept(1, &view, [0.0; 3], &obs).unwrap_err();
+    // A frame whose header disagrees with its length, through the mapper process's path.
+    let e = m
+        .accept_frame(1, &header, &cells[1..], [0.0; 3], &obs)
+        .unwrap_err();
+    assert!(matches!(e, MapError::Length { .. }), "{e}");
+    assert!(
+        e.to_string().contains(&(cells.len() - 1).to_string()),
+        "{e}"
+    );
+    let three = FrameHeader {
+        channels: 3,
+        ..header
+    };
+    let e = m
+        .accept_frame(1, &three, &cells, [0.0; 3], &obs)
+        .unwrap_err();
+    assert!(e.to_string().contains("3 channels"), "{e}");
+    // A view whose planes disagree with its geometry, through `accept`.
+    let short = MapView {
+        occupancy: &cells[..g.cells() - 1],
+        ..MapView::from_frame(&header, &cells).unwrap()
+    };
+    let e = m.accept(1, &short, [0.0; 3], &obs).unwrap_err();
+    assert!(matches!(e, MapError::Length { .. }), "{e}");
+    assert_eq!(m.counters.merges_rejected["length"], 3);
+    assert_eq!(m.counters.merges, 0);
+    assert_eq!(m.map.occupancy, before.occupancy);
+    assert_eq!(m.map.pheromone, before.pheromone);
+
+    cells[17] = f32::NAN;
+    let e = m
+        .accept_frame(1, &header, &cells, [0.0; 3], &obs)
+        .unwrap_err();
     assert!(e.to_string().contains("cell 17 is NaN"), "{e}");
     cells[17] = 0.5;
     let view = MapView::from_frame(&header, &cells).unwrap();
@@ -221,8 +386,10 @@ fn bad_maps_and_transforms_are_rejected_counted_and_never_merged() {
     assert_eq!(m.counters.merges, 0);
     assert_eq!(m.counters.merges_rejected["non_finite_cell"], 1);
     assert_eq!(m.counters.merges_rejected["transform"], 2);
-    m.accept(1, &view, [0.0; 3], &obs).unwrap();
+    assert_eq!(m.counters.merges_rejected["length"], 3);
+    m.accept_frame(1, &header, &cells, [0.0; 3], &obs).unwrap();
     assert_eq!(m.counters.merges, 1);
+    assert_ne!(m.map.occupancy, before.occupancy, "a valid frame is merged");
 }
 
 #[test]

@@ -26,6 +26,9 @@ pub struct WorldOptions {
     /// An observer (`pheromone sim`) takes part in the lockstep: the world waits for it to
     /// record each frame.
     pub observed: bool,
+    /// One mapper per robot (`pheromone mapper`) takes part when the scenario maps: the world
+    /// waits for each one's map frame of every step.
+    pub mapped: bool,
 }
 
 impl WorldOptions {
@@ -62,14 +65,25 @@ pub struct RobotSummary {
 
 /// The processes a lockstep run of `scenario` has besides the world: the field, and each
 /// robot's localizer, depositor and follower where the scenario gives them (plus an observer
-/// when `observed`).
-pub fn lockstep_participants(scenario: &Scenario, observed: bool) -> usize {
+/// when `observed`, and one mapper per robot of the world when `mapped` and the scenario maps).
+pub fn lockstep_participants(scenario: &Scenario, observed: bool, mapped: bool) -> usize {
     1 + observed as usize
+        + mapper_robots(scenario, mapped).len()
         + scenario
             .robots
             .iter()
             .map(|r| 1 + r.depositor.is_some() as usize + r.follower.is_some() as usize)
             .sum::<usize>()
+}
+
+/// The robots whose mapper takes part in a run (every robot of the world when `mapped` and the
+/// scenario maps; none otherwise).
+pub fn mapper_robots(scenario: &Scenario, mapped: bool) -> Vec<u32> {
+    if mapped && scenario.mapping().is_some() {
+        scenario.world.robots.iter().map(|r| r.id).collect()
+    } else {
+        Vec::new()
+    }
 }
 
 /// The world process: simulates, publishes sensors and truth, applies commands, makes the
@@ -122,7 +136,10 @@ pub fn run_world(
     if o.observed {
         after_tick.push((lockstep::role::OBSERVER, 0));
     }
-    let participants = lockstep_participants(scenario, o.observed);
+    for id in mapper_robots(scenario, o.mapped) {
+        after_tick.push((lockstep::role::MAPPER, id));
+    }
+    let participants = lockstep_participants(scenario, o.observed, o.mapped);
     let mut startup = Duration::ZERO;
     if !o.realtime {
         let timeout = o

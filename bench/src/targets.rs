@@ -1,0 +1,228 @@
+//! The targets of issues 6, 14, 15 and 18: each goal with its limit, the value measured in the
+//! run and whether it is met (`Report::targets`).
+
+use serde::Serialize;
+
+use crate::Report;
+
+/// One target of issue 6, with what was measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct Target {
+    pub name: String,
+    /// `"<="` or `">="`.
+    pub op: &'static str,
+    pub limit: f64,
+    pub measured: f64,
+    pub met: bool,
+}
+
+pub(crate) fn target(name: &str, op: &'static str, limit: f64, measured: f64) -> Target {
+    // Two decimals, or three significant digits for a value under 1 (a ratio of 0.004 stays
+    // 0.004, not 0).
+    let round = |v: f64| {
+        if v == 0.0 || !v.is_finite() {
+            return v;
+        }
+        let decimals = (2 - v.abs().log10().floor() as i32).clamp(2, 12);
+        let scale = 10f64.powi(decimals);
+        (v * scale).round() / scale
+    };
+    Target {
+        name: name.into(),
+        op,
+        limit: round(limit),
+        measured: round(measured),
+        met: if op == ">=" {
+            measured >= limit
+        } else {
+            measured <= limit
+        },
+    }
+}
+
+/// The targets of issues 6 and 18, each with the measured value and whether it is met.
+pub fn targets(r: &Report) -> Vec<Target> {
+    let mut t = Vec::new();
+    for (size, row) in &r.tick_vs_memcpy {
+        t.push(target(
+            &format!("plain tick / memcpy at {size}"),
+            "<=",
+            1.1,
+            row.exponential_ratio,
+        ));
+        t.push(target(
+            &format!("ambient tick / memcpy at {size}"),
+            "<=",
+            1.5,
+            row.ambient_ratio,
+        ));
+        for by in &row.ambient_by_radius {
+            t.push(target(
+                &format!(
+                    "ambient tick / memcpy at {size}, radius {} cells",
+                    by.radius_cells
+                ),
+                "<=",
+                1.5,
+                by.ambient_ratio,
+            ));
+        }
+    }
+    if let Some(h) = &r.hop_ns {
+        t.push(target(
+            "hop p50 ours / raw iceoryx2 (wait)",
+            "<=",
+            1.5,
+            h.ours.p50 / h.raw_iceoryx2.p50,
+        ));
+        t.push(target(
+            "hop p50 ours / raw iceoryx2 (busy-poll)",
+            "<=",
+            1.5,
+            h.busy_poll.ours.p50 / h.busy_poll.raw_iceoryx2.p50,
+        ));
+    }
+    if let (Some(small), Some(big)) = (r.frame_ns.get("1MiB"), r.frame_ns.get("16MiB")) {
+        t.push(target(
+            "frame p50 16 MiB / 1 MiB (ours, 1 reader)",
+            "<=",
+            2.0,
+            big.ours.p50 / small.ours.p50,
+        ));
+        t.push(target(
+            "frame p50 16 MiB / 1 MiB (ours, 8 readers)",
+            "<=",
+            2.0,
+            big.readers_8.ours.p50 / small.readers_8.ours.p50,
+        ));
+        for (size, f) in [("1 MiB", small), ("16 MiB", big)] {
+            t.push(target(
+                &format!("frame p50 ours / raw iceoryx2 at {size} (wait)"),
+                "<=",
+                1.5,
+                f.ours.p50 / f.raw_iceoryx2.p50,
+            ));
+            t.push(target(
+                &format!("frame p50 ours / raw iceoryx2 at {size} (busy-poll)"),
+                "<=",
+                1.5,
+                f.ours_busy_poll.p50 / f.raw_iceoryx2_busy_poll.p50,
+            ));
+            t.push(target(
+                &format!("frame p50 ours / raw iceoryx2 at {size} (paced spin)"),
+                "<=",
+                1.5,
+                f.ours_spin.p50 / f.raw_iceoryx2_spin.p50,
+            ));
+        }
+        t.push(target(
+            "frame p50 16 MiB / 1 MiB: ours / raw iceoryx2's (busy-poll)",
+            "<=",
+            1.0,
+            (big.ours_busy_poll.p50 / small.ours_busy_poll.p50)
+                / (big.raw_iceoryx2_busy_poll.p50 / small.raw_iceoryx2_busy_poll.p50),
+        ));
+        // Issue 18: ≥ 1000× both, in wait mode (every reader waits) and with ours busy-polling
+        // (the socket and Zenoh readers block in their receive either way: their frame takes
+        // milliseconds to copy and decode, so polling would not change them).
+        t.push(target(
+            "16 MiB frame p50: UDS+serde / ours (1 reader, wait)",
+            ">=",
+            1000.0,
+            big.uds_serde.p50 / big.ours.p50,
+        ));
+        t.push(target(
+            "16 MiB frame p50: UDS+serde / ours busy-polling (1 reader)",
+            ">=",
+            1000.0,
+            big.uds_serde.p50 / big.ours_busy_poll.p50,
+        ));
+        if let Some(z) = big.zenoh {
+            t.push(target(
+                "16 MiB frame p50: Zenoh / ours (1 reader, wait)",
+                ">=",
+                1000.0,
+                z.p50 / big.ours.p50,
+            ));
+            t.push(target(
+                "16 MiB frame p50: Zenoh / ours busy-polling (1 reader)",
+                ">=",
+                1000.0,
+                z.p50 / big.ours_busy_poll.p50,
+            ));
+        }
+    }
+    if let Some(v) = &r.deposit_to_visible_us {
+        t.push(target(
+            "deposit-to-visible p99 µs (limit: period + 1.2 x tick compute p99 + 50 µs)",
+            "<=",
+            v.target_p99_us,
+            v.latency.p99,
+        ));
+    }
+    if let Some(v) = &r.deposit_to_visible_on_deposit_us {
+        t.push(target(
+            "deposit-to-visible p99 µs, publishing on deposit (limit: tick compute p99 + 100 µs)",
+            "<=",
+            v.target_p99_us,
+            v.latency.p99,
+        ));
+    }
+    // Issue 14: a PIR answered well inside a 10 Hz robot's step, and one gateway core serving
+    // 1000 robots at 10 Hz (seed 002's server load grows with N² per axis; ours is O(1) per PIR).
+    if let Some(g) = &r.gateway_pir {
+        t.push(target(
+            "PIR round trip p99 µs over UDP loopback",
+            "<=",
+            1000.0,
+            g.pir_round_trip_ns.p99 / 1e3,
+        ));
+        t.push(target(
+            "PIRs per second of gateway CPU (one core)",
+            ">=",
+            10_000.0,
+            g.flood.pirs_per_cpu_s,
+        ));
+    }
+    mirror_targets(r, &mut t);
+    t
+}
+
+/// Issue 15: a mirror's wire traffic stays a small fraction of shipping the frames.
+#[cfg(feature = "zenoh")]
+fn mirror_targets(r: &Report, t: &mut Vec<Target>) {
+    let Some(m) = &r.mirror else {
+        return;
+    };
+    if let Some(w) = m.wire.iter().find(|w| w.deposits_per_s >= 1000.0) {
+        // Rounded to 2 decimals: the ratio is reported in percent.
+        t.push(target(
+            &format!(
+                "mirror wire bytes / raw frames at {0}x{0}, {1} Hz, 1000 deposits/s (%)",
+                m.width, m.tick_hz
+            ),
+            "<=",
+            1.0,
+            w.ratio_to_raw * 100.0,
+        ));
+    }
+}
+
+#[cfg(not(feature = "zenoh"))]
+fn mirror_targets(_r: &Report, _t: &mut [Target]) {}
+
+#[cfg(test)]
+mod tests {
+    use super::target;
+
+    #[test]
+    fn a_target_keeps_the_significant_digits_of_a_small_ratio() {
+        let t = target("small", "<=", 1.5, 0.002517);
+        assert_eq!(t.measured, 0.00252);
+        assert!(t.met);
+        let t = target("large", ">=", 1000.0, 2704.9712);
+        assert_eq!(t.measured, 2704.97);
+        assert!(t.met);
+        assert_eq!(target("zero", "<=", 1.0, 0.0).measured, 0.0);
+    }
+}

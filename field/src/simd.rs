@@ -1,0 +1,114 @@
+//! Run-time CPU dispatch of the ambient pass's kernels (`crate::ambient`).
+//!
+//! Each kernel is plain Rust marked `#[inline(always)]`. This module instantiates it twice: as
+//! is (the baseline of the build target, SSE2 on x86-64) and inside a function compiled with
+//! `#[target_feature(enable = "avx2")]`, where LLVM vectorizes the same loops four f64 / eight
+//! f32 wide. Neither enables FMA and Rust never contracts `a * b + c`, so both instantiations
+//! perform the same IEEE operations in the same order: their results are bit-identical.
+//!
+//! The AVX2 instantiation may only run on a CPU that has AVX2; `Dispatch::detect` checks it once
+//! with `is_x86_feature_detected!`. This is the crate's only `unsafe` outside `shm`.
+
+use std::sync::OnceLock;
+
+use crate::ambient;
+
+/// Which instantiation of the kernels runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Dispatch {
+    /// True only if the running CPU has AVX2 (the constructor checks it).
+    avx2: bool,
+}
+
+impl Dispatch {
+    /// The best instantiation for this CPU (detected once per process).
+    pub fn detect() -> Self {
+        static AVX2: OnceLock<bool> = OnceLock::new();
+        Self {
+            avx2: *AVX2.get_or_init(avx2_available),
+        }
+    }
+
+    /// The baseline instantiation, on any CPU.
+    pub fn portable() -> Self {
+        Self { avx2: false }
+    }
+
+    /// The AVX2 instantiation if this CPU has AVX2 (`None` otherwise).
+    pub fn avx2() -> Option<Self> {
+        avx2_available().then_some(Self { avx2: true })
+    }
+
+    /// "avx2" or "portable".
+    pub fn name(&self) -> &'static str {
+        if self.avx2 {
+            "avx2"
+        } else {
+            "portable"
+        }
+    }
+}
+
+fn avx2_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+macro_rules! dispatch {
+    ($(fn $name:ident($($arg:ident: $ty:ty),*);)*) => {
+        #[cfg(target_arch = "x86_64")]
+        mod avx2 {
+            use super::ambient;
+            $(
+                #[target_feature(enable = "avx2")]
+                #[allow(clippy::too_many_arguments)]
+                pub(super) unsafe fn $name($($arg: $ty),*) {
+                    ambient::$name($($arg),*)
+                }
+            )*
+        }
+
+        impl Dispatch {
+            $(
+                #[inline]
+                #[allow(clippy::too_many_arguments)]
+                pub(crate) fn $name(self, $($arg: $ty),*) {
+                    #[cfg(target_arch = "x86_64")]
+                    if self.avx2 {
+                        // SAFETY: `avx2` is true only when `is_x86_feature_detected!("avx2")`
+                        // returned true on this CPU (`Dispatch::detect` / `Dispatch::avx2`
+                        // are the only constructors that set it), which is the one requirement
+                        // of a `#[target_feature(enable = "avx2")]` function; the kernel itself
+                        // is safe Rust.
+                        unsafe { avx2::$name($($arg),*) };
+                        return;
+                    }
+                    ambient::$name($($arg),*)
+                }
+            )*
+        }
+    };
+}
+
+dispatch! {
+    fn add_row(col_sum: &mut [f64], row: &[f32]);
+    fn sub_row(col_sum: &mut [f64], row: &[f32]);
+    fn swap_row(col_sum: &mut [f64], row_in: &[f32], row_out: &[f32]);
+    fn prefix_sum(col: &[f64], prefix: &mut [f64]);
+    fn mean_row(prefix: &[f64], inv_count: &[f64], span: usize, out: &mut [f32]);
+    fn decay_row(
+        prefix: &[f64],
+        inv_count: &[f64],
+        span: usize,
+        src: &[f32],
+        out: &mut [f32],
+        factor: f32,
+        alpha: f32
+    );
+}

@@ -1,0 +1,189 @@
+//! `pheromone sweep`: seed 004's grid of experiments (`publishers::sim::sweep`) on all cores,
+//! with a progress bar, a summary on stderr and the files of `publishers::report::write_sweep`.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use publishers::roles::follower::StrategyKind;
+use publishers::sim::sweep::{
+    parse_rc_m, parse_robots, parse_strategies, run_sweep, SweepGrid, SweepResult,
+};
+
+use super::roles::load_scenario;
+use super::{bad, bad_from};
+
+/// Run seed 004's grid of experiments: exploration with and without map merging.
+///
+/// Every combination of --robots × --rc-m × merge {on, off} × --strategies runs --trials times
+/// (seeds 1..=T), each run the single-process simulation of the scenario (deterministic for a
+/// seed) with mapping on. Runs go to --jobs worker threads from one queue, the largest first.
+/// Per run it records `exploration_known` (sectors known, visited or merged: team, and mean per
+/// robot) and `exploration` (sectors visited); per point the mean ± sd of each over the
+/// trials; at equal points it compares merge on vs off and inverse vs uniform on the known mean
+/// per robot (Welch's t and its df; the paired t, the seeds match).
+///
+/// Writes into --out: sweep.csv (one row per run), sweep.json (points and comparisons),
+/// sweep_robots.png (exploration vs robots, with and without merging) and sweep_rc.png
+/// (exploration vs R_C), mean ± sd error bars. A progress bar shows on a terminal only.
+///
+/// Time (measured on a 2-core machine, release build): one 1000 s run takes 0.4 s (1 robot) to
+/// 3.4 s (8 robots), so the default sweep (robots 1,2,4,6,8 × merge on/off × 10 trials = 100
+/// runs of the paper's 1000 iterations) takes about a minute and a half on 2 cores; R_C and
+/// strategy lists multiply it. Without merging R_C changes nothing: those points run once, at
+/// the first R_C.
+#[derive(Args, Debug)]
+pub struct SweepArgs {
+    /// Scenario: a built-in name or a TOML file; it needs [metrics.exploration] (ias-ss).
+    #[arg(default_value = "ias-ss")]
+    pub scenario: String,
+    /// Robot counts, comma-separated (each ≥ 1, at most the robots the scenario places).
+    #[arg(
+        long,
+        value_name = "LIST",
+        default_value = "1,2,4,6,8",
+        allow_hyphen_values = true
+    )]
+    pub robots: String,
+    /// Communication radii R_C (m), comma-separated, each > 0 [default: the scenario's
+    /// [mapping] rc_m, 8 m in ias-ss].
+    #[arg(long = "rc-m", value_name = "LIST", allow_hyphen_values = true)]
+    pub rc_m: Option<String>,
+    /// Only runs with map merging (exchanges at rendezvous).
+    #[arg(long, conflicts_with = "no_merge")]
+    pub merge: bool,
+    /// Only runs without merging (each robot knows what it mapped itself).
+    #[arg(long)]
+    pub no_merge: bool,
+    /// Exploring strategies, comma-separated: inverse (IAS-SS), uniform.
+    #[arg(
+        long,
+        value_name = "LIST",
+        default_value = "inverse",
+        allow_hyphen_values = true
+    )]
+    pub strategies: String,
+    /// Also the uniform strategy (the same as --strategies inverse,uniform).
+    #[arg(long, conflicts_with = "strategies")]
+    pub uniform: bool,
+    /// Trials per point (seeds 1..=T).
+    #[arg(long, value_name = "T", default_value_t = 10)]
+    pub trials: u32,
+    /// Simulated seconds per run (one IAS-SS iteration a second: the paper's 1000 iterations).
+    #[arg(long = "duration-s", value_name = "S", default_value_t = 1000.0)]
+    pub duration_s: f64,
+    /// Worker threads [default: the available parallelism].
+    #[arg(long, value_name = "N")]
+    pub jobs: Option<usize>,
+    /// Directory for the files [default: pheromone-out/sweep-<SCENARIO>].
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Print sweep.json on stdout as well.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn grid(a: &SweepArgs) -> anyhow::Result<SweepGrid> {
+    if !(a.duration_s.is_finite() && a.duration_s > 0.0) {
+        return Err(bad(format!(
+            "--duration-s {}: must be a number of seconds > 0",
+            a.duration_s
+        )));
+    }
+    if a.trials == 0 {
+        return Err(bad("--trials 0: needs at least 1 trial"));
+    }
+    let strategies = if a.uniform {
+        vec![StrategyKind::Inverse, StrategyKind::Uniform]
+    } else {
+        parse_strategies(&a.strategies).map_err(bad_from)?
+    };
+    Ok(SweepGrid {
+        robots: parse_robots(&a.robots).map_err(bad_from)?,
+        rc_m: match &a.rc_m {
+            Some(t) => parse_rc_m(t).map_err(bad_from)?,
+            None => Vec::new(),
+        },
+        merge: match (a.merge, a.no_merge) {
+            (true, _) => vec![true],
+            (_, true) => vec![false],
+            _ => vec![true, false],
+        },
+        strategies,
+        trials: a.trials,
+        duration_s: a.duration_s,
+    })
+}
+
+pub fn run(a: SweepArgs) -> anyhow::Result<()> {
+    let grid = grid(&a)?;
+    let jobs = match a.jobs {
+        Some(0) => return Err(bad("--jobs 0: needs at least 1 worker")),
+        Some(n) => n,
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+    };
+    let base = load_scenario(&a.scenario)?;
+    let runs = publishers::sim::sweep::plan(&base, &grid)
+        .map_err(bad_from)?
+        .len();
+    eprintln!(
+        "sweep '{}': {runs} run(s) of {} s on {jobs} thread(s)",
+        base.name, grid.duration_s
+    );
+    let bar = indicatif::ProgressBar::new(runs as u64);
+    if let Ok(style) =
+        indicatif::ProgressStyle::with_template("{spinner} [{bar:40}] {pos}/{len} runs ({eta})")
+    {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    let result = run_sweep(&base, &grid, jobs, &|done, _| bar.set_position(done as u64))?;
+    bar.finish_and_clear();
+    print_summary(&result);
+    let dir = a
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("pheromone-out").join(format!("sweep-{}", base.name)));
+    let files = publishers::report::write_sweep(&dir, &result)?;
+    eprintln!("wrote {} file(s) to {}", files.len(), dir.display());
+    if a.json {
+        println!("{}", serde_json::to_string(&result)?);
+    }
+    Ok(())
+}
+
+fn print_summary(r: &SweepResult) {
+    eprintln!(
+        "sweep '{}' done: {} run(s) in {:.1} s wall time on {} thread(s)",
+        r.scenario,
+        r.runs.len(),
+        r.wall_s,
+        r.jobs
+    );
+    for p in &r.points {
+        eprintln!(
+            "  {}: known {:.3} ± {:.3} (team {:.3} ± {:.3}), visited {:.3} ± {:.3}",
+            p.key,
+            p.known_mean.mean,
+            p.known_mean.sd,
+            p.known_team.mean,
+            p.known_team.sd,
+            p.visited_mean.mean,
+            p.visited_mean.sd
+        );
+    }
+    for c in &r.comparisons {
+        let t = |x: Option<publishers::sim::sweep_stats::TTest>| {
+            x.map_or("undefined".to_string(), |x| {
+                format!("{:.2} (df {:.1})", x.t, x.df)
+            })
+        };
+        eprintln!(
+            "  {} at {}: {:.3} vs {:.3}, Welch t = {}, paired t = {}",
+            c.kind,
+            c.a,
+            c.mean_a,
+            c.mean_b,
+            t(c.welch),
+            t(c.paired)
+        );
+    }
+}

@@ -1,0 +1,96 @@
+//! `pheromone sweep ias-ss` (seed 004's grid of experiments): a tiny sweep writes a CSV row per
+//! run, the JSON points and comparisons, and two valid PNG charts; bad lists exit with status 2
+//! naming the option and the value.
+
+use std::path::Path;
+
+use crate::harness::*;
+
+fn is_png(path: &Path) -> bool {
+    let b = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    // Signature, then the IHDR chunk with a non-zero width and height.
+    b.len() > 33
+        && &b[..8] == b"\x89PNG\r\n\x1a\n"
+        && &b[12..16] == b"IHDR"
+        && u32::from_be_bytes([b[16], b[17], b[18], b[19]]) > 0
+        && u32::from_be_bytes([b[20], b[21], b[22], b[23]]) > 0
+}
+
+#[test]
+fn a_tiny_sweep_writes_a_row_per_run_the_points_and_two_pngs() {
+    let dir = std::env::temp_dir().join(unique("sweep"));
+    let out = dir.to_str().unwrap();
+    let o = run(&[
+        "sweep",
+        "ias-ss",
+        "--robots",
+        "1,2",
+        "--trials",
+        "2",
+        "--duration-s",
+        "120",
+        "--jobs",
+        "2",
+        "--out",
+        out,
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // 2 robot counts × merge {on, off} × 2 seeds.
+    let csv = std::fs::read_to_string(dir.join("sweep.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert!(lines
+        .next()
+        .unwrap()
+        .starts_with("robots,rc_m,merge,strategy,seed,"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 8, "{csv}");
+    let seeds: Vec<&str> = rows.iter().map(|r| r[4]).collect();
+    assert_eq!(seeds, ["1", "2", "1", "2", "1", "2", "1", "2"]);
+    for r in &rows {
+        let known: f64 = r[5].parse().unwrap();
+        assert!((0.0..=1.0).contains(&known), "{r:?}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("sweep.json")).unwrap()).unwrap();
+    let points = json["points"].as_array().unwrap();
+    assert_eq!(points.len(), 4, "{json}");
+    for p in points {
+        assert_eq!(p["known_mean"]["n"], 2, "{p}");
+        assert!(p["known_mean"]["mean"].as_f64().is_some(), "{p}");
+        assert!(p["visited_mean"]["sd"].as_f64().is_some(), "{p}");
+    }
+    // Merge on vs off at each robot count.
+    let comparisons = json["comparisons"].as_array().unwrap();
+    assert_eq!(comparisons.len(), 2, "{json}");
+    assert!(comparisons.iter().all(|c| c["kind"] == "merge"));
+    // --json prints the same object.
+    assert_eq!(crate::harness::json(&o)["points"], json["points"]);
+    for png in ["sweep_robots.png", "sweep_rc.png"] {
+        assert!(is_png(&dir.join(png)), "{png}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bad_lists_exit_with_status_2_naming_the_option_and_the_value() {
+    for (args, option, value) in [
+        (&["--robots", "0"][..], "--robots", "0"),
+        (&["--robots", "1,x"][..], "--robots", "x"),
+        (&["--robots", "12"][..], "--robots", "12"),
+        (&["--rc-m", "-1"][..], "--rc-m", "-1"),
+        (&["--rc-m", "abc"][..], "--rc-m", "abc"),
+        (&["--strategies", "route"][..], "--strategies", "route"),
+        (&["--trials", "0"][..], "--trials", "0"),
+    ] {
+        let dir = std::env::temp_dir().join(unique("sweep-bad"));
+        let mut all = vec!["sweep", "ias-ss", "--duration-s", "5", "--out"];
+        all.push(dir.to_str().unwrap());
+        all.extend_from_slice(args);
+        let o = run(&all);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+        assert!(e.contains(option) && e.contains(value), "{args:?}: {e}");
+        assert!(!dir.exists(), "{args:?}: nothing written");
+    }
+}
