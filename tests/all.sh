@@ -7,14 +7,11 @@ cd "$(dirname "$0")/.."
 echo "== cargo test --workspace"
 cargo test --workspace
 
-# Field mirrors over Zenoh (feature `zenoh`): only the mirror tests, so the rest of the suite is
-# not built twice (the feature adds zenoh, zstd and xxhash-rust to the binary).
+# Field mirrors over Zenoh (feature `zenoh`): only the mirror tests (tests/mirror: two iceoryx2
+# domains linked by a bridge, and the envelope of docs/mirror-wire.md byte by byte), so the rest
+# of the suite is not built twice (the feature adds zenoh, zstd and xxhash-rust to the binary).
 echo "== cargo test --test cli --features zenoh mirror::"
 cargo test --test cli --features zenoh mirror::
-
-# The bridge's codec, bridge and mirror unit tests (the envelope checks byte by byte).
-echo "== cargo test -p pheromone-publishers --features zenoh --lib bridge::"
-cargo test -p pheromone-publishers --features zenoh --lib bridge::
 
 # The `zenoh` extra (eclipse-zenoh 1.10.2, as the Rust zenoh crate in Cargo.lock; zstandard,
 # xxhash) is for python/tests/test_zenoh_frames.py: a bridge's --frames decoded in Python.

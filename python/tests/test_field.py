@@ -271,8 +271,11 @@ def test_watch_example_prints_a_line_per_frame_until_ctrl_c(start_field):
     with attach(f) as field:
         field.deposit(2.05, 1.55, 0.003)
         wait_applied(field, 1)
+    # Ctrl-C as in a terminal: SIGINT at its default even if this run inherited it ignored (a
+    # non-interactive shell's background job), where Python would install no KeyboardInterrupt.
     p = subprocess.Popen([sys.executable, str(REPO / "examples" / "python" / "watch.py"), f.name],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     STARTED_PIDS.add(p.pid)
     lines = []
     try:

@@ -12,6 +12,8 @@ use publishers::sim::supervisor::{ChildId, ChildSpec, Supervisor};
 
 use super::harness::*;
 
+mod wire;
+
 /// The two "hosts" (fixed names: iceoryx2 keeps one management segment per domain prefix).
 const ORIGIN: &str = "mirtestA";
 const MIRROR: &str = "mirtestB";

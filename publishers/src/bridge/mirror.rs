@@ -76,6 +76,8 @@ pub struct Mirror {
     checksum_sub: Sub,
     keyframe_sub: Sub,
     deposit_pub: zenoh::pubsub::Publisher<'static>,
+    /// Local deposits taken from the field's queue, not yet sent to the origin.
+    outbox: Vec<DepositMsg>,
     server: Option<FieldServer>,
     config: Option<FieldConfig>,
     /// The origin run the local frames come from (set from a keyframe and its configuration).
@@ -149,6 +151,7 @@ impl Mirror {
             checksum_sub,
             keyframe_sub,
             deposit_pub,
+            outbox: Vec::new(),
             server: None,
             config: None,
             epoch: 0,
@@ -471,6 +474,8 @@ impl Mirror {
             );
             return Ok(false);
         }
+        // Every frame published first takes the local deposits queued so far (`apply_pending`).
+        self.outbox.extend(server.take_local_deposits()?);
         server.reset_to(h, cells)?;
         self.finish_keyframe(h, bytes, started);
         Ok(true)
@@ -517,6 +522,10 @@ impl Mirror {
             }
             let (h, deposits) = self.pending.pop_first().expect("just looked").1;
             let server = self.server.as_mut().expect("checked above");
+            // A local depositor takes two new frames as the sign that its deposits left the
+            // queue (`DepositPublisher::flush`), as they do on a field, whose every tick drains
+            // the queue first; so does every frame here, also when one round applies several.
+            self.outbox.extend(server.take_local_deposits()?);
             let refused = server.apply_inputs(&h, &deposits)?;
             if refused > 0 {
                 eprintln!(
@@ -587,15 +596,16 @@ impl Mirror {
         let Some(server) = self.server.as_mut() else {
             return Ok(());
         };
-        let deposits = server.take_local_deposits()?;
-        if deposits.is_empty() {
+        self.outbox.extend(server.take_local_deposits()?);
+        if self.outbox.is_empty() {
             return Ok(());
         }
         self.deposit_pub
-            .put(codec::encode_deposits(&deposits))
+            .put(codec::encode_deposits(&self.outbox))
             .wait()
             .map_err(|e| zerr("put deposits", e))?;
-        self.stats.deposits_forwarded += deposits.len() as u64;
+        self.stats.deposits_forwarded += self.outbox.len() as u64;
+        self.outbox.clear();
         Ok(())
     }
 
