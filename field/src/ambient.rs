@@ -235,7 +235,16 @@ impl ColumnSums {
         // Row y − r − 1 was summed only if it is a row of the band's start-up window or later.
         let leaves = y > y0 && y > r;
         match (enters, leaves) {
-            (true, true) => d.swap_row(&mut s.col_sum, row(y + r), row(y - r - 1)),
+            (true, true) => {
+                // The row after this one enters next: fetched from memory while this one is
+                // summed, so the next row's sums do not wait on it (`swap_row`).
+                let ahead = if y + r + 1 < self.height {
+                    row(y + r + 1)
+                } else {
+                    &[]
+                };
+                d.swap_row(&mut s.col_sum, row(y + r), row(y - r - 1), ahead)
+            }
             (true, false) => d.add_row(&mut s.col_sum, row(y + r)),
             (false, true) => d.sub_row(&mut s.col_sum, row(y - r - 1)),
             (false, false) => {}
@@ -273,9 +282,34 @@ pub(crate) fn sub_row(col_sum: &mut [f64], row: &[f32]) {
 
 /// One row enters the window and one leaves. The difference of two f32 is exact in f64, so this
 /// is one rounding per column instead of two.
+///
+/// `ahead` (the row that enters next, or empty) is prefetched a cache line per line of this
+/// row: the entering row is the pass's one read from memory, and without the hint every row
+/// starts with a stall on it (`perf annotate`: 72 % of this kernel's samples on that load at
+/// 2048²), as the hardware prefetcher does not run ahead across the rows' other work. A hint
+/// changes no result.
 #[inline(always)]
-pub(crate) fn swap_row(col_sum: &mut [f64], row_in: &[f32], row_out: &[f32]) {
-    for ((c, &i), &o) in col_sum.iter_mut().zip(row_in).zip(row_out) {
+pub(crate) fn swap_row(col_sum: &mut [f64], row_in: &[f32], row_out: &[f32], ahead: &[f32]) {
+    const LINE: usize = 16; // f32 per 64-byte cache line
+    let n = col_sum.len().min(row_in.len()).min(row_out.len());
+    let full = n - n % LINE;
+    let chunks = col_sum[..full]
+        .chunks_exact_mut(LINE)
+        .zip(row_in[..full].chunks_exact(LINE))
+        .zip(row_out[..full].chunks_exact(LINE));
+    for (k, ((c, ri), ro)) in chunks.enumerate() {
+        if let Some(a) = ahead.get(k * LINE) {
+            crate::simd::prefetch(a);
+        }
+        for ((c, &i), &o) in c.iter_mut().zip(ri).zip(ro) {
+            *c += i as f64 - o as f64;
+        }
+    }
+    for ((c, &i), &o) in col_sum[full..n]
+        .iter_mut()
+        .zip(&row_in[full..n])
+        .zip(&row_out[full..n])
+    {
         *c += i as f64 - o as f64;
     }
 }

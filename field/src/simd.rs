@@ -60,6 +60,22 @@ fn avx2_available() -> bool {
     }
 }
 
+/// Hints the CPU to bring the cache line holding `v` into L1 (no effect on any result; a no-op
+/// off x86-64).
+#[inline(always)]
+pub(crate) fn prefetch(v: &f32) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        // SAFETY: a prefetch is only a hint: it never faults and reads nothing into the
+        // program, and `v` is a valid reference anyway; SSE, its one requirement, is part of
+        // the x86-64 baseline.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>((v as *const f32).cast::<i8>()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = v;
+}
+
 macro_rules! dispatch {
     ($(fn $name:ident($($arg:ident: $ty:ty),*);)*) => {
         #[cfg(target_arch = "x86_64")]
@@ -99,7 +115,7 @@ macro_rules! dispatch {
 dispatch! {
     fn add_row(col_sum: &mut [f64], row: &[f32]);
     fn sub_row(col_sum: &mut [f64], row: &[f32]);
-    fn swap_row(col_sum: &mut [f64], row_in: &[f32], row_out: &[f32]);
+    fn swap_row(col_sum: &mut [f64], row_in: &[f32], row_out: &[f32], ahead: &[f32]);
     fn prefix_sum(col: &[f64], prefix: &mut [f64]);
     fn mean_row(prefix: &[f64], inv_count: &[f64], span: usize, out: &mut [f32]);
     fn decay_row(
