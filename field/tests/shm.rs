@@ -304,3 +304,32 @@ fn every_wait_policy_sees_the_next_frame_and_honours_its_timeout() {
         assert!(t.elapsed() >= Duration::from_millis(30), "{policy:?}");
     }
 }
+
+/// `--wait` values: the three policies parse and print back the same; anything else is an
+/// error that names the value.
+#[test]
+fn wait_policies_parse_from_their_names_and_refuse_anything_else() {
+    use field::shm::WaitPolicy;
+    for (text, policy) in [
+        ("event", WaitPolicy::Event),
+        ("busy-poll", WaitPolicy::BusyPoll),
+        ("spin:200", WaitPolicy::Spin(Duration::from_micros(200))),
+        ("spin:1000000", WaitPolicy::Spin(Duration::from_secs(1))),
+    ] {
+        assert_eq!(text.parse::<WaitPolicy>(), Ok(policy), "{text}");
+        assert_eq!(policy.to_string(), text);
+    }
+    for bad in [
+        "",
+        "Event",
+        "spin",
+        "spin:",
+        "spin:0",
+        "spin:-5",
+        "spin:1.5",
+        "spin:1000001",
+    ] {
+        let e = bad.parse::<WaitPolicy>().unwrap_err();
+        assert!(e.to_string().contains(&format!("\"{bad}\"")), "{bad}: {e}");
+    }
+}

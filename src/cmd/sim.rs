@@ -295,6 +295,7 @@ fn run_processes(
             progress,
             view: a.view.clone(),
             remote: a.remote,
+            follower_wait: a.follower_wait,
         },
     )?)
 }

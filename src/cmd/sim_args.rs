@@ -66,6 +66,15 @@ pub struct SimArgs {
     /// (`--single-process` has no processes to put a gateway between).
     #[arg(long, conflicts_with = "single_process")]
     pub remote: bool,
+    /// How every follower process waits for the frame of its step (`pheromone follower
+    /// --wait`): event, spin:US or busy-poll. The metrics do not depend on it; separate
+    /// processes only.
+    #[arg(
+        long,
+        value_name = "event|spin:US|busy-poll",
+        conflicts_with = "single_process"
+    )]
+    pub follower_wait: Option<field::shm::WaitPolicy>,
     /// Every depositor deposits a constant amount, whatever its localization (the traditional
     /// scheme seed 000 argues against).
     #[arg(long)]

@@ -183,6 +183,38 @@ fn wrong_area_as_processes_gives_the_single_process_metrics_through_leader_lost_
     assert_eq!(w["followers_ended_in_a"], 2, "{w}");
 }
 
+#[test]
+fn followers_that_spin_or_busy_poll_for_their_frame_give_the_single_process_metrics() {
+    // trail-following: two followers read the field every step.
+    let base = [
+        "sim",
+        "trail-following",
+        "--no-out",
+        "--json",
+        "--duration",
+        "12",
+        "--seed",
+        "2",
+    ];
+    let single = sim_json(&[&base[..], &["--single-process"]].concat());
+    for wait in ["spin:200", "busy-poll"] {
+        let p = sim_json(&[&base[..], &["--follower-wait", wait]].concat());
+        assert_eq!(p["mode"], "processes", "{p}");
+        let mut diffs = Vec::new();
+        differences(&p, &single, "", &mut diffs);
+        assert!(diffs.is_empty(), "--follower-wait {wait}: {diffs:#?}");
+    }
+    for bad in ["spin:0", "spin:abc", "poll"] {
+        let o = run(&["sim", "trail-following", "--no-out", "--follower-wait", bad]);
+        assert_eq!(o.status.code(), Some(2), "{bad}: {}", stderr(&o));
+        assert!(
+            stderr(&o).contains("--follower-wait") && stderr(&o).contains(bad),
+            "{bad}: {}",
+            stderr(&o)
+        );
+    }
+}
+
 /// A scenario file whose robot 0 localizer is refused by `--slam` (a landmark region restricts
 /// a map that EKF-SLAM does not have): that process exits with an error at once.
 fn failing_scenario(run: &Run) -> String {

@@ -51,7 +51,7 @@ pub use inputs::{
     f32s_from_bytes, wire_bytes, wire_from_bytes, wire_slice_bytes, wire_vec_from_bytes,
     InputsPublisher, InputsSubscriber,
 };
-pub use reader::{FieldReader, Frame, WaitPolicy};
+pub use reader::{FieldReader, Frame, ParseWaitPolicyError, WaitPolicy};
 pub use server::{FieldServer, TickOutcome};
 pub use standby::{Standby, StandbyEvent, Takeover};
 pub use survey::{field_names, survey, FieldInfo};

@@ -41,9 +41,12 @@ fn live_frame_publishers(factory: &FrameFactory, config: &Config) -> usize {
 
 /// How a reader waits for the next frame (`FieldReader::wait_frame_with`).
 ///
-/// On a 2-core VM a blocking wake-up through the frame event costs about 35 µs, most of it the
-/// kernel's futex wake and the scheduler; a reader that polls sees a frame within a microsecond
-/// or two of its publication but burns its core while it polls.
+/// A blocking wake-up through the frame event costs what the host's scheduler makes it: on this
+/// project's 2-core VM about 20 µs between two busy processes (a small message's hop), and
+/// 150–200 µs for a reader that sleeps between frames (its idle vCPU has to be woken by the
+/// hypervisor); a reader that polls sees a frame within a few microseconds of its publication
+/// but burns its core while it polls. Parsed from `event`, `busy-poll` or `spin:US` (the
+/// followers' `--wait`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum WaitPolicy {
     /// Sleep on the frame event until the field notifies (no CPU while waiting).
@@ -56,6 +59,44 @@ pub enum WaitPolicy {
     Spin(Duration),
     /// Poll until the frame comes (or the timeout): the lowest latency, one core at 100 %.
     BusyPoll,
+}
+
+/// A `--wait` value that is not a wait policy.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("wait policy \"{0}\": expected event, busy-poll or spin:MICROSECONDS (e.g. spin:200, at most 1000000)")]
+pub struct ParseWaitPolicyError(pub String);
+
+impl std::str::FromStr for WaitPolicy {
+    type Err = ParseWaitPolicyError;
+
+    /// `event`, `busy-poll`, or `spin:US` (a spin of US microseconds, 1 to 1 000 000).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let err = || ParseWaitPolicyError(s.to_string());
+        match s {
+            "event" => Ok(Self::Event),
+            "busy-poll" => Ok(Self::BusyPoll),
+            _ => {
+                let us: u64 = s
+                    .strip_prefix("spin:")
+                    .and_then(|v| v.parse().ok())
+                    .ok_or_else(err)?;
+                if !(1..=1_000_000).contains(&us) {
+                    return Err(err());
+                }
+                Ok(Self::Spin(Duration::from_micros(us)))
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for WaitPolicy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Event => f.write_str("event"),
+            Self::BusyPoll => f.write_str("busy-poll"),
+            Self::Spin(d) => write!(f, "spin:{}", d.as_micros()),
+        }
+    }
 }
 
 /// A frame lent by a `FieldReader`: the header and a sampling view of the cells.

@@ -118,6 +118,10 @@ pub struct RoleOptions {
     /// Lockstep (the default): a depositor acknowledges each step, a follower waits for the
     /// frame of its step. `false`: the world steps on wall time and nobody waits.
     pub lockstep: bool,
+    /// How a reader of the field (the follower) waits for the frame of its step in lockstep
+    /// (`FieldReader::wait_frame_with`); the result is the same for every policy, only the
+    /// latency and the CPU spent waiting differ.
+    pub frame_wait: field::shm::WaitPolicy,
 }
 
 /// Runs `on_step` for every new message on `rx` until the world ends or a termination request.

@@ -43,6 +43,8 @@ pub struct ProcessRunOptions<'a> {
     /// The antenna robots read the field only through a `pheromone gateway` child (seed 002's
     /// thin clients, PIR over UDP loopback) instead of shared memory.
     pub remote: bool,
+    /// Passed to every follower that reads the field in shared memory as `--wait`.
+    pub follower_wait: Option<field::shm::WaitPolicy>,
 }
 
 /// The robots of `scenario` whose follower uses the antenna strategy: the ones a `--remote` run
@@ -318,6 +320,8 @@ fn supervise(
             let through = gateway.as_ref().filter(|_| remote.contains(&r.id));
             if let Some((_, address)) = through {
                 follower.extend(args(&["--gateway", address]));
+            } else if let Some(w) = o.follower_wait {
+                follower.extend(["--wait".to_string(), w.to_string()]);
             }
             let id = sup.spawn(ChildSpec::new("follower", Some(r.id), follower))?;
             if through.is_some() {

@@ -82,7 +82,7 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
                     if end.conductor_gone() || node.wait(Duration::ZERO).is_err() {
                         return Ok(());
                     }
-                    reader.wait_frame(Duration::from_millis(100))?;
+                    reader.wait_frame_with(o.frame_wait, Duration::from_millis(100))?;
                 }
             } else if reader.update()? {
                 // A field that died leaves its last frame with the reader: steer on it, say
