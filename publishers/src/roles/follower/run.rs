@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use field::link::Receiver;
+use field::link::{Receiver, Sender};
 use field::lockstep::Participant;
 use field::shm::{now_ns, FieldReader, ShmError, Svc};
 use iceoryx2::node::Node;
@@ -110,7 +110,7 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
                     service: format!("pheromone/{field_name}/frame"),
                 }));
             };
-            let (mut cmd, status) = match follower.step_pose(&frame.view, &p, dt_s) {
+            let (cmd, status) = match follower.step_pose(&frame.view, &p, dt_s) {
                 Ok(out) => (out.cmd, Some(out.status)),
                 Err(e) => {
                     rejected += 1;
@@ -127,16 +127,7 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
                     )
                 }
             };
-            cmd.step = p.step;
-            cmd.stamp_ns = now_ns();
-            cmds.send(cmd)?;
-            if let Some(mut st) = status {
-                st.step = p.step;
-                st.stamp_ns = cmd.stamp_ns;
-                statuses.send(st)?;
-            }
-            last.set(Some(cmd));
-            Ok(())
+            send_step(&cmds, &statuses, &last, p.step, (cmd, status))
         },
         || {
             if let Some(c) = last.get() {
@@ -147,4 +138,25 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
     )?;
     summary.rejected = rejected;
     Ok(summary)
+}
+
+/// Sends a step's command, and its status if the step produced one, both stamped now and
+/// numbered `step`; keeps the command for a repeated step (`role_loop`'s `on_repeat`).
+pub(super) fn send_step(
+    cmds: &Sender<CmdMsg>,
+    statuses: &Sender<FollowerStatusMsg>,
+    last: &std::cell::Cell<Option<CmdMsg>>,
+    step: u64,
+    (mut cmd, status): (CmdMsg, Option<FollowerStatusMsg>),
+) -> Result<(), ProcessError> {
+    cmd.step = step;
+    cmd.stamp_ns = now_ns();
+    cmds.send(cmd)?;
+    if let Some(mut st) = status {
+        st.step = step;
+        st.stamp_ns = cmd.stamp_ns;
+        statuses.send(st)?;
+    }
+    last.set(Some(cmd));
+    Ok(())
 }

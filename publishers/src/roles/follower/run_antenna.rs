@@ -7,7 +7,6 @@ use std::time::{Duration, Instant};
 
 use field::link::Receiver;
 use field::lockstep::Participant;
-use field::shm::now_ns;
 use iceoryx2::node::Node;
 use serde::{Deserialize, Serialize};
 
@@ -137,7 +136,7 @@ fn drive<
                     }
                 }
             };
-            let (mut cmd, status) = match out {
+            let (cmd, status) = match out {
                 Some(out) => (out.cmd, Some(out.status)),
                 None => (
                     CmdMsg {
@@ -147,15 +146,7 @@ fn drive<
                     None,
                 ),
             };
-            cmd.step = p.step;
-            cmd.stamp_ns = now_ns();
-            cmds.send(cmd)?;
-            if let Some(mut st) = status {
-                st.step = p.step;
-                st.stamp_ns = cmd.stamp_ns;
-                statuses.send(st)?;
-            }
-            last.set(Some(cmd));
+            super::run::send_step(&cmds, &statuses, &last, p.step, (cmd, status))?;
             if let (Some(d), true) = (run.deposits, status.is_some()) {
                 if d.every_steps > 0 && p.step.is_multiple_of(d.every_steps) {
                     // Applied at most once (the client never resends a deposit to the other
