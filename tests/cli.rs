@@ -167,6 +167,32 @@ fn rejected_deposits_are_counted_by_reason() {
 }
 
 #[test]
+fn a_reader_attaching_late_to_a_slow_field_gets_its_current_frame_before_the_next_tick() {
+    // One tick every 50 s: the next tick is far beyond the probes' 10 s timeout.
+    let name = unique("slow");
+    let field = Proc::spawn(&[
+        "field",
+        "--name",
+        &name,
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--tick-hz",
+        "0.02",
+        "--duration",
+        "60",
+    ]);
+    for _ in 0..2 {
+        // The first reader may meet the first frame; the second attaches after it.
+        let probe = run(&["probe", "--field", &name, "--json", "--timeout", "10"]);
+        assert!(probe.status.success(), "{}", stderr(&probe));
+    }
+    field.interrupt();
+    field.wait_exit(Duration::from_secs(10));
+}
+
+#[test]
 fn tune_reproduces_the_papers_check() {
     let o = run(&[
         "tune",

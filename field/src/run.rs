@@ -248,9 +248,25 @@ pub fn run_field(
                 }
             }
         } else {
-            let wait = deadline.saturating_duration_since(Instant::now());
-            if node.wait(wait).is_err() {
-                break; // SIGINT / SIGTERM
+            // In slices of at most IDLE_SLICE: a reader that attached meanwhile gets the current
+            // frame without waiting for the tick, which can be far off at a low tick rate (at
+            // 10 Hz and above this is one wait, as before).
+            let mut stop = false;
+            loop {
+                let left = deadline.saturating_duration_since(Instant::now());
+                if left.is_zero() {
+                    break;
+                }
+                if node.wait(left.min(IDLE_SLICE)).is_err() {
+                    stop = true; // SIGINT / SIGTERM
+                    break;
+                }
+                if left > IDLE_SLICE {
+                    server.serve_new_readers()?;
+                }
+            }
+            if stop {
+                break;
             }
             deadline += period;
             if deadline + period < Instant::now() {

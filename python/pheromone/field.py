@@ -343,9 +343,26 @@ class Field:
         cells.flags.writeable = False
         return Frame(s, header, cells, s.payload_ptr, n * ctypes.sizeof(ctypes.c_float))
 
-    def wait_frame(self, timeout_s: float) -> bool:
-        """Waits up to `timeout_s` for a frame newer than the one held; returns whether one came."""
-        deadline = time.monotonic() + timeout_s
+    def wait_frame(self, timeout_s: float, spin_s: float = 0.0) -> bool:
+        """Waits up to `timeout_s` for a frame newer than the one held; returns whether one came.
+
+        The wait policy of Rust's `WaitPolicy`: with `spin_s` > 0 it first polls for up to
+        `spin_s` seconds (a frame due shortly is seen without the 150–200 µs a wake-up from sleep
+        costs on a small VM, for at most `spin_s` of CPU), then sleeps on the field's frame event
+        (`spin_s=0`, the default: no CPU while waiting). `spin_s >= timeout_s` busy-polls.
+        """
+        if not (timeout_s >= 0 and spin_s >= 0):  # also refuses NaN
+            raise ValueError(
+                f"wait_frame: timeout_s {timeout_s!r} and spin_s {spin_s!r} must be numbers >= 0"
+            )
+        start = time.monotonic()
+        deadline = start + timeout_s
+        spin_until = start + min(spin_s, timeout_s)
+        while True:
+            if self.update():
+                return True
+            if time.monotonic() >= spin_until:
+                break
         while True:
             if self.update():
                 return True

@@ -311,3 +311,30 @@ def test_a_python_deposit_wakes_a_field_that_publishes_on_deposit(start_field):
         assert frame.sample(1.25, 0.75) > 0
         # Stepped by the real time since the last frame, not by the 50 s period.
         assert frame.header.sim_time_s < 20, frame.header.sim_time_s
+
+
+def test_wait_frame_spins_or_sleeps_as_asked_and_honours_its_timeout(start_field):
+    """`wait_frame(timeout_s, spin_s)`: sleeping on the event, spinning first, or busy-polling
+    (spin ≥ timeout), each sees the next frame of a ticking field; with no frame due it returns
+    False at its timeout, not before; bad arguments are refused naming them."""
+    ticking = start_field("tick", *CELLS, "--tick-hz", "50")
+    with attach(ticking) as field:
+        for spin_s in (0.0, 0.005, 10.0):
+            for _ in range(3):
+                assert field.wait_frame(5.0), "the field ticks at 50 Hz"
+                before = field.frame().header.sequence
+                assert field.wait_frame(5.0, spin_s=spin_s), f"spin_s={spin_s}: no frame in 5 s"
+                assert field.frame().header.sequence > before, spin_s
+        for bad in ({"timeout_s": -1.0}, {"timeout_s": 1.0, "spin_s": float("nan")}):
+            with pytest.raises(ValueError, match="spin_s"):
+                field.wait_frame(**bad)
+    # One frame every 50 s: after the first (which attaching may already hold), none is due.
+    slow = start_field("slow", *CELLS, "--tick-hz", "0.02")
+    with attach(slow) as field:
+        field.wait_frame(1.0)
+        assert field.frame().header.sequence == 0
+        for spin_s in (0.0, 0.1, 1.0):
+            t = time.monotonic()
+            assert not field.wait_frame(0.3, spin_s=spin_s), spin_s
+            took = time.monotonic() - t
+            assert 0.3 <= took < 5.0, (spin_s, took)
