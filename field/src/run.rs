@@ -248,25 +248,8 @@ pub fn run_field(
                 }
             }
         } else {
-            // In slices of at most IDLE_SLICE: a reader that attached meanwhile gets the current
-            // frame without waiting for the tick, which can be far off at a low tick rate (at
-            // 10 Hz and above this is one wait, as before).
-            let mut stop = false;
-            loop {
-                let left = deadline.saturating_duration_since(Instant::now());
-                if left.is_zero() {
-                    break;
-                }
-                if node.wait(left.min(IDLE_SLICE)).is_err() {
-                    stop = true; // SIGINT / SIGTERM
-                    break;
-                }
-                if left > IDLE_SLICE {
-                    server.serve_new_readers()?;
-                }
-            }
-            if stop {
-                break;
+            if !wait_serving_readers(node, &server, deadline)? {
+                break; // SIGINT / SIGTERM
             }
             deadline += period;
             if deadline + period < Instant::now() {
@@ -592,6 +575,28 @@ impl DepositWake {
                     ))
                 }
             }
+        }
+    }
+}
+
+/// Waits on the node until `deadline` in slices of at most `IDLE_SLICE`, between which a reader
+/// that attached meanwhile gets the current frame without waiting for the tick, which can be far
+/// off at a low tick rate (at 10 Hz and above this is one wait). False on a termination request.
+fn wait_serving_readers(
+    node: &Node<Svc>,
+    server: &FieldServer,
+    deadline: Instant,
+) -> Result<bool, ShmError> {
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Ok(true);
+        }
+        if node.wait(left.min(IDLE_SLICE)).is_err() {
+            return Ok(false);
+        }
+        if left > IDLE_SLICE {
+            server.serve_new_readers()?;
         }
     }
 }
