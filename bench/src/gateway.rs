@@ -4,7 +4,7 @@
 //! - A field peer ticks a 512² one-channel field; a `pheromone gateway` process serves it on a
 //!   loopback port the system picks (`--udp 127.0.0.1:0 --print-address`, no rate limit).
 //! - **Round trip:** this process sends a PIR with the thin client
-//!   ([`publishers::gateway::client::GatewayClient`]) and waits for its reply, one at a time.
+//!   ([`gateway::client::GatewayClient`]) and waits for its reply, one at a time.
 //! - **Direct read:** this process's [`FieldReader`] takes the newest frame (`update`) and reads
 //!   `FrameView::antennas` at the same pose: what a follower in shared memory does per step.
 //! - **Throughput:** a client keeps a window of PIRs in flight on one UDP socket (each reply
@@ -18,10 +18,10 @@ use std::time::{Duration, Instant};
 
 use field::shm::{create_node, FieldReader};
 use field::SamplePose;
+use gateway::client::{ClientConfig, GatewayClient, Transport};
 use gateway_codec::{decode, encode, Message, PirRequest, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
-use publishers::gateway::client::{ClientConfig, GatewayClient, Transport};
-use publishers::sim::supervisor::{ChildSpec, Supervisor};
 use serde::Serialize;
+use supervisor::{ChildSpec, Supervisor};
 
 use crate::peer::{Launcher, Peer, PeerSpec};
 use crate::stats::Latency;

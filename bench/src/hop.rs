@@ -11,7 +11,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use publishers::messages::PoseMsg;
+use messages::PoseMsg;
 
 use crate::peer::{say_ready, say_result, Launcher, Peer, PeerResult, PeerSpec};
 use crate::BenchError;

@@ -69,7 +69,7 @@ pub enum BenchError {
     #[error("interrupted")]
     Interrupted,
     #[error(transparent)]
-    Child(#[from] publishers::sim::supervisor::SupervisorError),
+    Child(#[from] supervisor::SupervisorError),
 }
 
 /// How much to measure.
@@ -391,7 +391,7 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
                 raw_iceoryx2: hop(true, true)?,
             },
             message_bytes: HopBytes {
-                ours: std::mem::size_of::<publishers::messages::PoseMsg>(),
+                ours: std::mem::size_of::<messages::PoseMsg>(),
                 raw_iceoryx2: std::mem::size_of::<u64>(),
             },
             method: "ping-pong between two processes, one-way = round trip / 2",

@@ -3,10 +3,10 @@
 //!
 //! - **Origin:** a `pheromone field` process in domain `benchmirA`, `width`² cells, one channel,
 //!   ticking at `tick_hz` (it publishes its inputs for bridges, as every field does).
-//! - **Bridge:** [`publishers::bridge::Bridge`] on a thread of this process (domain A), listening
+//! - **Bridge:** [`bridge::Bridge`] on a thread of this process (domain A), listening
 //!   on a loopback TCP port the system picks, checksum every 10 frames, a keyframe every `keyframe_every_s`
 //!   (the `pheromone bridge` defaults).
-//! - **Mirror:** [`publishers::bridge::Mirror`] on another thread (domain `benchmirB`),
+//! - **Mirror:** [`bridge::Mirror`] on another thread (domain `benchmirB`),
 //!   connected to the bridge, publishing the replayed frames in domain B.
 //! - This thread sends deposits to the origin at 10 and then 1000 per second, scattered over the
 //!   field, for `window` each.
@@ -24,14 +24,14 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use field::shm::{create_node_in, DepositPublisher};
-use field::DepositMsg;
-use publishers::bridge::zenoh::{self, Wait};
-use publishers::bridge::{
+use bridge::zenoh::{self, Wait};
+use bridge::{
     session_config_as, Bridge, BridgeOptions, BridgeStats, Keys, Mirror, MirrorOptions, MirrorStats,
 };
-use publishers::sim::supervisor::{ChildSpec, Supervisor};
+use field::shm::{create_node_in, DepositPublisher};
+use field::DepositMsg;
 use serde::Serialize;
+use supervisor::{ChildSpec, Supervisor};
 
 use crate::peer::Launcher;
 use crate::stats::Latency;

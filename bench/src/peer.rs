@@ -5,8 +5,8 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use publishers::sim::supervisor::{ChildId, ChildSpec, Supervisor};
 use serde::{Deserialize, Serialize};
+use supervisor::{ChildId, ChildSpec, Supervisor};
 
 use crate::BenchError;
 
@@ -136,7 +136,7 @@ pub struct PeerResult {
     pub cpu_share: Option<f64>,
 }
 
-/// One peer process, under the project's supervisor (`publishers::sim::supervisor`): stopped with
+/// One peer process, under the project's supervisor (`supervisor`): stopped with
 /// SIGTERM (then SIGKILL) when dropped, its stderr passed through.
 pub struct Peer {
     sup: Supervisor,

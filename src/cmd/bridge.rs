@@ -72,7 +72,7 @@ fn positive(flag: &str, v: f64) -> anyhow::Result<Duration> {
 
 #[cfg(feature = "zenoh")]
 pub fn run(a: BridgeArgs) -> anyhow::Result<()> {
-    use publishers::bridge::{Bridge, BridgeOptions, FramesOptions};
+    use bridge::{Bridge, BridgeOptions, FramesOptions};
     field::shm::check_name(&a.field).map_err(bad_from)?;
     if a.checksum_every == 0 {
         return Err(bad("--checksum-every 0: must be at least 1"));
@@ -162,7 +162,7 @@ pub fn run(_a: BridgeArgs) -> anyhow::Result<()> {
 
 #[cfg(feature = "zenoh")]
 pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
-    use publishers::bridge::{Mirror, MirrorOptions};
+    use bridge::{Mirror, MirrorOptions};
     let Some(endpoint) = endpoint.strip_prefix("zenoh:") else {
         return Err(bad(format!(
             "--mirror {endpoint}: expected zenoh:ENDPOINT, e.g. zenoh:tcp/10.0.0.1:7447"
@@ -183,7 +183,7 @@ pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
     while node.wait(Duration::ZERO).is_ok() && duration.is_none_or(|d| started.elapsed() < d) {
         if let Err(e) = mirror.step(&node, Duration::from_millis(20)) {
             match e {
-                publishers::bridge::BridgeError::Config(_) => return Err(bad_from(e)),
+                bridge::BridgeError::Config(_) => return Err(bad_from(e)),
                 e => return Err(e.into()),
             }
         }

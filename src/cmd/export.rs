@@ -1,14 +1,14 @@
 //! `pheromone export`: the next frame of a running field as a NumPy `.npy` file (every
 //! channel) or as a ROS map_server map (one channel, PGM + YAML). The writers are
-//! `publishers::export`.
+//! `report::export`.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::Args;
 use field::shm::{create_node, FieldReader};
-use publishers::export::npy::write_npy;
-use publishers::export::ros_map::{write_ros_map, PlaneRef};
+use report::export::npy::write_npy;
+use report::export::ros_map::{write_ros_map, PlaneRef};
 
 use super::{bad, seconds};
 
@@ -129,7 +129,7 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
                 cell_size_m: h.cell_size_m,
                 origin_m: [h.origin_x_m, h.origin_y_m],
             };
-            let (lo, hi) = publishers::export::ros_map::default_scale(plane.cells);
+            let (lo, hi) = report::export::ros_map::default_scale(plane.cells);
             let scale = match (a.min, a.max) {
                 (None, None) => None,
                 (min, max) => Some((min.unwrap_or(lo), max.unwrap_or(hi))),

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use clap::Args;
 use field::shm::create_node;
-use publishers::gateway::{serial, udp, Gateway, GatewayConfig};
+use gateway::{serial, udp, Gateway, GatewayConfig};
 
 use super::bad;
 
@@ -125,12 +125,10 @@ pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
         Duration::from_secs_f64(a.attach_timeout),
     ) {
         Ok(g) => g,
-        Err(e @ publishers::gateway::GatewayError::Config { .. }) => {
-            return Err(bad(e.to_string()))
-        }
+        Err(e @ gateway::GatewayError::Config { .. }) => return Err(bad(e.to_string())),
         Err(e) => return Err(e.into()),
     };
-    let log = |c: &publishers::gateway::GatewayCounters| {
+    let log = |c: &gateway::GatewayCounters| {
         eprintln!(
             "gateway: frames {} pir {} deposits {} (repeated {}, undelivered {}) pings {} \
              errors sent {:?} dropped {} rejected {:?}",

@@ -8,10 +8,10 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::Args;
 use field::shm::create_node;
-use publishers::graph::agent::{GraphStrategy, RegionsScenario, Until, BUILTIN_REGIONS};
-use publishers::graph::compare::{compare, comparison_text};
-use publishers::graph::processes::{run_graph_robot, run_graph_writer, WriterOptions};
-use publishers::graph::run::{simulate, tables_text, RunReport};
+use graph::agent::{GraphStrategy, RegionsScenario, Until, BUILTIN_REGIONS};
+use graph::compare::{compare, comparison_text};
+use graph::processes::{run_graph_robot, run_graph_writer, WriterOptions};
+use graph::run::{simulate, tables_text, RunReport};
 use serde_json::json;
 
 use super::sim_args::SimArgs;
@@ -208,11 +208,11 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
     };
     if let Some(&n) = counts
         .iter()
-        .find(|&&n| n == 0 || n > publishers::graph::shm::MAX_GRAPH_ROBOTS)
+        .find(|&&n| n == 0 || n > graph::shm::MAX_GRAPH_ROBOTS)
     {
         return Err(bad(format!(
             "robots {n}: a regions run takes 1 to {}",
-            publishers::graph::shm::MAX_GRAPH_ROBOTS
+            graph::shm::MAX_GRAPH_ROBOTS
         )));
     }
     let strategies = match &a.strategy {
@@ -277,7 +277,7 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
                 r.strategy.name(),
                 r.robots
             ));
-            publishers::report::write_graph_png(&png, &state, r, dock)?;
+            report::write_graph_png(&png, &state, r, dock)?;
         }
         eprintln!(
             "wrote metrics.json, tables.txt and {} picture(s) of the graph to {}",
@@ -298,7 +298,7 @@ fn run_as_processes(
     robots: usize,
     seed: u64,
 ) -> anyhow::Result<RunReport> {
-    Ok(publishers::sim::processes::run_graph_as_processes(
+    Ok(sim::processes::run_graph_as_processes(
         &std::env::current_exe()?,
         &a.scenario,
         strategy,

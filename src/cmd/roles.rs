@@ -3,12 +3,12 @@
 
 use clap::{Args, ValueEnum};
 use field::shm::{create_node, WaitPolicy};
-use publishers::roles::depositor::{DepositMode, DepositorConfig};
-use publishers::roles::follower::{Follower, FollowerConfig, StrategyKind};
-use publishers::roles::{
+use roles::depositor::{DepositMode, DepositorConfig};
+use roles::follower::{Follower, FollowerConfig, StrategyKind};
+use roles::scenario::Scenario;
+use roles::{
     run_depositor, run_follower, run_localizer, run_mapper, run_world, RoleOptions, WorldOptions,
 };
-use publishers::sim::scenario::Scenario;
 
 use super::{bad, bad_from, seconds};
 
@@ -17,7 +17,7 @@ use super::{bad, bad_from, seconds};
 pub struct Common {
     /// Scenario: a built-in name (blind-leader, trail-following, ias-ss, evaporation, trail,
     /// wrong-area) or a TOML file.
-    #[arg(long, default_value = publishers::sim::scenario::DEFAULT_SCENARIO)]
+    #[arg(long, default_value = roles::scenario::DEFAULT_SCENARIO)]
     pub scenario: String,
     /// Name of the simulated world (its clock is sim/<WORLD>/clock).
     #[arg(long, default_value = "sim")]
@@ -143,7 +143,7 @@ pub struct LocalizerArgs {
     #[arg(
         long,
         value_name = "XMIN,YMIN,XMAX,YMAX",
-        value_parser = publishers::roles::localizer::parse_landmark_region,
+        value_parser = roles::localizer::parse_landmark_region,
         allow_hyphen_values = true,
         conflicts_with = "slam"
     )]
@@ -385,12 +385,10 @@ fn run_remote_follower(
     config: &FollowerConfig,
     gateway: &str,
 ) -> anyhow::Result<()> {
-    use publishers::gateway::client::{ClientConfig, DepositRetry, GatewayClient, Transport};
-    use publishers::roles::follower::antenna_source::{AntennaRobot, GatewaySource};
-    use publishers::roles::follower::run_antenna::{
-        run_antenna_robot, AntennaRunOptions, RemoteDeposits,
-    };
-    use publishers::roles::follower::AntennaFollower;
+    use gateway::client::{ClientConfig, DepositRetry, GatewayClient, Transport};
+    use roles::follower::antenna_source::{AntennaRobot, GatewaySource};
+    use roles::follower::run_antenna::{run_antenna_robot, AntennaRunOptions, RemoteDeposits};
+    use roles::follower::AntennaFollower;
     if config.strategy != StrategyKind::Antenna {
         return Err(bad(format!(
             "--gateway: only the antenna strategy reads through a gateway (robot {} has '{}')",

@@ -7,13 +7,13 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use publishers::roles::follower::StrategyKind;
-use publishers::sim::metrics::{mean_sd, metrics_json, scenario_metrics, welch_t};
-use publishers::sim::processes::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
-use publishers::sim::record::Recording;
-use publishers::sim::scenario::{Overrides, Scenario};
-use publishers::sim::single::{run_single_process, RunSummary, SingleProcessOptions};
+use roles::follower::StrategyKind;
+use roles::scenario::{Overrides, Scenario};
 use serde_json::{json, Value};
+use sim::metrics::{mean_sd, metrics_json, scenario_metrics, welch_t};
+use sim::processes::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
+use sim::record::Recording;
+use sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 
 use super::roles::load_scenario;
 pub use super::sim_args::SimArgs;
@@ -47,7 +47,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     if let Some(t) = a.trials {
         return run_trials(&a, &scenario, t);
     }
-    if a.remote && publishers::sim::processes::remote_robots(&scenario).is_empty() {
+    if a.remote && sim::processes::remote_robots(&scenario).is_empty() {
         return Err(bad(format!(
             "--remote: scenario '{}' has no robot with an antenna follower (try trail-following)",
             scenario.name
@@ -103,13 +103,9 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     }
     print_summary(&metrics);
     if let Some(dir) = out_dir(&a, &scenario) {
-        let mut files = publishers::report::write_outputs(
-            &dir,
-            &rec,
-            &metrics,
-            &publishers::report::marks(&scenario, &rec),
-        )?;
-        files.extend(publishers::report::write_plots(&dir, &scenario, &rec)?);
+        let mut files =
+            report::write_outputs(&dir, &rec, &metrics, &report::marks(&scenario, &rec))?;
+        files.extend(report::write_plots(&dir, &scenario, &rec)?);
         eprintln!(
             "wrote {} file(s) to {} (the picture: {})",
             files.len(),

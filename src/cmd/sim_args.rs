@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use publishers::sim::scenario::DEFAULT_SCENARIO;
+use roles::scenario::DEFAULT_SCENARIO;
 
 /// Run a scenario and report what happened.
 ///

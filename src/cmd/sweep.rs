@@ -1,13 +1,11 @@
-//! `pheromone sweep`: seed 004's grid of experiments (`publishers::sim::sweep`) on all cores,
-//! with a progress bar, a summary on stderr and the files of `publishers::report::write_sweep`.
+//! `pheromone sweep`: seed 004's grid of experiments (`sim::sweep`) on all cores,
+//! with a progress bar, a summary on stderr and the files of `report::write_sweep`.
 
 use std::path::PathBuf;
 
 use clap::Args;
-use publishers::roles::follower::StrategyKind;
-use publishers::sim::sweep::{
-    parse_rc_m, parse_robots, parse_strategies, run_sweep, SweepGrid, SweepResult,
-};
+use roles::follower::StrategyKind;
+use sim::sweep::{parse_rc_m, parse_robots, parse_strategies, run_sweep, SweepGrid, SweepResult};
 
 use super::roles::load_scenario;
 use super::{bad, bad_from};
@@ -122,9 +120,7 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
     let base = load_scenario(&a.scenario)?;
-    let runs = publishers::sim::sweep::plan(&base, &grid)
-        .map_err(bad_from)?
-        .len();
+    let runs = sim::sweep::plan(&base, &grid).map_err(bad_from)?.len();
     eprintln!(
         "sweep '{}': {runs} run(s) of {} s on {jobs} thread(s)",
         base.name, grid.duration_s
@@ -142,7 +138,7 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("pheromone-out").join(format!("sweep-{}", base.name)));
-    let files = publishers::report::write_sweep(&dir, &result)?;
+    let files = report::write_sweep(&dir, &result)?;
     eprintln!("wrote {} file(s) to {}", files.len(), dir.display());
     if a.json {
         println!("{}", serde_json::to_string(&result)?);
@@ -171,7 +167,7 @@ fn print_summary(r: &SweepResult) {
         );
     }
     for c in &r.comparisons {
-        let t = |x: Option<publishers::sim::sweep_stats::TTest>| {
+        let t = |x: Option<sim::sweep_stats::TTest>| {
             x.map_or("undefined".to_string(), |x| {
                 format!("{:.2} (df {:.1})", x.t, x.df)
             })

@@ -2,8 +2,8 @@
 
 use clap::Args;
 use field::shm::create_node;
-use publishers::view::server::{bind, serve, View, ViewConfig};
-use publishers::view::MAX_SIDE_LIMIT;
+use view::server::{bind, serve, View, ViewConfig};
+use view::MAX_SIDE_LIMIT;
 
 use super::bad;
 

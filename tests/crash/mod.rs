@@ -24,7 +24,7 @@ use field::shm::{FieldReader, FieldWatch, Svc};
 use iceoryx2::config::Config;
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
-use publishers::sim::supervisor::ChildSpec;
+use supervisor::ChildSpec;
 
 use crate::harness::*;
 

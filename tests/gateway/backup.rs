@@ -4,7 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use publishers::gateway::client::{ClientConfig, GatewayClient, Transport, Which};
+use gateway::client::{ClientConfig, GatewayClient, Transport, Which};
 
 use super::free_port;
 use crate::harness::*;

@@ -10,7 +10,7 @@ use std::time::Duration;
 use field::shm::{create_node, FieldReader};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
-use publishers::sim::scenario::Scenario;
+use roles::scenario::Scenario;
 use serde_json::Value;
 
 use super::free_port;
@@ -98,9 +98,9 @@ fn primary_goes_away(signal: Signal) {
     );
     // Both gateways serve before the robots start (a robot fails when neither answers).
     for port in [p_port, b_port] {
-        let mut probe = publishers::gateway::client::GatewayClient::new(
-            publishers::gateway::client::Transport::udp(&format!("127.0.0.1:{port}")).unwrap(),
-            publishers::gateway::client::ClientConfig {
+        let mut probe = gateway::client::GatewayClient::new(
+            gateway::client::Transport::udp(&format!("127.0.0.1:{port}")).unwrap(),
+            gateway::client::ClientConfig {
                 client_id: 200,
                 ..Default::default()
             },

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::process::Output;
 use std::time::{Duration, Instant};
 
-use publishers::sim::supervisor::ChildSpec;
+use supervisor::ChildSpec;
 
 /// Path of the `pheromone` binary under test.
 pub fn bin() -> PathBuf {

@@ -5,10 +5,10 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
+use bridge::codec;
+use bridge::zenoh::{self, Wait};
 use field::shm::{create_node_in, FieldReader};
-use publishers::bridge::codec;
-use publishers::bridge::zenoh::{self, Wait};
-use publishers::sim::supervisor::{ChildId, ChildSpec, Supervisor};
+use supervisor::{ChildId, ChildSpec, Supervisor};
 
 use super::harness::*;
 
@@ -394,16 +394,11 @@ fn corrupted_lists_and_keyframes_are_rejected_and_counted() {
     assert_identical(&hosts.common(10, |_| true));
     // A third peer puts damaged messages on the mirror's keys.
     let session = zenoh::open(
-        publishers::bridge::session_config_as(
-            "client",
-            &[],
-            std::slice::from_ref(&bridge.endpoint),
-        )
-        .unwrap(),
+        bridge::session_config_as("client", &[], std::slice::from_ref(&bridge.endpoint)).unwrap(),
     )
     .wait()
     .unwrap();
-    let keys = publishers::bridge::Keys::of(&name);
+    let keys = bridge::Keys::of(&name);
     let seq = hosts.origin.frame().unwrap().header.sequence + 1_000_000;
     let header = field::messages::InputsHeader {
         sequence: seq,

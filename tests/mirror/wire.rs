@@ -2,9 +2,9 @@
 //! inputs message is refused, keyframes and downsampled frames round-trip, a corrupted keyframe
 //! fails its checksum.
 
+use bridge::codec::*;
 use field::messages::InputsHeader;
 use field::{DepositMsg, FrameHeader};
-use publishers::bridge::codec::*;
 #[test]
 fn every_flipped_byte_is_rejected() {
     let h = InputsHeader {

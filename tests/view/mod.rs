@@ -313,7 +313,7 @@ fn bad_parameters_get_a_400_naming_them_and_unknown_paths_a_404() {
 fn the_view_shows_robot_poses_and_their_recent_paths() {
     use field::link::Sender;
     use field::wire::{ready_service, RobotServices, ROBOT_LINK};
-    use publishers::messages::PoseMsg;
+    use messages::PoseMsg;
 
     let world = unique("view-w");
     let (_name, _field, _view, port) = field_and_view("view-robots", &["--world", &world]);

@@ -1,0 +1,343 @@
+//! Messages between the robot roles: fixed-size `#[repr(C)]`, `ZeroCopySend`, each with a robot id
+//! and a monotonic stamp (ns, CLOCK_MONOTONIC). Type names carry the layout version.
+//!
+//! Services (robot `r<ID>` of world `W`, named by `roles::RobotServices`):
+//! `pheromone/W/r<ID>/pose` ([`PoseMsg`]), `pheromone/W/r<ID>/cmd` ([`CmdMsg`]),
+//! `pheromone/W/r<ID>/status` ([`FollowerStatusMsg`]), `sim/W/r<ID>/sensors` ([`SensorMsg`]),
+//! `sim/W/r<ID>/truth` ([`TruthMsg`]); each has a `…-ready` event that wakes its receivers.
+
+/// Most landmark observations one sensor message carries; the world reports the nearest ones.
+pub const MAX_OBSERVATIONS: usize = 32;
+
+/// Pose estimate with its 3×3 covariance (row-major over x, y, θ).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C)]
+pub struct PoseMsg {
+    pub stamp_ns: u64,
+    /// World step this estimate belongs to.
+    pub step: u64,
+    pub robot_id: u32,
+    /// Landmarks associated in this update.
+    pub landmarks_used: u32,
+    pub x_m: f64,
+    pub y_m: f64,
+    pub theta_rad: f64,
+    pub cov: [f64; 9],
+}
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(PoseMsg, "PoseMsg", size = 120, align = 8);
+
+impl PoseMsg {
+    /// The position block Σxy as `[xx, xy, yy]`.
+    pub fn cov_xy(&self) -> [f64; 3] {
+        [self.cov[0], self.cov[1], self.cov[4]]
+    }
+}
+
+/// One landmark seen by a robot: range (m), bearing (rad, relative to the heading), signature.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C)]
+pub struct LandmarkObs {
+    pub range_m: f32,
+    pub bearing_rad: f32,
+    pub signature: u32,
+    pub _pad: u32,
+}
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(LandmarkObs, "LandmarkObs", size = 16, align = 4);
+
+/// What the world tells one robot after a step: the (noisy) velocity it executed — the control
+/// input of the velocity motion model — and the landmarks in sensor range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C)]
+pub struct SensorMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// Valid entries of `observations`.
+    pub count: u32,
+    pub sim_time_s: f64,
+    pub dt_s: f64,
+    /// Odometry: linear and angular velocity measured over the last step.
+    pub v_m_per_s: f64,
+    pub omega_rad_per_s: f64,
+    pub observations: [LandmarkObs; MAX_OBSERVATIONS],
+}
+
+// repr(C): numbers and an array of `LandmarkObs` only.
+field::wire_type!(
+    SensorMsg,
+    "SensorMsg",
+    size = 56 + 16 * MAX_OBSERVATIONS,
+    align = 8
+);
+
+impl Default for SensorMsg {
+    fn default() -> Self {
+        Self {
+            stamp_ns: 0,
+            step: 0,
+            robot_id: 0,
+            count: 0,
+            sim_time_s: 0.0,
+            dt_s: 0.0,
+            v_m_per_s: 0.0,
+            omega_rad_per_s: 0.0,
+            observations: [LandmarkObs::default(); MAX_OBSERVATIONS],
+        }
+    }
+}
+
+impl SensorMsg {
+    pub fn observations(&self) -> &[LandmarkObs] {
+        &self.observations[..(self.count as usize).min(MAX_OBSERVATIONS)]
+    }
+}
+
+/// The true pose of a robot (for metrics and pictures; robots' own roles never read it).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C)]
+pub struct TruthMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// 1 if the last command was blocked by a wall.
+    pub collided: u32,
+    pub sim_time_s: f64,
+    pub x_m: f64,
+    pub y_m: f64,
+    pub theta_rad: f64,
+}
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(TruthMsg, "TruthMsg", size = 56, align = 8);
+
+/// Motion command for one robot: linear and angular velocity.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C)]
+pub struct CmdMsg {
+    pub stamp_ns: u64,
+    /// The world step this command answers (lockstep clock).
+    pub step: u64,
+    pub robot_id: u32,
+    pub _pad: u32,
+    pub v_m_per_s: f64,
+    pub omega_rad_per_s: f64,
+}
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(CmdMsg, "CmdMsg", size = 40, align = 8);
+
+/// What a follower is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+#[repr(u32)]
+pub enum FollowerState {
+    /// Climbing a trail.
+    Following = 0,
+    /// The sensed level fell below the threshold: the trail was abandoned.
+    TrailAbandoned = 1,
+    /// Looking for pheromone / exploring.
+    Exploring = 2,
+    /// Gave a trail up ("leader lost", seed 000 L12) and explores on its own.
+    LeaderLost = 3,
+}
+
+impl FollowerState {
+    pub fn from_code(code: u32) -> Option<Self> {
+        Some(match code {
+            0 => FollowerState::Following,
+            1 => FollowerState::TrailAbandoned,
+            2 => FollowerState::Exploring,
+            3 => FollowerState::LeaderLost,
+            _ => return None,
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            FollowerState::Following => "following",
+            FollowerState::TrailAbandoned => "trail_abandoned",
+            FollowerState::Exploring => "exploring",
+            FollowerState::LeaderLost => "leader_lost",
+        }
+    }
+}
+
+/// A follower's status, published with every command.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C)]
+pub struct FollowerStatusMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// `FollowerState` code.
+    pub state: u32,
+    /// Pheromone level the follower senses at its pose.
+    pub sensed_level: f32,
+    pub _pad: u32,
+}
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(FollowerStatusMsg, "FollowerStatusMsg", size = 32, align = 8);
+
+/// Most rays one [`ScanMsg`] carries (seed 004's range sensor).
+pub const MAX_RAYS: usize = 64;
+
+/// One range scan of a robot (seed 004, `[mapping]`): `count` rays from `angle_min_rad` (relative
+/// to the heading) every `angle_step_rad`; ray `i` measured `ranges_m[i]` and hit a wall when bit
+/// `i` of `hits` is set (otherwise the ray saw nothing within `range_max_m` and
+/// `ranges_m[i] = range_max_m`). Published by the world on `sim/W/r<ID>/scan` when the scenario
+/// maps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C)]
+pub struct ScanMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// Valid entries of `ranges_m`.
+    pub count: u32,
+    pub angle_min_rad: f32,
+    pub angle_step_rad: f32,
+    pub range_max_m: f32,
+    pub _pad: u32,
+    /// Bit i: ray i hit a wall.
+    pub hits: u64,
+    pub ranges_m: [f32; MAX_RAYS],
+}
+
+// repr(C): numbers and an array of numbers only.
+field::wire_type!(ScanMsg, "ScanMsg", size = 48 + 4 * MAX_RAYS, align = 8);
+
+impl Default for ScanMsg {
+    fn default() -> Self {
+        Self {
+            stamp_ns: 0,
+            step: 0,
+            robot_id: 0,
+            count: 0,
+            angle_min_rad: 0.0,
+            angle_step_rad: 0.0,
+            range_max_m: 0.0,
+            _pad: 0,
+            hits: 0,
+            ranges_m: [0.0; MAX_RAYS],
+        }
+    }
+}
+
+impl ScanMsg {
+    /// The valid rays as (bearing relative to the heading, range, hit).
+    pub fn rays(&self) -> impl Iterator<Item = (f32, f32, bool)> + '_ {
+        let n = (self.count as usize).min(MAX_RAYS);
+        (0..n).map(move |i| {
+            (
+                self.angle_min_rad + i as f32 * self.angle_step_rad,
+                self.ranges_m[i],
+                self.hits >> i & 1 == 1,
+            )
+        })
+    }
+}
+
+/// Most robots one [`RendezvousMsg`] lists.
+pub const MAX_PEERS: usize = 16;
+
+/// A robot within R_C as the observer measures it (noisy): distance d_ij, the bearing of the
+/// peer relative to the observer's heading, and the peer's heading relative to the observer's.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C)]
+pub struct PeerObs {
+    pub robot_id: u32,
+    pub _pad: u32,
+    pub range_m: f64,
+    pub bearing_rad: f64,
+    pub heading_rad: f64,
+}
+
+// repr(C): numbers only.
+field::wire_type!(PeerObs, "PeerObs", size = 32, align = 8);
+
+/// The robots within R_C of one robot after a step (seed 004's rendezvous measurement),
+/// published by the world on `sim/W/r<ID>/rendezvous` when the scenario maps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C)]
+pub struct RendezvousMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// Valid entries of `peers`, by robot id.
+    pub count: u32,
+    pub peers: [PeerObs; MAX_PEERS],
+}
+
+// repr(C): numbers and an array of `PeerObs` only.
+field::wire_type!(
+    RendezvousMsg,
+    "RendezvousMsg",
+    size = 24 + 32 * MAX_PEERS,
+    align = 8
+);
+
+impl Default for RendezvousMsg {
+    fn default() -> Self {
+        Self {
+            stamp_ns: 0,
+            step: 0,
+            robot_id: 0,
+            count: 0,
+            peers: [PeerObs::default(); MAX_PEERS],
+        }
+    }
+}
+
+impl RendezvousMsg {
+    pub fn peers(&self) -> &[PeerObs] {
+        &self.peers[..(self.count as usize).min(MAX_PEERS)]
+    }
+}
+
+// ---- Planar geometry shared by the roles ----
+
+/// Wraps an angle to (−π, π].
+pub fn wrap_angle(angle_rad: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    let a = (angle_rad + PI).rem_euclid(TAU) - PI;
+    if a <= -PI {
+        a + TAU
+    } else {
+        a
+    }
+}
+
+/// A true pose as a pose message with zero covariance (a leader steered by its operator).
+pub fn truth_as_pose(t: &TruthMsg) -> PoseMsg {
+    PoseMsg {
+        step: t.step,
+        robot_id: t.robot_id,
+        x_m: t.x_m,
+        y_m: t.y_m,
+        theta_rad: t.theta_rad,
+        ..PoseMsg::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::{FRAC_PI_2, PI, TAU};
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() <= 1e-12
+    }
+
+    #[test]
+    fn wrap_angle_range() {
+        assert_eq!(wrap_angle(PI), PI);
+        assert_eq!(wrap_angle(-PI), PI);
+        assert!(close(wrap_angle(3.0 * PI / 2.0), -FRAC_PI_2));
+        assert!(close(wrap_angle(-7.0), -7.0 + TAU));
+    }
+}

@@ -1,0 +1,260 @@
+use std::io::BufReader;
+use std::sync::atomic::{AtomicU32, Ordering};
+
+use super::*;
+use messages::FollowerState;
+use sim::record::ProbeReading;
+use std::fs::File;
+
+use super::heatmap::{fmt_sig, Layout};
+use super::style::{lighter, Rgb, NAN_RGB, ROBOT_RGB, VIRIDIS};
+use sim::record::RobotSample;
+
+/// A directory under the system temp dir, unique per test and process, removed on drop.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(tag: &str) -> TempDir {
+        static COUNTER: AtomicU32 = AtomicU32::new(0);
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.subsec_nanos())
+            .unwrap_or(0);
+        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        TempDir(std::env::temp_dir().join(format!(
+            "pheromone-report-{tag}-{}-{nanos}-{n}",
+            std::process::id()
+        )))
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = fs::remove_dir_all(&self.0);
+    }
+}
+
+pub(super) fn sample(t_s: f64, x: f64, y: f64) -> RobotSample {
+    RobotSample {
+        t_s,
+        true_pose: [x, y, 0.0],
+        est_pose: None,
+        est_sigma_m: None,
+        v_m_per_s: 0.5,
+        omega_rad_per_s: 0.0,
+        state: None,
+        sensed_level: None,
+        deposit_peak: None,
+    }
+}
+
+/// 100 × 50 cells of 0.1 m, channel "trail", zero except `(80, 40)` = 7 (the max). Robot 0
+/// drives along y = 1 m from x = 1 to 6 m without estimates; robot 1 drives along y = 3 m
+/// with estimates 0.5 m below its true path.
+pub(super) fn scene() -> Recording {
+    let (w, h) = (100u32, 50u32);
+    let mut planes = vec![0.0f32; (w * h) as usize];
+    planes[(40 * w + 80) as usize] = 7.0;
+    let mut rec = Recording::default();
+    rec.snapshots.push(Snapshot {
+        t_s: 10.0,
+        width: w,
+        height: h,
+        cell_size_m: 0.1,
+        channels: vec!["trail".into()],
+        planes,
+    });
+    rec.robots.insert(
+        0,
+        (0..=10)
+            .map(|i| sample(i as f64, 1.0 + 0.5 * i as f64, 1.0))
+            .collect(),
+    );
+    rec.robots.insert(
+        1,
+        (0..=10)
+            .map(|i| {
+                let mut s = sample(i as f64, 1.0 + 0.5 * i as f64, 3.0);
+                s.est_pose = Some([1.0 + 0.5 * i as f64, 2.5, 0.0]);
+                s
+            })
+            .collect(),
+    );
+    rec
+}
+
+fn decode(path: &Path) -> (u32, u32, Vec<u8>) {
+    let file = File::open(path).unwrap();
+    let mut reader = png::Decoder::new(BufReader::new(file)).read_info().unwrap();
+    let mut buf = vec![0u8; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    assert_eq!(info.bit_depth, png::BitDepth::Eight);
+    buf.truncate(info.buffer_size());
+    (info.width, info.height, buf)
+}
+
+fn pixel(img: &(u32, u32, Vec<u8>), x: usize, y: usize) -> Rgb {
+    let i = (y * img.0 as usize + x) * 3;
+    [img.2[i], img.2[i + 1], img.2[i + 2]]
+}
+
+#[test]
+fn robot_csv_has_a_row_per_sample_and_empty_cells_for_none() {
+    let tmp = TempDir::new("csv");
+    let mut rec = Recording::default();
+    let mut full = sample(0.5, 1.25, -2.0);
+    full.est_pose = Some([1.0, -2.5, 0.25]);
+    full.est_sigma_m = Some(0.125);
+    full.state = Some(FollowerState::TrailAbandoned);
+    full.sensed_level = Some(3.5);
+    full.deposit_peak = Some(12.5);
+    rec.robots.insert(
+        3,
+        vec![sample(0.0, 1.0, -2.0), full, sample(1.0, 1.5, -2.0)],
+    );
+    rec.probes.push(ProbeReading {
+        t_s: 2.0,
+        x_m: 1.5,
+        y_m: 0.5,
+        channel: 0,
+        value: 0.25,
+    });
+    let metrics = serde_json::json!({"robots": 1, "distance_m": 0.5});
+    let written = write_outputs(&tmp.0, &rec, &metrics, &[]).unwrap();
+    let names: Vec<String> = written
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names, ["metrics.json", "robot_3.csv", "probes.csv"]);
+
+    let text = fs::read_to_string(tmp.0.join("robot_3.csv")).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 1 + 3);
+    assert_eq!(lines[0], ROBOT_CSV_HEADER);
+    let columns = lines[0].split(',').count();
+    assert_eq!(columns, 13);
+    for line in &lines[1..] {
+        assert_eq!(line.split(',').count(), columns, "{line}");
+    }
+    assert_eq!(lines[1], "0,1,-2,0,,,,,0.5,0,,,");
+    assert_eq!(
+        lines[2],
+        "0.5,1.25,-2,0,1,-2.5,0.25,0.125,0.5,0,trail_abandoned,3.5,12.5"
+    );
+
+    let probes = fs::read_to_string(tmp.0.join("probes.csv")).unwrap();
+    assert_eq!(probes, format!("{PROBES_CSV_HEADER}\n2,1.5,0.5,0,0.25\n"));
+    let back: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(tmp.0.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(back, metrics);
+}
+
+#[test]
+fn png_has_the_expected_size_trajectories_and_top_of_the_colour_map() {
+    let tmp = TempDir::new("png");
+    let rec = scene();
+    let written = write_outputs(&tmp.0, &rec, &serde_json::json!({}), &[]).unwrap();
+    let final_png = tmp.0.join("field_final.png");
+    let snap_png = tmp.0.join("field_trail_t010.0s.png");
+    assert!(written.contains(&snap_png), "{written:?}");
+    assert!(written.contains(&final_png), "{written:?}");
+    assert_eq!(fs::read(&snap_png).unwrap(), fs::read(&final_png).unwrap());
+
+    let img = decode(&snap_png);
+    // 100 cells × 8 px wide, 50 cells × 8 px high, with the axes and the strip around them.
+    let layout = Layout::for_grid(100, 50, 0.1);
+    assert_eq!(layout.scale, 8);
+    assert_eq!((img.0, img.1), layout.picture_px());
+    assert_eq!((img.0, img.1), (48 + 800 + 24, 28 + 400 + 40 + 64));
+
+    // Robot 0's true trajectory (y = 1 m) passes through x = 3 m: the middle of its 3 px line.
+    let (x, y) = layout.pixel_from_world(3.0, 1.0);
+    assert_eq!((x, y), (48.0 + 240.0, 28.0 + 320.0));
+    assert_eq!(pixel(&img, 288, 348), ROBOT_RGB[0]);
+    // Robot 1's estimate (y = 2.5 m, row 228) is dashed in a lighter shade of its colour.
+    let est: Vec<Rgb> = (150..450).map(|x| pixel(&img, x, 228)).collect();
+    assert!(est.contains(&lighter(ROBOT_RGB[1])));
+    assert!(est.iter().any(|&c| c == VIRIDIS[0]), "dashes have gaps");
+    assert_eq!(
+        pixel(&img, 288, 188),
+        ROBOT_RGB[1],
+        "true path of robot 1 (y = 3 m)"
+    );
+
+    // The max cell (80, 40) is drawn at the top of the colour map, y up: block row
+    // 50 − 1 − 40 = 9 from the top of the field, i.e. picture rows 100..108, columns 688..696.
+    assert_eq!(pixel(&img, 692, 104), VIRIDIS[9]);
+    assert_eq!(pixel(&img, 692, 112), VIRIDIS[0]);
+    assert_eq!(pixel(&img, 692, 28 + 400 - 76), VIRIDIS[0]);
+    // A zero cell away from every line is the bottom of the map.
+    assert_eq!(pixel(&img, 98, 78), VIRIDIS[0]);
+    // The strip has text and the colour bar: its top colour is there, at the right.
+    let strip_top = 28 + 400 + 40;
+    let bar: Vec<Rgb> = (436..872).map(|x| pixel(&img, x, strip_top + 30)).collect();
+    assert!(
+        bar.contains(&VIRIDIS[9]) && bar.contains(&VIRIDIS[0]),
+        "colour bar"
+    );
+    let text: usize = (strip_top..img.1 as usize)
+        .flat_map(|y| (0..436).map(move |x| (x, y)))
+        .filter(|&(x, y)| pixel(&img, x, y)[0] > 200)
+        .count();
+    assert!(text > 300, "{text} light pixels: no title or legend");
+}
+#[test]
+fn nan_cells_get_their_own_colour_without_panicking() {
+    let tmp = TempDir::new("nan");
+    let mut rec = scene();
+    let w = rec.snapshots[0].width as usize;
+    rec.snapshots[0].planes[10 * w + 10] = f32::NAN;
+    rec.snapshots[0].planes[11 * w + 10] = f32::INFINITY;
+    let written = write_outputs(&tmp.0, &rec, &serde_json::json!({}), &[]).unwrap();
+    assert!(written.iter().any(|p| p.ends_with("field_final.png")));
+    let img = decode(&tmp.0.join("field_final.png"));
+    // Cell (10, 10): columns 48 + 80..88, rows 28 + (49 − 10)·8 = 340..348.
+    assert_eq!(pixel(&img, 132, 343), NAN_RGB);
+    assert!(!VIRIDIS.contains(&NAN_RGB) && !ROBOT_RGB.contains(&NAN_RGB));
+    // NaN and ∞ do not spoil the scale: the finite max is still the top of the map.
+    assert_eq!(pixel(&img, 692, 104), VIRIDIS[9]);
+    assert_eq!(pixel(&img, 132, 335), VIRIDIS[9], "+inf clamps to the top");
+}
+#[test]
+fn file_names_and_bad_snapshots() {
+    assert_eq!(snapshot_file_name("trail", 12.0), "field_trail_t012.0s.png");
+    assert_eq!(
+        snapshot_file_name("anti trail", 3.26),
+        "field_anti_trail_t003.3s.png"
+    );
+    assert_eq!(snapshot_file_name("x", 1234.5), "field_x_t1234.5s.png");
+    let mut rec = scene();
+    rec.snapshots[0].planes.pop();
+    let tmp = TempDir::new("bad");
+    let err = write_outputs(&tmp.0, &rec, &serde_json::json!({}), &[]).unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("t = 10 s") && msg.contains("4999 values"),
+        "{msg}"
+    );
+    assert!(!tmp.0.exists(), "nothing written for a bad recording");
+    assert_eq!(fmt_sig(35.26), "35.3");
+    assert_eq!(fmt_sig(50.0), "50");
+    assert_eq!(fmt_sig(340.0), "340");
+    assert_eq!(fmt_sig(0.012345), "0.0123");
+    assert_eq!(fmt_sig(1.5e-5), "1.50e-5");
+}
+
+#[test]
+fn io_errors_name_the_path() {
+    let tmp = TempDir::new("io");
+    fs::create_dir_all(&tmp.0).unwrap();
+    let blocker = tmp.0.join("file");
+    fs::write(&blocker, b"not a directory").unwrap();
+    let dir = blocker.join("out");
+    let err = write_outputs(&dir, &scene(), &serde_json::json!({}), &[]).unwrap_err();
+    assert!(matches!(err, ReportError::Io { .. }), "{err:?}");
+    assert!(
+        err.to_string().contains(&dir.display().to_string()),
+        "{err}"
+    );
+}

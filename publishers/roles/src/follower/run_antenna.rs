@@ -1,0 +1,178 @@
+//! The process loop of an antenna robot that reads its antennas from an [`AntennaSource`]
+//! (`pheromone follower --strategy antenna --gateway udp://HOST:PORT`): pose → readings →
+//! command and status on the robot's services with the world. With a gateway source nothing of
+//! the field is opened in shared memory.
+
+use std::time::{Duration, Instant};
+
+use field::link::Receiver;
+use field::lockstep::Participant;
+use iceoryx2::node::Node;
+use serde::{Deserialize, Serialize};
+
+use super::antenna_source::{AntennaRobot, AntennaSource, AntennaStepError, SourceStats};
+use super::PoseSource;
+use crate::{
+    receiver, role_loop, sender, summary_of, ProcessError, RobotServices, RoleOptions, RoleSummary,
+};
+use field::shm::Svc;
+use messages::{CmdMsg, FollowerStatusMsg, PoseMsg, TruthMsg};
+
+/// Deposits an antenna robot makes through its gateway as it goes (a leader laying a trail
+/// remotely).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RemoteDeposits {
+    /// Amount of each deposit (field units).
+    pub amount: f32,
+    /// One deposit at the robot's pose every this many steps.
+    pub every_steps: u64,
+}
+
+/// How an antenna robot runs.
+#[derive(Debug, Clone, Copy)]
+pub struct AntennaRunOptions {
+    pub steer_by: PoseSource,
+    pub dt_s: f64,
+    /// Lockstep: how long a step may wait for the frame of its step before the robot fails.
+    pub frame_timeout: Duration,
+    pub deposits: Option<RemoteDeposits>,
+}
+
+/// An antenna robot's summary: the role's counters and its source's.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct AntennaRobotSummary {
+    pub role: RoleSummary,
+    pub source: SourceStats,
+}
+
+/// The antenna robot process: pose (estimate, or the world's truth) → readings from `robot`'s
+/// source → command and status. In lockstep each step reads the frame of its step (sequence
+/// `step + 1`, see [`super::antenna_source`]).
+pub fn run_antenna_robot<S: AntennaSource>(
+    node: &Node<Svc>,
+    o: &RoleOptions,
+    robot: AntennaRobot<S>,
+    run: AntennaRunOptions,
+) -> Result<AntennaRobotSummary, ProcessError> {
+    let s = RobotServices::new(&o.world, o.robot);
+    match run.steer_by {
+        PoseSource::Estimate => drive(
+            node,
+            o,
+            robot,
+            run,
+            receiver::<PoseMsg>(node, &s.pose)?,
+            |p: &PoseMsg| *p,
+        ),
+        PoseSource::Truth => drive(
+            node,
+            o,
+            robot,
+            run,
+            receiver::<TruthMsg>(node, &s.truth)?,
+            messages::truth_as_pose,
+        ),
+    }
+}
+
+/// How long one wait for the frame of a step lasts before Ctrl-C and the world's end are looked
+/// at again.
+const WAIT_SLICE: Duration = Duration::from_millis(100);
+
+fn drive<
+    S: AntennaSource,
+    T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static,
+>(
+    node: &Node<Svc>,
+    o: &RoleOptions,
+    mut robot: AntennaRobot<S>,
+    run: AntennaRunOptions,
+    poses: Receiver<T>,
+    to_pose: impl Fn(&T) -> PoseMsg,
+) -> Result<AntennaRobotSummary, ProcessError> {
+    let id = o.robot;
+    let s = RobotServices::new(&o.world, id);
+    let cmds = sender::<CmdMsg>(node, &s.cmd)?;
+    let statuses = sender::<FollowerStatusMsg>(node, &s.status)?;
+    let end = Participant::join(node, &o.world)?;
+    let mut summary = summary_of(id, "follower");
+    let last = std::cell::Cell::new(None::<CmdMsg>);
+    let mut rejected = 0u64;
+    role_loop(
+        node,
+        &end,
+        &poses,
+        |m: &T| to_pose(m).step,
+        &mut summary,
+        |m| {
+            let p = to_pose(m);
+            // Lockstep: the frame the field computed for this step, and no older one.
+            let want = if o.lockstep { p.step + 1 } else { 0 };
+            let give_up = Instant::now() + run.frame_timeout;
+            let out = loop {
+                let slice = (Instant::now() + WAIT_SLICE).min(give_up);
+                match robot.step_pose(&p, run.dt_s, want, slice) {
+                    Ok(Some((out, _))) => break Some(out),
+                    Ok(None) if Instant::now() < give_up => {
+                        if end.conductor_gone() || node.wait(Duration::ZERO).is_err() {
+                            return Ok(());
+                        }
+                    }
+                    Ok(None) => {
+                        return Err(ProcessError::AntennaSource(format!(
+                            "{}: no reading from frame {want} (step {}) within {:.1} s",
+                            robot.source().name(),
+                            p.step,
+                            run.frame_timeout.as_secs_f64()
+                        )))
+                    }
+                    Err(AntennaStepError::Input(e)) => {
+                        rejected += 1;
+                        eprintln!("follower r{id}: step {}: {e}; stopping the robot", p.step);
+                        break None;
+                    }
+                    Err(AntennaStepError::Source(e)) => {
+                        return Err(ProcessError::AntennaSource(e.to_string()))
+                    }
+                }
+            };
+            let (cmd, status) = match out {
+                Some(out) => (out.cmd, Some(out.status)),
+                None => (
+                    CmdMsg {
+                        robot_id: id,
+                        ..Default::default()
+                    },
+                    None,
+                ),
+            };
+            super::run::send_step(&cmds, &statuses, &last, p.step, (cmd, status))?;
+            if let (Some(d), true) = (run.deposits, status.is_some()) {
+                if d.every_steps > 0 && p.step.is_multiple_of(d.every_steps) {
+                    // Applied at most once (the client never resends a deposit to the other
+                    // gateway); a deposit that got no answer is counted, and the robot goes on.
+                    let channel = robot.channel();
+                    if let Err(e) =
+                        robot
+                            .source_mut()
+                            .deposit(p.x_m as f32, p.y_m as f32, d.amount, channel)
+                    {
+                        eprintln!("follower r{id}: step {}: deposit: {e}", p.step);
+                    }
+                }
+            }
+            Ok(())
+        },
+        || {
+            if let Some(c) = last.get() {
+                cmds.send(c)?;
+            }
+            Ok(())
+        },
+    )?;
+    summary.rejected = rejected;
+    Ok(AntennaRobotSummary {
+        role: summary,
+        source: robot.source().stats(),
+    })
+}

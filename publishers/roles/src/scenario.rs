@@ -1,0 +1,782 @@
+//! Scenarios: one TOML file describes the field, the world, each robot's roles and scripted
+//! deposits. Every process of a run reads the same scenario and takes its own part. Built-in
+//! scenarios are embedded in the binary and shipped under `examples/scenarios/`.
+
+use std::path::Path;
+
+use field::messages::KernelParams;
+use field::{DepositMsg, FieldConfig, KernelKind};
+use serde::{Deserialize, Serialize};
+
+use crate::depositor::{DepositMode, DepositorConfig};
+use crate::follower::{FollowerConfig, StrategyKind};
+use crate::localizer::EkfConfig;
+use crate::world::WorldConfig;
+
+pub use super::scenario_error::{DepositError, ScenarioError};
+
+/// Built-in scenarios: (name, TOML text).
+pub const BUILTIN: &[(&str, &str)] = &[
+    (
+        "blind-leader",
+        include_str!("../../../examples/scenarios/blind-leader.toml"),
+    ),
+    (
+        "trail-following",
+        include_str!("../../../examples/scenarios/trail-following.toml"),
+    ),
+    (
+        "ias-ss",
+        include_str!("../../../examples/scenarios/ias-ss.toml"),
+    ),
+    (
+        "evaporation",
+        include_str!("../../../examples/scenarios/evaporation.toml"),
+    ),
+    (
+        "trail",
+        include_str!("../../../examples/scenarios/trail.toml"),
+    ),
+    (
+        "wrong-area",
+        include_str!("../../../examples/scenarios/wrong-area.toml"),
+    ),
+];
+
+/// The scenario `pheromone sim` runs when none is named.
+pub const DEFAULT_SCENARIO: &str = "blind-leader";
+
+/// Every built-in scenario name: the grid ones, then the node-graph (`regions`) ones.
+pub(super) fn builtin_names() -> String {
+    BUILTIN
+        .iter()
+        .chain(graph::agent::BUILTIN_REGIONS.iter())
+        .map(|(n, _)| *n)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// A whole run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    pub name: String,
+    #[serde(default)]
+    pub seed: u64,
+    /// Simulated time the run lasts (s).
+    pub duration_s: f64,
+    #[serde(default)]
+    pub field: FieldConfig,
+    #[serde(default)]
+    pub world: WorldConfig,
+    /// The roles of each robot (`[[robot]]`).
+    #[serde(default, rename = "robot")]
+    pub robots: Vec<RobotRoles>,
+    /// Scripted deposits (`[[deposit]]`).
+    #[serde(default, rename = "deposit")]
+    pub deposits: Vec<ScriptedDeposit>,
+    /// Robots taking part: the first N of `[[world.robots]]` (all if unset); `--robots` sets it.
+    #[serde(default)]
+    pub active_robots: Option<usize>,
+    /// Mark every wall of the world on a channel at t = 0 (seed 004: pheromone builds up along
+    /// walls, so the sector strategies steer away from them).
+    #[serde(default)]
+    pub mark_walls: Option<MarkWalls>,
+    /// Points whose field values are recorded at given times (`[[probe]]`).
+    #[serde(default, rename = "probe")]
+    pub probes: Vec<ProbeSpec>,
+    /// Times (s) at which the field is pictured; the end of the run is always pictured.
+    #[serde(default)]
+    pub snapshots_s: Vec<f64>,
+    /// Scenario-specific metrics.
+    #[serde(default)]
+    pub metrics: MetricsConfig,
+    /// Seed 004's local maps and their merging (`sim/scenario_mapping.rs`); off by default.
+    #[serde(default)]
+    pub mapping: crate::mapper::MappingConfig,
+}
+
+/// `mark_walls`: deposits every `spacing_m` along every wall segment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MarkWalls {
+    pub channel: u32,
+    #[serde(default = "default_wall_amount")]
+    pub amount: f32,
+    #[serde(default = "default_wall_spacing_m")]
+    pub spacing_m: f32,
+    /// Half-width of the mark's plateau (m).
+    #[serde(default = "default_wall_plateau_m")]
+    pub plateau_m: f32,
+}
+
+fn default_wall_amount() -> f32 {
+    1.0
+}
+fn default_wall_spacing_m() -> f32 {
+    0.1
+}
+fn default_wall_plateau_m() -> f32 {
+    0.1
+}
+
+/// A probe: the value of `channel` at (x, y) at each of `times_s`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeSpec {
+    pub x_m: f32,
+    pub y_m: f32,
+    #[serde(default)]
+    pub channel: u32,
+    pub times_s: Vec<f64>,
+}
+
+/// Scenario-specific metrics (`[metrics]`).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MetricsConfig {
+    /// Seed 002: mean distance between a robot and a target path (`[[metrics.paths]]`).
+    pub paths: Vec<PathMetric>,
+    /// Seed 004: share of the map's sectors each robot visited.
+    pub exploration: Option<ExplorationMetric>,
+    /// Seed 000: where the follower of a leader that got lost ends up.
+    pub blind_leader: Option<BlindLeaderMetric>,
+    /// Seed 000 Figs. 1 and 24: whether the followers of a lost leader end in the wrong area A
+    /// or reach B, where the leader truly is.
+    pub wrong_area: Option<WrongAreaMetric>,
+}
+
+/// `mean_path_error_m`: the distance from `robot`'s true position to the polyline `points`,
+/// sampled every `every_s` over [`from_s`, `from_s + over_s`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PathMetric {
+    /// Name of the path in the metrics (`mean_path_error_m.<name>`).
+    pub name: String,
+    #[serde(default)]
+    pub robot: u32,
+    pub points: Vec<[f64; 2]>,
+    #[serde(default = "default_every_s")]
+    pub every_s: f64,
+    #[serde(default)]
+    pub from_s: f64,
+    pub over_s: f64,
+}
+
+fn default_every_s() -> f64 {
+    0.2
+}
+
+/// `exploration`: the rectangle split into `cols` × `rows` sectors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExplorationMetric {
+    pub min_m: [f64; 2],
+    pub max_m: [f64; 2],
+    pub cols: u32,
+    pub rows: u32,
+}
+
+/// `blind_leader`: the leader's and the follower's ids.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BlindLeaderMetric {
+    pub leader: u32,
+    pub follower: u32,
+}
+
+/// `wrong_area`: the leader, the followers (in chain order), area A (the rectangle where the lost
+/// leader believes it is) and location B (where it truly goes, reached within `b_radius_m`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WrongAreaMetric {
+    pub leader: u32,
+    pub followers: Vec<u32>,
+    /// Area A: corners [x, y] (m), min and max.
+    pub a_min_m: [f64; 2],
+    pub a_max_m: [f64; 2],
+    /// Location B [x, y] (m) and the radius within which a robot has reached it.
+    pub b_m: [f64; 2],
+    pub b_radius_m: f64,
+}
+
+impl WrongAreaMetric {
+    /// Distance from `p` to area A (m, 0 inside or on its edge).
+    pub fn distance_to_a_m(&self, p: [f64; 2]) -> f64 {
+        let d = |v: f64, lo: f64, hi: f64| (lo - v).max(v - hi).max(0.0);
+        d(p[0], self.a_min_m[0], self.a_max_m[0]).hypot(d(p[1], self.a_min_m[1], self.a_max_m[1]))
+    }
+
+    pub fn in_a(&self, p: [f64; 2]) -> bool {
+        self.distance_to_a_m(p) == 0.0
+    }
+
+    pub fn in_b(&self, p: [f64; 2]) -> bool {
+        (p[0] - self.b_m[0]).hypot(p[1] - self.b_m[1]) <= self.b_radius_m
+    }
+
+    fn validate(&self) -> Result<(), ScenarioError> {
+        let bad = |reason: String| ScenarioError::Metric {
+            metric: "metrics.wrong_area".into(),
+            reason,
+        };
+        let (lo, hi) = (self.a_min_m, self.a_max_m);
+        if !(lo.iter().chain(&hi).all(|v| v.is_finite()) && lo[0] < hi[0] && lo[1] < hi[1]) {
+            return Err(bad(format!(
+                "a_min_m = {lo:?}, a_max_m = {hi:?} is not a rectangle (finite, min < max)"
+            )));
+        }
+        if !(self.b_m.iter().all(|v| v.is_finite())
+            && self.b_radius_m.is_finite()
+            && self.b_radius_m > 0.0)
+        {
+            return Err(bad(format!(
+                "b_m = {:?}, b_radius_m = {} must be finite with a radius > 0",
+                self.b_m, self.b_radius_m
+            )));
+        }
+        if self.followers.is_empty() {
+            return Err(bad("followers = [] names no follower".into()));
+        }
+        Ok(())
+    }
+}
+
+/// Changes `pheromone sim` makes to a scenario from its flags.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Overrides {
+    pub seed: Option<u64>,
+    pub robots: Option<usize>,
+    pub duration_s: Option<f64>,
+    /// Every follower that is not a `route` leader uses this strategy.
+    pub strategy: Option<StrategyKind>,
+    /// Every depositor deposits with `constant` strength (seed 000's baseline).
+    pub constant: bool,
+    /// A ROS map_server map (`map.yaml`) whose walls replace the scenario's; the field and the
+    /// exploration sectors are fitted to it (`sim/scenario_map.rs`).
+    pub map: Option<std::path::PathBuf>,
+    /// `--merge` (true) / `--no-merge` (false): turn seed 004's mapping on, with or without
+    /// exchanges at rendezvous (`sim/scenario_mapping.rs`).
+    pub merge: Option<bool>,
+    /// `--rc-m R`: the communication radius R_C (m) of the exchanges.
+    pub rc_m: Option<f64>,
+}
+
+/// What runs for one robot: a localizer always, a depositor and a follower if configured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotRoles {
+    pub id: u32,
+    #[serde(default)]
+    pub localizer: EkfConfig,
+    /// Standard deviation of the localizer's initial position estimate (m).
+    #[serde(default = "default_initial_sigma_m")]
+    pub initial_sigma_m: f64,
+    #[serde(default)]
+    pub depositor: Option<DepositorConfig>,
+    #[serde(default)]
+    pub follower: Option<FollowerConfig>,
+}
+
+fn default_initial_sigma_m() -> f64 {
+    0.05
+}
+
+/// A deposit made by the world at time `t_s`; with `to_x_m`/`to_y_m`/`spacing_m` it is a line of
+/// deposits every `spacing_m` from (x, y) to (to_x, to_y).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScriptedDeposit {
+    #[serde(default)]
+    pub t_s: f64,
+    #[serde(default = "default_kernel")]
+    pub kernel: String,
+    #[serde(default)]
+    pub channel: u32,
+    pub x_m: f32,
+    pub y_m: f32,
+    #[serde(default)]
+    pub to_x_m: Option<f32>,
+    #[serde(default)]
+    pub to_y_m: Option<f32>,
+    #[serde(default)]
+    pub spacing_m: Option<f32>,
+    pub amount: f32,
+    #[serde(default = "default_cov")]
+    pub cov: [f32; 3],
+    #[serde(default = "default_range_m")]
+    pub range_m: f32,
+    #[serde(default = "default_gamma_max")]
+    pub gamma_max: f32,
+    #[serde(default = "default_sigma_m")]
+    pub sigma_m: f32,
+    #[serde(default)]
+    pub plateau_m: f32,
+    #[serde(default)]
+    pub slope_m: f32,
+}
+
+fn default_kernel() -> String {
+    "ellipse".into()
+}
+fn default_cov() -> [f32; 3] {
+    [0.01, 0.0, 0.01]
+}
+fn default_range_m() -> f32 {
+    1.0
+}
+fn default_gamma_max() -> f32 {
+    100.0
+}
+fn default_sigma_m() -> f32 {
+    0.1
+}
+
+impl ScriptedDeposit {
+    /// The deposit messages this entry stands for.
+    pub fn messages(&self) -> Result<Vec<DepositMsg>, DepositError> {
+        let kernel = self
+            .kernel
+            .parse::<KernelKind>()
+            .map_err(|e| DepositError::Kernel(e.into()))?;
+        let params = KernelParams {
+            cov: self.cov,
+            range_m: self.range_m,
+            gamma_max: self.gamma_max,
+            sigma_m: self.sigma_m,
+            plateau_m: self.plateau_m,
+            slope_m: self.slope_m,
+        };
+        let one = |x_m: f32, y_m: f32| {
+            DepositMsg::with_params(kernel, self.channel, x_m, y_m, self.amount, &params)
+        };
+        match (self.to_x_m, self.to_y_m, self.spacing_m) {
+            (None, None, None) => Ok(vec![one(self.x_m, self.y_m)]),
+            (Some(tx), Some(ty), Some(sp)) => {
+                if !(sp.is_finite() && sp > 0.0) {
+                    return Err(DepositError::Spacing { spacing_m: sp });
+                }
+                let len = ((tx - self.x_m).powi(2) + (ty - self.y_m).powi(2)).sqrt();
+                let n = (len / sp).floor() as usize;
+                if n > 1_000_000 {
+                    return Err(DepositError::TooLong { n, spacing_m: sp });
+                }
+                Ok((0..=n)
+                    .map(|i| {
+                        let f = if len > 0.0 { i as f32 * sp / len } else { 0.0 };
+                        one(
+                            self.x_m + f * (tx - self.x_m),
+                            self.y_m + f * (ty - self.y_m),
+                        )
+                    })
+                    .collect())
+            }
+            _ => Err(DepositError::IncompleteLine),
+        }
+    }
+}
+
+impl Scenario {
+    /// Loads a built-in scenario by name, or a TOML file by path.
+    pub fn load(name_or_path: &str) -> Result<Self, ScenarioError> {
+        let path = Path::new(name_or_path);
+        if path.is_file() {
+            let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+                origin: path.display().to_string(),
+                source,
+            })?;
+            let dir = path.parent().unwrap_or_else(|| Path::new("."));
+            return Self::parse_in(&text, &path.display().to_string(), dir);
+        }
+        match BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
+            Some((n, text)) => Self::parse(text, &format!("built-in scenario '{n}'")),
+            None => Err(ScenarioError::Unknown(name_or_path.to_string())),
+        }
+    }
+
+    /// Parses and validates; `origin` names the source in errors. A relative `[world] map` is
+    /// relative to the current directory.
+    pub fn parse(text: &str, origin: &str) -> Result<Self, ScenarioError> {
+        Self::parse_in(text, origin, Path::new("."))
+    }
+
+    /// Parses, loads `[world] map` (relative to `base_dir`) and validates.
+    pub fn parse_in(text: &str, origin: &str, base_dir: &Path) -> Result<Self, ScenarioError> {
+        let mut s: Scenario = toml::from_str(text).map_err(|e| ScenarioError::Parse {
+            origin: origin.to_string(),
+            source: Box::new(e),
+        })?;
+        s.load_world_map(base_dir)
+            .and_then(|()| s.validate())
+            .map_err(|e| ScenarioError::Invalid {
+                origin: origin.to_string(),
+                source: Box::new(e),
+            })?;
+        Ok(s)
+    }
+
+    /// Cross-checks the parts: sizes, the field clock against the world step, robot ids.
+    pub fn validate(&self) -> Result<(), ScenarioError> {
+        self.field.validate().map_err(ScenarioError::Field)?;
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
+            return Err(ScenarioError::value(
+                "duration_s",
+                self.duration_s,
+                "must be > 0",
+            ));
+        }
+        let field_dt = 1.0 / self.field.tick_hz as f64;
+        if (field_dt - self.world.dt_s).abs() > 1e-6 * self.world.dt_s.max(1e-9) + 1e-9 {
+            return Err(ScenarioError::ClockMismatch {
+                tick_hz: self.field.tick_hz,
+                field_dt,
+                world_dt: self.world.dt_s,
+            });
+        }
+        for r in &self.robots {
+            if !self.world.robots.iter().any(|w| w.id == r.id) {
+                return Err(ScenarioError::NoWorldRobot { robot: r.id });
+            }
+            let robot = r.id;
+            r.localizer
+                .validate()
+                .map_err(|source| ScenarioError::Localizer { robot, source })?;
+            if let Some(d) = &r.depositor {
+                d.validate()
+                    .map_err(|source| ScenarioError::Depositor { robot, source })?;
+            }
+            if let Some(f) = &r.follower {
+                f.validate()
+                    .map_err(|source| ScenarioError::Follower { robot, source })?;
+            }
+        }
+        for (i, d) in self.deposits.iter().enumerate() {
+            d.messages().map_err(|source| ScenarioError::Deposit {
+                index: i + 1,
+                source,
+            })?;
+        }
+        crate::world::World::new(self.world.clone(), self.seed).map_err(ScenarioError::World)?;
+        if let Some(n) = self.active_robots {
+            if n == 0 || n > self.world.robots.len() {
+                return Err(ScenarioError::ActiveRobots {
+                    n,
+                    robots: self.world.robots.len(),
+                });
+            }
+        }
+        let channels = self.field.channels.len() as u32;
+        if let Some(m) = &self.mark_walls {
+            if m.channel >= channels {
+                return Err(ScenarioError::Channel {
+                    key: "mark_walls.channel".into(),
+                    channel: m.channel,
+                    channels,
+                });
+            }
+            if !(m.spacing_m.is_finite() && m.spacing_m > 0.0) {
+                return Err(ScenarioError::value(
+                    "mark_walls.spacing_m",
+                    m.spacing_m,
+                    "must be > 0",
+                ));
+            }
+        }
+        for (i, p) in self.probes.iter().enumerate() {
+            if p.channel >= channels {
+                return Err(ScenarioError::Channel {
+                    key: format!("probe {}: channel", i + 1),
+                    channel: p.channel,
+                    channels,
+                });
+            }
+            if let Some(t) = p.times_s.iter().find(|t| !(t.is_finite() && **t >= 0.0)) {
+                return Err(ScenarioError::NegativeTime {
+                    key: format!("probe {}: times_s", i + 1),
+                    value: *t,
+                });
+            }
+        }
+        if let Some(t) = self
+            .snapshots_s
+            .iter()
+            .find(|t| !(t.is_finite() && **t >= 0.0))
+        {
+            return Err(ScenarioError::NegativeTime {
+                key: "snapshots_s".into(),
+                value: *t,
+            });
+        }
+        for p in &self.metrics.paths {
+            if p.points.len() < 2 {
+                return Err(ScenarioError::Metric {
+                    metric: format!("metrics.paths '{}'", p.name),
+                    reason: "needs at least 2 points".into(),
+                });
+            }
+            if !(p.every_s > 0.0 && p.over_s > 0.0) {
+                return Err(ScenarioError::Metric {
+                    metric: format!("metrics.paths '{}'", p.name),
+                    reason: format!(
+                        "every_s = {} and over_s = {} must be > 0",
+                        p.every_s, p.over_s
+                    ),
+                });
+            }
+        }
+        if let Some(w) = &self.metrics.wrong_area {
+            w.validate()?;
+        }
+        for r in &self.robots {
+            let Some(f) = &r.follower else { continue };
+            let explorer = f.after_loss.as_ref().and_then(|a| a.channel);
+            for (key, ch) in [
+                ("channel", Some(f.channel)),
+                ("after_loss.channel", explorer),
+            ] {
+                match ch {
+                    Some(c) if c >= channels => {
+                        return Err(ScenarioError::Channel {
+                            key: format!("robot {}: follower {key}", r.id),
+                            channel: c,
+                            channels,
+                        })
+                    }
+                    _ => {}
+                }
+            }
+        }
+        self.validate_mapping()?;
+        if let Some(e) = &self.metrics.exploration {
+            if e.cols == 0 || e.rows == 0 || e.max_m[0] <= e.min_m[0] || e.max_m[1] <= e.min_m[1] {
+                return Err(ScenarioError::Metric {
+                    metric: "metrics.exploration".into(),
+                    reason: format!("{e:?} is an empty grid of sectors"),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Applies `pheromone sim`'s flags and re-validates. Keeps only the active robots.
+    pub fn apply(&mut self, o: &Overrides) -> Result<(), ScenarioError> {
+        if let Some(map) = &o.map {
+            self.use_map(map)?;
+        }
+        if let Some(seed) = o.seed {
+            self.seed = seed;
+        }
+        if let Some(d) = o.duration_s {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(ScenarioError::Flag {
+                    flag: "--duration",
+                    value: d.to_string(),
+                    reason: "must be > 0",
+                });
+            }
+            self.duration_s = d;
+        }
+        self.apply_mapping(o)?;
+        if let Some(n) = o.robots {
+            if n == 0 || n > self.world.robots.len() {
+                return Err(ScenarioError::Robots {
+                    n,
+                    scenario: self.name.clone(),
+                    robots: self.world.robots.len(),
+                });
+            }
+            self.active_robots = Some(n);
+        }
+        if let Some(n) = self.active_robots.take() {
+            self.world.robots.truncate(n);
+            let ids: Vec<u32> = self.world.robots.iter().map(|r| r.id).collect();
+            self.robots.retain(|r| ids.contains(&r.id));
+        }
+        for r in &mut self.robots {
+            if let Some(f) = &mut r.follower {
+                if let Some(k) = o.strategy {
+                    if f.strategy != StrategyKind::Route {
+                        f.strategy = k;
+                    }
+                }
+            }
+            if o.constant {
+                if let Some(d) = &mut r.depositor {
+                    d.mode = DepositMode::Constant;
+                }
+            }
+        }
+        self.validate()
+    }
+
+    /// The follower settings of a robot, its RNG seed mixed with the scenario's seed so that
+    /// every seed of a run gives other random draws.
+    pub fn follower_config(&self, robot: u32) -> Option<FollowerConfig> {
+        let mut f = self.roles(robot)?.follower.clone()?;
+        f.seed = f
+            .seed
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .wrapping_add(self.seed.rotate_left(17))
+            .wrapping_add(robot as u64);
+        Some(f)
+    }
+
+    /// Every scripted deposit (walls first, at t = 0), sorted by time.
+    pub fn scripted(
+        &self,
+        walls: &[crate::world::Segment],
+    ) -> Result<Vec<(f64, DepositMsg)>, ScenarioError> {
+        let mut out = Vec::new();
+        if let Some(m) = &self.mark_walls {
+            for w in walls {
+                let d = ScriptedDeposit {
+                    t_s: 0.0,
+                    kernel: "z-shape".into(),
+                    channel: m.channel,
+                    x_m: w.a_m[0] as f32,
+                    y_m: w.a_m[1] as f32,
+                    to_x_m: Some(w.b_m[0] as f32),
+                    to_y_m: Some(w.b_m[1] as f32),
+                    spacing_m: Some(m.spacing_m),
+                    amount: m.amount,
+                    cov: default_cov(),
+                    range_m: default_range_m(),
+                    gamma_max: default_gamma_max(),
+                    sigma_m: default_sigma_m(),
+                    plateau_m: m.plateau_m,
+                    slope_m: 0.0,
+                };
+                let msgs = d.messages().map_err(ScenarioError::WallMark)?;
+                out.extend(msgs.into_iter().map(|m| (0.0, m)));
+            }
+        }
+        for (i, d) in self.deposits.iter().enumerate() {
+            let msgs = d.messages().map_err(|source| ScenarioError::Deposit {
+                index: i + 1,
+                source,
+            })?;
+            out.extend(msgs.into_iter().map(|m| (d.t_s, m)));
+        }
+        out.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // The world sends them: its id orders them in a tick, in both modes.
+        for (_, m) in &mut out {
+            m.robot_id = crate::WORLD_DEPOSITOR_ID;
+        }
+        Ok(out)
+    }
+
+    /// The field configuration of a run of this scenario as processes: the scenario's, with
+    /// the limits that are only defaults raised to fit the run, so no process is refused and no
+    /// deposit is dropped. Readers: every follower, the observer and two spare. Deposit queue:
+    /// the largest number of deposits one step can bring (the scripted ones due at that step,
+    /// one per depositor) and 64 spare.
+    pub fn field_config_for_processes(&self) -> Result<FieldConfig, ScenarioError> {
+        let mut c = self.field.clone();
+        let followers = self.robots.iter().filter(|r| r.follower.is_some()).count();
+        let depositors = self.robots.iter().filter(|r| r.depositor.is_some()).count();
+        c.max_readers = c.max_readers.max(followers + 3);
+        c.max_depositors = c.max_depositors.max(depositors + 2);
+        let world = crate::world::World::new(self.world.clone(), self.seed)
+            .map_err(ScenarioError::World)?;
+        let dt = self.world.dt_s;
+        let mut per_step = std::collections::BTreeMap::<u64, usize>::new();
+        for (t, _) in self.scripted(world.wall_segments())? {
+            // The world sends a deposit of time t at the first step whose end reaches it.
+            let step = ((t - 1e-9) / dt).ceil().max(1.0) as u64 - 1;
+            *per_step.entry(step).or_default() += 1;
+        }
+        let burst = per_step.values().copied().max().unwrap_or(0);
+        c.deposit_buffer = c.deposit_buffer.max(burst + depositors + 64);
+        c.validate().map_err(ScenarioError::FieldLimits)?;
+        Ok(c)
+    }
+
+    /// Every probe reading to take, as (time, index into `probes`), sorted by time.
+    pub fn probe_schedule(&self) -> Vec<(f64, usize)> {
+        let mut probes: Vec<(f64, usize)> = self
+            .probes
+            .iter()
+            .enumerate()
+            .flat_map(|(i, p)| p.times_s.iter().map(move |t| (*t, i)))
+            .collect();
+        probes.sort_by(|a, b| a.0.total_cmp(&b.0));
+        probes
+    }
+
+    /// The scenario as TOML (what `--print-config`-style dumps and sub-processes read).
+    pub fn to_toml(&self) -> Result<String, ScenarioError> {
+        toml::to_string(self).map_err(ScenarioError::Serialize)
+    }
+
+    /// Number of world steps the run lasts.
+    pub fn steps(&self) -> u64 {
+        (self.duration_s / self.world.dt_s).round() as u64
+    }
+
+    pub fn roles(&self, robot_id: u32) -> Option<&RobotRoles> {
+        self.robots.iter().find(|r| r.id == robot_id)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_scenario_loads() {
+        for (name, _) in BUILTIN {
+            let s = Scenario::load(name).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(&s.name, name);
+        }
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_are_refused_with_the_origin() {
+        let e = Scenario::parse("name = 'x'\nduration_s = 1\nspeed = 3\n", "x.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("x.toml") && e.contains("speed"), "{e}");
+        let e = Scenario::parse("name = 'x'\nduration_s = -1\n", "y.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("y.toml") && e.contains("duration_s = -1"), "{e}");
+        let e = Scenario::load("no-such-scenario").unwrap_err().to_string();
+        assert!(e.contains("no-such-scenario") && e.contains("trail"), "{e}");
+    }
+
+    #[test]
+    fn a_refused_scenario_keeps_what_was_refused_as_its_source() {
+        use std::error::Error;
+        let e = Scenario::parse("name = 'x'\nduration_s = -1\n", "y.toml").unwrap_err();
+        let inner = e
+            .source()
+            .and_then(|s| s.downcast_ref::<Box<ScenarioError>>());
+        assert!(
+            matches!(inner.map(|b| &**b), Some(ScenarioError::Value { key, .. }) if key == "duration_s"),
+            "{e:?}"
+        );
+        let mut s = Scenario::load("trail").unwrap();
+        s.deposits[0].kernel = "blob".into();
+        let e = s.validate().unwrap_err();
+        assert!(
+            matches!(
+                &e,
+                ScenarioError::Deposit {
+                    index: 1,
+                    source: DepositError::Kernel(_)
+                }
+            ),
+            "{e:?}"
+        );
+        let kernel = e.source().and_then(|d| d.source()).map(|k| k.to_string());
+        assert!(kernel.is_some_and(|k| k.contains("'blob'")), "{e}");
+    }
+
+    #[test]
+    fn a_line_deposit_expands_every_spacing() {
+        let s = Scenario::load("trail").unwrap();
+        let msgs = s.deposits[0].messages().unwrap();
+        assert_eq!(msgs.len(), 106);
+        assert!((msgs[105].x_m - 11.0).abs() < 1e-3);
+    }
+}

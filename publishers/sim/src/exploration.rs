@@ -1,0 +1,149 @@
+//! Seed 004's exploration as the paper counts it (`exploration_known`): the share of the
+//! sectors a robot *knows*, visited or merged. A sector is known when at least `known_share`
+//! of its free cells are mapped (|log-odds| ≥ `known_logodds`) in the robot's final map. The
+//! free cells of a sector are the points of a grid of the map's cell size over the sector that
+//! lie neither in a wall nor within half a cell of one in the true world; each is looked up in
+//! the robot's map through the robot's true start pose (the frame of its map).
+
+use serde::Serialize;
+
+use roles::mapper::team::{MappingRecord, RobotMap};
+use roles::mapper::{pose_in_frame, MappingConfig};
+use roles::scenario::{ExplorationMetric, Scenario};
+use roles::world::World;
+
+/// `exploration_known`, shaped like `exploration`.
+#[derive(Debug, Clone, Serialize)]
+pub struct KnownExploration {
+    pub sectors: u32,
+    /// Share of the sectors each robot knows, by robot id order.
+    pub per_robot: Vec<f64>,
+    pub mean: f64,
+    /// Share known by at least one robot.
+    pub team: f64,
+}
+
+/// The free points of each sector (world metres), on a grid of `step_m`.
+pub fn free_points(m: &ExplorationMetric, world: &World, step_m: f64) -> Vec<Vec<[f64; 2]>> {
+    let n = (m.cols * m.rows) as usize;
+    let mut out = vec![Vec::new(); n];
+    let (w, h) = (m.max_m[0] - m.min_m[0], m.max_m[1] - m.min_m[1]);
+    let (nx, ny) = ((w / step_m).floor() as usize, (h / step_m).floor() as usize);
+    for iy in 0..ny {
+        for ix in 0..nx {
+            let p = [
+                m.min_m[0] + (ix as f64 + 0.5) * step_m,
+                m.min_m[1] + (iy as f64 + 0.5) * step_m,
+            ];
+            if world.in_wall(p[0], p[1], 0.5 * step_m) {
+                continue;
+            }
+            if let Some(s) = crate::metrics::sector_index(m, p[0], p[1]) {
+                out[s].push(p);
+            }
+        }
+    }
+    out
+}
+
+/// Which sectors a map knows.
+pub fn known_sectors(map: &RobotMap, free: &[Vec<[f64; 2]>], c: &MappingConfig) -> Vec<bool> {
+    let g = &map.geometry;
+    free.iter()
+        .map(|points| {
+            if points.is_empty() {
+                return false;
+            }
+            let mapped = points
+                .iter()
+                .filter(|p| {
+                    let q = pose_in_frame(map.start, [p[0], p[1], 0.0]);
+                    g.cell_at(q[0] as f32, q[1] as f32)
+                        .is_some_and(|(x, y)| map.occupancy[g.index(x, y)].abs() >= c.known_logodds)
+                })
+                .count();
+            mapped as f64 >= c.known_share * points.len() as f64
+        })
+        .collect()
+}
+
+/// `exploration_known` of a run.
+pub fn exploration_known(
+    scenario: &Scenario,
+    m: &ExplorationMetric,
+    rec: &MappingRecord,
+) -> Option<KnownExploration> {
+    let c = scenario.mapping()?;
+    let world = World::new(scenario.world.clone(), scenario.seed).ok()?;
+    let free = free_points(m, &world, c.cell_size_m as f64);
+    let n = free.len();
+    let mut team = vec![false; n];
+    let per_robot: Vec<f64> = rec
+        .maps
+        .values()
+        .map(|map| {
+            let known = known_sectors(map, &free, c);
+            for (t, k) in team.iter_mut().zip(&known) {
+                *t |= *k;
+            }
+            known.iter().filter(|k| **k).count() as f64 / n as f64
+        })
+        .collect();
+    let mean = if per_robot.is_empty() {
+        0.0
+    } else {
+        per_robot.iter().sum::<f64>() / per_robot.len() as f64
+    };
+    Some(KnownExploration {
+        sectors: n as u32,
+        team: team.iter().filter(|k| **k).count() as f64 / n as f64,
+        per_robot,
+        mean,
+    })
+}
+
+/// The mapping keys of the metrics: `exploration_known`, `known_threshold`, `known_logodds`,
+/// `merge`, `rc_m`, `merges`, `merges_rejected`, `exchanges_refused_lost` and
+/// `merge_alignment_error_m` (`mean`, `max`; null without merges).
+pub fn mapping_metrics(
+    scenario: &Scenario,
+    rec: &MappingRecord,
+) -> serde_json::Map<String, serde_json::Value> {
+    use serde_json::json;
+    let mut out = serde_json::Map::new();
+    let Some(c) = scenario.mapping() else {
+        return out;
+    };
+    if let Some(m) = &scenario.metrics.exploration {
+        out.insert(
+            "exploration_known".into(),
+            serde_json::to_value(exploration_known(scenario, m, rec)).unwrap_or_default(),
+        );
+    }
+    out.insert("known_threshold".into(), json!(c.known_share));
+    out.insert("known_logodds".into(), json!(c.known_logodds));
+    out.insert("merge".into(), json!(c.merge));
+    out.insert("rc_m".into(), json!(c.rc_m));
+    out.insert("merges".into(), json!(rec.merges.len()));
+    let rejected: u64 = rec
+        .counters
+        .values()
+        .flat_map(|k| k.merges_rejected.values())
+        .sum();
+    out.insert("merges_rejected".into(), json!(rejected));
+    let lost: u64 = rec.counters.values().map(|k| k.refused_lost).sum();
+    out.insert("exchanges_refused_lost".into(), json!(lost));
+    let errors: Vec<f64> = rec.merges.iter().map(|e| e.alignment_error_m).collect();
+    out.insert(
+        "merge_alignment_error_m".into(),
+        if errors.is_empty() {
+            serde_json::Value::Null
+        } else {
+            json!({
+                "mean": errors.iter().sum::<f64>() / errors.len() as f64,
+                "max": errors.iter().copied().fold(0.0, f64::max),
+            })
+        },
+    );
+    out
+}

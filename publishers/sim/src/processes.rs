@@ -1,0 +1,628 @@
+//! A scenario as separate processes (`pheromone sim`, the default mode): the field, the world,
+//! and each robot's localizer, depositor and follower, each a child of the `pheromone` binary
+//! under one [`Supervisor`], in lockstep (`field::lockstep`) with an [`Observer`] in this
+//! process that records what a single-process run records. The result is the single-process
+//! run's for the same seed, key by key.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use field::run::FieldRunSummary;
+use field::shm::{cleanup_dead_nodes, create_node, ShmError};
+use serde::Serialize;
+
+use crate::observer::Observer;
+use crate::record::Recording;
+use crate::single::{role_name, FieldSummary, RobotResult, RunSummary};
+use roles::follower::run_antenna::AntennaRobotSummary;
+use roles::scenario::{Scenario, ScenarioError};
+use roles::world::World;
+use roles::{
+    lockstep_participants, mapper_robots, MapperSummary, RoleSummary, WorldOptions, WorldSummary,
+};
+use supervisor::{ChildId, ChildSpec, Supervisor, SupervisorError};
+
+/// How to run the processes.
+pub struct ProcessRunOptions<'a> {
+    /// The `pheromone` binary the roles are started from.
+    pub exe: PathBuf,
+    /// EKF-SLAM localizers.
+    pub slam: bool,
+    /// The world steps on wall time; nobody waits (the result is not the single-process one).
+    pub realtime: bool,
+    /// The whole run's limit.
+    pub timeout: Duration,
+    /// How long every process may take to join (None: grows with the number of processes).
+    pub attach_timeout: Option<Duration>,
+    /// Lockstep: a step that makes no progress for this long fails the run.
+    pub stall_timeout: Duration,
+    /// Called with the field time of each new frame.
+    pub progress: Option<&'a mut dyn FnMut(f64)>,
+    /// Serve `pheromone view` of the run's field and robots on this HTTP address.
+    pub view: Option<String>,
+    /// The antenna robots read the field only through a `pheromone gateway` child (seed 002's
+    /// thin clients, PIR over UDP loopback) instead of shared memory.
+    pub remote: bool,
+    /// Passed to every follower that reads the field in shared memory as `--wait`.
+    pub follower_wait: Option<field::shm::WaitPolicy>,
+}
+
+/// The robots of `scenario` whose follower uses the antenna strategy: the ones a `--remote` run
+/// serves through a gateway.
+pub fn remote_robots(scenario: &Scenario) -> Vec<u32> {
+    scenario
+        .robots
+        .iter()
+        .filter(|r| {
+            scenario
+                .follower_config(r.id)
+                .is_some_and(|f| f.strategy == roles::follower::StrategyKind::Antenna)
+        })
+        .map(|r| r.id)
+        .collect()
+}
+
+/// Why a run as processes failed. Every process of the run has been stopped by then.
+#[derive(Debug, thiserror::Error)]
+pub enum ProcessRunError {
+    #[error(transparent)]
+    Child(#[from] SupervisorError),
+    #[error("observer: {0}")]
+    Observer(#[from] ShmError),
+    #[error("scenario: {0}")]
+    Scenario(#[from] ScenarioError),
+    #[error("cannot write the scenario file {path}: {source}")]
+    ScenarioFile {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("the field of the run did not come up within {timeout_s:.1} s")]
+    NoField { timeout_s: f64 },
+    #[error("the gateway of the run did not serve within {timeout_s:.1} s; its last output:\n{stderr_tail}")]
+    NoGateway { timeout_s: f64, stderr_tail: String },
+    #[error("the gateway of the run announced '{line}', not udp://HOST:PORT")]
+    GatewayAddress { line: String },
+    #[error("--remote: scenario '{scenario}' has no robot with an antenna follower")]
+    NoRemoteRobot { scenario: String },
+    #[error("interrupted: stopped every process of the run")]
+    Interrupted,
+    #[error("the run took longer than {timeout_s} s: stopped every process")]
+    Timeout { timeout_s: f64 },
+    #[error(
+        "{who} did not stop within {timeout_s:.0} s of the end of the run: stopped every process"
+    )]
+    NotStopped { who: String, timeout_s: f64 },
+}
+
+/// One child's summary, as `metrics.json` lists them.
+#[derive(Debug, Clone, Serialize)]
+pub struct ProcessReport {
+    pub role: String,
+    pub summary: serde_json::Value,
+}
+
+/// What a run as processes gives besides the summary and recording shared with the
+/// single-process mode.
+#[derive(Debug, Clone, Serialize)]
+pub struct ProcessRunInfo {
+    /// From the first process started until the field's first lockstep frame (s).
+    pub startup_s: f64,
+    /// Processes of the run (the observer not counted).
+    pub processes: usize,
+    pub reports: Vec<ProcessReport>,
+}
+
+/// The effective scenario (after the flags) as a file every process reads; removed on drop.
+struct ScenarioFile(PathBuf);
+
+impl ScenarioFile {
+    fn write(scenario: &Scenario, tag: &str) -> Result<Self, ProcessRunError> {
+        let dir = std::env::temp_dir().join(format!("pheromone-{tag}"));
+        let path = dir.join("scenario.toml");
+        let io = |source| ProcessRunError::ScenarioFile {
+            path: path.display().to_string(),
+            source,
+        };
+        std::fs::create_dir_all(&dir).map_err(io)?;
+        let text = scenario.to_toml()?;
+        std::fs::write(&path, text).map_err(io)?;
+        Ok(Self(path))
+    }
+}
+
+impl Drop for ScenarioFile {
+    fn drop(&mut self) {
+        // A temporary file that another cleanup already removed is not an error; anything else
+        // leaves it behind, and says so.
+        let gone = |r: std::io::Result<()>, what: &std::path::Path| match r {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                eprintln!("sim: cannot remove {}: {e}", what.display())
+            }
+            _ => {}
+        };
+        gone(std::fs::remove_file(&self.0), &self.0);
+        if let Some(d) = self.0.parent() {
+            gone(std::fs::remove_dir(d), d);
+        }
+    }
+}
+
+/// Removes what killed (or crashed) children of run `tag` left in shared memory: their nodes
+/// and the memory behind them. A cleanup that cannot run says so: the leftovers stay until the
+/// next run's cleanup.
+fn cleanup_after(tag: &str) {
+    match create_node(&format!("{tag}-cleanup")) {
+        Ok(node) => {
+            cleanup_dead_nodes(&node);
+        }
+        Err(e) => eprintln!("sim: cannot clean up the shared memory of run {tag}: {e}"),
+    }
+}
+
+/// A run tag no other run on this host uses: names the field, the world and the temp dir.
+fn run_tag() -> String {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static RUN: AtomicU32 = AtomicU32::new(0);
+    format!(
+        "sim{}x{}",
+        std::process::id(),
+        RUN.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+/// Runs `scenario` as separate processes and returns what the single-process mode returns,
+/// plus the processes' reports. On any failure every process is stopped, what killed ones left
+/// in shared memory is cleaned up, and the error names the process that failed.
+pub fn run_as_processes(
+    scenario: &Scenario,
+    o: ProcessRunOptions<'_>,
+) -> Result<(RunSummary, Recording, ProcessRunInfo), ProcessRunError> {
+    let tag = run_tag();
+    let file = ScenarioFile::write(scenario, &tag)?;
+    let mut sup = Supervisor::new(&o.exe);
+    let result = supervise(scenario, o, &tag, &file.0, &mut sup);
+    if result.is_err() {
+        sup.stop_all(Duration::from_secs(5));
+    }
+    // Children killed (or crashed) leave their nodes behind: remove them, and their memory.
+    cleanup_after(&tag);
+    drop(file);
+    result
+}
+
+fn supervise(
+    scenario: &Scenario,
+    mut o: ProcessRunOptions<'_>,
+    tag: &str,
+    scenario_file: &Path,
+    sup: &mut Supervisor,
+) -> Result<(RunSummary, Recording, ProcessRunInfo), ProcessRunError> {
+    let (field_name, world_name) = (tag.to_string(), tag.to_string());
+    let path = scenario_file.display().to_string();
+    let participants = lockstep_participants(scenario, true, true);
+    let attach_timeout = o
+        .attach_timeout
+        .unwrap_or_else(|| WorldOptions::default_attach_timeout(participants));
+    let args = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+    let role = |name: &str, robot: Option<u32>| {
+        let mut v = args(&[
+            name,
+            "--scenario",
+            &path,
+            "--world",
+            &world_name,
+            "--field",
+            &field_name,
+            "--json",
+        ]);
+        if let Some(r) = robot {
+            v.extend(args(&["--robot", &r.to_string()]));
+        }
+        if o.realtime {
+            v.push("--realtime".to_string());
+        }
+        v
+    };
+    // The node first: from here on Ctrl-C is iceoryx2's, whatever thread it reaches.
+    let node = create_node(&format!("{tag}-observer"))?;
+    let started = Instant::now();
+    let field = sup.spawn(ChildSpec::new(
+        "field",
+        None,
+        args(&[
+            "field",
+            "--name",
+            &field_name,
+            "--scenario",
+            &path,
+            "--clock",
+            &world_name,
+            "--json",
+        ]),
+    ))?;
+    // The view is no lockstep participant: it reads frames and poses, and is stopped with the
+    // run (a view that cannot listen fails the run, as any child does).
+    if let Some(listen) = &o.view {
+        sup.spawn(ChildSpec::new(
+            "view",
+            None,
+            args(&[
+                "view",
+                "--field",
+                &field_name,
+                "--world",
+                &world_name,
+                "--listen",
+                listen,
+            ]),
+        ))?;
+    }
+    // --remote: the gateway serves the field to the antenna robots; they start once it serves.
+    let remote = if o.remote {
+        remote_robots(scenario)
+    } else {
+        Vec::new()
+    };
+    if o.remote && remote.is_empty() {
+        return Err(ProcessRunError::NoRemoteRobot {
+            scenario: scenario.name.clone(),
+        });
+    }
+    let gateway = if o.remote {
+        let id = sup.spawn(ChildSpec::new(
+            "gateway",
+            None,
+            args(&[
+                "gateway",
+                "--field",
+                &field_name,
+                "--udp",
+                "127.0.0.1:0",
+                "--rate-hz",
+                "0",
+                "--attach-timeout",
+                &attach_timeout.as_secs_f64().to_string(),
+                "--print-address",
+                "--json",
+            ]),
+        ))?;
+        Some((
+            id,
+            gateway_address(
+                &node,
+                sup,
+                id,
+                started + attach_timeout,
+                attach_timeout.as_secs_f64(),
+            )?,
+        ))
+    } else {
+        None
+    };
+    let mut roles: Vec<ChildId> = Vec::new();
+    let mut remote_ids: Vec<ChildId> = Vec::new();
+    for r in &scenario.robots {
+        let mut loc = role("localizer", Some(r.id));
+        if o.slam {
+            loc.push("--slam".into());
+        }
+        roles.push(sup.spawn(ChildSpec::new("localizer", Some(r.id), loc))?);
+        if r.depositor.is_some() {
+            roles.push(sup.spawn(ChildSpec::new(
+                "depositor",
+                Some(r.id),
+                role("depositor", Some(r.id)),
+            ))?);
+        }
+        if r.follower.is_some() {
+            let mut follower = role("follower", Some(r.id));
+            let through = gateway.as_ref().filter(|_| remote.contains(&r.id));
+            if let Some((_, address)) = through {
+                follower.extend(args(&["--gateway", address]));
+            } else if let Some(w) = o.follower_wait {
+                follower.extend(["--wait".to_string(), w.to_string()]);
+            }
+            let id = sup.spawn(ChildSpec::new("follower", Some(r.id), follower))?;
+            if through.is_some() {
+                remote_ids.push(id);
+            }
+            roles.push(id);
+        }
+    }
+    // Seed 004: one mapper per robot when the scenario maps, each publishing its map as field
+    // `<run>-map-r<ID>` and merging its peers' maps from their frames.
+    let mut mappers: Vec<ChildId> = Vec::new();
+    for id in mapper_robots(scenario, true) {
+        mappers.push(sup.spawn(ChildSpec::new("mapper", Some(id), role("mapper", Some(id))))?);
+    }
+    let mut world_args = role("world", None);
+    if !o.realtime {
+        world_args.extend(args(&[
+            "--observed",
+            "--mapped",
+            "--attach-timeout",
+            &attach_timeout.as_secs_f64().to_string(),
+            "--stall-timeout",
+            &o.stall_timeout.as_secs_f64().to_string(),
+        ]));
+    }
+    let world = sup.spawn(ChildSpec::new("world", None, world_args))?;
+    // The observer joins once the field is up; a child that fails meanwhile ends the run.
+    let field_deadline = started + attach_timeout;
+    let mut observer = loop {
+        sup.check()?;
+        match Observer::new(
+            &node,
+            scenario,
+            &world_name,
+            &field_name,
+            Duration::from_millis(100),
+        ) {
+            Ok(obs) => break obs,
+            Err(ShmError::NoField { .. }) | Err(ShmError::Service { .. })
+                if Instant::now() < field_deadline =>
+            {
+                continue
+            }
+            Err(ShmError::NoField { .. }) => {
+                return Err(ProcessRunError::NoField {
+                    timeout_s: attach_timeout.as_secs_f64(),
+                })
+            }
+            Err(e) => return Err(e.into()),
+        }
+    };
+    let walls = World::new(scenario.world.clone(), scenario.seed)
+        .map(|w| w.wall_segments().iter().map(|s| (s.a_m, s.b_m)).collect())
+        .unwrap_or_default();
+    observer.set_walls(walls);
+    let deadline = started + o.timeout;
+    let mut startup = None;
+    // Until the world ends: watch for failed children, Ctrl-C and the time limit, and record.
+    while sup.exit_status(world).is_none() {
+        if node.wait(Duration::ZERO).is_err() {
+            return Err(ProcessRunError::Interrupted);
+        }
+        sup.check()?;
+        if Instant::now() > deadline {
+            return Err(ProcessRunError::Timeout {
+                timeout_s: o.timeout.as_secs_f64(),
+            });
+        }
+        // Woken by the next frame; a child's exit is seen at most one round later.
+        observer.poll(Duration::from_millis(20))?;
+        if let Some(t) = observer.sim_time_s() {
+            if startup.is_none() && t > 0.0 {
+                startup = Some(started.elapsed());
+            }
+            if let Some(p) = o.progress.as_mut() {
+                p(t);
+            }
+        }
+    }
+    let world_summary: WorldSummary = sup.summary(world)?;
+    // The other roles stop by themselves when the world announces the end.
+    let end_timeout = Duration::from_secs(15);
+    let end_deadline = Instant::now() + end_timeout;
+    let mut reports = Vec::new();
+    for id in std::iter::once(field)
+        .chain(roles.iter().copied())
+        .chain(mappers.iter().copied())
+    {
+        if !sup.wait_exit(id, end_deadline.saturating_duration_since(Instant::now())) {
+            return Err(ProcessRunError::NotStopped {
+                who: sup.spec(id).who(),
+                timeout_s: end_timeout.as_secs_f64(),
+            });
+        }
+        sup.check()?;
+    }
+    let field_summary: FieldRunSummary = sup.summary(field)?;
+    reports.push(report("field", &field_summary));
+    for &id in &roles {
+        if remote_ids.contains(&id) {
+            let s: AntennaRobotSummary = sup.summary(id)?;
+            reports.push(report(&sup.spec(id).who(), &s));
+        } else {
+            let s: RoleSummary = sup.summary(id)?;
+            reports.push(report(&sup.spec(id).who(), &s));
+        }
+    }
+    for &id in &mappers {
+        let s: MapperSummary = sup.summary(id)?;
+        reports.push(report(&sup.spec(id).who(), &s));
+    }
+    if let Some((id, _)) = gateway {
+        // Every robot has gone: stop the gateway as Ctrl-C would, and take its counters.
+        sup.signal(id, nix::sys::signal::Signal::SIGTERM);
+        if !sup.wait_exit(id, end_timeout) {
+            return Err(ProcessRunError::NotStopped {
+                who: sup.spec(id).who(),
+                timeout_s: end_timeout.as_secs_f64(),
+            });
+        }
+        let counters: serde_json::Value = sup.summary(id)?;
+        reports.push(report("gateway", &counters));
+    }
+    reports.push(report("world", &world_summary));
+    let rec = observer.finish();
+    let summary = run_summary(scenario, &world_summary, &field_summary, &rec);
+    Ok((
+        summary,
+        rec,
+        ProcessRunInfo {
+            startup_s: startup.unwrap_or_else(|| started.elapsed()).as_secs_f64(),
+            processes: participants, // the observer counted in, the world not: as many
+            reports,
+        },
+    ))
+}
+
+/// The address a gateway child prints on its first stdout line once it serves
+/// (`--print-address`), waited for until `deadline` (woken by the line, or by Ctrl-C and a
+/// failed child within 100 ms).
+fn gateway_address(
+    node: &iceoryx2::node::Node<field::shm::Svc>,
+    sup: &mut Supervisor,
+    id: ChildId,
+    deadline: Instant,
+    timeout_s: f64,
+) -> Result<String, ProcessRunError> {
+    loop {
+        sup.check()?;
+        if node.wait(Duration::ZERO).is_err() {
+            return Err(ProcessRunError::Interrupted);
+        }
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(ProcessRunError::NoGateway {
+                timeout_s,
+                stderr_tail: sup.stderr_tail(id),
+            });
+        }
+        if let Some(line) = sup.next_line(id, left.min(Duration::from_millis(100)))? {
+            let line = line.trim().to_string();
+            return match line.strip_prefix("udp://") {
+                Some(a) if !a.is_empty() => Ok(line),
+                _ => Err(ProcessRunError::GatewayAddress { line }),
+            };
+        }
+    }
+}
+
+fn report(role: &str, s: &impl Serialize) -> ProcessReport {
+    ProcessReport {
+        role: role.to_string(),
+        summary: serde_json::to_value(s).unwrap_or(serde_json::Value::Null),
+    }
+}
+
+/// The run's summary from the children's typed summaries and the observer's recording, built
+/// the way the single-process runner builds it.
+fn run_summary(
+    scenario: &Scenario,
+    world: &WorldSummary,
+    field: &FieldRunSummary,
+    rec: &Recording,
+) -> RunSummary {
+    let mut fs = match rec.snapshots.last() {
+        Some(snap) => {
+            let view = field::FrameView::new(
+                scenario.field.geometry(),
+                scenario.field.channels.len(),
+                &snap.planes,
+            );
+            FieldSummary::of(&scenario.field, &view, field.deposits_applied, &[])
+        }
+        None => FieldSummary::default(),
+    };
+    // The field's own counters are authoritative.
+    fs.deposits_applied = field.deposits_applied;
+    fs.deposits_rejected = field.deposits_rejected.clone();
+    let robots = world
+        .robots
+        .iter()
+        .map(|r| RobotResult {
+            id: r.id,
+            role: role_name(scenario, r.id),
+            true_pose: r.true_pose,
+            estimated_pose: rec
+                .robots
+                .get(&r.id)
+                .and_then(|rows| rows.iter().rev().find_map(|row| row.est_pose)),
+            distance_travelled_m: rec.distance_travelled_m(r.id),
+            trail_abandoned_at_s: rec.trail_abandoned_at_s(r.id),
+            collisions: r.collisions,
+        })
+        .collect();
+    RunSummary {
+        steps: world.steps,
+        sim_time_s: world.sim_time_s,
+        ticks: field.ticks,
+        field: fs,
+        robots,
+        scripted_deposits: world.deposits_sent,
+    }
+}
+
+/// A node-graph run (seed 001) as processes: the graph writer and one `graph-robot` per robot,
+/// under one supervisor. `scenario` is what `pheromone graph --scenario` takes.
+pub fn run_graph_as_processes(
+    exe: &Path,
+    scenario: &str,
+    strategy: graph::agent::GraphStrategy,
+    robots: usize,
+    seed: u64,
+    timeout: Duration,
+) -> Result<graph::run::RunReport, ProcessRunError> {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static RUN: AtomicU32 = AtomicU32::new(0);
+    let tag = format!(
+        "sim{}g{}",
+        std::process::id(),
+        RUN.fetch_add(1, Ordering::Relaxed)
+    );
+    let mut sup = Supervisor::new(exe);
+    let result = (|| {
+        let node = create_node(&format!("{tag}-sim"))?;
+        let common = |role: &str| -> Vec<String> {
+            [
+                role,
+                "--scenario",
+                scenario,
+                "--name",
+                &tag,
+                "--robots",
+                &robots.to_string(),
+                "--strategy",
+                strategy.name(),
+                "--seed",
+                &seed.to_string(),
+                "--json",
+            ]
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
+        };
+        let writer = sup.spawn(ChildSpec::new("graph", None, common("graph")))?;
+        let mut ids = Vec::new();
+        for id in 1..=robots {
+            let mut args = common("graph-robot");
+            args.extend(["--robot".to_string(), id.to_string()]);
+            ids.push(sup.spawn(ChildSpec::new("graph-robot", Some(id as u32), args))?);
+        }
+        let deadline = Instant::now() + timeout;
+        while sup.exit_status(writer).is_none() {
+            sup.check()?;
+            if Instant::now() > deadline {
+                return Err(ProcessRunError::Timeout {
+                    timeout_s: timeout.as_secs_f64(),
+                });
+            }
+            if node.wait(Duration::ZERO).is_err() {
+                return Err(ProcessRunError::Interrupted);
+            }
+            // Woken by the first child that exits; the bound lets Ctrl-C through.
+            sup.poll(Duration::from_millis(100));
+        }
+        let mut report: graph::run::RunReport = sup.summary(writer)?;
+        let end_timeout = Duration::from_secs(15);
+        let end = Instant::now() + end_timeout;
+        for &id in &ids {
+            if !sup.wait_exit(id, end.saturating_duration_since(Instant::now())) {
+                return Err(ProcessRunError::NotStopped {
+                    who: sup.spec(id).who(),
+                    timeout_s: end_timeout.as_secs_f64(),
+                });
+            }
+            report.robot_reports.push(sup.summary(id)?);
+        }
+        Ok(report)
+    })();
+    if result.is_err() {
+        sup.stop_all(Duration::from_secs(5));
+    }
+    cleanup_after(&tag);
+    result
+}

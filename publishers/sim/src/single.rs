@@ -1,0 +1,368 @@
+//! A whole scenario in one process, in lockstep, bit-for-bit deterministic for a seed
+//! (`pheromone sim --single-process`). It runs the same role types as the separate processes —
+//! [`World`], the localizer [`Filter`], [`Depositor`], [`Follower`] and the field's
+//! [`OwnedField`] — in the order the lockstep processes follow within one step:
+//!
+//! 1. the world applies the commands of step k−1 and produces sensors and truth of step k;
+//! 2. scripted deposits due by then are offered to the field;
+//! 3. each localizer turns its sensors into a pose, each depositor the pose into a deposit;
+//! 4. the field ticks once (evaporation, then every deposit offered);
+//! 5. each follower reads the new frame and decides its command.
+//!
+//! The run also records what [`report`] draws and what the metrics need.
+
+use std::collections::BTreeMap;
+
+use field::{FieldConfig, FrameView, OwnedField, RejectReason};
+use serde::Serialize;
+
+use crate::record::{deposit_peak, ProbeReading, Recording, RobotSample, Snapshot};
+use messages::PoseMsg;
+use roles::depositor::Depositor;
+use roles::follower::{Follower, PoseSource};
+use roles::mapper::team::MappingTeam;
+use roles::scenario::{ProbeSpec, Scenario};
+use roles::world::World;
+use roles::{Filter, ProcessError};
+
+/// What a run ends with, whichever way it ran.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunSummary {
+    pub steps: u64,
+    pub sim_time_s: f64,
+    pub ticks: u64,
+    pub field: FieldSummary,
+    pub robots: Vec<RobotResult>,
+    /// Scripted deposits sent by the world.
+    pub scripted_deposits: u64,
+}
+
+/// The field at the end of a run.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct FieldSummary {
+    pub width: u32,
+    pub height: u32,
+    pub cell_size_m: f32,
+    pub channels: Vec<String>,
+    /// Sum of the cells of each channel.
+    pub total_mass: Vec<f64>,
+    /// Largest cell of each channel.
+    pub max: Vec<f32>,
+    pub nan_cells: u64,
+    pub deposits_applied: u64,
+    /// Rejected deposits by reason.
+    pub deposits_rejected: BTreeMap<String, u64>,
+}
+
+impl FieldSummary {
+    /// Summarizes a frame and the field's counters.
+    pub fn of(config: &FieldConfig, view: &FrameView<'_>, applied: u64, rejected: &[u64]) -> Self {
+        let g = config.geometry();
+        Self {
+            width: g.width,
+            height: g.height,
+            cell_size_m: g.cell_size_m,
+            channels: config.channels.iter().map(|c| c.name.clone()).collect(),
+            total_mass: (0..view.channels).map(|c| view.total(c)).collect(),
+            max: (0..view.channels).map(|c| view.max(c)).collect(),
+            nan_cells: view.non_finite_cells() as u64,
+            deposits_applied: applied,
+            deposits_rejected: rejected_by_reason(rejected),
+        }
+    }
+}
+
+/// Named rejection counters (`FrameHeader::deposits_rejected` order).
+pub fn rejected_by_reason(counts: &[u64]) -> BTreeMap<String, u64> {
+    RejectReason::ALL
+        .iter()
+        .zip(counts)
+        .map(|(r, n)| (r.name().to_string(), *n))
+        .collect()
+}
+
+/// One robot at the end of a run.
+#[derive(Debug, Clone, Serialize)]
+pub struct RobotResult {
+    pub id: u32,
+    pub role: String,
+    pub true_pose: [f64; 3],
+    pub estimated_pose: Option<[f64; 3]>,
+    pub distance_travelled_m: f64,
+    pub trail_abandoned_at_s: Option<f64>,
+    pub collisions: u64,
+}
+
+/// The role a robot plays, as reported: `leader`, `follower`, `depositor`, `explorer`…
+pub fn role_name(scenario: &Scenario, id: u32) -> String {
+    use roles::follower::StrategyKind as K;
+    let Some(r) = scenario.roles(id) else {
+        return "idle".into();
+    };
+    let mut parts = Vec::new();
+    match r.follower.as_ref().map(|f| f.strategy) {
+        Some(K::Route) => parts.push("leader"),
+        Some(K::Inverse | K::Uniform) => parts.push("explorer"),
+        Some(K::Gradient | K::Antenna) => parts.push("follower"),
+        None => {}
+    }
+    if r.depositor.is_some() {
+        parts.push("depositor");
+    }
+    if parts.is_empty() {
+        "localizer".into()
+    } else {
+        parts.join("+")
+    }
+}
+
+/// Options of a single-process run.
+#[derive(Default)]
+pub struct SingleProcessOptions<'a> {
+    /// EKF-SLAM localizers instead of the landmark EKF.
+    pub slam: bool,
+    /// Called after every step with (step, steps).
+    pub progress: Option<&'a mut dyn FnMut(u64, u64)>,
+}
+
+struct Robot {
+    id: u32,
+    filter: Filter,
+    depositor: Option<Depositor>,
+    follower: Option<(Follower, PoseSource)>,
+    pose: Option<PoseMsg>,
+    /// The peak of this step's deposit, if the depositor sent one.
+    deposit_peak: Option<f32>,
+    collisions: u64,
+}
+
+/// Runs the scenario in this process and returns its summary and recording.
+pub fn run_single_process(
+    scenario: &Scenario,
+    mut options: SingleProcessOptions<'_>,
+) -> Result<(RunSummary, Recording), ProcessError> {
+    let mut world =
+        World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::World)?;
+    if let Some(m) = scenario.mapping() {
+        world.enable_mapping(m, scenario.seed);
+    }
+    let mut mapping = MappingTeam::new(scenario).map_err(ProcessError::Mapping)?;
+    let mut field = OwnedField::new(scenario.field.clone()).map_err(ProcessError::Field)?;
+    let mut scripted = std::collections::VecDeque::from(scenario.scripted(world.wall_segments())?);
+    let scripted_total = scripted.len() as u64;
+    let mut robots = Vec::new();
+    for r in &scenario.world.robots {
+        let roles = scenario.roles(r.id);
+        let depositor = match roles.and_then(|x| x.depositor.clone()) {
+            Some(c) => Some(Depositor::new(c).map_err(|source| ProcessError::Depositor {
+                robot: Some(r.id),
+                source,
+            })?),
+            None => None,
+        };
+        let follower = match scenario.follower_config(r.id) {
+            Some(c) => Some((
+                Follower::from_config(r.id, &c).map_err(|source| ProcessError::Follower {
+                    robot: r.id,
+                    source,
+                })?,
+                c.steer_by,
+            )),
+            None => None,
+        };
+        robots.push(Robot {
+            id: r.id,
+            filter: Filter::for_robot(scenario, r.id, options.slam)?,
+            depositor,
+            follower,
+            pose: None,
+            deposit_peak: None,
+            collisions: 0,
+        });
+    }
+    let mut rec = Recording {
+        walls: world
+            .wall_segments()
+            .iter()
+            .map(|s| (s.a_m, s.b_m))
+            .collect(),
+        ..Recording::default()
+    };
+    let dt = scenario.world.dt_s;
+    let steps = scenario.steps();
+    let mut frames = FrameSchedule::new(scenario);
+    let mut commands = vec![(0.0, 0.0); robots.len()];
+    for k in 0..steps {
+        let outputs = world.step(&commands);
+        let sensed = world.mapping_outputs();
+        let t = world.sim_time_s();
+        while scripted.front().is_some_and(|(ts, _)| *ts <= t + 1e-9) {
+            let (_, m) = scripted.pop_front().expect("checked");
+            let _ = field.offer(&m); // a rejection is counted by the field
+        }
+        for (r, out) in robots.iter_mut().zip(&outputs) {
+            r.collisions += out.truth.collided as u64;
+            // A rejected sensor message: the localizer keeps its previous estimate, as the
+            // process does (which also logs it).
+            let _ = r.filter.step(&out.sensor);
+            let mut p = r.filter.to_msg(r.id, k);
+            // Simulated time as the stamp: deterministic, and what interval_s measures.
+            p.stamp_ns = (t * 1e9).round() as u64;
+            r.pose = Some(p);
+            r.deposit_peak = None;
+            if let Some(d) = r.depositor.as_mut() {
+                if let Ok(Some(m)) = d.process(&p) {
+                    r.deposit_peak = Some(deposit_peak(&m));
+                    // A rejection is counted by the field.
+                    let _ = field.offer(&m);
+                }
+            }
+        }
+        if let Some(team) = mapping.as_mut() {
+            let poses: Vec<PoseMsg> = robots.iter().map(|r| r.pose.expect("set above")).collect();
+            team.step(world.step_count(), &poses, &sensed);
+        }
+        field.tick();
+        let ft = field.stepper.sim_time_s;
+        let view = field.view();
+        frames.on_frame(&mut rec, ft, &view);
+        for ((r, out), cmd) in robots.iter_mut().zip(&outputs).zip(commands.iter_mut()) {
+            let pose = r.pose.expect("set above");
+            let mut state = None;
+            let mut level = None;
+            if let Some((f, source)) = r.follower.as_mut() {
+                let steer = match source {
+                    PoseSource::Estimate => pose,
+                    PoseSource::Truth => messages::truth_as_pose(&out.truth),
+                };
+                match f.step_pose(&view, &steer, dt) {
+                    Ok(o) => {
+                        *cmd = (o.cmd.v_m_per_s, o.cmd.omega_rad_per_s);
+                        state = Some(o.decision.state);
+                        level = Some(o.decision.sensed_level);
+                    }
+                    Err(_) => *cmd = (0.0, 0.0),
+                }
+            }
+            rec.robots.entry(r.id).or_default().push(RobotSample {
+                t_s: t,
+                true_pose: [out.truth.x_m, out.truth.y_m, out.truth.theta_rad],
+                est_pose: Some([pose.x_m, pose.y_m, pose.theta_rad]),
+                est_sigma_m: Some(sigma_max_m(&pose)),
+                v_m_per_s: cmd.0,
+                omega_rad_per_s: cmd.1,
+                state,
+                sensed_level: level,
+                deposit_peak: r.deposit_peak,
+            });
+        }
+        if let Some(p) = options.progress.as_mut() {
+            p(k + 1, steps);
+        }
+    }
+    frames.finish(&mut rec, field.stepper.sim_time_s, field.cells());
+    rec.mapping = mapping.map(MappingTeam::finish);
+    let counters = &field.stepper.counters;
+    let summary = RunSummary {
+        steps: world.step_count(),
+        sim_time_s: world.sim_time_s(),
+        ticks: field.stepper.sequence,
+        field: FieldSummary::of(
+            &scenario.field,
+            &field.view(),
+            counters.applied,
+            &counters.rejected,
+        ),
+        robots: robots
+            .iter()
+            .zip(world.poses())
+            .map(|(r, p)| RobotResult {
+                id: r.id,
+                role: role_name(scenario, r.id),
+                true_pose: [p.x_m, p.y_m, p.theta_rad],
+                estimated_pose: r.pose.map(|e| [e.x_m, e.y_m, e.theta_rad]),
+                distance_travelled_m: rec.distance_travelled_m(r.id),
+                trail_abandoned_at_s: rec.trail_abandoned_at_s(r.id),
+                collisions: r.collisions,
+            })
+            .collect(),
+        scripted_deposits: scripted_total,
+    };
+    Ok((summary, rec))
+}
+
+/// What a run records of its frames, the same in both modes: the probes' readings and the
+/// snapshots at the scenario's times, and the last frame.
+pub struct FrameSchedule {
+    field: FieldConfig,
+    probes: std::collections::VecDeque<(f64, ProbeSpec)>,
+    snapshot_times_s: std::collections::VecDeque<f64>,
+    half_dt_s: f64,
+}
+
+impl FrameSchedule {
+    pub fn new(scenario: &Scenario) -> Self {
+        let mut times = scenario.snapshots_s.clone();
+        times.sort_by(f64::total_cmp);
+        Self {
+            field: scenario.field.clone(),
+            probes: scenario
+                .probe_schedule()
+                .into_iter()
+                .map(|(t, i)| (t, scenario.probes[i].clone()))
+                .collect(),
+            snapshot_times_s: times.into(),
+            half_dt_s: 0.5 * scenario.world.dt_s,
+        }
+    }
+
+    /// Records what is due at the frame of field time `t_s`.
+    pub fn on_frame(&mut self, rec: &mut Recording, t_s: f64, view: &FrameView<'_>) {
+        while self.probes.front().is_some_and(|(pt, _)| *pt <= t_s + 1e-9) {
+            let (_, p) = self.probes.pop_front().expect("checked");
+            rec.probes.push(ProbeReading {
+                t_s,
+                x_m: p.x_m,
+                y_m: p.y_m,
+                channel: p.channel,
+                value: view.value(p.channel as usize, p.x_m, p.y_m),
+            });
+        }
+        while self
+            .snapshot_times_s
+            .front()
+            .is_some_and(|s| *s <= t_s + self.half_dt_s)
+        {
+            self.snapshot_times_s.pop_front();
+            rec.snapshots.push(snapshot(&self.field, t_s, view.cells));
+        }
+    }
+
+    /// Pictures the last frame (field time `t_s`) unless it already was.
+    pub fn finish(&self, rec: &mut Recording, t_s: f64, cells: &[f32]) {
+        if rec.snapshots.last().is_none_or(|s| s.t_s < t_s) {
+            rec.snapshots.push(snapshot(&self.field, t_s, cells));
+        }
+    }
+}
+
+/// A copy of the frame for the pictures.
+pub fn snapshot(config: &FieldConfig, t_s: f64, cells: &[f32]) -> Snapshot {
+    let g = config.geometry();
+    Snapshot {
+        t_s,
+        width: g.width,
+        height: g.height,
+        cell_size_m: g.cell_size_m,
+        channels: config.channels.iter().map(|c| c.name.clone()).collect(),
+        planes: cells.to_vec(),
+    }
+}
+
+/// √λmax of the position covariance (m): the long half-axis of the 1σ error ellipse.
+pub fn sigma_max_m(p: &PoseMsg) -> f64 {
+    let [a, b, c] = p.cov_xy();
+    let half = 0.5 * (a + c);
+    let d = (0.25 * (a - c).powi(2) + b * b).sqrt();
+    (half + d).max(0.0).sqrt()
+}

@@ -1,0 +1,625 @@
+//! Seed 004's grid of experiments (`pheromone sweep`): robots × R_C × merge {on, off} ×
+//! strategy × trials, each run the single-process runner ([`run_single_process`]) on the
+//! scenario with its overrides and the seeds 1..=T, in parallel on a work queue
+//! (`std::thread::scope`, one worker per job). Per run: `exploration_known` (team, mean per
+//! robot) and `exploration` (visited); per point (every value but the seed): mean ± sd of each
+//! ([`sweep_stats`](super::sweep_stats)); comparisons at equal points: merge on vs off and
+//! inverse vs uniform, Welch's t and the paired t (the seeds match).
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::exploration::exploration_known;
+use super::metrics::exploration;
+use super::single::{run_single_process, SingleProcessOptions};
+use super::sweep_stats::{paired, welch, MeanSd, TTest};
+use roles::follower::StrategyKind;
+use roles::role_loop::ProcessError;
+use roles::scenario::{Overrides, Scenario, ScenarioError};
+
+/// A sweep cannot be planned or one of its runs failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SweepError {
+    /// A list option is malformed or holds a value out of range.
+    #[error("{option} {value:?}: {reason}")]
+    List {
+        option: &'static str,
+        value: String,
+        reason: String,
+    },
+    /// The scenario has no exploration sectors to count.
+    #[error("scenario '{0}' has no [metrics.exploration] (try ias-ss)")]
+    NoExploration(String),
+    /// The overrides of a point are refused by the scenario.
+    #[error("{point}: {source}")]
+    Scenario {
+        point: String,
+        #[source]
+        source: Box<ScenarioError>,
+    },
+    /// A run failed.
+    #[error("{point}, seed {seed}: {source}")]
+    Run {
+        point: String,
+        seed: u64,
+        #[source]
+        source: Box<ProcessError>,
+    },
+}
+
+fn list_error(option: &'static str, value: &str, reason: impl Into<String>) -> SweepError {
+    SweepError::List {
+        option,
+        value: value.to_string(),
+        reason: reason.into(),
+    }
+}
+
+/// The comma-separated items of `text`, each trimmed; an empty item is an error naming it.
+fn items<'a>(option: &'static str, text: &'a str) -> Result<Vec<&'a str>, SweepError> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if parts.iter().any(|p| p.is_empty()) {
+        return Err(list_error(
+            option,
+            text,
+            "expected a comma-separated list with no empty item",
+        ));
+    }
+    Ok(parts)
+}
+
+/// `--robots 1,2,4`: robot counts ≥ 1, each at most once.
+pub fn parse_robots(text: &str) -> Result<Vec<usize>, SweepError> {
+    let mut out = Vec::new();
+    for p in items("--robots", text)? {
+        match p.parse::<usize>() {
+            Ok(n) if n >= 1 => {
+                if out.contains(&n) {
+                    return Err(list_error("--robots", p, "given twice"));
+                }
+                out.push(n)
+            }
+            _ => return Err(list_error("--robots", p, "not a robot count ≥ 1")),
+        }
+    }
+    Ok(out)
+}
+
+/// `--rc-m 4,8,16`: finite distances > 0 (m), each at most once.
+pub fn parse_rc_m(text: &str) -> Result<Vec<f64>, SweepError> {
+    let mut out = Vec::new();
+    for p in items("--rc-m", text)? {
+        match p.parse::<f64>() {
+            Ok(r) if r.is_finite() && r > 0.0 => {
+                if out.contains(&r) {
+                    return Err(list_error("--rc-m", p, "given twice"));
+                }
+                out.push(r)
+            }
+            _ => {
+                return Err(list_error(
+                    "--rc-m",
+                    p,
+                    "not a communication radius > 0 (m)",
+                ))
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// `--strategies inverse,uniform`: exploring strategies (inverse, uniform), each at most once.
+pub fn parse_strategies(text: &str) -> Result<Vec<StrategyKind>, SweepError> {
+    let mut out = Vec::new();
+    for p in items("--strategies", text)? {
+        match p.parse::<StrategyKind>() {
+            Ok(k @ (StrategyKind::Inverse | StrategyKind::Uniform)) => {
+                if out.contains(&k) {
+                    return Err(list_error("--strategies", p, "given twice"));
+                }
+                out.push(k)
+            }
+            _ => {
+                return Err(list_error(
+                    "--strategies",
+                    p,
+                    "not an exploring strategy (inverse, uniform)",
+                ))
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// What a sweep runs: every combination of the lists, `trials` seeds each (1..=trials).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweepGrid {
+    pub robots: Vec<usize>,
+    /// Empty: the scenario's R_C only.
+    pub rc_m: Vec<f64>,
+    pub merge: Vec<bool>,
+    pub strategies: Vec<StrategyKind>,
+    pub trials: u32,
+    pub duration_s: f64,
+}
+
+/// One point of the grid: every setting but the seed.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PointKey {
+    pub robots: usize,
+    pub rc_m: f64,
+    pub merge: bool,
+    #[serde(serialize_with = "strategy_name")]
+    pub strategy: StrategyKind,
+}
+
+fn strategy_name<S: serde::Serializer>(k: &StrategyKind, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(k.name())
+}
+
+impl std::fmt::Display for PointKey {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} robot(s), R_C = {} m, {}, {}",
+            self.robots,
+            self.rc_m,
+            if self.merge { "merge" } else { "no merge" },
+            self.strategy.name()
+        )
+    }
+}
+
+/// One run's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunResult {
+    #[serde(flatten)]
+    pub point: PointKey,
+    pub seed: u64,
+    /// `exploration_known`: mean over the robots, and known by at least one.
+    pub known_mean: f64,
+    pub known_team: f64,
+    /// `exploration` (visited): mean over the robots, and visited by at least one.
+    pub visited_mean: f64,
+    pub visited_team: f64,
+    pub merges: usize,
+    /// Mean merge alignment error (m), `None` without merges.
+    pub alignment_error_m: Option<f64>,
+    pub wall_s: f64,
+}
+
+/// A point's trials summarised.
+#[derive(Debug, Clone, Serialize)]
+pub struct Point {
+    #[serde(flatten)]
+    pub key: PointKey,
+    pub seeds: Vec<u64>,
+    pub known_mean: MeanSd,
+    pub known_team: MeanSd,
+    pub visited_mean: MeanSd,
+    pub visited_team: MeanSd,
+    pub merges: MeanSd,
+}
+
+/// Two points that differ in one setting, on `exploration_known` mean per robot.
+#[derive(Debug, Clone, Serialize)]
+pub struct Comparison {
+    /// `merge` (a: on, b: off) or `strategy` (a: inverse, b: uniform).
+    pub kind: &'static str,
+    pub a: PointKey,
+    pub b: PointKey,
+    pub mean_a: f64,
+    pub mean_b: f64,
+    /// Welch's t of a against b (unequal variances), `None` where undefined.
+    pub welch: Option<TTest>,
+    /// Paired t over the seeds (both points ran the same seeds), `None` where undefined.
+    pub paired: Option<TTest>,
+}
+
+/// Everything a sweep measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct SweepResult {
+    pub scenario: String,
+    pub duration_s: f64,
+    pub trials: u32,
+    pub sectors: u32,
+    pub jobs: usize,
+    pub wall_s: f64,
+    pub points: Vec<Point>,
+    pub comparisons: Vec<Comparison>,
+    /// One per run, in grid order (robots, R_C, merge, strategy, seed).
+    #[serde(skip)]
+    pub runs: Vec<RunResult>,
+}
+
+/// The runs of a sweep: each point's scenario with its overrides, `trials` seeds each, in grid
+/// order. Without merging, R_C only decides which rendezvous the world measures, and nobody
+/// uses them: those points run once, at the first R_C of the list. Every point is checked
+/// against the scenario before anything runs.
+pub fn plan(
+    base: &Scenario,
+    grid: &SweepGrid,
+) -> Result<Vec<(PointKey, u64, Scenario)>, SweepError> {
+    if base.metrics.exploration.is_none() {
+        return Err(SweepError::NoExploration(base.name.clone()));
+    }
+    if grid.trials == 0 {
+        return Err(list_error("--trials", "0", "needs at least 1 trial"));
+    }
+    let max = base.world.robots.len();
+    if let Some(&n) = grid.robots.iter().find(|&&n| n > max) {
+        return Err(list_error(
+            "--robots",
+            &n.to_string(),
+            format!("scenario '{}' places at most {max} robots", base.name),
+        ));
+    }
+    let rc_m = if grid.rc_m.is_empty() {
+        vec![base.mapping.rc_m]
+    } else {
+        grid.rc_m.clone()
+    };
+    let mut out = Vec::new();
+    for &robots in &grid.robots {
+        for (ir, &rc) in rc_m.iter().enumerate() {
+            for &merge in &grid.merge {
+                // Without merging R_C changes nothing a robot knows: once, at the first R_C.
+                if !merge && ir > 0 {
+                    continue;
+                }
+                for &strategy in &grid.strategies {
+                    let key = PointKey {
+                        robots,
+                        rc_m: rc,
+                        merge,
+                        strategy,
+                    };
+                    for seed in 1..=grid.trials as u64 {
+                        let mut s = base.clone();
+                        s.apply(&Overrides {
+                            seed: Some(seed),
+                            robots: Some(robots),
+                            duration_s: Some(grid.duration_s),
+                            strategy: Some(strategy),
+                            merge: Some(merge),
+                            rc_m: Some(rc),
+                            ..Overrides::default()
+                        })
+                        .map_err(|source| SweepError::Scenario {
+                            point: key.to_string(),
+                            source: Box::new(source),
+                        })?;
+                        out.push((key, seed, s));
+                    }
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// One run and its figures.
+fn run_one(key: PointKey, seed: u64, s: &Scenario) -> Result<RunResult, SweepError> {
+    let started = Instant::now();
+    let (_, rec) = run_single_process(s, SingleProcessOptions::default()).map_err(|source| {
+        SweepError::Run {
+            point: key.to_string(),
+            seed,
+            source: Box::new(source),
+        }
+    })?;
+    let m = s
+        .metrics
+        .exploration
+        .as_ref()
+        .ok_or_else(|| SweepError::NoExploration(s.name.clone()))?;
+    let visited = exploration(m, &rec);
+    let mapping = rec.mapping.as_ref();
+    let known = mapping.and_then(|r| exploration_known(s, m, r));
+    let errors: Vec<f64> = mapping
+        .map(|r| r.merges.iter().map(|e| e.alignment_error_m).collect())
+        .unwrap_or_default();
+    Ok(RunResult {
+        point: key,
+        seed,
+        known_mean: known.as_ref().map_or(visited.mean, |k| k.mean),
+        known_team: known.as_ref().map_or(visited.team, |k| k.team),
+        visited_mean: visited.mean,
+        visited_team: visited.team,
+        merges: errors.len(),
+        alignment_error_m: (!errors.is_empty())
+            .then(|| errors.iter().sum::<f64>() / errors.len() as f64),
+        wall_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Runs the sweep on `jobs` threads (at least 1). `progress(done, total)` is called after every
+/// run, from the worker that finished it. The first failure stops the sweep (runs under way
+/// finish) and is returned.
+pub fn run_sweep(
+    base: &Scenario,
+    grid: &SweepGrid,
+    jobs: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<SweepResult, SweepError> {
+    let started = Instant::now();
+    let runs = plan(base, grid)?;
+    let total = runs.len();
+    // The largest runs first, so that the last ones to finish are short.
+    let mut order: Vec<usize> = (0..total).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(runs[i].0.robots));
+    let next = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
+    let failed = AtomicBool::new(false);
+    let results: Mutex<Vec<Option<RunResult>>> = Mutex::new(vec![None; total]);
+    let first_error: Mutex<Option<SweepError>> = Mutex::new(None);
+    let jobs = jobs.clamp(1, total.max(1));
+    std::thread::scope(|scope| {
+        for _ in 0..jobs {
+            scope.spawn(|| loop {
+                if failed.load(Ordering::Relaxed) {
+                    return;
+                }
+                let k = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&i) = order.get(k) else {
+                    return;
+                };
+                let (key, seed, s) = &runs[i];
+                match run_one(*key, *seed, s) {
+                    Ok(r) => {
+                        results.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(r);
+                        progress(done.fetch_add(1, Ordering::Relaxed) + 1, total);
+                    }
+                    Err(e) => {
+                        failed.store(true, Ordering::Relaxed);
+                        first_error
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .get_or_insert(e);
+                        return;
+                    }
+                }
+            });
+        }
+    });
+    if let Some(e) = first_error.into_inner().unwrap_or_else(|e| e.into_inner()) {
+        return Err(e);
+    }
+    let runs: Vec<RunResult> = results
+        .into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .into_iter()
+        .flatten()
+        .collect();
+    let sectors = base
+        .metrics
+        .exploration
+        .as_ref()
+        .map_or(0, |m| m.cols * m.rows);
+    let points = points(&runs);
+    Ok(SweepResult {
+        scenario: base.name.clone(),
+        duration_s: grid.duration_s,
+        trials: grid.trials,
+        sectors,
+        jobs,
+        wall_s: started.elapsed().as_secs_f64(),
+        comparisons: comparisons(&runs, &points),
+        points,
+        runs,
+    })
+}
+
+/// The runs of each point, in grid order.
+fn by_point(runs: &[RunResult]) -> Vec<(PointKey, Vec<&RunResult>)> {
+    let mut out: Vec<(PointKey, Vec<&RunResult>)> = Vec::new();
+    for r in runs {
+        match out.iter_mut().find(|(k, _)| *k == r.point) {
+            Some((_, v)) => v.push(r),
+            None => out.push((r.point, vec![r])),
+        }
+    }
+    out
+}
+
+/// Each point's mean ± sd, in grid order.
+pub fn points(runs: &[RunResult]) -> Vec<Point> {
+    by_point(runs)
+        .into_iter()
+        .filter_map(|(key, rs)| {
+            let of = |f: &dyn Fn(&RunResult) -> f64| {
+                MeanSd::of(&rs.iter().map(|r| f(r)).collect::<Vec<_>>())
+            };
+            Some(Point {
+                key,
+                seeds: rs.iter().map(|r| r.seed).collect(),
+                known_mean: of(&|r| r.known_mean)?,
+                known_team: of(&|r| r.known_team)?,
+                visited_mean: of(&|r| r.visited_mean)?,
+                visited_team: of(&|r| r.visited_team)?,
+                merges: of(&|r| r.merges as f64)?,
+            })
+        })
+        .collect()
+}
+
+/// Merge on against off (at every R_C, against the one no-merge point), and inverse against
+/// uniform, wherever both points ran.
+pub fn comparisons(runs: &[RunResult], points: &[Point]) -> Vec<Comparison> {
+    let values: BTreeMap<usize, Vec<(u64, f64)>> = by_point(runs)
+        .into_iter()
+        .enumerate()
+        .map(|(i, (_, rs))| (i, rs.iter().map(|r| (r.seed, r.known_mean)).collect()))
+        .collect();
+    let keys: Vec<PointKey> = by_point(runs).into_iter().map(|(k, _)| k).collect();
+    let find = |k: &PointKey| keys.iter().position(|x| x == k);
+    let mut out = Vec::new();
+    for (ia, a) in keys.iter().enumerate() {
+        // The no-merge point of the same robots and strategy (it ran at one R_C only).
+        let partner = a
+            .merge
+            .then(|| {
+                keys.iter()
+                    .find(|k| !k.merge && k.robots == a.robots && k.strategy == a.strategy)
+            })
+            .flatten()
+            .map(|k| ("merge", *k));
+        let rival = (a.strategy == StrategyKind::Inverse).then_some((
+            "strategy",
+            PointKey {
+                strategy: StrategyKind::Uniform,
+                ..*a
+            },
+        ));
+        for (kind, b) in partner.into_iter().chain(rival) {
+            let Some(ib) = find(&b) else { continue };
+            let (va, vb) = (&values[&ia], &values[&ib]);
+            let xa: Vec<f64> = va.iter().map(|v| v.1).collect();
+            let xb: Vec<f64> = vb.iter().map(|v| v.1).collect();
+            let same_seeds = va.iter().map(|v| v.0).eq(vb.iter().map(|v| v.0));
+            let mean = |k: &PointKey| {
+                points
+                    .iter()
+                    .find(|p| p.key == *k)
+                    .map_or(f64::NAN, |p| p.known_mean.mean)
+            };
+            out.push(Comparison {
+                kind,
+                a: *a,
+                b,
+                mean_a: mean(a),
+                mean_b: mean(&b),
+                welch: welch(&xa, &xb),
+                paired: if same_seeds { paired(&xa, &xb) } else { None },
+            });
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lists_parse_and_bad_items_are_refused_naming_the_option_and_value() {
+        assert_eq!(parse_robots("1, 2,4").unwrap(), vec![1, 2, 4]);
+        assert_eq!(parse_rc_m("4,8.5,40").unwrap(), vec![4.0, 8.5, 40.0]);
+        assert_eq!(
+            parse_strategies("inverse,uniform").unwrap(),
+            vec![StrategyKind::Inverse, StrategyKind::Uniform]
+        );
+        for (e, option, value) in [
+            (parse_robots("0").unwrap_err(), "--robots", "\"0\""),
+            (parse_robots("1,x").unwrap_err(), "--robots", "\"x\""),
+            (parse_robots("2,2").unwrap_err(), "--robots", "\"2\""),
+            (parse_robots("1,,2").unwrap_err(), "--robots", "\"1,,2\""),
+            (parse_rc_m("-1").unwrap_err(), "--rc-m", "\"-1\""),
+            (parse_rc_m("abc").unwrap_err(), "--rc-m", "\"abc\""),
+            (parse_rc_m("8,NaN").unwrap_err(), "--rc-m", "\"NaN\""),
+            (parse_rc_m("inf").unwrap_err(), "--rc-m", "\"inf\""),
+            (
+                parse_strategies("route").unwrap_err(),
+                "--strategies",
+                "\"route\"",
+            ),
+        ] {
+            let text = e.to_string();
+            assert!(text.contains(option) && text.contains(value), "{text}");
+        }
+    }
+
+    fn grid() -> SweepGrid {
+        SweepGrid {
+            robots: vec![1, 2],
+            rc_m: vec![],
+            merge: vec![true, false],
+            strategies: vec![StrategyKind::Inverse],
+            trials: 2,
+            duration_s: 15.0,
+        }
+    }
+
+    #[test]
+    fn the_plan_is_the_cross_product_and_refuses_too_many_robots() {
+        let base = Scenario::load("ias-ss").unwrap();
+        let runs = plan(&base, &grid()).unwrap();
+        assert_eq!(runs.len(), 2 * 2 * 2);
+        let (key, seed, s) = &runs[1];
+        assert_eq!((key.robots, key.merge, *seed), (1, true, 2));
+        assert_eq!((s.world.robots.len(), s.seed, s.duration_s), (1, 2, 15.0));
+        assert_eq!(key.rc_m, base.mapping.rc_m, "the scenario's R_C by default");
+        let e = plan(
+            &base,
+            &SweepGrid {
+                robots: vec![99],
+                ..grid()
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("--robots") && e.contains("99"), "{e}");
+        // Two radii: merge on at both, merge off once (at the first).
+        let runs = plan(
+            &base,
+            &SweepGrid {
+                robots: vec![2],
+                rc_m: vec![4.0, 24.0],
+                ..grid()
+            },
+        )
+        .unwrap();
+        let keys: Vec<(f64, bool)> = runs.iter().map(|r| (r.0.rc_m, r.0.merge)).collect();
+        assert_eq!(
+            keys,
+            [
+                (4.0, true),
+                (4.0, true),
+                (4.0, false),
+                (4.0, false),
+                (24.0, true),
+                (24.0, true)
+            ]
+        );
+    }
+
+    #[test]
+    fn a_sweep_on_two_threads_gives_every_run_once_and_its_comparisons() {
+        let base = Scenario::load("ias-ss").unwrap();
+        let calls = AtomicUsize::new(0);
+        let r = run_sweep(&base, &grid(), 2, &|_, total| {
+            assert_eq!(total, 8);
+            calls.fetch_add(1, Ordering::Relaxed);
+        })
+        .unwrap();
+        assert_eq!(calls.into_inner(), 8);
+        assert_eq!(r.runs.len(), 8);
+        assert_eq!(r.points.len(), 4);
+        // Grid order, whatever order the threads ran them in.
+        let order: Vec<(usize, bool, u64)> = r
+            .runs
+            .iter()
+            .map(|x| (x.point.robots, x.point.merge, x.seed))
+            .collect();
+        assert_eq!(order[..3], [(1, true, 1), (1, true, 2), (1, false, 1)]);
+        // One run equals the same run alone (the threads share nothing).
+        let (key, seed, s) = &plan(&base, &grid()).unwrap()[5];
+        let alone = run_one(*key, *seed, s).unwrap();
+        assert_eq!(r.runs[5].known_mean, alone.known_mean);
+        assert_eq!(r.runs[5].visited_mean, alone.visited_mean);
+        // Merge on vs off for each robot count; no uniform point, so no strategy comparison.
+        assert_eq!(r.comparisons.len(), 2);
+        assert!(r
+            .comparisons
+            .iter()
+            .all(|c| c.kind == "merge" && c.a.merge && !c.b.merge));
+        for x in &r.runs {
+            assert!((0.0..=1.0).contains(&x.known_mean) && x.known_mean.is_finite());
+            assert!(x.known_mean + 1e-12 >= 0.0);
+        }
+    }
+}

@@ -1,0 +1,321 @@
+//! The view's HTTP side: one loop that takes the field's newest frame, the robots' poses and
+//! the page's requests in turn (`tiny_http`, synchronous; see the module above for why).
+//!
+//! | path | answer |
+//! | --- | --- |
+//! | `/` (`/view.js`, `/view.css`) | the page: static HTML, JS and CSS embedded in the binary |
+//! | `/api/frame?channel=C&max_side=N` | [`super::FrameSnapshot`] as JSON |
+//! | `/api/stats` | [`super::Stats`] as JSON |
+//! | `/api/robots` | `{"world": W, "robots": [`[`super::RobotTrack`]`]}` (empty without `--world`) |
+//!
+//! A bad parameter is a 400 with a plain-text message naming it and its value, an unknown path
+//! a 404, another method than GET or HEAD a 405, and `/api/frame` before the first frame a 503.
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+
+use field::link::Receiver;
+use field::shm::{FieldReader, ShmError, Svc};
+use field::wire::{ready_service, RobotServices, ROBOT_LINK};
+use iceoryx2::node::Node;
+use iceoryx2::prelude::*;
+use tiny_http::{Header, Method, Request, Response, Server};
+
+use super::{parse_frame_query, snapshot, QueryError, RobotPaths, StatsTracker};
+use messages::PoseMsg;
+
+const PAGE_HTML: &str = include_str!("page/index.html");
+const PAGE_JS: &str = include_str!("page/view.js");
+const PAGE_CSS: &str = include_str!("page/view.css");
+
+/// How long the loop waits for a request before it looks at the field, the robots and Ctrl-C.
+/// Short enough to see nearly every frame of a 100 Hz field (for the tick statistics).
+const REQUEST_SLICE: Duration = Duration::from_millis(5);
+/// How often missing robots are looked for.
+const RESCAN: Duration = Duration::from_secs(1);
+/// How often a field not there yet is looked for.
+const REATTACH: Duration = Duration::from_millis(200);
+
+/// What `pheromone view` serves.
+#[derive(Debug, Clone)]
+pub struct ViewConfig {
+    pub field: String,
+    /// World whose robots' poses are shown (`pheromone/W/r<ID>/pose`), if any.
+    pub world: Option<String>,
+    /// Robots `r0..r<max_robots>` looked for.
+    pub max_robots: u32,
+    /// `max_side` of `/api/frame` when the request gives none.
+    pub default_max_side: usize,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ViewError {
+    #[error("cannot listen on {address}: {source}")]
+    Bind {
+        address: String,
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    #[error(transparent)]
+    Shm(#[from] ShmError),
+}
+
+/// Binds the HTTP server on `address` (e.g. `127.0.0.1:8080`; port 0 picks a free one) and
+/// returns it with the address it listens on.
+pub fn bind(address: &str) -> Result<(Server, SocketAddr), ViewError> {
+    let server = Server::http(address).map_err(|source| ViewError::Bind {
+        address: address.to_string(),
+        source,
+    })?;
+    let local = server
+        .server_addr()
+        .to_ip()
+        .ok_or_else(|| ViewError::Bind {
+            address: address.to_string(),
+            source: "not an IP address".into(),
+        })?;
+    Ok((server, local))
+}
+
+/// An HTTP answer before it is sent.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Reply {
+    pub status: u16,
+    pub content_type: &'static str,
+    pub body: Vec<u8>,
+}
+
+impl Reply {
+    fn text(status: u16, body: impl Into<String>) -> Self {
+        Self {
+            status,
+            content_type: "text/plain; charset=utf-8",
+            body: body.into().into_bytes(),
+        }
+    }
+
+    fn json(value: &impl serde::Serialize) -> Self {
+        match serde_json::to_vec(value) {
+            Ok(body) => Self {
+                status: 200,
+                content_type: "application/json",
+                body,
+            },
+            Err(e) => Self::text(500, format!("cannot encode the answer: {e}")),
+        }
+    }
+
+    fn bad(e: QueryError) -> Self {
+        Self::text(400, e.to_string())
+    }
+}
+
+/// The robots of one world: a pose receiver per robot whose pose service exists.
+struct Robots {
+    world: String,
+    receivers: BTreeMap<u32, Receiver<PoseMsg>>,
+    paths: RobotPaths,
+}
+
+impl Robots {
+    /// Attaches to the pose services of `r0..r<max>` that exist now (never creates one).
+    fn scan(&mut self, node: &Node<Svc>, max: u32) {
+        for id in 0..max {
+            if self.receivers.contains_key(&id) {
+                continue;
+            }
+            let names = RobotServices::new(&self.world, id);
+            let Ok(name) = ServiceName::new(&names.pose) else {
+                continue;
+            };
+            let exists =
+                ipc::Service::does_exist(&name, node.config(), MessagingPattern::PublishSubscribe)
+                    .unwrap_or(false);
+            if !exists {
+                continue;
+            }
+            match Receiver::create(node, &names.pose, &ready_service(&names.pose), ROBOT_LINK) {
+                Ok(r) => {
+                    self.receivers.insert(id, r);
+                }
+                Err(e) => eprintln!("view: robot r{id}: {e}"),
+            }
+        }
+    }
+
+    fn drain(&mut self) {
+        for (&id, r) in &self.receivers {
+            while let Ok(Some(pose)) = r.try_recv() {
+                self.paths.push(id, pose);
+            }
+        }
+    }
+}
+
+/// The view's state between requests.
+pub struct View {
+    config: ViewConfig,
+    reader: Option<FieldReader>,
+    robots: Option<Robots>,
+    stats: StatsTracker,
+    next_scan: Instant,
+    next_attach: Instant,
+}
+
+impl View {
+    pub fn new(config: ViewConfig) -> Self {
+        let robots = config.world.clone().map(|world| Robots {
+            world,
+            receivers: BTreeMap::new(),
+            paths: RobotPaths::default(),
+        });
+        Self {
+            config,
+            reader: None,
+            robots,
+            stats: StatsTracker::default(),
+            next_scan: Instant::now(),
+            next_attach: Instant::now(),
+        }
+    }
+
+    /// Takes what arrived: the newest frame (attaching to the field when it appears) and the
+    /// robots' poses.
+    pub fn poll(&mut self, node: &Node<Svc>) -> Result<(), ShmError> {
+        let now = Instant::now();
+        let rescan = now >= self.next_scan;
+        if rescan {
+            self.next_scan = now + RESCAN;
+        }
+        if self.reader.is_none() && now >= self.next_attach {
+            self.next_attach = now + REATTACH;
+            match FieldReader::attach(node, &self.config.field) {
+                Ok(r) => {
+                    eprintln!("view: attached to field '{}'", self.config.field);
+                    self.reader = Some(r);
+                }
+                Err(ShmError::NoField { .. }) => {}
+                Err(e) => return Err(e),
+            }
+        }
+        if let Some(reader) = &mut self.reader {
+            reader.update()?;
+            if let Some(f) = reader.frame() {
+                self.stats.record(f.header);
+            }
+        }
+        if let Some(robots) = &mut self.robots {
+            if rescan {
+                robots.scan(node, self.config.max_robots);
+            }
+            robots.drain();
+        }
+        Ok(())
+    }
+
+    /// The answer to a GET of `url` (path and query).
+    pub fn answer(&self, url: &str) -> Reply {
+        let (path, query) = match url.split_once('?') {
+            Some((p, q)) => (p, Some(q)),
+            None => (url, None),
+        };
+        let no_params = || match query.and_then(|q| q.split('&').find(|p| !p.is_empty())) {
+            None => Ok(()),
+            Some(p) => {
+                let (k, v) = p.split_once('=').unwrap_or((p, ""));
+                Err(Reply::bad(super::query_error(k, v, "unknown parameter")))
+            }
+        };
+        let page = |content_type, body: &str| Reply {
+            status: 200,
+            content_type,
+            body: body.as_bytes().to_vec(),
+        };
+        match path {
+            "/" | "/index.html" => page("text/html; charset=utf-8", PAGE_HTML),
+            "/view.js" => page("text/javascript; charset=utf-8", PAGE_JS),
+            "/view.css" => page("text/css; charset=utf-8", PAGE_CSS),
+            "/api/frame" => self.frame(query),
+            "/api/stats" => no_params().map_or_else(
+                |e| e,
+                |()| {
+                    let readers = self.reader.as_ref().map(|r| r.readers());
+                    Reply::json(&self.stats.stats(&self.config.field, readers))
+                },
+            ),
+            "/api/robots" => no_params().map_or_else(|e| e, |()| self.robots()),
+            _ => Reply::text(404, format!("not found: {path}")),
+        }
+    }
+
+    fn frame(&self, query: Option<&str>) -> Reply {
+        let q = match parse_frame_query(query, self.config.default_max_side) {
+            Ok(q) => q,
+            Err(e) => return Reply::bad(e),
+        };
+        let Some(sample) = self.reader.as_ref().and_then(|r| r.sample()) else {
+            return Reply::text(
+                503,
+                format!("no frame yet from field '{}'", self.config.field),
+            );
+        };
+        let header = sample.user_header();
+        if let Err(e) = q.check_channel(header.channels) {
+            return Reply::bad(e);
+        }
+        Reply::json(&snapshot(header, sample.payload(), q.channel, q.max_side))
+    }
+
+    fn robots(&self) -> Reply {
+        #[derive(serde::Serialize)]
+        struct Answer<'a> {
+            world: Option<&'a str>,
+            robots: Vec<super::RobotTrack>,
+        }
+        Reply::json(&Answer {
+            world: self.robots.as_ref().map(|r| r.world.as_str()),
+            robots: self
+                .robots
+                .as_ref()
+                .map(|r| r.paths.tracks())
+                .unwrap_or_default(),
+        })
+    }
+
+    fn respond(&mut self, node: &Node<Svc>, request: Request) -> Result<(), ShmError> {
+        let reply = match request.method() {
+            Method::Get | Method::Head => {
+                // The newest frame, not the one of the last slice.
+                self.poll(node)?;
+                self.answer(request.url())
+            }
+            m => Reply::text(405, format!("method {m} not allowed: GET only")),
+        };
+        let mut response = Response::from_data(reply.body).with_status_code(reply.status);
+        for (k, v) in [
+            ("Content-Type", reply.content_type),
+            ("Cache-Control", "no-store"),
+        ] {
+            if let Ok(h) = Header::from_bytes(k.as_bytes(), v.as_bytes()) {
+                response.add_header(h);
+            }
+        }
+        // A page that went away mid-answer is no failure of the view.
+        let _ = request.respond(response);
+        Ok(())
+    }
+}
+
+/// Serves `view` on `server` until the node sees a termination request (Ctrl-C, SIGTERM).
+pub fn serve(node: &Node<Svc>, server: &Server, view: &mut View) -> Result<(), ViewError> {
+    while node.wait(Duration::ZERO).is_ok() {
+        view.poll(node)?;
+        match server.recv_timeout(REQUEST_SLICE) {
+            Ok(Some(request)) => view.respond(node, request)?,
+            Ok(None) => {}
+            // A connection that failed to be accepted; the server goes on.
+            Err(e) => eprintln!("view: {e}"),
+        }
+    }
+    Ok(())
+}
