@@ -23,6 +23,7 @@
 //! The processes are started through a [`peer::Launcher`] (the `pheromone` binary passes itself
 //! and its hidden `bench-peer` subcommand); [`run_peer`] is what that subcommand runs.
 
+mod frame_run;
 pub mod frames;
 pub mod gateway;
 pub mod hop;

@@ -15,6 +15,8 @@ pub mod link;
 pub mod lockstep;
 pub mod messages;
 pub mod models;
+mod plan;
+mod reject;
 pub mod run;
 pub mod sample;
 pub mod shm;
