@@ -79,6 +79,8 @@ macro_rules! wire_type_name {
 #[macro_export]
 macro_rules! wire_type {
     ($t:ty, $name:literal, size = $size:expr, align = $align:expr) => {
+        // Implementing `ZeroCopySend` is `unsafe`: allowed here, where the contract is stated.
+        #[allow(unsafe_code)]
         // SAFETY: the caller guarantees `$t` is `#[repr(C)]` plain data (numbers and arrays of
         // them, no pointers or references), so its bytes mean the same in every process that maps
         // them; the asserts below pin its size and alignment, and the type name carries the
@@ -114,6 +116,7 @@ macro_rules! wire_type {
 }
 
 /// The type name a wire type is registered under (for error messages).
+#[allow(unsafe_code)] // iceoryx2's `type_name` is an `unsafe fn`
 pub fn type_name_of<T: ZeroCopySend + ?Sized>() -> &'static str {
     // SAFETY: `type_name` only returns a constant string; iceoryx2 marks it unsafe because a
     // wrong name would let incompatible types share a service, which reading it cannot do.
