@@ -23,6 +23,7 @@
 //! The processes are started through a [`peer::Launcher`] (the `pheromone` binary passes itself
 //! and its hidden `bench-peer` subcommand); [`run_peer`] is what that subcommand runs.
 
+mod frame_run;
 pub mod frames;
 pub mod gateway;
 pub mod hop;
@@ -327,244 +328,99 @@ fn latency(samples: &[u64], what: &str) -> Result<Latency, BenchError> {
     Latency::from_ns(samples).ok_or_else(|| BenchError::Peer(format!("{what}: no samples")))
 }
 
+/// What every section of a run uses: the options, the mode's plan, whether this process is
+/// pinned, the progress log and the unique tags of the peers' services.
+struct Ctx<'a> {
+    opts: &'a Options,
+    plan: Plan,
+    pin: bool,
+    started: Instant,
+    serial: u32,
+}
+
+impl Ctx<'_> {
+    /// A progress line on stderr (`Options::progress`), stamped with the time since the start.
+    fn say(&self, msg: &str) {
+        if self.opts.progress {
+            eprintln!("[{:>6.1}s] {msg}", self.started.elapsed().as_secs_f64());
+        }
+    }
+
+    /// A tag no other measurement of this run (or process) uses.
+    fn tag(&mut self) -> String {
+        self.serial += 1;
+        format!("{}-{}", std::process::id(), self.serial)
+    }
+
+    fn runs(&self, s: Section) -> bool {
+        self.opts.only.is_empty() || self.opts.only.contains(&s)
+    }
+}
+
 /// Runs every measurement and returns the report.
 pub fn run(opts: &Options) -> Result<Report, BenchError> {
     let started = Instant::now();
     let plan = opts.mode.plan();
     let machine = Machine::detect();
     let pin = opts.pin && machine.cores >= 2 && machine::pin_to_core(0);
-    let say = |msg: &str| {
-        if opts.progress {
-            eprintln!("[{:>6.1}s] {msg}", started.elapsed().as_secs_f64());
-        }
+    let mut cx = Ctx {
+        opts,
+        plan,
+        pin,
+        started,
+        serial: 0,
     };
-    let mut serial = 0u32;
-    let mut tag = || {
-        serial += 1;
-        format!("{}-{serial}", std::process::id())
-    };
-    say(&format!(
+    cx.say(&format!(
         "machine: {} ({} cores){}",
         machine.cpu_model,
         machine.cores,
         if pin { ", pinned" } else { "" }
     ));
-
-    let runs = |s: Section| opts.only.is_empty() || opts.only.contains(&s);
-    let sections: Vec<Section> = Section::ALL.into_iter().filter(|s| runs(*s)).collect();
+    let sections: Vec<Section> = Section::ALL.into_iter().filter(|s| cx.runs(*s)).collect();
     let mut tick_vs_memcpy = BTreeMap::new();
-    for &w in plan.tick_widths.iter().filter(|_| runs(Section::Tick)) {
-        say(&format!("tick vs memcpy at {w}x{w}"));
+    for &w in plan.tick_widths.iter().filter(|_| cx.runs(Section::Tick)) {
+        cx.say(&format!("tick vs memcpy at {w}x{w}"));
         tick_vs_memcpy.insert(format!("{w}x{w}"), tick::measure(w, plan.tick_reps)?);
     }
-
-    let mut hop = |raw: bool, busy: bool| -> Result<Latency, BenchError> {
-        say(&format!(
-            "hop: {} {} ({} ping-pongs)",
-            if raw {
-                "raw iceoryx2 u64"
-            } else {
-                "ours (PoseMsg link)"
-            },
-            if busy { "busy-poll" } else { "wait" },
-            plan.hop_count
-        ));
-        let s = hop::measure(
-            &opts.launcher,
-            &tag(),
-            hop::HopRun {
-                raw,
-                busy,
-                warmup: plan.hop_warmup,
-                count: plan.hop_count,
-                pin,
-            },
-        )?;
-        latency(&s, "hop")
+    let hop_ns = match cx.runs(Section::Hop) {
+        true => Some(measure_hops(&mut cx)?),
+        false => None,
     };
-    let hop_ns = if runs(Section::Hop) {
-        Some(HopReport {
-            ours: hop(false, false)?,
-            raw_iceoryx2: hop(true, false)?,
-            busy_poll: HopPair {
-                ours: hop(false, true)?,
-                raw_iceoryx2: hop(true, true)?,
-            },
-            message_bytes: HopBytes {
-                ours: std::mem::size_of::<messages::PoseMsg>(),
-                raw_iceoryx2: std::mem::size_of::<u64>(),
-            },
-            method: "ping-pong between two processes, one-way = round trip / 2",
-        })
-    } else {
-        None
-    };
-
     let mut frame_ns = BTreeMap::new();
     let frame_sizes = [
         ("1MiB", 512u32, plan.frames_1mib, 20u64),
         ("16MiB", 2048u32, plan.frames_16mib, 100u64),
     ];
-    for (key, width, (count, skip), period_ms) in
-        frame_sizes.into_iter().filter(|_| runs(Section::Frames))
-    {
-        let period = Duration::from_millis(period_ms);
-        const EVENT: ReaderWait = ReaderWait::Event;
-        const BUSY: ReaderWait = ReaderWait::BusyPoll;
-        let spin = ReaderWait::Spin { spin_us: SPIN_US };
-        let mut cpu: BTreeMap<(FrameTransport, ReaderWait), f64> = BTreeMap::new();
-        let mut frames = |transport: FrameTransport,
-                          readers: usize,
-                          wait: ReaderWait|
-         -> Result<Option<Latency>, BenchError> {
-            if transport == FrameTransport::Zenoh && !ZENOH_BUILT {
-                return Ok(None);
-            }
-            say(&format!(
-                "frames {key}: {transport:?} to {readers} reader(s), {} ({count} frames)",
-                wait.label()
-            ));
-            let s = frames::measure(
-                &opts.launcher,
-                &tag(),
-                frames::FrameRun {
-                    transport,
-                    width,
-                    readers,
-                    wait,
-                    count,
-                    skip,
-                    period,
-                    pin,
-                },
-            )?;
-            if let (1, Some(share)) = (readers, s.reader_cpu_share) {
-                cpu.insert((transport, wait), share);
-            }
-            latency(&s.samples_ns, "frames").map(Some)
-        };
-        let need = |l: Option<Latency>| l.ok_or(BenchError::NoZenoh);
-        let report = FrameReport {
+    let run_frames = cx.runs(Section::Frames);
+    for (key, width, (count, skip), period_ms) in frame_sizes.into_iter().filter(|_| run_frames) {
+        let size = FrameSize {
+            key,
             width,
-            frame_bytes: width as u64 * width as u64 * 4,
-            ours: need(frames(FrameTransport::Ours, 1, EVENT)?)?,
-            uds_serde: need(frames(FrameTransport::UdsSerde, 1, EVENT)?)?,
-            zenoh: frames(FrameTransport::Zenoh, 1, EVENT)?,
-            readers_8: FrameSet {
-                ours: need(frames(FrameTransport::Ours, 8, EVENT)?)?,
-                uds_serde: need(frames(FrameTransport::UdsSerde, 8, EVENT)?)?,
-                zenoh: frames(FrameTransport::Zenoh, 8, EVENT)?,
-            },
-            ours_busy_poll: need(frames(FrameTransport::Ours, 1, BUSY)?)?,
-            raw_iceoryx2: need(frames(FrameTransport::RawIceoryx, 1, EVENT)?)?,
-            raw_iceoryx2_busy_poll: need(frames(FrameTransport::RawIceoryx, 1, BUSY)?)?,
-            ours_spin: need(frames(FrameTransport::Ours, 1, spin)?)?,
-            raw_iceoryx2_spin: need(frames(FrameTransport::RawIceoryx, 1, spin)?)?,
-            spin_us: SPIN_US,
-            period_ms: period_ms as f64,
-            reader_cpu_share: ReaderCpu {
-                ours_wait: cpu.get(&(FrameTransport::Ours, EVENT)).copied(),
-                ours_spin: cpu.get(&(FrameTransport::Ours, spin)).copied(),
-                ours_busy_poll: cpu.get(&(FrameTransport::Ours, BUSY)).copied(),
-                raw_iceoryx2_wait: cpu.get(&(FrameTransport::RawIceoryx, EVENT)).copied(),
-                raw_iceoryx2_spin: cpu.get(&(FrameTransport::RawIceoryx, spin)).copied(),
-                raw_iceoryx2_busy_poll: cpu.get(&(FrameTransport::RawIceoryx, BUSY)).copied(),
-            },
+            count,
+            skip,
+            period_ms,
         };
-        frame_ns.insert(key.to_string(), report);
+        frame_ns.insert(key.to_string(), measure_frames(&mut cx, size)?);
     }
-
-    let (deposit_to_visible_us, deposit_to_visible_on_deposit_us) = if runs(Section::Visible) {
-        say(&format!(
-            "deposit to visible: {w}x{w} field at {} Hz ({} deposits)",
-            opts.tick_hz,
-            plan.visible_count,
-            w = opts.visible_width
-        ));
-        let visible_run = visible::VisibleRun {
-            width: opts.visible_width,
-            tick_hz: opts.tick_hz,
-            warmup: (plan.visible_count / 20).max(2),
-            count: plan.visible_count,
-            pin,
-            on_deposit: false,
-            cpu_window: plan.cpu_window,
-        };
-        let v = visible::measure(&opts.launcher, &tag(), visible_run)?;
-        let compute = Latency::from_ns_as_us(&v.compute_ns)
-            .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?;
-        let deposit_to_visible_us = VisibleReport {
-            latency: Latency::from_ns_as_us(&v.samples_ns)
-                .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?,
-            tick_hz: opts.tick_hz,
-            width: opts.visible_width,
-            target_p99_us: 1e6 / opts.tick_hz as f64 + 1.2 * compute.p99 + 50.0,
-            tick_compute_us: compute,
-            field_cpu: v.cpu,
-        };
-        say(&format!(
-            "deposit to visible, publishing on deposit: {w}x{w} field ({} deposits), then its CPU \
-             at 10, 100 and 1000 deposits/s",
-            plan.visible_count,
-            w = opts.visible_width
-        ));
-        let v = visible::measure(
-            &opts.launcher,
-            &tag(),
-            visible::VisibleRun {
-                on_deposit: true,
-                ..visible_run
-            },
-        )?;
-        let compute = Latency::from_ns_as_us(&v.compute_ns)
-            .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?;
-        let deposit_to_visible_on_deposit_us = VisibleReport {
-            latency: Latency::from_ns_as_us(&v.samples_ns)
-                .ok_or_else(|| BenchError::Peer("deposit to visible: no samples".into()))?,
-            tick_hz: opts.tick_hz,
-            width: opts.visible_width,
-            target_p99_us: compute.p99 + 100.0,
-            tick_compute_us: compute,
-            field_cpu: v.cpu,
-        };
-        (
-            Some(deposit_to_visible_us),
-            Some(deposit_to_visible_on_deposit_us),
-        )
-    } else {
-        (None, None)
+    let (deposit_to_visible_us, deposit_to_visible_on_deposit_us) = match cx.runs(Section::Visible)
+    {
+        true => {
+            let (on_tick, on_deposit) = measure_visible(&mut cx)?;
+            (Some(on_tick), Some(on_deposit))
+        }
+        false => (None, None),
     };
-    let gateway_pir = if runs(Section::Gateway) {
-        say(&format!(
-            "gateway: {} PIR round trips over UDP loopback, {} direct reads, {:.1} s flood",
-            plan.pir_count.0,
-            plan.pir_count.0,
-            plan.flood.as_secs_f64()
-        ));
-        let gateway_pir = gateway::measure(
-            &opts.launcher,
-            &tag(),
-            gateway::GatewayRun {
-                warmup: plan.pir_count.1,
-                count: plan.pir_count.0,
-                flood: plan.flood,
-                window: 32,
-                pin,
-            },
-        )?;
-        Some(gateway_pir)
-    } else {
-        None
+    let gateway_pir = match cx.runs(Section::Gateway) {
+        true => Some(measure_gateway(&mut cx)?),
+        false => None,
     };
-    let mirror = if runs(Section::Mirror) {
-        measure_mirror(opts, &plan, pin, &mut tag, &say)?
-    } else {
-        None
+    let mirror = match cx.runs(Section::Mirror) {
+        true => measure_mirror(&mut cx)?,
+        false => None,
     };
     if pin {
         machine::unpin();
     }
-
     let mut report = Report {
         machine,
         mode: opts.mode,
@@ -583,51 +439,254 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
     };
     report.targets = targets(&report);
     report.elapsed_s = (started.elapsed().as_secs_f64() * 10.0).round() / 10.0;
-    say("done");
+    cx.say("done");
     Ok(report)
+}
+
+/// The `hop_ns` section: ours and raw iceoryx2, waiting and busy-polling.
+fn measure_hops(cx: &mut Ctx) -> Result<HopReport, BenchError> {
+    let mut hop = |raw: bool, busy: bool| -> Result<Latency, BenchError> {
+        cx.say(&format!(
+            "hop: {} {} ({} ping-pongs)",
+            if raw {
+                "raw iceoryx2 u64"
+            } else {
+                "ours (PoseMsg link)"
+            },
+            if busy { "busy-poll" } else { "wait" },
+            cx.plan.hop_count
+        ));
+        let s = hop::measure(
+            &cx.opts.launcher,
+            &cx.tag(),
+            hop::HopRun {
+                raw,
+                busy,
+                warmup: cx.plan.hop_warmup,
+                count: cx.plan.hop_count,
+                pin: cx.pin,
+            },
+        )?;
+        latency(&s, "hop")
+    };
+    Ok(HopReport {
+        ours: hop(false, false)?,
+        raw_iceoryx2: hop(true, false)?,
+        busy_poll: HopPair {
+            ours: hop(false, true)?,
+            raw_iceoryx2: hop(true, true)?,
+        },
+        message_bytes: HopBytes {
+            ours: std::mem::size_of::<messages::PoseMsg>(),
+            raw_iceoryx2: std::mem::size_of::<u64>(),
+        },
+        method: "ping-pong between two processes, one-way = round trip / 2",
+    })
+}
+
+/// One frame size of the `frame_ns` section.
+struct FrameSize {
+    key: &'static str,
+    width: u32,
+    /// Frames recorded and skipped.
+    count: usize,
+    skip: usize,
+    period_ms: u64,
+}
+
+/// One frame size of the `frame_ns` section: every transport and wait policy.
+fn measure_frames(cx: &mut Ctx, size: FrameSize) -> Result<FrameReport, BenchError> {
+    let FrameSize {
+        key,
+        width,
+        count,
+        skip,
+        period_ms,
+    } = size;
+    let period = Duration::from_millis(period_ms);
+    const EVENT: ReaderWait = ReaderWait::Event;
+    const BUSY: ReaderWait = ReaderWait::BusyPoll;
+    let spin = ReaderWait::Spin { spin_us: SPIN_US };
+    let mut cpu: BTreeMap<(FrameTransport, ReaderWait), f64> = BTreeMap::new();
+    let mut frames = |transport: FrameTransport,
+                      readers: usize,
+                      wait: ReaderWait|
+     -> Result<Option<Latency>, BenchError> {
+        if transport == FrameTransport::Zenoh && !ZENOH_BUILT {
+            return Ok(None);
+        }
+        cx.say(&format!(
+            "frames {key}: {transport:?} to {readers} reader(s), {} ({count} frames)",
+            wait.label()
+        ));
+        let s = frames::measure(
+            &cx.opts.launcher,
+            &cx.tag(),
+            frames::FrameRun {
+                transport,
+                width,
+                readers,
+                wait,
+                count,
+                skip,
+                period,
+                pin: cx.pin,
+            },
+        )?;
+        if let (1, Some(share)) = (readers, s.reader_cpu_share) {
+            cpu.insert((transport, wait), share);
+        }
+        latency(&s.samples_ns, "frames").map(Some)
+    };
+    let need = |l: Option<Latency>| l.ok_or(BenchError::NoZenoh);
+    let ours = need(frames(FrameTransport::Ours, 1, EVENT)?)?;
+    let uds_serde = need(frames(FrameTransport::UdsSerde, 1, EVENT)?)?;
+    let zenoh = frames(FrameTransport::Zenoh, 1, EVENT)?;
+    let readers_8 = FrameSet {
+        ours: need(frames(FrameTransport::Ours, 8, EVENT)?)?,
+        uds_serde: need(frames(FrameTransport::UdsSerde, 8, EVENT)?)?,
+        zenoh: frames(FrameTransport::Zenoh, 8, EVENT)?,
+    };
+    let ours_busy_poll = need(frames(FrameTransport::Ours, 1, BUSY)?)?;
+    let raw_iceoryx2 = need(frames(FrameTransport::RawIceoryx, 1, EVENT)?)?;
+    let raw_iceoryx2_busy_poll = need(frames(FrameTransport::RawIceoryx, 1, BUSY)?)?;
+    let ours_spin = need(frames(FrameTransport::Ours, 1, spin)?)?;
+    let raw_iceoryx2_spin = need(frames(FrameTransport::RawIceoryx, 1, spin)?)?;
+    let share = |t: FrameTransport, w: ReaderWait| cpu.get(&(t, w)).copied();
+    Ok(FrameReport {
+        width,
+        frame_bytes: width as u64 * width as u64 * 4,
+        ours,
+        uds_serde,
+        zenoh,
+        readers_8,
+        ours_busy_poll,
+        raw_iceoryx2,
+        raw_iceoryx2_busy_poll,
+        ours_spin,
+        raw_iceoryx2_spin,
+        spin_us: SPIN_US,
+        period_ms: period_ms as f64,
+        reader_cpu_share: ReaderCpu {
+            ours_wait: share(FrameTransport::Ours, EVENT),
+            ours_spin: share(FrameTransport::Ours, spin),
+            ours_busy_poll: share(FrameTransport::Ours, BUSY),
+            raw_iceoryx2_wait: share(FrameTransport::RawIceoryx, EVENT),
+            raw_iceoryx2_spin: share(FrameTransport::RawIceoryx, spin),
+            raw_iceoryx2_busy_poll: share(FrameTransport::RawIceoryx, BUSY),
+        },
+    })
+}
+
+/// The `deposit_to_visible_us` section: the field ticking, then publishing on deposit.
+fn measure_visible(cx: &mut Ctx) -> Result<(VisibleReport, VisibleReport), BenchError> {
+    let opts = cx.opts;
+    cx.say(&format!(
+        "deposit to visible: {w}x{w} field at {} Hz ({} deposits)",
+        opts.tick_hz,
+        cx.plan.visible_count,
+        w = opts.visible_width
+    ));
+    let visible_run = visible::VisibleRun {
+        width: opts.visible_width,
+        tick_hz: opts.tick_hz,
+        warmup: (cx.plan.visible_count / 20).max(2),
+        count: cx.plan.visible_count,
+        pin: cx.pin,
+        on_deposit: false,
+        cpu_window: cx.plan.cpu_window,
+    };
+    let v = visible::measure(&opts.launcher, &cx.tag(), visible_run)?;
+    let on_tick = visible_report(opts, v, |compute_p99_us| {
+        1e6 / opts.tick_hz as f64 + 1.2 * compute_p99_us + 50.0
+    })?;
+    cx.say(&format!(
+        "deposit to visible, publishing on deposit: {w}x{w} field ({} deposits), then its CPU \
+         at 10, 100 and 1000 deposits/s",
+        cx.plan.visible_count,
+        w = opts.visible_width
+    ));
+    let v = visible::measure(
+        &opts.launcher,
+        &cx.tag(),
+        visible::VisibleRun {
+            on_deposit: true,
+            ..visible_run
+        },
+    )?;
+    let on_deposit = visible_report(opts, v, |compute_p99_us| compute_p99_us + 100.0)?;
+    Ok((on_tick, on_deposit))
+}
+
+/// A deposit-to-visible report from its samples; `target_p99_us` of the tick compute's p99 (µs).
+fn visible_report(
+    opts: &Options,
+    v: visible::VisibleResult,
+    target_p99_us: impl Fn(f64) -> f64,
+) -> Result<VisibleReport, BenchError> {
+    let no_samples = || BenchError::Peer("deposit to visible: no samples".into());
+    let compute = Latency::from_ns_as_us(&v.compute_ns).ok_or_else(no_samples)?;
+    Ok(VisibleReport {
+        latency: Latency::from_ns_as_us(&v.samples_ns).ok_or_else(no_samples)?,
+        tick_hz: opts.tick_hz,
+        width: opts.visible_width,
+        target_p99_us: target_p99_us(compute.p99),
+        tick_compute_us: compute,
+        field_cpu: v.cpu,
+    })
+}
+
+/// The `gateway_pir` section.
+fn measure_gateway(cx: &mut Ctx) -> Result<gateway::GatewayReport, BenchError> {
+    let plan = cx.plan;
+    cx.say(&format!(
+        "gateway: {} PIR round trips over UDP loopback, {} direct reads, {:.1} s flood",
+        plan.pir_count.0,
+        plan.pir_count.0,
+        plan.flood.as_secs_f64()
+    ));
+    gateway::measure(
+        &cx.opts.launcher,
+        &cx.tag(),
+        gateway::GatewayRun {
+            warmup: plan.pir_count.1,
+            count: plan.pir_count.0,
+            flood: plan.flood,
+            window: 32,
+            pin: cx.pin,
+        },
+    )
 }
 
 /// The `mirror` section: an origin of `plan.mirror_width`² at 100 Hz, a bridge and a mirror.
 #[cfg(feature = "zenoh")]
-fn measure_mirror(
-    opts: &Options,
-    plan: &Plan,
-    pin: bool,
-    tag: &mut impl FnMut() -> String,
-    say: &impl Fn(&str),
-) -> Result<Option<MirrorSection>, BenchError> {
-    let w = plan.mirror_width;
-    say(&format!(
+fn measure_mirror(cx: &mut Ctx) -> Result<Option<MirrorSection>, BenchError> {
+    let w = cx.plan.mirror_width;
+    cx.say(&format!(
         "mirror: {w}x{w} origin at 100 Hz, bridge and mirror over Zenoh on loopback, \
          {:.1} s at 10 and at 1000 deposits/s, then a mirror started afresh",
-        plan.mirror_window.as_secs_f64()
+        cx.plan.mirror_window.as_secs_f64()
     ));
     mirror::measure(
-        &opts.launcher,
-        &tag(),
+        &cx.opts.launcher,
+        &cx.tag(),
         mirror::MirrorRun {
             width: w,
             tick_hz: 100.0,
-            window: plan.mirror_window,
+            window: cx.plan.mirror_window,
             keyframe_every: Duration::from_secs(5),
-            pin,
+            pin: cx.pin,
         },
     )
     .map(Some)
 }
 
 #[cfg(not(feature = "zenoh"))]
-fn measure_mirror(
-    _opts: &Options,
-    plan: &Plan,
-    _pin: bool,
-    _tag: &mut impl FnMut() -> String,
-    say: &impl Fn(&str),
-) -> Result<Option<MirrorSection>, BenchError> {
-    say(&format!(
+fn measure_mirror(cx: &mut Ctx) -> Result<Option<MirrorSection>, BenchError> {
+    cx.say(&format!(
         "mirror ({w}x{w}, {:.1} s per deposit rate): not built (--features zenoh)",
-        plan.mirror_window.as_secs_f64(),
-        w = plan.mirror_width
+        cx.plan.mirror_window.as_secs_f64(),
+        w = cx.plan.mirror_width
     ));
     Ok(None)
 }

@@ -13,7 +13,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
-use crate::frames::{
+use crate::frame_run::{
     drive, pause, record, spawn_readers, test_plane, FrameRun, FrameSamples, FRAME_TIMEOUT,
 };
 use crate::peer::{Launcher, ReaderWait};

@@ -175,6 +175,47 @@ impl<'a> Cursor<'a> {
 /// Decodes checkpoint bytes, checking magic, versions, sizes, checksum and finiteness.
 pub fn decode(bytes: &[u8]) -> Result<Checkpoint, FormatError> {
     let mut c = Cursor { bytes, at: 0 };
+    let layout = decode_versions(&mut c)?;
+    let header = decode_header(&mut c, layout)?;
+    let config_len = c.u32("configuration length")?;
+    if config_len > MAX_CONFIG_BYTES {
+        return Err(FormatError::Invalid {
+            what: "configuration length",
+            value: config_len.to_string(),
+            reason: format!("exceeds {MAX_CONFIG_BYTES} bytes"),
+        });
+    }
+    let config_toml =
+        String::from_utf8_lossy(c.take(config_len as usize, "configuration")?).into_owned();
+    let raw = take_cells(&mut c, &header)?;
+    let body_end = c.at;
+    let stored = c.u64("checksum")?;
+    if c.at != bytes.len() {
+        return Err(FormatError::Trailing {
+            extra: bytes.len() - c.at,
+        });
+    }
+    let computed = fnv1a64(&bytes[..body_end]);
+    if stored != computed {
+        return Err(FormatError::Checksum { stored, computed });
+    }
+    let cells = finite_cells(raw)?;
+    if !header.sim_time_s.is_finite() || header.sim_time_s < 0.0 {
+        return Err(FormatError::Invalid {
+            what: "sim_time_s",
+            value: header.sim_time_s.to_string(),
+            reason: "must be finite and ≥ 0".into(),
+        });
+    }
+    Ok(Checkpoint {
+        header,
+        config_toml,
+        cells,
+    })
+}
+
+/// The magic, the format version and the layout version (returned), each checked.
+fn decode_versions(c: &mut Cursor) -> Result<u32, FormatError> {
     let magic = c.take(8, "magic")?;
     if magic != MAGIC {
         return Err(FormatError::Magic {
@@ -189,6 +230,12 @@ pub fn decode(bytes: &[u8]) -> Result<Checkpoint, FormatError> {
     if layout != LAYOUT_VERSION {
         return Err(FormatError::Layout { found: layout });
     }
+    Ok(layout)
+}
+
+/// The frame header: geometry, clock and counters (`sim_time_s` is checked by the caller, after
+/// the checksum).
+fn decode_header(c: &mut Cursor, layout: u32) -> Result<FrameHeader, FormatError> {
     let width = c.u32("header")?;
     let height = c.u32("header")?;
     let channels = c.u32("header")?;
@@ -212,16 +259,29 @@ pub fn decode(bytes: &[u8]) -> Result<Checkpoint, FormatError> {
     for r in &mut deposits_rejected {
         *r = c.u64("header")?;
     }
-    let config_len = c.u32("configuration length")?;
-    if config_len > MAX_CONFIG_BYTES {
-        return Err(FormatError::Invalid {
-            what: "configuration length",
-            value: config_len.to_string(),
-            reason: format!("exceeds {MAX_CONFIG_BYTES} bytes"),
-        });
-    }
-    let config_toml =
-        String::from_utf8_lossy(c.take(config_len as usize, "configuration")?).into_owned();
+    Ok(FrameHeader {
+        layout_version: layout,
+        channels,
+        width,
+        height,
+        sequence,
+        stamp_ns,
+        sim_time_s,
+        cell_size_m,
+        origin_x_m,
+        origin_y_m,
+        dt_s,
+        tick_compute_ns: 0,
+        deposits_applied,
+        deposits_rejected,
+        deposits_this_tick: 0,
+        _reserved: 0,
+    })
+}
+
+/// The cells' bytes, after their count, which must be the header's width × height × channels.
+fn take_cells<'a>(c: &mut Cursor<'a>, header: &FrameHeader) -> Result<&'a [u8], FormatError> {
+    let (width, height, channels) = (header.width, header.height, header.channels);
     let n = c.u64("cell count")?;
     let expected = width as u64 * height as u64 * channels as u64;
     if n != expected {
@@ -239,18 +299,11 @@ pub fn decode(bytes: &[u8]) -> Result<Checkpoint, FormatError> {
             value: n.to_string(),
             reason: "too large".into(),
         })?;
-    let raw = c.take(cell_bytes, "cells")?;
-    let body_end = c.at;
-    let stored = c.u64("checksum")?;
-    if c.at != bytes.len() {
-        return Err(FormatError::Trailing {
-            extra: bytes.len() - c.at,
-        });
-    }
-    let computed = fnv1a64(&bytes[..body_end]);
-    if stored != computed {
-        return Err(FormatError::Checksum { stored, computed });
-    }
+    c.take(cell_bytes, "cells")
+}
+
+/// The cells as f32, every one finite.
+fn finite_cells(raw: &[u8]) -> Result<Vec<f32>, FormatError> {
     let cells: Vec<f32> = raw
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
@@ -262,36 +315,7 @@ pub fn decode(bytes: &[u8]) -> Result<Checkpoint, FormatError> {
             reason: "must be finite".into(),
         });
     }
-    if !sim_time_s.is_finite() || sim_time_s < 0.0 {
-        return Err(FormatError::Invalid {
-            what: "sim_time_s",
-            value: sim_time_s.to_string(),
-            reason: "must be finite and ≥ 0".into(),
-        });
-    }
-    let header = FrameHeader {
-        layout_version: layout,
-        channels,
-        width,
-        height,
-        sequence,
-        stamp_ns,
-        sim_time_s,
-        cell_size_m,
-        origin_x_m,
-        origin_y_m,
-        dt_s,
-        tick_compute_ns: 0,
-        deposits_applied,
-        deposits_rejected,
-        deposits_this_tick: 0,
-        _reserved: 0,
-    };
-    Ok(Checkpoint {
-        header,
-        config_toml,
-        cells,
-    })
+    Ok(cells)
 }
 
 /// `FILE.tmp` beside `FILE`.

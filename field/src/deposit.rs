@@ -1,79 +1,10 @@
 //! Deposit kernels (MODELS.md M1–M4) and the validation every deposit passes before it may touch
 //! a frame. A deposit costs O(kernel area): only the cells within its extent are visited.
 
-use std::fmt;
-
 use crate::geometry::{CellBox, GridGeometry};
 use crate::messages::{DepositMsg, KernelKind};
 use crate::models::ChannelSpec;
-
-/// Why a deposit was refused. The discriminant is the index of its counter in the frame header.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum RejectReason {
-    /// A position, amount, covariance or parameter is NaN or infinite.
-    NonFinite = 0,
-    /// The position covariance is not symmetric positive semi-definite.
-    NotPsd = 1,
-    /// The channel index names no channel of this field.
-    UnknownChannel = 2,
-    /// The kernel code is not one this build knows.
-    UnknownKernel = 3,
-    /// An amount, range or shape parameter is out of the accepted limits.
-    OutOfLimits = 4,
-    /// The kernel's extent does not reach any cell of the grid.
-    OutsideGrid = 5,
-    /// A negative amount on a channel that is not signed.
-    NegativeOnUnsigned = 6,
-}
-
-/// Number of rejection reasons (length of the counters array in the frame header).
-pub const REJECT_REASONS: usize = 7;
-
-impl RejectReason {
-    pub const ALL: [RejectReason; REJECT_REASONS] = [
-        RejectReason::NonFinite,
-        RejectReason::NotPsd,
-        RejectReason::UnknownChannel,
-        RejectReason::UnknownKernel,
-        RejectReason::OutOfLimits,
-        RejectReason::OutsideGrid,
-        RejectReason::NegativeOnUnsigned,
-    ];
-
-    /// Stable snake_case name, used in logs and JSON.
-    pub fn name(self) -> &'static str {
-        match self {
-            RejectReason::NonFinite => "non_finite",
-            RejectReason::NotPsd => "not_psd",
-            RejectReason::UnknownChannel => "unknown_channel",
-            RejectReason::UnknownKernel => "unknown_kernel",
-            RejectReason::OutOfLimits => "out_of_limits",
-            RejectReason::OutsideGrid => "outside_grid",
-            RejectReason::NegativeOnUnsigned => "negative_on_unsigned",
-        }
-    }
-}
-
-/// A refused deposit: the reason and what was wrong, naming the field and value.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Rejection {
-    pub reason: RejectReason,
-    pub detail: String,
-}
-
-impl fmt::Display for Rejection {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "deposit rejected ({}): {}",
-            self.reason.name(),
-            self.detail
-        )
-    }
-}
-
-impl std::error::Error for Rejection {}
+pub use crate::reject::{RejectReason, Rejection, REJECT_REASONS};
 
 fn reject(reason: RejectReason, detail: impl Into<String>) -> Rejection {
     Rejection {
@@ -182,6 +113,31 @@ pub fn prepare(
     channels: &[ChannelSpec],
     limits: &DepositLimits,
 ) -> Result<PreparedDeposit, Rejection> {
+    check_finite(msg)?;
+    let (channel, kernel) = check_target(msg, channels, limits)?;
+    let h = geometry.cell_size_m;
+    let lengths = Lengths {
+        max_m: limits.max_radius_cells * h,
+    };
+    let (shape, extent_m) = match kernel {
+        KernelKind::Ellipse | KernelKind::Paper => {
+            quadratic_shape(msg, kernel, h, limits, lengths)?
+        }
+        KernelKind::Saturating => saturating_shape(msg, lengths)?,
+        KernelKind::ZShape => z_shape_kernel(msg, h, lengths)?,
+    };
+    Ok(PreparedDeposit {
+        channel,
+        cells: cells_reached(msg, geometry, extent_m)?,
+        x_m: msg.x_m,
+        y_m: msg.y_m,
+        range2_m2: extent_m * extent_m,
+        shape,
+    })
+}
+
+/// Every number of the message is finite.
+fn check_finite(msg: &DepositMsg) -> Result<(), Rejection> {
     let named = [
         ("x_m", msg.x_m),
         ("y_m", msg.y_m),
@@ -195,9 +151,19 @@ pub fn prepare(
         ("plateau_m", msg.plateau_m),
         ("slope_m", msg.slope_m),
     ];
-    if let Some((name, v)) = named.iter().find(|(_, v)| !v.is_finite()) {
-        return Err(reject(RejectReason::NonFinite, format!("{name} = {v}")));
+    match named.iter().find(|(_, v)| !v.is_finite()) {
+        Some((name, v)) => Err(reject(RejectReason::NonFinite, format!("{name} = {v}"))),
+        None => Ok(()),
     }
+}
+
+/// The channel and kernel the message names, and its amount checked against them: the
+/// channel's index and the kernel.
+fn check_target(
+    msg: &DepositMsg,
+    channels: &[ChannelSpec],
+    limits: &DepositLimits,
+) -> Result<(usize, KernelKind), Rejection> {
     let channel = msg.channel as usize;
     let Some(spec) = channels.get(channel) else {
         return Err(reject(
@@ -230,9 +196,20 @@ pub fn prepare(
             ),
         ));
     }
-    let h = geometry.cell_size_m;
-    let max_range_m = limits.max_radius_cells * h;
-    let check_len = |name: &str, v: f32, allow_zero: bool| {
+    Ok((channel, kernel))
+}
+
+/// The longest length (range, σ, plateau, slope) a deposit may ask for.
+#[derive(Clone, Copy)]
+struct Lengths {
+    max_m: f32,
+}
+
+impl Lengths {
+    /// `v` (metres, called `name` in the message) is within `[0, max]`, and not 0 unless
+    /// `allow_zero`.
+    fn check(self, name: &str, v: f32, allow_zero: bool) -> Result<(), Rejection> {
+        let max_range_m = self.max_m;
         if v < 0.0 || (!allow_zero && v == 0.0) || v > max_range_m {
             Err(reject(
                 RejectReason::OutOfLimits,
@@ -244,122 +221,134 @@ pub fn prepare(
         } else {
             Ok(())
         }
-    };
-    let (shape, extent_m) = match kernel {
-        KernelKind::Ellipse | KernelKind::Paper => {
-            check_len("range_m", msg.range_m, false)?;
-            if !(msg.gamma_max > 0.0 && msg.gamma_max <= limits.max_gamma) {
-                return Err(reject(
-                    RejectReason::OutOfLimits,
-                    format!(
-                        "gamma_max = {} (must be in (0, {}])",
-                        msg.gamma_max, limits.max_gamma
-                    ),
-                ));
-            }
-            let (xx, xy, yy) = (msg.cov_xx, msg.cov_xy, msg.cov_yy);
-            let scale = xx.abs().max(yy.abs()).max(f32::MIN_POSITIVE);
-            if xx < 0.0
-                || yy < 0.0
-                || (xx as f64 * yy as f64 - xy as f64 * xy as f64) < -1e-6 * (scale as f64).powi(2)
-            {
-                return Err(reject(
-                    RejectReason::NotPsd,
-                    format!(
-                        "covariance [[{xx}, {xy}], [{xy}, {yy}]] is not positive semi-definite"
-                    ),
-                ));
-            }
-            let ellipse = ErrorEllipse::from_cov(xx, xy, yy);
-            let g = gamma(msg.amount, ellipse.det(), msg.gamma_max);
-            // The shape uses variances floored at (h/2)²: a point-like ellipse still lands on
-            // the cell under it instead of falling between cell centres.
-            // Computed in f64 and saturated into f32: with tiny cells 1/λ² overflows f32, and
-            // ∞·0 in the rotation below would be NaN.
-            let floor = 0.25 * (h as f64) * (h as f64);
-            let l1 = (ellipse.lambda1 as f64).max(floor);
-            let l2 = (ellipse.lambda2 as f64).max(floor);
-            let (c, s) = (ellipse.major.0 as f64, ellipse.major.1 as f64);
-            // Weights along the axes: ellipse ½/λ (= ½ dᵀΣ⁻¹d), paper 1/λ² (eq. 14 as printed).
-            let (w1, w2) = match kernel {
-                KernelKind::Ellipse => (0.5 / l1, 0.5 / l2),
-                _ => (1.0 / (l1 * l1), 1.0 / (l2 * l2)),
-            };
-            let to_f32 = |v: f64| v.clamp(-(f32::MAX as f64), f32::MAX as f64) as f32;
-            // Quadratic form R diag(w1, w2) Rᵀ.
-            let a = to_f32(w1 * c * c + w2 * s * s);
-            let b = to_f32((w1 - w2) * c * s);
-            let cc = to_f32(w1 * s * s + w2 * c * c);
-            (
-                Shape::Quadratic {
-                    gain: g,
-                    a,
-                    b,
-                    c: cc,
-                },
-                msg.range_m,
-            )
-        }
-        KernelKind::Saturating => {
-            check_len("range_m", msg.range_m, false)?;
-            check_len("sigma_m", msg.sigma_m, false)?;
-            if msg.amount.abs() > 1.0 {
-                return Err(reject(
-                    RejectReason::OutOfLimits,
-                    format!(
-                        "amount = {} (ρt of a saturating deposit must be within [−1, 1])",
-                        msg.amount
-                    ),
-                ));
-            }
-            (
-                Shape::Saturating {
-                    rho: msg.amount,
-                    // A vanishing λ (λ² underflows) must not give 1/λ² = ∞: at d = 0 that
-                    // would be 0·∞ = NaN. f32::MAX keeps it a point deposit.
-                    inv_lambda2: (1.0 / (msg.sigma_m * msg.sigma_m)).min(f32::MAX),
-                },
-                msg.range_m,
-            )
-        }
-        KernelKind::ZShape => {
-            check_len("plateau_m", msg.plateau_m, true)?;
-            check_len("slope_m", msg.slope_m, true)?;
-            let extent = msg.plateau_m + msg.slope_m;
-            check_len("plateau_m + slope_m", extent, true)?;
-            (
-                Shape::ZShape {
-                    amount: msg.amount,
-                    plateau_m: msg.plateau_m,
-                    slope_m: msg.slope_m,
-                },
-                // Reach at least the cell under the centre.
-                extent.max(0.5 * h),
-            )
-        }
-    };
-    let Some(cells) = geometry.cell_box(msg.x_m, msg.y_m, extent_m) else {
+    }
+}
+
+/// The M1 kernels (ellipse and paper, seed 000): the covariance's quadratic form and γ, and the
+/// cut-off range. `h`: the cell size (m).
+fn quadratic_shape(
+    msg: &DepositMsg,
+    kernel: KernelKind,
+    h: f32,
+    limits: &DepositLimits,
+    lengths: Lengths,
+) -> Result<(Shape, f32), Rejection> {
+    lengths.check("range_m", msg.range_m, false)?;
+    if !(msg.gamma_max > 0.0 && msg.gamma_max <= limits.max_gamma) {
         return Err(reject(
-            RejectReason::OutsideGrid,
+            RejectReason::OutOfLimits,
             format!(
-                "({}, {}) m with extent {extent_m} m misses the grid [{}, {}] × [{}, {}] m",
-                msg.x_m,
-                msg.y_m,
-                geometry.origin_x_m,
-                geometry.origin_x_m + geometry.width_m(),
-                geometry.origin_y_m,
-                geometry.origin_y_m + geometry.height_m()
+                "gamma_max = {} (must be in (0, {}])",
+                msg.gamma_max, limits.max_gamma
             ),
         ));
+    }
+    let (xx, xy, yy) = (msg.cov_xx, msg.cov_xy, msg.cov_yy);
+    let scale = xx.abs().max(yy.abs()).max(f32::MIN_POSITIVE);
+    if xx < 0.0
+        || yy < 0.0
+        || (xx as f64 * yy as f64 - xy as f64 * xy as f64) < -1e-6 * (scale as f64).powi(2)
+    {
+        return Err(reject(
+            RejectReason::NotPsd,
+            format!("covariance [[{xx}, {xy}], [{xy}, {yy}]] is not positive semi-definite"),
+        ));
+    }
+    let ellipse = ErrorEllipse::from_cov(xx, xy, yy);
+    let g = gamma(msg.amount, ellipse.det(), msg.gamma_max);
+    // The shape uses variances floored at (h/2)²: a point-like ellipse still lands on
+    // the cell under it instead of falling between cell centres.
+    // Computed in f64 and saturated into f32: with tiny cells 1/λ² overflows f32, and
+    // ∞·0 in the rotation below would be NaN.
+    let floor = 0.25 * (h as f64) * (h as f64);
+    let l1 = (ellipse.lambda1 as f64).max(floor);
+    let l2 = (ellipse.lambda2 as f64).max(floor);
+    let (c, s) = (ellipse.major.0 as f64, ellipse.major.1 as f64);
+    // Weights along the axes: ellipse ½/λ (= ½ dᵀΣ⁻¹d), paper 1/λ² (eq. 14 as printed).
+    let (w1, w2) = match kernel {
+        KernelKind::Ellipse => (0.5 / l1, 0.5 / l2),
+        _ => (1.0 / (l1 * l1), 1.0 / (l2 * l2)),
     };
-    Ok(PreparedDeposit {
-        channel,
-        cells,
-        x_m: msg.x_m,
-        y_m: msg.y_m,
-        range2_m2: extent_m * extent_m,
-        shape,
-    })
+    let to_f32 = |v: f64| v.clamp(-(f32::MAX as f64), f32::MAX as f64) as f32;
+    // Quadratic form R diag(w1, w2) Rᵀ.
+    let a = to_f32(w1 * c * c + w2 * s * s);
+    let b = to_f32((w1 - w2) * c * s);
+    let cc = to_f32(w1 * s * s + w2 * c * c);
+    Ok((
+        Shape::Quadratic {
+            gain: g,
+            a,
+            b,
+            c: cc,
+        },
+        msg.range_m,
+    ))
+}
+
+/// The saturating kernel (seed 001 eq. 3 / seed 004) and its cut-off range.
+fn saturating_shape(msg: &DepositMsg, lengths: Lengths) -> Result<(Shape, f32), Rejection> {
+    lengths.check("range_m", msg.range_m, false)?;
+    lengths.check("sigma_m", msg.sigma_m, false)?;
+    if msg.amount.abs() > 1.0 {
+        return Err(reject(
+            RejectReason::OutOfLimits,
+            format!(
+                "amount = {} (ρt of a saturating deposit must be within [−1, 1])",
+                msg.amount
+            ),
+        ));
+    }
+    Ok((
+        Shape::Saturating {
+            rho: msg.amount,
+            // A vanishing λ (λ² underflows) must not give 1/λ² = ∞: at d = 0 that
+            // would be 0·∞ = NaN. f32::MAX keeps it a point deposit.
+            inv_lambda2: (1.0 / (msg.sigma_m * msg.sigma_m)).min(f32::MAX),
+        },
+        msg.range_m,
+    ))
+}
+
+/// The z-shaped kernel (seed 002 eq. 1) and its extent, at least the cell under the centre
+/// (`h`: the cell size, m).
+fn z_shape_kernel(msg: &DepositMsg, h: f32, lengths: Lengths) -> Result<(Shape, f32), Rejection> {
+    lengths.check("plateau_m", msg.plateau_m, true)?;
+    lengths.check("slope_m", msg.slope_m, true)?;
+    let extent = msg.plateau_m + msg.slope_m;
+    lengths.check("plateau_m + slope_m", extent, true)?;
+    Ok((
+        Shape::ZShape {
+            amount: msg.amount,
+            plateau_m: msg.plateau_m,
+            slope_m: msg.slope_m,
+        },
+        // Reach at least the cell under the centre.
+        extent.max(0.5 * h),
+    ))
+}
+
+/// The cells within `extent_m` of the deposit's centre; a deposit that reaches none is refused.
+fn cells_reached(
+    msg: &DepositMsg,
+    geometry: &GridGeometry,
+    extent_m: f32,
+) -> Result<CellBox, Rejection> {
+    geometry
+        .cell_box(msg.x_m, msg.y_m, extent_m)
+        .ok_or_else(|| {
+            reject(
+                RejectReason::OutsideGrid,
+                format!(
+                    "({}, {}) m with extent {extent_m} m misses the grid [{}, {}] × [{}, {}] m",
+                    msg.x_m,
+                    msg.y_m,
+                    geometry.origin_x_m,
+                    geometry.origin_x_m + geometry.width_m(),
+                    geometry.origin_y_m,
+                    geometry.origin_y_m + geometry.height_m()
+                ),
+            )
+        })
 }
 
 impl PreparedDeposit {

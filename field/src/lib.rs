@@ -2,8 +2,8 @@
 //!
 //! A virtual pheromone field for several processes on one host: geometry, the models of the
 //! seed papers (MODELS.md M1–M4), the fused tick engine, sampling, the shared-memory message
-//! types and the iceoryx2 service (`shm`, which holds the crate's `unsafe` besides the kernel
-//! dispatch in `simd`).
+//! types and the iceoryx2 service (`shm`). `unsafe` is denied (`unsafe_code`) except in the
+//! files that allow it: `shm/server.rs`, `shm/inputs.rs`, `simd.rs` and `wire.rs` (`wire_type!`).
 
 pub mod ambient;
 pub mod checkpoint;
@@ -15,6 +15,8 @@ pub mod link;
 pub mod lockstep;
 pub mod messages;
 pub mod models;
+mod plan;
+mod reject;
 pub mod run;
 pub mod sample;
 pub mod shm;

@@ -14,24 +14,7 @@ use iceoryx2::prelude::*;
 
 use crate::shm::{service_name, Cause, ShmError, Svc};
 
-/// Limits every side of a link agrees on (they are part of the service's identity).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct LinkOptions {
-    pub max_publishers: usize,
-    pub max_subscribers: usize,
-    /// Messages a subscriber buffers; with `keep_latest` the oldest is overwritten when full.
-    pub buffer: usize,
-    /// `true`: a full buffer drops its oldest message (state such as poses, where only the newest
-    /// matters). `false`: the sender is told the message was not delivered.
-    pub keep_latest: bool,
-}
-
-impl Default for LinkOptions {
-    /// The options of every robot link ([`crate::wire::ROBOT_LINK`]).
-    fn default() -> Self {
-        crate::wire::ROBOT_LINK
-    }
-}
+pub use crate::wire::LinkOptions;
 
 fn err(service: &str, action: &'static str, e: impl Into<Cause>) -> ShmError {
     ShmError::Service {

@@ -2,7 +2,7 @@
 //! pointers. Their iceoryx2 type names carry a layout version, so a client built against another
 //! layout is refused when it opens the service instead of reading garbage.
 
-use crate::deposit::REJECT_REASONS;
+use crate::reject::REJECT_REASONS;
 
 pub use crate::wire::LAYOUT_VERSION;
 

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::ambient::{self, BandScratch, Output};
 use crate::error::ConfigError;
+pub use crate::plan::PlanePlan;
 pub use crate::simd::Dispatch;
 
 /// How a channel loses pheromone between ticks.
@@ -171,21 +172,6 @@ impl ChannelSpec {
 /// reach infinity.
 pub const CELL_LIMIT: f32 = 1.0e30;
 
-/// What one tick does to one plane, with every per-tick constant already computed.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum PlanePlan {
-    /// P' = P·factor (exponential, saturating, or none with factor 1).
-    Scale { factor: f32 },
-    /// P' = P·e + (1 − e)·min(P, α·Pa), Pa the mean over a (2r+1)² window.
-    Ambient {
-        factor: f32,
-        alpha: f32,
-        radius_cells: u32,
-    },
-    /// P' = sign(P)·max(|P| − loss, 0).
-    Subtract { loss: f32 },
-}
-
 impl PlanePlan {
     /// The plan for a tick of `dt_s` that starts at field time `t_s`.
     pub fn for_tick(spec: &ChannelSpec, t_s: f64, dt_s: f32, cell_size_m: f32) -> Self {
@@ -309,32 +295,6 @@ pub fn step_plane_with(
         threads,
         dispatch,
     );
-}
-
-#[inline]
-pub(crate) fn scale(src: &[f32], out: &mut [f32], factor: f32) {
-    for (o, &p) in out.iter_mut().zip(src) {
-        *o = p * factor;
-    }
-}
-
-#[inline]
-pub(crate) fn subtract_toward_zero(p: f32, loss: f32) -> f32 {
-    let m = (p.abs() - loss).max(0.0);
-    m.copysign(p)
-}
-
-pub(crate) fn diffuse_row(row: &[f32], up: &[f32], down: &[f32], kappa: f32, out: &mut [f32]) {
-    let w = row.len();
-    if w == 1 {
-        out[0] = row[0] + kappa * (up[0] + down[0] - 2.0 * row[0]);
-        return;
-    }
-    out[0] = row[0] + kappa * (row[1] + up[0] + down[0] - 3.0 * row[0]);
-    for x in 1..w - 1 {
-        out[x] = row[x] + kappa * (row[x - 1] + row[x + 1] + up[x] + down[x] - 4.0 * row[x]);
-    }
-    out[w - 1] = row[w - 1] + kappa * (row[w - 2] + up[w - 1] + down[w - 1] - 3.0 * row[w - 1]);
 }
 
 /// The running-sum ambient mean of every cell of a `width`-wide plane, over the `(2r+1)²` window

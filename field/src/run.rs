@@ -118,18 +118,109 @@ pub fn run_field(
 ) -> Result<Option<FieldRunSummary>, FieldRunError> {
     let started = Instant::now();
     let config = &o.config;
-    let mut standby = None;
     // The deposit-ready event exists before the deposit service does, so that a depositor that
     // attaches as soon as it finds the field also finds the event to wake it (a standby creates
     // it when it takes over, as the primary's is still there until then).
     let wakes_on_deposit = o.publish_on_deposit.filter(|_| o.clock.is_none());
-    let mut deposit_wake = match wakes_on_deposit {
+    let deposit_wake = match wakes_on_deposit {
         Some(min_interval) if !o.standby => {
             Some(DepositWake::new(node, &o.name, config, min_interval)?)
         }
         _ => None,
     };
-    let (mut server, mut longest_gap_ns) = if o.standby {
+    let Some(Started {
+        mut server,
+        longest_gap_ns,
+        standby,
+    }) = start(node, o)?
+    else {
+        return Ok(None);
+    };
+    server
+        .set_threads(o.threads)
+        .map_err(|source| ShmError::Config {
+            field: o.name.clone(),
+            source,
+        })?;
+    // Each frame's inputs, for `pheromone bridge` (mirrors on other hosts).
+    server.publish_inputs(node)?;
+    // Lockstep: join the world's run once every port exists.
+    let clock = match &o.clock {
+        Some(world) => Some(Participant::join(node, world)?),
+        None => None,
+    };
+    let mut checkpointer = o
+        .checkpoint
+        .as_ref()
+        .map(|path| Checkpointer::new(path.clone(), o.checkpoint_every));
+    let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
+    let metronome = Metronome {
+        period,
+        deadline: Instant::now() + period,
+    };
+    let mut stats = TickStats::new(longest_gap_ns);
+    let deposit_wake = match (wakes_on_deposit, deposit_wake) {
+        (Some(min_interval), None) => Some(DepositWake::new(node, &o.name, config, min_interval)?),
+        (_, wake) => wake,
+    };
+    let mut pace: Box<dyn Pace> = match (clock, deposit_wake) {
+        (Some(clock), _) => Box::new(Lockstep {
+            clock,
+            last_step: None,
+            field: o.name.clone(),
+        }),
+        (None, Some(wake)) => Box::new(OnDeposit {
+            wake,
+            metronome,
+            early_frames: 0,
+        }),
+        (None, None) => Box::new(metronome),
+    };
+    while pace.next_tick(node, &server, stats.last_frame_at)? == Next::Tick {
+        let out = pace.tick(&mut server, stats.last_frame_at)?;
+        stats.count(&out);
+        if let Some(c) = &mut checkpointer {
+            c.maybe_write(&server);
+        }
+        stats.every_second(node, &o.name, server.stepper());
+        if o.ticks.is_some_and(|n| stats.ticks >= n)
+            || o.duration.is_some_and(|d| started.elapsed() >= d)
+        {
+            break;
+        }
+    }
+    let checkpoint = match &mut checkpointer {
+        Some(c) => {
+            c.finish(&server)?;
+            Some(c.summary())
+        }
+        None => None,
+    };
+    Ok(Some(summarize(
+        o,
+        started,
+        &server,
+        &stats,
+        Extras {
+            checkpoint,
+            standby,
+            frames_on_deposit: pace.frames_on_deposit(),
+        },
+    )))
+}
+
+/// The field's server at the start of the loop, and what taking over (for a standby) measured.
+struct Started {
+    server: FieldServer,
+    /// The gap between the primary's last frame and the standby's first (0 for a primary).
+    longest_gap_ns: u64,
+    standby: Option<StandbySummary>,
+}
+
+/// Starts the field's server: a new one (restored from a checkpoint if asked), or a standby's
+/// once it took over (`None`: stopped before).
+fn start(node: &Node<Svc>, o: &FieldRunOptions) -> Result<Option<Started>, FieldRunError> {
+    if o.standby {
         let Some((server, takeover, mirrored)) = run_standby(node, o)? else {
             return Ok(None);
         };
@@ -151,156 +242,54 @@ pub fn run_field(
                 .saturating_sub(takeover.detected_stamp_ns)),
             takeover.deposits_carried
         );
-        standby = Some(StandbySummary {
-            took_over: true,
-            mirrored_frames: Some(mirrored),
-            last_mirrored_sequence: Some(takeover.last_mirrored_sequence),
-            takeover_gap_ms: Some(ms(gap_ns)),
-            deposits_carried: Some(takeover.deposits_carried as u64),
-        });
-        (server, gap_ns)
-    } else {
-        let restore = o
-            .restore
-            .as_ref()
-            .map(|(_, c)| (c.header, c.cells.as_slice()));
-        if let Some((path, c)) = &o.restore {
-            eprintln!(
-                "field '{}': restored frame {} (t = {:.3} s, {} deposits applied) from {}",
-                o.name,
-                c.header.sequence,
-                c.header.sim_time_s,
-                c.header.deposits_applied,
-                path.display()
-            );
-        }
-        (
-            FieldServer::start(node, &o.name, config.clone(), restore)?,
-            0,
-        )
-    };
-    server
-        .set_threads(o.threads)
-        .map_err(|source| ShmError::Config {
-            field: o.name.clone(),
-            source,
-        })?;
-    // Each frame's inputs, for `pheromone bridge` (mirrors on other hosts).
-    server.publish_inputs(node)?;
-    // Lockstep: join the world's run once every port exists.
-    let clock = match &o.clock {
-        Some(world) => Some(Participant::join(node, world)?),
-        None => None,
-    };
-    let mut checkpointer = o.checkpoint.as_ref().map(|path| Checkpointer {
-        path: path.clone(),
-        every: o.checkpoint_every,
-        last: Instant::now(),
-        writing: None,
-        written: 0,
-        failed: 0,
-    });
-    let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
-    let mut deadline = Instant::now() + period;
-    let mut window = Window::new(Instant::now());
-    let mut max_compute_ns = 0u64;
-    let mut ticks = 0u64;
-    let mut dead_nodes_cleaned = 0u64;
-    let mut last_clock_step: Option<u64> = None;
-    let mut last_frame_at = Instant::now();
-    if let (Some(min_interval), None) = (wakes_on_deposit, &deposit_wake) {
-        deposit_wake = Some(DepositWake::new(node, &o.name, config, min_interval)?);
+        return Ok(Some(Started {
+            server,
+            longest_gap_ns: gap_ns,
+            standby: Some(StandbySummary {
+                took_over: true,
+                mirrored_frames: Some(mirrored),
+                last_mirrored_sequence: Some(takeover.last_mirrored_sequence),
+                takeover_gap_ms: Some(ms(gap_ns)),
+                deposits_carried: Some(takeover.deposits_carried as u64),
+            }),
+        }));
     }
-    let deposit_wake = deposit_wake;
-    let mut early_frames = 0u64;
-    loop {
-        if let Some(clock) = &clock {
-            // Lockstep: one tick per world step, acknowledged once published.
-            match clock.next_clock(Duration::from_millis(20))? {
-                Some(msg) if msg.finished != 0 => break,
-                Some(msg) if last_clock_step.is_some_and(|s| msg.step <= s) => continue,
-                Some(msg) => last_clock_step = Some(msg.step),
-                None => {
-                    if node.wait(Duration::ZERO).is_err() {
-                        break;
-                    }
-                    if clock.conductor_gone() {
-                        eprintln!(
-                            "field '{}': the world's clock is gone without announcing the end; stopping",
-                            o.name
-                        );
-                        break;
-                    }
-                    // Idle between steps: late readers still get the current frame.
-                    server.serve_new_readers()?;
-                    continue;
-                }
-            }
-        } else if let Some(wake) = &deposit_wake {
-            match wake.wait(node, &server, deadline, last_frame_at)? {
-                Wake::Stop => break,
-                Wake::Deposit => early_frames += 1,
-                Wake::Tick => {
-                    deadline += period;
-                    if deadline + period < Instant::now() {
-                        deadline = Instant::now() + period;
-                    }
-                }
-            }
-        } else {
-            if !wait_serving_readers(node, &server, deadline)? {
-                break; // SIGINT / SIGTERM
-            }
-            deadline += period;
-            if deadline + period < Instant::now() {
-                deadline = Instant::now() + period; // fell behind: don't burst to catch up
-            }
-        }
-        if clock.is_some() && node.wait(Duration::ZERO).is_err() {
-            break;
-        }
-        let out = if deposit_wake.is_some() {
-            // Stepped by the real time since the last frame (at most one period).
-            server.tick_dt(last_frame_at.elapsed().as_secs_f32())?
-        } else {
-            server.tick()?
-        };
-        if let (Some(clock), Some(step)) = (&clock, last_clock_step) {
-            clock.ack(step, lockstep::role::FIELD, 0)?;
-        }
-        let now = Instant::now();
-        let gap_ns = now.duration_since(last_frame_at).as_nanos() as u64;
-        last_frame_at = now;
-        longest_gap_ns = longest_gap_ns.max(gap_ns);
-        ticks += 1;
-        max_compute_ns = max_compute_ns.max(out.compute_ns);
-        window.add(&out, gap_ns);
-        if let Some(c) = &mut checkpointer {
-            c.maybe_write(&server);
-        }
-        if window.started.elapsed() >= Duration::from_secs(1) {
-            // Clients killed since the last second: free their ports and the frames they held.
-            let cleaned = cleanup_dead_nodes(node);
-            dead_nodes_cleaned += cleaned;
-            window.log(&o.name, server.stepper(), cleaned);
-            window = Window::new(Instant::now());
-        }
-        if o.ticks.is_some_and(|n| ticks >= n) || o.duration.is_some_and(|d| started.elapsed() >= d)
-        {
-            break;
-        }
+    let restore = o
+        .restore
+        .as_ref()
+        .map(|(_, c)| (c.header, c.cells.as_slice()));
+    if let Some((path, c)) = &o.restore {
+        eprintln!(
+            "field '{}': restored frame {} (t = {:.3} s, {} deposits applied) from {}",
+            o.name,
+            c.header.sequence,
+            c.header.sim_time_s,
+            c.header.deposits_applied,
+            path.display()
+        );
     }
-    let checkpoint = match &mut checkpointer {
-        Some(c) => {
-            c.finish(&server)?;
-            Some(CheckpointSummary {
-                file: c.path.display().to_string(),
-                written: c.written,
-                failed: c.failed,
-            })
-        }
-        None => None,
-    };
+    Ok(Some(Started {
+        server: FieldServer::start(node, &o.name, o.config.clone(), restore)?,
+        longest_gap_ns: 0,
+        standby: None,
+    }))
+}
+
+/// The parts of the summary that only some runs have.
+struct Extras {
+    checkpoint: Option<CheckpointSummary>,
+    standby: Option<StandbySummary>,
+    frames_on_deposit: Option<u64>,
+}
+
+/// Logs the run's last line and returns its summary.
+fn summarize(
+    o: &FieldRunOptions,
+    started: Instant,
+    server: &FieldServer,
+    stats: &TickStats,
+    extras: Extras,
+) -> FieldRunSummary {
     let stepper = server.stepper();
     let counters = stepper.counters;
     let (total_mass, max): (Vec<f64>, Vec<f32>) = match server.latest() {
@@ -310,17 +299,18 @@ pub fn run_field(
         None => (vec![], vec![]),
     };
     eprintln!(
-        "field '{}' stopped after {ticks} ticks ({:.1} s): {} deposits applied, {} rejected, longest tick {:.3} ms, longest gap between frames {:.3} ms",
+        "field '{}' stopped after {} ticks ({:.1} s): {} deposits applied, {} rejected, longest tick {:.3} ms, longest gap between frames {:.3} ms",
         o.name,
+        stats.ticks,
         started.elapsed().as_secs_f64(),
         counters.applied,
         counters.rejected_total(),
-        max_compute_ns as f64 / 1e6,
-        longest_gap_ns as f64 / 1e6
+        stats.max_compute_ns as f64 / 1e6,
+        stats.longest_gap_ns as f64 / 1e6
     );
-    Ok(Some(FieldRunSummary {
+    FieldRunSummary {
         field: o.name.clone(),
-        ticks,
+        ticks: stats.ticks,
         sequence: stepper.sequence,
         sim_time_s: stepper.sim_time_s,
         deposits_applied: counters.applied,
@@ -330,15 +320,181 @@ pub fn run_field(
             .collect(),
         total_mass,
         max,
-        max_tick_compute_ms: max_compute_ns as f64 / 1e6,
-        frames_on_deposit: deposit_wake.as_ref().map(|_| early_frames),
-        longest_tick_gap_ms: longest_gap_ns as f64 / 1e6,
-        dead_nodes_cleaned,
+        max_tick_compute_ms: stats.max_compute_ns as f64 / 1e6,
+        frames_on_deposit: extras.frames_on_deposit,
+        longest_tick_gap_ms: stats.longest_gap_ns as f64 / 1e6,
+        dead_nodes_cleaned: stats.dead_nodes_cleaned,
         restored_sequence: o.restore.as_ref().map(|(_, c)| c.header.sequence),
-        checkpoint,
-        standby,
+        checkpoint: extras.checkpoint,
+        standby: extras.standby,
         wall_time_s: started.elapsed().as_secs_f64(),
-    }))
+    }
+}
+
+/// Whether the loop ticks again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Next {
+    Tick,
+    /// The run ends (Ctrl-C / SIGTERM, the world's end).
+    Stop,
+}
+
+/// How the field waits for its next frame: on wall time ([`Metronome`]), on wall time or
+/// sooner for deposits ([`OnDeposit`]), or once per step of a simulated world ([`Lockstep`]).
+trait Pace {
+    /// Waits until the next frame is due (serving readers that attach meanwhile).
+    /// `last_frame_at`: when the previous frame was published.
+    fn next_tick(
+        &mut self,
+        node: &Node<Svc>,
+        server: &FieldServer,
+        last_frame_at: Instant,
+    ) -> Result<Next, ShmError>;
+
+    /// Computes and publishes the frame.
+    fn tick(
+        &mut self,
+        server: &mut FieldServer,
+        _last_frame_at: Instant,
+    ) -> Result<TickOutcome, ShmError> {
+        server.tick()
+    }
+
+    /// Frames published between ticks because deposits arrived (a field that publishes on
+    /// deposit), else `None`.
+    fn frames_on_deposit(&self) -> Option<u64> {
+        None
+    }
+}
+
+/// Ticks on wall time, one per `period`.
+struct Metronome {
+    period: Duration,
+    deadline: Instant,
+}
+
+impl Metronome {
+    /// The next deadline, one period on; a field that fell behind does not burst to catch up.
+    fn advance(&mut self) {
+        self.deadline += self.period;
+        if self.deadline + self.period < Instant::now() {
+            self.deadline = Instant::now() + self.period;
+        }
+    }
+}
+
+impl Pace for Metronome {
+    fn next_tick(
+        &mut self,
+        node: &Node<Svc>,
+        server: &FieldServer,
+        _last_frame_at: Instant,
+    ) -> Result<Next, ShmError> {
+        if !wait_serving_readers(node, server, self.deadline)? {
+            return Ok(Next::Stop); // SIGINT / SIGTERM
+        }
+        self.advance();
+        Ok(Next::Tick)
+    }
+}
+
+/// Ticks on wall time, and publishes sooner when deposits arrive
+/// (`FieldRunOptions::publish_on_deposit`); every frame steps by the real time since the last.
+struct OnDeposit {
+    wake: DepositWake,
+    metronome: Metronome,
+    early_frames: u64,
+}
+
+impl Pace for OnDeposit {
+    fn next_tick(
+        &mut self,
+        node: &Node<Svc>,
+        server: &FieldServer,
+        last_frame_at: Instant,
+    ) -> Result<Next, ShmError> {
+        match self
+            .wake
+            .wait(node, server, self.metronome.deadline, last_frame_at)?
+        {
+            Wake::Stop => return Ok(Next::Stop),
+            Wake::Deposit => self.early_frames += 1,
+            Wake::Tick => self.metronome.advance(),
+        }
+        Ok(Next::Tick)
+    }
+
+    fn tick(
+        &mut self,
+        server: &mut FieldServer,
+        last_frame_at: Instant,
+    ) -> Result<TickOutcome, ShmError> {
+        // Stepped by the real time since the last frame (at most one period).
+        server.tick_dt(last_frame_at.elapsed().as_secs_f32())
+    }
+
+    fn frames_on_deposit(&self) -> Option<u64> {
+        Some(self.early_frames)
+    }
+}
+
+/// One tick per step of a simulated world's clock, acknowledged once published.
+struct Lockstep {
+    clock: Participant,
+    /// The last step ticked (a step the clock repeats is not ticked again).
+    last_step: Option<u64>,
+    /// The field's name, for the log.
+    field: String,
+}
+
+impl Pace for Lockstep {
+    fn next_tick(
+        &mut self,
+        node: &Node<Svc>,
+        server: &FieldServer,
+        _last_frame_at: Instant,
+    ) -> Result<Next, ShmError> {
+        loop {
+            match self.clock.next_clock(Duration::from_millis(20))? {
+                Some(msg) if msg.finished != 0 => return Ok(Next::Stop),
+                Some(msg) if self.last_step.is_some_and(|s| msg.step <= s) => continue,
+                Some(msg) => {
+                    self.last_step = Some(msg.step);
+                    break;
+                }
+                None => {
+                    if node.wait(Duration::ZERO).is_err() {
+                        return Ok(Next::Stop);
+                    }
+                    if self.clock.conductor_gone() {
+                        eprintln!(
+                            "field '{}': the world's clock is gone without announcing the end; stopping",
+                            self.field
+                        );
+                        return Ok(Next::Stop);
+                    }
+                    // Idle between steps: late readers still get the current frame.
+                    server.serve_new_readers()?;
+                }
+            }
+        }
+        if node.wait(Duration::ZERO).is_err() {
+            return Ok(Next::Stop);
+        }
+        Ok(Next::Tick)
+    }
+
+    fn tick(
+        &mut self,
+        server: &mut FieldServer,
+        _last_frame_at: Instant,
+    ) -> Result<TickOutcome, ShmError> {
+        let out = server.tick()?;
+        if let Some(step) = self.last_step {
+            self.clock.ack(step, lockstep::role::FIELD, 0)?;
+        }
+        Ok(out)
+    }
 }
 
 /// The standby phase: mirror the primary until it dies, then take over. `None` when stopped
@@ -385,6 +541,25 @@ struct Checkpointer {
 }
 
 impl Checkpointer {
+    fn new(path: PathBuf, every: Duration) -> Self {
+        Self {
+            path,
+            every,
+            last: Instant::now(),
+            writing: None,
+            written: 0,
+            failed: 0,
+        }
+    }
+
+    fn summary(&self) -> CheckpointSummary {
+        CheckpointSummary {
+            file: self.path.display().to_string(),
+            written: self.written,
+            failed: self.failed,
+        }
+    }
+
     fn collect(&mut self, wait: bool) {
         if let Some(h) = self.writing.take() {
             if !wait && !h.is_finished() {
@@ -428,6 +603,53 @@ impl Checkpointer {
             self.written += 1;
         }
         Ok(())
+    }
+}
+
+/// What the loop counts: the run's totals and the current second's [`Window`].
+struct TickStats {
+    ticks: u64,
+    max_compute_ns: u64,
+    longest_gap_ns: u64,
+    dead_nodes_cleaned: u64,
+    /// When the last frame was published (the start, before the first).
+    last_frame_at: Instant,
+    window: Window,
+}
+
+impl TickStats {
+    /// `longest_gap_ns`: a gap before the first tick (a standby's takeover).
+    fn new(longest_gap_ns: u64) -> Self {
+        Self {
+            ticks: 0,
+            max_compute_ns: 0,
+            longest_gap_ns,
+            dead_nodes_cleaned: 0,
+            last_frame_at: Instant::now(),
+            window: Window::new(Instant::now()),
+        }
+    }
+
+    /// Counts a frame just published.
+    fn count(&mut self, out: &TickOutcome) {
+        let now = Instant::now();
+        let gap_ns = now.duration_since(self.last_frame_at).as_nanos() as u64;
+        self.last_frame_at = now;
+        self.longest_gap_ns = self.longest_gap_ns.max(gap_ns);
+        self.ticks += 1;
+        self.max_compute_ns = self.max_compute_ns.max(out.compute_ns);
+        self.window.add(out, gap_ns);
+    }
+
+    /// Once a second: frees what clients killed since the last second held (their ports and
+    /// frames), logs the window's line and starts the next window.
+    fn every_second(&mut self, node: &Node<Svc>, field: &str, stepper: &Stepper) {
+        if self.window.started.elapsed() >= Duration::from_secs(1) {
+            let cleaned = cleanup_dead_nodes(node);
+            self.dead_nodes_cleaned += cleaned;
+            self.window.log(field, stepper, cleaned);
+            self.window = Window::new(Instant::now());
+        }
     }
 }
 

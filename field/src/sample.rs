@@ -5,6 +5,28 @@
 use crate::geometry::GridGeometry;
 
 /// A read-only view of a frame: geometry, channel count and the planes (`channel, y, x`).
+///
+/// A [`FieldReader`](crate::shm::FieldReader) lends one for each frame (`reader.frame()?.view`,
+/// see its example); any buffer of the right length is one too:
+///
+/// ```
+/// use field::{FrameView, GridGeometry, SamplePose};
+///
+/// // 4 × 4 cells of 0.5 m, one channel; cell (2, 1), centred at (1.25 m, 0.75 m), holds 1.
+/// let geometry = GridGeometry::new(4, 4, 0.5).unwrap();
+/// let mut cells = vec![0.0f32; geometry.cells()];
+/// cells[geometry.index(2, 1)] = 1.0;
+/// let view = FrameView::new(geometry, 1, &cells);
+///
+/// assert_eq!(view.value(0, 1.25, 0.75), 1.0);
+/// // Half-way between two cell centres, bilinear.
+/// assert_eq!(view.value(0, 1.0, 0.75), 0.5);
+/// // Uphill toward the cell along +x.
+/// assert_eq!(view.gradient(0, 0.75, 0.75), (1.0, 0.0));
+/// // A robot at (1.25 m, 0.5 m) heading +x with a 0.5 m wheel base: the cell is on its left.
+/// let (left, right) = view.antennas(0, SamplePose::new(1.25, 0.5, 0.0), 0.5);
+/// assert!(left > right);
+/// ```
 #[derive(Debug, Clone, Copy)]
 pub struct FrameView<'a> {
     pub geometry: GridGeometry,

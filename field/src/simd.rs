@@ -1,4 +1,4 @@
-//! Run-time CPU dispatch of the ambient pass's kernels (`crate::ambient`).
+//! Run-time CPU dispatch of the ambient pass's row kernels (`kernels`, used by `crate::ambient`).
 //!
 //! Each kernel is plain Rust marked `#[inline(always)]`. This module instantiates it twice: as
 //! is (the baseline of the build target, SSE2 on x86-64) and inside a function compiled with
@@ -7,11 +7,15 @@
 //! perform the same IEEE operations in the same order: their results are bit-identical.
 //!
 //! The AVX2 instantiation may only run on a CPU that has AVX2; `Dispatch::detect` checks it once
-//! with `is_x86_feature_detected!`. This is the crate's only `unsafe` outside `shm`.
+//! with `is_x86_feature_detected!`.
+
+// Calling the AVX2 instantiation (a `target_feature` function) and the prefetch intrinsic (it
+// takes a pointer) is `unsafe`; `unsafe_code` is denied everywhere but in a few such files.
+#![allow(unsafe_code)]
+
+pub(crate) mod kernels;
 
 use std::sync::OnceLock;
-
-use crate::ambient;
 
 /// Which instantiation of the kernels runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -80,12 +84,12 @@ macro_rules! dispatch {
     ($(fn $name:ident($($arg:ident: $ty:ty),*);)*) => {
         #[cfg(target_arch = "x86_64")]
         mod avx2 {
-            use super::ambient;
+            use super::kernels;
             $(
                 #[target_feature(enable = "avx2")]
                 #[allow(clippy::too_many_arguments)]
                 pub(super) unsafe fn $name($($arg: $ty),*) {
-                    ambient::$name($($arg),*)
+                    kernels::$name($($arg),*)
                 }
             )*
         }
@@ -105,7 +109,7 @@ macro_rules! dispatch {
                         unsafe { avx2::$name($($arg),*) };
                         return;
                     }
-                    ambient::$name($($arg),*)
+                    kernels::$name($($arg),*)
                 }
             )*
         }

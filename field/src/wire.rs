@@ -27,8 +27,6 @@
 //! | `pheromone/W/r<ID>/cmd`, `…/status` (+ `-ready`) | `CmdMsg`, `FollowerStatusMsg` | follower → world, observers |
 //! | `pheromone/G/graph`, `…/graph-update`, `…/contend` (+ `-ready`) | `GraphSnapshot`, `GraphUpdateMsg`, `ContendWire` | graph writer ↔ robots |
 
-use crate::link::LinkOptions;
-
 pub use iceoryx2::prelude::ZeroCopySend;
 
 /// The layout version as a literal (for `concat!`): **the one place to bump** on any change to
@@ -81,6 +79,8 @@ macro_rules! wire_type_name {
 #[macro_export]
 macro_rules! wire_type {
     ($t:ty, $name:literal, size = $size:expr, align = $align:expr) => {
+        // Implementing `ZeroCopySend` is `unsafe`: allowed here, where the contract is stated.
+        #[allow(unsafe_code)]
         // SAFETY: the caller guarantees `$t` is `#[repr(C)]` plain data (numbers and arrays of
         // them, no pointers or references), so its bytes mean the same in every process that maps
         // them; the asserts below pin its size and alignment, and the type name carries the
@@ -116,10 +116,32 @@ macro_rules! wire_type {
 }
 
 /// The type name a wire type is registered under (for error messages).
+#[allow(unsafe_code)] // iceoryx2's `type_name` is an `unsafe fn`
 pub fn type_name_of<T: ZeroCopySend + ?Sized>() -> &'static str {
     // SAFETY: `type_name` only returns a constant string; iceoryx2 marks it unsafe because a
     // wrong name would let incompatible types share a service, which reading it cannot do.
     unsafe { <T as ZeroCopySend>::type_name() }
+}
+
+// ---- links (`crate::link`) -----------------------------------------------------------------
+
+/// Limits every side of a link ([`crate::link`]) agrees on (they are part of the service's identity).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LinkOptions {
+    pub max_publishers: usize,
+    pub max_subscribers: usize,
+    /// Messages a subscriber buffers; with `keep_latest` the oldest is overwritten when full.
+    pub buffer: usize,
+    /// `true`: a full buffer drops its oldest message (state such as poses, where only the newest
+    /// matters). `false`: the sender is told the message was not delivered.
+    pub keep_latest: bool,
+}
+
+impl Default for LinkOptions {
+    /// The options of every robot link ([`ROBOT_LINK`]).
+    fn default() -> Self {
+        ROBOT_LINK
+    }
 }
 
 // ---- field `F` ------------------------------------------------------------------------------

@@ -152,6 +152,8 @@ fn other_layout_name(name: &str) -> &'static str {
     Box::leak(format!("pheromone::{name}/v{v}").into_boxed_str())
 }
 
+// The layout test needs a wire type under another type name, which `wire_type!` cannot give.
+#[allow(unsafe_code)]
 // SAFETY: a `#[repr(C)]` wrapper of a wire type (plain numbers); only its type name differs.
 unsafe impl iceoryx2::prelude::ZeroCopySend for OtherLayoutDeposit {
     unsafe fn type_name() -> &'static str {

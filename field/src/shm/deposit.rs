@@ -17,6 +17,27 @@ use crate::messages::DepositMsg;
 /// iceoryx2 drops samples whose publisher disappears before the subscriber first connected to
 /// it, so a publisher that sent deposits waits, when dropped (or on `flush`), until the field has
 /// published two more frames — by then its drain loop has taken everything that was sent.
+///
+/// Attach to the field `main` as robot 7 and deposit:
+///
+/// ```no_run
+/// use std::time::Duration;
+///
+/// use field::shm::{create_node, DepositPublisher, ShmError};
+/// use field::DepositMsg;
+///
+/// fn main() -> Result<(), ShmError> {
+///     let node = create_node("my-depositor")?;
+///     let mut depositor = DepositPublisher::attach_within(&node, "main", 7, Duration::from_secs(5))?;
+///     // Seed 000's ellipse kernel on channel 0 at (2 m, 3 m): amount 0.2, the pose covariance
+///     // [xx, xy, yy] (m²), cut off at 1 m, γ capped at 100.
+///     depositor.send(DepositMsg::ellipse(0, 2.0, 3.0, 0.2, [0.01, 0.0, 0.01], 1.0, 100.0))?;
+///     // Waits until the field has taken it (dropping the publisher waits too).
+///     let taken = depositor.flush(Duration::from_secs(1));
+///     println!("deposit taken by the field: {taken}");
+///     Ok(())
+/// }
+/// ```
 pub struct DepositPublisher {
     names: FieldServices,
     publisher: Publisher<Svc, DepositMsg, ()>,

@@ -3,6 +3,9 @@
 //! applied; `pheromone/F/config` holds the field's configuration as TOML (history 1), so a mirror
 //! builds the same `Stepper`. Also the byte views of wire types the bridge sends over the network.
 
+// The byte views of wire types reinterpret plain `#[repr(C)]` numbers as bytes and back.
+#![allow(unsafe_code)]
+
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;

@@ -1,6 +1,6 @@
 //! The field in iceoryx2 shared memory: the field process (`FieldServer`), readers
-//! (`FieldReader`) and deposit publishers (`DepositPublisher`). This is the crate's only module
-//! with `unsafe`.
+//! (`FieldReader`) and deposit publishers (`DepositPublisher`). Two of its files allow `unsafe`:
+//! `server.rs` (the frame loan) and `inputs.rs` (byte views of wire types).
 //!
 //! Services for a field called `F` (DESIGN.md):
 //! - `pheromone/F/frame`: publish-subscribe of `[f32]` with a `FrameHeader` user header, one

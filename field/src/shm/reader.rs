@@ -110,6 +110,34 @@ pub struct Frame<'a> {
 /// When the field dies the reader keeps its last frame (`frame()` still lends it) and
 /// `field_alive` turns false; a field restarted under the same name (or a standby taking over)
 /// publishes to the same services, and the reader receives its frames without attaching again.
+///
+/// Attach to the field `main` (`pheromone field --name main`), wait for a frame, sample it:
+///
+/// ```no_run
+/// use std::time::Duration;
+///
+/// use field::shm::{create_node, FieldReader, ShmError};
+/// use field::SamplePose;
+///
+/// fn main() -> Result<(), ShmError> {
+///     let node = create_node("my-reader")?;
+///     // Retries while the field is not up yet, for at most 5 s.
+///     let mut reader = FieldReader::attach_within(&node, "main", Duration::from_secs(5))?;
+///     // Sleeps on the frame event until a frame newer than the one held comes (at most 1 s).
+///     if reader.wait_frame(Duration::from_secs(1))? {
+///         let frame = reader.frame().expect("a frame came");
+///         // Channel 0 at (2 m, 3 m), its gradient there, and a robot's two antennas.
+///         let value = frame.view.value(0, 2.0, 3.0);
+///         let (gx, gy) = frame.view.gradient(0, 2.0, 3.0);
+///         let (left, right) = frame.view.antennas(0, SamplePose::new(2.0, 3.0, 0.0), 0.2);
+///         println!(
+///             "frame {}: {value} (gradient {gx}, {gy}; antennas {left}, {right})",
+///             frame.header.sequence
+///         );
+///     }
+///     Ok(())
+/// }
+/// ```
 pub struct FieldReader {
     names: FieldServices,
     service: FrameFactory,

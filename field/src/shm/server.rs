@@ -1,6 +1,9 @@
 //! The field process: `FieldServer` creates the field's services, publishes the first frame
 //! and then one frame per `tick`, computed straight into a loaned shared-memory sample.
 
+// The loaned frame is taken as initialized (`assume_init`) before `compute` overwrites it.
+#![allow(unsafe_code)]
+
 use iceoryx2::prelude::*;
 
 use super::inputs::InputsPublisher;
