@@ -34,6 +34,17 @@ def deadline_loop(timeout_s, what):
             pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
 
 
+#: Fixtures that start `pheromone` processes: a test using one is marked `process`
+#: (`pytest -m "not process"` runs the tests that need no binary).
+PROCESS_FIXTURES = {"start_field", "sim_run", "start_bridge", "zenoh_bin"}
+
+
+def pytest_collection_modifyitems(items):
+    for item in items:
+        if PROCESS_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.process)
+
+
 # ---- leftovers --------------------------------------------------------------------------------
 
 
@@ -165,7 +176,9 @@ class FieldProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-                raise AssertionError(f"field {self.name} did not stop on SIGINT: {self.stderr()}")
+                raise AssertionError(
+                    f"field {self.name} did not stop on SIGINT: {self.stderr()}"
+                ) from None
         self._stderr.close()
         return self.proc.returncode
 
@@ -207,7 +220,7 @@ def run_cli(*args, timeout=30):
     except subprocess.TimeoutExpired:
         STARTED.send_signal(signal.SIGINT)
         out, err = STARTED.communicate()
-        raise AssertionError(f"pheromone {' '.join(map(str, args))} timed out: {err}")
+        raise AssertionError(f"pheromone {' '.join(map(str, args))} timed out: {err}") from None
     assert STARTED.returncode == 0, f"pheromone {' '.join(map(str, args))} failed: {err}"
     return out
 

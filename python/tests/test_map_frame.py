@@ -33,7 +33,9 @@ def sim_run(tmp_path):
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-            raise AssertionError(f"sim did not stop on SIGINT: {err_path.read_text()[-2000:]}")
+            raise AssertionError(
+                f"sim did not stop on SIGINT: {err_path.read_text()[-2000:]}"
+            ) from None
     err.close()
     # Interrupted, the run stops every process of it and says so (status 1).
     text = err_path.read_text()
@@ -61,7 +63,7 @@ def test_a_mappers_map_frame_is_read_by_the_python_package(sim_run):
         assert header.channels == 2
         assert header.width == header.height and header.width > 0
         assert header.cell_size_m > 0
-        assert cells.shape == (2, header.height, header.width)
+        assert cells.shape == (2, header.height, header.width) == field.shape
         assert cells.dtype == np.float32
         assert np.isfinite(cells).all()
         # The map knows the cells its scans saw: occupancy log-odds are not all zero.

@@ -24,6 +24,8 @@ from conftest import BIN, STARTED_PIDS, deadline_loop
 
 REQUIRED = os.environ.get("PHEROMONE_REQUIRE_ZENOH") == "1"
 
+pytestmark = pytest.mark.zenoh
+
 try:
     import xxhash
     import zenoh  # noqa: F401
@@ -65,7 +67,7 @@ def zenoh_bin():
     # An invalid field name: a build with Zenoh refuses it before opening anything.
     p = subprocess.run([str(BIN), "bridge", "--field", "no/such", "--listen", "tcp/127.0.0.1:1"],
                        capture_output=True, text=True, timeout=30)
-    if "no Zenoh" in p.stderr or p.returncode == 2 and "unrecognized subcommand" in p.stderr:
+    if "no Zenoh" in p.stderr or (p.returncode == 2 and "unrecognized subcommand" in p.stderr):
         msg = f"{BIN} has no `bridge` (cargo build --features zenoh): {p.stderr.strip()}"
         if REQUIRED:
             pytest.fail(msg)
@@ -199,7 +201,7 @@ def _corrupted_messages_are_refused(raw):
         with pytest.raises(zf.WireError, match=re.escape(what)):
             zf.decode_frame(flipped(i))
     # Every byte the checksum or the envelope's checks cover.
-    for i in [*range(0, 8), *range(24, len(raw))]:
+    for i in [*range(8), *range(24, len(raw))]:
         with pytest.raises(zf.WireError):
             zf.decode_frame(flipped(i, 0x01))
     # Epoch and sequence (bytes 8..24) are outside the body checksum (docs/mirror-wire.md).
