@@ -1,4 +1,6 @@
-"""Fixtures: real `pheromone field` processes (binary from $PHEROMONE_BIN, default
+"""Fixtures of the Python tests: real `pheromone field` processes, and nothing left behind.
+
+Fixtures: real `pheromone field` processes (binary from $PHEROMONE_BIN, default
 `target/debug/pheromone` of the repository), each with a field name unique to this run, stopped
 with SIGINT and waited for (also when a test fails); and a session check that the run leaves
 nothing in /dev/shm or iceoryx2's node directory."""

@@ -1,4 +1,6 @@
-"""`pheromone export` against a real field: the `.npy` file, loaded with NumPy, equals the frame
+"""`pheromone export` of a real field: the `.npy` equals the frame, the PGM the scaled channel.
+
+`pheromone export` against a real field: the `.npy` file, loaded with NumPy, equals the frame
 read zero-copy by `pheromone.Field`; the map_server PGM + YAML holds the chosen channel scaled
 to 0–255, flipped so that its first row is the top of the map."""
 

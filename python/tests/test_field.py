@@ -1,5 +1,7 @@
-"""Against real `pheromone field` processes: attach, zero-copy, values equal to Rust's, deposit
-round trip, refusal of another layout, frame lifetimes, the watch example."""
+"""`pheromone.Field` against real fields: attach, zero-copy frames, values and deposits as Rust's.
+
+Also the grid as attributes, deposits equal to `pheromone deposit`'s, refusal of another layout,
+frame lifetimes, `wait_frame`'s spin and timeout, and the watch example."""
 
 import ctypes
 import os

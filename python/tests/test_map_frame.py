@@ -1,4 +1,6 @@
-"""A mapper's map, read with the Python package: `pheromone sim ias-ss --merge` as processes
+"""A mapper's map of `sim ias-ss --merge` (processes), read with `pheromone.Field`.
+
+A mapper's map, read with the Python package: `pheromone sim ias-ss --merge` as processes
 starts one `pheromone mapper` per robot, each publishing its occupancy + pheromone map as the
 field `<run>-map-r<ID>` (run tag `sim<PID>x0`); the test attaches to robot 1's map while the
 run steps, checks its frame (2 channels, finite, the geometry its header states), and stops

@@ -1,4 +1,6 @@
-"""`pheromone/_wire.py` against the Rust layout: the layout-version literal of
+"""`pheromone/_wire.py` against the Rust layout, parsed from field/src; no process.
+
+`pheromone/_wire.py` against the Rust layout: the layout-version literal of
 `field/src/wire.rs`, and the fields, sizes and alignments of every `wire_type!` of
 `field/src/messages.rs` that Python mirrors. Parsed from the sources, so a change on the Rust
 side that is not mirrored here fails this test (the binary has no command that prints them)."""

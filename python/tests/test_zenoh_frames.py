@@ -1,4 +1,6 @@
-"""`pheromone bridge --frames` received in Python with the `eclipse-zenoh` package and decoded by
+"""`pheromone bridge --frames` received over Zenoh and decoded by `pheromone.zenoh_frames`.
+
+`pheromone bridge --frames` received in Python with the `eclipse-zenoh` package and decoded by
 `pheromone.zenoh_frames` from docs/mirror-wire.md alone: a real field (two channels, no
 evaporation, so every frame after the deposits holds the same cells) and a real bridge on a
 loopback port; the frames have the downsampled shape, verify their XXH3-64 checksum, are finite,
