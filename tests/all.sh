@@ -13,13 +13,18 @@ cargo test --workspace
 echo "== cargo test --test cli --features zenoh mirror::"
 cargo test --test cli --features zenoh mirror::
 
-# The `zenoh` extra (eclipse-zenoh 1.10.2, as the Rust zenoh crate in Cargo.lock; zstandard,
-# xxhash) is for python/tests/test_zenoh_frames.py: a bridge's --frames decoded in Python.
-echo "== python: venv .venv, pip install ./python[zenoh] pytest"
+# The `test` extra: pytest and the pinned ruff and mypy; the `zenoh` extra (eclipse-zenoh
+# 1.10.2, as the Rust zenoh crate in Cargo.lock; zstandard, xxhash) is for
+# python/tests/test_zenoh_frames.py: a bridge's --frames decoded in Python.
+echo "== python: venv .venv, pip install ./python[test,zenoh]"
 if [ ! -x .venv/bin/python ]; then
     python3 -m venv .venv
 fi
-.venv/bin/python -m pip install -q --upgrade './python[zenoh]' pytest
+.venv/bin/python -m pip install -q --upgrade './python[test,zenoh]'
+
+# Lints of the package and its tests (configured in python/pyproject.toml; a second or two).
+echo "== python: ruff check, mypy"
+(cd python && ../.venv/bin/ruff check . && ../.venv/bin/mypy)
 
 # The mirror tests above have just built target/debug/pheromone with `--features zenoh` (the
 # binary of the integration tests, `bridge` included), which test_zenoh_frames.py needs; a plain

@@ -23,57 +23,28 @@ use harness::*;
 #[test]
 fn a_deposit_from_another_process_arrives_in_a_frame_then_evaporates() {
     let name = unique("e2e");
-    let field = Proc::spawn(&[
-        "field",
-        "--name",
-        &name,
-        "--width",
-        "128",
-        "--height",
-        "128",
-        "--cell-size",
-        "0.1",
-        "--model",
-        "exponential",
-        // The old spelling of --decay-per-s, still accepted.
-        "--decay-per-sec",
-        "2",
-        "--tick-hz",
-        "50",
-        "--duration",
-        "60",
-        "--json",
-    ]);
+    let field = Proc::spawn(
+        &Cmd::field(&name)
+            .grid(128, 128)
+            .cell_size(0.1)
+            .model("exponential")
+            // The old spelling of --decay-per-s, still accepted.
+            .opt("--decay-per-sec", 2)
+            .tick_hz(50)
+            .duration(60)
+            .json()
+            .argv(),
+    );
     // The depositor is its own process; it waits for the field to exist.
-    let dep = run(&[
-        "deposit",
-        "--field",
-        &name,
-        "--x",
-        "6.4",
-        "--y",
-        "6.4",
-        "--amount",
-        "0.5",
-        "--cov",
-        "0.01,0,0.01",
-    ]);
+    let dep = run(&Cmd::deposit(&name)
+        .at(6.4, 6.4)
+        .amount(0.5)
+        .opt("--cov", "0.01,0,0.01")
+        .argv());
     assert!(dep.status.success(), "deposit failed: {}", stderr(&dep));
     // A third process reads frames until the deposit is visible…
-    let seen = run(&[
-        "probe",
-        "--field",
-        &name,
-        "--x",
-        "6.4",
-        "--y",
-        "6.4",
-        "--above",
-        "50",
-        "--timeout",
-        "20",
-        "--json",
-    ]);
+    let probe = Cmd::probe(&name).at(6.4, 6.4);
+    let seen = run(&probe.clone().opt("--above", 50).timeout(20).json().argv());
     assert!(
         seen.status.success(),
         "deposit never seen: {}",
@@ -83,20 +54,7 @@ fn a_deposit_from_another_process_arrives_in_a_frame_then_evaporates() {
     assert_eq!(seen["deposits_applied"], 1);
     assert!(seen["value"].as_f64().unwrap() > 50.0);
     // …and until it has evaporated (K = 2/s: below 1 within a few seconds).
-    let gone = run(&[
-        "probe",
-        "--field",
-        &name,
-        "--x",
-        "6.4",
-        "--y",
-        "6.4",
-        "--below",
-        "1",
-        "--timeout",
-        "20",
-        "--json",
-    ]);
+    let gone = run(&probe.opt("--below", 1).timeout(20).json().argv());
     assert!(
         gone.status.success(),
         "deposit never evaporated: {}",
@@ -122,39 +80,22 @@ fn a_deposit_from_another_process_arrives_in_a_frame_then_evaporates() {
 #[test]
 fn rejected_deposits_are_counted_by_reason() {
     let name = unique("reject");
-    let field = Proc::spawn(&[
-        "field",
-        "--name",
-        &name,
-        "--width",
-        "64",
-        "--height",
-        "64",
-        "--duration",
-        "60",
-        "--json",
-    ]);
+    let field = Proc::spawn(&Cmd::field(&name).grid(64, 64).duration(60).json().argv());
     // Not positive semi-definite (|xy| > √(xx·yy)), outside the grid, negative on an unsigned channel.
-    for extra in [
-        &[
-            "--x",
-            "1",
-            "--y",
-            "1",
-            "--amount",
-            "1",
-            "--cov",
-            "0.01,0.5,0.01",
-        ][..],
-        &["--x", "500", "--y", "1", "--amount", "1"][..],
-        &["--x", "1", "--y", "1", "--amount", "-1"][..],
+    let deposit = Cmd::deposit(&name);
+    for args in [
+        deposit
+            .clone()
+            .at(1, 1)
+            .amount(1)
+            .opt("--cov", "0.01,0.5,0.01"),
+        deposit.clone().at(500, 1).amount(1),
+        deposit.at(1, 1).amount(-1),
     ] {
-        let mut args = vec!["deposit", "--field", &name];
-        args.extend_from_slice(extra);
-        let o = run(&args);
+        let o = run(&args.argv());
         assert!(o.status.success(), "{}", stderr(&o));
     }
-    let probe = run(&["probe", "--field", &name, "--json"]);
+    let probe = run(&Cmd::probe(&name).json().argv());
     assert!(probe.status.success(), "{}", stderr(&probe));
     field.interrupt();
     let summary = json(&field.wait_exit(Duration::from_secs(10)));
@@ -170,22 +111,16 @@ fn rejected_deposits_are_counted_by_reason() {
 fn a_reader_attaching_late_to_a_slow_field_gets_its_current_frame_before_the_next_tick() {
     // One tick every 50 s: the next tick is far beyond the probes' 10 s timeout.
     let name = unique("slow");
-    let field = Proc::spawn(&[
-        "field",
-        "--name",
-        &name,
-        "--width",
-        "16",
-        "--height",
-        "16",
-        "--tick-hz",
-        "0.02",
-        "--duration",
-        "60",
-    ]);
+    let field = Proc::spawn(
+        &Cmd::field(&name)
+            .grid(16, 16)
+            .tick_hz(0.02)
+            .duration(60)
+            .argv(),
+    );
     for _ in 0..2 {
         // The first reader may meet the first frame; the second attaches after it.
-        let probe = run(&["probe", "--field", &name, "--json", "--timeout", "10"]);
+        let probe = run(&Cmd::probe(&name).json().timeout(10).argv());
         assert!(probe.status.success(), "{}", stderr(&probe));
     }
     field.interrupt();
@@ -194,50 +129,47 @@ fn a_reader_attaching_late_to_a_slow_field_gets_its_current_frame_before_the_nex
 
 #[test]
 fn tune_reproduces_the_papers_check() {
-    let o = run(&[
-        "tune",
-        "threshold",
-        "--p0",
-        "35",
-        "--k",
-        "0.0057",
-        "--level",
-        "18",
-        "--json",
-    ]);
+    let threshold = Cmd::new("tune")
+        .arg("threshold")
+        .opt("--p0", 35)
+        .opt("--k", 0.0057);
+    let o = run(&threshold.opt("--level", 18).json().argv());
     assert!(o.status.success(), "{}", stderr(&o));
     let t = json(&o)["time_to_threshold_s"].as_f64().unwrap();
     assert!((t - 116.0).abs() < 1.0, "t = {t}");
-    let o = run(&[
-        "tune", "k", "--p0", "35", "--ptm", "18", "--tm", "116.66", "--json",
-    ]);
-    let k = json(&o)["k_per_s"].as_f64().unwrap();
-    assert!((k - 0.0057).abs() < 1e-5, "k = {k}");
-    let o = run(&["tune", "k", "--p0", "35", "--ptm", "18", "--tm", "116.66"]);
+    let k = Cmd::new("tune")
+        .arg("k")
+        .opt("--p0", 35)
+        .opt("--ptm", 18)
+        .opt("--tm", 116.66);
+    let o = run(&k.clone().json().argv());
+    let k_per_s = json(&o)["k_per_s"].as_f64().unwrap();
+    assert!((k_per_s - 0.0057).abs() < 1e-5, "k = {k_per_s}");
+    let o = run(&k.argv());
     assert!(stdout(&o).contains("K = 0.0057"), "{}", stdout(&o));
 }
 
 #[test]
 fn impossible_tuning_exits_2_and_says_why() {
-    let o = run(&[
-        "tune",
-        "threshold",
-        "--p0",
-        "35",
-        "--k",
-        "0.0057",
-        "--level",
-        "3",
-        "--pa",
-        "5",
-    ]);
+    let o = run(&Cmd::new("tune")
+        .arg("threshold")
+        .opt("--p0", 35)
+        .opt("--k", 0.0057)
+        .opt("--level", 3)
+        .opt("--pa", 5)
+        .argv());
     assert_eq!(o.status.code(), Some(2));
     assert!(
         stderr(&o).contains("level = 3") && stderr(&o).contains("ambient"),
         "{}",
         stderr(&o)
     );
-    let o = run(&["tune", "k", "--p0", "35", "--ptm", "40", "--tm", "10"]);
+    let o = run(&Cmd::new("tune")
+        .arg("k")
+        .opt("--p0", 35)
+        .opt("--ptm", 40)
+        .opt("--tm", 10)
+        .argv());
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("ptm = 40"), "{}", stderr(&o));
 }
@@ -248,15 +180,12 @@ fn a_malformed_config_exits_2_naming_file_line_and_key() {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("field.toml");
     std::fs::write(&path, "width = 64\nheight = 64\ncell_sise_m = 0.1\n").unwrap();
-    let o = run(&[
-        "field",
-        "--name",
-        &unique("cfg"),
-        "--config",
-        path.to_str().unwrap(),
-        "--ticks",
-        "1",
-    ]);
+    let with_config = || {
+        Cmd::field(&unique("cfg"))
+            .opt("--config", path.display())
+            .ticks(1)
+    };
+    let o = run(&with_config().argv());
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     let e = stderr(&o);
     assert!(
@@ -265,27 +194,14 @@ fn a_malformed_config_exits_2_naming_file_line_and_key() {
     );
     // A value out of range names the setting and the value.
     std::fs::write(&path, "width = 64\nheight = 64\ntick_hz = -5\n").unwrap();
-    let o = run(&[
-        "field",
-        "--name",
-        &unique("cfg"),
-        "--config",
-        path.to_str().unwrap(),
-        "--ticks",
-        "1",
-    ]);
+    let o = run(&with_config().argv());
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("tick_hz = -5"), "{}", stderr(&o));
     // An unstable diffusion is refused before anything starts.
-    let o = run(&[
-        "field",
-        "--name",
-        &unique("cfg"),
-        "--diffusion",
-        "10",
-        "--ticks",
-        "1",
-    ]);
+    let o = run(&Cmd::field(&unique("cfg"))
+        .opt("--diffusion", 10)
+        .ticks(1)
+        .argv());
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("unstable"), "{}", stderr(&o));
     std::fs::remove_dir_all(&dir).unwrap();
@@ -294,35 +210,21 @@ fn a_malformed_config_exits_2_naming_file_line_and_key() {
 #[test]
 fn field_threads_are_checked_and_a_threaded_ambient_field_ticks() {
     for bad in ["0", "257"] {
-        let o = run(&[
-            "field",
-            "--name",
-            &unique("thr"),
-            "--threads",
-            bad,
-            "--ticks",
-            "1",
-        ]);
+        let o = run(&Cmd::field(&unique("thr"))
+            .opt("--threads", bad)
+            .ticks(1)
+            .argv());
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
         let e = stderr(&o);
         assert!(e.contains(&format!("--threads {bad}")), "{e}");
     }
-    let o = run(&[
-        "field",
-        "--name",
-        &unique("thr"),
-        "--width",
-        "300",
-        "--height",
-        "200",
-        "--model",
-        "ambient",
-        "--threads",
-        "2",
-        "--ticks",
-        "5",
-        "--json",
-    ]);
+    let o = run(&Cmd::field(&unique("thr"))
+        .grid(300, 200)
+        .model("ambient")
+        .opt("--threads", 2)
+        .ticks(5)
+        .json()
+        .argv());
     assert!(o.status.success(), "{}", stderr(&o));
     let summary: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
     assert_eq!(summary["ticks"], 5, "{summary}");
@@ -330,27 +232,22 @@ fn field_threads_are_checked_and_a_threaded_ambient_field_ticks() {
 
 #[test]
 fn a_config_file_round_trips_through_print_config() {
-    let o = run(&[
-        "field",
-        "--model",
-        "saturating",
-        "--rho-per-tick",
-        "0.1",
-        "--signed",
-        "--print-config",
-    ]);
+    let o = run(&Cmd::new("field")
+        .model("saturating")
+        .opt("--rho-per-tick", 0.1)
+        .arg("--signed")
+        .arg("--print-config")
+        .argv());
     assert!(o.status.success(), "{}", stderr(&o));
     let text = stdout(&o);
     let dir = std::env::temp_dir().join(unique("print"));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("f.toml");
     std::fs::write(&path, &text).unwrap();
-    let again = run(&[
-        "field",
-        "--config",
-        path.to_str().unwrap(),
-        "--print-config",
-    ]);
+    let again = run(&Cmd::new("field")
+        .opt("--config", path.display())
+        .arg("--print-config")
+        .argv());
     assert!(again.status.success(), "{}", stderr(&again));
     assert_eq!(stdout(&again), text);
     assert!(
@@ -373,36 +270,24 @@ fn the_robot_also_follows_the_trail_with_an_ekf_slam_localizer() {
 fn run_trail_as_processes(localizer_flags: &[&'static str]) {
     let field_name = unique("rf");
     let world = unique("rw");
-    let common = [
-        "--scenario",
-        "trail",
-        "--world",
-        &world,
-        "--field",
-        &field_name,
-        "--json",
-    ];
-    let with = |role: &'static str| {
-        let mut v = vec![role];
-        v.extend_from_slice(&common);
-        v
+    let role = |name: &str| {
+        Cmd::new(name)
+            .opt("--scenario", "trail")
+            .opt("--world", &world)
+            .opt("--field", &field_name)
+            .json()
     };
-    let field = Proc::spawn(&[
-        "field",
-        "--name",
-        &field_name,
-        "--scenario",
-        "trail",
-        "--clock",
-        &world,
-        "--json",
-    ]);
-    let mut localizer_args = with("localizer");
-    localizer_args.extend_from_slice(localizer_flags);
-    let localizer = Proc::spawn(&localizer_args);
-    let depositor = Proc::spawn(&with("depositor"));
-    let follower = Proc::spawn(&with("follower"));
-    let world_out = Proc::spawn(&with("world")).wait_exit(Duration::from_secs(120));
+    let field = Proc::spawn(
+        &Cmd::field(&field_name)
+            .opt("--scenario", "trail")
+            .opt("--clock", &world)
+            .json()
+            .argv(),
+    );
+    let localizer = Proc::spawn(&role("localizer").args(localizer_flags).argv());
+    let depositor = Proc::spawn(&role("depositor").argv());
+    let follower = Proc::spawn(&role("follower").argv());
+    let world_out = Proc::spawn(&role("world").argv()).wait_exit(Duration::from_secs(120));
     if !world_out.status.success() {
         let mut report = format!("world: {}", stderr(&world_out));
         for p in [localizer, depositor, follower, field] {
@@ -491,7 +376,13 @@ fn services_named(tag: &str) -> Vec<String> {
 fn sim_runs_a_scenario_as_processes_writes_its_outputs_and_leaves_nothing_behind() {
     let dir = std::env::temp_dir().join(unique("sim-out"));
     let dir_s = dir.display().to_string();
-    let p = Proc::spawn(&["sim", "trail", "--json", "--out", &dir_s]);
+    let p = Proc::spawn(
+        &Cmd::new("sim")
+            .arg("trail")
+            .json()
+            .opt("--out", &dir_s)
+            .argv(),
+    );
     // The run's services are named after the sim process (sim<PID>x<N>).
     let tag = format!("sim{}x", p.pid());
     let o = p.wait_exit(Duration::from_secs(300));
@@ -556,14 +447,12 @@ fn sim_runs_a_scenario_as_processes_writes_its_outputs_and_leaves_nothing_behind
 
 #[test]
 fn sim_single_process_prints_the_metrics_of_the_default_scenario() {
-    let o = run(&[
-        "sim",
-        "--single-process",
-        "--json",
-        "--no-out",
-        "--duration",
-        "40",
-    ]);
+    let o = run(&Cmd::new("sim")
+        .arg("--single-process")
+        .json()
+        .arg("--no-out")
+        .duration(40)
+        .argv());
     assert!(o.status.success(), "{}", stderr(&o));
     let m = json(&o);
     assert_eq!(m["scenario"], "blind-leader");

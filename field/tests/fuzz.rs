@@ -1,3 +1,5 @@
+//! Fuzzing the field's inputs: arbitrary deposits and configs never panic nor corrupt a frame.
+//!
 //! Fuzzing what the field accepts (issue 7, part 5): about a million deposits with arbitrary bit
 //! patterns — NaN, ±inf, subnormals, 1e38, covariances that are not positive semi-definite,
 //! unknown channels and kernels — offered to the tick engine on fields of every model and of

@@ -1,3 +1,5 @@
+//! Evaporation under the irregular steps of a field that publishes on deposit.
+//!
 //! A field that publishes on deposit steps by the real elapsed time (`Stepper::step_dt`): the
 //! closed forms of the evaporation models must hold whatever the steps, and a step longer than
 //! the tick period is clamped to it.

@@ -1,3 +1,5 @@
+//! Property tests of the numeric kernels: evaporation, ambient mean, deposits, never a NaN.
+//!
 //! Property tests of the numeric kernels (DESIGN.md "Style": proptest + approx): evaporation never
 //! increases a cell, each model matches its closed form, the running-sum ambient mean equals the
 //! brute-force one, deposits add exactly what they claim, and no input ever puts a NaN in a frame.

@@ -1,3 +1,5 @@
+//! A mirror's replay of the origin's applied deposits gives bit-identical frames.
+//!
 //! A mirror replays the origin's applied deposits (`Stepper::applied` → `Stepper::replay`) and
 //! computes bit-identical frames, whatever order the deposits arrived in at the origin.
 

@@ -2,11 +2,12 @@
 
     import pheromone
     with pheromone.Field.attach("main") as field:
-        header, cells = field.frame()      # cells: read-only (channels, height, width) float32, no copy
+        print(field.shape, field.cell_size_m, field.origin)  # the grid: fixed for the field's life
+        header, cells = field.frame()  # cells: read-only (channels, height, width) float32, no copy
         field.deposit(1.0, 2.0, 0.005, cov=(0.01, 0.0, 0.01))
 """
 
-from ._wire import LAYOUT_VERSION, KERNELS, DepositMsg, FrameHeader, wire_type_name
+from ._wire import KERNELS, LAYOUT_VERSION, DepositMsg, FrameHeader, wire_type_name
 from .field import (
     DepositNotDelivered,
     Field,
@@ -20,19 +21,19 @@ from .field import (
 from .sample import gradient, sample
 
 __all__ = [
-    "LAYOUT_VERSION",
     "KERNELS",
+    "LAYOUT_VERSION",
     "DepositMsg",
-    "FrameHeader",
-    "wire_type_name",
-    "Field",
-    "Frame",
-    "Header",
-    "PheromoneError",
-    "FieldNotFound",
-    "LayoutMismatch",
-    "FramesHeld",
     "DepositNotDelivered",
-    "sample",
+    "Field",
+    "FieldNotFound",
+    "Frame",
+    "FrameHeader",
+    "FramesHeld",
+    "Header",
+    "LayoutMismatch",
+    "PheromoneError",
     "gradient",
+    "sample",
+    "wire_type_name",
 ]

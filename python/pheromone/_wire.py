@@ -8,6 +8,7 @@ Rust side first (its layout version is the one place to bump), then this file.
 """
 
 import ctypes
+from collections.abc import Sequence
 
 #: Layout version of every wire type (`field::wire::LAYOUT_VERSION`); part of every type name.
 LAYOUT_VERSION = 1
@@ -134,7 +135,15 @@ class DepositMsg(ctypes.Structure):
 WIRE_TYPES = {"FrameHeader": FrameHeader, "DepositMsg": DepositMsg}
 
 
-def ellipse(channel, x_m, y_m, tau, cov, range_m, gamma_max) -> DepositMsg:
+def ellipse(
+    channel: int,
+    x_m: float,
+    y_m: float,
+    tau: float,
+    cov: Sequence[float],
+    range_m: float,
+    gamma_max: float,
+) -> DepositMsg:
     """`DepositMsg::ellipse`: a seed 000 deposit (amount τ, covariance Σxy, range, γ cap)."""
     return DepositMsg(
         channel=channel,
@@ -150,7 +159,15 @@ def ellipse(channel, x_m, y_m, tau, cov, range_m, gamma_max) -> DepositMsg:
     )
 
 
-def paper(channel, x_m, y_m, tau, cov, range_m, gamma_max) -> DepositMsg:
+def paper(
+    channel: int,
+    x_m: float,
+    y_m: float,
+    tau: float,
+    cov: Sequence[float],
+    range_m: float,
+    gamma_max: float,
+) -> DepositMsg:
     """The seed 000 eq. 14 kernel: the ellipse's fields with kernel code `paper` (Rust has no
     constructor for it; `pheromone deposit --kernel paper` fills the same fields)."""
     msg = ellipse(channel, x_m, y_m, tau, cov, range_m, gamma_max)
@@ -158,7 +175,9 @@ def paper(channel, x_m, y_m, tau, cov, range_m, gamma_max) -> DepositMsg:
     return msg
 
 
-def saturating(channel, x_m, y_m, rho, sigma_m, range_m) -> DepositMsg:
+def saturating(
+    channel: int, x_m: float, y_m: float, rho: float, sigma_m: float, range_m: float
+) -> DepositMsg:
     """`DepositMsg::saturating`: a seed 001/004 deposit of strength ρt ∈ [−1, 1]."""
     return DepositMsg(
         channel=channel,
@@ -171,7 +190,9 @@ def saturating(channel, x_m, y_m, rho, sigma_m, range_m) -> DepositMsg:
     )
 
 
-def z_shape(channel, x_m, y_m, amount, plateau_m, slope_m) -> DepositMsg:
+def z_shape(
+    channel: int, x_m: float, y_m: float, amount: float, plateau_m: float, slope_m: float
+) -> DepositMsg:
     """`DepositMsg::z_shape`: a seed 002 Z-shape deposit of quantum `amount`."""
     return DepositMsg(
         channel=channel,

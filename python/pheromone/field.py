@@ -11,12 +11,15 @@ The services, as the Rust side builds them (`field/src/shm/`):
 Clients only *open* these services (never create them), so every identity option is the field's.
 """
 
+import contextlib
 import ctypes
 import dataclasses
+import os
 import re
 import sys
 import time
-from typing import Optional
+from collections.abc import Iterator
+from typing import Any, Optional
 
 import iceoryx2 as iox2
 import numpy as np
@@ -37,7 +40,7 @@ class FieldNotFound(PheromoneError):
 class LayoutMismatch(PheromoneError):
     """The running field speaks another layout version (its type names differ from ours)."""
 
-    def __init__(self, service: str, ours: str, theirs: Optional[str]):
+    def __init__(self, service: str, ours: str, theirs: Optional[str]) -> None:
         self.service, self.ours, self.theirs = service, ours, theirs
         super().__init__(
             f"service '{service}' was created with another message layout: the field speaks "
@@ -71,22 +74,25 @@ class Header:
     dt_s: float
     tick_compute_ns: int
     deposits_applied: int
-    deposits_rejected: tuple
+    deposits_rejected: tuple[int, ...]
     deposits_this_tick: int
     _reserved: int
 
     @classmethod
-    def from_ctypes(cls, h) -> "Header":
-        values = {}
+    def from_ctypes(cls, h: Any) -> "Header":
+        """A copy of a `FrameHeader` (ctypes) in shared memory."""
+        values: dict[str, Any] = {}
         for name, _ in h._fields_:
             v = getattr(h, name)
             values[name] = tuple(v) if isinstance(v, ctypes.Array) else v
         return cls(**values)
 
     def deposits_rejected_total(self) -> int:
+        """Deposits the field refused since it started, all reasons."""
         return sum(self.deposits_rejected)
 
-    def deposits_rejected_by_reason(self) -> dict:
+    def deposits_rejected_by_reason(self) -> dict[str, int]:
+        """Refused deposits by reason name (`non_finite`, `not_psd`, …)."""
         return dict(zip(_wire.REJECT_REASON_NAMES, self.deposits_rejected))
 
     def __len__(self) -> int:
@@ -103,7 +109,9 @@ class Frame:
     newer frames); use `copy()` to keep the values. Unpacks as `header, cells = frame`.
     """
 
-    def __init__(self, sample, header: Header, cells: np.ndarray, address: int, nbytes: int):
+    def __init__(
+        self, sample: Any, header: Header, cells: np.ndarray, address: int, nbytes: int
+    ) -> None:
         self._sample = sample
         self.header = header
         self.cells = cells
@@ -125,10 +133,10 @@ class Frame:
     def __enter__(self) -> "Frame":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[Any]:
         yield self.header
         yield self.cells
 
@@ -137,9 +145,11 @@ class Frame:
         return np.array(self.cells, copy=True)
 
     def sample(self, x_m: float, y_m: float, channel: int = 0) -> float:
+        """The bilinear value at `(x_m, y_m)` (see `pheromone.sample`)."""
         return _sample(self, x_m, y_m, channel)
 
-    def gradient(self, x_m: float, y_m: float, channel: int = 0) -> tuple:
+    def gradient(self, x_m: float, y_m: float, channel: int = 0) -> tuple[float, float]:
+        """∇P per metre at `(x_m, y_m)` (see `pheromone.gradient`)."""
         return _gradient(self, x_m, y_m, channel)
 
     def __repr__(self) -> str:
@@ -151,11 +161,11 @@ class Frame:
         )
 
 
-def _duration(seconds: float):
+def _duration(seconds: float) -> Any:
     return iox2.Duration.from_nanos(max(0, int(seconds * 1e9)))
 
 
-def _their_user_header(node, service: str) -> Optional[str]:
+def _their_user_header(node: Any, service: str) -> Optional[str]:
     """The user-header type name the running service was created with. iceoryx2 0.10's Python
     binding does not expose a service's static configuration, only its debug text: read it there."""
     try:
@@ -165,14 +175,23 @@ def _their_user_header(node, service: str) -> Optional[str]:
             iox2.MessagingPattern.PublishSubscribe,
             iox2.ServiceType.Ipc,
         )
-    except Exception:
+    except Exception:  # any failure only loses the detail of the error message
         return None
     m = re.search(r'user_header: TypeDetail \{.*?type_name: [^"]*"([^"]*)"', str(details), re.S)
     return m.group(1) if m else None
 
 
-def _open_error(e) -> str:
+def _open_error(e: BaseException) -> str:
     return str(e.args[0]) if e.args else ""
+
+
+#: Errors opening the frame service that mean "not (yet) there": `attach` retries them.
+_RETRIED_OPEN_ERRORS = (
+    "DoesNotExist",
+    "ServiceInCorruptedState",
+    "InsufficientPermissions",
+    "HangsInCreation",
+)
 
 
 class Field:
@@ -181,9 +200,29 @@ class Field:
     Create it with `Field.attach(name)`. Close it (or use `with`) to remove its iceoryx2 node and
     ports from shared memory; `close()` also waits (at most `flush_timeout_s`) until the field
     has taken the deposits sent, as Rust's `DepositPublisher` does when dropped.
+
+    The grid's geometry is read from the field's first frame at `attach` and is fixed for the
+    life of the field (its frame service is created for exactly that many cells).
     """
 
-    def __init__(self):
+    #: The field's name (`pheromone field --name`): services `pheromone/<name>/…`.
+    name: str
+    #: Cells along x (columns), along y (rows), and the number of channels.
+    width: int
+    height: int
+    channels: int
+    #: Side of a (square) cell in metres.
+    cell_size_m: float
+    #: World coordinates (m) of the grid's corner: cell `(0, 0)` spans `origin_x_m` to
+    #: `origin_x_m + cell_size_m` along x (likewise along y).
+    origin_x_m: float
+    origin_y_m: float
+    #: Robot id stamped on this client's deposits.
+    robot_id: int
+    #: How long `close()` waits for the field to take the deposits sent (seconds).
+    flush_timeout_s: float
+
+    def __init__(self) -> None:
         raise TypeError("use Field.attach(name)")
 
     @classmethod
@@ -193,7 +232,7 @@ class Field:
         timeout_s: float = 5.0,
         *,
         robot_id: int = 0,
-        header_type=_wire.FrameHeader,
+        header_type: Any = _wire.FrameHeader,
     ) -> "Field":
         """Attaches to the running field `name`, waiting up to `timeout_s` for it to exist and to
         publish a frame. Raises `FieldNotFound` (naming the field) if it does not, and
@@ -202,25 +241,7 @@ class Field:
         another layout on purpose."""
         _wire.check_name(name)
         self = object.__new__(cls)
-        self.name = name
-        self.robot_id = int(robot_id)
-        self.flush_timeout_s = 1.0
-        self._header_type = header_type
-        self._latest: Optional[Frame] = None
-        self._subscriber = self._listener = self._publisher = self._deposit_ready = None
-        self._frames = self._ready = self._deposits = None
-        self._unflushed_after = None
-        self._frame_service = _wire.frame_service(name)
-        self._ready_service = _wire.frame_ready_service(name)
-        self._deposit_service = _wire.deposit_service(name)
-        iox2.set_log_level(iox2.LogLevel.Fatal)
-        # Python keeps Ctrl-C (KeyboardInterrupt): iceoryx2 installs no signal handler.
-        self._node = (
-            iox2.NodeBuilder.new()
-            .name(iox2.NodeName.new(f"pheromone-py-{_pid()}"))
-            .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
-            .create(iox2.ServiceType.Ipc)
-        )
+        self._open(name, int(robot_id), header_type)
         try:
             self._attach(timeout_s)
         except BaseException:
@@ -228,8 +249,49 @@ class Field:
             raise
         return self
 
+    def _open(self, name: str, robot_id: int, header_type: Any) -> None:
+        """This client's state and its iceoryx2 node; no service is opened yet."""
+        self.name = name
+        self.robot_id = robot_id
+        self.flush_timeout_s = 1.0
+        # Set from the first frame by `_attach`.
+        self.width = self.height = self.channels = 0
+        self.cell_size_m = self.origin_x_m = self.origin_y_m = 0.0
+        self._header_type = header_type
+        self._latest: Optional[Frame] = None
+        self._subscriber: Any = None
+        self._listener: Any = None
+        self._publisher: Any = None
+        self._deposit_ready: Any = None
+        self._frames: Any = None
+        self._ready: Any = None
+        self._deposits: Any = None
+        self._unflushed_after: Optional[int] = None
+        self._frame_service = _wire.frame_service(name)
+        self._ready_service = _wire.frame_ready_service(name)
+        self._deposit_service = _wire.deposit_service(name)
+        iox2.set_log_level(iox2.LogLevel.Fatal)
+        # Python keeps Ctrl-C (KeyboardInterrupt): iceoryx2 installs no signal handler.
+        self._node: Any = (
+            iox2.NodeBuilder.new()
+            .name(iox2.NodeName.new(f"pheromone-py-{os.getpid()}"))
+            .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
+            .create(iox2.ServiceType.Ipc)
+        )
+
+    @property
+    def origin(self) -> tuple[float, float]:
+        """`(origin_x_m, origin_y_m)`: the world coordinates (m) of the grid's corner."""
+        return (self.origin_x_m, self.origin_y_m)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """`(channels, height, width)`: the shape of every frame's `cells`."""
+        return (self.channels, self.height, self.width)
+
     def _attach(self, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
+        last: BaseException
         ours = _wire.wire_type_name("FrameHeader")
         if hasattr(self._header_type, "type_name"):
             ours = self._header_type.type_name()
@@ -248,13 +310,11 @@ class Field:
                 )
                 break
             except iox2.PublishSubscribeOpenError as e:
+                svc = self._frame_service
                 if _open_error(e) == "IncompatibleTypes":
-                    raise LayoutMismatch(
-                        self._frame_service, ours, _their_user_header(self._node, self._frame_service)
-                    ) from None
-                if _open_error(e) not in ("DoesNotExist", "ServiceInCorruptedState",
-                                          "InsufficientPermissions", "HangsInCreation"):
-                    raise PheromoneError(f"service '{self._frame_service}': open failed: {e!r}") from e
+                    raise LayoutMismatch(svc, ours, _their_user_header(self._node, svc)) from None
+                if _open_error(e) not in _RETRIED_OPEN_ERRORS:
+                    raise PheromoneError(f"service '{svc}': open failed: {e!r}") from e
                 last = e
             except iox2.EventOpenError as e:
                 last = e
@@ -278,16 +338,21 @@ class Field:
                     f"field '{self.name}' exists but published no frame within {timeout_s} s"
                 )
             self._wait_event(min(left, 0.1))
+        # The geometry of every frame of this field (its frame service is sized for it).
+        assert self._latest is not None, "update() returned True without a frame"
+        h = self._latest.header
+        self.width, self.height, self.channels = h.width, h.height, h.channels
+        self.cell_size_m = h.cell_size_m
+        self.origin_x_m, self.origin_y_m = h.origin_x_m, h.origin_y_m
 
     # ---- frames ---------------------------------------------------------------------------
 
     def _wait_event(self, seconds: float) -> None:
-        try:
+        # Interrupted by a signal: the caller loops on its own deadline.
+        with contextlib.suppress(iox2.ListenerWaitError):
             self._listener.timed_wait(_duration(seconds))
-        except iox2.ListenerWaitError:
-            pass  # interrupted by a signal: the caller loops on its own deadline
 
-    def _receive(self):
+    def _receive(self) -> Any:
         if not self._subscriber.has_samples():
             return None
         try:
@@ -321,7 +386,7 @@ class Field:
                 previous.close()
             fresh = True
 
-    def _frame_of(self, s) -> Frame:
+    def _frame_of(self, s: Any) -> Frame:
         header = Header.from_ctypes(s.user_header().contents)
         # iceoryx2 0.10's Python binding reports a slice's length in bytes, not elements
         # (upstream issue eclipse-iceoryx/iceoryx2#1533): the element count is taken from the
@@ -387,7 +452,7 @@ class Field:
         """The value at `(x_m, y_m)` on the newest frame (see `pheromone.sample`)."""
         return _sample(self.frame(), x_m, y_m, channel)
 
-    def gradient(self, x_m: float, y_m: float, channel: int = 0) -> tuple:
+    def gradient(self, x_m: float, y_m: float, channel: int = 0) -> tuple[float, float]:
         """∇P at `(x_m, y_m)` on the newest frame (see `pheromone.gradient`)."""
         return _gradient(self.frame(), x_m, y_m, channel)
 
@@ -398,7 +463,7 @@ class Field:
         x_m: float,
         y_m: float,
         amount: float,
-        cov=None,
+        cov: Optional[tuple[float, float, float]] = None,
         kernel: str = "ellipse",
         channel: int = 0,
         *,
@@ -415,7 +480,7 @@ class Field:
         defaults (cov 0.01,0,0.01 m², range 1 m, γmax 100, σ 0.1 m, plateau 0.2 m, slope 0.3 m).
         Raises `DepositNotDelivered` if no field took it."""
         self._check_open()
-        given = {
+        given: dict[str, Any] = {
             "cov": cov,
             "range_m": range_m,
             "gamma_max": gamma_max,
@@ -436,8 +501,14 @@ class Field:
         unused = [k for k, v in given.items() if v is not None and k not in used[kernel]]
         if unused:
             raise ValueError(f"kernel '{kernel}' does not use {', '.join(unused)}")
-        d = dict(cov=(0.01, 0.0, 0.01), range_m=1.0, gamma_max=100.0, sigma_m=0.1,
-                 plateau_m=0.2, slope_m=0.3)
+        d: dict[str, Any] = {
+            "cov": (0.01, 0.0, 0.01),
+            "range_m": 1.0,
+            "gamma_max": 100.0,
+            "sigma_m": 0.1,
+            "plateau_m": 0.2,
+            "slope_m": 0.3,
+        }
         d.update({k: v for k, v in given.items() if v is not None})
         if len(tuple(d["cov"])) != 3:
             raise ValueError("cov needs three values (xx, xy, yy)")
@@ -464,18 +535,18 @@ class Field:
         try:
             delivered = self._publisher.send_copy(msg)
         except iox2.SendError as e:
-            raise DepositNotDelivered(f"deposit on '{self._deposit_service}' not delivered: {e!r}") from e
+            raise DepositNotDelivered(
+                f"deposit on '{self._deposit_service}' not delivered: {e!r}"
+            ) from e
         if delivered == 0:
             raise DepositNotDelivered(
                 f"deposit not delivered: no field is subscribed to '{self._deposit_service}' "
                 "or its deposit buffer is full"
             )
         if self._deposit_ready is not None:
-            try:
+            # A failed wake-up only delays the deposit to the field's next tick.
+            with contextlib.suppress(Exception):
                 self._deposit_ready.notify()
-            except Exception:
-                # A failed wake-up only delays the deposit to the field's next tick.
-                pass
         # The field takes it at its next tick: two frames after the newest one held.
         self.update()
         seq = self._latest.header.sequence if self._latest is not None else 0
@@ -509,8 +580,9 @@ class Field:
         # A field that publishes on deposit has this event; any other field has not, and its
         # deposits wait for the next tick (as `DepositPublisher` does in Rust).
         try:
+            ready = iox2.ServiceName.new(_wire.deposit_ready_service(self.name))
             self._deposit_ready = (
-                self._node.service_builder(iox2.ServiceName.new(_wire.deposit_ready_service(self.name)))
+                self._node.service_builder(ready)
                 .event()
                 .open()
                 .notifier_builder()
@@ -527,7 +599,8 @@ class Field:
         deadline = time.monotonic() + timeout_s
         while True:
             self.update()
-            if self._latest is not None and self._latest.header.sequence >= self._unflushed_after + 2:
+            seq = self._latest.header.sequence if self._latest is not None else None
+            if seq is not None and seq >= self._unflushed_after + 2:
                 self._unflushed_after = None
                 return True
             left = deadline - time.monotonic()
@@ -550,11 +623,10 @@ class Field:
         client's iceoryx2 node and ports."""
         if self._node is None:
             return
-        try:
+        # Closing never raises for a field that went away meanwhile.
+        with contextlib.suppress(Exception):
             if self._subscriber is not None and self._unflushed_after is not None:
                 self.flush(self.flush_timeout_s)
-        except Exception:
-            pass
         if self._latest is not None:
             self._latest.close()
             self._latest = None
@@ -568,17 +640,19 @@ class Field:
     def __enter__(self) -> "Field":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def __del__(self):
-        try:
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):
             self.close()
-        except Exception:
-            pass
 
     def __repr__(self) -> str:
-        return f"<pheromone.Field '{self.name}'{' closed' if self.closed else ''}>"
+        state = " closed" if self.closed else ""
+        return (
+            f"<pheromone.Field '{self.name}' {self.channels}×{self.height}×{self.width} "
+            f"{self.cell_size_m} m{state}>"
+        )
 
 
 def _only_ours(frame: Frame) -> bool:
@@ -587,9 +661,9 @@ def _only_ours(frame: Frame) -> bool:
     besides the Field's own."""
     if not frame._handed_out:
         return True
-    getrefcount = getattr(sys, "getrefcount", None)
-    if getrefcount is None:
+    if not hasattr(sys, "getrefcount"):
         return False
+    getrefcount = sys.getrefcount
     # Each count includes getrefcount's own argument. The caller holds the frame in a local
     # (and this function in `frame`); the frame holds `cells`, which every view of it references
     # (NumPy sets a view's base to `cells`, the first array up the chain); `cells` holds the
@@ -600,8 +674,3 @@ def _only_ours(frame: Frame) -> bool:
         and getrefcount(frame.cells.base) <= 2
     )
 
-
-def _pid() -> int:
-    import os
-
-    return os.getpid()

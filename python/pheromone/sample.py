@@ -5,6 +5,8 @@ same numbers Rust's `FrameView::value` and `FrameView::gradient` give on the sam
 tests compare them with `pheromone probe`).
 """
 
+from typing import Any, Protocol, Union, cast
+
 import numpy as np
 
 _F = np.float32
@@ -13,15 +15,48 @@ _ONE = _F(1.0)
 _TWO = _F(2.0)
 
 
-def _parts(frame):
+class GridHeader(Protocol):
+    """What sampling reads of a frame's header (`pheromone.Header` has it)."""
+
+    @property
+    def channels(self) -> int: ...
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def cell_size_m(self) -> float: ...
+    @property
+    def origin_x_m(self) -> float: ...
+    @property
+    def origin_y_m(self) -> float: ...
+
+
+class FrameLike(Protocol):
+    """A frame: a header and its `(channels, height, width)` cells (`pheromone.Frame` is one)."""
+
+    @property
+    def header(self) -> GridHeader: ...
+    @property
+    def cells(self) -> np.ndarray: ...
+
+
+_Real = Union[float, np.floating[Any]]
+
+#: What `sample` and `gradient` take: a `Frame`, or a `(header, cells)` pair.
+Frame = Union[FrameLike, tuple[GridHeader, np.ndarray]]
+
+
+def _parts(frame: Frame) -> tuple[GridHeader, np.ndarray]:
     """(header, cells) of a `Frame` or of a `(header, cells)` pair."""
     if hasattr(frame, "header") and hasattr(frame, "cells"):
-        return frame.header, frame.cells
+        f = cast(FrameLike, frame)
+        return f.header, f.cells
     header, cells = frame
     return header, cells
 
 
-def _value(header, plane, x_m, y_m):
+def _value(header: GridHeader, plane: np.ndarray, x_m: _Real, y_m: _Real) -> np.float32:
     w, h = int(header.width), int(header.height)
     cell = _F(header.cell_size_m)
     gx = (_F(x_m) - _F(header.origin_x_m)) / cell
@@ -39,21 +74,22 @@ def _value(header, plane, x_m, y_m):
     return _F(top * (_ONE - ty) + bottom * ty)
 
 
-def _plane(header, cells, channel):
+def _plane(header: GridHeader, cells: np.ndarray, channel: int) -> np.ndarray:
     channel = int(channel)
     if not 0 <= channel < int(header.channels):
         raise IndexError(f"channel {channel}: the field has {header.channels} channel(s)")
-    return cells[channel]
+    plane: np.ndarray = cells[channel]
+    return plane
 
 
-def sample(frame, x_m: float, y_m: float, channel: int = 0) -> float:
+def sample(frame: Frame, x_m: float, y_m: float, channel: int = 0) -> float:
     """Bilinear value at world point `(x_m, y_m)` of `channel` (`FrameView::value`): interpolated
     between cell centres, edge cells extend to the border, 0 outside the grid."""
     header, cells = _parts(frame)
     return float(_value(header, _plane(header, cells, channel), x_m, y_m))
 
 
-def gradient(frame, x_m: float, y_m: float, channel: int = 0) -> tuple:
+def gradient(frame: Frame, x_m: float, y_m: float, channel: int = 0) -> tuple[float, float]:
     """∇P per metre at `(x_m, y_m)` (`FrameView::gradient`): central differences of the
     bilinear value one cell apart."""
     header, cells = _parts(frame)

@@ -24,7 +24,8 @@ import json
 import struct
 import threading
 import time
-from typing import Optional, Sequence, Union
+from collections.abc import Iterator, Sequence
+from typing import Any, Optional, Union
 
 import numpy as np
 import xxhash
@@ -106,8 +107,9 @@ class ZenohFrame:
     wire_bytes: int
 
     @property
-    def shape(self):
-        return self.cells.shape
+    def shape(self) -> tuple[int, ...]:
+        """`(channels, height, width)` of `cells`."""
+        return tuple(self.cells.shape)
 
 
 def _body_error(kind: int, detail: str) -> WireError:
@@ -225,7 +227,8 @@ def block_mean(cells: np.ndarray, downsample: int) -> np.ndarray:
     counts[:h, :w] = 1.0
     sums = padded.reshape(c, oh, d, ow, d).sum(axis=(2, 4))
     n = counts.reshape(oh, d, ow, d).sum(axis=(1, 3))
-    return (sums / n).astype(np.float32)
+    means: np.ndarray = (sums / n).astype(np.float32)
+    return means
 
 
 def frames_key(field: str) -> str:
@@ -237,7 +240,9 @@ def config_key(field: str) -> str:
     return f"pheromone/{field}/config"
 
 
-def session_config(connect: Sequence[str], mode: str = "client", timeout_s: float = 5.0):
+def session_config(
+    connect: Union[str, Sequence[str]], mode: str = "client", timeout_s: float = 5.0
+) -> Any:
     """A Zenoh configuration that connects to the bridge's `--listen` endpoints (no multicast
     scouting, as the bridge), waiting up to `timeout_s` for it and retrying every 100–500 ms."""
     import zenoh
@@ -276,16 +281,17 @@ class FrameSubscriber:
         self.field = field
         self.rejected = 0
         self.last_error: Optional[WireError] = None
-        self._messages = collections.deque(maxlen=queue)
+        self._messages: collections.deque[bytes] = collections.deque(maxlen=queue)
         self._cond = threading.Condition()
+        self._session: Any
         try:
             self._session = zenoh.open(session_config(connect, mode, timeout_s))
         except zenoh.ZError as e:
             raise PheromoneError(f"cannot connect to the bridge at {connect}: {e}") from None
-        self._sub = self._session.declare_subscriber(frames_key(field), self._on_sample)
+        self._sub: Any = self._session.declare_subscriber(frames_key(field), self._on_sample)
 
-    def _on_sample(self, sample) -> None:
-        data = sample.payload.to_bytes()
+    def _on_sample(self, sample: Any) -> None:
+        data: bytes = sample.payload.to_bytes()
         with self._cond:
             self._messages.append(data)
             self._cond.notify()
@@ -314,7 +320,7 @@ class FrameSubscriber:
                 self.rejected += 1
                 self.last_error = e
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[ZenohFrame]:
         """Frames until the subscriber is closed (blocks between frames)."""
         while self._session is not None:
             f = self.recv(1.0)
@@ -340,8 +346,8 @@ class FrameSubscriber:
             self._session.close()
             self._session = None
 
-    def __enter__(self):
+    def __enter__(self) -> "FrameSubscriber":
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()

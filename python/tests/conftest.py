@@ -1,4 +1,6 @@
-"""Fixtures: real `pheromone field` processes (binary from $PHEROMONE_BIN, default
+"""Fixtures of the Python tests: real `pheromone field` processes, and nothing left behind.
+
+Fixtures: real `pheromone field` processes (binary from $PHEROMONE_BIN, default
 `target/debug/pheromone` of the repository), each with a field name unique to this run, stopped
 with SIGINT and waited for (also when a test fails); and a session check that the run leaves
 nothing in /dev/shm or iceoryx2's node directory."""
@@ -32,6 +34,17 @@ def deadline_loop(timeout_s, what):
         yield
         if time.monotonic() > end:
             pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
+
+
+#: Fixtures that start `pheromone` processes: a test using one is marked `process`
+#: (`pytest -m "not process"` runs the tests that need no binary).
+PROCESS_FIXTURES = {"start_field", "sim_run", "start_bridge", "zenoh_bin"}
+
+
+def pytest_collection_modifyitems(items):
+    for item in items:
+        if PROCESS_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.process)
 
 
 # ---- leftovers --------------------------------------------------------------------------------
@@ -165,7 +178,9 @@ class FieldProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-                raise AssertionError(f"field {self.name} did not stop on SIGINT: {self.stderr()}")
+                raise AssertionError(
+                    f"field {self.name} did not stop on SIGINT: {self.stderr()}"
+                ) from None
         self._stderr.close()
         return self.proc.returncode
 
@@ -207,7 +222,7 @@ def run_cli(*args, timeout=30):
     except subprocess.TimeoutExpired:
         STARTED.send_signal(signal.SIGINT)
         out, err = STARTED.communicate()
-        raise AssertionError(f"pheromone {' '.join(map(str, args))} timed out: {err}")
+        raise AssertionError(f"pheromone {' '.join(map(str, args))} timed out: {err}") from None
     assert STARTED.returncode == 0, f"pheromone {' '.join(map(str, args))} failed: {err}"
     return out
 

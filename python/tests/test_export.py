@@ -1,4 +1,6 @@
-"""`pheromone export` against a real field: the `.npy` file, loaded with NumPy, equals the frame
+"""`pheromone export` of a real field: the `.npy` equals the frame, the PGM the scaled channel.
+
+`pheromone export` against a real field: the `.npy` file, loaded with NumPy, equals the frame
 read zero-copy by `pheromone.Field`; the map_server PGM + YAML holds the chosen channel scaled
 to 0–255, flipped so that its first row is the top of the map."""
 
@@ -53,7 +55,7 @@ def test_npy_export_loads_in_numpy_equal_to_the_frame(start_field, tmp_path):
         meta = json.loads(run_cli("export", "--field", f.name, "--out", out, "--json"))
         arr = np.load(out)
         with field.frame() as frame:
-            header, cells = frame
+            _header, cells = frame
             assert arr.dtype == np.dtype("<f4") and arr.shape == cells.shape == (2, 30, 40)
             # No evaporation: every frame after the deposits holds the same cells.
             np.testing.assert_array_equal(arr, cells)
@@ -98,7 +100,7 @@ def test_map_export_is_the_channel_scaled_to_a_pgm_with_its_geometry(start_field
     assert "negate: 1\n" in yaml and "image: map.pgm\n" in yaml, yaml
     lo, hi = meta["scale"]
     assert lo == 0.0 and abs(hi - plane.max()) < 1e-6 * hi
-    assert f"# scale_max: " in yaml
+    assert "# scale_max: " in yaml
     pixels = _read_pgm(tmp_path / "map.pgm")
     expected = np.clip(np.rint(255 * (plane - lo) / (hi - lo)), 0, 255)
     # The PGM's first row is the top of the map (largest y): the plane flipped.

@@ -1,5 +1,7 @@
-"""Against real `pheromone field` processes: attach, zero-copy, values equal to Rust's, deposit
-round trip, refusal of another layout, frame lifetimes, the watch example."""
+"""`pheromone.Field` against real fields: attach, zero-copy frames, values and deposits as Rust's.
+
+Also the grid as attributes, deposits equal to `pheromone deposit`'s, refusal of another layout,
+frame lifetimes, `wait_frame`'s spin and timeout, and the watch example."""
 
 import ctypes
 import os
@@ -13,11 +15,11 @@ import numpy as np
 import pytest
 
 import pheromone
-from conftest import BIN, REPO, STARTED_PIDS, deadline_loop, probe, run_cli
+from conftest import REPO, STARTED_PIDS, deadline_loop, probe, run_cli
 
 F32 = np.float32
 CELLS = ("--width", "40", "--height", "30", "--cell-size", "0.1")
-GRID = CELLS + ("--tick-hz", "50")
+GRID = (*CELLS, "--tick-hz", "50")
 
 
 def attach(f, timeout_s=10.0, **kw):
@@ -48,12 +50,25 @@ def test_attach_reads_the_header_of_the_running_field(start_field):
         assert len(header.deposits_rejected) == 7
         assert cells.shape == (1, 30, 40) and cells.dtype == np.float32
         assert not cells.flags.writeable
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match="read-only"):
             cells[0, 0, 0] = 1.0
         seq = header.sequence
         assert field.wait_frame(2.0)
         assert field.frame().header.sequence > seq
+        # The grid as attributes, from the first frame.
+        assert field.name == f.name
+        assert (field.channels, field.height, field.width) == field.shape == (1, 30, 40)
+        assert field.cell_size_m == pytest.approx(0.1)
+        assert field.origin == (field.origin_x_m, field.origin_y_m) == (-1.5, 0.5)
+        assert "1×30×40" in repr(field)
     print(f"\nattach (field already running) {attach_s * 1e3:.1f} ms")
+
+
+def test_a_field_is_made_by_attach_only():
+    with pytest.raises(TypeError, match=r"Field\.attach"):
+        pheromone.Field()
+    with pytest.raises(ValueError, match="invalid field name"):
+        pheromone.Field.attach("no/such", timeout_s=0.1)
 
 
 def test_attach_without_a_field_names_it(start_field):
@@ -99,7 +114,7 @@ def test_frame_is_a_zero_copy_view_of_the_shared_memory_sample(start_field):
     f = start_field("z", "--width", "512", "--height", "512", "--cell-size", "0.05")
     with attach(f) as field:
         with field.frame() as frame:
-            header, cells = frame
+            _header, cells = frame
             data = cells.__array_interface__["data"][0]
             sample = frame._sample
             lo = sample.payload_ptr
@@ -181,7 +196,8 @@ def test_python_deposit_appears_where_and_as_high_as_expected(start_field):
         cells = frame.cells
         peak = np.unravel_index(int(np.argmax(cells)), cells.shape)
         assert tuple(int(i) for i in peak) == (0, 7, 12)
-        assert float(cells.max()) == pytest.approx(_ellipse_peak(0.005, (0.01, 0, 0.01), 100), rel=1e-5)
+        peak_value = _ellipse_peak(0.005, (0.01, 0, 0.01), 100)
+        assert float(cells.max()) == pytest.approx(peak_value, rel=1e-5)
         assert frame.header.deposits_this_tick in (0, 1)
         assert frame.sample(x, y) == pytest.approx(50.0, rel=1e-5)
         # Symmetric around its centre, cut at range_m = 1 m.
@@ -190,19 +206,19 @@ def test_python_deposit_appears_where_and_as_high_as_expected(start_field):
 
 
 @pytest.mark.parametrize(
-    "kernel, kwargs, cli",
+    ("kernel", "kwargs", "cli"),
     [
-        ("ellipse", dict(cov=(0.02, 0.006, 0.015), range_m=0.8, gamma_max=40.0),
+        ("ellipse", {"cov": (0.02, 0.006, 0.015), "range_m": 0.8, "gamma_max": 40.0},
          ["--cov", "0.02,0.006,0.015", "--range", "0.8", "--gamma-max", "40"]),
-        ("paper", dict(cov=(0.03, 0.0, 0.01)), ["--cov", "0.03,0,0.01"]),
-        ("saturating", dict(sigma_m=0.25, range_m=0.7), ["--sigma", "0.25", "--range", "0.7"]),
-        ("z-shape", dict(plateau_m=0.15, slope_m=0.35), ["--plateau", "0.15", "--slope", "0.35"]),
+        ("paper", {"cov": (0.03, 0.0, 0.01)}, ["--cov", "0.03,0,0.01"]),
+        ("saturating", {"sigma_m": 0.25, "range_m": 0.7}, ["--sigma", "0.25", "--range", "0.7"]),
+        ("z-shape", {"plateau_m": 0.15, "slope_m": 0.35}, ["--plateau", "0.15", "--slope", "0.35"]),
     ],
 )
 def test_python_deposit_equals_the_same_deposit_from_rust(start_field, kernel, kwargs, cli):
     """Twin fields: one gets the deposit from Python, the other from `pheromone deposit` (Rust's
     DepositMsg); both frames are equal cell for cell."""
-    amount = "0.6" if kernel == "saturating" else "0.004" if kernel in ("ellipse", "paper") else "2.5"
+    amount = {"saturating": "0.6", "ellipse": "0.004", "paper": "0.004"}.get(kernel, "2.5")
     model = ("--model", "none")
     py, rs = start_field("p", *GRID, *model), start_field("r", *GRID, *model)
     with attach(py) as a, attach(rs) as b:
@@ -253,10 +269,14 @@ def test_frames_live_as_long_as_they_are_held(start_field):
         for _ in range(5):
             assert field.wait_frame(2.0)
         assert field.frame().header.sequence > seq
-        second = field.frame()  # noqa: F841: the reader now holds two frames
-        with pytest.raises(pheromone.FramesHeld):
+        second = field.frame()  # the reader now holds two frames
+
+        def wait_for_a_third_frame():
             for _ in deadline_loop(5, "a third frame"):
                 field.wait_frame(0.2)
+
+        with pytest.raises(pheromone.FramesHeld):
+            wait_for_a_third_frame()
         del cells, second
         for _ in range(3):
             assert field.wait_frame(2.0)
@@ -287,7 +307,7 @@ def test_watch_example_prints_a_line_per_frame_until_ctrl_c(start_field):
                 break
     finally:
         p.send_signal(signal.SIGINT)
-        out, err = p.communicate(timeout=10)
+        _out, err = p.communicate(timeout=10)
     assert len(lines) >= 3, (lines, err)
     assert p.returncode == 0, err
     # "frame <seq> max <value> at channel 0 cell (x, y) = (… m, … m)"

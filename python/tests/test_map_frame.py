@@ -1,4 +1,6 @@
-"""A mapper's map, read with the Python package: `pheromone sim ias-ss --merge` as processes
+"""A mapper's map of `sim ias-ss --merge` (processes), read with `pheromone.Field`.
+
+A mapper's map, read with the Python package: `pheromone sim ias-ss --merge` as processes
 starts one `pheromone mapper` per robot, each publishing its occupancy + pheromone map as the
 field `<run>-map-r<ID>` (run tag `sim<PID>x0`); the test attaches to robot 1's map while the
 run steps, checks its frame (2 channels, finite, the geometry its header states), and stops
@@ -33,7 +35,9 @@ def sim_run(tmp_path):
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-            raise AssertionError(f"sim did not stop on SIGINT: {err_path.read_text()[-2000:]}")
+            raise AssertionError(
+                f"sim did not stop on SIGINT: {err_path.read_text()[-2000:]}"
+            ) from None
     err.close()
     # Interrupted, the run stops every process of it and says so (status 1).
     text = err_path.read_text()
@@ -61,7 +65,7 @@ def test_a_mappers_map_frame_is_read_by_the_python_package(sim_run):
         assert header.channels == 2
         assert header.width == header.height and header.width > 0
         assert header.cell_size_m > 0
-        assert cells.shape == (2, header.height, header.width)
+        assert cells.shape == (2, header.height, header.width) == field.shape
         assert cells.dtype == np.float32
         assert np.isfinite(cells).all()
         # The map knows the cells its scans saw: occupancy log-odds are not all zero.

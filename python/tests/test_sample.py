@@ -1,4 +1,6 @@
-"""`pheromone.sample` / `gradient` on the fixture of Rust's own unit test
+"""`pheromone.sample` and `gradient` on the fixture of Rust's own unit test; no process.
+
+`pheromone.sample` / `gradient` on the fixture of Rust's own unit test
 (`field/src/sample.rs`, `bilinear_reproduces_a_plane_and_its_gradient`): P = 2·x + 3·y at cell
 centres of a 20×10 grid of 0.5 m cells. No process needed."""
 

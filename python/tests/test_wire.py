@@ -1,4 +1,6 @@
-"""`pheromone/_wire.py` against the Rust layout: the layout-version literal of
+"""`pheromone/_wire.py` against the Rust layout, parsed from field/src; no process.
+
+`pheromone/_wire.py` against the Rust layout: the layout-version literal of
 `field/src/wire.rs`, and the fields, sizes and alignments of every `wire_type!` of
 `field/src/messages.rs` that Python mirrors. Parsed from the sources, so a change on the Rust
 side that is not mirrored here fails this test (the binary has no command that prints them)."""
@@ -11,7 +13,6 @@ import re
 import pytest
 
 from conftest import REPO
-
 from pheromone import _wire
 
 FIELD_SRC = REPO / "field" / "src"
@@ -46,7 +47,9 @@ def evaluate(expr: str, consts: dict) -> int:
             return n.value
         if isinstance(n, ast.Name):
             if n.id not in consts:
-                pytest.fail(f"size expression {expr!r} uses {n.id}, not a usize constant of field/src")
+                pytest.fail(
+                    f"size expression {expr!r} uses {n.id}, not a usize constant of field/src"
+                )
             return consts[n.id]
         if isinstance(n, ast.BinOp) and type(n.op) in ops:
             return ops[type(n.op)](ev(n.left), ev(n.right))
@@ -82,7 +85,7 @@ def layout_version_literal():
 
 def test_layout_version_is_the_rust_one():
     rust = layout_version_literal()
-    assert _wire.LAYOUT_VERSION == rust, (
+    assert rust == _wire.LAYOUT_VERSION, (
         f"field/src/wire.rs says layout version {rust}, python/pheromone/_wire.py says "
         f"{_wire.LAYOUT_VERSION}: update _wire.py to the Rust layout"
     )
@@ -91,7 +94,7 @@ def test_layout_version_is_the_rust_one():
 
 
 def test_reject_reasons_are_the_rust_ones():
-    assert _wire.REJECT_REASONS == rust_consts()["REJECT_REASONS"]
+    assert rust_consts()["REJECT_REASONS"] == _wire.REJECT_REASONS
     names = re.findall(r'RejectReason::\w+ => "(\w+)"', (FIELD_SRC / "deposit.rs").read_text())
     assert tuple(names) == _wire.REJECT_REASON_NAMES
 
@@ -108,7 +111,7 @@ def test_kernel_codes_are_the_rust_ones():
 def test_ctypes_structures_match_the_rust_layout(name):
     rust = wire_types()
     assert name in rust, f"wire_type!({name}, …) not found in field/src/messages.rs"
-    struct, size, align, fields = rust[name]
+    _struct, size, align, fields = rust[name]
     py = _wire.WIRE_TYPES[name]
     assert ctypes.sizeof(py) == size and ctypes.alignment(py) == align, (
         f"{name}: Rust's wire_type! pins size {size}, align {align}; "
@@ -128,11 +131,13 @@ def test_ctypes_structures_match_the_rust_layout(name):
     assert [f for f, _ in got] == [f for f, _ in expected], (
         f"{name}: Rust fields {[f for f, _ in expected]}, _wire.py fields {[f for f, _ in got]}"
     )
+    rust_struct = type("R", (ctypes.Structure,), {"_fields_": expected})
     for (f, t), (_, e) in zip(got, expected):
-        assert ctypes.sizeof(t) == ctypes.sizeof(e) and getattr(t, "_type_", t) == getattr(e, "_type_", e), (
+        same_type = getattr(t, "_type_", t) == getattr(e, "_type_", e)
+        assert ctypes.sizeof(t) == ctypes.sizeof(e) and same_type, (
             f"{name}.{f}: Rust type {e}, _wire.py type {t}"
         )
-        assert getattr(py, f).offset == getattr(type("R", (ctypes.Structure,), {"_fields_": expected}), f).offset
+        assert getattr(py, f).offset == getattr(rust_struct, f).offset
 
 
 def test_deposit_constructors_fill_the_rust_fields():
@@ -140,6 +145,8 @@ def test_deposit_constructors_fill_the_rust_fields():
     assert (m.kernel, m.channel, m.amount, m.range_m, m.gamma_max) == (0, 1, 0.5, 1.5, 80.0)
     assert (m.sigma_m, m.plateau_m, m.slope_m, m.stamp_ns, m.robot_id) == (0, 0, 0, 0, 0)
     s = _wire.saturating(0, 1.0, 1.0, -0.5, 0.2, 0.9)
-    assert (s.kernel, s.amount, s.sigma_m, s.range_m, s.cov_xx, s.gamma_max) == (2, -0.5, pytest.approx(0.2), pytest.approx(0.9), 0, 0)
+    assert (s.kernel, s.amount, s.sigma_m, s.range_m, s.cov_xx, s.gamma_max) == (
+        2, -0.5, pytest.approx(0.2), pytest.approx(0.9), 0, 0
+    )
     z = _wire.z_shape(0, 1.0, 1.0, 3.0, 0.25, 0.5)
     assert (z.kernel, z.amount, z.plateau_m, z.slope_m, z.range_m) == (3, 3.0, 0.25, 0.5, 0)

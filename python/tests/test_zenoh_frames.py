@@ -1,4 +1,6 @@
-"""`pheromone bridge --frames` received in Python with the `eclipse-zenoh` package and decoded by
+"""`pheromone bridge --frames` received over Zenoh and decoded by `pheromone.zenoh_frames`.
+
+`pheromone bridge --frames` received in Python with the `eclipse-zenoh` package and decoded by
 `pheromone.zenoh_frames` from docs/mirror-wire.md alone: a real field (two channels, no
 evaporation, so every frame after the deposits holds the same cells) and a real bridge on a
 loopback port; the frames have the downsampled shape, verify their XXH3-64 checksum, are finite,
@@ -23,6 +25,8 @@ import pheromone
 from conftest import BIN, STARTED_PIDS, deadline_loop
 
 REQUIRED = os.environ.get("PHEROMONE_REQUIRE_ZENOH") == "1"
+
+pytestmark = pytest.mark.zenoh
 
 try:
     import xxhash
@@ -65,7 +69,7 @@ def zenoh_bin():
     # An invalid field name: a build with Zenoh refuses it before opening anything.
     p = subprocess.run([str(BIN), "bridge", "--field", "no/such", "--listen", "tcp/127.0.0.1:1"],
                        capture_output=True, text=True, timeout=30)
-    if "no Zenoh" in p.stderr or p.returncode == 2 and "unrecognized subcommand" in p.stderr:
+    if "no Zenoh" in p.stderr or (p.returncode == 2 and "unrecognized subcommand" in p.stderr):
         msg = f"{BIN} has no `bridge` (cargo build --features zenoh): {p.stderr.strip()}"
         if REQUIRED:
             pytest.fail(msg)
@@ -199,7 +203,7 @@ def _corrupted_messages_are_refused(raw):
         with pytest.raises(zf.WireError, match=re.escape(what)):
             zf.decode_frame(flipped(i))
     # Every byte the checksum or the envelope's checks cover.
-    for i in [*range(0, 8), *range(24, len(raw))]:
+    for i in [*range(8), *range(24, len(raw))]:
         with pytest.raises(zf.WireError):
             zf.decode_frame(flipped(i, 0x01))
     # Epoch and sequence (bytes 8..24) are outside the body checksum (docs/mirror-wire.md).

@@ -1,5 +1,7 @@
-//! `pheromone bench`: a run with a few samples of everything prints one JSON object with every
-//! figure, each latency ordered (p50 ≤ p99 ≤ p99.9 ≤ max) and positive. Speed is never asserted.
+//! `pheromone bench`: a small run prints every figure as one JSON object; speed never asserted.
+//!
+//! A run with a few samples of everything: each latency is ordered (p50 ≤ p99 ≤ p99.9 ≤ max) and
+//! positive.
 
 use std::time::Duration;
 

@@ -1,3 +1,5 @@
+//! Clients SIGKILLed at random instants and restarted: the field keeps ticking and cleans up.
+//!
 //! Client crashes (issue 7, part 1): localizer, depositor, follower, world, reader and one-shot
 //! depositor processes are killed with SIGKILL at random instants (seeded) and restarted. The
 //! field must keep ticking (a reader in this test process sees a newer frame after every kill),
@@ -468,23 +470,13 @@ fn clients_killed_at_any_instant_leave_the_field_ticking_and_attach_again() {
     let mut rng = Rng(seed);
     // Exactly as many slots as clients: readers = this test's, the follower's and the probe's;
     // deposit publishers = the world's (scripted trail), the depositor's and a one-shot's.
-    let mut field_proc = run.spawn(
-        &[
-            "field",
-            "--name",
-            &field,
-            "--scenario",
-            &scenario,
-            "--tick-hz",
-            "50",
-            "--max-readers",
-            "3",
-            "--max-depositors",
-            "3",
-            "--json",
-        ],
-        "field",
-    );
+    let field_cmd = Cmd::field(&field)
+        .opt("--scenario", &scenario)
+        .tick_hz(50)
+        .opt("--max-readers", 3)
+        .opt("--max-depositors", 3)
+        .json();
+    let mut field_proc = run.spawn(&field_cmd.argv(), "field");
     let watch = FrameWatch::start(&run, &field);
     watch.wait_newer(0, WAIT, "the field's first frame");
     let node = run.node(&format!("crash-test-{}", std::process::id()));
@@ -492,61 +484,21 @@ fn clients_killed_at_any_instant_leave_the_field_ticking_and_attach_again() {
         FieldWatch::open(&node, &field).ok()
     });
 
-    let args = |role: Role| -> Vec<String> {
-        let mut v: Vec<String> = match role {
-            Role::World => vec!["world".into(), "--realtime".into()],
-            Role::Localizer => vec!["localizer".into(), "--robot".into(), "0".into()],
-            Role::Depositor => vec!["depositor".into(), "--robot".into(), "0".into()],
-            Role::Follower => vec!["follower".into(), "--robot".into(), "0".into()],
-            Role::Reader => {
-                return [
-                    "probe",
-                    "--field",
-                    &field,
-                    "--above",
-                    "1e30",
-                    "--timeout",
-                    "3600",
-                ]
-                .map(String::from)
-                .to_vec()
-            }
-            Role::OneShot => {
-                return [
-                    "deposit",
-                    "--field",
-                    &field,
-                    "--x",
-                    "3",
-                    "--y",
-                    "1",
-                    "--amount",
-                    "0.1",
-                    "--timeout",
-                    "20",
-                ]
-                .map(String::from)
-                .to_vec()
-            }
+    let args = |role: Role| -> Cmd {
+        let cmd = match role {
+            Role::World => Cmd::new("world").arg("--realtime"),
+            Role::Localizer => Cmd::new("localizer").opt("--robot", 0),
+            Role::Depositor => Cmd::new("depositor").opt("--robot", 0),
+            Role::Follower => Cmd::new("follower").opt("--robot", 0),
+            Role::Reader => return Cmd::probe(&field).opt("--above", "1e30").timeout(3600),
+            Role::OneShot => return Cmd::deposit(&field).at(3, 1).amount(0.1).timeout(20),
         };
-        v.extend(
-            [
-                "--scenario",
-                &scenario,
-                "--world",
-                &world,
-                "--field",
-                &field,
-            ]
-            .map(String::from),
-        );
-        v
+        cmd.opt("--scenario", &scenario)
+            .opt("--world", &world)
+            .opt("--field", &field)
     };
-    let spawn = |role: Role| -> Proc {
-        let a = args(role);
-        let a: Vec<&str> = a.iter().map(String::as_str).collect();
-        run.spawn(&a, &format!("{role:?}").to_lowercase())
-    };
+    let spawn =
+        |role: Role| -> Proc { run.spawn(&args(role).argv(), &format!("{role:?}").to_lowercase()) };
     let persistent = [
         Role::World,
         Role::Localizer,
@@ -580,9 +532,7 @@ fn clients_killed_at_any_instant_leave_the_field_ticking_and_attach_again() {
             kills += kill(&mut p) as u64;
             watch.wait_newer(at, LIVENESS, "a frame after killing a one-shot depositor");
             // A new one-shot cleans up after the dead one and delivers its deposit.
-            let args = args(Role::OneShot);
-            let args: Vec<&str> = args.iter().map(String::as_str).collect();
-            let o = run.run(&args);
+            let o = run.run(&args(Role::OneShot).argv());
             assert!(
                 o.status.success(),
                 "round {round}: a one-shot deposit after a killed one failed: {}",

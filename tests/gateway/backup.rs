@@ -1,3 +1,5 @@
+//! A gateway client fails over from a SIGKILLed primary to its backup; no deposit twice.
+//!
 //! A client with a primary and a backup gateway (two `pheromone gateway` processes on one
 //! field): the primary is SIGKILLed mid-run, the client switches to the backup and keeps getting
 //! PIR answers, and the deposit sent to the dead primary is applied once, by the backup.

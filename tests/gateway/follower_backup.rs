@@ -1,3 +1,5 @@
+//! Robot processes on a primary and a backup gateway, the primary killed or stopped mid-run.
+//!
 //! The real robot processes with a primary and a backup gateway: `pheromone follower --strategy
 //! antenna --gateway … --backup …` (trail-following's two antenna robots, in lockstep with the
 //! world, field and localizers), robot 0 also depositing through the gateway. The primary is
@@ -43,39 +45,26 @@ fn primary_goes_away(signal: Signal) {
     let path = scenario_file(&tag);
     let scenario = path.display().to_string();
     let (field_name, world) = (tag.clone(), tag.clone());
-    let role = |role: &str, robot: Option<u32>, extra: &[&str]| {
-        let mut v: Vec<String> = [
-            role,
-            "--scenario",
-            &scenario,
-            "--world",
-            &world,
-            "--field",
-            &field_name,
-            "--json",
-        ]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
+    let role = |name: &str, robot: Option<u32>, extra: &[&str]| {
+        let mut cmd = Cmd::new(name)
+            .opt("--scenario", &scenario)
+            .opt("--world", &world)
+            .opt("--field", &field_name)
+            .json();
         if let Some(r) = robot {
-            v.extend(["--robot".to_string(), r.to_string()]);
+            cmd = cmd.opt("--robot", r);
         }
-        v.extend(extra.iter().map(|s| s.to_string()));
-        v
+        cmd.args(extra)
     };
-    let spawn =
-        |args: Vec<String>| Proc::spawn(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let spawn = |cmd: Cmd| Proc::spawn(&cmd.argv());
 
-    let field_proc = Proc::spawn(&[
-        "field",
-        "--name",
-        &field_name,
-        "--scenario",
-        &scenario,
-        "--clock",
-        &world,
-        "--json",
-    ]);
+    let field_proc = Proc::spawn(
+        &Cmd::field(&field_name)
+            .opt("--scenario", &scenario)
+            .opt("--clock", &world)
+            .json()
+            .argv(),
+    );
     let (p_port, b_port) = (free_port(), free_port());
     let gateway = |port: u16| {
         let udp = format!("127.0.0.1:{port}");

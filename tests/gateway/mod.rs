@@ -1,3 +1,5 @@
+//! `pheromone gateway` over UDP loopback, from a client that knows only docs/gateway-wire.md.
+//!
 //! `pheromone gateway` end to end over UDP loopback, with a real field process, from a client
 //! that knows only the documented bytes of docs/gateway-wire.md (MODELS.md M3): it builds and
 //! parses frames by hand — DLE STX, client ID, opcode, little-endian data, CRC-16/ARC written out
@@ -134,22 +136,15 @@ impl Client {
 
 /// A field of 100×100 cells of 0.1 m, no evaporation, 50 Hz, that prints its summary at exit.
 fn start_field(name: &str) -> Proc {
-    Proc::spawn(&[
-        "field",
-        "--name",
-        name,
-        "--width",
-        "100",
-        "--height",
-        "100",
-        "--cell-size",
-        "0.1",
-        "--model",
-        "none",
-        "--tick-hz",
-        "50",
-        "--json",
-    ])
+    Proc::spawn(
+        &Cmd::field(name)
+            .grid(100, 100)
+            .cell_size(0.1)
+            .model("none")
+            .tick_hz(50)
+            .json()
+            .argv(),
+    )
 }
 
 /// A UDP port free a moment ago (the gateway binds it next).
@@ -264,7 +259,7 @@ fn a_thin_client_reads_antennas_deposits_once_and_gets_each_documented_error() {
 #[test]
 fn a_client_over_its_rate_is_told_so() {
     let field = unique("gw-rate");
-    let field_proc = Proc::spawn(&["field", "--name", &field, "--tick-hz", "20"]);
+    let field_proc = Proc::spawn(&Cmd::field(&field).tick_hz(20).argv());
     // 1 request per second: a burst of 1 (the ready ping takes it), then one a second.
     let (gateway, c) = start_gateway(&field, free_port(), &["--rate-hz", "1"]);
     let limited = (0..10)

@@ -1,3 +1,5 @@
+//! `sim trail-following --remote`: robots reading through a gateway track the shared-memory run.
+//!
 //! `pheromone sim trail-following --remote`: the antenna robots read the field only through a
 //! `pheromone gateway` the sim starts (PIR over UDP loopback), in lockstep; their mean path
 //! error stays within 10 % of the shared-memory run's for the same seed.

@@ -1,3 +1,5 @@
+//! `pheromone gateway --serial` end to end over a pseudo-terminal pair, with a real field.
+//!
 //! `pheromone gateway --serial` end to end over a pseudo-terminal pair, with a real field
 //! process: the gateway opens the pty's slave (`/dev/pts/N`) at 9600 baud, the test's
 //! `GatewayClient` talks on the master side. A pty does not enforce the baud rate, so the

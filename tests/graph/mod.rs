@@ -1,5 +1,4 @@
-//! Node-graph runs (seed 001) as real processes: `pheromone graph`, `pheromone graph-robot`
-//! and `pheromone sim regions…`.
+//! Node-graph runs (seed 001) as processes: `graph`, `graph-robot` and `sim regions…`.
 
 use std::time::Duration;
 

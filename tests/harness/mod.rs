@@ -1,5 +1,7 @@
-//! Helper harness for the integration tests: unique names, child processes that are killed and
-//! reaped when dropped, and waiting for a condition with a deadline.
+//! The helpers of the process tests: the binary under test, `run`, `Proc::spawn`, `eventually`.
+//!
+//! Unique names and the argv builder `Cmd` come from the test kit (`tests/kit`); child processes
+//! are killed and reaped when dropped; `eventually` waits for a condition with a deadline.
 
 #![allow(dead_code)]
 
@@ -14,7 +16,7 @@ pub fn bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_pheromone"))
 }
 
-pub use testkit::unique;
+pub use testkit::{unique, Cmd};
 
 /// Runs `pheromone ARGS` to completion.
 pub fn run(args: &[&str]) -> Output {

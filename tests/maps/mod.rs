@@ -1,3 +1,5 @@
+//! Scenarios on ROS map_server maps in both modes; malformed YAML and PGM files exit with 2.
+//!
 //! Scenarios on ROS map_server maps (issue 16): `pheromone sim ias-ss --map FILE.yaml` as
 //! processes and `--single-process` with the same metrics, on the example map's walls; a
 //! scenario's `[world] map` relative to the scenario file; malformed YAML and PGM files exit

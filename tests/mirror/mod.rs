@@ -1,3 +1,5 @@
+//! Field mirrors over Zenoh (feature `zenoh`): a mirror's frames equal its origin's.
+//!
 //! Field mirrors over Zenoh (feature `zenoh`): two iceoryx2 domains stand for two hosts, a
 //! bridge and a mirror link them over loopback TCP. Frames are compared by XXH3-64 of their
 //! cells for the same sequence number, read from both domains by this process.
@@ -37,28 +39,18 @@ fn origin_field(name: &str) -> Proc {
 
 /// An origin field of `side` × `side` cells of 0.1 m.
 fn origin_field_of(name: &str, side: u32) -> Proc {
-    let side = side.to_string();
-    Proc::spawn(&[
-        "field",
-        "--iox-domain",
-        ORIGIN,
-        "--name",
-        name,
-        "--width",
-        &side,
-        "--height",
-        &side,
-        "--cell-size",
-        "0.1",
-        "--model",
-        "exponential",
-        "--decay-per-s",
-        "0.2",
-        "--tick-hz",
-        "50",
-        "--duration",
-        "120",
-    ])
+    Proc::spawn(
+        &Cmd::new("field")
+            .opt("--iox-domain", ORIGIN)
+            .opt("--name", name)
+            .grid(side, side)
+            .cell_size(0.1)
+            .model("exponential")
+            .opt("--decay-per-s", 0.2)
+            .tick_hz(50)
+            .duration(120)
+            .argv(),
+    )
 }
 
 /// A bridge on a loopback port the system picks (`--print-address` tells which).
@@ -107,21 +99,16 @@ fn bridge_on(name: &str, listen: &str) -> BridgeProc {
 }
 
 fn mirror(name: &str, endpoint: &str) -> Proc {
-    let connect = format!("zenoh:{endpoint}");
-    Proc::spawn(&[
-        "field",
-        "--iox-domain",
-        MIRROR,
-        "--name",
-        name,
-        "--mirror",
-        &connect,
-        "--stale-after-s",
-        "0.5",
-        "--duration",
-        "120",
-        "--json",
-    ])
+    Proc::spawn(
+        &Cmd::new("field")
+            .opt("--iox-domain", MIRROR)
+            .opt("--name", name)
+            .opt("--mirror", format!("zenoh:{endpoint}"))
+            .opt("--stale-after-s", 0.5)
+            .duration(120)
+            .json()
+            .argv(),
+    )
 }
 
 struct Hosts {
@@ -218,23 +205,14 @@ fn value_at(f: &field::shm::Frame<'_>, x: f32, y: f32) -> f32 {
 }
 
 fn deposit(domain: &str, name: &str, x: &str, y: &str) {
-    let out = run(&[
-        "deposit",
-        "--iox-domain",
-        domain,
-        "--field",
-        name,
-        "--x",
-        x,
-        "--y",
-        y,
-        "--amount",
-        "2",
-        "--cov",
-        "0.02,0,0.02",
-        "--timeout",
-        "20",
-    ]);
+    let out = run(&Cmd::new("deposit")
+        .opt("--iox-domain", domain)
+        .opt("--field", name)
+        .at(x, y)
+        .amount(2)
+        .opt("--cov", "0.02,0,0.02")
+        .timeout(20)
+        .argv());
     assert!(out.status.success(), "deposit failed: {}", stderr(&out));
 }
 

@@ -1,3 +1,5 @@
+//! The bytes of docs/mirror-wire.md: envelopes and bodies refused when corrupted, round trips.
+//!
 //! The envelope and bodies of docs/mirror-wire.md, byte by byte: every flipped byte of an
 //! inputs message is refused, keyframes and downsampled frames round-trip, a corrupted keyframe
 //! fails its checksum.

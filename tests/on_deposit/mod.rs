@@ -1,5 +1,4 @@
-//! `pheromone field --publish-on-deposit-ms`: a deposit is visible in a frame published when it
-//! arrives, long before the next regular tick, and the frame is stepped by the real elapsed time.
+//! `field --publish-on-deposit-ms`: a deposit is in a frame at once, stepped by the real time.
 
 use std::time::Duration;
 
@@ -14,28 +13,18 @@ const WAIT: Duration = Duration::from_secs(30);
 fn a_deposit_is_published_at_once_instead_of_at_the_next_tick() {
     let name = unique("ondep");
     // One regular tick every 50 s: any frame with the deposit before that came on deposit.
-    let field = Proc::spawn(&[
-        "field",
-        "--name",
-        &name,
-        "--width",
-        "64",
-        "--height",
-        "64",
-        "--cell-size",
-        "0.1",
-        "--model",
-        "exponential",
-        "--decay-per-s",
-        "0.5",
-        "--tick-hz",
-        "0.02",
-        "--publish-on-deposit-ms",
-        "2",
-        "--duration",
-        "120",
-        "--json",
-    ]);
+    let field = Proc::spawn(
+        &Cmd::field(&name)
+            .grid(64, 64)
+            .cell_size(0.1)
+            .model("exponential")
+            .opt("--decay-per-s", 0.5)
+            .tick_hz(0.02)
+            .opt("--publish-on-deposit-ms", 2)
+            .duration(120)
+            .json()
+            .argv(),
+    );
     let node = create_node(&unique("ondep-client")).unwrap();
     let mut reader = FieldReader::attach_within(&node, &name, WAIT).unwrap();
     let mut depositor = DepositPublisher::attach_within(&node, &name, 3, WAIT).unwrap();

@@ -1,3 +1,5 @@
+//! Every scenario as processes equals `--single-process`; a failed or killed child stops the run.
+//!
 //! Scenarios as separate processes, the default mode of `pheromone sim`: the same metrics as
 //! `--single-process` for a seed, key by key, for every built-in scenario and every file in
 //! `examples/scenarios/`; eight robots; a child that fails, and one that is killed, stop the

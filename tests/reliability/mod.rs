@@ -1,3 +1,5 @@
+//! Crashes, restarts, checkpoints and the standby field: the field or its standby keeps serving.
+//!
 //! Crashes, restarts, checkpoints and the standby field (README "Reliability"): processes are
 //! killed with SIGKILL at arbitrary points and the field (or its standby) must keep serving.
 //!
@@ -15,27 +17,14 @@ use crate::harness::*;
 const WAIT: Duration = Duration::from_secs(30);
 
 /// A small field on wall time with no evaporation, so values are exact.
-fn field_args<'a>(name: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
-    let mut v = vec![
-        "field",
-        "--name",
-        name,
-        "--width",
-        "64",
-        "--height",
-        "64",
-        "--cell-size",
-        "0.1",
-        "--model",
-        "none",
-        "--tick-hz",
-        "50",
-        "--duration",
-        "120",
-        "--json",
-    ];
-    v.extend_from_slice(extra);
-    v
+fn small_field(name: &str) -> Cmd {
+    Cmd::field(name)
+        .grid(64, 64)
+        .cell_size(0.1)
+        .model("none")
+        .tick_hz(50)
+        .duration(120)
+        .json()
 }
 
 fn watch(node: &Node<Svc>, name: &str) -> FieldWatch {
@@ -46,19 +35,7 @@ fn watch(node: &Node<Svc>, name: &str) -> FieldWatch {
 
 /// A deposit of amount `tau` at (x, y) through the CLI (its own process).
 fn deposit(name: &str, x: f32, y: f32, tau: f32) {
-    let o = run(&[
-        "deposit",
-        "--field",
-        name,
-        "--x",
-        &x.to_string(),
-        "--y",
-        &y.to_string(),
-        "--amount",
-        &tau.to_string(),
-        "--timeout",
-        "30",
-    ]);
+    let o = run(&Cmd::deposit(name).at(x, y).amount(tau).timeout(30).argv());
     assert!(o.status.success(), "deposit: {}", stderr(&o));
 }
 
@@ -75,7 +52,7 @@ fn value_at(reader: &mut FieldReader, x: f32, y: f32, above: f32, what: &str) ->
 #[test]
 fn readers_killed_while_holding_frames_are_cleaned_up_and_the_field_keeps_publishing() {
     let name = unique("rel-readers");
-    let field = Proc::spawn(&field_args(&name, &["--max-readers", "2"]));
+    let field = Proc::spawn(&small_field(&name).opt("--max-readers", 2).argv());
     let node = create_node(&unique("rel-watch")).unwrap();
     let w = watch(&node, &name);
     eventually(WAIT, "the field's publisher", || {
@@ -85,15 +62,7 @@ fn readers_killed_while_holding_frames_are_cleaned_up_and_the_field_keeps_publis
     // holds frames (a probe waiting for a value that never comes holds the newest frame).
     let kills = 4;
     for i in 0..kills {
-        let reader = Proc::spawn(&[
-            "probe",
-            "--field",
-            &name,
-            "--above",
-            "1e20",
-            "--timeout",
-            "60",
-        ]);
+        let reader = Proc::spawn(&Cmd::probe(&name).opt("--above", "1e20").timeout(60).argv());
         eventually(WAIT, &format!("reader {i} to attach"), || {
             (w.status().subscribers == 2).then_some(())
         });
@@ -133,7 +102,7 @@ fn a_killed_depositor_is_cleaned_up_and_a_restarted_one_attaches() {
     let name = unique("rel-dep");
     let world = unique("rel-world");
     // One depositor at a time: a dead one's port must be freed for the next.
-    let field = Proc::spawn(&field_args(&name, &["--max-depositors", "1"]));
+    let field = Proc::spawn(&small_field(&name).opt("--max-depositors", 1).argv());
     let node = create_node(&unique("rel-watch")).unwrap();
     let w = watch(&node, &name);
     for i in 0..3 {
@@ -181,7 +150,7 @@ fn a_reader_keeps_its_frame_when_the_field_is_killed_and_sees_the_field_restarte
 {
     let name = unique("rel-restart");
     let node = create_node(&unique("rel-reader")).unwrap();
-    let field = Proc::spawn(&field_args(&name, &[]));
+    let field = Proc::spawn(&small_field(&name).argv());
     deposit(&name, 3.0, 3.0, 0.5);
     let mut reader = FieldReader::attach_within(&node, &name, WAIT).unwrap();
     let before = value_at(&mut reader, 3.0, 3.0, 1.0, "the first field");
@@ -196,7 +165,7 @@ fn a_reader_keeps_its_frame_when_the_field_is_killed_and_sees_the_field_restarte
     assert_eq!(last.view.value(0, 3.0, 3.0), before);
     let (last_sequence, last_stamp) = (last.header.sequence, last.header.stamp_ns);
     // The same name again: no stale-service trap.
-    let field = Proc::spawn(&field_args(&name, &[]));
+    let field = Proc::spawn(&small_field(&name).argv());
     let frame = reader
         .wait_until(WAIT, |f| f.header.stamp_ns > last_stamp)
         .unwrap()
@@ -220,10 +189,12 @@ fn a_checkpoint_restores_a_killed_field_and_a_damaged_one_is_refused() {
     let file = dir.join("field.ckpt");
     let file_s = file.to_str().unwrap();
     let node = create_node(&unique("rel-reader")).unwrap();
-    let field = Proc::spawn(&field_args(
-        &name,
-        &["--checkpoint", file_s, "--checkpoint-every", "0.2"],
-    ));
+    let field = Proc::spawn(
+        &small_field(&name)
+            .opt("--checkpoint", file_s)
+            .opt("--checkpoint-every", 0.2)
+            .argv(),
+    );
     deposit(&name, 3.0, 3.0, 0.5);
     let mut reader = FieldReader::attach_within(&node, &name, WAIT).unwrap();
     let value = value_at(&mut reader, 3.0, 3.0, 1.0, "the deposit");
@@ -238,7 +209,7 @@ fn a_checkpoint_restores_a_killed_field_and_a_damaged_one_is_refused() {
     let cp = checkpoint::read(&file).expect("the last checkpoint is complete");
     assert_eq!(cp.header.deposits_applied, 1);
     // Restore: the value is back, the sequence and field time continue.
-    let restored = Proc::spawn(&field_args(&name, &["--restore", file_s]));
+    let restored = Proc::spawn(&small_field(&name).opt("--restore", file_s).argv());
     let frame = reader
         .wait_until(WAIT, |f| {
             f.header.stamp_ns > killed_ns && f.header.sequence > cp.header.sequence
@@ -275,21 +246,12 @@ fn a_checkpoint_restores_a_killed_field_and_a_damaged_one_is_refused() {
     for (what, content, expect) in cases {
         let bad = dir.join(format!("{what}.ckpt"));
         std::fs::write(&bad, content).unwrap();
-        let o = run(&[
-            "field",
-            "--name",
-            &unique("rel-bad"),
-            "--width",
-            "64",
-            "--height",
-            "64",
-            "--cell-size",
-            "0.1",
-            "--restore",
-            bad.to_str().unwrap(),
-            "--ticks",
-            "1",
-        ]);
+        let o = run(&Cmd::field(&unique("rel-bad"))
+            .grid(64, 64)
+            .cell_size(0.1)
+            .opt("--restore", bad.display())
+            .ticks(1)
+            .argv());
         assert_eq!(o.status.code(), Some(2), "{what}: {}", stderr(&o));
         let e = stderr(&o);
         assert!(
@@ -298,15 +260,10 @@ fn a_checkpoint_restores_a_killed_field_and_a_damaged_one_is_refused() {
         );
     }
     // Another grid than the checkpoint's is refused too.
-    let o = run(&[
-        "field",
-        "--name",
-        &unique("rel-bad"),
-        "--restore",
-        file_s,
-        "--ticks",
-        "1",
-    ]);
+    let o = run(&Cmd::field(&unique("rel-bad"))
+        .opt("--restore", file_s)
+        .ticks(1)
+        .argv());
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("64×64"), "{}", stderr(&o));
     std::fs::remove_dir_all(&dir).unwrap();
@@ -316,9 +273,9 @@ fn a_checkpoint_restores_a_killed_field_and_a_damaged_one_is_refused() {
 fn a_standby_takes_over_when_the_primary_is_killed_and_keeps_the_deposits() {
     let name = unique("rel-standby");
     let node = create_node(&unique("rel-client")).unwrap();
-    let primary = Proc::spawn(&field_args(&name, &[]));
+    let primary = Proc::spawn(&small_field(&name).argv());
     let w = watch(&node, &name);
-    let standby = Proc::spawn(&field_args(&name, &["--standby"]));
+    let standby = Proc::spawn(&small_field(&name).arg("--standby").argv());
     eventually(WAIT, "the standby to attach", || {
         (w.status().deposit_subscribers == 2).then_some(())
     });

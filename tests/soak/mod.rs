@@ -1,3 +1,5 @@
+//! Soak: a field and 25 robot processes under random SIGKILLs for a bounded time.
+//!
 //! Soak (issue 7, part 6): one field and eight robots — a world on wall time and, per robot, a
 //! localizer, a depositor and a follower: 25 client processes — with random SIGKILLs (seeded)
 //! and restarts for a bounded time. Asserts that the field stayed alive (a newer frame after every
@@ -31,23 +33,13 @@ fn a_field_and_eight_robots_survive_random_kills_and_leave_nothing_behind() {
     let mut rng = Rng(seed);
     let readers = ROBOTS + 1; // the followers and this test
     let depositors = ROBOTS + 1; // the depositors and the world (scripted trail)
-    let mut field_proc = run.spawn(
-        &[
-            "field",
-            "--name",
-            &field,
-            "--scenario",
-            &scenario,
-            "--tick-hz",
-            "50",
-            "--max-readers",
-            &readers.to_string(),
-            "--max-depositors",
-            &depositors.to_string(),
-            "--json",
-        ],
-        "field",
-    );
+    let field_cmd = Cmd::field(&field)
+        .opt("--scenario", &scenario)
+        .tick_hz(50)
+        .opt("--max-readers", readers)
+        .opt("--max-depositors", depositors)
+        .json();
+    let mut field_proc = run.spawn(&field_cmd.argv(), "field");
     let watch = FrameWatch::start(&run, &field);
     watch.wait_newer(0, WAIT, "the field's first frame");
     let node = run.node(&format!("soak-test-{}", std::process::id()));
@@ -58,29 +50,21 @@ fn a_field_and_eight_robots_survive_random_kills_and_leave_nothing_behind() {
     // Client k: 0 = the world, then localizer, depositor, follower of robot (k − 1) / 3.
     let clients = 1 + 3 * ROBOTS as usize;
     let spawn = |k: usize| -> Proc {
-        let (mut args, name): (Vec<String>, String) = if k == 0 {
-            (vec!["world".into(), "--realtime".into()], "world".into())
+        let (cmd, name) = if k == 0 {
+            (Cmd::new("world").arg("--realtime"), "world".to_string())
         } else {
-            let robot = ((k - 1) / 3).to_string();
+            let robot = (k - 1) / 3;
             let role = ["localizer", "depositor", "follower"][(k - 1) % 3];
             (
-                vec![role.into(), "--robot".into(), robot.clone()],
+                Cmd::new(role).opt("--robot", robot),
                 format!("{role}-r{robot}"),
             )
         };
-        args.extend(
-            [
-                "--scenario",
-                &scenario,
-                "--world",
-                &world,
-                "--field",
-                &field,
-            ]
-            .map(String::from),
-        );
-        let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        run.spawn(&args, &name)
+        let cmd = cmd
+            .opt("--scenario", &scenario)
+            .opt("--world", &world)
+            .opt("--field", &field);
+        run.spawn(&cmd.argv(), &name)
     };
     let mut procs: Vec<Proc> = (0..clients).map(spawn).collect();
     let attached = |s: &field::shm::FieldStatus| {

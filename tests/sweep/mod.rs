@@ -1,3 +1,5 @@
+//! `pheromone sweep ias-ss`: a tiny sweep's CSV, JSON and charts; bad lists exit with status 2.
+//!
 //! `pheromone sweep ias-ss` (seed 004's grid of experiments): a tiny sweep writes a CSV row per
 //! run, the JSON points and comparisons, and two valid PNG charts; bad lists exit with status 2
 //! naming the option and the value.

@@ -1,5 +1,4 @@
-//! `pheromone view` end to end: a real field, a real view, HTTP/1.0 GETs written by hand over
-//! a `TcpStream`, and the page itself in Debian's headless Chromium.
+//! `pheromone view` end to end: real field and view, HTTP by hand, the page in headless Chromium.
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -78,21 +77,14 @@ fn get_text(port: u16, path: &str) -> (u16, String) {
 /// A 200×100 field of 0.1 m cells that keeps what it gets (model none), and a view of it.
 fn field_and_view(tag: &str, view_args: &[&str]) -> (String, Proc, Proc, u16) {
     let name = unique(tag);
-    let field = Proc::spawn(&[
-        "field",
-        "--name",
-        &name,
-        "--width",
-        "200",
-        "--height",
-        "100",
-        "--cell-size",
-        "0.1",
-        "--model",
-        "none",
-        "--tick-hz",
-        "50",
-    ]);
+    let field = Proc::spawn(
+        &Cmd::field(&name)
+            .grid(200, 100)
+            .cell_size(0.1)
+            .model("none")
+            .tick_hz(50)
+            .argv(),
+    );
     let port = free_port();
     let listen = format!("127.0.0.1:{port}");
     let mut args = vec!["view", "--field", &name, "--listen", &listen];

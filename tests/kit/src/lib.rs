@@ -1,7 +1,10 @@
 //! The test kit shared by every test binary of the workspace (dev-only): names no other test
-//! uses ([`unique`]), the TOML mutator of the fuzz suites ([`toml_fuzz`]), a command builder for
-//! the `pheromone` binary ([`Cli`]) and a background process under the project's supervisor
-//! ([`Proc`]).
+//! uses ([`unique`]), the TOML mutator of the fuzz suites ([`toml_fuzz`]), the argv of a
+//! `pheromone` command ([`Cmd`]), a runner for the binary ([`Cli`]) and a background process
+//! under the project's supervisor ([`Proc`]).
+
+mod cmd;
+pub use cmd::Cmd;
 
 use std::path::Path;
 use std::process::{Command, Output};
