@@ -4,14 +4,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-echo "== cargo test --workspace"
-cargo test --workspace
-
-# Field mirrors over Zenoh (feature `zenoh`): only the mirror tests (tests/mirror: two iceoryx2
-# domains linked by a bridge, and the envelope of docs/mirror-wire.md byte by byte), so the rest
-# of the suite is not built twice (the feature adds zenoh, zstd and xxhash-rust to the binary).
-echo "== cargo test --test cli --features zenoh mirror::"
-cargo test --test cli --features zenoh mirror::
+# The whole workspace with the `zenoh` feature (the bridge crate is a member and links Zenoh in
+# any case; the feature adds `pheromone bridge`/`field --mirror` to the binary, so the mirror tests
+# of tests/cli.rs run in this same pass and the binary the Python tests use has them).
+echo "== cargo test --workspace --features zenoh"
+cargo test --workspace --features zenoh
 
 # The `test` extra: pytest and the pinned ruff and mypy; the `zenoh` extra (eclipse-zenoh
 # 1.10.2, as the Rust zenoh crate in Cargo.lock; zstandard, xxhash) is for
@@ -26,9 +23,9 @@ fi
 echo "== python: ruff check, mypy"
 (cd python && ../.venv/bin/ruff check . && ../.venv/bin/mypy)
 
-# The mirror tests above have just built target/debug/pheromone with `--features zenoh` (the
-# binary of the integration tests, `bridge` included), which test_zenoh_frames.py needs; a plain
-# `cargo build` would resolve other features (no dev-dependencies) and rebuild everything.
+# The run above has just built target/debug/pheromone with `--features zenoh` (the binary of the
+# integration tests, `bridge` included), which test_zenoh_frames.py needs; a plain `cargo build`
+# would resolve other features (no dev-dependencies) and rebuild everything.
 export PHEROMONE_BIN="${PHEROMONE_BIN:-${CARGO_TARGET_DIR:-target}/debug/pheromone}"
 if [ ! -x "$PHEROMONE_BIN" ]; then
     echo "== python: pheromone binary"
