@@ -80,7 +80,10 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Sim(a) => cmd::sim::run(a),
         Command::Sweep(a) => cmd::sweep::run(a),
-        Command::Field(a) => cmd::field::run(*a),
+        Command::Field(a) => match a.mirror.clone() {
+            Some(endpoint) => cmd::bridge::run_mirror(&a, &endpoint),
+            None => cmd::field::run(*a),
+        },
         Command::Tune(a) => cmd::tune::run(a),
         Command::World(a) => cmd::roles::run_world_cmd(a),
         Command::Localizer(a) => cmd::roles::run_localizer_cmd(a),

@@ -163,6 +163,7 @@ pub fn run(_a: BridgeArgs) -> anyhow::Result<()> {
 #[cfg(feature = "zenoh")]
 pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
     use bridge::{Mirror, MirrorOptions};
+    field::shm::check_name(&a.name).map_err(bad_from)?;
     let Some(endpoint) = endpoint.strip_prefix("zenoh:") else {
         return Err(bad(format!(
             "--mirror {endpoint}: expected zenoh:ENDPOINT, e.g. zenoh:tcp/10.0.0.1:7447"

@@ -275,10 +275,8 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
             field::engine::MAX_THREADS
         )));
     }
-    if let Some(m) = &a.mirror {
-        field::shm::check_name(&a.name).map_err(bad_from)?;
-        return super::bridge::run_mirror(&a, m);
-    }
+    // `--mirror` runs `bridge::run_mirror` instead (dispatched by main, as this module's
+    // arguments are the mirror's too).
     let config = config_from_args(&a)?;
     field::shm::check_name(&a.name).map_err(bad_from)?;
     if a.print_config {

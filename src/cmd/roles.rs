@@ -387,8 +387,8 @@ fn run_remote_follower(
 ) -> anyhow::Result<()> {
     use gateway::client::{ClientConfig, DepositRetry, GatewayClient, Transport};
     use roles::follower::antenna_source::{AntennaRobot, GatewaySource};
-    use roles::follower::run_antenna::{run_antenna_robot, AntennaRunOptions, RemoteDeposits};
     use roles::follower::AntennaFollower;
+    use roles::process::follower_antenna::{run_antenna_robot, AntennaRunOptions, RemoteDeposits};
     if config.strategy != StrategyKind::Antenna {
         return Err(bad(format!(
             "--gateway: only the antenna strategy reads through a gateway (robot {} has '{}')",

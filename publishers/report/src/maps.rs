@@ -7,7 +7,7 @@
 
 use super::style::{Picture, Rgb};
 use roles::mapper::pose_in_frame;
-use roles::mapper::team::RobotMap;
+use roles::team::RobotMap;
 use sim::record::Recording;
 
 const UNKNOWN: f32 = 160.0;

@@ -14,9 +14,7 @@ use std::collections::BTreeMap;
 use field::Evaporation;
 
 use roles::scenario::{BlindLeaderMetric, ExplorationMetric, Scenario};
-use sim::metrics::{
-    blind_leader, distance_to_polyline_m, mean_path_error_m, sector_index, BlindLeader,
-};
+use sim::metrics::{blind_leader, distance_to_polyline_m, mean_path_error_m, BlindLeader};
 use sim::record::Recording;
 
 /// The closed form a probe's readings are compared with: the level `p0` read at `t0_s`,
@@ -149,7 +147,7 @@ pub fn exploration_over_time(m: &ExplorationMetric, rec: &Recording) -> Explorat
         let mut count = 0;
         let mut series = Vec::with_capacity(rows.len());
         for r in rows {
-            if let Some(s) = sector_index(m, r.true_pose[0], r.true_pose[1]) {
+            if let Some(s) = m.sector_index(r.true_pose[0], r.true_pose[1]) {
                 if !seen[s] {
                     seen[s] = true;
                     count += 1;

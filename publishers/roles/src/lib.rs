@@ -8,20 +8,18 @@ pub mod depositor;
 pub mod follower;
 pub mod localizer;
 pub mod mapper;
-pub mod role_loop;
+pub mod process;
 pub mod scenario;
-mod scenario_error;
-mod scenario_map;
-mod scenario_mapping;
+pub mod team;
 pub mod world;
 
-pub use depositor::run::run_depositor;
-pub use follower::run::run_follower;
-pub use localizer::run::{run_localizer, Filter};
-pub use mapper::run::{run_mapper, MapperSummary};
-pub(crate) use role_loop::{receiver, role_loop, sender, summary_of};
-pub use role_loop::{sim_stamp_ns, ProcessError, RobotServices, RoleOptions, RoleSummary};
-pub use world::run::{
+pub use process::depositor::run_depositor;
+pub use process::follower::run_follower;
+pub use process::localizer::{run_localizer, Filter};
+pub use process::mapper::{run_mapper, MapperSummary};
+pub(crate) use process::role_loop::{receiver, role_loop, sender, summary_of};
+pub use process::role_loop::{sim_stamp_ns, ProcessError, RobotServices, RoleOptions, RoleSummary};
+pub use process::world::{
     lockstep_participants, mapper_robots, run_world, RobotSummary, WorldOptions, WorldSummary,
-    WORLD_DEPOSITOR_ID,
 };
+pub use scenario::WORLD_DEPOSITOR_ID;

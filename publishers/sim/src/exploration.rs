@@ -7,9 +7,9 @@
 
 use serde::Serialize;
 
-use roles::mapper::team::{MappingRecord, RobotMap};
 use roles::mapper::{pose_in_frame, MappingConfig};
 use roles::scenario::{ExplorationMetric, Scenario};
+use roles::team::{MappingRecord, RobotMap};
 use roles::world::World;
 
 /// `exploration_known`, shaped like `exploration`.
@@ -38,7 +38,7 @@ pub fn free_points(m: &ExplorationMetric, world: &World, step_m: f64) -> Vec<Vec
             if world.in_wall(p[0], p[1], 0.5 * step_m) {
                 continue;
             }
-            if let Some(s) = crate::metrics::sector_index(m, p[0], p[1]) {
+            if let Some(s) = m.sector_index(p[0], p[1]) {
                 out[s].push(p);
             }
         }

@@ -110,19 +110,9 @@ pub struct Exploration {
     pub team: f64,
 }
 
-/// The sector a point falls in (row-major from `min_m`), if it is inside the map.
-pub fn sector_index(m: &ExplorationMetric, x: f64, y: f64) -> Option<usize> {
-    let fx = (x - m.min_m[0]) / (m.max_m[0] - m.min_m[0]);
-    let fy = (y - m.min_m[1]) / (m.max_m[1] - m.min_m[1]);
-    if !(0.0..1.0).contains(&fx) || !(0.0..1.0).contains(&fy) {
-        return None;
-    }
-    Some((fy * m.rows as f64) as usize * m.cols as usize + (fx * m.cols as f64) as usize)
-}
-
 pub fn exploration(m: &ExplorationMetric, rec: &Recording) -> Exploration {
     let n = (m.cols * m.rows) as usize;
-    let sector = |x: f64, y: f64| sector_index(m, x, y);
+    let sector = |x: f64, y: f64| m.sector_index(x, y);
     let mut team = vec![false; n];
     let per_robot: Vec<f64> = rec
         .robots

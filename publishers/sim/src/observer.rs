@@ -29,8 +29,8 @@ use messages::{
     CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, RendezvousMsg, ScanMsg, TruthMsg,
 };
 use roles::depositor::Depositor;
-use roles::mapper::team::MappingTeam;
 use roles::scenario::Scenario;
+use roles::team::MappingTeam;
 use roles::RobotServices;
 
 struct RobotLinks {

@@ -14,7 +14,7 @@ use serde::Serialize;
 use crate::observer::Observer;
 use crate::record::Recording;
 use crate::single::{role_name, FieldSummary, RobotResult, RunSummary};
-use roles::follower::run_antenna::AntennaRobotSummary;
+use roles::process::follower_antenna::AntennaRobotSummary;
 use roles::scenario::{Scenario, ScenarioError};
 use roles::world::World;
 use roles::{

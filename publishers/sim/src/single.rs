@@ -20,8 +20,8 @@ use crate::record::{deposit_peak, ProbeReading, Recording, RobotSample, Snapshot
 use messages::PoseMsg;
 use roles::depositor::Depositor;
 use roles::follower::{Follower, PoseSource};
-use roles::mapper::team::MappingTeam;
 use roles::scenario::{ProbeSpec, Scenario};
+use roles::team::MappingTeam;
 use roles::world::World;
 use roles::{Filter, ProcessError};
 

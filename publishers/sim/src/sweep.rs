@@ -18,7 +18,7 @@ use super::metrics::exploration;
 use super::single::{run_single_process, SingleProcessOptions};
 use super::sweep_stats::{paired, welch, MeanSd, TTest};
 use roles::follower::StrategyKind;
-use roles::role_loop::ProcessError;
+use roles::process::role_loop::ProcessError;
 use roles::scenario::{Overrides, Scenario, ScenarioError};
 
 /// A sweep cannot be planned or one of its runs failed.

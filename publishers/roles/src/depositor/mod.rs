@@ -22,8 +22,6 @@
 //! that do not fit the `f32` deposit message) are rejected with a [`PoseRejection`] and counted
 //! by reason; no `DepositMsg` carrying a non-finite value is ever produced.
 
-pub mod run;
-
 use field::{DepositMsg, KernelKind};
 use serde::{Deserialize, Serialize};
 

@@ -28,8 +28,6 @@ mod antenna;
 pub mod antenna_source;
 mod gradient;
 mod route;
-pub mod run;
-pub mod run_antenna;
 mod sector;
 #[cfg(test)]
 mod test_support;

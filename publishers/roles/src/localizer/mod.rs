@@ -27,10 +27,9 @@
 
 mod ekf;
 mod models;
-pub mod run;
 mod slam;
 #[cfg(test)]
-mod test_support;
+pub(crate) mod test_support;
 
 pub use ekf::Ekf;
 pub use slam::{EkfSlam, SlamLandmark};

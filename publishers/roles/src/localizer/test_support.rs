@@ -86,4 +86,4 @@ pub(super) fn corridor() -> WorldConfig {
 
 /// The captured area of the corridor: x in [8, 24] m, 16 of the 40 landmarks (40 %, as in
 /// seed 001 Fig. 6).
-pub(super) const CAPTURED: [f64; 4] = [8.0, 0.0, 24.0, 4.0];
+pub(crate) const CAPTURED: [f64; 4] = [8.0, 0.0, 24.0, 4.0];

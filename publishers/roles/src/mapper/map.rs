@@ -2,10 +2,11 @@
 //! frame Σ (origin = its start pose, x along its start heading), updated from its pose estimate
 //! and its range scans (seed 004 §3, MODELS.md M4).
 
-use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, GridGeometry, Stepper};
+use field::{
+    ChannelSpec, DepositMsg, Evaporation, FieldConfig, FrameHeader, GridGeometry, Stepper,
+};
 
 use super::config::MappingConfig;
-use super::merge::MapView;
 use super::MapError;
 use messages::ScanMsg;
 
@@ -22,7 +23,7 @@ pub fn pose_in_frame(origin: Pose2, pose: Pose2) -> Pose2 {
     [
         c * dx + s * dy,
         -s * dx + c * dy,
-        crate::world::wrap_angle(pose[2] - origin[2]),
+        messages::wrap_angle(pose[2] - origin[2]),
     ]
 }
 
@@ -214,5 +215,77 @@ impl LocalMap {
             .iter()
             .filter(|l| l.abs() >= threshold)
             .count()
+    }
+}
+
+/// The farthest a corner of `g` lies from the origin (m).
+pub(super) fn reach_m(g: &GridGeometry) -> f64 {
+    let xs = [g.origin_x_m as f64, (g.origin_x_m + g.width_m()) as f64];
+    let ys = [g.origin_y_m as f64, (g.origin_y_m + g.height_m()) as f64];
+    xs.iter()
+        .flat_map(|x| ys.iter().map(move |y| x.hypot(*y)))
+        .fold(0.0, f64::max)
+}
+
+/// A map to merge from: its geometry and both planes, borrowed (a [`LocalMap`] or a map frame
+/// in shared memory, zero-copy).
+#[derive(Debug, Clone, Copy)]
+pub struct MapView<'a> {
+    pub geometry: GridGeometry,
+    pub occupancy: &'a [f32],
+    pub pheromone: &'a [f32],
+}
+
+impl<'a> MapView<'a> {
+    /// A map frame as published by a mapper: its header must describe exactly `cells`
+    /// (`MAP_CHANNELS.len()` planes of width × height, a valid geometry).
+    pub fn from_frame(header: &FrameHeader, cells: &'a [f32]) -> Result<Self, MapError> {
+        let geometry = GridGeometry {
+            width: header.width,
+            height: header.height,
+            cell_size_m: header.cell_size_m,
+            origin_x_m: header.origin_x_m,
+            origin_y_m: header.origin_y_m,
+        };
+        let plane = header.width as usize * header.height as usize;
+        if header.channels as usize != MAP_CHANNELS.len()
+            || plane.checked_mul(MAP_CHANNELS.len()) != Some(cells.len())
+        {
+            return Err(MapError::Length {
+                channels: header.channels,
+                width: header.width,
+                height: header.height,
+                len: cells.len(),
+            });
+        }
+        geometry.validate().map_err(MapError::Field)?;
+        Ok(Self {
+            geometry,
+            occupancy: &cells[..plane],
+            pheromone: &cells[plane..],
+        })
+    }
+
+    /// The first non-finite cell, as (channel, index, value).
+    pub fn first_non_finite(&self) -> Option<(&'static str, usize, f32)> {
+        for (name, plane) in MAP_CHANNELS.iter().zip([self.occupancy, self.pheromone]) {
+            // One fast pass; the position is looked up only when something is wrong.
+            // Branch-free per chunk (the exponent test vectorizes); early exit between chunks.
+            let finite = |c: &[f32]| {
+                c.iter().fold(true, |ok, v| {
+                    ok & (v.to_bits() & 0x7f80_0000 != 0x7f80_0000)
+                })
+            };
+            if !plane.chunks(1024).all(finite) {
+                let i = plane.iter().position(|v| !v.is_finite()).expect("found");
+                return Some((name, i, plane[i]));
+            }
+        }
+        None
+    }
+
+    /// Radius of the smallest disc about the frame's origin that holds the map (m).
+    pub fn reach_m(&self) -> f64 {
+        reach_m(&self.geometry)
     }
 }

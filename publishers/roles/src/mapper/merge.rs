@@ -14,82 +14,11 @@
 //! in one map takes the other map's occupancy and pheromone, a cell known in both averages
 //! both.
 
-use field::{FrameHeader, GridGeometry};
+use field::GridGeometry;
 
-use super::map::{LocalMap, Pose2, MAP_CHANNELS};
+use super::map::{reach_m, LocalMap, MapView, Pose2};
 use super::MapError;
 use messages::PeerObs;
-
-/// A map to merge from: its geometry and both planes, borrowed (a [`LocalMap`] or a map frame
-/// in shared memory, zero-copy).
-#[derive(Debug, Clone, Copy)]
-pub struct MapView<'a> {
-    pub geometry: GridGeometry,
-    pub occupancy: &'a [f32],
-    pub pheromone: &'a [f32],
-}
-
-impl<'a> MapView<'a> {
-    /// A map frame as published by a mapper: its header must describe exactly `cells`
-    /// (`MAP_CHANNELS.len()` planes of width × height, a valid geometry).
-    pub fn from_frame(header: &FrameHeader, cells: &'a [f32]) -> Result<Self, MapError> {
-        let geometry = GridGeometry {
-            width: header.width,
-            height: header.height,
-            cell_size_m: header.cell_size_m,
-            origin_x_m: header.origin_x_m,
-            origin_y_m: header.origin_y_m,
-        };
-        let plane = header.width as usize * header.height as usize;
-        if header.channels as usize != MAP_CHANNELS.len()
-            || plane.checked_mul(MAP_CHANNELS.len()) != Some(cells.len())
-        {
-            return Err(MapError::Length {
-                channels: header.channels,
-                width: header.width,
-                height: header.height,
-                len: cells.len(),
-            });
-        }
-        geometry.validate().map_err(MapError::Field)?;
-        Ok(Self {
-            geometry,
-            occupancy: &cells[..plane],
-            pheromone: &cells[plane..],
-        })
-    }
-
-    /// The first non-finite cell, as (channel, index, value).
-    pub fn first_non_finite(&self) -> Option<(&'static str, usize, f32)> {
-        for (name, plane) in MAP_CHANNELS.iter().zip([self.occupancy, self.pheromone]) {
-            // One fast pass; the position is looked up only when something is wrong.
-            // Branch-free per chunk (the exponent test vectorizes); early exit between chunks.
-            let finite = |c: &[f32]| {
-                c.iter().fold(true, |ok, v| {
-                    ok & (v.to_bits() & 0x7f80_0000 != 0x7f80_0000)
-                })
-            };
-            if !plane.chunks(1024).all(finite) {
-                let i = plane.iter().position(|v| !v.is_finite()).expect("found");
-                return Some((name, i, plane[i]));
-            }
-        }
-        None
-    }
-
-    /// Radius of the smallest disc about the frame's origin that holds the map (m).
-    pub fn reach_m(&self) -> f64 {
-        reach_m(&self.geometry)
-    }
-}
-
-fn reach_m(g: &GridGeometry) -> f64 {
-    let xs = [g.origin_x_m as f64, (g.origin_x_m + g.width_m()) as f64];
-    let ys = [g.origin_y_m as f64, (g.origin_y_m + g.height_m()) as f64];
-    xs.iter()
-        .flat_map(|x| ys.iter().map(move |y| x.hypot(*y)))
-        .fold(0.0, f64::max)
-}
 
 /// Eqs. 7–10: Σi (source) → Σj (destination).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -112,9 +41,9 @@ impl MergeTransform {
     /// distance, bearing relative to j's heading, i's heading relative to j's).
     pub fn from_measurement(dst_pose: Pose2, src_pose: Pose2, obs: &PeerObs) -> Self {
         Self {
-            theta_ij_rad: crate::world::wrap_angle(dst_pose[2] + obs.heading_rad - src_pose[2]),
+            theta_ij_rad: messages::wrap_angle(dst_pose[2] + obs.heading_rad - src_pose[2]),
             d_ij_m: obs.range_m,
-            alpha_ji_rad: crate::world::wrap_angle(dst_pose[2] + obs.bearing_rad),
+            alpha_ji_rad: messages::wrap_angle(dst_pose[2] + obs.bearing_rad),
             src_robot_m: [src_pose[0], src_pose[1]],
             dst_robot_m: [dst_pose[0], dst_pose[1]],
         }

@@ -13,16 +13,15 @@
 pub mod config;
 pub mod map;
 pub mod merge;
-pub mod run;
-pub mod team;
 #[cfg(test)]
 mod tests;
 
 use std::collections::BTreeMap;
 
 pub use config::{MappingConfig, MappingConfigError};
+pub use map::MapView;
 pub use map::{pose_in_frame, LocalMap, Pose2, MAP_CHANNELS};
-pub use merge::{merge_planes, MapView, MergeStats, MergeTransform};
+pub use merge::{merge_planes, MergeStats, MergeTransform};
 
 use crate::depositor::Depositor;
 use messages::{PeerObs, PoseMsg, ScanMsg};

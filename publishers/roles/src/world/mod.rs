@@ -16,7 +16,6 @@
 //! Everything is deterministic for a seed (`ChaCha8Rng`).
 
 mod map;
-pub mod run;
 mod scan;
 mod sensors;
 #[cfg(test)]

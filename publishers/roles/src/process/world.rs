@@ -6,7 +6,7 @@ use field::lockstep::{self, Conductor, LockstepError};
 use field::shm::{now_ns, DepositPublisher, Svc};
 use iceoryx2::node::Node;
 
-use crate::scenario::Scenario;
+use crate::scenario::{Scenario, WORLD_DEPOSITOR_ID};
 use crate::world::World;
 use crate::{receiver, sender, ProcessError, RobotServices};
 use messages::{CmdMsg, RendezvousMsg, ScanMsg, SensorMsg, TruthMsg};
@@ -319,7 +319,3 @@ pub fn run_world(
             .collect(),
     })
 }
-
-/// The robot id the world's scripted deposits carry: after every robot's in a tick's
-/// canonical order (`field::shm::FieldServer::tick`).
-pub const WORLD_DEPOSITOR_ID: u32 = u32::MAX;

@@ -32,7 +32,7 @@ pub enum ScenarioError {
         #[source]
         source: Box<ScenarioError>,
     },
-    #[error("unknown scenario '{0}': not a file, and not a built-in ({builtins})", builtins = super::scenario::builtin_names())]
+    #[error("unknown scenario '{0}': not a file, and not a built-in ({builtins})", builtins = super::builtin_names())]
     Unknown(String),
     /// `[mapping]` is refused.
     #[error("{0}")]

@@ -10,8 +10,8 @@ use field::lockstep::Participant;
 use iceoryx2::node::Node;
 use serde::{Deserialize, Serialize};
 
-use super::antenna_source::{AntennaRobot, AntennaSource, AntennaStepError, SourceStats};
-use super::PoseSource;
+use crate::follower::antenna_source::{AntennaRobot, AntennaSource, AntennaStepError, SourceStats};
+use crate::follower::PoseSource;
 use crate::{
     receiver, role_loop, sender, summary_of, ProcessError, RobotServices, RoleOptions, RoleSummary,
 };
@@ -47,7 +47,7 @@ pub struct AntennaRobotSummary {
 
 /// The antenna robot process: pose (estimate, or the world's truth) → readings from `robot`'s
 /// source → command and status. In lockstep each step reads the frame of its step (sequence
-/// `step + 1`, see [`super::antenna_source`]).
+/// `step + 1`, see [`crate::follower::antenna_source`]).
 pub fn run_antenna_robot<S: AntennaSource>(
     node: &Node<Svc>,
     o: &RoleOptions,
@@ -146,7 +146,7 @@ fn drive<
                     None,
                 ),
             };
-            super::run::send_step(&cmds, &statuses, &last, p.step, (cmd, status))?;
+            crate::process::follower::send_step(&cmds, &statuses, &last, p.step, (cmd, status))?;
             if let (Some(d), true) = (run.deposits, status.is_some()) {
                 if d.every_steps > 0 && p.step.is_multiple_of(d.every_steps) {
                     // Applied at most once (the client never resends a deposit to the other

@@ -1,6 +1,6 @@
 //! ROS map_server maps in scenarios: `[world] map = "map.yaml"` (relative to the scenario
 //! file) adds the map's occupied cells to the world's walls; `pheromone sim … --map FILE.yaml`
-//! ([`Overrides::map`](super::scenario::Overrides)) puts a scenario on a user's map.
+//! ([`Overrides::map`](super::Overrides)) puts a scenario on a user's map.
 //!
 //! A map is loaded once, where the scenario is loaded: its walls (occupied cells merged into
 //! rectangles, [`OccupancyMap::to_walls`]) go into `world.walls` and `world.map` is cleared, so
@@ -9,7 +9,7 @@
 
 use std::path::Path;
 
-use super::scenario::{Scenario, ScenarioError};
+use super::{Scenario, ScenarioError};
 use crate::world::OccupancyMap;
 
 fn load(key: &'static str, path: &Path) -> Result<OccupancyMap, ScenarioError> {

@@ -13,33 +13,41 @@ use crate::follower::{FollowerConfig, StrategyKind};
 use crate::localizer::EkfConfig;
 use crate::world::WorldConfig;
 
-pub use super::scenario_error::{DepositError, ScenarioError};
+mod error;
+mod map;
+mod mapping;
+
+pub use error::{DepositError, ScenarioError};
+
+/// The robot id the world's scripted deposits carry: after every robot's in a tick's
+/// canonical order (`field::shm::FieldServer::tick`).
+pub const WORLD_DEPOSITOR_ID: u32 = u32::MAX;
 
 /// Built-in scenarios: (name, TOML text).
 pub const BUILTIN: &[(&str, &str)] = &[
     (
         "blind-leader",
-        include_str!("../../../examples/scenarios/blind-leader.toml"),
+        include_str!("../../../../examples/scenarios/blind-leader.toml"),
     ),
     (
         "trail-following",
-        include_str!("../../../examples/scenarios/trail-following.toml"),
+        include_str!("../../../../examples/scenarios/trail-following.toml"),
     ),
     (
         "ias-ss",
-        include_str!("../../../examples/scenarios/ias-ss.toml"),
+        include_str!("../../../../examples/scenarios/ias-ss.toml"),
     ),
     (
         "evaporation",
-        include_str!("../../../examples/scenarios/evaporation.toml"),
+        include_str!("../../../../examples/scenarios/evaporation.toml"),
     ),
     (
         "trail",
-        include_str!("../../../examples/scenarios/trail.toml"),
+        include_str!("../../../../examples/scenarios/trail.toml"),
     ),
     (
         "wrong-area",
-        include_str!("../../../examples/scenarios/wrong-area.toml"),
+        include_str!("../../../../examples/scenarios/wrong-area.toml"),
     ),
 ];
 
@@ -91,7 +99,7 @@ pub struct Scenario {
     /// Scenario-specific metrics.
     #[serde(default)]
     pub metrics: MetricsConfig,
-    /// Seed 004's local maps and their merging (`sim/scenario_mapping.rs`); off by default.
+    /// Seed 004's local maps and their merging (`scenario/mapping.rs`); off by default.
     #[serde(default)]
     pub mapping: crate::mapper::MappingConfig,
 }
@@ -177,6 +185,21 @@ pub struct ExplorationMetric {
     pub rows: u32,
 }
 
+impl ExplorationMetric {
+    /// The sector a point falls in (row-major from `min_m`), if it is inside the map.
+    pub fn sector_index(&self, x: f64, y: f64) -> Option<usize> {
+        let fx = (x - self.min_m[0]) / (self.max_m[0] - self.min_m[0]);
+        let fy = (y - self.min_m[1]) / (self.max_m[1] - self.min_m[1]);
+        if !(0.0..1.0).contains(&fx) || !(0.0..1.0).contains(&fy) {
+            return None;
+        }
+        Some(
+            (fy * self.rows as f64) as usize * self.cols as usize
+                + (fx * self.cols as f64) as usize,
+        )
+    }
+}
+
 /// `blind_leader`: the leader's and the follower's ids.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -253,10 +276,10 @@ pub struct Overrides {
     /// Every depositor deposits with `constant` strength (seed 000's baseline).
     pub constant: bool,
     /// A ROS map_server map (`map.yaml`) whose walls replace the scenario's; the field and the
-    /// exploration sectors are fitted to it (`sim/scenario_map.rs`).
+    /// exploration sectors are fitted to it (`scenario/map.rs`).
     pub map: Option<std::path::PathBuf>,
     /// `--merge` (true) / `--no-merge` (false): turn seed 004's mapping on, with or without
-    /// exchanges at rendezvous (`sim/scenario_mapping.rs`).
+    /// exchanges at rendezvous (`scenario/mapping.rs`).
     pub merge: Option<bool>,
     /// `--rc-m R`: the communication radius R_C (m) of the exchanges.
     pub rc_m: Option<f64>,
@@ -660,7 +683,7 @@ impl Scenario {
         out.sort_by(|a, b| a.0.total_cmp(&b.0));
         // The world sends them: its id orders them in a tick, in both modes.
         for (_, m) in &mut out {
-            m.robot_id = crate::WORLD_DEPOSITOR_ID;
+            m.robot_id = WORLD_DEPOSITOR_ID;
         }
         Ok(out)
     }

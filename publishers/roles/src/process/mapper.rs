@@ -3,7 +3,7 @@
 //! published as a frame of field `<world>-map-r<ID>` ([`field::wire::map_field`]; two channels,
 //! [`MAP_CHANNELS`], in the robot's own frame), and Algorithm 1's exchanges made zero-copy: at a
 //! rendezvous the mapper holds its peer's map frame in shared memory and merges from it
-//! ([`Mapper::accept_frame`]: [`MapView::from_frame`](super::MapView::from_frame), which
+//! ([`Mapper::accept_frame`]: [`MapView::from_frame`](crate::mapper::MapView::from_frame), which
 //! validates it, then the merge).
 //!
 //! Step k (of the links; the world's step k + 1, the step number the mapper's schedule and its
@@ -26,9 +26,9 @@ use field::shm::{FieldReader, FrameWriter, ShmError, Svc};
 use field::{ChannelSpec, Evaporation, FieldConfig};
 use iceoryx2::node::Node;
 
-use super::{pose_in_frame, Mapper, MapperCounters, Pose2, MAP_CHANNELS};
-use crate::mapper::team::{alignment_error_m, mapper_for, true_transform, MergeEvent};
+use crate::mapper::{pose_in_frame, Mapper, MapperCounters, Pose2, MAP_CHANNELS};
 use crate::scenario::Scenario;
+use crate::team::{alignment_error_m, mapper_for, true_transform, MergeEvent};
 use crate::{
     receiver, role_loop, summary_of, ProcessError, RobotServices, RoleOptions, RoleSummary,
 };

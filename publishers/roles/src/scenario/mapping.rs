@@ -4,7 +4,7 @@
 //! leaves the scenario's `[mapping]` as it is (off in every built-in scenario, so their runs are
 //! unchanged). `--rc-m R` sets R_C whether mapping is on or not.
 
-use super::scenario::{Overrides, Scenario, ScenarioError};
+use super::{Overrides, Scenario, ScenarioError};
 use crate::mapper::MappingConfig;
 use messages::MAX_PEERS;
 

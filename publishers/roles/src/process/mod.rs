@@ -1,0 +1,10 @@
+//! The process loop of each role: set up from a scenario, then a short loop that waits on its
+//! inputs (iceoryx2 events) and publishes its outputs, in lockstep with the world.
+
+pub mod depositor;
+pub mod follower;
+pub mod follower_antenna;
+pub mod localizer;
+pub mod mapper;
+pub mod role_loop;
+pub mod world;
