@@ -19,7 +19,7 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --upgrade './python[test,zenoh]'
 
-# Lints of the package and its tests (configured in python/pyproject.toml; a second or two).
+# Lints of the package and its tests (configured in python/pyproject.toml; mypy cold ~7 s).
 echo "== python: ruff check, mypy"
 (cd python && ../.venv/bin/ruff check . && ../.venv/bin/mypy)
 
