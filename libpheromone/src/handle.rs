@@ -56,6 +56,7 @@ impl PheromoneField {
         field::shm::set_verbose(false);
         let node = create_node(o.iox_domain)?;
         let timeout = Duration::from_nanos(o.c.attach_timeout_ns);
+        let started = std::time::Instant::now();
         let reader = if timeout.is_zero() {
             FieldReader::attach(&node, name)
         } else {
@@ -65,14 +66,20 @@ impl PheromoneField {
         if let Some(f) = reader.frame() {
             check_frame_layout(name, f.header)?;
         }
-        let deposit = if o.c.deposits != 0 {
-            Some(
-                DepositPublisher::attach(&node, name, o.c.robot_id)
-                    .map_err(|e| from_shm("attach the deposit publisher", &e))?,
-            )
-        } else {
-            None
-        };
+        // A field that is starting may have its frame service and not yet its deposit service.
+        let left = timeout.saturating_sub(started.elapsed());
+        let deposit = match (o.c.deposits != 0, left.is_zero()) {
+            (false, _) => None,
+            (true, true) => Some(DepositPublisher::attach(&node, name, o.c.robot_id)),
+            (true, false) => Some(DepositPublisher::attach_within(
+                &node,
+                name,
+                o.c.robot_id,
+                left,
+            )),
+        }
+        .transpose()
+        .map_err(|e| from_shm("attach the deposit publisher", &e))?;
         Ok(Box::new(Self {
             name: name.to_string(),
             borrowed: false,
