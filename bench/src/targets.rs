@@ -43,6 +43,20 @@ pub(crate) fn target(name: &str, op: &'static str, limit: f64, measured: f64) ->
 /// The targets of issues 6 and 18, each with the measured value and whether it is met.
 pub fn targets(r: &Report) -> Vec<Target> {
     let mut t = Vec::new();
+    if let Some(c) = &r.c_abi {
+        t.push(target(
+            "C reader frame latency p50 / Rust reader's (issue 29)",
+            "<=",
+            1.1,
+            c.frame_ratio_p50,
+        ));
+        t.push(target(
+            "C sampling (value + gradient) / Rust FrameView's (issue 29)",
+            "<=",
+            1.1,
+            c.sample_ratio,
+        ));
+    }
     for (size, row) in &r.tick_vs_memcpy {
         t.push(target(
             &format!("plain tick / memcpy at {size}"),
