@@ -6,11 +6,13 @@
 use std::time::Duration;
 
 use field::messages::FrameHeader;
+use field::sample::FrameView;
 use field::sample::SamplePose;
-use field::shm::{DepositPublisher, FieldReader, Frame, Svc, WaitPolicy};
+use field::shm::{DepositPublisher, FieldReader, Svc, WaitPolicy};
 use field::{DepositMsg, KernelKind};
 use iceoryx2::prelude::*;
 
+use crate::borrowed::Borrowed;
 use crate::error::{bail, fail, from_shm, Failure};
 use crate::types::{
     PheromoneAttachOptions, PheromoneDeposit, PheromoneEllipseParams, PheromoneFrameView,
@@ -26,7 +28,7 @@ pub struct PheromoneField {
     name: String,
     /// The caller holds a view of the reader's newest frame: the reader is not updated (and so
     /// never drops that frame) until `release`.
-    borrowed: bool,
+    borrowed: Option<Borrowed>,
     // Dropped in this order: the ports before their node.
     deposit: Option<DepositPublisher>,
     reader: FieldReader,
@@ -82,7 +84,7 @@ impl PheromoneField {
         .map_err(|e| from_shm("attach the deposit publisher", &e))?;
         Ok(Box::new(Self {
             name: name.to_string(),
-            borrowed: false,
+            borrowed: None,
             deposit,
             reader,
             _node: node,
@@ -91,7 +93,7 @@ impl PheromoneField {
 
     /// Refuses to be dropped while a frame is borrowed.
     pub fn check_detach(&self) -> Result<(), Failure> {
-        if self.borrowed {
+        if self.borrowed.is_some() {
             bail!(
                 PheromoneStatus::Borrowed,
                 "field '{}': a frame is borrowed: call pheromone_frame_release before detaching",
@@ -104,7 +106,7 @@ impl PheromoneField {
     /// Waits for a frame newer than the one held; `Ok(false)` on timeout.
     pub fn wait(&mut self, policy: PheromoneWaitPolicy, timeout_ns: u64) -> Result<bool, Failure> {
         let policy = wait_policy(policy)?;
-        if self.borrowed {
+        if self.borrowed.is_some() {
             bail!(
                 PheromoneStatus::Borrowed,
                 "field '{}': a frame is borrowed: call pheromone_frame_release before waiting for \
@@ -162,46 +164,46 @@ impl PheromoneField {
                 std::ptr::null()
             };
         }
-        self.borrowed = true;
+        self.borrowed = Some(Borrowed::of(&f));
         Ok(())
     }
 
     /// Ends the borrow (the view's pointers must not be used any more).
     pub fn release(&mut self) {
-        self.borrowed = false;
+        self.borrowed = None;
     }
 
     /// The borrowed frame and a checked channel.
-    fn sampled(&self, channel: u32) -> Result<(Frame<'_>, usize), Failure> {
-        let frame = match self.reader.frame() {
-            Some(f) if self.borrowed => f,
-            _ => bail!(
+    fn sampled(&self, channel: u32) -> Result<(FrameView<'_>, usize), Failure> {
+        let Some(b) = &self.borrowed else {
+            bail!(
                 PheromoneStatus::NoFrame,
                 "field '{}': sampling needs a borrowed frame (call pheromone_frame_borrow first)",
                 self.name
-            ),
+            );
         };
-        if channel as usize >= frame.view.channels {
+        let view = b.view();
+        if channel as usize >= view.channels {
             bail!(
                 BAD,
                 "channel = {channel}: field '{}' has {} channel(s)",
                 self.name,
-                frame.view.channels
+                view.channels
             );
         }
-        Ok((frame, channel as usize))
+        Ok((view, channel as usize))
     }
 
     pub fn value(&self, channel: u32, x_m: f32, y_m: f32) -> Result<f32, Failure> {
         finite(&[("x_m", x_m), ("y_m", y_m)])?;
         let (f, c) = self.sampled(channel)?;
-        Ok(f.view.value(c, x_m, y_m))
+        Ok(f.value(c, x_m, y_m))
     }
 
     pub fn gradient(&self, channel: u32, x_m: f32, y_m: f32) -> Result<(f32, f32), Failure> {
         finite(&[("x_m", x_m), ("y_m", y_m)])?;
         let (f, c) = self.sampled(channel)?;
-        Ok(f.view.gradient(c, x_m, y_m))
+        Ok(f.gradient(c, x_m, y_m))
     }
 
     pub fn antennas(
@@ -215,7 +217,7 @@ impl PheromoneField {
             bail!(BAD, "wheel_base_m = {wheel_base_m}: must be finite and ≥ 0");
         }
         let (f, c) = self.sampled(channel)?;
-        Ok(f.view.antennas(c, pose, wheel_base_m))
+        Ok(f.antennas(c, pose, wheel_base_m))
     }
 
     pub fn sectors(
@@ -230,7 +232,7 @@ impl PheromoneField {
             bail!(BAD, "radius_m = {radius_m}: must be finite and > 0");
         }
         let (f, c) = self.sampled(channel)?;
-        f.view.sector_means_into(c, pose, radius_m, out);
+        f.sector_means_into(c, pose, radius_m, out);
         Ok(())
     }
 

@@ -9,8 +9,10 @@
 //!
 //! Modules: `types` (the C types), `error` (statuses and the per-thread last error), `handle`
 //! (a handle in safe Rust over `field`'s `FieldReader` and `DepositPublisher`), `ellipse` (the
-//! pose → deposit rule), `ffi` (the `extern "C"` functions; the crate's only `unsafe`).
+//! pose → deposit rule), `ffi` (the `extern "C"` functions) and `borrowed` (the borrowed frame's view): the crate's
+//! `unsafe`.
 
+mod borrowed;
 pub mod ellipse;
 pub mod error;
 pub mod ffi;
