@@ -275,7 +275,10 @@ fn print_c_abi(c: &pheromone_bench::c_abi::CAbiReport) {
         "\nC ABI (libpheromone) vs Rust, {w}x{w} frame   p50       p99     p99.9       max",
         w = c.width
     );
-    println!("Rust reader, wait      {}", lat(&c.frame_rust_ns, 1e-3, "µs"));
+    println!(
+        "Rust reader, wait      {}",
+        lat(&c.frame_rust_ns, 1e-3, "µs")
+    );
     println!("C reader, wait         {}", lat(&c.frame_c_ns, 1e-3, "µs"));
     println!(
         "C / Rust: frame latency {:.3} (p50), {:.3} (p99); value + gradient {:.1} ns vs {:.1} ns \
