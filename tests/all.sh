@@ -36,3 +36,7 @@ export PHEROMONE_REQUIRE_ZENOH="${PHEROMONE_REQUIRE_ZENOH:-1}"
 
 echo "== python: pytest python/tests"
 .venv/bin/python -m pytest -q python/tests
+
+# libpheromone from C and C++ (cc, c++, pkg-config, CMake, valgrind) against live fields.
+echo "== libpheromone: C and C++ (libpheromone/tests/c_abi.sh)"
+bash libpheromone/tests/c_abi.sh

@@ -64,7 +64,8 @@ fn field_config(width: u32, readers: usize) -> FieldConfig {
 pub fn measure(launcher: &Launcher, tag: &str, run: FrameRun) -> Result<FrameSamples, BenchError> {
     let node = create_node(&format!("bench-frames-{tag}"))?;
     match run.transport {
-        FrameTransport::Ours => {
+        // The same field for the Rust reader and libpheromone's C reader (issue 29).
+        FrameTransport::Ours | FrameTransport::CAbi => {
             let name = format!("bench-{tag}");
             let mut server =
                 FieldServer::start(&node, &name, field_config(run.width, run.readers), None)?;
@@ -191,6 +192,7 @@ pub fn read(
         }
         FrameTransport::Zenoh => zenoh_side::read(source, skip, count),
         FrameTransport::RawIceoryx => crate::raw_frames::read(source, wait, skip, count),
+        FrameTransport::CAbi => crate::c_abi::read(source, wait, skip, count),
     }
 }
 

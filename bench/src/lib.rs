@@ -13,6 +13,8 @@
 //! - `gateway_pir`: seed 002's PIR round trip over UDP loopback to a `pheromone gateway` process
 //!   beside a direct shared-memory read of the same two antenna values, and the PIRs per second
 //!   one gateway serves (flooded by one client) with its CPU time;
+//! - `c_abi` (issue 29): libpheromone's C reader against the Rust `FieldReader` — frame latency
+//!   and sampling cost, as ratios measured in the same run;
 //! - `mirror` (feature `zenoh`): a field mirrored over Zenoh to a second iceoryx2 domain — bytes
 //!   on the wire against raw frames at 10 and 1000 deposits/s, origin-to-mirror lag, keyframe size
 //!   and catch-up.
@@ -23,6 +25,7 @@
 //! The processes are started through a [`peer::Launcher`] (the `pheromone` binary passes itself
 //! and its hidden `bench-peer` subcommand); [`run_peer`] is what that subcommand runs.
 
+pub mod c_abi;
 mod frame_run;
 pub mod frames;
 pub mod gateway;
@@ -104,6 +107,10 @@ struct Plan {
     /// The mirror's field side and how long deposits go at each rate.
     mirror_width: u32,
     mirror_window: Duration,
+    /// The C ABI section: (frames, skipped) per reader and round, rounds, (points, reps).
+    c_abi_frames: (usize, usize),
+    c_abi_rounds: usize,
+    c_abi_points: (usize, usize),
 }
 
 impl Mode {
@@ -122,6 +129,9 @@ impl Mode {
                 flood: Duration::from_secs(5),
                 mirror_width: 1024,
                 mirror_window: Duration::from_secs(10),
+                c_abi_frames: (150, 5),
+                c_abi_rounds: 3,
+                c_abi_points: (10_000, 21),
             },
             Mode::Quick => Plan {
                 tick_widths: &[512, 1024, 2048, 4096],
@@ -136,6 +146,9 @@ impl Mode {
                 flood: Duration::from_secs(2),
                 mirror_width: 1024,
                 mirror_window: Duration::from_secs(3),
+                c_abi_frames: (60, 3),
+                c_abi_rounds: 2,
+                c_abi_points: (2_000, 9),
             },
             Mode::Smoke => Plan {
                 tick_widths: &[512],
@@ -150,6 +163,9 @@ impl Mode {
                 flood: Duration::from_millis(200),
                 mirror_width: 256,
                 mirror_window: Duration::from_millis(400),
+                c_abi_frames: (4, 1),
+                c_abi_rounds: 1,
+                c_abi_points: (200, 3),
             },
         }
     }
@@ -171,16 +187,20 @@ pub enum Section {
     Gateway,
     /// `mirror` (a build with `--features zenoh`).
     Mirror,
+    /// `c_abi`: libpheromone's C reader against the Rust reader.
+    #[serde(rename = "c-abi")]
+    CAbi,
 }
 
 impl Section {
-    pub const ALL: [Section; 6] = [
+    pub const ALL: [Section; 7] = [
         Section::Tick,
         Section::Hop,
         Section::Frames,
         Section::Visible,
         Section::Gateway,
         Section::Mirror,
+        Section::CAbi,
     ];
 }
 
@@ -307,6 +327,8 @@ pub struct Report {
     pub gateway_pir: Option<gateway::GatewayReport>,
     /// Issue 15's field mirror over Zenoh; null in a build without Zenoh.
     pub mirror: Option<MirrorSection>,
+    /// Issue 29: libpheromone's C reader against the Rust reader.
+    pub c_abi: Option<c_abi::CAbiReport>,
     pub targets: Vec<Target>,
     pub elapsed_s: f64,
 }
@@ -418,6 +440,28 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         true => measure_mirror(&mut cx)?,
         false => None,
     };
+    let c_abi = if runs(Section::CAbi) {
+        say(&format!(
+            "C ABI: 1 MiB frames to a Rust and a C reader ({} rounds of {} frames each), \
+             sampling {} points x {}",
+            plan.c_abi_rounds, plan.c_abi_frames.0, plan.c_abi_points.0, plan.c_abi_points.1
+        ));
+        Some(c_abi::measure(
+            &opts.launcher,
+            &mut tag,
+            c_abi::CAbiRun {
+                width: 512,
+                count: plan.c_abi_frames.0,
+                skip: plan.c_abi_frames.1,
+                rounds: plan.c_abi_rounds,
+                points: plan.c_abi_points.0,
+                reps: plan.c_abi_points.1,
+                pin,
+            },
+        )?)
+    } else {
+        None
+    };
     if pin {
         machine::unpin();
     }
@@ -434,6 +478,7 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         deposit_to_visible_on_deposit_us,
         gateway_pir,
         mirror,
+        c_abi,
         targets: Vec::new(),
         elapsed_s: 0.0,
     };

@@ -29,6 +29,9 @@ pub enum FrameTransport {
     Zenoh,
     /// The reference: the same `[f32]` slice over plain iceoryx2 (`raw_frames`).
     RawIceoryx,
+    /// libpheromone's C ABI (`pheromone_wait_frame`, `pheromone_frame_borrow`): the field's
+    /// frame as a C reader sees it (issue 29).
+    CAbi,
 }
 
 /// How a frame reader waits for the next frame (`field::shm::WaitPolicy` on the wire).

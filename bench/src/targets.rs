@@ -49,6 +49,7 @@ pub fn targets(r: &Report) -> Vec<Target> {
     visible_targets(r, &mut t);
     gateway_targets(r, &mut t);
     mirror_targets(r, &mut t);
+    c_abi_targets(r, &mut t);
     t
 }
 
@@ -249,5 +250,23 @@ mod tests {
         assert_eq!(t.measured, 2704.97);
         assert!(t.met);
         assert_eq!(target("zero", "<=", 1.0, 0.0).measured, 0.0);
+    }
+}
+
+/// libpheromone's C reader is as fast as the Rust reader it wraps.
+fn c_abi_targets(r: &Report, t: &mut Vec<Target>) {
+    if let Some(c) = &r.c_abi {
+        t.push(target(
+            "C reader frame latency p50 / Rust reader's",
+            "<=",
+            1.1,
+            c.frame_ratio_p50,
+        ));
+        t.push(target(
+            "C sampling (value + gradient) / Rust FrameView's",
+            "<=",
+            1.1,
+            c.sample_ratio,
+        ));
     }
 }

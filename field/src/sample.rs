@@ -126,28 +126,40 @@ impl<'a> FrameView<'a> {
         radius_m: f32,
         half_sectors: usize,
     ) -> Vec<f32> {
-        let n = 2 * half_sectors + 1;
+        let mut out = vec![0.0; 2 * half_sectors + 1];
+        self.sector_means_into(channel, pose, radius_m, &mut out);
+        out
+    }
+
+    /// [`sector_means`](Self::sector_means) into `out`, one mean per sector (`out.len()` of
+    /// them, odd: `2·half_sectors + 1`), without allocating (the C ABI's sampling).
+    pub fn sector_means_into(
+        &self,
+        channel: usize,
+        pose: SamplePose,
+        radius_m: f32,
+        out: &mut [f32],
+    ) {
+        let n = out.len();
         let width = std::f32::consts::PI / n as f32;
         let h = self.geometry.cell_size_m;
         let radial = ((radius_m / h).ceil() as usize).clamp(1, 64);
-        (0..n)
-            .map(|s| {
-                let a0 = pose.theta_rad - std::f32::consts::FRAC_PI_2 + s as f32 * width;
-                let mut sum = 0.0f64;
-                let mut count = 0usize;
-                for i in 0..radial {
-                    let r = radius_m * (i as f32 + 0.5) / radial as f32;
-                    let across = ((r * width / h).ceil() as usize).clamp(1, 64);
-                    for j in 0..across {
-                        let a = a0 + width * (j as f32 + 0.5) / across as f32;
-                        sum += self.value(channel, pose.x_m + r * a.cos(), pose.y_m + r * a.sin())
-                            as f64;
-                        count += 1;
-                    }
+        for (s, mean) in out.iter_mut().enumerate() {
+            let a0 = pose.theta_rad - std::f32::consts::FRAC_PI_2 + s as f32 * width;
+            let mut sum = 0.0f64;
+            let mut count = 0usize;
+            for i in 0..radial {
+                let r = radius_m * (i as f32 + 0.5) / radial as f32;
+                let across = ((r * width / h).ceil() as usize).clamp(1, 64);
+                for j in 0..across {
+                    let a = a0 + width * (j as f32 + 0.5) / across as f32;
+                    sum +=
+                        self.value(channel, pose.x_m + r * a.cos(), pose.y_m + r * a.sin()) as f64;
+                    count += 1;
                 }
-                (sum / count as f64) as f32
-            })
-            .collect()
+            }
+            *mean = (sum / count as f64) as f32;
+        }
     }
 
     /// Sum of a channel's cells.

@@ -59,6 +59,8 @@ enum SectionArg {
     Gateway,
     /// A field mirror over Zenoh (a build with --features zenoh).
     Mirror,
+    /// libpheromone's C reader against the Rust reader (frame latency, sampling cost).
+    CAbi,
 }
 
 impl From<SectionArg> for Section {
@@ -70,6 +72,7 @@ impl From<SectionArg> for Section {
             SectionArg::Visible => Section::Visible,
             SectionArg::Gateway => Section::Gateway,
             SectionArg::Mirror => Section::Mirror,
+            SectionArg::CAbi => Section::CAbi,
         }
     }
 }
@@ -251,6 +254,9 @@ fn print_tables(r: &Report) {
     if let Some(m) = &r.mirror {
         print_mirror(m);
     }
+    if let Some(c) = &r.c_abi {
+        print_c_abi(c);
+    }
     println!("\ntargets");
     for t in &r.targets {
         println!(
@@ -262,6 +268,23 @@ fn print_tables(r: &Report) {
             t.measured
         );
     }
+}
+
+fn print_c_abi(c: &pheromone_bench::c_abi::CAbiReport) {
+    println!(
+        "\nC ABI (libpheromone) vs Rust, {w}x{w} frame   p50       p99     p99.9       max",
+        w = c.width
+    );
+    println!(
+        "Rust reader, wait      {}",
+        lat(&c.frame_rust_ns, 1e-3, "µs")
+    );
+    println!("C reader, wait         {}", lat(&c.frame_c_ns, 1e-3, "µs"));
+    println!(
+        "C / Rust: frame latency {:.3} (p50), {:.3} (p99); value + gradient {:.1} ns vs {:.1} ns \
+         per point = {:.3}",
+        c.frame_ratio_p50, c.frame_ratio_p99, c.sample_c_ns, c.sample_rust_ns, c.sample_ratio
+    );
 }
 
 fn print_ticks(r: &Report) {

@@ -1,0 +1,74 @@
+// pheromone.hpp against a live field (libpheromone/tests/c_abi.sh):
+//   wrapper_test FIELD X Y EXPECTED MISSING_FIELD
+// reads the value at (X, Y) zero-copy and checks it equals EXPECTED (pheromone probe's, parsed
+// as a float), checks a missing field throws PHEROMONE_STATUS_NO_FIELD, deposits seed 000's
+// ellipse at (X + 0.5, Y) and waits until the frame shows it.
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "pheromone.hpp"
+
+namespace {
+int failures = 0;
+void check(bool ok, const std::string& what) {
+  if (!ok) {
+    std::fprintf(stderr, "wrapper_test: %s\n", what.c_str());
+    ++failures;
+  }
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 6) {
+    std::fprintf(stderr, "usage: wrapper_test FIELD X Y EXPECTED MISSING_FIELD\n");
+    return 2;
+  }
+  const float x = std::strtof(argv[2], nullptr), y = std::strtof(argv[3], nullptr);
+  const float expected = std::strtof(argv[4], nullptr);
+  try {
+    pheromone::Field missing(argv[5]);
+    check(false, "attaching a missing field did not throw");
+  } catch (const pheromone::Error& e) {
+    check(e.status() == PHEROMONE_STATUS_NO_FIELD, std::string("missing field: ") + e.what());
+  }
+  try {
+    PheromoneAttachOptions o = pheromone::default_options();
+    o.attach_timeout_ns = 5'000'000'000ull;
+    pheromone::Field field(argv[1], o);
+    field.wait_frame(std::chrono::seconds(2));
+    float before = 0.0f;
+    {
+      pheromone::Frame frame = field.borrow();
+      pheromone::Span<const float> plane = frame.plane(0);
+      check(plane.size() == size_t(frame.width()) * frame.height(), "plane size");
+      float value = frame.value(0, x, y);
+      check(value == expected, "value " + std::to_string(value) + " != probe's " + argv[4]);
+      before = frame.value(0, x + 0.5f, y);
+      std::vector<float> sectors = frame.sectors(0, PheromonePose{x, y, 0.0f}, 1.0f, 2);
+      check(sectors.size() == 5, "five sectors");
+      try {
+        field.wait_frame(std::chrono::milliseconds(1));
+        check(false, "waiting while a frame is borrowed did not throw");
+      } catch (const pheromone::Error& e) {
+        check(e.status() == PHEROMONE_STATUS_BORROWED, e.what());
+      }
+    }  // the frame is released here
+    PheromonePoseEstimate pose{double(x) + 0.5, double(y), 0.0,
+                               {0.02, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.1}};
+    field.deposit_pose(pose);
+    float after = before;
+    for (int i = 0; i < 500 && after <= before; ++i) {
+      if (!field.wait_frame(std::chrono::seconds(5))) break;
+      after = field.borrow().value(0, x + 0.5f, y);
+    }
+    check(after > before, "the deposit never showed: " + std::to_string(after));
+    std::printf("wrapper: value %.9g equals probe's, deposit %.9g -> %.9g\n", expected, before,
+                after);
+  } catch (const pheromone::Error& e) {
+    std::fprintf(stderr, "wrapper_test: %s\n", e.what());
+    return 1;
+  }
+  return failures == 0 ? 0 : 1;
+}
