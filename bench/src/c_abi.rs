@@ -29,7 +29,8 @@ use pheromone::{
 };
 use serde::Serialize;
 
-use crate::frames::{self, record, FrameRun, FRAME_TIMEOUT};
+use crate::frame_run::{record, FRAME_TIMEOUT};
+use crate::frames::{self, FrameRun};
 use crate::peer::{say_ready, FrameTransport, Launcher, ReaderWait};
 use crate::{BenchError, Latency};
 

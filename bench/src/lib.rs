@@ -440,27 +440,9 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         true => measure_mirror(&mut cx)?,
         false => None,
     };
-    let c_abi = if runs(Section::CAbi) {
-        say(&format!(
-            "C ABI: 1 MiB frames to a Rust and a C reader ({} rounds of {} frames each), \
-             sampling {} points x {}",
-            plan.c_abi_rounds, plan.c_abi_frames.0, plan.c_abi_points.0, plan.c_abi_points.1
-        ));
-        Some(c_abi::measure(
-            &opts.launcher,
-            &mut tag,
-            c_abi::CAbiRun {
-                width: 512,
-                count: plan.c_abi_frames.0,
-                skip: plan.c_abi_frames.1,
-                rounds: plan.c_abi_rounds,
-                points: plan.c_abi_points.0,
-                reps: plan.c_abi_points.1,
-                pin,
-            },
-        )?)
-    } else {
-        None
+    let c_abi = match cx.runs(Section::CAbi) {
+        true => Some(measure_c_abi(&mut cx)?),
+        false => None,
     };
     if pin {
         machine::unpin();
@@ -486,6 +468,37 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
     report.elapsed_s = (started.elapsed().as_secs_f64() * 10.0).round() / 10.0;
     cx.say("done");
     Ok(report)
+}
+
+/// The `c_abi` section: libpheromone's C reader against the Rust reader.
+fn measure_c_abi(cx: &mut Ctx) -> Result<c_abi::CAbiReport, BenchError> {
+    let plan = cx.plan;
+    cx.say(&format!(
+        "C ABI: 1 MiB frames to a Rust and a C reader ({} rounds of {} frames each), \
+         sampling {} points x {}",
+        plan.c_abi_rounds, plan.c_abi_frames.0, plan.c_abi_points.0, plan.c_abi_points.1
+    ));
+    let run = c_abi::CAbiRun {
+        width: 512,
+        count: plan.c_abi_frames.0,
+        skip: plan.c_abi_frames.1,
+        rounds: plan.c_abi_rounds,
+        points: plan.c_abi_points.0,
+        reps: plan.c_abi_points.1,
+        pin: cx.pin,
+    };
+    let launcher = &cx.opts.launcher;
+    let mut serial = cx.serial;
+    let report = c_abi::measure(
+        launcher,
+        &mut || {
+            serial += 1;
+            format!("{}-{}", std::process::id(), serial)
+        },
+        run,
+    );
+    cx.serial = serial;
+    report
 }
 
 /// The `hop_ns` section: ours and raw iceoryx2, waiting and busy-polling.
