@@ -151,6 +151,10 @@ def _session(endpoint):
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
     conf.insert_json5("scouting/multicast/enabled", "false")
+    # The node listens once the field has published its first frame.
+    conf.insert_json5("connect/timeout_ms", "15000")
+    conf.insert_json5(
+        "connect/retry", "{period_init_ms: 100, period_max_ms: 500, period_increase_factor: 2}")
     return zenoh.open(conf)
 
 
