@@ -144,7 +144,8 @@ pub struct Ros2Node {
     subscriptions: Vec<RosSubscription>,
     pose_type: TypeInfo,
     period: Duration,
-    last_publish: Option<Instant>,
+    /// When the next frame is due (`None`: the first frame is).
+    next_publish: Option<Instant>,
     /// Frame-to-publish latencies (µs), one per published frame.
     pub latencies_us: Vec<u32>,
     pub stats: Ros2Stats,
@@ -223,7 +224,7 @@ impl Ros2Node {
             subscriptions,
             pose_type,
             period,
-            last_publish: None,
+            next_publish: None,
             latencies_us: Vec::new(),
             stats: Ros2Stats::default(),
         })
@@ -255,8 +256,20 @@ impl Ros2Node {
         Ok(())
     }
 
+    /// Whether a frame arriving now is published: a tenth of a period early counts as on time,
+    /// so frames of a field ticking at a multiple of the rate are not skipped by jitter.
     fn due(&self) -> bool {
-        self.last_publish.is_none_or(|t| t.elapsed() >= self.period)
+        self.next_publish
+            .is_none_or(|t| Instant::now() + self.period / 10 >= t)
+    }
+
+    /// Deadlines advance by whole periods (no drift); a node that fell behind starts over.
+    fn schedule_next(&mut self) {
+        let now = Instant::now();
+        self.next_publish = Some(match self.next_publish {
+            Some(t) if t + self.period > now => t + self.period,
+            _ => now + self.period,
+        });
     }
 
     fn publish_frame(&mut self) -> Result<(), Ros2Error> {
@@ -267,7 +280,7 @@ impl Ros2Node {
             // The field restarted with another channel count: its topics are not ours.
             return Ok(());
         }
-        self.last_publish = Some(Instant::now());
+        self.schedule_next();
         for (p, m) in self.publishers.iter_mut().zip(fm.messages) {
             self.stats.bytes_published += m.len() as u64;
             p.put(m)?;
