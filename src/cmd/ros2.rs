@@ -136,7 +136,10 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
     use ros2::node::{Ros2Node, Ros2Options};
     field::shm::check_name(&a.field).map_err(bad_from)?;
     if !(a.rate_hz.is_finite() && a.rate_hz > 0.0 && a.rate_hz <= 1000.0) {
-        return Err(bad(format!("--rate-hz {}: must be within (0, 1000]", a.rate_hz)));
+        return Err(bad(format!(
+            "--rate-hz {}: must be within (0, 1000]",
+            a.rate_hz
+        )));
     }
     if a.listen.is_empty() && a.connect.is_empty() {
         return Err(bad("give --listen and/or --connect (a Zenoh endpoint)"));

@@ -44,11 +44,7 @@ fn check_tokens(name: &str, allow_empty: bool) -> Result<(), NameError> {
     };
     let body = name.trim_start_matches('/');
     if body.is_empty() {
-        return if allow_empty {
-            Ok(())
-        } else {
-            err("is empty")
-        };
+        return if allow_empty { Ok(()) } else { err("is empty") };
     }
     for tok in body.split('/') {
         if tok.is_empty() {
@@ -64,9 +60,9 @@ fn check_tokens(name: &str, allow_empty: bool) -> Result<(), NameError> {
     Ok(())
 }
 
-/// An absolute namespace (`/` or `/a/b`).
+/// An absolute namespace (`/` or `/a/b`; a trailing '/' is dropped).
 pub fn namespace(ns: &str) -> Result<String, NameError> {
-    check_tokens(ns, true)?;
+    check_tokens(ns.trim_end_matches('/'), true)?;
     let body = ns.trim_matches('/');
     Ok(format!("/{body}"))
 }
@@ -161,7 +157,12 @@ pub struct NodeIdentity {
 
 impl NodeIdentity {
     /// The liveliness token of entity `entity_id` (0 is the node itself).
-    pub fn token(&self, kind: EntityKind, entity_id: u32, topic: Option<(&str, &TypeInfo, Qos)>) -> String {
+    pub fn token(
+        &self,
+        kind: EntityKind,
+        entity_id: u32,
+        topic: Option<(&str, &TypeInfo, Qos)>,
+    ) -> String {
         let mut s = format!(
             "{ADMIN_SPACE}/{}/{}/0/{entity_id}/{}/%/{}/{}",
             self.domain_id,
@@ -244,7 +245,10 @@ mod tests {
     fn names_resolve_and_bad_ones_are_refused() {
         assert_eq!(namespace("/").unwrap(), "/");
         assert_eq!(namespace("robot1/").unwrap(), "/robot1");
-        assert_eq!(resolve_topic("/", "pheromone/grid_map").unwrap(), "/pheromone/grid_map");
+        assert_eq!(
+            resolve_topic("/", "pheromone/grid_map").unwrap(),
+            "/pheromone/grid_map"
+        );
         assert_eq!(resolve_topic("/r1", "amcl_pose").unwrap(), "/r1/amcl_pose");
         assert_eq!(resolve_topic("/r1", "/amcl_pose").unwrap(), "/amcl_pose");
         assert!(resolve_topic("/", "a//b").is_err());
@@ -259,11 +263,18 @@ mod tests {
         let key = topic_key(3, "/pheromone/grid_map", &t);
         assert_eq!(
             key,
-            format!("3/pheromone/grid_map/grid_map_msgs::msg::dds_::GridMap_/{}", t.hash)
+            format!(
+                "3/pheromone/grid_map/grid_map_msgs::msg::dds_::GridMap_/{}",
+                t.hash
+            )
         );
         assert_eq!(
             split_topic_key(&key),
-            Some(("pheromone/grid_map", "grid_map_msgs::msg::dds_::GridMap_", t.hash.as_str()))
+            Some((
+                "pheromone/grid_map",
+                "grid_map_msgs::msg::dds_::GridMap_",
+                t.hash.as_str()
+            ))
         );
         let id = NodeIdentity {
             domain_id: 3,
@@ -271,13 +282,20 @@ mod tests {
             namespace: "/".into(),
             name: "pheromone".into(),
         };
-        assert_eq!(id.token(EntityKind::Node, 0, None), "@ros2_lv/3/abc/0/0/NN/%/%/pheromone");
+        assert_eq!(
+            id.token(EntityKind::Node, 0, None),
+            "@ros2_lv/3/abc/0/0/NN/%/%/pheromone"
+        );
         let qos = Qos {
             reliable: true,
             transient_local: false,
             depth: 1,
         };
-        let tok = id.token(EntityKind::Publisher, 1, Some(("/pheromone/grid_map", &t, qos)));
+        let tok = id.token(
+            EntityKind::Publisher,
+            1,
+            Some(("/pheromone/grid_map", &t, qos)),
+        );
         assert_eq!(
             tok,
             format!(

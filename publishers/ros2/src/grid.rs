@@ -178,10 +178,7 @@ mod tests {
                 .unwrap(),
             channels: 2,
             cells,
-            stamp: Stamp {
-                sec: 7,
-                nanosec: 9,
-            },
+            stamp: Stamp { sec: 7, nanosec: 9 },
             frame_id: "map",
         }
     }

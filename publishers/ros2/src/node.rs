@@ -186,7 +186,9 @@ impl Ros2Node {
         if o.admin_space {
             config = with_admin_space(config).map_err(|e| zerr("session config", e))?;
         }
-        let session = zenoh::open(config).wait().map_err(|e| zerr("open session", e))?;
+        let session = zenoh::open(config)
+            .wait()
+            .map_err(|e| zerr("open session", e))?;
         let identity = NodeIdentity {
             domain_id: o.domain_id,
             zid: session.info().zid().wait().to_string(),
@@ -209,7 +211,12 @@ impl Ros2Node {
         for (i, d) in o.deposit_from.iter().enumerate() {
             let id = (1 + publishers.len() + i) as u32;
             subscriptions.push(declare_subscription(
-                &session, &identity, id, d, &pose_type, &o.depositor,
+                &session,
+                &identity,
+                id,
+                d,
+                &pose_type,
+                &o.depositor,
             )?);
         }
         let period = Duration::from_secs_f64(1.0 / o.rate_hz);

@@ -135,6 +135,9 @@ mod tests {
         let schema = msgs[0].channel.schema.as_ref().unwrap();
         assert_eq!(schema.name, "grid_map_msgs/msg/GridMap");
         assert_eq!(schema.encoding, "ros2msg");
-        assert_eq!((msgs[0].log_time, &msgs[1].data[..]), (5, &[0, 1, 0, 0, 8][..]));
+        assert_eq!(
+            (msgs[0].log_time, &msgs[1].data[..]),
+            (5, &[0, 1, 0, 0, 8][..])
+        );
     }
 }
