@@ -34,6 +34,7 @@ pub struct RosDepositArgs {
 }
 
 impl RosDepositArgs {
+    #[cfg_attr(not(feature = "zenoh"), allow(dead_code))]
     pub fn config(&self) -> DepositorConfig {
         DepositorConfig {
             tau: self.tau,
