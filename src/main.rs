@@ -63,6 +63,10 @@ enum Command {
     View(cmd::view::ViewArgs),
     /// Publish a field's inputs on Zenoh for mirrors on other hosts (and frames for dashboards).
     Bridge(cmd::bridge::BridgeArgs),
+    /// Show a field to ROS 2 over Zenoh (rmw_zenoh): GridMap, OccupancyGrid; poses → deposits.
+    Ros2(Box<cmd::ros2::Ros2Args>),
+    /// Record a field as a ROS 2 MCAP file (GridMap and OccupancyGrid messages).
+    Record(cmd::ros2::RecordArgs),
     /// Measure latency and throughput side by side with raw iceoryx2, a Unix socket and Zenoh.
     Bench(cmd::bench::BenchArgs),
     /// One peer process of `pheromone bench` (started by it).
@@ -99,6 +103,8 @@ fn main() -> ExitCode {
         Command::Gateway(a) => cmd::gateway::run(a),
         Command::View(a) => cmd::view::run(a),
         Command::Bridge(a) => cmd::bridge::run(a),
+        Command::Ros2(a) => cmd::ros2::run(*a),
+        Command::Record(a) => cmd::ros2::run_record(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::BenchPeer(a) => cmd::bench::run_peer(a),
     };

@@ -9,6 +9,7 @@ pub mod graph;
 pub mod list;
 pub mod probe;
 pub mod roles;
+pub mod ros2;
 pub mod sim;
 pub mod sim_args;
 pub mod sweep;

@@ -11,7 +11,7 @@
 //! cost is the association, not the signature test. Each sample starts from the same filter
 //! (cloned outside the timing). Throughput is landmark comparisons (observations × candidates).
 //!
-//! `cargo bench -p pheromone-publishers --bench landmarks`; after the run a table of the
+//! `cargo bench -p pheromone-roles --bench landmarks`; after the run a table of the
 //! captured/whole time ratios is printed from criterion's estimates.
 
 use std::collections::HashSet;

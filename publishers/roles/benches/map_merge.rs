@@ -4,7 +4,7 @@
 //! and moved 2 m) against a same-size memcpy (both planes copied), for n = 256, 512, 1024. The
 //! merge includes its validation pass over the source (no non-finite cell).
 //!
-//! `cargo bench -p pheromone-publishers --bench map_merge`; after the run a table of the
+//! `cargo bench -p pheromone-roles --bench map_merge`; after the run a table of the
 //! merge/memcpy time ratios is printed from criterion's estimates.
 
 use std::hint::black_box;

@@ -1,0 +1,87 @@
+//! What a frame becomes on ROS 2: its topics and their messages, shared by the Zenoh node and
+//! the MCAP recorder.
+
+use field::shm::{now_ns, FieldReader};
+
+use crate::graph::{resolve_topic, NameError};
+use crate::grid::{grid_map_cdr, layer_name, occupancy_grid_cdr, FrameRef, Stamp};
+use crate::types::{TypeInfo, GRID_MAP, OCCUPANCY_GRID};
+
+/// The field's topics (absolute names) and types: index 0 is the GridMap, index `1 + c` channel
+/// `c`'s OccupancyGrid.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FieldTopics {
+    pub names: Vec<String>,
+    pub types: Vec<TypeInfo>,
+}
+
+impl FieldTopics {
+    /// `<ns>/pheromone/grid_map` and `<ns>/pheromone/occupancy/channel_<c>`.
+    pub fn new(namespace: &str, channels: usize) -> Result<Self, NameError> {
+        let mut names = vec![resolve_topic(namespace, "pheromone/grid_map")?];
+        let mut types = vec![TypeInfo::of(GRID_MAP)];
+        let occ = TypeInfo::of(OCCUPANCY_GRID);
+        for c in 0..channels {
+            names.push(resolve_topic(
+                namespace,
+                &format!("pheromone/occupancy/{}", layer_name(c)),
+            )?);
+            types.push(occ.clone());
+        }
+        Ok(Self { names, types })
+    }
+}
+
+/// Nanoseconds since the epoch now.
+pub fn wall_now_ns() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as i64)
+}
+
+/// The wall-clock time of a CLOCK_MONOTONIC stamp (a frame's `stamp_ns`).
+pub fn wall_from_monotonic_ns(mono_ns: u64) -> i64 {
+    let age = now_ns().saturating_sub(mono_ns) as i64;
+    wall_now_ns() - age
+}
+
+/// The messages of the reader's current frame, in topic order (see [`FieldTopics`]), with the
+/// frame's sequence and monotonic stamp; `None` before the first frame. Each message is
+/// serialized straight from the shared frame.
+pub fn frame_messages(reader: &FieldReader, frame_id: &str) -> Option<FrameMessages> {
+    let frame = reader.frame()?;
+    let h = frame.header;
+    let geometry = h.geometry();
+    let n = geometry.cells();
+    let channels = h.channels as usize;
+    let cells = reader.sample()?.payload();
+    let f = FrameRef {
+        geometry,
+        channels,
+        cells: &cells[..channels * n],
+        stamp: Stamp::from_ns(wall_from_monotonic_ns(h.stamp_ns)),
+        frame_id,
+    };
+    let mut messages = Vec::with_capacity(1 + channels);
+    messages.push(grid_map_cdr(&f));
+    for c in 0..channels {
+        messages.push(occupancy_grid_cdr(&f, c).0);
+    }
+    Some(FrameMessages {
+        sequence: h.sequence,
+        stamp_mono_ns: h.stamp_ns,
+        stamp: f.stamp,
+        channels,
+        messages,
+    })
+}
+
+/// One frame's messages.
+#[derive(Debug, Clone)]
+pub struct FrameMessages {
+    pub sequence: u64,
+    pub stamp_mono_ns: u64,
+    pub stamp: Stamp,
+    pub channels: usize,
+    pub messages: Vec<Vec<u8>>,
+}

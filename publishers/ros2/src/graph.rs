@@ -1,0 +1,322 @@
+//! `rmw_zenoh_cpp`'s naming, from its `docs/design.md` and `src/detail/liveliness_utils.cpp`
+//! (ros2/rmw_zenoh): topic key expressions, liveliness tokens (what `ros2 node list` and
+//! `ros2 topic list` read), the QoS string inside a token, the entity GID and the attachment
+//! every published sample carries.
+//!
+//! - Topic key expression: `<domain>/<topic without its leading and trailing '/'>/<DDS type
+//!   name>/<RIHS01 hash>`.
+//! - Liveliness token: `@ros2_lv/<domain>/<session zid>/<node id>/<entity id>/<NN|MP|MS>/
+//!   <enclave>/<namespace>/<node name>`, and for a publisher or subscription
+//!   `/<topic>/<DDS type name>/<hash>/<qos>`; in names, '/' becomes '%' (so the root namespace
+//!   and enclave `/` are `%`).
+//! - GID (16 bytes): XXH3-128 of the entity's token, low 64 bits then high 64 bits, each little
+//!   endian.
+//! - Attachment (Zenoh serialization format, rmw_zenoh_cpp ≥ 0.2 / Jazzy): the sequence number
+//!   (i64 LE, from 1), the source timestamp (i64 LE, ns since the epoch), the GID as a
+//!   length-prefixed byte array (`0x10` and 16 bytes): 33 bytes.
+
+use thiserror::Error;
+
+use crate::types::TypeInfo;
+
+/// The admin space of `rmw_zenoh_cpp`'s liveliness tokens.
+pub const ADMIN_SPACE: &str = "@ros2_lv";
+
+/// A ROS name (namespace, topic) in the form a token holds: '/' → '%'.
+pub fn mangle(name: &str) -> String {
+    name.replace('/', "%")
+}
+
+/// Why a ROS name was refused.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("ROS name {name:?}: {reason}")]
+pub struct NameError {
+    pub name: String,
+    pub reason: &'static str,
+}
+
+fn check_tokens(name: &str, allow_empty: bool) -> Result<(), NameError> {
+    let err = |reason| {
+        Err(NameError {
+            name: name.to_string(),
+            reason,
+        })
+    };
+    let body = name.trim_start_matches('/');
+    if body.is_empty() {
+        return if allow_empty { Ok(()) } else { err("is empty") };
+    }
+    for tok in body.split('/') {
+        if tok.is_empty() {
+            return err("has an empty component ('//' or a trailing '/')");
+        }
+        if tok.starts_with(|c: char| c.is_ascii_digit()) {
+            return err("has a component starting with a digit");
+        }
+        if !tok.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return err("may hold only letters, digits, '_' and '/'");
+        }
+    }
+    Ok(())
+}
+
+/// An absolute namespace (`/` or `/a/b`; a trailing '/' is dropped).
+pub fn namespace(ns: &str) -> Result<String, NameError> {
+    check_tokens(ns.trim_end_matches('/'), true)?;
+    let body = ns.trim_matches('/');
+    Ok(format!("/{body}"))
+}
+
+/// A node name: one component.
+pub fn node_name(n: &str) -> Result<String, NameError> {
+    check_tokens(n, false)?;
+    if n.contains('/') {
+        return Err(NameError {
+            name: n.into(),
+            reason: "a node name has no '/'",
+        });
+    }
+    Ok(n.to_string())
+}
+
+/// The absolute topic name of `topic` in namespace `ns` (already checked by [`namespace`]).
+pub fn resolve_topic(ns: &str, topic: &str) -> Result<String, NameError> {
+    check_tokens(topic, false)?;
+    if topic.starts_with('/') {
+        Ok(topic.to_string())
+    } else if ns == "/" {
+        Ok(format!("/{topic}"))
+    } else {
+        Ok(format!("{ns}/{topic}"))
+    }
+}
+
+/// `<domain>/<topic>/<type>/<hash>`.
+pub fn topic_key(domain_id: u32, topic: &str, t: &TypeInfo) -> String {
+    format!(
+        "{domain_id}/{}/{}/{}",
+        topic.trim_matches('/'),
+        t.dds_name,
+        t.hash
+    )
+}
+
+/// rmw QoS of an entity, as far as its token tells it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Qos {
+    pub reliable: bool,
+    pub transient_local: bool,
+    /// KEEP_LAST depth.
+    pub depth: u32,
+}
+
+impl Qos {
+    /// The token's QoS component: `reliability:durability:history,depth:deadline:lifespan:
+    /// liveliness`, each left empty when it is rmw_zenoh's default (reliable, transient local,
+    /// keep last, depth 42, the rest infinite/automatic).
+    pub fn keyexpr(&self) -> String {
+        let rel = if self.reliable { "" } else { "2" };
+        let dur = if self.transient_local { "" } else { "2" };
+        let depth = if self.depth == 42 {
+            String::new()
+        } else {
+            self.depth.to_string()
+        };
+        format!("{rel}:{dur}:,{depth}:,:,:,,")
+    }
+}
+
+/// Entity kinds of a token.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EntityKind {
+    Node,
+    Publisher,
+    Subscription,
+}
+
+impl EntityKind {
+    pub fn code(self) -> &'static str {
+        match self {
+            EntityKind::Node => "NN",
+            EntityKind::Publisher => "MP",
+            EntityKind::Subscription => "MS",
+        }
+    }
+}
+
+/// Who the node is on the ROS graph.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeIdentity {
+    pub domain_id: u32,
+    /// The Zenoh session's id, as text.
+    pub zid: String,
+    /// Absolute namespace.
+    pub namespace: String,
+    pub name: String,
+}
+
+impl NodeIdentity {
+    /// The liveliness token of entity `entity_id` (0 is the node itself).
+    pub fn token(
+        &self,
+        kind: EntityKind,
+        entity_id: u32,
+        topic: Option<(&str, &TypeInfo, Qos)>,
+    ) -> String {
+        let mut s = format!(
+            "{ADMIN_SPACE}/{}/{}/0/{entity_id}/{}/%/{}/{}",
+            self.domain_id,
+            self.zid,
+            kind.code(),
+            mangle(&self.namespace),
+            self.name
+        );
+        if let Some((topic, t, qos)) = topic {
+            s.push_str(&format!(
+                "/{}/{}/{}/{}",
+                mangle(topic),
+                t.dds_name,
+                t.hash,
+                qos.keyexpr()
+            ));
+        }
+        s
+    }
+}
+
+/// The GID rmw_zenoh_cpp gives the entity of liveliness token `token`.
+pub fn gid(token: &str) -> [u8; 16] {
+    let h = xxhash_rust::xxh3::xxh3_128(token.as_bytes());
+    let mut g = [0u8; 16];
+    g[..8].copy_from_slice(&(h as u64).to_le_bytes());
+    g[8..].copy_from_slice(&((h >> 64) as u64).to_le_bytes());
+    g
+}
+
+/// A sample's attachment (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Attachment {
+    pub sequence_number: i64,
+    pub source_timestamp_ns: i64,
+    pub source_gid: [u8; 16],
+}
+
+/// Length of an encoded [`Attachment`].
+pub const ATTACHMENT_LEN: usize = 33;
+
+impl Attachment {
+    pub fn encode(&self) -> [u8; ATTACHMENT_LEN] {
+        let mut b = [0u8; ATTACHMENT_LEN];
+        b[..8].copy_from_slice(&self.sequence_number.to_le_bytes());
+        b[8..16].copy_from_slice(&self.source_timestamp_ns.to_le_bytes());
+        b[16] = 16;
+        b[17..].copy_from_slice(&self.source_gid);
+        b
+    }
+
+    /// Reads an attachment; `None` if it does not have this shape.
+    pub fn decode(b: &[u8]) -> Option<Self> {
+        if b.len() != ATTACHMENT_LEN || b[16] != 16 {
+            return None;
+        }
+        Some(Self {
+            sequence_number: i64::from_le_bytes(b[..8].try_into().ok()?),
+            source_timestamp_ns: i64::from_le_bytes(b[8..16].try_into().ok()?),
+            source_gid: b[17..].try_into().ok()?,
+        })
+    }
+}
+
+/// Splits a topic key expression `<domain>/<topic…>/<type>/<hash>` into its topic, type and
+/// hash (`None` if it has fewer than four parts).
+pub fn split_topic_key(key: &str) -> Option<(&str, &str, &str)> {
+    let (rest, hash) = key.rsplit_once('/')?;
+    let (rest, ty) = rest.rsplit_once('/')?;
+    let (_, topic) = rest.split_once('/')?;
+    Some((topic, ty, hash))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::types::{TypeInfo, GRID_MAP};
+
+    #[test]
+    fn names_resolve_and_bad_ones_are_refused() {
+        assert_eq!(namespace("/").unwrap(), "/");
+        assert_eq!(namespace("robot1/").unwrap(), "/robot1");
+        assert_eq!(
+            resolve_topic("/", "pheromone/grid_map").unwrap(),
+            "/pheromone/grid_map"
+        );
+        assert_eq!(resolve_topic("/r1", "amcl_pose").unwrap(), "/r1/amcl_pose");
+        assert_eq!(resolve_topic("/r1", "/amcl_pose").unwrap(), "/amcl_pose");
+        assert!(resolve_topic("/", "a//b").is_err());
+        assert!(resolve_topic("/", "1a").is_err());
+        assert!(node_name("a/b").is_err());
+        assert!(namespace("/a-b").is_err());
+    }
+
+    #[test]
+    fn keys_and_tokens_have_rmw_zenohs_shape() {
+        let t = TypeInfo::of(GRID_MAP);
+        let key = topic_key(3, "/pheromone/grid_map", &t);
+        assert_eq!(
+            key,
+            format!(
+                "3/pheromone/grid_map/grid_map_msgs::msg::dds_::GridMap_/{}",
+                t.hash
+            )
+        );
+        assert_eq!(
+            split_topic_key(&key),
+            Some((
+                "pheromone/grid_map",
+                "grid_map_msgs::msg::dds_::GridMap_",
+                t.hash.as_str()
+            ))
+        );
+        let id = NodeIdentity {
+            domain_id: 3,
+            zid: "abc".into(),
+            namespace: "/".into(),
+            name: "pheromone".into(),
+        };
+        assert_eq!(
+            id.token(EntityKind::Node, 0, None),
+            "@ros2_lv/3/abc/0/0/NN/%/%/pheromone"
+        );
+        let qos = Qos {
+            reliable: true,
+            transient_local: false,
+            depth: 1,
+        };
+        let tok = id.token(
+            EntityKind::Publisher,
+            1,
+            Some(("/pheromone/grid_map", &t, qos)),
+        );
+        assert_eq!(
+            tok,
+            format!(
+                "@ros2_lv/3/abc/0/1/MP/%/%/pheromone/%pheromone%grid_map/\
+                 grid_map_msgs::msg::dds_::GridMap_/{}/:2:,1:,:,:,,",
+                t.hash
+            )
+        );
+        assert_ne!(gid(&tok), gid(&id.token(EntityKind::Node, 0, None)));
+    }
+
+    #[test]
+    fn attachment_round_trips_and_refuses_other_shapes() {
+        let a = Attachment {
+            sequence_number: 5,
+            source_timestamp_ns: 1_700_000_000_000_000_000,
+            source_gid: [7; 16],
+        };
+        let b = a.encode();
+        assert_eq!(b[16], 16);
+        assert_eq!(Attachment::decode(&b), Some(a));
+        assert_eq!(Attachment::decode(&b[..32]), None);
+    }
+}

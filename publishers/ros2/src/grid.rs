@@ -1,0 +1,236 @@
+//! The field's frame as `grid_map_msgs/msg/GridMap` (every channel a float32 layer) and as one
+//! `nav_msgs/msg/OccupancyGrid` per channel, serialized to CDR straight from the frame's cells.
+//!
+//! Layouts. The field stores each channel row-major from its lower-left corner: cell `(x, y)`
+//! at `y·width + x`, centred at `origin + (x + ½, y + ½)·cell_size`.
+//! - OccupancyGrid has the same layout (row-major from `info.origin`): the data is the channel
+//!   in order, scaled.
+//! - grid_map stores a layer column-major from the corner of largest x and y (its index
+//!   `(i, j)` counts cells along −x and −y): element `k` of a layer is the field's cell
+//!   `width·height − 1 − k`, i.e. the plane read back to front. The layout's dimensions are
+//!   `column_index` (size `height`, stride `width·height`) and `row_index` (size `width`,
+//!   stride `width`), as `grid_map_ros` writes them; `info.pose` is the field's centre.
+//!
+//! OccupancyGrid scaling (0–100): with `lo = min(0, smallest value)` and `hi = the largest
+//! value` of the channel in this frame, a cell is `round(100·(v − lo)/(hi − lo))`; a channel
+//! whose values are all equal (`hi ≤ lo`) is all 0. The message has no field for the scale (its
+//! `MapMetaData` holds only geometry): the GridMap topic carries the values themselves.
+
+use field::geometry::GridGeometry;
+
+use crate::cdr::CdrWriter;
+
+/// A ROS time (`builtin_interfaces/msg/Time`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Stamp {
+    pub sec: i32,
+    pub nanosec: u32,
+}
+
+impl Stamp {
+    /// From nanoseconds since the epoch (negative times are clamped to 0).
+    pub fn from_ns(ns: i64) -> Self {
+        let ns = ns.max(0);
+        Self {
+            sec: (ns / 1_000_000_000).min(i32::MAX as i64) as i32,
+            nanosec: (ns % 1_000_000_000) as u32,
+        }
+    }
+
+    pub fn as_ns(self) -> i64 {
+        self.sec as i64 * 1_000_000_000 + self.nanosec as i64
+    }
+}
+
+/// One frame to publish: its geometry, channels, stamp and frame id, and its cells (all
+/// channels, `channel, y, x`), borrowed from the shared frame.
+#[derive(Debug, Clone, Copy)]
+pub struct FrameRef<'a> {
+    pub geometry: GridGeometry,
+    pub channels: usize,
+    pub cells: &'a [f32],
+    pub stamp: Stamp,
+    pub frame_id: &'a str,
+}
+
+impl<'a> FrameRef<'a> {
+    pub fn plane(&self, channel: usize) -> &'a [f32] {
+        let n = self.geometry.cells();
+        &self.cells[channel * n..(channel + 1) * n]
+    }
+}
+
+/// The name of channel `c`'s layer (and of its OccupancyGrid topic).
+pub fn layer_name(c: usize) -> String {
+    format!("channel_{c}")
+}
+
+fn header(w: &mut CdrWriter, stamp: Stamp, frame_id: &str) {
+    w.i32(stamp.sec);
+    w.u32(stamp.nanosec);
+    w.string(frame_id);
+}
+
+/// A `geometry_msgs/msg/Pose` at `(x, y, 0)` with the identity orientation.
+fn flat_pose(w: &mut CdrWriter, x_m: f64, y_m: f64) {
+    for v in [x_m, y_m, 0.0, 0.0, 0.0, 0.0, 1.0] {
+        w.f64(v);
+    }
+}
+
+/// The frame as a CDR `grid_map_msgs/msg/GridMap`.
+pub fn grid_map_cdr(f: &FrameRef<'_>) -> Vec<u8> {
+    let g = &f.geometry;
+    let (wc, hc) = (g.width as usize, g.height as usize);
+    let n = wc * hc;
+    let mut w = CdrWriter::with_capacity(256 + f.frame_id.len() + f.channels * (96 + 4 * n));
+    header(&mut w, f.stamp, f.frame_id);
+    let res = g.cell_size_m as f64;
+    let (lx, ly) = (wc as f64 * res, hc as f64 * res);
+    w.f64(res);
+    w.f64(lx);
+    w.f64(ly);
+    flat_pose(
+        &mut w,
+        g.origin_x_m as f64 + lx / 2.0,
+        g.origin_y_m as f64 + ly / 2.0,
+    );
+    w.seq_len(f.channels);
+    for c in 0..f.channels {
+        w.string(&layer_name(c));
+    }
+    w.seq_len(0);
+    w.seq_len(f.channels);
+    for c in 0..f.channels {
+        w.seq_len(2);
+        w.string("column_index");
+        w.u32(hc as u32);
+        w.u32(n as u32);
+        w.string("row_index");
+        w.u32(wc as u32);
+        w.u32(wc as u32);
+        w.u32(0);
+        let plane = f.plane(c);
+        w.f32_seq_from(n, |k| plane[n - 1 - k]);
+    }
+    w.u16(0);
+    w.u16(0);
+    w.finish()
+}
+
+/// The 0–100 scale of one channel in one frame (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OccupancyScale {
+    pub lo: f32,
+    pub hi: f32,
+}
+
+impl OccupancyScale {
+    pub fn of(plane: &[f32]) -> Self {
+        let (mut lo, mut hi) = (0.0f32, f32::NEG_INFINITY);
+        for &v in plane {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        Self { lo, hi }
+    }
+
+    /// The occupancy value (0–100) of `v`.
+    #[inline]
+    pub fn value(&self, v: f32) -> i8 {
+        let span = self.hi - self.lo;
+        if span.is_finite() && span > 0.0 {
+            (100.0 * (v - self.lo) / span).round().clamp(0.0, 100.0) as i8
+        } else {
+            0
+        }
+    }
+}
+
+/// Channel `channel` of the frame as a CDR `nav_msgs/msg/OccupancyGrid`, and its scale.
+pub fn occupancy_grid_cdr(f: &FrameRef<'_>, channel: usize) -> (Vec<u8>, OccupancyScale) {
+    let g = &f.geometry;
+    let n = g.cells();
+    let plane = f.plane(channel);
+    let scale = OccupancyScale::of(plane);
+    let mut w = CdrWriter::with_capacity(160 + f.frame_id.len() + n);
+    header(&mut w, f.stamp, f.frame_id);
+    w.i32(f.stamp.sec);
+    w.u32(f.stamp.nanosec);
+    w.f32(g.cell_size_m);
+    w.u32(g.width);
+    w.u32(g.height);
+    flat_pose(&mut w, g.origin_x_m as f64, g.origin_y_m as f64);
+    w.i8_seq_from(n, plane.iter().map(|&v| scale.value(v)));
+    (w.finish(), scale)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cdr::CdrReader;
+
+    fn frame(cells: &[f32]) -> FrameRef<'_> {
+        FrameRef {
+            geometry: GridGeometry::new(3, 2, 0.5)
+                .unwrap()
+                .with_origin(-1.0, 2.0)
+                .unwrap(),
+            channels: 2,
+            cells,
+            stamp: Stamp { sec: 7, nanosec: 9 },
+            frame_id: "map",
+        }
+    }
+
+    #[test]
+    fn grid_map_layers_are_the_planes_back_to_front() {
+        let cells: Vec<f32> = (0..12).map(|v| v as f32).collect();
+        let b = grid_map_cdr(&frame(&cells));
+        let mut r = CdrReader::new(&b).unwrap();
+        assert_eq!(r.i32("sec").unwrap(), 7);
+        assert_eq!(r.u32("ns").unwrap(), 9);
+        assert_eq!(r.string("frame").unwrap(), "map");
+        let info: Vec<f64> = (0..10).map(|_| r.f64("info").unwrap()).collect();
+        assert_eq!(&info[..5], &[0.5, 1.5, 1.0, -0.25, 2.5]);
+        assert_eq!(r.u32("layers").unwrap(), 2);
+        assert_eq!(r.string("l0").unwrap(), "channel_0");
+        assert_eq!(r.string("l1").unwrap(), "channel_1");
+        assert_eq!(r.u32("basic").unwrap(), 0);
+        assert_eq!(r.u32("data").unwrap(), 2);
+        for c in 0..2 {
+            assert_eq!(r.u32("dims").unwrap(), 2);
+            assert_eq!(r.string("d0").unwrap(), "column_index");
+            assert_eq!((r.u32("").unwrap(), r.u32("").unwrap()), (2, 6));
+            assert_eq!(r.string("d1").unwrap(), "row_index");
+            assert_eq!((r.u32("").unwrap(), r.u32("").unwrap()), (3, 3));
+            assert_eq!(r.u32("offset").unwrap(), 0);
+            assert_eq!(r.u32("n").unwrap(), 6);
+            for k in 0..6 {
+                let v = f32::from_bits(r.u32("v").unwrap());
+                assert_eq!(v, (c * 6 + 5 - k) as f32);
+            }
+        }
+    }
+
+    #[test]
+    fn occupancy_is_scaled_from_min_zero_to_max() {
+        let s = OccupancyScale::of(&[0.0, 2.0, 4.0, 1.0]);
+        assert_eq!((s.lo, s.hi), (0.0, 4.0));
+        assert_eq!(s.value(1.0), 25);
+        assert_eq!(s.value(4.0), 100);
+        let neg = OccupancyScale::of(&[-1.0, 1.0]);
+        assert_eq!(neg.value(0.0), 50);
+        assert_eq!(OccupancyScale::of(&[0.0, 0.0]).value(0.0), 0);
+        let cells: Vec<f32> = (0..12).map(|v| v as f32).collect();
+        let (b, scale) = occupancy_grid_cdr(&frame(&cells), 1);
+        assert_eq!((scale.lo, scale.hi), (0.0, 11.0));
+        let tail = &b[b.len() - 6..];
+        let want: Vec<u8> = (6..12)
+            .map(|v| (100.0 * v as f32 / 11.0).round() as u8)
+            .collect();
+        assert_eq!(tail, &want[..]);
+        let n = u32::from_le_bytes(b[b.len() - 10..b.len() - 6].try_into().unwrap());
+        assert_eq!(n, 6);
+    }
+}

@@ -1,0 +1,22 @@
+//! ROS 2 without ROS: the field on ROS 2 topics through Zenoh, in the wire format of
+//! `rmw_zenoh_cpp` (ROS 2's Zenoh middleware), with messages in CDR (docs/ros2.md).
+//!
+//! - [`types`]: message descriptions, DDS type names, RIHS01 type hashes, `ros2msg` schemas.
+//! - [`cdr`]: the CDR writer and reader.
+//! - [`grid`]: a frame as `grid_map_msgs/msg/GridMap` and `nav_msgs/msg/OccupancyGrid`.
+//! - [`pose`]: `geometry_msgs/msg/PoseWithCovarianceStamped` → the depositor's pose.
+//! - [`graph`]: rmw_zenoh's key expressions, liveliness tokens, GIDs and attachments.
+//! - [`frames`]: the topics of a field and the messages of its current frame.
+//! - [`record`]: ROS 2 MCAP files.
+//! - `node` (feature `zenoh`): the node itself — publishers, `--deposit-from` subscriptions.
+
+pub mod cdr;
+pub mod deps;
+pub mod frames;
+pub mod graph;
+pub mod grid;
+#[cfg(feature = "zenoh")]
+pub mod node;
+pub mod pose;
+pub mod record;
+pub mod types;

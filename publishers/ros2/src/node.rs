@@ -1,0 +1,459 @@
+//! The ROS 2 node over Zenoh (`pheromone ros2`): publishes the field's GridMap and
+//! OccupancyGrids at a chosen rate, each frame serialized straight from shared memory once
+//! the field's frame-ready event wakes it, and turns the `PoseWithCovarianceStamped`s of its
+//! `--deposit-from` topics into seed 000 deposits through the depositor library. Liveliness
+//! tokens announce the node, its publishers and its subscriptions to the ROS graph; every
+//! sample carries rmw_zenoh's attachment ([`crate::graph`]).
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use field::shm::{now_ns, DepositPublisher, FieldReader, ShmError, Svc};
+use iceoryx2::node::Node;
+use thiserror::Error;
+use zenoh::handlers::FifoChannelHandler;
+use zenoh::liveliness::LivelinessToken;
+use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::qos::CongestionControl;
+use zenoh::sample::Sample;
+use zenoh::Wait;
+
+use crate::deps::depositor::{Depositor, DepositorConfig, DepositorConfigError};
+use crate::deps::{session_config, with_admin_space};
+use crate::frames::{frame_messages, wall_now_ns, FieldTopics};
+use crate::graph::{
+    self, split_topic_key, topic_key, Attachment, EntityKind, NameError, NodeIdentity, Qos,
+};
+use crate::pose::{check_pose, PoseWithCovarianceStamped};
+use crate::types::{TypeInfo, POSE_COV_STAMPED};
+
+#[derive(Debug, Error)]
+pub enum Ros2Error {
+    #[error(transparent)]
+    Shm(#[from] ShmError),
+    #[error(transparent)]
+    Name(#[from] NameError),
+    #[error(transparent)]
+    Depositor(#[from] DepositorConfigError),
+    #[error("zenoh: {action}: {detail}")]
+    Zenoh { action: String, detail: String },
+    #[error("field {0}: no frame within the timeout")]
+    NoFrame(String),
+}
+
+fn zerr(action: impl Into<String>, e: impl std::fmt::Display) -> Ros2Error {
+    Ros2Error::Zenoh {
+        action: action.into(),
+        detail: e.to_string(),
+    }
+}
+
+/// A `--deposit-from TOPIC[=ROBOT_ID]` subscription.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DepositFrom {
+    pub topic: String,
+    pub robot_id: u32,
+}
+
+#[derive(Debug, Clone)]
+pub struct Ros2Options {
+    pub field: String,
+    pub domain_id: u32,
+    pub namespace: String,
+    pub node_name: String,
+    pub frame_id: String,
+    pub rate_hz: f64,
+    pub listen: Vec<String>,
+    pub connect: Vec<String>,
+    pub deposit_from: Vec<DepositFrom>,
+    pub depositor: DepositorConfig,
+    pub admin_space: bool,
+}
+
+/// What the node did, cumulative.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct Ros2Stats {
+    pub frames_published: u64,
+    pub messages_published: u64,
+    pub bytes_published: u64,
+    pub last_sequence: u64,
+    pub poses_received: u64,
+    pub deposits_sent: u64,
+    pub deposits_skipped_interval: u64,
+    /// The field took no deposit (not running, or its buffer full).
+    pub deposits_not_taken: u64,
+    /// Samples on a `--deposit-from` topic with another type name or type hash in their key.
+    pub refused_type: u64,
+    /// Truncated or malformed CDR.
+    pub refused_cdr: u64,
+    /// Poses in another frame than `--frame-id`.
+    pub refused_frame: u64,
+    /// Refused poses by reason (`non_finite`, `not_psd`, `not_positive_definite`, …).
+    pub refused_pose: BTreeMap<String, u64>,
+}
+
+impl Ros2Stats {
+    pub fn refused_total(&self) -> u64 {
+        self.refused_type
+            + self.refused_cdr
+            + self.refused_frame
+            + self.refused_pose.values().sum::<u64>()
+    }
+}
+
+struct RosPublisher {
+    publisher: Publisher<'static>,
+    _token: LivelinessToken,
+    gid: [u8; 16],
+    sequence: i64,
+}
+
+impl RosPublisher {
+    fn put(&mut self, cdr: Vec<u8>) -> Result<(), Ros2Error> {
+        self.sequence += 1;
+        let att = Attachment {
+            sequence_number: self.sequence,
+            source_timestamp_ns: wall_now_ns(),
+            source_gid: self.gid,
+        };
+        self.publisher
+            .put(cdr)
+            .attachment(att.encode().to_vec())
+            .wait()
+            .map_err(|e| zerr(format!("put {}", self.publisher.key_expr()), e))
+    }
+}
+
+struct RosSubscription {
+    topic: String,
+    subscriber: Subscriber<FifoChannelHandler<Sample>>,
+    _token: LivelinessToken,
+    depositor: Depositor,
+    robot_id: u32,
+}
+
+/// The running node.
+pub struct Ros2Node {
+    o: Ros2Options,
+    session: zenoh::Session,
+    _node_token: LivelinessToken,
+    reader: FieldReader,
+    deposits: Option<DepositPublisher>,
+    topics: FieldTopics,
+    publishers: Vec<RosPublisher>,
+    subscriptions: Vec<RosSubscription>,
+    pose_type: TypeInfo,
+    period: Duration,
+    /// When the next frame is due (`None`: the first frame is).
+    next_publish: Option<Instant>,
+    /// Frame-to-publish latencies (µs), one per published frame.
+    pub latencies_us: Vec<u32>,
+    pub stats: Ros2Stats,
+}
+
+/// The QoS of the field's topics: reliable, volatile, keep last 1.
+pub const PUBLISHER_QOS: Qos = Qos {
+    reliable: true,
+    transient_local: false,
+    depth: 1,
+};
+/// The QoS of `--deposit-from` subscriptions: reliable, volatile, keep last 10.
+pub const SUBSCRIPTION_QOS: Qos = Qos {
+    reliable: true,
+    transient_local: false,
+    depth: 10,
+};
+
+impl Ros2Node {
+    /// Attaches to the field (waiting up to `timeout` for its first frame), opens the Zenoh
+    /// session and declares the node's publishers, subscriptions and liveliness tokens.
+    pub fn start(node: &Node<Svc>, o: Ros2Options, timeout: Duration) -> Result<Self, Ros2Error> {
+        let namespace = graph::namespace(&o.namespace)?;
+        let name = graph::node_name(&o.node_name)?;
+        let mut reader = FieldReader::attach_within(node, &o.field, timeout)?;
+        let channels = match reader.wait_until(timeout, |_| true)? {
+            Some(f) => f.header.channels as usize,
+            None => return Err(Ros2Error::NoFrame(o.field.clone())),
+        };
+        let topics = FieldTopics::new(&namespace, channels)?;
+        let deposits = if o.deposit_from.is_empty() {
+            None
+        } else {
+            Some(DepositPublisher::attach(node, &o.field, u32::MAX)?)
+        };
+        let mut config =
+            session_config(&o.listen, &o.connect).map_err(|e| zerr("session config", e))?;
+        if o.admin_space {
+            config = with_admin_space(config).map_err(|e| zerr("session config", e))?;
+        }
+        let session = zenoh::open(config)
+            .wait()
+            .map_err(|e| zerr("open session", e))?;
+        let identity = NodeIdentity {
+            domain_id: o.domain_id,
+            zid: session.info().zid().wait().to_string(),
+            namespace,
+            name,
+        };
+        let node_token = declare_token(&session, &identity.token(EntityKind::Node, 0, None))?;
+        let mut publishers = Vec::new();
+        for (i, (topic, t)) in topics.names.iter().zip(&topics.types).enumerate() {
+            publishers.push(declare_publisher(
+                &session,
+                &identity,
+                1 + i as u32,
+                topic,
+                t,
+            )?);
+        }
+        let pose_type = TypeInfo::of(POSE_COV_STAMPED);
+        let mut subscriptions = Vec::new();
+        for (i, d) in o.deposit_from.iter().enumerate() {
+            let id = (1 + publishers.len() + i) as u32;
+            subscriptions.push(declare_subscription(
+                &session,
+                &identity,
+                id,
+                d,
+                &pose_type,
+                &o.depositor,
+            )?);
+        }
+        let period = Duration::from_secs_f64(1.0 / o.rate_hz);
+        Ok(Self {
+            o,
+            session,
+            _node_token: node_token,
+            reader,
+            deposits,
+            topics,
+            publishers,
+            subscriptions,
+            pose_type,
+            period,
+            next_publish: None,
+            latencies_us: Vec::new(),
+            stats: Ros2Stats::default(),
+        })
+    }
+
+    /// The field's topics (absolute names) and their types.
+    pub fn topics(&self) -> &FieldTopics {
+        &self.topics
+    }
+
+    /// The `--deposit-from` topics (absolute names).
+    pub fn subscription_topics(&self) -> Vec<String> {
+        self.subscriptions.iter().map(|s| s.topic.clone()).collect()
+    }
+
+    /// The endpoints the session listens on (needs `admin_space`).
+    pub fn listen_locators(&self) -> Result<Vec<String>, Ros2Error> {
+        crate::deps::listen_locators(&self.session).map_err(|e| zerr("listen locators", e))
+    }
+
+    /// One round: takes the poses that came, waits up to `timeout` for a frame and publishes
+    /// it if the rate allows.
+    pub fn step(&mut self, timeout: Duration) -> Result<(), Ros2Error> {
+        self.take_poses();
+        if self.reader.wait_frame(timeout)? && self.due() {
+            self.publish_frame()?;
+        }
+        self.take_poses();
+        Ok(())
+    }
+
+    /// Whether a frame arriving now is published: a tenth of a period early counts as on time,
+    /// so frames of a field ticking at a multiple of the rate are not skipped by jitter.
+    fn due(&self) -> bool {
+        self.next_publish
+            .is_none_or(|t| Instant::now() + self.period / 10 >= t)
+    }
+
+    /// Deadlines advance by whole periods (no drift); a node that fell behind starts over.
+    fn schedule_next(&mut self) {
+        let now = Instant::now();
+        self.next_publish = Some(match self.next_publish {
+            Some(t) if t + self.period > now => t + self.period,
+            _ => now + self.period,
+        });
+    }
+
+    fn publish_frame(&mut self) -> Result<(), Ros2Error> {
+        let Some(fm) = frame_messages(&self.reader, &self.o.frame_id) else {
+            return Ok(());
+        };
+        if fm.messages.len() != self.publishers.len() {
+            // The field restarted with another channel count: its topics are not ours.
+            return Ok(());
+        }
+        self.schedule_next();
+        for (p, m) in self.publishers.iter_mut().zip(fm.messages) {
+            self.stats.bytes_published += m.len() as u64;
+            p.put(m)?;
+            self.stats.messages_published += 1;
+        }
+        let latency_ns = now_ns().saturating_sub(fm.stamp_mono_ns);
+        self.latencies_us
+            .push((latency_ns / 1000).min(u32::MAX as u64) as u32);
+        self.stats.frames_published += 1;
+        self.stats.last_sequence = fm.sequence;
+        Ok(())
+    }
+
+    fn take_poses(&mut self) {
+        for s in &mut self.subscriptions {
+            while let Ok(Some(sample)) = s.subscriber.try_recv() {
+                self.stats.poses_received += 1;
+                handle_pose(
+                    &sample,
+                    &self.pose_type,
+                    &self.o.frame_id,
+                    s,
+                    self.deposits.as_mut(),
+                    &mut self.stats,
+                );
+            }
+        }
+    }
+
+    /// Frame-to-publish latency percentile `q` (0–1) in µs, over the frames published.
+    pub fn latency_percentile_us(&self, q: f64) -> Option<u32> {
+        let mut v = self.latencies_us.clone();
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_unstable();
+        let i = ((v.len() - 1) as f64 * q).round() as usize;
+        Some(v[i])
+    }
+
+    /// Flushes the deposits sent and closes the session (tokens are withdrawn).
+    pub fn close(mut self) {
+        if let Some(d) = self.deposits.as_mut() {
+            d.flush(Duration::from_secs(1));
+        }
+        let _ = self.session.close().wait();
+    }
+}
+
+fn declare_token(session: &zenoh::Session, key: &str) -> Result<LivelinessToken, Ros2Error> {
+    session
+        .liveliness()
+        .declare_token(key.to_string())
+        .wait()
+        .map_err(|e| zerr(format!("declare liveliness token {key}"), e))
+}
+
+fn declare_publisher(
+    session: &zenoh::Session,
+    identity: &NodeIdentity,
+    entity_id: u32,
+    topic: &str,
+    t: &TypeInfo,
+) -> Result<RosPublisher, Ros2Error> {
+    let token_key = identity.token(
+        EntityKind::Publisher,
+        entity_id,
+        Some((topic, t, PUBLISHER_QOS)),
+    );
+    let key = topic_key(identity.domain_id, topic, t);
+    let publisher = session
+        .declare_publisher(key.clone())
+        .congestion_control(CongestionControl::Drop)
+        .wait()
+        .map_err(|e| zerr(format!("declare publisher {key}"), e))?;
+    Ok(RosPublisher {
+        publisher,
+        _token: declare_token(session, &token_key)?,
+        gid: graph::gid(&token_key),
+        sequence: 0,
+    })
+}
+
+fn declare_subscription(
+    session: &zenoh::Session,
+    identity: &NodeIdentity,
+    entity_id: u32,
+    d: &DepositFrom,
+    t: &TypeInfo,
+    config: &DepositorConfig,
+) -> Result<RosSubscription, Ros2Error> {
+    let topic = graph::resolve_topic(&identity.namespace, &d.topic)?;
+    let token_key = identity.token(
+        EntityKind::Subscription,
+        entity_id,
+        Some((&topic, t, SUBSCRIPTION_QOS)),
+    );
+    // Any type and hash: a sample of another type is refused and counted, not silently missed.
+    let key = format!("{}/{}/*/*", identity.domain_id, topic.trim_matches('/'));
+    let subscriber = session
+        .declare_subscriber(key.clone())
+        .wait()
+        .map_err(|e| zerr(format!("subscribe {key}"), e))?;
+    Ok(RosSubscription {
+        topic,
+        subscriber,
+        _token: declare_token(session, &token_key)?,
+        depositor: Depositor::new(config.clone())?,
+        robot_id: d.robot_id,
+    })
+}
+
+/// Checks one sample of a `--deposit-from` topic and deposits it, counting whatever is refused.
+fn handle_pose(
+    sample: &Sample,
+    t: &TypeInfo,
+    frame_id: &str,
+    s: &mut RosSubscription,
+    deposits: Option<&mut DepositPublisher>,
+    stats: &mut Ros2Stats,
+) {
+    let key = sample.key_expr().as_str();
+    let typed = split_topic_key(key).is_some_and(|(_, ty, h)| ty == t.dds_name && h == t.hash);
+    if !typed {
+        stats.refused_type += 1;
+        eprintln!("ros2: {key}: refused: not {} {}", t.dds_name, t.hash);
+        return;
+    }
+    let payload = sample.payload().to_bytes();
+    let msg = match PoseWithCovarianceStamped::from_cdr(&payload) {
+        Ok(m) => m,
+        Err(e) => {
+            stats.refused_cdr += 1;
+            eprintln!("ros2: {}: refused: {e}", s.topic);
+            return;
+        }
+    };
+    if msg.frame_id != frame_id {
+        stats.refused_frame += 1;
+        eprintln!(
+            "ros2: {}: refused: frame_id {:?}, the field's is {frame_id:?}",
+            s.topic, msg.frame_id
+        );
+        return;
+    }
+    let pose = msg.to_pose_msg(s.robot_id);
+    if let Err(e) = check_pose(&pose) {
+        *stats.refused_pose.entry(e.name().to_string()).or_default() += 1;
+        eprintln!("ros2: {}: {e}", s.topic);
+        return;
+    }
+    match s.depositor.process(&pose) {
+        Ok(Some(mut d)) => {
+            // The field's stamps are CLOCK_MONOTONIC: the publisher stamps it on sending.
+            d.stamp_ns = 0;
+            match deposits.map(|p| p.send_as(d)) {
+                Some(Ok(())) => stats.deposits_sent += 1,
+                _ => stats.deposits_not_taken += 1,
+            }
+        }
+        Ok(None) => stats.deposits_skipped_interval += 1,
+        Err(e) => {
+            *stats
+                .refused_pose
+                .entry(e.reason().name().to_string())
+                .or_default() += 1;
+        }
+    }
+}

@@ -1,0 +1,342 @@
+//! `pheromone ros2` (feature `zenoh`) and `pheromone record --mcap`: the field for ROS 2 tools.
+//! The library is `ros2` (publishers/ros2); docs/ros2.md.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use roles::depositor::DepositorConfig;
+
+use super::{bad, bad_from, seconds};
+
+/// Depositor settings of `--deposit-from` (seed 000's uncertainty-aware deposit).
+#[derive(Args, Debug, Clone)]
+pub struct RosDepositArgs {
+    /// τ of seed 000 (pheromone·m⁴): a pose deposits γ = τ / det Σxy at its peak, capped at
+    /// --gamma-max.
+    #[arg(long, default_value_t = 0.2)]
+    pub tau: f32,
+    /// γmax, the cap on γ.
+    #[arg(long, default_value_t = 100.0)]
+    pub gamma_max: f32,
+    /// Sensor range z_rng (m): no cell farther than this from the pose receives pheromone.
+    #[arg(long, default_value_t = 1.0)]
+    pub range_m: f32,
+    /// Deposit again once the robot moved this far (m) from its last deposit; 0 = off.
+    #[arg(long, default_value_t = 0.25)]
+    pub interval_m: f64,
+    /// Deposit again once this many seconds (of the poses' stamps) elapsed; 0 = off.
+    #[arg(long, default_value_t = 0.0)]
+    pub interval_s: f64,
+    /// Field channel the deposits go to.
+    #[arg(long, default_value_t = 0)]
+    pub channel: u32,
+}
+
+impl RosDepositArgs {
+    #[cfg_attr(not(feature = "zenoh"), allow(dead_code))]
+    pub fn config(&self) -> DepositorConfig {
+        DepositorConfig {
+            tau: self.tau,
+            gamma_max: self.gamma_max,
+            range_m: self.range_m,
+            interval_m: self.interval_m,
+            interval_s: self.interval_s,
+            channel: self.channel,
+            ..DepositorConfig::default()
+        }
+    }
+}
+
+/// Show a running field to ROS 2 nodes over Zenoh, in the wire format of rmw_zenoh_cpp
+/// (docs/ros2.md), and let ROS 2 robots deposit into it.
+///
+/// Publishes, at most --rate-hz times a second and each time the field publishes a frame,
+/// `<ns>/pheromone/grid_map` (grid_map_msgs/msg/GridMap: every channel a float32 layer named
+/// channel_<c>) and `<ns>/pheromone/occupancy/channel_<c>` (nav_msgs/msg/OccupancyGrid, the
+/// channel scaled to 0–100 between min(0, its smallest value) and its largest), in frame
+/// --frame-id, with the field's cell size and lower-left corner. Each
+/// --deposit-from TOPIC[=ROBOT_ID] subscribes a geometry_msgs/msg/PoseWithCovarianceStamped
+/// topic (AMCL's /amcl_pose, robot_localization's pose) and turns each pose into seed 000's
+/// deposit: γ = τ / det Σxy at the pose, the shape of its error ellipse, again once the robot
+/// moved --interval-m. Poses with a NaN or non-positive-definite covariance, another frame_id,
+/// another type or hash, or truncated CDR are refused and counted, never deposited.
+///
+/// Declares rmw_zenoh's liveliness tokens for the node, its publishers and subscriptions (so
+/// `ros2 node list` / `ros2 topic list` show them) and attaches the sequence number, source
+/// timestamp and GID to every message. A ROS 2 machine sees it through a Zenoh router
+/// (`--connect tcp/ROUTER:7447`, RMW_IMPLEMENTATION=rmw_zenoh_cpp). Needs a build with
+/// `--features zenoh`. Ctrl-C stops it.
+#[derive(Args, Debug)]
+pub struct Ros2Args {
+    /// The field to publish (it must run on this host, in this iceoryx2 domain).
+    #[arg(long, default_value = "main")]
+    pub field: String,
+    /// Most frames published per second.
+    #[arg(long, value_name = "HZ", default_value_t = 10.0)]
+    pub rate_hz: f64,
+    /// ROS domain id (the first component of every key expression).
+    #[arg(long, default_value_t = 0)]
+    pub domain_id: u32,
+    /// ROS namespace of the node and its relative topics.
+    #[arg(long, default_value = "/")]
+    pub namespace: String,
+    /// ROS node name.
+    #[arg(long, default_value = "pheromone")]
+    pub node_name: String,
+    /// frame_id of the published messages; poses in another frame are refused.
+    #[arg(long, default_value = "map")]
+    pub frame_id: String,
+    /// Zenoh endpoint to connect to, e.g. a router: tcp/127.0.0.1:7447 (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+    /// Subscribe TOPIC (PoseWithCovarianceStamped) and deposit its poses as robot ROBOT_ID
+    /// [default id: 0] (repeatable; a relative TOPIC is in --namespace).
+    #[arg(long, value_name = "TOPIC[=ROBOT_ID]")]
+    pub deposit_from: Vec<String>,
+    #[command(flatten)]
+    pub deposit: RosDepositArgs,
+    /// Seconds to wait for the field and its first frame.
+    #[arg(long, value_name = "SECS", default_value_t = 10.0)]
+    pub timeout: f64,
+    /// Stop after this many seconds.
+    #[arg(long, value_name = "SECS")]
+    pub duration: Option<f64>,
+    /// Once listening, print each endpoint with its port on stdout (as `bridge` does).
+    #[arg(long)]
+    pub print_address: bool,
+    /// At exit, print one JSON summary on stdout: counts, refusals, bytes, latency p50/p99.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[cfg(feature = "zenoh")]
+fn parse_deposit_from(s: &str) -> anyhow::Result<ros2::node::DepositFrom> {
+    let (topic, id) = match s.split_once('=') {
+        Some((t, id)) => {
+            let id = id.parse::<u32>().map_err(|e| {
+                bad(format!(
+                    "--deposit-from {s}: robot id {id:?} is not a number: {e}"
+                ))
+            })?;
+            (t, id)
+        }
+        None => (s, 0),
+    };
+    Ok(ros2::node::DepositFrom {
+        topic: topic.to_string(),
+        robot_id: id,
+    })
+}
+
+#[cfg(feature = "zenoh")]
+pub fn run(a: Ros2Args) -> anyhow::Result<()> {
+    use ros2::node::{Ros2Node, Ros2Options};
+    field::shm::check_name(&a.field).map_err(bad_from)?;
+    if !(a.rate_hz.is_finite() && a.rate_hz > 0.0 && a.rate_hz <= 1000.0) {
+        return Err(bad(format!(
+            "--rate-hz {}: must be within (0, 1000]",
+            a.rate_hz
+        )));
+    }
+    if a.listen.is_empty() && a.connect.is_empty() {
+        return Err(bad("give --listen and/or --connect (a Zenoh endpoint)"));
+    }
+    let timeout = seconds("timeout", a.timeout)?;
+    let duration = a.duration.map(|d| seconds("duration", d)).transpose()?;
+    let deposit_from = a
+        .deposit_from
+        .iter()
+        .map(|s| parse_deposit_from(s))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let depositor = a.deposit.config();
+    depositor.validate().map_err(bad_from)?;
+    let node = field::shm::create_node(&format!("ros2-{}", std::process::id()))?;
+    let options = Ros2Options {
+        field: a.field.clone(),
+        domain_id: a.domain_id,
+        namespace: a.namespace.clone(),
+        node_name: a.node_name.clone(),
+        frame_id: a.frame_id.clone(),
+        rate_hz: a.rate_hz,
+        listen: a.listen.clone(),
+        connect: a.connect.clone(),
+        deposit_from,
+        depositor,
+        admin_space: a.print_address,
+    };
+    let mut ros = Ros2Node::start(&node, options, timeout).map_err(|e| match e {
+        ros2::node::Ros2Error::Name(_) | ros2::node::Ros2Error::Depositor(_) => bad_from(e),
+        e => e.into(),
+    })?;
+    announce(&a, &ros)?;
+    let started = Instant::now();
+    let mut last_log = Instant::now();
+    while node.wait(Duration::ZERO).is_ok() && duration.is_none_or(|d| started.elapsed() < d) {
+        ros.step(Duration::from_millis(20))?;
+        if last_log.elapsed() >= Duration::from_secs(5) {
+            last_log = Instant::now();
+            let s = &ros.stats;
+            eprintln!(
+                "ros2 '{}': {} frames published ({} bytes), {} poses, {} deposits, {} refused",
+                a.field,
+                s.frames_published,
+                s.bytes_published,
+                s.poses_received,
+                s.deposits_sent,
+                s.refused_total()
+            );
+        }
+    }
+    let elapsed_s = started.elapsed().as_secs_f64();
+    let summary = serde_json::json!({
+        "field": a.field,
+        "ros2": ros.stats,
+        "refused_total": ros.stats.refused_total(),
+        "elapsed_s": elapsed_s,
+        "bytes_per_s": ros.stats.bytes_published as f64 / elapsed_s.max(1e-9),
+        "latency_p50_us": ros.latency_percentile_us(0.5),
+        "latency_p99_us": ros.latency_percentile_us(0.99),
+    });
+    ros.close();
+    if a.json {
+        println!("{summary}");
+    }
+    Ok(())
+}
+
+#[cfg(feature = "zenoh")]
+fn announce(a: &Ros2Args, ros: &ros2::node::Ros2Node) -> anyhow::Result<()> {
+    use std::io::Write;
+    eprintln!(
+        "ros2 '{}': node {} in {}, publishing {:?}, depositing from {:?}",
+        a.field,
+        a.node_name,
+        a.namespace,
+        ros.topics().names,
+        ros.subscription_topics()
+    );
+    if a.print_address {
+        let mut out = std::io::stdout().lock();
+        for l in ros.listen_locators()? {
+            writeln!(out, "{l}")?;
+        }
+        out.flush()?;
+    }
+    Ok(())
+}
+
+#[cfg(not(feature = "zenoh"))]
+pub fn run(_a: Ros2Args) -> anyhow::Result<()> {
+    Err(bad(
+        "this build has no Zenoh: rebuild with `cargo build --release --features zenoh`",
+    ))
+}
+
+/// Record a running field as a ROS 2 MCAP file (profile ros2, ros2msg schemas, CDR messages)
+/// for `ros2 bag play` and Foxglove: the GridMap and OccupancyGrid messages `pheromone ros2`
+/// publishes, at most --rate-hz frames a second. Each frame's messages close a chunk and are
+/// flushed, so a killed recorder leaves a file readable up to its last frame; Ctrl-C (or
+/// --duration) finishes it with its summary.
+#[derive(Args, Debug)]
+pub struct RecordArgs {
+    /// The field to record.
+    #[arg(long, default_value = "main")]
+    pub field: String,
+    /// Output MCAP file.
+    #[arg(long, value_name = "FILE")]
+    pub mcap: PathBuf,
+    /// Most frames recorded per second.
+    #[arg(long, value_name = "HZ", default_value_t = 10.0)]
+    pub rate_hz: f64,
+    /// ROS namespace of the topics.
+    #[arg(long, default_value = "/")]
+    pub namespace: String,
+    /// frame_id of the messages.
+    #[arg(long, default_value = "map")]
+    pub frame_id: String,
+    /// Seconds to wait for the field and its first frame.
+    #[arg(long, value_name = "SECS", default_value_t = 10.0)]
+    pub timeout: f64,
+    /// Stop after this many seconds.
+    #[arg(long, value_name = "SECS")]
+    pub duration: Option<f64>,
+    /// Stop after this many frames.
+    #[arg(long, value_name = "N")]
+    pub frames: Option<u64>,
+    /// At exit, print one JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run_record(a: RecordArgs) -> anyhow::Result<()> {
+    use ros2::frames::{frame_messages, wall_now_ns, FieldTopics};
+    use ros2::record::McapRecorder;
+    field::shm::check_name(&a.field).map_err(bad_from)?;
+    if !(a.rate_hz.is_finite() && a.rate_hz > 0.0) {
+        return Err(bad(format!("--rate-hz {}: must be positive", a.rate_hz)));
+    }
+    let ns = ros2::graph::namespace(&a.namespace).map_err(bad_from)?;
+    let timeout = seconds("timeout", a.timeout)?;
+    let duration = a.duration.map(|d| seconds("duration", d)).transpose()?;
+    let period = Duration::from_secs_f64(1.0 / a.rate_hz);
+    let node = field::shm::create_node(&format!("record-{}", std::process::id()))?;
+    let mut reader = field::shm::FieldReader::attach_within(&node, &a.field, timeout)?;
+    let Some(channels) = reader
+        .wait_until(timeout, |_| true)?
+        .map(|f| f.header.channels as usize)
+    else {
+        anyhow::bail!("field {}: no frame within {:?}", a.field, timeout);
+    };
+    let topics = FieldTopics::new(&ns, channels).map_err(bad_from)?;
+    let mut rec = McapRecorder::create(&a.mcap).map_err(bad_from)?;
+    for (name, t) in topics.names.iter().zip(&topics.types) {
+        rec.add_topic(name, t)?;
+    }
+    let started = Instant::now();
+    let mut last: Option<Instant> = None;
+    let mut frames = 0u64;
+    // The frame held on attaching is recorded first.
+    let mut fresh = true;
+    while node.wait(Duration::ZERO).is_ok()
+        && duration.is_none_or(|d| started.elapsed() < d)
+        && a.frames.is_none_or(|n| frames < n)
+    {
+        if (fresh || reader.wait_frame(Duration::from_millis(20))?)
+            && last.is_none_or(|t| t.elapsed() >= period)
+        {
+            if let Some(fm) = frame_messages(&reader, &a.frame_id) {
+                if fm.messages.len() == topics.names.len() {
+                    let log_ns = fm.stamp.as_ns().max(0) as u64;
+                    for (i, m) in fm.messages.iter().enumerate() {
+                        rec.write(i, log_ns, m)?;
+                    }
+                    rec.end_frame()?;
+                    frames += 1;
+                    last = Some(Instant::now());
+                }
+            }
+        }
+        fresh = false;
+    }
+    let (messages, bytes) = (rec.messages, rec.bytes);
+    rec.finish()?;
+    eprintln!(
+        "record '{}': {frames} frames, {messages} messages in {}",
+        a.field,
+        a.mcap.display()
+    );
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "field": a.field, "mcap": a.mcap, "frames": frames, "messages": messages,
+                "bytes": bytes, "topics": topics.names, "finished_ns": wall_now_ns(),
+            })
+        );
+    }
+    Ok(())
+}
