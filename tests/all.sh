@@ -10,14 +10,21 @@ cd "$(dirname "$0")/.."
 echo "== cargo test --workspace --features zenoh"
 cargo test --workspace --features zenoh
 
+# No `use crate::` cycle between the modules of any crate (issue 27), and the checker's own test.
+echo "== module cycles (.ci/module_cycles.py)"
+python3 .ci/test_module_cycles.py
+python3 .ci/module_cycles.py
+
 # The `test` extra: pytest and the pinned ruff and mypy; the `zenoh` extra (eclipse-zenoh
 # 1.10.2, as the Rust zenoh crate in Cargo.lock; zstandard, xxhash) is for
-# python/tests/test_zenoh_frames.py: a bridge's --frames decoded in Python.
-echo "== python: venv .venv, pip install ./python[test,zenoh]"
+# python/tests/test_zenoh_frames.py: a bridge's --frames decoded in Python; the `ros2` extra
+# (rosbags, mcap) is for python/tests/test_ros2.py: our ROS 2 messages, hashes and MCAP files
+# read by ROS 2's own Python tools.
+echo "== python: venv .venv, pip install ./python[test,zenoh,ros2]"
 if [ ! -x .venv/bin/python ]; then
     python3 -m venv .venv
 fi
-.venv/bin/python -m pip install -q --upgrade './python[test,zenoh]'
+.venv/bin/python -m pip install -q --upgrade './python[test,zenoh,ros2]'
 
 # Lints of the package and its tests (configured in python/pyproject.toml; mypy cold ~7 s).
 echo "== python: ruff check, mypy"

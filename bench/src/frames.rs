@@ -192,7 +192,9 @@ pub fn read(
         }
         FrameTransport::Zenoh => zenoh_side::read(source, skip, count),
         FrameTransport::RawIceoryx => crate::raw_frames::read(source, wait, skip, count),
-        FrameTransport::CAbi => crate::c_abi::read(source, wait, skip, count),
+        FrameTransport::CAbi => Err(BenchError::Peer(
+            "the C reader is c_abi::read (frames reads the other transports)".into(),
+        )),
     }
 }
 

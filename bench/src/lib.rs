@@ -784,7 +784,11 @@ pub fn run_peer(spec_json: &str) -> Result<(), BenchError> {
             core,
         } => {
             place(core);
-            frames::read(transport, &source, wait, skip, count)
+            match transport {
+                // The C reader lives with its section (c_abi drives frames::measure).
+                FrameTransport::CAbi => c_abi::read(&source, wait, skip, count),
+                _ => frames::read(transport, &source, wait, skip, count),
+            }
         }
         PeerSpec::Field {
             name,
