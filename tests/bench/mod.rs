@@ -24,6 +24,8 @@ fn check_latency(v: &Value, what: &str) {
     assert!(get("samples") >= 1.0, "{what}: no samples");
 }
 
+// A test reads as one scenario, top to bottom (the line limit is for non-test code).
+#[allow(clippy::too_many_lines)]
 #[test]
 fn bench_smoke_run_reports_every_figure_as_one_json_object() {
     let out = Proc::spawn(&[

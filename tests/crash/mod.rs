@@ -459,6 +459,8 @@ const ROLES: [Role; 6] = [
     Role::OneShot,
 ];
 
+// A test reads as one scenario, top to bottom (the line limit is for non-test code).
+#[allow(clippy::too_many_lines)]
 #[test]
 fn clients_killed_at_any_instant_leave_the_field_ticking_and_attach_again() {
     let run = Run::new("c");

@@ -40,6 +40,8 @@ fn last_json(o: &std::process::Output) -> Value {
     serde_json::from_str(line).unwrap_or_else(|e| panic!("{e}: {out}\n{}", stderr(o)))
 }
 
+// A test reads as one scenario, top to bottom (the line limit is for non-test code).
+#[allow(clippy::too_many_lines)]
 fn primary_goes_away(signal: Signal) {
     let tag = unique("gw-fb");
     let path = scenario_file(&tag);

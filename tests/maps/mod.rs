@@ -91,6 +91,8 @@ fn scenario_with_map(map: &str) -> String {
     )
 }
 
+// A test reads as one scenario, top to bottom (the line limit is for non-test code).
+#[allow(clippy::too_many_lines)]
 #[test]
 fn a_scenario_map_is_relative_to_the_scenario_and_malformed_maps_exit_2_naming_file_and_line_or_byte(
 ) {

@@ -22,6 +22,8 @@ use crate::harness::*;
 
 const ROBOTS: u32 = 8;
 
+// A test reads as one scenario, top to bottom (the line limit is for non-test code).
+#[allow(clippy::too_many_lines)]
 #[test]
 fn a_field_and_eight_robots_survive_random_kills_and_leave_nothing_behind() {
     let run = Run::new("s");

@@ -186,6 +186,8 @@ fn wall_near(m: &LocalMap, x: i64, y: i64) -> bool {
     })
 }
 
+// A test reads as one scenario, top to bottom (the line limit is for non-test code).
+#[allow(clippy::too_many_lines)]
 #[test]
 fn a_known_rotation_and_translation_is_recovered_within_one_cell_under_the_worlds_noise() {
     use crate::world::{NoiseConfig, RobotConfig, World, WorldConfig, WorldPose};
