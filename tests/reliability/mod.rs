@@ -1,6 +1,6 @@
 //! Crashes, restarts, checkpoints and the standby field: the field or its standby keeps serving.
 //!
-//! Crashes, restarts, checkpoints and the standby field (README "Reliability"): processes are
+//! Crashes, restarts, checkpoints and the standby field (docs/reliability.md): processes are
 //! killed with SIGKILL at arbitrary points and the field (or its standby) must keep serving.
 //!
 //! Times are measured and printed (run with `--nocapture` to see them), never asserted.

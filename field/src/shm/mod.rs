@@ -14,7 +14,7 @@
 //! borrowed) + 1 history + 1 loaned` (the `+ 1` reader is the field itself, holding the previous
 //! frame). `frame_pool` computes it; the field refuses to start when /dev/shm lacks it.
 //!
-//! Crashes (README "Reliability"): a process killed with SIGKILL leaves its ports behind;
+//! Crashes (docs/reliability.md): a process killed with SIGKILL leaves its ports behind;
 //! `cleanup_dead_nodes` (which the field calls once a second, and every process calls when it
 //! creates its node) removes them, which also returns the frames a dead reader held to the
 //! field's pool. Readers tell a dead field with `FieldReader::field_alive`, keep their last frame
