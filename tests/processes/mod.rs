@@ -326,6 +326,48 @@ fn a_sigkilled_child_stops_the_whole_run_with_a_clear_error_and_no_leftovers() {
 }
 
 #[test]
+fn a_sigkilled_sim_takes_every_child_with_it() {
+    let run = Run::new("d");
+    let sim = run.spawn(
+        &["sim", "blind-leader", "--duration", "100000", "--no-out"],
+        "sim",
+    );
+    let sim_pid = sim.pid();
+    eventually(WAIT, "the run to step", || {
+        run.log("sim").contains("separate processes").then_some(())
+    });
+    // blind-leader: the field, two localizers, a depositor, two followers, then the world.
+    let children = eventually(WAIT, "the field, 5 roles and the world", || {
+        let c = children_with(sim_pid, "");
+        (c.len() >= 7 && !children_with(sim_pid, "world").is_empty()).then_some(c)
+    });
+    // SIGKILL: the sim runs no handler; its children must go by themselves (PR_SET_PDEATHSIG).
+    sim.kill();
+    let killed = std::time::Instant::now();
+    let gone = |p: &u32| !Path::new(&format!("/proc/{p}")).exists();
+    eventually(WAIT, "every child of the killed sim to exit", || {
+        children.iter().all(gone).then_some(())
+    });
+    println!(
+        "sim SIGKILLed: its {} children gone after {:.0} ms",
+        children.len(),
+        killed.elapsed().as_secs_f64() * 1e3
+    );
+    // The sim's own node died with it; the children's nodes went with their orderly exit.
+    let dead_cleaned = run.wait_nodes_gone(WAIT);
+    assert!(
+        dead_cleaned <= 1,
+        "dead nodes left besides the sim's: {dead_cleaned}"
+    );
+    assert_eq!(
+        run.shm_entries(),
+        Vec::<String>::new(),
+        "{}",
+        run.log("sim")
+    );
+}
+
+#[test]
 fn ias_ss_with_merging_as_processes_gives_the_single_process_metrics() {
     // Exchanges start after iteration 100 (100 s): 130 s leaves three chances per pair.
     let m = assert_same_in_both_modes(

@@ -6,7 +6,8 @@
 //!
 //! Every child has a waiter thread that reaps it and reports its exit on a channel, so the
 //! supervisor is woken by an exit (no polling of exit statuses), and a reader thread for each
-//! of its pipes, so a chatty child never blocks on a full pipe.
+//! of its pipes, so a chatty child never blocks on a full pipe. A child gets SIGTERM when the
+//! thread that started it dies, even by SIGKILL (`death`), so no child outlives its run.
 
 use std::collections::VecDeque;
 use std::io::{BufRead, BufReader};
@@ -18,6 +19,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use serde::de::DeserializeOwned;
+
+mod death;
 
 /// Lines of a child's stderr shown in its error report.
 const STDERR_TAIL_LINES: usize = 12;
@@ -147,7 +150,8 @@ impl Supervisor {
         }
     }
 
-    /// Starts `pheromone ARGS` (stdin closed, stdout and stderr captured).
+    /// Starts `pheromone ARGS` (stdin closed, stdout and stderr captured). The child gets
+    /// SIGTERM if this thread dies first, by any signal (`PR_SET_PDEATHSIG`).
     pub fn spawn(&mut self, spec: ChildSpec) -> Result<ChildId, SupervisorError> {
         let mut log = match &spec.log_file {
             Some(path) => {
@@ -162,6 +166,7 @@ impl Supervisor {
             None => None,
         };
         let mut command = Command::new(&self.exe);
+        death::die_with_parent(&mut command);
         if let Some(dir) = &spec.cwd {
             command.current_dir(dir);
         }
