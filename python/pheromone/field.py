@@ -399,13 +399,14 @@ class Field:
                 f"{len(header)}"
             )
         view = iox2.Slice(s.payload_ptr, n, ctypes.c_float, owner=s).as_memory_view()
-        # The array's base is the ctypes array under the memoryview, which holds the sample: the
-        # sample lives as long as the array or any view of it (unless closed explicitly).
+        # The ctypes array under the memoryview holds the sample: the sample lives as long as
+        # the array or any view of it (unless closed explicitly).
         view.obj._pheromone_sample = s
-        cells = np.ndarray(
-            (header.channels, header.height, header.width), dtype=np.float32, buffer=view
-        )
-        cells.flags.writeable = False
+        # Over a read-only memoryview: NumPy then refuses `setflags(write=True)` (ValueError)
+        # instead of letting a write reach memory the field published read-only (a segfault).
+        # The array's base is a flat array over that memoryview, which every view references.
+        flat = np.frombuffer(view.toreadonly(), dtype=np.float32)
+        cells = flat.reshape(header.channels, header.height, header.width)
         return Frame(s, header, cells, s.payload_ptr, n * ctypes.sizeof(ctypes.c_float))
 
     def wait_frame(self, timeout_s: float, spin_s: float = 0.0) -> bool:
@@ -665,9 +666,10 @@ def _only_ours(frame: Frame) -> bool:
         return False
     getrefcount = sys.getrefcount
     # Each count includes getrefcount's own argument. The caller holds the frame in a local
-    # (and this function in `frame`); the frame holds `cells`, which every view of it references
-    # (NumPy sets a view's base to `cells`, the first array up the chain); `cells` holds the
-    # ctypes array over the sample (its base), which a memoryview of it would reference.
+    # (and this function in `frame`); the frame holds `cells`, whose base is the flat array over
+    # the sample's read-only memoryview; every view of `cells` references that flat array
+    # (NumPy sets a view's base to the first array up the chain that is not itself a view of an
+    # array), and a memoryview of `cells` references `cells`.
     return (
         getrefcount(frame) <= 3
         and getrefcount(frame.cells) <= 2

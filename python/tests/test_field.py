@@ -52,6 +52,11 @@ def test_attach_reads_the_header_of_the_running_field(start_field):
         assert not cells.flags.writeable
         with pytest.raises(ValueError, match="read-only"):
             cells[0, 0, 0] = 1.0
+        # Making it writable is refused (it would let a write reach the field's published
+        # memory, which segfaults): for the frame, a view of it and a reshaped copy-free view.
+        for a in (cells, cells[0], cells.reshape(-1)):
+            with pytest.raises(ValueError, match="WRITEABLE"):
+                a.setflags(write=True)
         seq = header.sequence
         assert field.wait_frame(2.0)
         assert field.frame().header.sequence > seq
@@ -126,9 +131,12 @@ def test_frame_is_a_zero_copy_view_of_the_shared_memory_sample(start_field):
             mapping = _shm_mapping(data)
             assert mapping and "/dev/shm/iox2_" in mapping[2], mapping
             assert mapping[0] <= data and data + cells.nbytes <= mapping[1]
-            # The array owns nothing: its base is the ctypes array at the sample's address.
-            assert not cells.flags.owndata
-            assert ctypes.addressof(cells.base) == lo
+            # The array owns nothing: its base is a flat array over a read-only memoryview of
+            # the ctypes array at the sample's address.
+            assert not cells.flags.owndata and not cells.base.flags.owndata
+            view = cells.base.base
+            assert isinstance(view, memoryview) and view.readonly
+            assert ctypes.addressof(view.obj) == lo
             print(f"\nzero-copy: array at {data:#x}, sample payload {lo:#x}..{hi:#x}, "
                   f"mapping {mapping[2]}")
         # Getting a new frame costs no copy: time from the field's publish stamp to the array.

@@ -121,10 +121,10 @@ class Ros2Node:
             self.proc.send_signal(signal.SIGINT)
         try:
             out, _ = self.proc.communicate(timeout=15)
-        except subprocess.TimeoutExpired:
+        except subprocess.TimeoutExpired as e:
             self.proc.kill()
             self.proc.communicate()
-            raise AssertionError("pheromone ros2 did not stop on SIGINT")
+            raise AssertionError("pheromone ros2 did not stop on SIGINT") from e
         self.err.close()
         text = open(self.err.name, errors="replace").read()
         assert self.proc.returncode == 0, f"pheromone ros2 exited {self.proc.returncode}: {text}"
@@ -193,7 +193,7 @@ def test_topics_tokens_and_messages_are_rmw_zenohs_and_equal_the_field(
     cfg = tmp_path / "two.toml"
     cfg.write_text(TWO_CHANNELS)
     f = start_field("r2", "--config", str(cfg))
-    applied_seq = _deposit_cells(f.name)
+    _deposit_cells(f.name)
     node = ros2_node(f.name, "--deposit-from", "/amcl_pose=3", "--domain-id", "7")
     npy = tmp_path / "frame.npy"
     run_cli("export", "--field", f.name, "--out", npy)
@@ -293,9 +293,11 @@ def test_amcl_poses_deposit_and_bad_ones_are_refused(start_field, ros2_node, sto
         pub = s.declare_publisher(key)
         gid = bytes(range(16))
 
-        def put(payload, k=None, seq=[0]):
-            seq[0] += 1
-            att = struct.pack("<qq", seq[0], time.time_ns()) + b"\x10" + gid
+        sent = [0]
+
+        def put(payload, k=None):
+            sent[0] += 1
+            att = struct.pack("<qq", sent[0], time.time_ns()) + b"\x10" + gid
             if k is None:
                 pub.put(payload, attachment=att)
             else:

@@ -95,7 +95,7 @@ def test_layout_version_is_the_rust_one():
 
 def test_reject_reasons_are_the_rust_ones():
     assert rust_consts()["REJECT_REASONS"] == _wire.REJECT_REASONS
-    names = re.findall(r'RejectReason::\w+ => "(\w+)"', (FIELD_SRC / "deposit.rs").read_text())
+    names = re.findall(r'RejectReason::\w+ => "(\w+)"', (FIELD_SRC / "reject.rs").read_text())
     assert tuple(names) == _wire.REJECT_REASON_NAMES
 
 
