@@ -65,8 +65,12 @@ def deposit_ready_service(field: str) -> str:
     return f"pheromone/{field}/deposit-ready"
 
 
-def check_name(name: str) -> None:
-    """Field names: 1–64 characters of `[A-Za-z0-9_-]` (`shm::check_name`)."""
+# The environment variable naming a process's iceoryx2 domain (`shm::IOX_DOMAIN_ENV`).
+IOX_DOMAIN_ENV = "PHEROMONE_IOX_DOMAIN"
+
+
+def check_name(name: str, what: str = "field name") -> None:
+    """Field and domain names: 1–64 characters of `[A-Za-z0-9_-]` (`shm::check_name`)."""
     ok = (
         isinstance(name, str)
         and 0 < len(name) <= 64
@@ -74,7 +78,7 @@ def check_name(name: str) -> None:
     )
     if not ok:
         raise ValueError(
-            f"invalid field name {name!r}: use 1–64 characters from A–Z, a–z, 0–9, '_' and '-'"
+            f"invalid {what} {name!r}: use 1–64 characters from A–Z, a–z, 0–9, '_' and '-'"
         )
 
 

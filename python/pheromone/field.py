@@ -221,6 +221,8 @@ class Field:
     robot_id: int
     #: How long `close()` waits for the field to take the deposits sent (seconds).
     flush_timeout_s: float
+    #: The iceoryx2 domain (`pheromone --iox-domain D`), or None for iceoryx2's own.
+    domain: Optional[str]
 
     def __init__(self) -> None:
         raise TypeError("use Field.attach(name)")
@@ -233,14 +235,21 @@ class Field:
         *,
         robot_id: int = 0,
         header_type: Any = _wire.FrameHeader,
+        domain: Optional[str] = None,
     ) -> "Field":
         """Attaches to the running field `name`, waiting up to `timeout_s` for it to exist and to
         publish a frame. Raises `FieldNotFound` (naming the field) if it does not, and
         `LayoutMismatch` (naming both type names) if it speaks another layout. `robot_id` is
         stamped on this client's deposits; `header_type` is for tools and tests that speak
-        another layout on purpose."""
+        another layout on purpose. `domain` is the iceoryx2 domain of `pheromone --iox-domain D`
+        (default: the environment variable `PHEROMONE_IOX_DOMAIN`, else iceoryx2's own)."""
         _wire.check_name(name)
+        if domain is None:
+            domain = os.environ.get(_wire.IOX_DOMAIN_ENV) or None
+        if domain is not None:
+            _wire.check_name(domain, what="iceoryx2 domain")
         self = object.__new__(cls)
+        self.domain = domain
         self._open(name, int(robot_id), header_type)
         try:
             self._attach(timeout_s)
@@ -272,9 +281,15 @@ class Field:
         self._deposit_service = _wire.deposit_service(name)
         iox2.set_log_level(iox2.LogLevel.Fatal)
         # Python keeps Ctrl-C (KeyboardInterrupt): iceoryx2 installs no signal handler.
+        # iceoryx2's configuration (a config/iceoryx2.toml if there is one), with the prefix
+        # `<D>_iox2_` of domain D as `shm::domain_config_of` sets it.
+        config = iox2.config.global_config()
+        if self.domain is not None:
+            config.global_cfg.prefix = iox2.FileName.new(f"{self.domain}_iox2_")
         self._node: Any = (
             iox2.NodeBuilder.new()
             .name(iox2.NodeName.new(f"pheromone-py-{os.getpid()}"))
+            .config(config)
             .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
             .create(iox2.ServiceType.Ipc)
         )

@@ -84,6 +84,24 @@ def test_attach_without_a_field_names_it(start_field):
     assert time.monotonic() - t0 < 3
 
 
+def test_a_field_in_an_iceoryx2_domain_is_found_with_that_domain_only(start_field, monkeypatch):
+    dom = f"py{os.getpid()}"
+    f = start_field("dom", *GRID, "--iox-domain", dom)
+    with attach(f, domain=dom) as field:
+        assert field.domain == dom
+        assert field.wait_frame(2.0)
+        assert field.frame().header.width == 40
+    monkeypatch.delenv("PHEROMONE_IOX_DOMAIN", raising=False)
+    with pytest.raises(pheromone.FieldNotFound, match=f"'{f.name}'"):
+        pheromone.Field.attach(f.name, timeout_s=0.5)
+    # The domain a `pheromone --iox-domain` parent hands its children.
+    monkeypatch.setenv("PHEROMONE_IOX_DOMAIN", dom)
+    with attach(f) as field:
+        assert field.domain == dom
+    with pytest.raises(ValueError, match="invalid iceoryx2 domain 'a/b'"):
+        attach(f, domain="a/b")
+
+
 def test_attach_waits_for_a_field_that_starts_later(start_field):
     import threading
 
