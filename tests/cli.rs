@@ -469,3 +469,49 @@ fn sim_single_process_prints_the_metrics_of_the_default_scenario() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--robots 99"), "{}", stderr(&o));
 }
+
+#[test]
+fn every_time_flag_refuses_nan_infinity_negative_and_absurd_values_with_exit_2_naming_it() {
+    // (the command line before the flag, the flag): each fails before it opens anything.
+    let cases: [(&[&str], &str); 10] = [
+        (
+            &["probe", "--field", "nf", "--x", "0", "--y", "0"],
+            "--timeout",
+        ),
+        (
+            &[
+                "deposit", "--field", "nf", "--x", "0", "--y", "0", "--amount", "1",
+            ],
+            "--timeout",
+        ),
+        (&["list"], "--window-s"),
+        (&["field", "--name", "nf"], "--duration"),
+        (&["field", "--name", "nf"], "--checkpoint-every"),
+        (&["field", "--name", "nf"], "--publish-on-deposit-ms"),
+        (&["sim", "--no-out"], "--timeout"),
+        (&["sim", "--no-out"], "--stall-timeout"),
+        (
+            &["export", "--field", "nf", "--out", "/nonexistent/x.npy"],
+            "--timeout-s",
+        ),
+        (&["gateway", "--field", "nf"], "--attach-timeout"),
+    ];
+    let mut failures = Vec::new();
+    for (head, flag) in cases {
+        for value in ["nan", "inf", "-1", "1e300", "", "junk"] {
+            let mut args: Vec<String> = head.iter().map(|s| s.to_string()).collect();
+            args.push(format!("{flag}={value}"));
+            let argv: Vec<&str> = args.iter().map(String::as_str).collect();
+            let o = run(&argv);
+            let err = stderr(&o);
+            if o.status.code() != Some(2) || !err.contains(flag) || err.contains("panicked") {
+                failures.push(format!(
+                    "pheromone {}: {:?}: {err}",
+                    argv.join(" "),
+                    o.status
+                ));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

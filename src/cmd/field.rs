@@ -9,7 +9,7 @@ use field::run::{run_field, FieldRunOptions};
 use field::shm::{create_node, frame_pool};
 use field::{Evaporation, FieldConfig};
 
-use super::{bad, bad_from, bad_in, read_toml};
+use super::{bad, bad_from, bad_in, read_toml, seconds, seconds_or_zero, MAX_SECONDS};
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
 pub enum ModelArg {
@@ -283,24 +283,17 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         print!("{}", toml::to_string_pretty(&config)?);
         return Ok(());
     }
-    let every = a.checkpoint_every.unwrap_or(10.0);
-    if !(every.is_finite() && every > 0.0) {
-        return Err(bad(format!(
-            "--checkpoint-every {every}: must be a positive number of seconds"
-        )));
-    }
-    let duration = match a.duration {
-        Some(d) if !(d.is_finite() && d >= 0.0) => {
-            return Err(bad(format!(
-                "--duration {d}: must be a non-negative number of seconds"
-            )))
-        }
-        d => d.map(Duration::from_secs_f64),
-    };
+    let every = seconds("checkpoint-every", a.checkpoint_every.unwrap_or(10.0))?;
+    let duration = a
+        .duration
+        .map(|d| seconds_or_zero("duration", d))
+        .transpose()?;
     let publish_on_deposit = match a.publish_on_deposit_ms {
-        Some(ms) if !(ms.is_finite() && ms >= 0.0) => {
+        Some(ms) if !(ms.is_finite() && (0.0..=MAX_SECONDS * 1e3).contains(&ms)) => {
             return Err(bad(format!(
-                "--publish-on-deposit-ms {ms}: must be a non-negative number of milliseconds"
+                "--publish-on-deposit-ms {}: must be a number of milliseconds from 0 to {:e}",
+                super::num(ms),
+                MAX_SECONDS * 1e3
             )))
         }
         ms => ms.map(|ms| Duration::from_secs_f64(ms / 1e3)),
@@ -333,7 +326,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         ticks: a.ticks,
         duration,
         checkpoint: a.checkpoint.clone(),
-        checkpoint_every: Duration::from_secs_f64(every),
+        checkpoint_every: every,
         restore,
         standby: a.standby,
         publish_on_deposit,

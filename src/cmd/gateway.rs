@@ -1,8 +1,6 @@
 //! `pheromone gateway`: seed 002's pheromone server for thin radio clients (DLE/CRC frames over
 //! UDP or a serial line), in front of a running field.
 
-use std::time::Duration;
-
 use clap::Args;
 use field::shm::create_node;
 use gateway::{serial, udp, Gateway, GatewayConfig};
@@ -117,13 +115,9 @@ pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
         Some(_) => None,
         None => Some(udp::bind(a.udp.as_deref().unwrap_or(DEFAULT_UDP))?),
     };
+    let attach_timeout = super::seconds_or_zero("attach-timeout", a.attach_timeout)?;
     let node = create_node(&format!("gateway-{}", std::process::id()))?;
-    let mut gateway = match Gateway::attach(
-        &node,
-        &a.field,
-        config,
-        Duration::from_secs_f64(a.attach_timeout),
-    ) {
+    let mut gateway = match Gateway::attach(&node, &a.field, config, attach_timeout) {
         Ok(g) => g,
         Err(e @ gateway::GatewayError::Config { .. }) => return Err(bad(e.to_string())),
         Err(e) => return Err(e.into()),

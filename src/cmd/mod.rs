@@ -100,13 +100,39 @@ pub fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<
     toml::from_str(&text).map_err(|e| bad_in(path.display().to_string(), e))
 }
 
+/// The longest time any flag may give, in seconds (about 31.7 years): longer is a mistake, and
+/// `Duration` from 1e300 s would overflow.
+pub const MAX_SECONDS: f64 = 1e9;
+
+/// A number as a user would write it: `1e300`, not its 301 digits.
+pub fn num(v: f64) -> String {
+    if v.is_finite() && v.abs() >= 1e6 {
+        format!("{v:e}")
+    } else {
+        v.to_string()
+    }
+}
+
 /// A positive number of seconds from a flag, or a `BadInput` naming the flag and the value.
 pub fn seconds(flag: &str, v: f64) -> anyhow::Result<std::time::Duration> {
-    if v.is_finite() && v > 0.0 {
+    if v > 0.0 {
+        seconds_or_zero(flag, v)
+    } else {
+        Err(bad(format!(
+            "--{flag} {}: must be a positive number of seconds (at most {MAX_SECONDS:e})",
+            num(v)
+        )))
+    }
+}
+
+/// A number of seconds ≥ 0 from a flag, or a `BadInput` naming the flag and the value.
+pub fn seconds_or_zero(flag: &str, v: f64) -> anyhow::Result<std::time::Duration> {
+    if v.is_finite() && (0.0..=MAX_SECONDS).contains(&v) {
         Ok(std::time::Duration::from_secs_f64(v))
     } else {
         Err(bad(format!(
-            "--{flag} {v}: must be a positive number of seconds"
+            "--{flag} {}: must be a number of seconds from 0 to {MAX_SECONDS:e}",
+            num(v)
         )))
     }
 }

@@ -9,7 +9,7 @@ use field::shm::{create_node, DepositPublisher, FieldReader, Frame, Svc};
 use field::{DepositMsg, KernelKind};
 use iceoryx2::prelude::Node;
 
-use super::bad;
+use super::{bad, seconds_or_zero};
 
 /// Read a running field: wait for a frame, print its header and the value at a point.
 ///
@@ -59,11 +59,11 @@ pub fn run_probe(a: ProbeArgs) -> anyhow::Result<()> {
             a.rate_hz
         )));
     }
+    let timeout = seconds_or_zero("timeout", a.timeout)?;
     let node = create_node(&format!("probe-{}", std::process::id()))?;
-    let timeout = Duration::from_secs_f64(a.timeout);
     let mut reader = FieldReader::attach_within(&node, &a.field, timeout)?;
     if a.follow {
-        return follow(&a, &node, reader);
+        return follow(&a, &node, reader, timeout);
     }
     let (x, y, ch) = (a.x, a.y, a.channel);
     let pred = |v: f32| match (a.above, a.below) {
@@ -148,11 +148,16 @@ fn probe_line(frame: &Frame<'_>, x: f32, y: f32, ch: usize) -> String {
 
 /// `probe --follow`: a line from the newest frame every 1/rate s, waiting on the node (which
 /// returns on Ctrl-C or SIGTERM: exit status 0), as iceoryx2's examples loop.
-fn follow(a: &ProbeArgs, node: &Node<Svc>, mut reader: FieldReader) -> anyhow::Result<()> {
+fn follow(
+    a: &ProbeArgs,
+    node: &Node<Svc>,
+    mut reader: FieldReader,
+    timeout: Duration,
+) -> anyhow::Result<()> {
     let period = Duration::from_secs_f64(1.0 / a.rate_hz);
     let (x, y, ch) = (a.x, a.y, a.channel);
     if reader.frame().is_none() {
-        reader.wait_frame(Duration::from_secs_f64(a.timeout))?;
+        reader.wait_frame(timeout)?;
     }
     loop {
         reader.update()?;
@@ -220,6 +225,7 @@ pub struct DepositArgs {
 }
 
 pub fn run_deposit(a: DepositArgs) -> anyhow::Result<()> {
+    let timeout = seconds_or_zero("timeout", a.timeout)?;
     let node = create_node(&format!("deposit-{}", std::process::id()))?;
     if a.cov.len() != 3 {
         return Err(bad(format!(
@@ -227,12 +233,7 @@ pub fn run_deposit(a: DepositArgs) -> anyhow::Result<()> {
             a.cov.len()
         )));
     }
-    let mut publisher = DepositPublisher::attach_within(
-        &node,
-        &a.field,
-        a.robot,
-        Duration::from_secs_f64(a.timeout),
-    )?;
+    let mut publisher = DepositPublisher::attach_within(&node, &a.field, a.robot, timeout)?;
     let params = KernelParams {
         cov: [a.cov[0], a.cov[1], a.cov[2]],
         range_m: a.range,
