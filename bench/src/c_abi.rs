@@ -227,15 +227,18 @@ pub fn read(source: &str, wait: ReaderWait, skip: usize, count: usize) -> Result
             )));
         }
         check(s, "pheromone_wait_frame")?;
-        // SAFETY: a live handle and a writable view.
         check(
+            // SAFETY: `h.0` is live (attached by `CHandle::attach`, detached only when `h` drops,
+            // after `record`) and only this thread calls on it; `view` is a local
+            // `PheromoneFrameView`, valid for the write `pheromone_frame_borrow` makes.
             unsafe { pheromone_frame_borrow(h.0, &mut view) },
             "pheromone_frame_borrow",
         )?;
         let now = now_ns();
         let (sequence, stamp_ns) = (view.sequence, view.stamp_ns);
-        // SAFETY: a live handle; the view is not used after this.
         check(
+            // SAFETY: `h.0` is live (as above), and only this thread calls on it; the view's
+            // plane pointers are not read after the release (its sequence and stamp were copied).
             unsafe { pheromone_frame_release(h.0) },
             "pheromone_frame_release",
         )?;
@@ -289,8 +292,10 @@ fn sampling_cost(
         check(s, "pheromone_wait_frame")?;
     }
     let mut view = empty_view();
-    // SAFETY: a live handle and a writable view.
     check(
+        // SAFETY: `h.0` is live (attached by `CHandle::attach`, detached only when `h` drops at
+        // the end of this function) and only this thread calls on it; `view` is a local
+        // `PheromoneFrameView`, valid for the write `pheromone_frame_borrow` makes.
         unsafe { pheromone_frame_borrow(h.0, &mut view) },
         "pheromone_frame_borrow",
     )?;
@@ -337,8 +342,9 @@ fn sampling_cost(
         black_box(acc);
         c_ns.push(t0.elapsed().as_nanos() as f64 / points as f64);
     }
-    // SAFETY: a live handle.
     check(
+        // SAFETY: `h.0` is still live (`h` drops after this) and only this thread calls on it;
+        // the sampling above, the only use of the borrowed frame, is over.
         unsafe { pheromone_frame_release(h.0) },
         "pheromone_frame_release",
     )?;

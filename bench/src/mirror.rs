@@ -362,60 +362,21 @@ fn measure_with(
     let keyframe_key = Keys::of(name).keyframe;
     let raw_frame_bytes = run.width as u64 * run.width as u64 * 4;
     let raw_bytes_per_s = raw_frame_bytes as f64 * run.tick_hz as f64;
-    let side_m = run.width as f32 * field::FieldConfig::default().cell_size_m;
+    let rig = Rig {
+        node,
+        bridge: &bridge,
+        mirror: &mirror,
+        asker: &asker,
+        keyframe_key: &keyframe_key,
+        run,
+        side_m: run.width as f32 * field::FieldConfig::default().cell_size_m,
+        raw_bytes_per_s,
+    };
     let mut rng = 0x9e37_79b9_7f4a_7c15u64;
     let mut wire = Vec::new();
     lock(&mirror.shared).lags_ns.clear();
     for rate in [10.0, 1000.0] {
-        let b0 = lock(&bridge.shared).bridge;
-        let started = Instant::now();
-        let interval = Duration::from_secs_f64(1.0 / rate);
-        let mut next = started;
-        while started.elapsed() < run.window {
-            // Scattered over the field (xorshift), as robots' trails are.
-            let mut coord = || {
-                rng ^= rng << 13;
-                rng ^= rng >> 7;
-                rng ^= rng << 17;
-                (rng >> 40) as f32 / (1u64 << 24) as f32 * side_m
-            };
-            let (x, y) = (coord(), coord());
-            depositor.send(DepositMsg::ellipse(
-                0,
-                x,
-                y,
-                0.001,
-                [0.01, 0.0, 0.01],
-                0.5,
-                100.0,
-            ))?;
-            next += interval;
-            let now = Instant::now();
-            if next > now {
-                node.wait(next - now).map_err(|_| BenchError::Interrupted)?;
-            }
-            bridge.check()?;
-            mirror.check()?;
-        }
-        let b1 = lock(&bridge.shared).bridge;
-        let secs = started.elapsed().as_secs_f64();
-        let keyframe_bytes = keyframe_now(&asker, &keyframe_key)?;
-        let per_s = |a: u64, b: u64| b.saturating_sub(a) as f64 / secs;
-        let inputs_bytes_per_s = per_s(b0.inputs_bytes, b1.inputs_bytes);
-        let other_bytes_per_s = per_s(b0.other_bytes, b1.other_bytes);
-        let keyframe_bytes_per_s = keyframe_bytes as f64 / run.keyframe_every.as_secs_f64();
-        let wire_bytes_per_s = inputs_bytes_per_s + other_bytes_per_s + keyframe_bytes_per_s;
-        wire.push(WireAtRate {
-            deposits_per_s: rate,
-            applied_per_s: per_s(b0.deposits_in_inputs, b1.deposits_in_inputs),
-            frames_per_s: per_s(b0.inputs_sent, b1.inputs_sent),
-            inputs_bytes_per_s,
-            other_bytes_per_s,
-            keyframe_bytes,
-            keyframe_bytes_per_s,
-            wire_bytes_per_s,
-            ratio_to_raw: wire_bytes_per_s / raw_bytes_per_s,
-        });
+        wire.push(rig.wire_at_rate(&mut depositor, rate, &mut rng)?);
     }
     let lags_ns = std::mem::take(&mut lock(&mirror.shared).lags_ns);
     let lag_us = Latency::from_ns_as_us(&lags_ns)
@@ -423,25 +384,8 @@ fn measure_with(
     let first = lock(&mirror.shared).mirror;
     mirror.finish()?;
     // A mirror started afresh catches up on the field as the deposits left it.
-    let again = mirror_worker(name.to_string(), listen, format!("{tag}-2"));
-    wait_for(
-        node,
-        &again,
-        start_timeout,
-        "the restarted mirror went live",
-        |s| s.live_at.is_some(),
-    )?;
-    let (catch_up, start_to_live_ms, catch_up_bytes) = {
-        let s = lock(&again.shared);
-        let opened = s.opened_at.expect("set before the mirror steps");
-        let live = s.live_at.expect("waited for");
-        (
-            s.mirror.last_catch_up_ms,
-            live.duration_since(opened).as_secs_f64() * 1e3,
-            s.mirror.last_keyframe_bytes,
-        )
-    };
-    again.finish()?;
+    let (catch_up, start_to_live_ms, catch_up_bytes) =
+        fresh_mirror_catch_up(node, name, listen, tag, start_timeout)?;
     let _ = asker.close().wait();
     drop(depositor);
     bridge.finish()?;
@@ -449,10 +393,6 @@ fn measure_with(
     let keyframe_bytes = match catch_up_bytes {
         0 => wire.last().map_or(0, |w| w.keyframe_bytes),
         n => n,
-    };
-    let round = |v: f64, digits: i32| {
-        let f = 10f64.powi(digits);
-        (v * f).round() / f
     };
     Ok(MirrorReport {
         width: run.width,
@@ -471,4 +411,131 @@ fn measure_with(
         checksum_mismatches: first.checksum_mismatches,
         method: "origin field process (domain A) -> Bridge thread -> Zenoh over loopback TCP -> Mirror thread (domain B); bytes from the bridge's counters, keyframe amortized over its interval",
     })
+}
+
+/// `v` rounded to `digits` decimal digits.
+fn round(v: f64, digits: i32) -> f64 {
+    let f = 10f64.powi(digits);
+    (v * f).round() / f
+}
+
+/// What the deposit windows drive and watch, and the run's figures.
+struct Rig<'a> {
+    node: &'a iceoryx2::node::Node<field::shm::Svc>,
+    bridge: &'a Worker,
+    mirror: &'a Worker,
+    asker: &'a zenoh::Session,
+    keyframe_key: &'a str,
+    run: MirrorRun,
+    /// The field's side (m).
+    side_m: f32,
+    /// Raw frames per second, bytes.
+    raw_bytes_per_s: f64,
+}
+
+impl Rig<'_> {
+    /// Sends deposits at `rate` per second for the run's window and measures the wire bytes.
+    fn wire_at_rate(
+        &self,
+        depositor: &mut DepositPublisher,
+        rate: f64,
+        rng: &mut u64,
+    ) -> Result<WireAtRate, BenchError> {
+        let b0 = lock(&self.bridge.shared).bridge;
+        let started = Instant::now();
+        self.send_deposits(depositor, started, rate, rng)?;
+        let b1 = lock(&self.bridge.shared).bridge;
+        let secs = started.elapsed().as_secs_f64();
+        let keyframe_bytes = keyframe_now(self.asker, self.keyframe_key)?;
+        let per_s = |a: u64, b: u64| b.saturating_sub(a) as f64 / secs;
+        let inputs_bytes_per_s = per_s(b0.inputs_bytes, b1.inputs_bytes);
+        let other_bytes_per_s = per_s(b0.other_bytes, b1.other_bytes);
+        let keyframe_bytes_per_s = keyframe_bytes as f64 / self.run.keyframe_every.as_secs_f64();
+        let wire_bytes_per_s = inputs_bytes_per_s + other_bytes_per_s + keyframe_bytes_per_s;
+        Ok(WireAtRate {
+            deposits_per_s: rate,
+            applied_per_s: per_s(b0.deposits_in_inputs, b1.deposits_in_inputs),
+            frames_per_s: per_s(b0.inputs_sent, b1.inputs_sent),
+            inputs_bytes_per_s,
+            other_bytes_per_s,
+            keyframe_bytes,
+            keyframe_bytes_per_s,
+            wire_bytes_per_s,
+            ratio_to_raw: wire_bytes_per_s / self.raw_bytes_per_s,
+        })
+    }
+
+    /// Sends scattered deposits at `rate` per second for the window, checking both threads.
+    fn send_deposits(
+        &self,
+        depositor: &mut DepositPublisher,
+        started: Instant,
+        rate: f64,
+        rng: &mut u64,
+    ) -> Result<(), BenchError> {
+        let interval = Duration::from_secs_f64(1.0 / rate);
+        let mut next = started;
+        while started.elapsed() < self.run.window {
+            // Scattered over the field (xorshift), as robots' trails are.
+            let mut coord = || scattered(rng, self.side_m);
+            let (x, y) = (coord(), coord());
+            depositor.send(DepositMsg::ellipse(
+                0,
+                x,
+                y,
+                0.001,
+                [0.01, 0.0, 0.01],
+                0.5,
+                100.0,
+            ))?;
+            next += interval;
+            let now = Instant::now();
+            if next > now {
+                self.node
+                    .wait(next - now)
+                    .map_err(|_| BenchError::Interrupted)?;
+            }
+            self.bridge.check()?;
+            self.mirror.check()?;
+        }
+        Ok(())
+    }
+}
+
+/// The next coordinate in `0..side_m` from the xorshift state `rng`.
+fn scattered(rng: &mut u64, side_m: f32) -> f32 {
+    *rng ^= *rng << 13;
+    *rng ^= *rng >> 7;
+    *rng ^= *rng << 17;
+    (*rng >> 40) as f32 / (1u64 << 24) as f32 * side_m
+}
+
+/// A fresh mirror's catch-up (ms), session open → live (ms) and keyframe bytes.
+fn fresh_mirror_catch_up(
+    node: &iceoryx2::node::Node<field::shm::Svc>,
+    name: &str,
+    listen: String,
+    tag: &str,
+    start_timeout: Duration,
+) -> Result<(f64, f64, u64), BenchError> {
+    let again = mirror_worker(name.to_string(), listen, format!("{tag}-2"));
+    wait_for(
+        node,
+        &again,
+        start_timeout,
+        "the restarted mirror went live",
+        |s| s.live_at.is_some(),
+    )?;
+    let caught_up = {
+        let s = lock(&again.shared);
+        let opened = s.opened_at.expect("set before the mirror steps");
+        let live = s.live_at.expect("waited for");
+        (
+            s.mirror.last_catch_up_ms,
+            live.duration_since(opened).as_secs_f64() * 1e3,
+            s.mirror.last_keyframe_bytes,
+        )
+    };
+    again.finish()?;
+    Ok(caught_up)
 }

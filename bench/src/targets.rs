@@ -237,22 +237,6 @@ fn mirror_targets(r: &Report, t: &mut Vec<Target>) {
 #[cfg(not(feature = "zenoh"))]
 fn mirror_targets(_r: &Report, _t: &mut [Target]) {}
 
-#[cfg(test)]
-mod tests {
-    use super::target;
-
-    #[test]
-    fn a_target_keeps_the_significant_digits_of_a_small_ratio() {
-        let t = target("small", "<=", 1.5, 0.002517);
-        assert_eq!(t.measured, 0.00252);
-        assert!(t.met);
-        let t = target("large", ">=", 1000.0, 2704.9712);
-        assert_eq!(t.measured, 2704.97);
-        assert!(t.met);
-        assert_eq!(target("zero", "<=", 1.0, 0.0).measured, 0.0);
-    }
-}
-
 /// libpheromone's C reader is as fast as the Rust reader it wraps.
 fn c_abi_targets(r: &Report, t: &mut Vec<Target>) {
     if let Some(c) = &r.c_abi {
@@ -268,5 +252,21 @@ fn c_abi_targets(r: &Report, t: &mut Vec<Target>) {
             1.1,
             c.sample_ratio,
         ));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::target;
+
+    #[test]
+    fn a_target_keeps_the_significant_digits_of_a_small_ratio() {
+        let t = target("small", "<=", 1.5, 0.002517);
+        assert_eq!(t.measured, 0.00252);
+        assert!(t.met);
+        let t = target("large", ">=", 1000.0, 2704.9712);
+        assert_eq!(t.measured, 2704.97);
+        assert!(t.met);
+        assert_eq!(target("zero", "<=", 1.0, 0.0).measured, 0.0);
     }
 }

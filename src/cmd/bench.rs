@@ -162,6 +162,21 @@ fn print_tables(r: &Report) {
     if !r.tick_vs_memcpy.is_empty() {
         print_ticks(r);
     }
+    print_hop(r);
+    print_frames(r);
+    print_visible(r);
+    print_gateway(r);
+    if let Some(m) = &r.mirror {
+        print_mirror(m);
+    }
+    if let Some(c) = &r.c_abi {
+        print_c_abi(c);
+    }
+    print_targets(r);
+}
+
+/// The hop latency table, if the run measured it.
+fn print_hop(r: &Report) {
     if let Some(h) = &r.hop_ns {
         println!("\nhop (one way)                    p50       p99     p99.9       max");
         println!("ours, wait             {}", lat(&h.ours, 1e-3, "µs"));
@@ -178,6 +193,10 @@ fn print_tables(r: &Report) {
             lat(&h.busy_poll.raw_iceoryx2, 1e-3, "µs")
         );
     }
+}
+
+/// The frame delivery table: every reader's latency and CPU share, per frame size.
+fn print_frames(r: &Report) {
     if !r.frame_ns.is_empty() {
         println!("\nframe delivery                       p50       p99     p99.9       max");
     }
@@ -213,6 +232,10 @@ fn print_tables(r: &Report) {
             share(c.raw_iceoryx2_busy_poll)
         );
     }
+}
+
+/// Deposit to visible (ticking and publishing on deposit) and the field's CPU, if measured.
+fn print_visible(r: &Report) {
     if let (Some(v), Some(o)) = (
         &r.deposit_to_visible_us,
         &r.deposit_to_visible_on_deposit_us,
@@ -236,6 +259,10 @@ fn print_tables(r: &Report) {
             );
         }
     }
+}
+
+/// Seed 002's PIR through a gateway: round trip, the shared-memory read and the flood.
+fn print_gateway(r: &Report) {
     if let Some(g) = &r.gateway_pir {
         println!("\ngateway (seed 002 PIR)           p50       p99     p99.9       max");
         println!(
@@ -251,12 +278,10 @@ fn print_tables(r: &Report) {
             g.flood.pirs_per_s, g.flood.wall_s, g.flood.gateway_cpu_s, g.flood.pirs_per_cpu_s, g.flood.window
         );
     }
-    if let Some(m) = &r.mirror {
-        print_mirror(m);
-    }
-    if let Some(c) = &r.c_abi {
-        print_c_abi(c);
-    }
+}
+
+/// Each target, met or missed, with what was measured.
+fn print_targets(r: &Report) {
     println!("\ntargets");
     for t in &r.targets {
         println!(

@@ -2,11 +2,11 @@
 //! channel) or as a ROS map_server map (one channel, PGM + YAML). The writers are
 //! `report::export`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use clap::Args;
-use field::shm::{create_node, FieldReader};
+use field::shm::{create_node, FieldReader, Frame};
 use report::export::npy::write_npy;
 use report::export::ros_map::{write_ros_map, PlaneRef};
 
@@ -53,38 +53,11 @@ enum Format {
 }
 
 pub fn run(a: ExportArgs) -> anyhow::Result<()> {
-    let format = match a.out.extension().and_then(|e| e.to_str()) {
-        Some("npy") => Format::Npy,
-        Some("yaml" | "yml") => Format::RosMap,
-        _ => {
-            return Err(bad(format!(
-                "--out {}: the file must end in .npy (NumPy) or .yaml (ROS map_server map)",
-                a.out.display()
-            )))
-        }
-    };
+    let format = format_of(&a.out)?;
     let timeout = seconds("timeout-s", a.timeout_s)?;
     let node = create_node(&format!("export-{}", std::process::id()))?;
     let mut reader = FieldReader::attach_within(&node, &a.field, timeout)?;
-    let held = reader.frame().map(|f| f.header.sequence);
-    let deadline = Instant::now() + timeout;
-    let mut fresh = false;
-    while !fresh {
-        let left = deadline.saturating_duration_since(Instant::now());
-        if left.is_zero() {
-            break;
-        }
-        reader.wait_frame(left.min(Duration::from_millis(200)))?;
-        fresh = reader
-            .frame()
-            .is_some_and(|f| Some(f.header.sequence) != held);
-        if node.wait(Duration::ZERO).is_err() {
-            anyhow::bail!(
-                "interrupted while waiting for a frame of field '{}'",
-                a.field
-            );
-        }
-    }
+    let fresh = wait_fresh(&node, &mut reader, &a.field, timeout)?;
     let Some(frame) = reader.frame() else {
         anyhow::bail!(
             "field '{}' published no frame within {} s",
@@ -115,54 +88,108 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
                 a.out.display()
             );
         }
-        Format::RosMap => {
-            if a.channel >= c {
-                return Err(bad(format!(
-                    "--channel {}: field '{}' has {c} channel(s)",
-                    a.channel, a.field
-                )));
-            }
-            let plane = PlaneRef {
-                cells: frame.view.plane(a.channel),
-                width,
-                height,
-                cell_size_m: h.cell_size_m,
-                origin_m: [h.origin_x_m, h.origin_y_m],
-            };
-            let (lo, hi) = report::export::ros_map::default_scale(plane.cells);
-            let scale = match (a.min, a.max) {
-                (None, None) => None,
-                (min, max) => Some((min.unwrap_or(lo), max.unwrap_or(hi))),
-            };
-            if let Some((min, max)) = scale {
-                if !(min.is_finite() && max.is_finite() && min < max) {
-                    return Err(bad(format!(
-                        "--min {min} --max {max}: the scale needs finite numbers with min < max"
-                    )));
-                }
-            }
-            let comment = format!(
-                "pheromone export: field '{}', channel {}, frame {} at t = {} s",
-                a.field, a.channel, h.sequence, h.sim_time_s
-            );
-            let w = write_ros_map(&a.out, plane, scale, &comment)?;
-            eprintln!(
-                "channel {} of frame {} of field '{}' written to {} and {} (scale {} … {})",
-                a.channel,
-                h.sequence,
-                a.field,
-                w.yaml.display(),
-                w.pgm.display(),
-                w.scale_min,
-                w.scale_max
-            );
-            report["channel"] = a.channel.into();
-            report["pgm"] = serde_json::json!(w.pgm);
-            report["scale"] = serde_json::json!([w.scale_min, w.scale_max]);
-        }
+        Format::RosMap => export_ros_map(&a, &frame, &mut report)?,
     }
     if a.json {
         println!("{report}");
     }
     Ok(())
+}
+
+/// The format `--out`'s extension asks for.
+fn format_of(out: &Path) -> anyhow::Result<Format> {
+    match out.extension().and_then(|e| e.to_str()) {
+        Some("npy") => Ok(Format::Npy),
+        Some("yaml" | "yml") => Ok(Format::RosMap),
+        _ => Err(bad(format!(
+            "--out {}: the file must end in .npy (NumPy) or .yaml (ROS map_server map)",
+            out.display()
+        ))),
+    }
+}
+
+/// Waits up to `timeout` for a frame newer than the one `reader` holds; whether one came.
+fn wait_fresh(
+    node: &iceoryx2::node::Node<field::shm::Svc>,
+    reader: &mut FieldReader,
+    field: &str,
+    timeout: Duration,
+) -> anyhow::Result<bool> {
+    let held = reader.frame().map(|f| f.header.sequence);
+    let deadline = Instant::now() + timeout;
+    let mut fresh = false;
+    while !fresh {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            break;
+        }
+        reader.wait_frame(left.min(Duration::from_millis(200)))?;
+        fresh = reader
+            .frame()
+            .is_some_and(|f| Some(f.header.sequence) != held);
+        if node.wait(Duration::ZERO).is_err() {
+            anyhow::bail!("interrupted while waiting for a frame of field '{field}'");
+        }
+    }
+    Ok(fresh)
+}
+
+/// Writes `--channel` of `frame` as a ROS map_server map and adds what was written to `report`.
+fn export_ros_map(
+    a: &ExportArgs,
+    frame: &Frame<'_>,
+    report: &mut serde_json::Value,
+) -> anyhow::Result<()> {
+    let h = *frame.header;
+    let (c, height, width) = (h.channels as usize, h.height as usize, h.width as usize);
+    if a.channel >= c {
+        return Err(bad(format!(
+            "--channel {}: field '{}' has {c} channel(s)",
+            a.channel, a.field
+        )));
+    }
+    let plane = PlaneRef {
+        cells: frame.view.plane(a.channel),
+        width,
+        height,
+        cell_size_m: h.cell_size_m,
+        origin_m: [h.origin_x_m, h.origin_y_m],
+    };
+    let scale = map_scale(a, plane.cells)?;
+    let comment = format!(
+        "pheromone export: field '{}', channel {}, frame {} at t = {} s",
+        a.field, a.channel, h.sequence, h.sim_time_s
+    );
+    let w = write_ros_map(&a.out, plane, scale, &comment)?;
+    eprintln!(
+        "channel {} of frame {} of field '{}' written to {} and {} (scale {} … {})",
+        a.channel,
+        h.sequence,
+        a.field,
+        w.yaml.display(),
+        w.pgm.display(),
+        w.scale_min,
+        w.scale_max
+    );
+    report["channel"] = a.channel.into();
+    report["pgm"] = serde_json::json!(w.pgm);
+    report["scale"] = serde_json::json!([w.scale_min, w.scale_max]);
+    Ok(())
+}
+
+/// The map's scale from `--min` / `--max` (defaults from the channel), checked.
+fn map_scale(a: &ExportArgs, cells: &[f32]) -> anyhow::Result<Option<(f32, f32)>> {
+    let (lo, hi) = report::export::ros_map::default_scale(cells);
+    let scale = match (a.min, a.max) {
+        (None, None) => None,
+        (min, max) => Some((min.unwrap_or(lo), max.unwrap_or(hi))),
+    };
+    if let Some((min, max)) = scale {
+        if !(min.is_finite() && max.is_finite() && min < max) {
+            return Err(bad(format!(
+                "--min {min} --max {max}: the scale needs finite numbers with min < max"
+            )));
+        }
+    }
+    Ok(scale)
 }

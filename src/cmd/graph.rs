@@ -185,61 +185,16 @@ pub fn run_robot(a: GraphRobotArgs) -> anyhow::Result<()> {
 /// `pheromone sim` on a `regions` scenario: every robot count of the scenario (or --robots)
 /// with both strategies (or --strategy), then the comparison of the time to the goal.
 pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
-    for (set, flag) in [
-        (a.duration.is_some(), "--duration"),
-        (a.realtime, "--realtime"),
-        (a.constant, "--constant"),
-        (a.trials.is_some(), "--trials"),
-        (a.slam, "--slam"),
-        (a.map.is_some(), "--map"),
-    ] {
-        if set {
-            return Err(bad(format!(
-                "{flag} does not apply to the regions scenario '{}' (it has no grid robots)",
-                a.scenario
-            )));
-        }
-    }
+    refuse_grid_flags(a)?;
     let scenario = load_regions(&a.scenario)?;
     let seed = a.seed.unwrap_or(scenario.seed);
-    let counts = match a.robots {
-        Some(n) => vec![n],
-        None => scenario.robots.clone(),
-    };
-    if let Some(&n) = counts
-        .iter()
-        .find(|&&n| n == 0 || n > graph::shm::MAX_GRAPH_ROBOTS)
-    {
-        return Err(bad(format!(
-            "robots {n}: a regions run takes 1 to {}",
-            graph::shm::MAX_GRAPH_ROBOTS
-        )));
-    }
+    let counts = robot_counts(a, &scenario)?;
     let strategies = match &a.strategy {
         Some(s) => vec![parse_strategy(s)?],
         None => scenario.strategies.clone(),
     };
     let started = Instant::now();
-    let mut runs: Vec<RunReport> = Vec::new();
-    let mut text = String::new();
-    for &n in &counts {
-        for &strategy in &strategies {
-            let run_started = Instant::now();
-            let report = if a.single_process {
-                simulate(&scenario, strategy, n, seed)?
-            } else {
-                run_as_processes(a, strategy, n, seed)?
-            };
-            let t = tables_text(&report);
-            eprintln!(
-                "{t}  ({:.2} s wall time)\n",
-                run_started.elapsed().as_secs_f64()
-            );
-            text += &t;
-            text += "\n";
-            runs.push(report);
-        }
-    }
+    let (runs, mut text) = run_each(a, &scenario, &counts, &strategies, seed)?;
     let comparison = compare(&runs);
     // A run for a fixed time (Sec. 6.2) has no goal to reach: nothing to compare.
     let cmp_text = if scenario.regions_sim.until == Until::Time {
@@ -258,36 +213,116 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
         "runs": runs,
     });
     if !a.no_out {
-        let dir = a
-            .out
-            .clone()
-            .unwrap_or_else(|| Path::new("pheromone-out").join(&scenario.name));
-        std::fs::create_dir_all(&dir)
-            .with_context(|| format!("cannot create {}", dir.display()))?;
-        std::fs::write(
-            dir.join("metrics.json"),
-            serde_json::to_string_pretty(&metrics)?,
-        )?;
-        std::fs::write(dir.join("tables.txt"), &text)?;
-        let state = scenario.validate()?;
-        let dock = scenario.dock_node(&state.graph)?;
-        for r in &runs {
-            let png = dir.join(format!(
-                "graph_{}_{}robots.png",
-                r.strategy.name(),
-                r.robots
-            ));
-            report::write_graph_png(&png, &state, r, dock)?;
-        }
-        eprintln!(
-            "wrote metrics.json, tables.txt and {} picture(s) of the graph to {}",
-            runs.len(),
-            dir.display()
-        );
+        write_sim_out(a, &scenario, &metrics, &text, &runs)?;
     }
     if a.json {
         println!("{metrics}");
     }
+    Ok(())
+}
+
+/// Refuses the `sim` flags that only grid scenarios take.
+fn refuse_grid_flags(a: &SimArgs) -> anyhow::Result<()> {
+    for (set, flag) in [
+        (a.duration.is_some(), "--duration"),
+        (a.realtime, "--realtime"),
+        (a.constant, "--constant"),
+        (a.trials.is_some(), "--trials"),
+        (a.slam, "--slam"),
+        (a.map.is_some(), "--map"),
+    ] {
+        if set {
+            return Err(bad(format!(
+                "{flag} does not apply to the regions scenario '{}' (it has no grid robots)",
+                a.scenario
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The robot counts to run (--robots, else the scenario's), each checked.
+fn robot_counts(a: &SimArgs, scenario: &RegionsScenario) -> anyhow::Result<Vec<usize>> {
+    let counts = match a.robots {
+        Some(n) => vec![n],
+        None => scenario.robots.clone(),
+    };
+    if let Some(&n) = counts
+        .iter()
+        .find(|&&n| n == 0 || n > graph::shm::MAX_GRAPH_ROBOTS)
+    {
+        return Err(bad(format!(
+            "robots {n}: a regions run takes 1 to {}",
+            graph::shm::MAX_GRAPH_ROBOTS
+        )));
+    }
+    Ok(counts)
+}
+
+/// Runs every robot count with every strategy: the reports and their tables' text.
+fn run_each(
+    a: &SimArgs,
+    scenario: &RegionsScenario,
+    counts: &[usize],
+    strategies: &[GraphStrategy],
+    seed: u64,
+) -> anyhow::Result<(Vec<RunReport>, String)> {
+    let mut runs: Vec<RunReport> = Vec::new();
+    let mut text = String::new();
+    for &n in counts {
+        for &strategy in strategies {
+            let run_started = Instant::now();
+            let report = if a.single_process {
+                simulate(scenario, strategy, n, seed)?
+            } else {
+                run_as_processes(a, strategy, n, seed)?
+            };
+            let t = tables_text(&report);
+            eprintln!(
+                "{t}  ({:.2} s wall time)\n",
+                run_started.elapsed().as_secs_f64()
+            );
+            text += &t;
+            text += "\n";
+            runs.push(report);
+        }
+    }
+    Ok((runs, text))
+}
+
+/// Writes `metrics.json`, `tables.txt` and a picture of the graph per run into the out dir.
+fn write_sim_out(
+    a: &SimArgs,
+    scenario: &RegionsScenario,
+    metrics: &serde_json::Value,
+    text: &str,
+    runs: &[RunReport],
+) -> anyhow::Result<()> {
+    let dir = a
+        .out
+        .clone()
+        .unwrap_or_else(|| Path::new("pheromone-out").join(&scenario.name));
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    std::fs::write(
+        dir.join("metrics.json"),
+        serde_json::to_string_pretty(metrics)?,
+    )?;
+    std::fs::write(dir.join("tables.txt"), text)?;
+    let state = scenario.validate()?;
+    let dock = scenario.dock_node(&state.graph)?;
+    for r in runs {
+        let png = dir.join(format!(
+            "graph_{}_{}robots.png",
+            r.strategy.name(),
+            r.robots
+        ));
+        report::write_graph_png(&png, &state, r, dock)?;
+    }
+    eprintln!(
+        "wrote metrics.json, tables.txt and {} picture(s) of the graph to {}",
+        runs.len(),
+        dir.display()
+    );
     Ok(())
 }
 

@@ -212,38 +212,76 @@ pub fn graph_from_mask(mask: &FreeMask, opts: SkeletonOptions) -> Result<Graph, 
         &mut img,
         (opts.min_branch_m / mask.cell_size_m).ceil() as usize,
     );
-    // Node pixels, clustered by 8-connectivity.
-    let is_node: Vec<bool> = (0..img.px.len())
-        .map(|i| img.px[i] && (is_junction(&img, i) || count(&img.ring(i)) <= 1))
-        .collect();
-    let mut cluster = vec![usize::MAX; img.px.len()];
-    let mut members: Vec<Vec<usize>> = Vec::new();
-    for i in 0..img.px.len() {
-        if !is_node[i] || cluster[i] != usize::MAX {
-            continue;
-        }
-        let c = members.len();
-        let mut stack = vec![i];
-        let mut m = Vec::new();
-        cluster[i] = c;
-        while let Some(p) = stack.pop() {
-            m.push(p);
-            for n in img.neighbours(p).collect::<Vec<_>>() {
-                if is_node[n] && cluster[n] == usize::MAX {
-                    cluster[n] = c;
-                    stack.push(n);
+    let nodes = NodeClusters::of(&img);
+    let mut g = Graph::new();
+    add_cluster_nodes(&mut g, mask, &img, &nodes.members)?;
+    trace_passages(&mut g, mask, &img, &nodes)?;
+    g.mark_terminals();
+    Ok(g)
+}
+
+/// The node pixels of a skeleton (junctions and dead ends), clustered by 8-connectivity.
+struct NodeClusters {
+    /// Whether each pixel is a node pixel.
+    is_node: Vec<bool>,
+    /// The cluster of each node pixel (`usize::MAX` for the others).
+    cluster: Vec<usize>,
+    /// The pixels of each cluster, in the order they were reached.
+    members: Vec<Vec<usize>>,
+}
+
+impl NodeClusters {
+    /// Finds the node pixels of `img` and clusters them, in row-major order of their first pixel.
+    fn of(img: &Img) -> NodeClusters {
+        // Node pixels, clustered by 8-connectivity.
+        let is_node: Vec<bool> = (0..img.px.len())
+            .map(|i| img.px[i] && (is_junction(img, i) || count(&img.ring(i)) <= 1))
+            .collect();
+        let mut cluster = vec![usize::MAX; img.px.len()];
+        let mut members: Vec<Vec<usize>> = Vec::new();
+        for i in 0..img.px.len() {
+            if !is_node[i] || cluster[i] != usize::MAX {
+                continue;
+            }
+            let c = members.len();
+            let mut stack = vec![i];
+            let mut m = Vec::new();
+            cluster[i] = c;
+            while let Some(p) = stack.pop() {
+                m.push(p);
+                for n in img.neighbours(p).collect::<Vec<_>>() {
+                    if is_node[n] && cluster[n] == usize::MAX {
+                        cluster[n] = c;
+                        stack.push(n);
+                    }
                 }
             }
+            members.push(m);
         }
-        members.push(m);
+        NodeClusters {
+            is_node,
+            cluster,
+            members,
+        }
     }
-    let world = |i: usize| {
-        (
-            mask.origin_m[0] + ((i % img.w) as f32 + 0.5) * mask.cell_size_m,
-            mask.origin_m[1] + ((i / img.w) as f32 + 0.5) * mask.cell_size_m,
-        )
-    };
-    let mut g = Graph::new();
+}
+
+/// The world position (m) of the centre of pixel `i`.
+fn world(mask: &FreeMask, img: &Img, i: usize) -> (f32, f32) {
+    (
+        mask.origin_m[0] + ((i % img.w) as f32 + 0.5) * mask.cell_size_m,
+        mask.origin_m[1] + ((i / img.w) as f32 + 0.5) * mask.cell_size_m,
+    )
+}
+
+/// Adds one node `n<c>` per cluster, at the member pixel nearest the cluster's centroid.
+fn add_cluster_nodes(
+    g: &mut Graph,
+    mask: &FreeMask,
+    img: &Img,
+    members: &[Vec<usize>],
+) -> Result<(), SkeletonError> {
+    let world = |i: usize| world(mask, img, i);
     for (c, m) in members.iter().enumerate() {
         // The member pixel nearest the cluster's centroid.
         let (sx, sy) = m.iter().fold((0.0, 0.0), |(sx, sy), &p| {
@@ -264,61 +302,96 @@ pub fn graph_from_mask(mask: &FreeMask, opts: SkeletonOptions) -> Result<Graph, 
         let (x, y) = world(best);
         g.add_node(&format!("n{c}"), x, y)?;
     }
-    // Trace passages.
+    Ok(())
+}
+
+/// Traces the passages leaving each cluster and links the clusters they join.
+fn trace_passages(
+    g: &mut Graph,
+    mask: &FreeMask,
+    img: &Img,
+    nodes: &NodeClusters,
+) -> Result<(), SkeletonError> {
     let mut used = vec![false; img.px.len()];
-    for (x, m) in members.iter().enumerate() {
+    for (x, m) in nodes.members.iter().enumerate() {
         for &start in m {
             for first in img.neighbours(start).collect::<Vec<_>>() {
-                if is_node[first] || used[first] {
+                if nodes.is_node[first] || used[first] {
                     continue;
                 }
-                let mut path = vec![first];
-                used[first] = true;
-                let mut prev = start;
-                let mut cur = first;
-                let end = loop {
-                    let ns: Vec<usize> = img.neighbours(cur).filter(|&n| n != prev).collect();
-                    if let Some(&n) = ns
-                        .iter()
-                        .find(|&&n| is_node[n] && (cluster[n] != x || path.len() > 2))
-                    {
-                        break Some(cluster[n]);
-                    }
-                    match ns.iter().find(|&&n| !is_node[n] && !used[n]) {
-                        Some(&n) => {
-                            used[n] = true;
-                            path.push(n);
-                            prev = cur;
-                            cur = n;
-                        }
-                        None => break None,
-                    }
-                };
+                let (end, path) = trace(img, nodes, &mut used, x, start, first);
                 let Some(y) = end else { continue };
-                // Split loops and parallel passages with extra nodes so links stay unique.
-                let pieces = if x == y {
-                    3
-                } else if g.edge_dirs(x, y).is_some() {
-                    2
-                } else {
-                    1
-                };
-                let mut chain = vec![x];
-                for k in 1..pieces {
-                    let p = path[path.len() * k / pieces];
-                    let (wx, wy) = world(p);
-                    let name = format!("n{}", g.len());
-                    chain.push(g.add_node(&name, wx, wy)?);
-                }
-                chain.push(y);
-                for pair in chain.windows(2) {
-                    g.add_edge(pair[0], pair[1], None, None)?;
-                }
+                link_passage(g, mask, img, x, y, &path)?;
             }
         }
     }
-    g.mark_terminals();
-    Ok(g)
+    Ok(())
+}
+
+/// Follows a passage from cluster `x` through `first`: the cluster it ends in, and its pixels.
+fn trace(
+    img: &Img,
+    nodes: &NodeClusters,
+    used: &mut [bool],
+    x: usize,
+    start: usize,
+    first: usize,
+) -> (Option<usize>, Vec<usize>) {
+    let (is_node, cluster) = (&nodes.is_node, &nodes.cluster);
+    let mut path = vec![first];
+    used[first] = true;
+    let mut prev = start;
+    let mut cur = first;
+    let end = loop {
+        let ns: Vec<usize> = img.neighbours(cur).filter(|&n| n != prev).collect();
+        if let Some(&n) = ns
+            .iter()
+            .find(|&&n| is_node[n] && (cluster[n] != x || path.len() > 2))
+        {
+            break Some(cluster[n]);
+        }
+        match ns.iter().find(|&&n| !is_node[n] && !used[n]) {
+            Some(&n) => {
+                used[n] = true;
+                path.push(n);
+                prev = cur;
+                cur = n;
+            }
+            None => break None,
+        }
+    };
+    (end, path)
+}
+
+/// Links nodes `x` and `y` along a traced passage, with extra nodes on loops and parallels.
+fn link_passage(
+    g: &mut Graph,
+    mask: &FreeMask,
+    img: &Img,
+    x: usize,
+    y: usize,
+    path: &[usize],
+) -> Result<(), SkeletonError> {
+    // Split loops and parallel passages with extra nodes so links stay unique.
+    let pieces = if x == y {
+        3
+    } else if g.edge_dirs(x, y).is_some() {
+        2
+    } else {
+        1
+    };
+    let mut chain = vec![x];
+    for k in 1..pieces {
+        let p = path[path.len() * k / pieces];
+        let (wx, wy) = world(mask, img, p);
+        let name = format!("n{}", g.len());
+        chain.push(g.add_node(&name, wx, wy)?);
+    }
+    chain.push(y);
+    for pair in chain.windows(2) {
+        g.add_edge(pair[0], pair[1], None, None)?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -9,6 +9,7 @@ use std::fmt::Write as _;
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
@@ -146,26 +147,16 @@ fn lines(points: &[Point], axis: Axis) -> Vec<Line<'_>> {
     out
 }
 
+/// A sweep chart: exploration (%) against the axis' setting.
+type Chart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The chart of one axis: each line's mean ± sd against the axis' setting.
 fn chart(points: &[Point], axis: Axis, subtitle: &str) -> Result<Picture, String> {
     let lines = lines(points, axis);
-    let xs = lines
-        .iter()
-        .flat_map(|l| l.points.iter().map(|p| axis.x(&p.key)));
-    let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
-        (a.min(x), b.max(x))
-    });
-    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+    let (lo, hi) = x_span(&lines, axis);
     let pad = ((hi - lo) * 0.06).max(0.5);
-    let (title, x_desc) = match axis {
-        Axis::Robots => (
-            "Exploration against the number of robots, with and without merging",
-            "robots",
-        ),
-        Axis::Rc => (
-            "Exploration against the communication radius R_C",
-            "R_C (m)",
-        ),
-    };
+    let (title, x_desc) = titles(axis);
     let mut pic = blank();
     {
         let root = pic.area()?;
@@ -189,93 +180,154 @@ fn chart(points: &[Point], axis: Axis, subtitle: &str) -> Result<Picture, String
         // One colour per line whatever its merge setting; merge off dashed.
         let mut colours: Vec<PointKey> = Vec::new();
         for l in &lines {
-            let base = PointKey {
-                merge: true,
-                ..l.key
-            };
-            let i = match colours
-                .iter()
-                .position(|k| axis.label(k) == axis.label(&base))
-            {
-                Some(i) => i,
-                None => {
-                    colours.push(base);
-                    colours.len() - 1
-                }
-            };
-            let rgb: Rgb = series_rgb(i);
-            let style = colour(rgb).stroke_width(2);
-            let mut xy: Vec<(f64, f64)> = l
-                .points
-                .iter()
-                .map(|p| (axis.x(&p.key), 100.0 * p.known_mean.mean))
-                .collect();
-            let across = axis == Axis::Rc && !l.key.merge && xy.len() == 1 && hi > lo;
-            if across {
-                xy = vec![(lo, xy[0].1), (hi, xy[0].1)];
-            }
-            let anno = if l.key.merge {
-                chart
-                    .draw_series(LineSeries::new(xy.clone(), style))
-                    .map_err(msg)?
-            } else {
-                chart
-                    .draw_series(std::iter::once(DashedPathElement::new(
-                        xy.clone(),
-                        8,
-                        5,
-                        style,
-                    )))
-                    .map_err(msg)?
-            };
-            let dashed = !l.key.merge;
-            let label = if across {
-                format!(
-                    "{}, no merge, {} robot(s) (any R_C)",
-                    l.key.strategy.name(),
-                    l.key.robots
-                )
-            } else {
-                axis.label(&l.key)
-            };
-            anno.label(label).legend(move |(x, y)| {
-                let st = colour(rgb).stroke_width(2);
-                let mid = if dashed {
-                    vec![]
-                } else {
-                    vec![(9, 0), (15, 0)]
-                };
-                EmptyElement::at((x, y))
-                    + PathElement::new(vec![(0, 0), (9, 0)], st)
-                    + PathElement::new(mid, st)
-                    + PathElement::new(vec![(15, 0), (24, 0)], st)
-                    + Circle::new((12, 0), 4, colour(rgb).filled())
-            });
-            // Error bars: mean ± sd, capped (plotters' ErrorBar needs a feature; three lines).
-            let cap = 0.12 * pad;
-            for p in &l.points {
-                let x = axis.x(&p.key);
-                let (m, s) = (100.0 * p.known_mean.mean, 100.0 * p.known_mean.sd);
-                let (y0, y1) = ((m - s).max(0.0), (m + s).min(105.0));
-                chart
-                    .draw_series([
-                        PathElement::new(vec![(x, y0), (x, y1)], style),
-                        PathElement::new(vec![(x - cap, y0), (x + cap, y0)], style),
-                        PathElement::new(vec![(x - cap, y1), (x + cap, y1)], style),
-                    ])
-                    .map_err(msg)?;
-            }
-            chart
-                .draw_series(l.points.iter().map(|p| {
-                    let xy = (axis.x(&p.key), 100.0 * p.known_mean.mean);
-                    Circle::new(xy, 4, colour(rgb).filled())
-                }))
-                .map_err(msg)?;
+            let rgb: Rgb = series_rgb(colour_index(&mut colours, axis, &l.key));
+            draw_line(&mut chart, l, axis, rgb, (lo, hi), pad)?;
         }
         series_labels(&mut chart, SeriesLabelPosition::LowerRight)?;
         root.present().map_err(msg)?;
     }
     Ok(pic)
+}
+
+/// The lowest and highest x of the lines' points ((0, 1) if there is none).
+fn x_span(lines: &[Line<'_>], axis: Axis) -> (f64, f64) {
+    let xs = lines
+        .iter()
+        .flat_map(|l| l.points.iter().map(|p| axis.x(&p.key)));
+    let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+        (a.min(x), b.max(x))
+    });
+    if lo.is_finite() {
+        (lo, hi)
+    } else {
+        (0.0, 1.0)
+    }
+}
+
+/// The chart's title and the x axis' description.
+fn titles(axis: Axis) -> (&'static str, &'static str) {
+    match axis {
+        Axis::Robots => (
+            "Exploration against the number of robots, with and without merging",
+            "robots",
+        ),
+        Axis::Rc => (
+            "Exploration against the communication radius R_C",
+            "R_C (m)",
+        ),
+    }
+}
+
+/// The colour index of a line: the same for both merge settings of a key, new keys appended.
+fn colour_index(colours: &mut Vec<PointKey>, axis: Axis, key: &PointKey) -> usize {
+    let base = PointKey {
+        merge: true,
+        ..*key
+    };
+    match colours
+        .iter()
+        .position(|k| axis.label(k) == axis.label(&base))
+    {
+        Some(i) => i,
+        None => {
+            colours.push(base);
+            colours.len() - 1
+        }
+    }
+}
+
+/// Draws one line (dashed without merging), its legend entry, error bars and dots.
+fn draw_line<'a, 'b: 'a>(
+    chart: &mut Chart<'a, 'b>,
+    l: &Line<'_>,
+    axis: Axis,
+    rgb: Rgb,
+    (lo, hi): (f64, f64),
+    pad: f64,
+) -> Result<(), String> {
+    let style = colour(rgb).stroke_width(2);
+    let mut xy: Vec<(f64, f64)> = l
+        .points
+        .iter()
+        .map(|p| (axis.x(&p.key), 100.0 * p.known_mean.mean))
+        .collect();
+    let across = axis == Axis::Rc && !l.key.merge && xy.len() == 1 && hi > lo;
+    if across {
+        xy = vec![(lo, xy[0].1), (hi, xy[0].1)];
+    }
+    let anno = if l.key.merge {
+        chart
+            .draw_series(LineSeries::new(xy.clone(), style))
+            .map_err(msg)?
+    } else {
+        chart
+            .draw_series(std::iter::once(DashedPathElement::new(
+                xy.clone(),
+                8,
+                5,
+                style,
+            )))
+            .map_err(msg)?
+    };
+    let dashed = !l.key.merge;
+    anno.label(line_label(l, axis, across))
+        .legend(move |(x, y)| {
+            let st = colour(rgb).stroke_width(2);
+            let mid = if dashed {
+                vec![]
+            } else {
+                vec![(9, 0), (15, 0)]
+            };
+            EmptyElement::at((x, y))
+                + PathElement::new(vec![(0, 0), (9, 0)], st)
+                + PathElement::new(mid, st)
+                + PathElement::new(vec![(15, 0), (24, 0)], st)
+                + Circle::new((12, 0), 4, colour(rgb).filled())
+        });
+    draw_error_bars(chart, l, axis, style, 0.12 * pad)?;
+    chart
+        .draw_series(l.points.iter().map(|p| {
+            let xy = (axis.x(&p.key), 100.0 * p.known_mean.mean);
+            Circle::new(xy, 4, colour(rgb).filled())
+        }))
+        .map_err(msg)?;
+    Ok(())
+}
+
+/// A line's legend text; a no-merge line drawn across the R_C axis says so.
+fn line_label(l: &Line<'_>, axis: Axis, across: bool) -> String {
+    if across {
+        format!(
+            "{}, no merge, {} robot(s) (any R_C)",
+            l.key.strategy.name(),
+            l.key.robots
+        )
+    } else {
+        axis.label(&l.key)
+    }
+}
+
+/// Error bars: mean ± sd, capped (plotters' ErrorBar needs a feature; three lines).
+fn draw_error_bars<'a, 'b: 'a>(
+    chart: &mut Chart<'a, 'b>,
+    l: &Line<'_>,
+    axis: Axis,
+    style: ShapeStyle,
+    cap: f64,
+) -> Result<(), String> {
+    for p in &l.points {
+        let x = axis.x(&p.key);
+        let (m, s) = (100.0 * p.known_mean.mean, 100.0 * p.known_mean.sd);
+        let (y0, y1) = ((m - s).max(0.0), (m + s).min(105.0));
+        chart
+            .draw_series([
+                PathElement::new(vec![(x, y0), (x, y1)], style),
+                PathElement::new(vec![(x - cap, y0), (x + cap, y0)], style),
+                PathElement::new(vec![(x - cap, y1), (x + cap, y1)], style),
+            ])
+            .map_err(msg)?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
