@@ -11,6 +11,7 @@ mod maps;
 mod mirror;
 mod on_deposit;
 mod processes;
+mod realtime;
 mod reliability;
 mod soak;
 mod sweep;

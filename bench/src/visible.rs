@@ -196,6 +196,7 @@ pub fn field(name: &str, width: u32, tick_hz: f32, on_deposit: bool) -> Result<(
             standby: false,
             publish_on_deposit: Some(Duration::ZERO),
             threads: 1,
+            deadline_slack: None,
         };
         // The services exist once the first frame is out; say ready from a thread that sees it.
         let ready_name = name.to_string();

@@ -16,6 +16,7 @@ pub mod lockstep;
 pub mod messages;
 pub mod models;
 mod plan;
+pub mod realtime;
 mod reject;
 pub mod run;
 pub mod sample;

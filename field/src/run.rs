@@ -11,7 +11,8 @@ use crate::checkpoint::{self, Checkpoint, CheckpointError};
 use crate::deposit::RejectReason;
 use crate::lockstep::{self, Participant};
 use crate::shm::{
-    cleanup_dead_nodes, FieldServer, ShmError, Standby, StandbyEvent, Svc, Takeover, TickOutcome,
+    cleanup_dead_nodes, wait_or_stop, FieldServer, ShmError, Standby, StandbyEvent, Svc, Takeover,
+    TickOutcome,
 };
 use crate::{FieldConfig, Stepper};
 use iceoryx2::node::Node;
@@ -40,6 +41,9 @@ pub struct FieldRunOptions {
     /// Threads of each tick's evaporation pass (1..=`engine::MAX_THREADS`; rows split across
     /// threads, the frames bit-identical to one thread's).
     pub threads: usize,
+    /// A wall-time tick that starts later than this after its deadline is a missed deadline
+    /// (`None`: a tenth of the period).
+    pub deadline_slack: Option<Duration>,
 }
 
 /// Why a field process stopped with an error.
@@ -108,6 +112,12 @@ pub struct FieldRunSummary {
     /// Frames published between ticks because deposits arrived (`publish_on_deposit`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames_on_deposit: Option<u64>,
+    /// Wall-time ticks that started later than the slack after their deadline (not in lockstep).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub missed_deadlines: Option<u64>,
+    /// The latest a wall-time tick started after its deadline (ms).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_tick_lateness_ms: Option<f64>,
 }
 
 /// Runs a field until its end (ticks, duration, the world's end, Ctrl-C/SIGTERM); `Ok(None)`
@@ -157,8 +167,10 @@ pub fn run_field(
     let metronome = Metronome {
         period,
         deadline: Instant::now() + period,
+        late: None,
     };
-    let mut stats = TickStats::new(longest_gap_ns);
+    let slack = o.deadline_slack.unwrap_or(period / 10);
+    let mut stats = TickStats::new(longest_gap_ns, slack);
     let deposit_wake = match (wakes_on_deposit, deposit_wake) {
         (Some(min_interval), None) => Some(DepositWake::new(node, &o.name, config, min_interval)?),
         (_, wake) => wake,
@@ -178,7 +190,7 @@ pub fn run_field(
     };
     while pace.next_tick(node, &server, stats.last_frame_at)? == Next::Tick {
         let out = pace.tick(&mut server, stats.last_frame_at)?;
-        stats.count(&out);
+        stats.count(&out, pace.lateness());
         if let Some(c) = &mut checkpointer {
             c.maybe_write(&server);
         }
@@ -321,6 +333,8 @@ fn summarize(
         total_mass,
         max,
         max_tick_compute_ms: stats.max_compute_ns as f64 / 1e6,
+        missed_deadlines: stats.max_lateness_ns.map(|_| stats.missed_deadlines),
+        max_tick_lateness_ms: stats.max_lateness_ns.map(|ns| ns as f64 / 1e6),
         frames_on_deposit: extras.frames_on_deposit,
         longest_tick_gap_ms: stats.longest_gap_ns as f64 / 1e6,
         dead_nodes_cleaned: stats.dead_nodes_cleaned,
@@ -351,6 +365,12 @@ trait Pace {
         last_frame_at: Instant,
     ) -> Result<Next, ShmError>;
 
+    /// How late the tick `next_tick` just allowed started after its wall-time deadline (`None`:
+    /// it had none — a lockstep step or a frame for deposits).
+    fn lateness(&self) -> Option<Duration> {
+        None
+    }
+
     /// Computes and publishes the frame.
     fn tick(
         &mut self,
@@ -371,11 +391,15 @@ trait Pace {
 struct Metronome {
     period: Duration,
     deadline: Instant,
+    /// How late the last tick started after its deadline.
+    late: Option<Duration>,
 }
 
 impl Metronome {
     /// The next deadline, one period on; a field that fell behind does not burst to catch up.
+    /// Notes how late this tick is.
     fn advance(&mut self) {
+        self.late = Some(Instant::now().saturating_duration_since(self.deadline));
         self.deadline += self.period;
         if self.deadline + self.period < Instant::now() {
             self.deadline = Instant::now() + self.period;
@@ -395,6 +419,10 @@ impl Pace for Metronome {
         }
         self.advance();
         Ok(Next::Tick)
+    }
+
+    fn lateness(&self) -> Option<Duration> {
+        self.late
     }
 }
 
@@ -418,10 +446,17 @@ impl Pace for OnDeposit {
             .wait(node, server, self.metronome.deadline, last_frame_at)?
         {
             Wake::Stop => return Ok(Next::Stop),
-            Wake::Deposit => self.early_frames += 1,
+            Wake::Deposit => {
+                self.early_frames += 1;
+                self.metronome.late = None;
+            }
             Wake::Tick => self.metronome.advance(),
         }
         Ok(Next::Tick)
+    }
+
+    fn lateness(&self) -> Option<Duration> {
+        self.metronome.late
     }
 
     fn tick(
@@ -612,6 +647,11 @@ struct TickStats {
     max_compute_ns: u64,
     longest_gap_ns: u64,
     dead_nodes_cleaned: u64,
+    /// A tick later than this after its deadline is a missed deadline.
+    slack: Duration,
+    missed_deadlines: u64,
+    /// The latest tick start after its deadline (`None`: no tick had a deadline).
+    max_lateness_ns: Option<u64>,
     /// When the last frame was published (the start, before the first).
     last_frame_at: Instant,
     window: Window,
@@ -619,19 +659,30 @@ struct TickStats {
 
 impl TickStats {
     /// `longest_gap_ns`: a gap before the first tick (a standby's takeover).
-    fn new(longest_gap_ns: u64) -> Self {
+    fn new(longest_gap_ns: u64, slack: Duration) -> Self {
         Self {
             ticks: 0,
             max_compute_ns: 0,
             longest_gap_ns,
             dead_nodes_cleaned: 0,
+            slack,
+            missed_deadlines: 0,
+            max_lateness_ns: None,
             last_frame_at: Instant::now(),
             window: Window::new(Instant::now()),
         }
     }
 
-    /// Counts a frame just published.
-    fn count(&mut self, out: &TickOutcome) {
+    /// Counts a frame just published, `late` after its deadline if it had one.
+    fn count(&mut self, out: &TickOutcome, late: Option<Duration>) {
+        if let Some(late) = late {
+            let ns = late.as_nanos() as u64;
+            self.max_lateness_ns = Some(self.max_lateness_ns.unwrap_or(0).max(ns));
+            if late > self.slack {
+                self.missed_deadlines += 1;
+                self.window.missed += 1;
+            }
+        }
         let now = Instant::now();
         let gap_ns = now.duration_since(self.last_frame_at).as_nanos() as u64;
         self.last_frame_at = now;
@@ -662,6 +713,8 @@ struct Window {
     applied: u64,
     rejected: u64,
     longest_gap_ns: u64,
+    /// Ticks that started later than the slack after their deadline.
+    missed: u64,
 }
 
 impl Window {
@@ -674,6 +727,7 @@ impl Window {
             applied: 0,
             rejected: 0,
             longest_gap_ns: 0,
+            missed: 0,
         }
     }
 
@@ -696,7 +750,7 @@ impl Window {
             .collect();
         eprintln!(
             "field '{name}': {:.1} ticks/s, tick {:.3} ms mean / {:.3} ms max, longest_tick_gap_ms {:.3}, \
-             deposits +{} applied +{} rejected (total {} applied, {} rejected{}{}){}",
+             deposits +{} applied +{} rejected (total {} applied, {} rejected{}{}){}{}",
             self.ticks as f64 / secs,
             self.compute_ns as f64 / self.ticks.max(1) as f64 / 1e6,
             self.max_compute_ns as f64 / 1e6,
@@ -709,6 +763,11 @@ impl Window {
             reasons.join(", "),
             if dead_nodes_cleaned > 0 {
                 format!("; cleaned {dead_nodes_cleaned} dead node(s)")
+            } else {
+                String::new()
+            },
+            if self.missed > 0 {
+                format!("; missed {} deadline(s)", self.missed)
             } else {
                 String::new()
             }
@@ -814,7 +873,7 @@ fn wait_serving_readers(
         if left.is_zero() {
             return Ok(true);
         }
-        if node.wait(left.min(IDLE_SLICE)).is_err() {
+        if !wait_or_stop(node, left.min(IDLE_SLICE)) {
             return Ok(false);
         }
         if left > IDLE_SLICE {

@@ -149,6 +149,22 @@ pub struct FieldArgs {
     /// own thread.
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub threads: usize,
+    /// Real-time scheduling: SCHED_FIFO at priority N (1–99) and every page locked in memory
+    /// (mlockall, so the frame pool is faulted in before the first tick). Without CAP_SYS_NICE
+    /// or a large enough RLIMIT_RTPRIO (and CAP_IPC_LOCK or RLIMIT_MEMLOCK) the field refuses
+    /// to start and says which is missing, unless --rt-best-effort.
+    #[arg(long, value_name = "N")]
+    pub rt_priority: Option<i32>,
+    /// With --rt-priority: run on this CPU only.
+    #[arg(long, value_name = "CPU", requires = "rt_priority")]
+    pub rt_cpu: Option<usize>,
+    /// With --rt-priority: start anyway without what the OS refuses, and say what it refused.
+    #[arg(long, requires = "rt_priority")]
+    pub rt_best_effort: bool,
+    /// A wall-time tick that starts more than this after its deadline counts as a missed
+    /// deadline (µs; default a tenth of the period). Counted in the log and the --json summary.
+    #[arg(long, value_name = "US")]
+    pub deadline_slack_us: Option<f64>,
     /// Run as a mirror of the field of the same name on another host: `zenoh:tcp/HOST:PORT`,
     /// the address of its `pheromone bridge`. The mirror takes the origin's configuration,
     /// starts from a keyframe, applies each frame's deposits with the same stepper and publishes
@@ -318,6 +334,17 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         bytes as f64 / (1 << 20) as f64,
         frames
     );
+    let deadline_slack = match a.deadline_slack_us {
+        Some(us) if !(us.is_finite() && (0.0..=MAX_SECONDS * 1e6).contains(&us)) => {
+            return Err(bad(format!(
+                "--deadline-slack-us {}: must be a number of microseconds from 0 to {:e}",
+                super::num(us),
+                MAX_SECONDS * 1e6
+            )))
+        }
+        us => us.map(|us| Duration::from_secs_f64(us / 1e6)),
+    };
+    realtime(&a)?;
     let node = create_node(&format!("field-{}", a.name))?;
     let options = FieldRunOptions {
         name: a.name.clone(),
@@ -331,6 +358,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         standby: a.standby,
         publish_on_deposit,
         threads: a.threads,
+        deadline_slack,
     };
     let summary = match run_field(&node, &options) {
         Ok(s) => s,
@@ -347,5 +375,42 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
             ),
         }
     }
+    Ok(())
+}
+
+/// `--rt-priority`: SCHED_FIFO, memory locked, optionally one CPU; says what it got.
+fn realtime(a: &FieldArgs) -> anyhow::Result<()> {
+    let Some(priority) = a.rt_priority else {
+        return Ok(());
+    };
+    let o = field::realtime::RealtimeOptions {
+        priority,
+        cpu: a.rt_cpu,
+        best_effort: a.rt_best_effort,
+    };
+    let applied = match field::realtime::apply(&o) {
+        Ok(applied) => applied,
+        Err(e @ field::realtime::RealtimeError::Priority(_)) => return Err(bad(e.to_string())),
+        Err(e) => return Err(e.into()),
+    };
+    for refused in &applied.refused {
+        eprintln!(
+            "field '{}': going on without it (--rt-best-effort): {refused}",
+            a.name
+        );
+    }
+    eprintln!(
+        "field '{}': real-time: SCHED_FIFO {}, memory {}, CPU {}",
+        a.name,
+        applied
+            .fifo_priority
+            .map_or("refused".to_string(), |p| format!("priority {p}")),
+        if applied.memory_locked {
+            "locked"
+        } else {
+            "not locked"
+        },
+        applied.cpu.map_or("any".to_string(), |c| c.to_string()),
+    );
     Ok(())
 }

@@ -150,6 +150,20 @@ pub enum ShmError {
     StandbyMismatch { field: String, detail: String },
 }
 
+/// Waits on the node for `d`; `false` once SIGINT or SIGTERM asked the process to stop. Any other
+/// signal that cuts the sleep short (SIGCONT after a SIGSTOP or Ctrl-Z, SIGCHLD…) is not a
+/// request to stop, although `node.wait` reports it as an interrupt.
+pub fn wait_or_stop(node: &Node<Svc>, d: Duration) -> bool {
+    use iceoryx2::node::NodeWaitFailure;
+    match node.wait(d) {
+        Ok(()) => true,
+        Err(NodeWaitFailure::TerminationRequest) => false,
+        Err(NodeWaitFailure::Interrupt) => {
+            !iceoryx2_bb_posix::signal::SignalHandler::termination_requested()
+        }
+    }
+}
+
 /// Waits on a listener; a signal that interrupts the wait (any caught one, not only Ctrl-C) is
 /// a spurious wake-up, since callers loop on their own deadline and see Ctrl-C through
 /// `node.wait`.

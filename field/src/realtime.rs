@@ -1,0 +1,142 @@
+//! Real-time scheduling for a process that must keep its period on a shared robot computer:
+//! `SCHED_FIFO` at a priority, every page locked in memory (`mlockall`, current and future
+//! mappings, so the frame pool is faulted in before the first tick), optionally one CPU.
+//!
+//! When the OS refuses, the error names what is missing (CAP_SYS_NICE or RLIMIT_RTPRIO,
+//! CAP_IPC_LOCK or RLIMIT_MEMLOCK); with `best_effort` the process goes on and reports what it
+//! did not get. Threads started afterwards (the tick's row workers) inherit the policy.
+#![allow(unsafe_code)]
+
+use nix::sched::{sched_setaffinity, CpuSet};
+use nix::sys::mman::{mlockall, MlockAllFlags};
+use nix::sys::resource::{getrlimit, Resource};
+use nix::unistd::Pid;
+
+/// What to ask the OS for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RealtimeOptions {
+    /// `SCHED_FIFO` priority, 1..=99.
+    pub priority: i32,
+    /// Run on this CPU only.
+    pub cpu: Option<usize>,
+    /// Go on without what the OS refuses (reported in [`Applied::refused`]).
+    pub best_effort: bool,
+}
+
+/// What the OS refused.
+#[derive(Debug, thiserror::Error)]
+pub enum RealtimeError {
+    #[error("--rt-priority {0}: must be a SCHED_FIFO priority from 1 to 99")]
+    Priority(i32),
+    #[error(
+        "SCHED_FIFO priority {priority} refused ({source}): it needs CAP_SYS_NICE (root) or an \
+         RLIMIT_RTPRIO of at least {priority} (`ulimit -r`; here {rlimit})"
+    )]
+    Scheduler {
+        priority: i32,
+        rlimit: String,
+        source: nix::Error,
+    },
+    #[error(
+        "locking memory (mlockall) refused ({source}): it needs CAP_IPC_LOCK (root) or an \
+         RLIMIT_MEMLOCK larger than the process (`ulimit -l`; here {rlimit})"
+    )]
+    Lock { rlimit: String, source: nix::Error },
+    #[error("--rt-cpu {cpu}: pinning refused ({source})")]
+    Pin { cpu: usize, source: nix::Error },
+}
+
+/// What the process got.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Applied {
+    pub fifo_priority: Option<i32>,
+    pub memory_locked: bool,
+    pub cpu: Option<usize>,
+    /// With `best_effort`: each refusal's message.
+    pub refused: Vec<String>,
+}
+
+fn limit(resource: Resource) -> String {
+    match getrlimit(resource) {
+        Ok((soft, _)) if soft == libc::RLIM_INFINITY => "unlimited".into(),
+        Ok((soft, _)) => soft.to_string(),
+        Err(e) => format!("unknown: {e}"),
+    }
+}
+
+/// `SCHED_FIFO` at `priority` for the calling thread (and the threads it starts later).
+fn set_fifo(priority: i32) -> Result<(), RealtimeError> {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: sched_setscheduler reads the `sched_param` through the pointer for the duration
+    // of the call only; `param` is a live, initialised local. pid 0 is the calling thread.
+    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(RealtimeError::Scheduler {
+            priority,
+            rlimit: limit(Resource::RLIMIT_RTPRIO),
+            source: nix::Error::last(),
+        })
+    }
+}
+
+/// Asks for everything `o` names, in order: the CPU, memory locking, then the priority.
+pub fn apply(o: &RealtimeOptions) -> Result<Applied, RealtimeError> {
+    if !(1..=99).contains(&o.priority) {
+        return Err(RealtimeError::Priority(o.priority));
+    }
+    let mut applied = Applied::default();
+    let mut outcome = |r: Result<(), RealtimeError>| -> Result<bool, RealtimeError> {
+        match r {
+            Ok(()) => Ok(true),
+            Err(e) if o.best_effort => {
+                applied.refused.push(e.to_string());
+                Ok(false)
+            }
+            Err(e) => Err(e),
+        }
+    };
+    if let Some(cpu) = o.cpu {
+        let pin = (|| {
+            let mut set = CpuSet::new();
+            set.set(cpu)?;
+            sched_setaffinity(Pid::from_raw(0), &set)
+        })()
+        .map_err(|source| RealtimeError::Pin { cpu, source });
+        if outcome(pin)? {
+            applied.cpu = Some(cpu);
+        }
+    }
+    let lock = mlockall(MlockAllFlags::MCL_CURRENT | MlockAllFlags::MCL_FUTURE).map_err(|source| {
+        RealtimeError::Lock {
+            rlimit: limit(Resource::RLIMIT_MEMLOCK),
+            source,
+        }
+    });
+    applied.memory_locked = outcome(lock)?;
+    if outcome(set_fifo(o.priority))? {
+        applied.fifo_priority = Some(o.priority);
+    }
+    Ok(applied)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_priority_outside_1_to_99_is_refused_before_asking_the_os() {
+        for p in [0, 100, -5] {
+            let o = RealtimeOptions {
+                priority: p,
+                cpu: None,
+                best_effort: true,
+            };
+            let e = apply(&o).unwrap_err().to_string();
+            assert!(e.contains(&format!("--rt-priority {p}")), "{e}");
+        }
+    }
+}

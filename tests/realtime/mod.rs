@@ -1,0 +1,93 @@
+//! `field --rt-priority`: refused with the missing permission named, best effort on request, and
+//! missed deadlines counted when a tick is held up on purpose.
+
+use std::process::Command;
+use std::time::Duration;
+
+use nix::sys::signal::{kill, Signal};
+use nix::unistd::Pid;
+
+use crate::harness::*;
+
+/// `pheromone ARGS` with RLIMIT_RTPRIO 0 and without CAP_SYS_NICE (dropped from the bounding
+/// set, so even root lacks it): a robot computer's unprivileged user. CAP_IPC_LOCK stays, so
+/// only the scheduler is refused.
+fn without_rt_permission(args: &[&str]) -> std::process::Output {
+    Command::new("prlimit")
+        .args(["--rtprio=0", "setpriv", "--bounding-set=-sys_nice"])
+        .arg(bin())
+        .args(args)
+        .output()
+        .expect("run prlimit/setpriv (util-linux)")
+}
+
+#[test]
+fn sched_fifo_without_the_permission_is_refused_naming_it_unless_best_effort() {
+    let name = unique("rt-refused");
+    let o = without_rt_permission(&Cmd::field(&name).ticks(5).opt("--rt-priority", 10).argv());
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("SCHED_FIFO priority 10 refused")
+            && err.contains("CAP_SYS_NICE")
+            && err.contains("RLIMIT_RTPRIO of at least 10")
+            && err.contains("here 0"),
+        "{err}"
+    );
+    let o = without_rt_permission(
+        &Cmd::field(&name)
+            .ticks(5)
+            .opt("--rt-priority", 10)
+            .arg("--rt-best-effort")
+            .json()
+            .argv(),
+    );
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("going on without it (--rt-best-effort)"),
+        "{err}"
+    );
+    assert!(err.contains("SCHED_FIFO refused, memory locked"), "{err}");
+    assert_eq!(json(&o)["ticks"], 5);
+    let o = run(&Cmd::field(&name).ticks(5).opt("--rt-priority", 0).argv());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--rt-priority 0"), "{}", stderr(&o));
+}
+
+#[test]
+fn a_tick_held_up_on_purpose_is_a_missed_deadline_in_the_summary() {
+    let name = unique("rt-late");
+    let field = Proc::spawn(
+        &Cmd::field(&name)
+            .grid(64, 64)
+            .tick_hz(100)
+            .duration(3)
+            .opt("--deadline-slack-us", 50_000)
+            .json()
+            .argv(),
+    );
+    let pid = Pid::from_raw(field.pid() as i32);
+    // Once it ticks, stop the process for 300 ms (as Ctrl-Z and `fg` would): the tick due
+    // meanwhile starts late, and the field goes on (SIGCONT is no request to stop).
+    eventually(Duration::from_secs(30), "the field to publish", || {
+        run(&Cmd::probe(&name).at(0.5, 0.5).timeout(1).argv())
+            .status
+            .success()
+            .then_some(())
+    });
+    kill(pid, Signal::SIGSTOP).unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    kill(pid, Signal::SIGCONT).unwrap();
+    let out = field.wait_exit(Duration::from_secs(60));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let s = json(&out);
+    let missed = s["missed_deadlines"].as_u64().expect("missed_deadlines");
+    let late_ms = s["max_tick_lateness_ms"]
+        .as_f64()
+        .expect("max_tick_lateness_ms");
+    println!("held 300 ms: {missed} missed deadline(s), latest tick {late_ms:.1} ms late");
+    assert!(missed >= 1 && late_ms >= 50.0, "{s}");
+    // It ran its whole --duration: SIGCONT did not stop it.
+    assert!(s["wall_time_s"].as_f64().unwrap() >= 3.0, "{s}");
+}
