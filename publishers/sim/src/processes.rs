@@ -191,6 +191,7 @@ pub fn run_as_processes(
     result
 }
 
+/// The run under `sup`: starts every child, records until the world ends, collects the reports.
 fn supervise(
     scenario: &Scenario,
     mut o: ProcessRunOptions<'_>,
@@ -198,252 +199,38 @@ fn supervise(
     scenario_file: &Path,
     sup: &mut Supervisor,
 ) -> Result<(RunSummary, Recording, ProcessRunInfo), ProcessRunError> {
-    let (field_name, world_name) = (tag.to_string(), tag.to_string());
-    let path = scenario_file.display().to_string();
+    let args = ChildArgs {
+        field: tag.to_string(),
+        world: tag.to_string(),
+        scenario: scenario_file.display().to_string(),
+        realtime: o.realtime,
+    };
     let participants = lockstep_participants(scenario, true, true);
     let attach_timeout = o
         .attach_timeout
         .unwrap_or_else(|| WorldOptions::default_attach_timeout(participants));
-    let args = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
-    let role = |name: &str, robot: Option<u32>| {
-        let mut v = args(&[
-            name,
-            "--scenario",
-            &path,
-            "--world",
-            &world_name,
-            "--field",
-            &field_name,
-            "--json",
-        ]);
-        if let Some(r) = robot {
-            v.extend(args(&["--robot", &r.to_string()]));
-        }
-        if o.realtime {
-            v.push("--realtime".to_string());
-        }
-        v
-    };
     // The node first: from here on Ctrl-C is iceoryx2's, whatever thread it reaches.
     let node = create_node(&format!("{tag}-observer"))?;
     let started = Instant::now();
-    let field = sup.spawn(ChildSpec::new(
-        "field",
-        None,
-        args(&[
-            "field",
-            "--name",
-            &field_name,
-            "--scenario",
-            &path,
-            "--clock",
-            &world_name,
-            "--json",
-        ]),
-    ))?;
-    // The view is no lockstep participant: it reads frames and poses, and is stopped with the
-    // run (a view that cannot listen fails the run, as any child does).
-    if let Some(listen) = &o.view {
-        sup.spawn(ChildSpec::new(
-            "view",
-            None,
-            args(&[
-                "view",
-                "--field",
-                &field_name,
-                "--world",
-                &world_name,
-                "--listen",
-                listen,
-            ]),
-        ))?;
-    }
-    // --remote: the gateway serves the field to the antenna robots; they start once it serves.
-    let remote = if o.remote {
-        remote_robots(scenario)
-    } else {
-        Vec::new()
+    let start = RunStart {
+        node: &node,
+        started,
+        attach_timeout,
     };
-    if o.remote && remote.is_empty() {
-        return Err(ProcessRunError::NoRemoteRobot {
-            scenario: scenario.name.clone(),
-        });
-    }
-    let gateway = if o.remote {
-        let id = sup.spawn(ChildSpec::new(
-            "gateway",
-            None,
-            args(&[
-                "gateway",
-                "--field",
-                &field_name,
-                "--udp",
-                "127.0.0.1:0",
-                "--rate-hz",
-                "0",
-                "--attach-timeout",
-                &attach_timeout.as_secs_f64().to_string(),
-                "--print-address",
-                "--json",
-            ]),
-        ))?;
-        Some((
-            id,
-            gateway_address(
-                &node,
-                sup,
-                id,
-                started + attach_timeout,
-                attach_timeout.as_secs_f64(),
-            )?,
-        ))
-    } else {
-        None
-    };
-    let mut roles: Vec<ChildId> = Vec::new();
-    let mut remote_ids: Vec<ChildId> = Vec::new();
-    for r in &scenario.robots {
-        let mut loc = role("localizer", Some(r.id));
-        if o.slam {
-            loc.push("--slam".into());
-        }
-        roles.push(sup.spawn(ChildSpec::new("localizer", Some(r.id), loc))?);
-        if r.depositor.is_some() {
-            roles.push(sup.spawn(ChildSpec::new(
-                "depositor",
-                Some(r.id),
-                role("depositor", Some(r.id)),
-            ))?);
-        }
-        if r.follower.is_some() {
-            let mut follower = role("follower", Some(r.id));
-            let through = gateway.as_ref().filter(|_| remote.contains(&r.id));
-            if let Some((_, address)) = through {
-                follower.extend(args(&["--gateway", address]));
-            } else if let Some(w) = o.follower_wait {
-                follower.extend(["--wait".to_string(), w.to_string()]);
-            }
-            let id = sup.spawn(ChildSpec::new("follower", Some(r.id), follower))?;
-            if through.is_some() {
-                remote_ids.push(id);
-            }
-            roles.push(id);
-        }
-    }
-    // Seed 004: one mapper per robot when the scenario maps, each publishing its map as field
-    // `<run>-map-r<ID>` and merging its peers' maps from their frames.
-    let mut mappers: Vec<ChildId> = Vec::new();
-    for id in mapper_robots(scenario, true) {
-        mappers.push(sup.spawn(ChildSpec::new("mapper", Some(id), role("mapper", Some(id))))?);
-    }
-    let mut world_args = role("world", None);
-    if !o.realtime {
-        world_args.extend(args(&[
-            "--observed",
-            "--mapped",
-            "--attach-timeout",
-            &attach_timeout.as_secs_f64().to_string(),
-            "--stall-timeout",
-            &o.stall_timeout.as_secs_f64().to_string(),
-        ]));
-    }
-    let world = sup.spawn(ChildSpec::new("world", None, world_args))?;
-    // The observer joins once the field is up; a child that fails meanwhile ends the run.
-    let field_deadline = started + attach_timeout;
-    let mut observer = loop {
-        sup.check()?;
-        match Observer::new(
-            &node,
-            scenario,
-            &world_name,
-            &field_name,
-            Duration::from_millis(100),
-        ) {
-            Ok(obs) => break obs,
-            Err(ShmError::NoField { .. }) | Err(ShmError::Service { .. })
-                if Instant::now() < field_deadline =>
-            {
-                continue
-            }
-            Err(ShmError::NoField { .. }) => {
-                return Err(ProcessRunError::NoField {
-                    timeout_s: attach_timeout.as_secs_f64(),
-                })
-            }
-            Err(e) => return Err(e.into()),
-        }
-    };
+    let children = Children::spawn(scenario, &o, &args, &start, sup)?;
+    let mut observer = join_observer(scenario, &args, &start, sup)?;
     let walls = World::new(scenario.world.clone(), scenario.seed)
         .map(|w| w.wall_segments().iter().map(|s| (s.a_m, s.b_m)).collect())
         .unwrap_or_default();
     observer.set_walls(walls);
-    let deadline = started + o.timeout;
-    let mut startup = None;
-    // Until the world ends: watch for failed children, Ctrl-C and the time limit, and record.
-    while sup.exit_status(world).is_none() {
-        if node.wait(Duration::ZERO).is_err() {
-            return Err(ProcessRunError::Interrupted);
-        }
-        sup.check()?;
-        if Instant::now() > deadline {
-            return Err(ProcessRunError::Timeout {
-                timeout_s: o.timeout.as_secs_f64(),
-            });
-        }
-        // Woken by the next frame; a child's exit is seen at most one round later.
-        observer.poll(Duration::from_millis(20))?;
-        if let Some(t) = observer.sim_time_s() {
-            if startup.is_none() && t > 0.0 {
-                startup = Some(started.elapsed());
-            }
-            if let Some(p) = o.progress.as_mut() {
-                p(t);
-            }
-        }
-    }
-    let world_summary: WorldSummary = sup.summary(world)?;
+    let startup = record_until_the_world_ends(&mut observer, children.world, &start, &mut o, sup)?;
+    let world_summary: WorldSummary = sup.summary(children.world)?;
     // The other roles stop by themselves when the world announces the end.
     let end_timeout = Duration::from_secs(15);
-    let end_deadline = Instant::now() + end_timeout;
-    let mut reports = Vec::new();
-    for id in std::iter::once(field)
-        .chain(roles.iter().copied())
-        .chain(mappers.iter().copied())
-    {
-        if !sup.wait_exit(id, end_deadline.saturating_duration_since(Instant::now())) {
-            return Err(ProcessRunError::NotStopped {
-                who: sup.spec(id).who(),
-                timeout_s: end_timeout.as_secs_f64(),
-            });
-        }
-        sup.check()?;
-    }
-    let field_summary: FieldRunSummary = sup.summary(field)?;
-    reports.push(report("field", &field_summary));
-    for &id in &roles {
-        if remote_ids.contains(&id) {
-            let s: AntennaRobotSummary = sup.summary(id)?;
-            reports.push(report(&sup.spec(id).who(), &s));
-        } else {
-            let s: RoleSummary = sup.summary(id)?;
-            reports.push(report(&sup.spec(id).who(), &s));
-        }
-    }
-    for &id in &mappers {
-        let s: MapperSummary = sup.summary(id)?;
-        reports.push(report(&sup.spec(id).who(), &s));
-    }
-    if let Some((id, _)) = gateway {
-        // Every robot has gone: stop the gateway as Ctrl-C would, and take its counters.
-        sup.signal(id, nix::sys::signal::Signal::SIGTERM);
-        if !sup.wait_exit(id, end_timeout) {
-            return Err(ProcessRunError::NotStopped {
-                who: sup.spec(id).who(),
-                timeout_s: end_timeout.as_secs_f64(),
-            });
-        }
-        let counters: serde_json::Value = sup.summary(id)?;
-        reports.push(report("gateway", &counters));
+    children.wait_roles_stopped(sup, end_timeout)?;
+    let (field_summary, mut reports) = children.reports(sup)?;
+    if let Some((id, _)) = children.gateway {
+        reports.push(stop_gateway(sup, id, end_timeout)?);
     }
     reports.push(report("world", &world_summary));
     let rec = observer.finish();
@@ -457,6 +244,373 @@ fn supervise(
             reports,
         },
     ))
+}
+
+/// `v` as owned arguments.
+fn args(v: &[&str]) -> Vec<String> {
+    v.iter().map(|x| x.to_string()).collect()
+}
+
+/// The names a run's children are started with, and their command lines.
+struct ChildArgs {
+    field: String,
+    world: String,
+    /// The scenario file's path.
+    scenario: String,
+    realtime: bool,
+}
+
+impl ChildArgs {
+    /// A role's arguments: the scenario, world and field, the robot, `--realtime`.
+    fn role(&self, name: &str, robot: Option<u32>) -> Vec<String> {
+        let mut v = args(&[
+            name,
+            "--scenario",
+            &self.scenario,
+            "--world",
+            &self.world,
+            "--field",
+            &self.field,
+            "--json",
+        ]);
+        if let Some(r) = robot {
+            v.extend(args(&["--robot", &r.to_string()]));
+        }
+        if self.realtime {
+            v.push("--realtime".to_string());
+        }
+        v
+    }
+
+    /// The field's arguments: clocked by the world.
+    fn field(&self) -> Vec<String> {
+        args(&[
+            "field",
+            "--name",
+            &self.field,
+            "--scenario",
+            &self.scenario,
+            "--clock",
+            &self.world,
+            "--json",
+        ])
+    }
+
+    /// The view's arguments, listening on `listen`.
+    fn view(&self, listen: &str) -> Vec<String> {
+        args(&[
+            "view",
+            "--field",
+            &self.field,
+            "--world",
+            &self.world,
+            "--listen",
+            listen,
+        ])
+    }
+
+    /// The gateway's arguments: UDP loopback on any port, printing its address.
+    fn gateway(&self, attach_timeout: Duration) -> Vec<String> {
+        args(&[
+            "gateway",
+            "--field",
+            &self.field,
+            "--udp",
+            "127.0.0.1:0",
+            "--rate-hz",
+            "0",
+            "--attach-timeout",
+            &attach_timeout.as_secs_f64().to_string(),
+            "--print-address",
+            "--json",
+        ])
+    }
+
+    /// The world's arguments: in lockstep it waits for the observer and the mappers.
+    fn world(&self, attach_timeout: Duration, stall_timeout: Duration) -> Vec<String> {
+        let mut world_args = self.role("world", None);
+        if !self.realtime {
+            world_args.extend(args(&[
+                "--observed",
+                "--mapped",
+                "--attach-timeout",
+                &attach_timeout.as_secs_f64().to_string(),
+                "--stall-timeout",
+                &stall_timeout.as_secs_f64().to_string(),
+            ]));
+        }
+        world_args
+    }
+}
+
+/// What the waits of a run's start share: the observer's node, when the first process started,
+/// and how long every process may take to join.
+struct RunStart<'a> {
+    node: &'a iceoryx2::node::Node<field::shm::Svc>,
+    started: Instant,
+    attach_timeout: Duration,
+}
+
+/// The children of a run, by role.
+struct Children {
+    field: ChildId,
+    /// `--remote`: the gateway and the address it serves.
+    gateway: Option<(ChildId, String)>,
+    /// Localizers, depositors and followers, robot by robot.
+    roles: Vec<ChildId>,
+    /// The followers that read the field through the gateway.
+    remote_ids: Vec<ChildId>,
+    mappers: Vec<ChildId>,
+    world: ChildId,
+}
+
+impl Children {
+    /// Starts the field, the view, the gateway, each robot's roles, the mappers and the world.
+    fn spawn(
+        scenario: &Scenario,
+        o: &ProcessRunOptions<'_>,
+        a: &ChildArgs,
+        start: &RunStart<'_>,
+        sup: &mut Supervisor,
+    ) -> Result<Self, ProcessRunError> {
+        let field = sup.spawn(ChildSpec::new("field", None, a.field()))?;
+        // The view is no lockstep participant: it reads frames and poses, and is stopped with the
+        // run (a view that cannot listen fails the run, as any child does).
+        if let Some(listen) = &o.view {
+            sup.spawn(ChildSpec::new("view", None, a.view(listen)))?;
+        }
+        // --remote: the gateway serves the field to the antenna robots; they start once it serves.
+        let remote = if o.remote {
+            remote_robots(scenario)
+        } else {
+            Vec::new()
+        };
+        if o.remote && remote.is_empty() {
+            return Err(ProcessRunError::NoRemoteRobot {
+                scenario: scenario.name.clone(),
+            });
+        }
+        let gateway = if o.remote {
+            Some(spawn_gateway(a, start, sup)?)
+        } else {
+            None
+        };
+        let (roles, remote_ids) =
+            spawn_robot_roles(scenario, o, a, gateway.as_ref(), &remote, sup)?;
+        // Seed 004: one mapper per robot when the scenario maps, each publishing its map as field
+        // `<run>-map-r<ID>` and merging its peers' maps from their frames.
+        let mut mappers: Vec<ChildId> = Vec::new();
+        for id in mapper_robots(scenario, true) {
+            mappers.push(sup.spawn(ChildSpec::new(
+                "mapper",
+                Some(id),
+                a.role("mapper", Some(id)),
+            ))?);
+        }
+        let world_args = a.world(start.attach_timeout, o.stall_timeout);
+        let world = sup.spawn(ChildSpec::new("world", None, world_args))?;
+        Ok(Self {
+            field,
+            gateway,
+            roles,
+            remote_ids,
+            mappers,
+            world,
+        })
+    }
+
+    /// Waits (`end_timeout` for all) until the field, the roles and the mappers have stopped.
+    fn wait_roles_stopped(
+        &self,
+        sup: &mut Supervisor,
+        end_timeout: Duration,
+    ) -> Result<(), ProcessRunError> {
+        let end_deadline = Instant::now() + end_timeout;
+        for id in std::iter::once(self.field)
+            .chain(self.roles.iter().copied())
+            .chain(self.mappers.iter().copied())
+        {
+            if !sup.wait_exit(id, end_deadline.saturating_duration_since(Instant::now())) {
+                return Err(ProcessRunError::NotStopped {
+                    who: sup.spec(id).who(),
+                    timeout_s: end_timeout.as_secs_f64(),
+                });
+            }
+            sup.check()?;
+        }
+        Ok(())
+    }
+
+    /// The field's summary, and the reports of the field, the roles and the mappers.
+    fn reports(
+        &self,
+        sup: &mut Supervisor,
+    ) -> Result<(FieldRunSummary, Vec<ProcessReport>), ProcessRunError> {
+        let mut reports = Vec::new();
+        let field_summary: FieldRunSummary = sup.summary(self.field)?;
+        reports.push(report("field", &field_summary));
+        for &id in &self.roles {
+            if self.remote_ids.contains(&id) {
+                let s: AntennaRobotSummary = sup.summary(id)?;
+                reports.push(report(&sup.spec(id).who(), &s));
+            } else {
+                let s: RoleSummary = sup.summary(id)?;
+                reports.push(report(&sup.spec(id).who(), &s));
+            }
+        }
+        for &id in &self.mappers {
+            let s: MapperSummary = sup.summary(id)?;
+            reports.push(report(&sup.spec(id).who(), &s));
+        }
+        Ok((field_summary, reports))
+    }
+}
+
+/// Starts each robot's localizer, depositor and follower; all of them, and those via `gateway`.
+fn spawn_robot_roles(
+    scenario: &Scenario,
+    o: &ProcessRunOptions<'_>,
+    a: &ChildArgs,
+    gateway: Option<&(ChildId, String)>,
+    remote: &[u32],
+    sup: &mut Supervisor,
+) -> Result<(Vec<ChildId>, Vec<ChildId>), ProcessRunError> {
+    let mut roles: Vec<ChildId> = Vec::new();
+    let mut remote_ids: Vec<ChildId> = Vec::new();
+    for r in &scenario.robots {
+        let mut loc = a.role("localizer", Some(r.id));
+        if o.slam {
+            loc.push("--slam".into());
+        }
+        roles.push(sup.spawn(ChildSpec::new("localizer", Some(r.id), loc))?);
+        if r.depositor.is_some() {
+            roles.push(sup.spawn(ChildSpec::new(
+                "depositor",
+                Some(r.id),
+                a.role("depositor", Some(r.id)),
+            ))?);
+        }
+        if r.follower.is_some() {
+            let mut follower = a.role("follower", Some(r.id));
+            let through = gateway.filter(|_| remote.contains(&r.id));
+            if let Some((_, address)) = through {
+                follower.extend(args(&["--gateway", address]));
+            } else if let Some(w) = o.follower_wait {
+                follower.extend(["--wait".to_string(), w.to_string()]);
+            }
+            let id = sup.spawn(ChildSpec::new("follower", Some(r.id), follower))?;
+            if through.is_some() {
+                remote_ids.push(id);
+            }
+            roles.push(id);
+        }
+    }
+    Ok((roles, remote_ids))
+}
+
+/// Starts the gateway and waits until it serves; its id and address.
+fn spawn_gateway(
+    a: &ChildArgs,
+    start: &RunStart<'_>,
+    sup: &mut Supervisor,
+) -> Result<(ChildId, String), ProcessRunError> {
+    let id = sup.spawn(ChildSpec::new(
+        "gateway",
+        None,
+        a.gateway(start.attach_timeout),
+    ))?;
+    let address = gateway_address(
+        start.node,
+        sup,
+        id,
+        start.started + start.attach_timeout,
+        start.attach_timeout.as_secs_f64(),
+    )?;
+    Ok((id, address))
+}
+
+/// Every robot has gone: stops the gateway `id` as Ctrl-C would, and reports its counters.
+fn stop_gateway(
+    sup: &mut Supervisor,
+    id: ChildId,
+    end_timeout: Duration,
+) -> Result<ProcessReport, ProcessRunError> {
+    sup.signal(id, nix::sys::signal::Signal::SIGTERM);
+    if !sup.wait_exit(id, end_timeout) {
+        return Err(ProcessRunError::NotStopped {
+            who: sup.spec(id).who(),
+            timeout_s: end_timeout.as_secs_f64(),
+        });
+    }
+    let counters: serde_json::Value = sup.summary(id)?;
+    Ok(report("gateway", &counters))
+}
+
+/// The observer, joined once the field is up; a child that fails meanwhile ends the run.
+fn join_observer(
+    scenario: &Scenario,
+    a: &ChildArgs,
+    start: &RunStart<'_>,
+    sup: &mut Supervisor,
+) -> Result<Observer, ProcessRunError> {
+    let field_deadline = start.started + start.attach_timeout;
+    loop {
+        sup.check()?;
+        match Observer::new(
+            start.node,
+            scenario,
+            &a.world,
+            &a.field,
+            Duration::from_millis(100),
+        ) {
+            Ok(obs) => return Ok(obs),
+            Err(ShmError::NoField { .. }) | Err(ShmError::Service { .. })
+                if Instant::now() < field_deadline =>
+            {
+                continue
+            }
+            Err(ShmError::NoField { .. }) => {
+                return Err(ProcessRunError::NoField {
+                    timeout_s: start.attach_timeout.as_secs_f64(),
+                })
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+}
+
+/// Records until the world ends (watching children, Ctrl-C, the time limit); the startup time.
+fn record_until_the_world_ends(
+    observer: &mut Observer,
+    world: ChildId,
+    start: &RunStart<'_>,
+    o: &mut ProcessRunOptions<'_>,
+    sup: &mut Supervisor,
+) -> Result<Option<Duration>, ProcessRunError> {
+    let deadline = start.started + o.timeout;
+    let mut startup = None;
+    while sup.exit_status(world).is_none() {
+        if start.node.wait(Duration::ZERO).is_err() {
+            return Err(ProcessRunError::Interrupted);
+        }
+        sup.check()?;
+        if Instant::now() > deadline {
+            return Err(ProcessRunError::Timeout {
+                timeout_s: o.timeout.as_secs_f64(),
+            });
+        }
+        // Woken by the next frame; a child's exit is seen at most one round later.
+        observer.poll(Duration::from_millis(20))?;
+        if let Some(t) = observer.sim_time_s() {
+            if startup.is_none() && t > 0.0 {
+                startup = Some(start.started.elapsed());
+            }
+            if let Some(p) = o.progress.as_mut() {
+                p(t);
+            }
+        }
+    }
+    Ok(startup)
 }
 
 /// The address a gateway child prints on its first stdout line once it serves

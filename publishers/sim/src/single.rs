@@ -11,18 +11,18 @@
 //!
 //! The run also records what [`report`] draws and what the metrics need.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 
-use field::{FieldConfig, FrameView, OwnedField, RejectReason};
+use field::{DepositMsg, FieldConfig, FrameView, OwnedField, RejectReason};
 use serde::Serialize;
 
 use crate::record::{deposit_peak, ProbeReading, Recording, RobotSample, Snapshot};
-use messages::PoseMsg;
+use messages::{FollowerState, PoseMsg};
 use roles::depositor::Depositor;
 use roles::follower::{Follower, PoseSource};
 use roles::scenario::{ProbeSpec, Scenario};
 use roles::team::MappingTeam;
-use roles::world::World;
+use roles::world::{StepOutput, World};
 use roles::{Filter, ProcessError};
 
 /// What a run ends with, whichever way it ran.
@@ -136,115 +136,185 @@ struct Robot {
     collisions: u64,
 }
 
-/// Runs the scenario in this process and returns its summary and recording.
-pub fn run_single_process(
-    scenario: &Scenario,
-    mut options: SingleProcessOptions<'_>,
-) -> Result<(RunSummary, Recording), ProcessError> {
-    let mut world =
-        World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::World)?;
-    if let Some(m) = scenario.mapping() {
-        world.enable_mapping(m, scenario.seed);
-    }
-    let mut mapping = MappingTeam::new(scenario).map_err(ProcessError::Mapping)?;
-    let mut field = OwnedField::new(scenario.field.clone()).map_err(ProcessError::Field)?;
-    let mut scripted = std::collections::VecDeque::from(scenario.scripted(world.wall_segments())?);
-    let scripted_total = scripted.len() as u64;
-    let mut robots = Vec::new();
-    for r in &scenario.world.robots {
-        let roles = scenario.roles(r.id);
+impl Robot {
+    /// Robot `id`'s roles as the scenario gives them: depositor, follower, localizer.
+    fn new(scenario: &Scenario, id: u32, slam: bool) -> Result<Self, ProcessError> {
+        let roles = scenario.roles(id);
         let depositor = match roles.and_then(|x| x.depositor.clone()) {
             Some(c) => Some(Depositor::new(c).map_err(|source| ProcessError::Depositor {
-                robot: Some(r.id),
+                robot: Some(id),
                 source,
             })?),
             None => None,
         };
-        let follower = match scenario.follower_config(r.id) {
+        let follower = match scenario.follower_config(id) {
             Some(c) => Some((
-                Follower::from_config(r.id, &c).map_err(|source| ProcessError::Follower {
-                    robot: r.id,
-                    source,
-                })?,
+                Follower::from_config(id, &c)
+                    .map_err(|source| ProcessError::Follower { robot: id, source })?,
                 c.steer_by,
             )),
             None => None,
         };
-        robots.push(Robot {
-            id: r.id,
-            filter: Filter::for_robot(scenario, r.id, options.slam)?,
+        Ok(Self {
+            id,
+            filter: Filter::for_robot(scenario, id, slam)?,
             depositor,
             follower,
             pose: None,
             deposit_peak: None,
             collisions: 0,
-        });
+        })
     }
-    let mut rec = Recording {
-        walls: world
-            .wall_segments()
-            .iter()
-            .map(|s| (s.a_m, s.b_m))
-            .collect(),
-        ..Recording::default()
-    };
-    let dt = scenario.world.dt_s;
+
+    /// Step `k` (at `t_s`) before the tick: the pose from the sensors, and the deposit offered.
+    fn localize_and_deposit(&mut self, k: u64, t_s: f64, out: &StepOutput, field: &mut OwnedField) {
+        self.collisions += out.truth.collided as u64;
+        // A rejected sensor message: the localizer keeps its previous estimate, as the
+        // process does (which also logs it).
+        let _ = self.filter.step(&out.sensor);
+        let mut p = self.filter.to_msg(self.id, k);
+        // Simulated time as the stamp: deterministic, and what interval_s measures.
+        p.stamp_ns = (t_s * 1e9).round() as u64;
+        self.pose = Some(p);
+        self.deposit_peak = None;
+        if let Some(d) = self.depositor.as_mut() {
+            if let Ok(Some(m)) = d.process(&p) {
+                self.deposit_peak = Some(deposit_peak(&m));
+                // A rejection is counted by the field.
+                let _ = field.offer(&m);
+            }
+        }
+    }
+
+    /// After the tick: the follower's command into `cmd` (stop on error), its state and level.
+    fn follow(
+        &mut self,
+        pose: PoseMsg,
+        out: &StepOutput,
+        view: &FrameView<'_>,
+        dt: f64,
+        cmd: &mut (f64, f64),
+    ) -> (Option<FollowerState>, Option<f32>) {
+        let mut state = None;
+        let mut level = None;
+        if let Some((f, source)) = self.follower.as_mut() {
+            let steer = match source {
+                PoseSource::Estimate => pose,
+                PoseSource::Truth => messages::truth_as_pose(&out.truth),
+            };
+            match f.step_pose(view, &steer, dt) {
+                Ok(o) => {
+                    *cmd = (o.cmd.v_m_per_s, o.cmd.omega_rad_per_s);
+                    state = Some(o.decision.state);
+                    level = Some(o.decision.sensed_level);
+                }
+                Err(_) => *cmd = (0.0, 0.0),
+            }
+        }
+        (state, level)
+    }
+}
+
+/// Runs the scenario in this process and returns its summary and recording.
+pub fn run_single_process(
+    scenario: &Scenario,
+    mut options: SingleProcessOptions<'_>,
+) -> Result<(RunSummary, Recording), ProcessError> {
+    let mut run = SingleRun::new(scenario, options.slam)?;
     let steps = scenario.steps();
-    let mut frames = FrameSchedule::new(scenario);
-    let mut commands = vec![(0.0, 0.0); robots.len()];
     for k in 0..steps {
-        let outputs = world.step(&commands);
-        let sensed = world.mapping_outputs();
-        let t = world.sim_time_s();
-        while scripted.front().is_some_and(|(ts, _)| *ts <= t + 1e-9) {
-            let (_, m) = scripted.pop_front().expect("checked");
-            let _ = field.offer(&m); // a rejection is counted by the field
+        run.step(k);
+        if let Some(p) = options.progress.as_mut() {
+            p(k + 1, steps);
         }
-        for (r, out) in robots.iter_mut().zip(&outputs) {
-            r.collisions += out.truth.collided as u64;
-            // A rejected sensor message: the localizer keeps its previous estimate, as the
-            // process does (which also logs it).
-            let _ = r.filter.step(&out.sensor);
-            let mut p = r.filter.to_msg(r.id, k);
-            // Simulated time as the stamp: deterministic, and what interval_s measures.
-            p.stamp_ns = (t * 1e9).round() as u64;
-            r.pose = Some(p);
-            r.deposit_peak = None;
-            if let Some(d) = r.depositor.as_mut() {
-                if let Ok(Some(m)) = d.process(&p) {
-                    r.deposit_peak = Some(deposit_peak(&m));
-                    // A rejection is counted by the field.
-                    let _ = field.offer(&m);
-                }
-            }
+    }
+    Ok(run.finish())
+}
+
+/// A single-process run: the world, the field, the robots' roles and what is recorded.
+struct SingleRun<'a> {
+    scenario: &'a Scenario,
+    world: World,
+    mapping: Option<MappingTeam>,
+    field: OwnedField,
+    scripted: VecDeque<(f64, DepositMsg)>,
+    scripted_total: u64,
+    robots: Vec<Robot>,
+    rec: Recording,
+    frames: FrameSchedule,
+    /// Each robot's command, applied by the next step.
+    commands: Vec<(f64, f64)>,
+}
+
+impl<'a> SingleRun<'a> {
+    /// Builds the world, the mapping team, the field, the scripted deposits and the robots.
+    fn new(scenario: &'a Scenario, slam: bool) -> Result<Self, ProcessError> {
+        let mut world =
+            World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::World)?;
+        if let Some(m) = scenario.mapping() {
+            world.enable_mapping(m, scenario.seed);
         }
-        if let Some(team) = mapping.as_mut() {
-            let poses: Vec<PoseMsg> = robots.iter().map(|r| r.pose.expect("set above")).collect();
-            team.step(world.step_count(), &poses, &sensed);
+        let mapping = MappingTeam::new(scenario).map_err(ProcessError::Mapping)?;
+        let field = OwnedField::new(scenario.field.clone()).map_err(ProcessError::Field)?;
+        let scripted = VecDeque::from(scenario.scripted(world.wall_segments())?);
+        let scripted_total = scripted.len() as u64;
+        let mut robots = Vec::new();
+        for r in &scenario.world.robots {
+            robots.push(Robot::new(scenario, r.id, slam)?);
         }
-        field.tick();
-        let ft = field.stepper.sim_time_s;
-        let view = field.view();
-        frames.on_frame(&mut rec, ft, &view);
-        for ((r, out), cmd) in robots.iter_mut().zip(&outputs).zip(commands.iter_mut()) {
+        let rec = Recording {
+            walls: world
+                .wall_segments()
+                .iter()
+                .map(|s| (s.a_m, s.b_m))
+                .collect(),
+            ..Recording::default()
+        };
+        let commands = vec![(0.0, 0.0); robots.len()];
+        Ok(Self {
+            scenario,
+            world,
+            mapping,
+            field,
+            scripted,
+            scripted_total,
+            robots,
+            rec,
+            frames: FrameSchedule::new(scenario),
+            commands,
+        })
+    }
+
+    /// Step `k`, in the order of the lockstep processes (see the module's documentation).
+    fn step(&mut self, k: u64) {
+        let outputs = self.world.step(&self.commands);
+        let sensed = self.world.mapping_outputs();
+        let t = self.world.sim_time_s();
+        while self.scripted.front().is_some_and(|(ts, _)| *ts <= t + 1e-9) {
+            let (_, m) = self.scripted.pop_front().expect("checked");
+            let _ = self.field.offer(&m); // a rejection is counted by the field
+        }
+        for (r, out) in self.robots.iter_mut().zip(&outputs) {
+            r.localize_and_deposit(k, t, out, &mut self.field);
+        }
+        if let Some(team) = self.mapping.as_mut() {
+            let poses: Vec<PoseMsg> = self
+                .robots
+                .iter()
+                .map(|r| r.pose.expect("set above"))
+                .collect();
+            team.step(self.world.step_count(), &poses, &sensed);
+        }
+        self.field.tick();
+        let ft = self.field.stepper.sim_time_s;
+        let view = self.field.view();
+        self.frames.on_frame(&mut self.rec, ft, &view);
+        let dt = self.scenario.world.dt_s;
+        let robots = self.robots.iter_mut().zip(&outputs);
+        for ((r, out), cmd) in robots.zip(self.commands.iter_mut()) {
             let pose = r.pose.expect("set above");
-            let mut state = None;
-            let mut level = None;
-            if let Some((f, source)) = r.follower.as_mut() {
-                let steer = match source {
-                    PoseSource::Estimate => pose,
-                    PoseSource::Truth => messages::truth_as_pose(&out.truth),
-                };
-                match f.step_pose(&view, &steer, dt) {
-                    Ok(o) => {
-                        *cmd = (o.cmd.v_m_per_s, o.cmd.omega_rad_per_s);
-                        state = Some(o.decision.state);
-                        level = Some(o.decision.sensed_level);
-                    }
-                    Err(_) => *cmd = (0.0, 0.0),
-                }
-            }
-            rec.robots.entry(r.id).or_default().push(RobotSample {
+            let (state, level) = r.follow(pose, out, &view, dt, cmd);
+            self.rec.robots.entry(r.id).or_default().push(RobotSample {
                 t_s: t,
                 true_pose: [out.truth.x_m, out.truth.y_m, out.truth.theta_rad],
                 est_pose: Some([pose.x_m, pose.y_m, pose.theta_rad]),
@@ -256,39 +326,45 @@ pub fn run_single_process(
                 deposit_peak: r.deposit_peak,
             });
         }
-        if let Some(p) = options.progress.as_mut() {
-            p(k + 1, steps);
-        }
     }
-    frames.finish(&mut rec, field.stepper.sim_time_s, field.cells());
-    rec.mapping = mapping.map(MappingTeam::finish);
-    let counters = &field.stepper.counters;
-    let summary = RunSummary {
-        steps: world.step_count(),
-        sim_time_s: world.sim_time_s(),
-        ticks: field.stepper.sequence,
-        field: FieldSummary::of(
-            &scenario.field,
-            &field.view(),
-            counters.applied,
-            &counters.rejected,
-        ),
-        robots: robots
-            .iter()
-            .zip(world.poses())
-            .map(|(r, p)| RobotResult {
-                id: r.id,
-                role: role_name(scenario, r.id),
-                true_pose: [p.x_m, p.y_m, p.theta_rad],
-                estimated_pose: r.pose.map(|e| [e.x_m, e.y_m, e.theta_rad]),
-                distance_travelled_m: rec.distance_travelled_m(r.id),
-                trail_abandoned_at_s: rec.trail_abandoned_at_s(r.id),
-                collisions: r.collisions,
-            })
-            .collect(),
-        scripted_deposits: scripted_total,
-    };
-    Ok((summary, rec))
+
+    /// Pictures the last frame and sums up the run.
+    fn finish(mut self) -> (RunSummary, Recording) {
+        let scenario = self.scenario;
+        let field = &self.field;
+        self.frames
+            .finish(&mut self.rec, field.stepper.sim_time_s, field.cells());
+        self.rec.mapping = self.mapping.map(MappingTeam::finish);
+        let rec = self.rec;
+        let counters = &field.stepper.counters;
+        let summary = RunSummary {
+            steps: self.world.step_count(),
+            sim_time_s: self.world.sim_time_s(),
+            ticks: field.stepper.sequence,
+            field: FieldSummary::of(
+                &scenario.field,
+                &field.view(),
+                counters.applied,
+                &counters.rejected,
+            ),
+            robots: self
+                .robots
+                .iter()
+                .zip(self.world.poses())
+                .map(|(r, p)| RobotResult {
+                    id: r.id,
+                    role: role_name(scenario, r.id),
+                    true_pose: [p.x_m, p.y_m, p.theta_rad],
+                    estimated_pose: r.pose.map(|e| [e.x_m, e.y_m, e.theta_rad]),
+                    distance_travelled_m: rec.distance_travelled_m(r.id),
+                    trail_abandoned_at_s: rec.trail_abandoned_at_s(r.id),
+                    collisions: r.collisions,
+                })
+                .collect(),
+            scripted_deposits: self.scripted_total,
+        };
+        (summary, rec)
+    }
 }
 
 /// What a run records of its frames, the same in both modes: the probes' readings and the

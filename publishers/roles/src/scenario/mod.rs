@@ -440,6 +440,31 @@ impl Scenario {
 
     /// Cross-checks the parts: sizes, the field clock against the world step, robot ids.
     pub fn validate(&self) -> Result<(), ScenarioError> {
+        self.validate_clock()?;
+        self.validate_robot_roles()?;
+        for (i, d) in self.deposits.iter().enumerate() {
+            d.messages().map_err(|source| ScenarioError::Deposit {
+                index: i + 1,
+                source,
+            })?;
+        }
+        crate::world::World::new(self.world.clone(), self.seed).map_err(ScenarioError::World)?;
+        self.validate_active_robots()?;
+        let channels = self.field.channels.len() as u32;
+        self.validate_mark_walls(channels)?;
+        self.validate_probes(channels)?;
+        self.validate_snapshot_times()?;
+        self.validate_metric_paths()?;
+        if let Some(w) = &self.metrics.wrong_area {
+            w.validate()?;
+        }
+        self.validate_follower_channels(channels)?;
+        self.validate_mapping()?;
+        self.validate_exploration()
+    }
+
+    /// The field, the duration, and the field's tick against the world's step.
+    fn validate_clock(&self) -> Result<(), ScenarioError> {
         self.field.validate().map_err(ScenarioError::Field)?;
         if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
             return Err(ScenarioError::value(
@@ -456,6 +481,11 @@ impl Scenario {
                 world_dt: self.world.dt_s,
             });
         }
+        Ok(())
+    }
+
+    /// Each robot's roles: a robot of the world, with a valid localizer, depositor, follower.
+    fn validate_robot_roles(&self) -> Result<(), ScenarioError> {
         for r in &self.robots {
             if !self.world.robots.iter().any(|w| w.id == r.id) {
                 return Err(ScenarioError::NoWorldRobot { robot: r.id });
@@ -473,13 +503,11 @@ impl Scenario {
                     .map_err(|source| ScenarioError::Follower { robot, source })?;
             }
         }
-        for (i, d) in self.deposits.iter().enumerate() {
-            d.messages().map_err(|source| ScenarioError::Deposit {
-                index: i + 1,
-                source,
-            })?;
-        }
-        crate::world::World::new(self.world.clone(), self.seed).map_err(ScenarioError::World)?;
+        Ok(())
+    }
+
+    /// `active_robots`, if given, between 1 and the world's robots.
+    fn validate_active_robots(&self) -> Result<(), ScenarioError> {
         if let Some(n) = self.active_robots {
             if n == 0 || n > self.world.robots.len() {
                 return Err(ScenarioError::ActiveRobots {
@@ -488,7 +516,11 @@ impl Scenario {
                 });
             }
         }
-        let channels = self.field.channels.len() as u32;
+        Ok(())
+    }
+
+    /// `mark_walls`, if given: a channel of the field's `channels` and a spacing > 0.
+    fn validate_mark_walls(&self, channels: u32) -> Result<(), ScenarioError> {
         if let Some(m) = &self.mark_walls {
             if m.channel >= channels {
                 return Err(ScenarioError::Channel {
@@ -505,6 +537,11 @@ impl Scenario {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// Each probe: a channel of the field's `channels`, and finite times ≥ 0.
+    fn validate_probes(&self, channels: u32) -> Result<(), ScenarioError> {
         for (i, p) in self.probes.iter().enumerate() {
             if p.channel >= channels {
                 return Err(ScenarioError::Channel {
@@ -520,6 +557,11 @@ impl Scenario {
                 });
             }
         }
+        Ok(())
+    }
+
+    /// `snapshots_s`: finite times ≥ 0.
+    fn validate_snapshot_times(&self) -> Result<(), ScenarioError> {
         if let Some(t) = self
             .snapshots_s
             .iter()
@@ -530,6 +572,11 @@ impl Scenario {
                 value: *t,
             });
         }
+        Ok(())
+    }
+
+    /// `metrics.paths`: at least 2 points each, and positive `every_s` and `over_s`.
+    fn validate_metric_paths(&self) -> Result<(), ScenarioError> {
         for p in &self.metrics.paths {
             if p.points.len() < 2 {
                 return Err(ScenarioError::Metric {
@@ -547,9 +594,11 @@ impl Scenario {
                 });
             }
         }
-        if let Some(w) = &self.metrics.wrong_area {
-            w.validate()?;
-        }
+        Ok(())
+    }
+
+    /// Each follower's channel and explorer (`after_loss`) channel: one of the field's `channels`.
+    fn validate_follower_channels(&self, channels: u32) -> Result<(), ScenarioError> {
         for r in &self.robots {
             let Some(f) = &r.follower else { continue };
             let explorer = f.after_loss.as_ref().and_then(|a| a.channel);
@@ -569,7 +618,11 @@ impl Scenario {
                 }
             }
         }
-        self.validate_mapping()?;
+        Ok(())
+    }
+
+    /// `metrics.exploration`, if given: a non-empty grid of sectors.
+    fn validate_exploration(&self) -> Result<(), ScenarioError> {
         if let Some(e) = &self.metrics.exploration {
             if e.cols == 0 || e.rows == 0 || e.max_m[0] <= e.min_m[0] || e.max_m[1] <= e.min_m[1] {
                 return Err(ScenarioError::Metric {

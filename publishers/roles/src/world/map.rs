@@ -181,122 +181,183 @@ impl OccupancyMap {
     }
 }
 
-fn parse_map_yaml(text: &str) -> Result<MapYaml, MapError> {
-    let mut image = None;
-    let mut resolution = None;
-    let mut origin = None;
-    let mut negate = false;
-    let mut occupied_thresh = (0.65, 0);
-    let mut free_thresh = (0.196, 0);
-    for (i, raw) in text.lines().enumerate() {
-        let line_no = i + 1;
+/// The keys of a map_server YAML file as read, before they are checked: each value with the
+/// line it was on (the thresholds' defaults on line 0).
+struct RawMapYaml {
+    image: Option<String>,
+    resolution: Option<(f64, usize)>,
+    origin: Option<([f64; 3], usize)>,
+    negate: bool,
+    occupied_thresh: (f64, usize),
+    free_thresh: (f64, usize),
+}
+
+impl Default for RawMapYaml {
+    /// No keys read yet: map_server's default thresholds.
+    fn default() -> Self {
+        Self {
+            image: None,
+            resolution: None,
+            origin: None,
+            negate: false,
+            occupied_thresh: (0.65, 0),
+            free_thresh: (0.196, 0),
+        }
+    }
+}
+
+/// The error of line `line`: `reason`.
+fn yaml_err(line: usize, reason: String) -> MapError {
+    MapError::Yaml { line, reason }
+}
+
+/// A number of line `line`, or the error naming it.
+fn yaml_number(v: &str, line: usize) -> Result<f64, MapError> {
+    v.trim()
+        .parse::<f64>()
+        .map_err(|_| yaml_err(line, format!("`{}` is not a number", v.trim())))
+}
+
+/// An `origin` value, `[x, y, yaw]`, of line `line`.
+fn yaml_origin(value: &str, line: usize) -> Result<[f64; 3], MapError> {
+    let inner = value
+        .strip_prefix('[')
+        .and_then(|v| v.strip_suffix(']'))
+        .ok_or_else(|| yaml_err(line, "origin must be `[x, y, yaw]`".into()))?;
+    let parts: Vec<&str> = inner.split(',').collect();
+    if parts.len() != 3 {
+        return Err(yaml_err(line, "origin must be `[x, y, yaw]`".into()));
+    }
+    Ok([
+        yaml_number(parts[0], line)?,
+        yaml_number(parts[1], line)?,
+        yaml_number(parts[2], line)?,
+    ])
+}
+
+impl RawMapYaml {
+    /// Reads one line (`line_no` from 1) of the YAML: a comment, a blank or one known key.
+    fn read_line(&mut self, line_no: usize, raw: &str) -> Result<(), MapError> {
         let line = raw.split('#').next().unwrap_or("").trim();
         if line.is_empty() {
-            continue;
+            return Ok(());
         }
-        let yaml_err = |reason: String| MapError::Yaml {
-            line: line_no,
-            reason,
-        };
         let (key, value) = line
             .split_once(':')
-            .ok_or_else(|| yaml_err(format!("expected `key: value`, got `{line}`")))?;
+            .ok_or_else(|| yaml_err(line_no, format!("expected `key: value`, got `{line}`")))?;
         let value = value.trim();
-        let number = |v: &str| -> Result<f64, MapError> {
-            v.trim()
-                .parse::<f64>()
-                .map_err(|_| yaml_err(format!("`{}` is not a number", v.trim())))
-        };
+        let number = |v: &str| yaml_number(v, line_no);
         match key.trim() {
             "image" => {
                 let name = value.trim_matches(['"', '\'']);
                 if name.is_empty() {
-                    return Err(yaml_err("`image` is empty".into()));
+                    return Err(yaml_err(line_no, "`image` is empty".into()));
                 }
-                image = Some(name.to_string());
+                self.image = Some(name.to_string());
             }
-            "resolution" => resolution = Some((number(value)?, line_no)),
-            "origin" => {
-                let inner = value
-                    .strip_prefix('[')
-                    .and_then(|v| v.strip_suffix(']'))
-                    .ok_or_else(|| yaml_err("origin must be `[x, y, yaw]`".into()))?;
-                let parts: Vec<&str> = inner.split(',').collect();
-                if parts.len() != 3 {
-                    return Err(yaml_err("origin must be `[x, y, yaw]`".into()));
-                }
-                origin = Some((
-                    [number(parts[0])?, number(parts[1])?, number(parts[2])?],
-                    line_no,
-                ));
-            }
-            "negate" => negate = number(value)? != 0.0,
-            "occupied_thresh" => occupied_thresh = (number(value)?, line_no),
-            "free_thresh" => free_thresh = (number(value)?, line_no),
+            "resolution" => self.resolution = Some((number(value)?, line_no)),
+            "origin" => self.origin = Some((yaml_origin(value, line_no)?, line_no)),
+            "negate" => self.negate = number(value)? != 0.0,
+            "occupied_thresh" => self.occupied_thresh = (number(value)?, line_no),
+            "free_thresh" => self.free_thresh = (number(value)?, line_no),
             "mode" => {
                 if value.trim_matches(['"', '\'']) != "trinary" {
-                    return Err(yaml_err(format!(
-                        "mode `{value}` unsupported (trinary only)"
-                    )));
+                    return Err(yaml_err(
+                        line_no,
+                        format!("mode `{value}` unsupported (trinary only)"),
+                    ));
                 }
             }
-            other => return Err(yaml_err(format!("unknown key `{other}`"))),
+            other => return Err(yaml_err(line_no, format!("unknown key `{other}`"))),
         }
+        Ok(())
     }
-    let (resolution_m, line) = resolution.ok_or(MapError::MissingKey("resolution"))?;
-    if !(resolution_m.is_finite() && resolution_m > 0.0) {
-        return Err(MapError::InvalidValue {
-            line,
-            key: "resolution",
-            value: resolution_m,
-            expected: "finite and > 0",
-        });
-    }
-    let (origin, line) = origin.ok_or(MapError::MissingKey("origin"))?;
-    if let Some(v) = origin.iter().find(|v| !v.is_finite()) {
-        return Err(MapError::InvalidValue {
-            line,
-            key: "origin",
-            value: *v,
-            expected: "finite",
-        });
-    }
-    if origin[2].abs() > 1e-9 {
-        return Err(MapError::InvalidValue {
-            line,
-            key: "origin",
-            value: origin[2],
-            expected: "yaw 0: walls are axis-aligned",
-        });
-    }
-    for (key, (v, line)) in [
-        ("occupied_thresh", occupied_thresh),
-        ("free_thresh", free_thresh),
-    ] {
-        if !(0.0..=1.0).contains(&v) {
+
+    /// The resolution, present, finite and > 0.
+    fn resolution_m(&self) -> Result<f64, MapError> {
+        let (resolution_m, line) = self.resolution.ok_or(MapError::MissingKey("resolution"))?;
+        if !(resolution_m.is_finite() && resolution_m > 0.0) {
             return Err(MapError::InvalidValue {
                 line,
-                key,
-                value: v,
-                expected: "in [0, 1]",
+                key: "resolution",
+                value: resolution_m,
+                expected: "finite and > 0",
             });
         }
+        Ok(resolution_m)
     }
-    if free_thresh.0 > occupied_thresh.0 {
-        return Err(MapError::InvalidValue {
-            line: free_thresh.1,
-            key: "free_thresh",
-            value: free_thresh.0,
-            expected: "at most occupied_thresh",
-        });
+
+    /// The origin, present, finite and with yaw 0.
+    fn origin(&self) -> Result<[f64; 3], MapError> {
+        let (origin, line) = self.origin.ok_or(MapError::MissingKey("origin"))?;
+        if let Some(v) = origin.iter().find(|v| !v.is_finite()) {
+            return Err(MapError::InvalidValue {
+                line,
+                key: "origin",
+                value: *v,
+                expected: "finite",
+            });
+        }
+        if origin[2].abs() > 1e-9 {
+            return Err(MapError::InvalidValue {
+                line,
+                key: "origin",
+                value: origin[2],
+                expected: "yaw 0: walls are axis-aligned",
+            });
+        }
+        Ok(origin)
     }
-    Ok(MapYaml {
-        image: image.ok_or(MapError::MissingKey("image"))?,
-        resolution_m,
-        origin,
-        negate,
-        occupied_thresh: occupied_thresh.0,
-    })
+
+    /// Checks both thresholds are in [0, 1] and `free_thresh` at most `occupied_thresh`.
+    fn check_thresholds(&self) -> Result<(), MapError> {
+        let (occupied_thresh, free_thresh) = (self.occupied_thresh, self.free_thresh);
+        for (key, (v, line)) in [
+            ("occupied_thresh", occupied_thresh),
+            ("free_thresh", free_thresh),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(MapError::InvalidValue {
+                    line,
+                    key,
+                    value: v,
+                    expected: "in [0, 1]",
+                });
+            }
+        }
+        if free_thresh.0 > occupied_thresh.0 {
+            return Err(MapError::InvalidValue {
+                line: free_thresh.1,
+                key: "free_thresh",
+                value: free_thresh.0,
+                expected: "at most occupied_thresh",
+            });
+        }
+        Ok(())
+    }
+
+    /// The checked keys: resolution, origin, thresholds, then the image, in that order.
+    fn finish(self) -> Result<MapYaml, MapError> {
+        let resolution_m = self.resolution_m()?;
+        let origin = self.origin()?;
+        self.check_thresholds()?;
+        Ok(MapYaml {
+            image: self.image.ok_or(MapError::MissingKey("image"))?,
+            resolution_m,
+            origin,
+            negate: self.negate,
+            occupied_thresh: self.occupied_thresh.0,
+        })
+    }
+}
+
+/// Parses and checks a map_server YAML file's text.
+fn parse_map_yaml(text: &str) -> Result<MapYaml, MapError> {
+    let mut raw = RawMapYaml::default();
+    for (i, line) in text.lines().enumerate() {
+        raw.read_line(i + 1, line)?;
+    }
+    raw.finish()
 }
 
 /// Parses a PGM image (P5 binary with maxval < 256 or ≥ 256, or P2 ASCII) into
