@@ -113,37 +113,55 @@ pub struct ProcessRunInfo {
     pub reports: Vec<ProcessReport>,
 }
 
-/// The effective scenario (after the flags) as a file every process reads; removed on drop.
-struct ScenarioFile(PathBuf);
+/// The effective scenario (after the flags) as a file every process reads, in a private
+/// temporary directory: a random name, mode 0700, created exclusively (`tempfile`), so nobody
+/// can plant a symlink where it goes or read it. Removed with its directory on drop.
+struct ScenarioFile {
+    path: PathBuf,
+    dir: Option<tempfile::TempDir>,
+}
 
 impl ScenarioFile {
     fn write(scenario: &Scenario, tag: &str) -> Result<Self, ProcessRunError> {
-        let dir = std::env::temp_dir().join(format!("pheromone-{tag}"));
-        let path = dir.join("scenario.toml");
-        let io = |source| ProcessRunError::ScenarioFile {
-            path: path.display().to_string(),
-            source,
+        let io = |path: &std::path::Path| {
+            let path = path.display().to_string();
+            move |source| ProcessRunError::ScenarioFile { path, source }
         };
-        std::fs::create_dir_all(&dir).map_err(io)?;
+        let tmp = std::env::temp_dir();
+        let private = std::os::unix::fs::PermissionsExt::from_mode(0o700);
+        let dir = tempfile::Builder::new()
+            .prefix(&format!("pheromone-{tag}-"))
+            .permissions(private)
+            .tempdir_in(&tmp)
+            .map_err(io(&tmp))?;
+        let path = dir.path().join("scenario.toml");
         let text = scenario.to_toml()?;
-        std::fs::write(&path, text).map_err(io)?;
-        Ok(Self(path))
+        // create_new: O_EXCL, so not even a file that appeared in the fresh directory is followed.
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+            .map_err(io(&path))?;
+        std::io::Write::write_all(&mut file, text.as_bytes()).map_err(io(&path))?;
+        Ok(Self {
+            path,
+            dir: Some(dir),
+        })
     }
 }
 
 impl Drop for ScenarioFile {
     fn drop(&mut self) {
-        // A temporary file that another cleanup already removed is not an error; anything else
+        // A directory that another cleanup already removed is not an error; anything else
         // leaves it behind, and says so.
-        let gone = |r: std::io::Result<()>, what: &std::path::Path| match r {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                eprintln!("sim: cannot remove {}: {e}", what.display())
+        if let Some(dir) = self.dir.take() {
+            let shown = dir.path().display().to_string();
+            match dir.close() {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    eprintln!("sim: cannot remove {shown}: {e}")
+                }
+                _ => {}
             }
-            _ => {}
-        };
-        gone(std::fs::remove_file(&self.0), &self.0);
-        if let Some(d) = self.0.parent() {
-            gone(std::fs::remove_dir(d), d);
         }
     }
 }
@@ -181,7 +199,7 @@ pub fn run_as_processes(
     let tag = run_tag();
     let file = ScenarioFile::write(scenario, &tag)?;
     let mut sup = Supervisor::new(&o.exe);
-    let result = supervise(scenario, o, &tag, &file.0, &mut sup);
+    let result = supervise(scenario, o, &tag, &file.path, &mut sup);
     if result.is_err() {
         sup.stop_all(Duration::from_secs(5));
     }
