@@ -7,6 +7,8 @@ use std::time::Duration;
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 
+use field::shm::{create_node, FieldReader};
+
 use crate::harness::*;
 
 /// `pheromone ARGS` with RLIMIT_RTPRIO 0 and without CAP_SYS_NICE (dropped from the bounding
@@ -68,13 +70,17 @@ fn a_tick_held_up_on_purpose_is_a_missed_deadline_in_the_summary() {
             .argv(),
     );
     let pid = Pid::from_raw(field.pid() as i32);
-    let publishes = || {
-        run(&Cmd::probe(&name).at(0.5, 0.5).timeout(1).argv())
-            .status
-            .success()
-            .then_some(())
+    let node = create_node(&unique("rt-late-reader")).unwrap();
+    let mut reader = FieldReader::attach_within(&node, &name, Duration::from_secs(30)).unwrap();
+    // Ticks on its metronome (the frame published at creation comes before the first deadline).
+    let mut ticked_past = |sequence: u64| {
+        eventually(Duration::from_secs(30), "the field to tick", || {
+            reader.wait_frame(Duration::from_millis(100)).unwrap();
+            let seq = reader.frame().map_or(0, |f| f.header.sequence);
+            (seq > sequence).then_some(seq)
+        })
     };
-    eventually(Duration::from_secs(30), "the field to publish", publishes);
+    let before = ticked_past(5);
     // Stop the process for 300 ms (as Ctrl-Z and `fg` would): the tick due meanwhile starts
     // late, and the field goes on (SIGCONT is no request to stop).
     kill(pid, Signal::SIGSTOP).unwrap();
@@ -87,11 +93,7 @@ fn a_tick_held_up_on_purpose_is_a_missed_deadline_in_the_summary() {
     });
     std::thread::sleep(Duration::from_millis(300));
     kill(pid, Signal::SIGCONT).unwrap();
-    eventually(
-        Duration::from_secs(30),
-        "the field to publish again",
-        publishes,
-    );
+    ticked_past(before + 5);
     field.interrupt();
     let out = field.wait_exit(Duration::from_secs(60));
     assert!(out.status.success(), "{}", stderr(&out));
