@@ -52,7 +52,11 @@ def pytest_collection_modifyitems(items):
 
 def _entries():
     out = set()
-    for d, keep in ((Path("/dev/shm"), lambda n: n.startswith("iox2_")), (IOX_ROOT / "nodes", None),
+    # iceoryx2's entries, and the `<n>.zenoh` segments of a Zenoh session with shared memory.
+    def ours(n: str) -> bool:
+        return n.startswith("iox2_") or n.endswith(".zenoh")
+
+    for d, keep in ((Path("/dev/shm"), ours), (IOX_ROOT / "nodes", None),
                     (IOX_ROOT / "services", None)):
         try:
             for n in os.listdir(d):
@@ -122,7 +126,7 @@ def nothing_left_behind():
     gc.collect()
     our_pids = {os.getpid(), *STARTED_PIDS}
     left = set()
-    for _ in deadline_loop(10, "this run's iceoryx2 entries to disappear"):
+    for _ in deadline_loop(10, "this run's iceoryx2 and Zenoh shared-memory entries to disappear"):
         new = _entries() - before
         tokens, foreign_services = _foreign_tokens(our_pids)
         left = {e for e in new if not any(t in e for t in tokens)}

@@ -151,6 +151,9 @@ def _session(endpoint):
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
     conf.insert_json5("scouting/multicast/enabled", "false")
+    # No shared-memory transport: eclipse-zenoh's would leave a `<n>.zenoh` file in /dev/shm
+    # (our node speaks TCP only; rmw_zenoh's peers likewise fall back to the network).
+    conf.insert_json5("transport/shared_memory/enabled", "false")
     # The node listens once the field has published its first frame.
     conf.insert_json5("connect/timeout_ms", "15000")
     conf.insert_json5(
