@@ -3,7 +3,8 @@
 //! A virtual pheromone field for several processes on one host: geometry, the models of the
 //! seed papers (MODELS.md M1–M4), the fused tick engine, sampling, the shared-memory message
 //! types and the iceoryx2 service (`shm`). `unsafe` is denied (`unsafe_code`) except in the
-//! files that allow it: `shm/server.rs`, `shm/inputs.rs`, `simd.rs` and `wire.rs` (`wire_type!`).
+//! files that allow it: `shm/server.rs`, `shm/inputs.rs`, `simd.rs`, `wire.rs` (`wire_type!`) and
+//! `realtime.rs` (`sched_setscheduler`).
 
 pub mod ambient;
 pub mod checkpoint;
