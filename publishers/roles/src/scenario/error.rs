@@ -73,6 +73,21 @@ pub enum ScenarioError {
     },
     #[error("robot id = {robot}: no [[world.robots]] entry with that id")]
     NoWorldRobot { robot: u32 },
+    #[error("robot id = {robot}: more than one [[robots]] entry with that id")]
+    DuplicateRobot { robot: u32 },
+    #[error(
+        "robot {robot}: its start ({x_m}, {y_m}) m lies outside the field, which spans \
+         x {x0_m}..{x1_m} m, y {y0_m}..{y1_m} m"
+    )]
+    StartOutsideField {
+        robot: u32,
+        x_m: f64,
+        y_m: f64,
+        x0_m: f64,
+        x1_m: f64,
+        y0_m: f64,
+        y1_m: f64,
+    },
     #[error("robot {robot} localizer: {source}")]
     Localizer {
         robot: u32,
@@ -143,6 +158,10 @@ pub enum DepositError {
     TooLong { n: usize, spacing_m: f32 },
     #[error("a line needs all of to_x_m, to_y_m and spacing_m")]
     IncompleteLine,
+    /// The field would refuse it (NaN, a covariance that is not positive definite, a channel
+    /// the field lacks, outside the grid…).
+    #[error("the field would refuse it: {0}")]
+    Refused(#[source] field::Rejection),
 }
 
 impl ScenarioError {

@@ -442,13 +442,9 @@ impl Scenario {
     pub fn validate(&self) -> Result<(), ScenarioError> {
         self.validate_clock()?;
         self.validate_robot_roles()?;
-        for (i, d) in self.deposits.iter().enumerate() {
-            d.messages().map_err(|source| ScenarioError::Deposit {
-                index: i + 1,
-                source,
-            })?;
-        }
+        self.validate_scripted_deposits()?;
         crate::world::World::new(self.world.clone(), self.seed).map_err(ScenarioError::World)?;
+        self.validate_starts_in_field()?;
         self.validate_active_robots()?;
         let channels = self.field.channels.len() as u32;
         self.validate_mark_walls(channels)?;
@@ -466,11 +462,11 @@ impl Scenario {
     /// The field, the duration, and the field's tick against the world's step.
     fn validate_clock(&self) -> Result<(), ScenarioError> {
         self.field.validate().map_err(ScenarioError::Field)?;
-        if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0 && self.duration_s <= 1e9) {
             return Err(ScenarioError::value(
                 "duration_s",
                 self.duration_s,
-                "must be > 0",
+                "must be > 0 s and at most 1e9 s",
             ));
         }
         let field_dt = 1.0 / self.field.tick_hz as f64;
@@ -486,7 +482,10 @@ impl Scenario {
 
     /// Each robot's roles: a robot of the world, with a valid localizer, depositor, follower.
     fn validate_robot_roles(&self) -> Result<(), ScenarioError> {
-        for r in &self.robots {
+        for (i, r) in self.robots.iter().enumerate() {
+            if self.robots[..i].iter().any(|q| q.id == r.id) {
+                return Err(ScenarioError::DuplicateRobot { robot: r.id });
+            }
             if !self.world.robots.iter().any(|w| w.id == r.id) {
                 return Err(ScenarioError::NoWorldRobot { robot: r.id });
             }
@@ -501,6 +500,46 @@ impl Scenario {
             if let Some(f) = &r.follower {
                 f.validate()
                     .map_err(|source| ScenarioError::Follower { robot, source })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Each scripted deposit as the field will take it: every message passes the field's own
+    /// checks (finite numbers, covariance, channel, grid), so none is refused mid-run.
+    fn validate_scripted_deposits(&self) -> Result<(), ScenarioError> {
+        let geometry = self.field.geometry();
+        for (i, d) in self.deposits.iter().enumerate() {
+            let err = |source| ScenarioError::Deposit {
+                index: i + 1,
+                source,
+            };
+            for msg in d.messages().map_err(err)? {
+                field::deposit::prepare(&msg, &geometry, &self.field.channels, &self.field.limits)
+                    .map_err(|r| err(DepositError::Refused(r)))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Every world robot starts on the field's grid (its deposits and readings would be lost).
+    fn validate_starts_in_field(&self) -> Result<(), ScenarioError> {
+        let f = &self.field;
+        let (x0_m, y0_m) = (f.origin_x_m as f64, f.origin_y_m as f64);
+        let x1_m = x0_m + f.width as f64 * f.cell_size_m as f64;
+        let y1_m = y0_m + f.height as f64 * f.cell_size_m as f64;
+        for r in &self.world.robots {
+            let (x_m, y_m) = (r.start.x_m, r.start.y_m);
+            if !((x0_m..=x1_m).contains(&x_m) && (y0_m..=y1_m).contains(&y_m)) {
+                return Err(ScenarioError::StartOutsideField {
+                    robot: r.id,
+                    x_m,
+                    y_m,
+                    x0_m,
+                    x1_m,
+                    y0_m,
+                    y1_m,
+                });
             }
         }
         Ok(())
@@ -818,6 +857,34 @@ mod tests {
         assert!(e.contains("y.toml") && e.contains("duration_s = -1"), "{e}");
         let e = Scenario::load("no-such-scenario").unwrap_err().to_string();
         assert!(e.contains("no-such-scenario") && e.contains("trail"), "{e}");
+    }
+
+    #[test]
+    fn duplicates_robots_off_the_field_nan_deposits_and_endless_runs_are_refused() {
+        let refused = |edit: &dyn Fn(&mut Scenario)| {
+            let mut s = Scenario::load("trail").unwrap();
+            edit(&mut s);
+            s.validate().unwrap_err().to_string()
+        };
+        let e = refused(&|s| s.robots.push(s.robots[0].clone()));
+        assert!(e.contains("more than one [[robots]] entry"), "{e}");
+        let e = refused(&|s| s.world.robots[0].start.x_m = -1e4);
+        assert!(
+            e.contains("lies outside the field") && e.contains("-10000"),
+            "{e}"
+        );
+        let e = refused(&|s| s.deposits[0].amount = f32::NAN);
+        assert!(
+            e.contains("deposit 1: the field would refuse it") && e.contains("non_finite"),
+            "{e}"
+        );
+        let e = refused(&|s| s.deposits[0].channel = 7);
+        assert!(e.contains("deposit 1: the field would refuse it"), "{e}");
+        let e = refused(&|s| s.duration_s = 1e300);
+        assert!(
+            e.contains("duration_s") && e.contains("at most 1e9 s"),
+            "{e}"
+        );
     }
 
     #[test]
