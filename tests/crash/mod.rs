@@ -183,7 +183,7 @@ impl Run {
             }
             let (alive, dead) = self.nodes();
             if alive.is_empty() && dead.is_empty() {
-                return cleaned;
+                return cleaned + self.remove_half_created_nodes();
             }
             assert!(
                 Instant::now() < deadline,
@@ -191,6 +191,38 @@ impl Run {
             );
             std::thread::park_timeout(Duration::from_millis(20));
         }
+    }
+
+    /// Once no node of the run is left: removes the node directories whose details file is
+    /// empty, left by a process SIGKILLed (after its stop's grace period, on a loaded machine)
+    /// while it created its node. iceoryx2 cannot read such an entry, so no cleanup of its own
+    /// removes it; the run's unique prefix makes it this run's. Returns how many it removed
+    /// (printed: a figure, not an error).
+    fn remove_half_created_nodes(&self) -> u64 {
+        let root = self.config.global.node_dir().to_string();
+        let mut removed = 0;
+        for dir in std::fs::read_dir(&root).into_iter().flatten().flatten() {
+            let half_created = std::fs::read_dir(dir.path())
+                .into_iter()
+                .flatten()
+                .flatten()
+                .any(|f| {
+                    let name = f.file_name().to_string_lossy().into_owned();
+                    name.starts_with(&self.prefix)
+                        && name.ends_with("node.details")
+                        && f.metadata().is_ok_and(|m| m.len() == 0)
+                });
+            if half_created && std::fs::remove_dir_all(dir.path()).is_ok() {
+                removed += 1;
+            }
+        }
+        if removed > 0 {
+            println!(
+                "run {}: removed {removed} half-created node entr(ies)",
+                self.prefix
+            );
+        }
+        removed
     }
 
     /// The run's entries in /dev/shm, except iceoryx2's host-wide management segment
