@@ -11,11 +11,13 @@ use crate::checkpoint::{self, Checkpoint, CheckpointError};
 use crate::deposit::RejectReason;
 use crate::lockstep::{self, Participant};
 use crate::shm::{
-    cleanup_dead_nodes, wait_or_stop, FieldServer, ShmError, Standby, StandbyEvent, Svc, Takeover,
-    TickOutcome,
+    wait_or_stop, FieldServer, ShmError, Standby, StandbyEvent, Svc, Takeover, TickOutcome,
 };
-use crate::{FieldConfig, Stepper};
+use crate::FieldConfig;
+
+mod stats;
 use iceoryx2::node::Node;
+use stats::TickStats;
 
 /// How a field process runs.
 #[derive(Debug, Clone)]
@@ -638,140 +640,6 @@ impl Checkpointer {
             self.written += 1;
         }
         Ok(())
-    }
-}
-
-/// What the loop counts: the run's totals and the current second's [`Window`].
-struct TickStats {
-    ticks: u64,
-    max_compute_ns: u64,
-    longest_gap_ns: u64,
-    dead_nodes_cleaned: u64,
-    /// A tick later than this after its deadline is a missed deadline.
-    slack: Duration,
-    missed_deadlines: u64,
-    /// The latest tick start after its deadline (`None`: no tick had a deadline).
-    max_lateness_ns: Option<u64>,
-    /// When the last frame was published (the start, before the first).
-    last_frame_at: Instant,
-    window: Window,
-}
-
-impl TickStats {
-    /// `longest_gap_ns`: a gap before the first tick (a standby's takeover).
-    fn new(longest_gap_ns: u64, slack: Duration) -> Self {
-        Self {
-            ticks: 0,
-            max_compute_ns: 0,
-            longest_gap_ns,
-            dead_nodes_cleaned: 0,
-            slack,
-            missed_deadlines: 0,
-            max_lateness_ns: None,
-            last_frame_at: Instant::now(),
-            window: Window::new(Instant::now()),
-        }
-    }
-
-    /// Counts a frame just published, `late` after its deadline if it had one.
-    fn count(&mut self, out: &TickOutcome, late: Option<Duration>) {
-        if let Some(late) = late {
-            let ns = late.as_nanos() as u64;
-            self.max_lateness_ns = Some(self.max_lateness_ns.unwrap_or(0).max(ns));
-            if late > self.slack {
-                self.missed_deadlines += 1;
-                self.window.missed += 1;
-            }
-        }
-        let now = Instant::now();
-        let gap_ns = now.duration_since(self.last_frame_at).as_nanos() as u64;
-        self.last_frame_at = now;
-        self.longest_gap_ns = self.longest_gap_ns.max(gap_ns);
-        self.ticks += 1;
-        self.max_compute_ns = self.max_compute_ns.max(out.compute_ns);
-        self.window.add(out, gap_ns);
-    }
-
-    /// Once a second: frees what clients killed since the last second held (their ports and
-    /// frames), logs the window's line and starts the next window.
-    fn every_second(&mut self, node: &Node<Svc>, field: &str, stepper: &Stepper) {
-        if self.window.started.elapsed() >= Duration::from_secs(1) {
-            let cleaned = cleanup_dead_nodes(node);
-            self.dead_nodes_cleaned += cleaned;
-            self.window.log(field, stepper, cleaned);
-            self.window = Window::new(Instant::now());
-        }
-    }
-}
-
-/// Per-second statistics for the log line.
-struct Window {
-    started: Instant,
-    ticks: u64,
-    compute_ns: u64,
-    max_compute_ns: u64,
-    applied: u64,
-    rejected: u64,
-    longest_gap_ns: u64,
-    /// Ticks that started later than the slack after their deadline.
-    missed: u64,
-}
-
-impl Window {
-    fn new(started: Instant) -> Self {
-        Self {
-            started,
-            ticks: 0,
-            compute_ns: 0,
-            max_compute_ns: 0,
-            applied: 0,
-            rejected: 0,
-            longest_gap_ns: 0,
-            missed: 0,
-        }
-    }
-
-    fn add(&mut self, out: &TickOutcome, gap_ns: u64) {
-        self.ticks += 1;
-        self.longest_gap_ns = self.longest_gap_ns.max(gap_ns);
-        self.compute_ns += out.compute_ns;
-        self.max_compute_ns = self.max_compute_ns.max(out.compute_ns);
-        self.applied += out.report.deposits_applied as u64;
-        self.rejected += out.rejected;
-    }
-
-    fn log(&self, name: &str, stepper: &Stepper, dead_nodes_cleaned: u64) {
-        let secs = self.started.elapsed().as_secs_f64();
-        let c = stepper.counters;
-        let reasons: Vec<String> = RejectReason::ALL
-            .iter()
-            .filter(|r| c.rejected[**r as usize] > 0)
-            .map(|r| format!("{} {}", r.name(), c.rejected[*r as usize]))
-            .collect();
-        eprintln!(
-            "field '{name}': {:.1} ticks/s, tick {:.3} ms mean / {:.3} ms max, longest_tick_gap_ms {:.3}, \
-             deposits +{} applied +{} rejected (total {} applied, {} rejected{}{}){}{}",
-            self.ticks as f64 / secs,
-            self.compute_ns as f64 / self.ticks.max(1) as f64 / 1e6,
-            self.max_compute_ns as f64 / 1e6,
-            self.longest_gap_ns as f64 / 1e6,
-            self.applied,
-            self.rejected,
-            c.applied,
-            c.rejected_total(),
-            if reasons.is_empty() { "" } else { ": " },
-            reasons.join(", "),
-            if dead_nodes_cleaned > 0 {
-                format!("; cleaned {dead_nodes_cleaned} dead node(s)")
-            } else {
-                String::new()
-            },
-            if self.missed > 0 {
-                format!("; missed {} deadline(s)", self.missed)
-            } else {
-                String::new()
-            }
-        );
     }
 }
 
