@@ -25,6 +25,7 @@ use field::deposit::{prepare, DepositLimits};
 use field::{
     ChannelSpec, DepositMsg, Evaporation, FieldConfig, FrameView, GridGeometry, SamplePose, Stepper,
 };
+use field::{Deposit, Kernel};
 
 const CELL_SIZE_M: f32 = 0.05;
 const TICK_HZ: f32 = 50.0;
@@ -216,15 +217,17 @@ fn bench_deposits(c: &mut Criterion) {
     for sigma_cells in [1u32, 2, 4, 8, 16, 32, 64] {
         let sigma_m = sigma_cells as f32 * CELL_SIZE_M;
         let var = sigma_m * sigma_m;
-        let msg = DepositMsg::ellipse(
-            0,
-            centre,
-            centre,
-            0.2,
-            [var, 0.0, var],
-            3.0 * sigma_m,
-            100.0,
-        );
+        let msg = DepositMsg::from(Deposit {
+            channel: 0,
+            x_m: centre,
+            y_m: centre,
+            kernel: Kernel::Ellipse {
+                tau: 0.2,
+                cov_m2: [var, 0.0, var],
+                range_m: 3.0 * sigma_m,
+                gamma_max: 100.0,
+            },
+        });
         run(&mut group, "ellipse_sigma_cells", sigma_cells, msg);
     }
     let sigma_cells = 8;
@@ -233,13 +236,31 @@ fn bench_deposits(c: &mut Criterion) {
         &mut group,
         "saturating_sigma_cells",
         sigma_cells,
-        DepositMsg::saturating(1, centre, centre, 0.5, sigma_m, 3.0 * sigma_m),
+        DepositMsg::from(Deposit {
+            channel: 1,
+            x_m: centre,
+            y_m: centre,
+            kernel: Kernel::Saturating {
+                rho: 0.5,
+                sigma_m,
+                range_m: 3.0 * sigma_m,
+            },
+        }),
     );
     run(
         &mut group,
         "z_shape_sigma_cells",
         sigma_cells,
-        DepositMsg::z_shape(0, centre, centre, 1.0, sigma_m, 2.0 * sigma_m),
+        DepositMsg::from(Deposit {
+            channel: 0,
+            x_m: centre,
+            y_m: centre,
+            kernel: Kernel::ZShape {
+                amount: 1.0,
+                plateau_m: sigma_m,
+                slope_m: 2.0 * sigma_m,
+            },
+        }),
     );
     group.finish();
 }

@@ -6,6 +6,7 @@ use std::time::Duration;
 
 use field::shm::{create_node, DepositPublisher};
 use field::DepositMsg;
+use field::{Deposit, Kernel};
 
 const FIELD: &str = "main";
 const PERIOD: Duration = Duration::from_millis(200);
@@ -21,7 +22,17 @@ fn main() -> anyhow::Result<()> {
         // Σxy grows from (5 cm)² to (25 cm)² and back: γ = τ/det Σxy falls as uncertainty grows.
         let sigma_m = 0.05 + 0.2 * (0.5 - 0.5 * (angle * 0.3).cos());
         let var = sigma_m * sigma_m;
-        let msg = DepositMsg::ellipse(0, x, y, 0.2, [var, 0.0, var], 1.0, 100.0);
+        let msg = DepositMsg::from(Deposit {
+            channel: 0,
+            x_m: x,
+            y_m: y,
+            kernel: Kernel::Ellipse {
+                tau: 0.2,
+                cov_m2: [var, 0.0, var],
+                range_m: 1.0,
+                gamma_max: 100.0,
+            },
+        });
         match publisher.send(msg) {
             Ok(()) => println!("deposit {step:>4} at ({x:6.2}, {y:6.2}) m, σ = {sigma_m:.3} m"),
             Err(e) => eprintln!("deposit {step} not delivered: {e}"),

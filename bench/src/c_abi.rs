@@ -20,6 +20,7 @@ use std::time::{Duration, Instant};
 
 use field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
+use field::{Deposit, Kernel};
 use pheromone::{
     pheromone_field_attach, pheromone_field_detach, pheromone_frame_borrow,
     pheromone_frame_release, pheromone_last_error, pheromone_sample_gradient,
@@ -270,15 +271,17 @@ fn sampling_cost(
     let side_m = width as f32 * config.cell_size_m;
     for i in 0..16 {
         let t = i as f32 / 16.0;
-        depositor.send(DepositMsg::ellipse(
-            0,
-            side_m * (0.1 + 0.8 * t),
-            side_m * (0.5 + 0.3 * (6.0 * t).sin()),
-            0.05,
-            [0.5, 0.1, 0.8],
-            3.0,
-            100.0,
-        ))?;
+        depositor.send(DepositMsg::from(Deposit {
+            channel: 0,
+            x_m: side_m * (0.1 + 0.8 * t),
+            y_m: side_m * (0.5 + 0.3 * (6.0 * t).sin()),
+            kernel: Kernel::Ellipse {
+                tau: 0.05,
+                cov_m2: [0.5, 0.1, 0.8],
+                range_m: 3.0,
+                gamma_max: 100.0,
+            },
+        }))?;
     }
     let h = CHandle::attach(&name)?;
     let mut reader = FieldReader::attach(&node, &name)?;

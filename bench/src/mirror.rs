@@ -30,6 +30,7 @@ use bridge::{
 };
 use field::shm::{create_node_in, DepositPublisher};
 use field::DepositMsg;
+use field::{Deposit, Kernel};
 use serde::Serialize;
 use supervisor::{ChildSpec, Supervisor};
 
@@ -479,15 +480,17 @@ impl Rig<'_> {
             // Scattered over the field (xorshift), as robots' trails are.
             let mut coord = || scattered(rng, self.side_m);
             let (x, y) = (coord(), coord());
-            depositor.send(DepositMsg::ellipse(
-                0,
-                x,
-                y,
-                0.001,
-                [0.01, 0.0, 0.01],
-                0.5,
-                100.0,
-            ))?;
+            depositor.send(DepositMsg::from(Deposit {
+                channel: 0,
+                x_m: x,
+                y_m: y,
+                kernel: Kernel::Ellipse {
+                    tau: 0.001,
+                    cov_m2: [0.01, 0.0, 0.01],
+                    range_m: 0.5,
+                    gamma_max: 100.0,
+                },
+            }))?;
             next += interval;
             let now = Instant::now();
             if next > now {

@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 use field::run::run_field;
 use field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
+use field::{Deposit, Kernel};
 
 use crate::peer::{say_ready, say_result, Launcher, Peer, PeerResult, PeerSpec};
 use crate::BenchError;
@@ -141,7 +142,17 @@ pub fn measure(
 
 /// The deposit both measurements send: small, at the field's centre.
 fn small_deposit(x_m: f32, y_m: f32) -> DepositMsg {
-    DepositMsg::ellipse(0, x_m, y_m, 0.001, [0.01, 0.0, 0.01], 0.5, 100.0)
+    DepositMsg::from(Deposit {
+        channel: 0,
+        x_m,
+        y_m,
+        kernel: Kernel::Ellipse {
+            tau: 0.001,
+            cov_m2: [0.01, 0.0, 0.01],
+            range_m: 0.5,
+            gamma_max: 100.0,
+        },
+    })
 }
 
 /// Sends deposits at `rate` per second for `window` and measures the field's CPU meanwhile.

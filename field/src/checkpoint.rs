@@ -422,7 +422,7 @@ impl Checkpoint {
 mod tests {
     use super::*;
     use crate::engine::OwnedField;
-    use crate::DepositMsg;
+    use crate::{Deposit, DepositMsg, Kernel};
 
     fn sample() -> (FieldConfig, FrameHeader, Vec<f32>) {
         let config = FieldConfig {
@@ -433,15 +433,17 @@ mod tests {
             ..FieldConfig::default()
         };
         let mut f = OwnedField::new(config.clone()).unwrap();
-        f.offer(&DepositMsg::ellipse(
-            0,
-            0.3,
-            0.4,
-            0.2,
-            [0.01, 0.0, 0.01],
-            1.0,
-            100.0,
-        ))
+        f.offer(&DepositMsg::from(Deposit {
+            channel: 0,
+            x_m: 0.3,
+            y_m: 0.4,
+            kernel: Kernel::Ellipse {
+                tau: 0.2,
+                cov_m2: [0.01, 0.0, 0.01],
+                range_m: 1.0,
+                gamma_max: 100.0,
+            },
+        }))
         .unwrap();
         let r = f.tick();
         f.tick();

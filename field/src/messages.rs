@@ -61,23 +61,8 @@ impl std::str::FromStr for KernelKind {
     }
 }
 
-/// Every kernel's shape parameters, for [`DepositMsg::with_params`].
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct KernelParams {
-    /// Position covariance Σxy as `[xx, xy, yy]` (m²), for ellipse and paper.
-    pub cov: [f32; 3],
-    /// Cut-off radius z_rng (m), for ellipse, paper and saturating.
-    pub range_m: f32,
-    /// γmax, for ellipse and paper.
-    pub gamma_max: f32,
-    /// λ (m), for saturating.
-    pub sigma_m: f32,
-    /// c and σ (m), for z-shape.
-    pub plateau_m: f32,
-    pub slope_m: f32,
-}
-
-/// One deposit request. Unused parameters of a kernel are ignored but must be finite.
+/// One deposit request on the wire. Build it from a typed [`crate::Deposit`] (`deposit.into()`)
+/// rather than field by field. Unused parameters of a kernel are ignored but must be finite.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct DepositMsg {
@@ -110,104 +95,6 @@ pub struct DepositMsg {
 
 // repr(C): numbers and arrays of numbers only.
 crate::wire_type!(DepositMsg, "DepositMsg", size = 64, align = 8);
-
-impl DepositMsg {
-    /// A deposit of any kernel with every parameter given (`pheromone deposit`, scripted
-    /// deposits); parameters the kernel does not use are carried but ignored.
-    pub fn with_params(
-        kernel: KernelKind,
-        channel: u32,
-        x_m: f32,
-        y_m: f32,
-        amount: f32,
-        p: &KernelParams,
-    ) -> Self {
-        Self {
-            channel,
-            kernel: kernel as u32,
-            x_m,
-            y_m,
-            amount,
-            cov_xx: p.cov[0],
-            cov_xy: p.cov[1],
-            cov_yy: p.cov[2],
-            range_m: p.range_m,
-            gamma_max: p.gamma_max,
-            sigma_m: p.sigma_m,
-            plateau_m: p.plateau_m,
-            slope_m: p.slope_m,
-            ..Default::default()
-        }
-    }
-
-    /// A seed 000 deposit: amount τ, pose covariance block Σxy, sensor range z_rng, cap γmax.
-    #[allow(clippy::too_many_arguments)]
-    pub fn ellipse(
-        channel: u32,
-        x_m: f32,
-        y_m: f32,
-        tau: f32,
-        cov: [f32; 3],
-        range_m: f32,
-        gamma_max: f32,
-    ) -> Self {
-        Self {
-            channel,
-            kernel: KernelKind::Ellipse as u32,
-            x_m,
-            y_m,
-            amount: tau,
-            cov_xx: cov[0],
-            cov_xy: cov[1],
-            cov_yy: cov[2],
-            range_m,
-            gamma_max,
-            ..Default::default()
-        }
-    }
-
-    /// A seed 001/004 saturating deposit of strength ρt ∈ [−1, 1].
-    pub fn saturating(
-        channel: u32,
-        x_m: f32,
-        y_m: f32,
-        rho: f32,
-        sigma_m: f32,
-        range_m: f32,
-    ) -> Self {
-        Self {
-            channel,
-            kernel: KernelKind::Saturating as u32,
-            x_m,
-            y_m,
-            amount: rho,
-            sigma_m,
-            range_m,
-            ..Default::default()
-        }
-    }
-
-    /// A seed 002 Z-shape deposit of quantum `amount`.
-    pub fn z_shape(
-        channel: u32,
-        x_m: f32,
-        y_m: f32,
-        amount: f32,
-        plateau_m: f32,
-        slope_m: f32,
-    ) -> Self {
-        Self {
-            channel,
-            kernel: KernelKind::ZShape as u32,
-            x_m,
-            y_m,
-            amount,
-            plateau_m,
-            slope_m,
-            ..Default::default()
-        }
-    }
-}
 
 /// Header of every published frame. Counters are cumulative since the field started (or was
 /// restored).

@@ -5,6 +5,7 @@
 //! the tick period is clamped to it.
 
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, Stepper};
+use field::{Deposit, Kernel};
 
 fn config(evaporation: Evaporation, tick_hz: f32) -> FieldConfig {
     FieldConfig {
@@ -144,15 +145,17 @@ fn deposits_apply_in_a_short_step_as_in_a_tick() {
     let prev = vec![0.0; c.frame_len()];
     let mut next = vec![0.0; c.frame_len()];
     stepper
-        .offer(&DepositMsg::ellipse(
-            0,
-            0.8,
-            0.8,
-            0.01,
-            [0.01, 0.0, 0.01],
-            1.0,
-            10.0,
-        ))
+        .offer(&DepositMsg::from(Deposit {
+            channel: 0,
+            x_m: 0.8,
+            y_m: 0.8,
+            kernel: Kernel::Ellipse {
+                tau: 0.01,
+                cov_m2: [0.01, 0.0, 0.01],
+                range_m: 1.0,
+                gamma_max: 10.0,
+            },
+        }))
         .unwrap();
     let report = stepper.step_dt(&prev, &mut next, 0.0002);
     assert_eq!(report.deposits_applied, 1);

@@ -9,6 +9,7 @@ use field::deposit::{prepare, DepositLimits, REJECT_REASONS};
 use field::models::{ambient_mean_brute, ambient_mean_plane, CELL_LIMIT};
 use field::tune::time_to_threshold_s;
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, GridGeometry, OwnedField, Stepper};
+use field::{Deposit, Kernel};
 use proptest::collection::vec;
 use proptest::prelude::*;
 
@@ -419,15 +420,7 @@ proptest! {
         let det = cov[0] as f64 * cov[2] as f64 - cov[1] as f64 * cov[1] as f64;
         let tau = (gamma * det) as f32;
         let centre = 0.5 * side as f32 * h;
-        let msg = DepositMsg::ellipse(
-            0,
-            centre + jitter.0 * h,
-            centre + jitter.1 * h,
-            tau,
-            cov,
-            range_cells as f32 * h,
-            1.0e6,
-        );
+        let msg = DepositMsg::from(Deposit { channel: 0, x_m: centre + jitter.0 * h, y_m: centre + jitter.1 * h, kernel: Kernel::Ellipse { tau, cov_m2: cov, range_m: range_cells as f32 * h, gamma_max: 1.0e6 } });
         let d = prepare(&msg, &g, &one_channel(false, Evaporation::None), &DepositLimits::default()).unwrap();
         let prev = vec![0.0f32; g.cells()];
         let mut plane = prev.clone();
@@ -450,7 +443,7 @@ proptest! {
         let side = (2.0 * (plateau_m + slope_m) / h).ceil() as usize + 8;
         let g = GridGeometry::new(side as u32, side as u32, h).unwrap();
         let centre = 0.5 * side as f32 * h;
-        let msg = DepositMsg::z_shape(0, centre + jitter.0 * h, centre + jitter.1 * h, amount, plateau_m, slope_m);
+        let msg = DepositMsg::from(Deposit { channel: 0, x_m: centre + jitter.0 * h, y_m: centre + jitter.1 * h, kernel: Kernel::ZShape { amount, plateau_m, slope_m } });
         let d = prepare(&msg, &g, &one_channel(false, Evaporation::None), &DepositLimits::default()).unwrap();
         let prev = vec![0.0f32; g.cells()];
         let mut plane = prev.clone();
@@ -543,7 +536,7 @@ proptest! {
                 // Land several on the same spot: positions snap to a coarse lattice.
                 let x = (px * 4.0).floor() / 4.0 * g.width_m();
                 let y = (py * 4.0).floor() / 4.0 * g.height_m();
-                f.offer(&DepositMsg::saturating(0, x, y, rho, sigma_m, range_m)).unwrap();
+                f.offer(&DepositMsg::from(Deposit { channel: 0, x_m: x, y_m: y, kernel: Kernel::Saturating { rho, sigma_m, range_m } })).unwrap();
             }
             f.tick();
             prop_assert!(f.cells().iter().all(|&v| (lo..=1.0).contains(&v)), "{:?}", f.cells());
@@ -716,8 +709,17 @@ fn vanishing_sigma_on_a_cell_centre_stays_finite() {
     .unwrap();
     for sigma_m in [1.0e-30f32, 1.0e-45, f32::MIN_POSITIVE] {
         // (0.45, 0.45) m is the centre of cell (4, 4).
-        if f.offer(&DepositMsg::saturating(0, 0.45, 0.45, 0.5, sigma_m, 0.2))
-            .is_ok()
+        if f.offer(&DepositMsg::from(Deposit {
+            channel: 0,
+            x_m: 0.45,
+            y_m: 0.45,
+            kernel: Kernel::Saturating {
+                rho: 0.5,
+                sigma_m,
+                range_m: 0.2,
+            },
+        }))
+        .is_ok()
         {
             f.tick();
         }
@@ -891,15 +893,7 @@ proptest! {
         let (mut a, mut b) = (cells.clone(), cells);
         let (mut na, mut nb) = (vec![0.0f32; a.len()], vec![0.0f32; b.len()]);
         for tick in 0..3 {
-            let msg = DepositMsg::ellipse(
-                0,
-                (tick as f32 + 0.5) * 0.05,
-                h as f32 * 0.5 * 0.05,
-                0.5,
-                [0.01, 0.0, 0.01],
-                0.15,
-                1.0,
-            );
+            let msg = DepositMsg::from(Deposit { channel: 0, x_m: (tick as f32 + 0.5) * 0.05, y_m: h as f32 * 0.5 * 0.05, kernel: Kernel::Ellipse { tau: 0.5, cov_m2: [0.01, 0.0, 0.01], range_m: 0.15, gamma_max: 1.0 } });
             let _ = one.offer(&msg);
             let _ = many.offer(&msg);
             one.step(&a, &mut na);

@@ -4,6 +4,7 @@
 //! computes bit-identical frames, whatever order the deposits arrived in at the origin.
 
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, Stepper};
+use field::{Deposit, Kernel};
 
 fn config() -> FieldConfig {
     FieldConfig {
@@ -27,15 +28,17 @@ fn config() -> FieldConfig {
 }
 
 fn deposit(robot: u32, i: u32) -> DepositMsg {
-    let mut d = DepositMsg::ellipse(
-        i % 2,
-        0.3 + (i % 23) as f32 * 0.11,
-        0.4 + (i % 17) as f32 * 0.13,
-        1.0 + (i % 5) as f32,
-        [0.01, 0.0, 0.01],
-        0.4,
-        0.2,
-    );
+    let mut d = DepositMsg::from(Deposit {
+        channel: i % 2,
+        x_m: 0.3 + (i % 23) as f32 * 0.11,
+        y_m: 0.4 + (i % 17) as f32 * 0.13,
+        kernel: Kernel::Ellipse {
+            tau: 1.0 + (i % 5) as f32,
+            cov_m2: [0.01, 0.0, 0.01],
+            range_m: 0.4,
+            gamma_max: 0.2,
+        },
+    });
     d.robot_id = robot;
     d
 }

@@ -4,6 +4,7 @@ use std::time::Duration;
 
 use field::shm::{create_node, DepositPublisher, FieldReader, FieldServer, ShmError};
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
+use field::{Deposit, Kernel};
 
 use testkit::unique;
 
@@ -32,15 +33,17 @@ fn deposit_arrives_in_a_frame_and_evaporates() {
     let mut reader = FieldReader::attach(&node, &name).unwrap();
     let mut depositor = DepositPublisher::attach(&node, &name, 7).unwrap();
     depositor
-        .send(DepositMsg::ellipse(
-            0,
-            3.0,
-            1.5,
-            0.01,
-            [0.01, 0.0, 0.01],
-            1.0,
-            100.0,
-        ))
+        .send(DepositMsg::from(Deposit {
+            channel: 0,
+            x_m: 3.0,
+            y_m: 1.5,
+            kernel: Kernel::Ellipse {
+                tau: 0.01,
+                cov_m2: [0.01, 0.0, 0.01],
+                range_m: 1.0,
+                gamma_max: 100.0,
+            },
+        }))
         .unwrap();
     let out = server.tick().unwrap();
     server.tick().unwrap();
@@ -78,30 +81,44 @@ fn bad_deposits_are_counted_in_the_header_and_never_reach_the_grid() {
         FieldServer::start(&node, &name, small_config(Evaporation::None), None).unwrap();
     let mut depositor = DepositPublisher::attach(&node, &name, 1).unwrap();
     depositor.flush_timeout = Duration::ZERO;
-    let mut nan = DepositMsg::ellipse(0, 3.0, 1.5, 1.0, [0.01, 0.0, 0.01], 1.0, 100.0);
+    let mut nan = DepositMsg::from(Deposit {
+        channel: 0,
+        x_m: 3.0,
+        y_m: 1.5,
+        kernel: Kernel::Ellipse {
+            tau: 1.0,
+            cov_m2: [0.01, 0.0, 0.01],
+            range_m: 1.0,
+            gamma_max: 100.0,
+        },
+    });
     nan.x_m = f32::NAN;
     depositor.send(nan).unwrap();
     depositor
-        .send(DepositMsg::ellipse(
-            0,
-            3.0,
-            1.5,
-            1.0,
-            [0.01, 0.5, 0.01],
-            1.0,
-            100.0,
-        ))
+        .send(DepositMsg::from(Deposit {
+            channel: 0,
+            x_m: 3.0,
+            y_m: 1.5,
+            kernel: Kernel::Ellipse {
+                tau: 1.0,
+                cov_m2: [0.01, 0.5, 0.01],
+                range_m: 1.0,
+                gamma_max: 100.0,
+            },
+        }))
         .unwrap();
     depositor
-        .send(DepositMsg::ellipse(
-            9,
-            3.0,
-            1.5,
-            1.0,
-            [0.01, 0.0, 0.01],
-            1.0,
-            100.0,
-        ))
+        .send(DepositMsg::from(Deposit {
+            channel: 9,
+            x_m: 3.0,
+            y_m: 1.5,
+            kernel: Kernel::Ellipse {
+                tau: 1.0,
+                cov_m2: [0.01, 0.0, 0.01],
+                range_m: 1.0,
+                gamma_max: 100.0,
+            },
+        }))
         .unwrap();
     let out = server.tick().unwrap();
     assert_eq!(out.rejected, 3);

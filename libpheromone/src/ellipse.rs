@@ -8,6 +8,7 @@
 //! covariance is not symmetric (|Σij − Σji| > 1e-6·max|Σ|) or not positive semi-definite
 //! (λmin < −1e-9·max|Σ|), or a value does not fit the `f32` message.
 
+use field::{Deposit, Kernel, KernelParams};
 use field::{DepositMsg, KernelKind};
 
 use crate::error::{bail, Failure};
@@ -131,17 +132,19 @@ pub fn deposit_for(
     // Keep Σxy PSD after rounding to f32: |xy| ≤ √(xx·yy).
     let bound = (xx32 as f64 * yy32 as f64).max(0.0).sqrt();
     let xy32 = xy.clamp(-bound, bound) as f32;
-    let mut msg = DepositMsg::ellipse(
-        p.channel,
-        x,
-        y,
-        sign * p.tau,
-        [xx32, xy32, yy32],
-        p.range_m,
-        p.gamma_max,
-    );
-    msg.kernel = kernel as u32;
-    Ok(msg)
+    let params = KernelParams {
+        cov_m2: [xx32, xy32, yy32],
+        range_m: p.range_m,
+        gamma_max: p.gamma_max,
+        ..KernelParams::default()
+    };
+    let deposit = Deposit {
+        channel: p.channel,
+        x_m: x,
+        y_m: y,
+        kernel: Kernel::from_params(kernel, sign * p.tau, &params),
+    };
+    Ok(deposit.into())
 }
 
 #[cfg(test)]

@@ -382,15 +382,19 @@ pub fn deposit_msg(d: &PheromoneDeposit) -> Result<DepositMsg, Failure> {
         ("deposit plateau_m", d.plateau_m),
         ("deposit slope_m", d.slope_m),
     ])?;
-    let params = field::messages::KernelParams {
-        cov: [d.cov_xx, d.cov_xy, d.cov_yy],
+    let params = field::KernelParams {
+        cov_m2: [d.cov_xx, d.cov_xy, d.cov_yy],
         range_m: d.range_m,
         gamma_max: d.gamma_max,
         sigma_m: d.sigma_m,
         plateau_m: d.plateau_m,
         slope_m: d.slope_m,
     };
-    Ok(DepositMsg::with_params(
-        kernel, d.channel, d.x_m, d.y_m, d.amount, &params,
-    ))
+    let deposit = field::Deposit {
+        channel: d.channel,
+        x_m: d.x_m,
+        y_m: d.y_m,
+        kernel: field::Kernel::from_params(kernel, d.amount, &params),
+    };
+    Ok(deposit.into())
 }

@@ -10,6 +10,7 @@ use std::time::Duration;
 
 use field::shm::{create_node, DepositPublisher, FieldReader, FieldServer};
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, SamplePose};
+use field::{Deposit, Kernel};
 use pheromone::*;
 
 /// Counts this thread's allocations while `COUNTING` is on.
@@ -270,15 +271,17 @@ fn sampling_gives_frame_views_numbers_and_the_hot_calls_do_not_allocate() {
     let mut depositor = DepositPublisher::attach(&node, &name, 1).unwrap();
     for (x, y, ch) in [(1.0, 1.5, 0), (3.2, 0.7, 0), (2.0, 2.0, 1)] {
         depositor
-            .send(DepositMsg::ellipse(
-                ch,
-                x,
-                y,
-                0.02,
-                [0.05, 0.01, 0.08],
-                1.5,
-                100.0,
-            ))
+            .send(DepositMsg::from(Deposit {
+                channel: ch,
+                x_m: x,
+                y_m: y,
+                kernel: Kernel::Ellipse {
+                    tau: 0.02,
+                    cov_m2: [0.05, 0.01, 0.08],
+                    range_m: 1.5,
+                    gamma_max: 100.0,
+                },
+            }))
             .unwrap();
     }
     let h = attach(&name).unwrap();

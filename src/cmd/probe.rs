@@ -4,7 +4,6 @@
 use std::time::Duration;
 
 use clap::Args;
-use field::messages::KernelParams;
 use field::shm::{create_node, DepositPublisher, FieldReader, Frame, Svc};
 use field::{DepositMsg, KernelKind};
 use iceoryx2::prelude::Node;
@@ -234,15 +233,20 @@ pub fn run_deposit(a: DepositArgs) -> anyhow::Result<()> {
         )));
     }
     let mut publisher = DepositPublisher::attach_within(&node, &a.field, a.robot, timeout)?;
-    let params = KernelParams {
-        cov: [a.cov[0], a.cov[1], a.cov[2]],
+    let params = field::KernelParams {
+        cov_m2: [a.cov[0], a.cov[1], a.cov[2]],
         range_m: a.range,
         gamma_max: a.gamma_max,
         sigma_m: a.sigma,
         plateau_m: a.plateau,
         slope_m: a.slope,
     };
-    let msg = DepositMsg::with_params(a.kernel, a.channel, a.x, a.y, a.amount, &params);
+    let msg = DepositMsg::from(field::Deposit {
+        channel: a.channel,
+        x_m: a.x,
+        y_m: a.y,
+        kernel: field::Kernel::from_params(a.kernel, a.amount, &params),
+    });
     publisher.send(msg)?;
     eprintln!(
         "deposit sent to field '{}': {} at ({}, {}) amount {}",

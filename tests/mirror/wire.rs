@@ -6,6 +6,7 @@
 
 use bridge::codec::*;
 use field::messages::InputsHeader;
+use field::{Deposit, Kernel};
 use field::{DepositMsg, FrameHeader};
 #[test]
 fn every_flipped_byte_is_rejected() {
@@ -17,7 +18,16 @@ fn every_flipped_byte_is_rejected() {
         count: 2,
         ..Default::default()
     };
-    let deposits = [DepositMsg::z_shape(0, 1.0, 2.0, 3.0, 0.1, 0.1); 2];
+    let deposits = [DepositMsg::from(Deposit {
+        channel: 0,
+        x_m: 1.0,
+        y_m: 2.0,
+        kernel: Kernel::ZShape {
+            amount: 3.0,
+            plateau_m: 0.1,
+            slope_m: 0.1,
+        },
+    }); 2];
     let bytes = encode_inputs(&h, &deposits);
     assert_eq!(decode_inputs(&bytes).unwrap(), (h, deposits.to_vec()));
     for i in 0..bytes.len() {

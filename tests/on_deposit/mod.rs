@@ -4,6 +4,7 @@ use std::time::Duration;
 
 use field::shm::{create_node, now_ns, DepositPublisher, FieldReader};
 use field::DepositMsg;
+use field::{Deposit, Kernel};
 
 use crate::harness::*;
 
@@ -38,15 +39,17 @@ fn a_deposit_is_published_at_once_instead_of_at_the_next_tick() {
     for (i, x) in [1.0f32, 2.0, 3.0].into_iter().enumerate() {
         sent_ns.push(now_ns());
         depositor
-            .send(DepositMsg::ellipse(
-                0,
-                x,
-                3.0,
-                0.5,
-                [0.01, 0.0, 0.01],
-                1.0,
-                100.0,
-            ))
+            .send(DepositMsg::from(Deposit {
+                channel: 0,
+                x_m: x,
+                y_m: 3.0,
+                kernel: Kernel::Ellipse {
+                    tau: 0.5,
+                    cov_m2: [0.01, 0.0, 0.01],
+                    range_m: 1.0,
+                    gamma_max: 100.0,
+                },
+            }))
             .unwrap();
         let frame = reader
             .wait_until(Duration::from_secs(20), |f| f.view.value(0, x, 3.0) > 1.0)

@@ -10,6 +10,7 @@ use std::time::Duration;
 use field::checkpoint;
 use field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldWatch, Svc};
 use field::DepositMsg;
+use field::{Deposit, Kernel};
 use iceoryx2::prelude::Node;
 
 use crate::harness::*;
@@ -281,7 +282,19 @@ fn a_standby_takes_over_when_the_primary_is_killed_and_keeps_the_deposits() {
     });
     let mut reader = FieldReader::attach_within(&node, &name, WAIT).unwrap();
     let mut depositor = DepositPublisher::attach_within(&node, &name, 7, WAIT).unwrap();
-    let d = |x: f32| DepositMsg::ellipse(0, x, 3.0, 0.5, [0.01, 0.0, 0.01], 1.0, 100.0);
+    let d = |x: f32| {
+        DepositMsg::from(Deposit {
+            channel: 0,
+            x_m: x,
+            y_m: 3.0,
+            kernel: Kernel::Ellipse {
+                tau: 0.5,
+                cov_m2: [0.01, 0.0, 0.01],
+                range_m: 1.0,
+                gamma_max: 100.0,
+            },
+        })
+    };
     depositor.send(d(1.0)).unwrap();
     let before = value_at(&mut reader, 1.0, 3.0, 1.0, "a deposit to the primary");
     // Let the standby mirror the frame with that deposit, then kill the primary.

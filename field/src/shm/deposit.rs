@@ -24,14 +24,20 @@ use crate::messages::DepositMsg;
 /// use std::time::Duration;
 ///
 /// use field::shm::{create_node, DepositPublisher, ShmError};
-/// use field::DepositMsg;
+/// use field::{Deposit, Kernel};
 ///
 /// fn main() -> Result<(), ShmError> {
 ///     let node = create_node("my-depositor")?;
 ///     let mut depositor = DepositPublisher::attach_within(&node, "main", 7, Duration::from_secs(5))?;
 ///     // Seed 000's ellipse kernel on channel 0 at (2 m, 3 m): amount 0.2, the pose covariance
 ///     // [xx, xy, yy] (m²), cut off at 1 m, γ capped at 100.
-///     depositor.send(DepositMsg::ellipse(0, 2.0, 3.0, 0.2, [0.01, 0.0, 0.01], 1.0, 100.0))?;
+///     let deposit = Deposit {
+///         channel: 0,
+///         x_m: 2.0,
+///         y_m: 3.0,
+///         kernel: Kernel::Ellipse { tau: 0.2, cov_m2: [0.01, 0.0, 0.01], range_m: 1.0, gamma_max: 100.0 },
+///     };
+///     depositor.send(deposit.into())?;
 ///     // Waits until the field has taken it (dropping the publisher waits too).
 ///     let taken = depositor.flush(Duration::from_secs(1));
 ///     println!("deposit taken by the field: {taken}");

@@ -27,7 +27,8 @@ pub mod udp;
 use std::time::Duration;
 
 use field::shm::{DepositPublisher, FieldReader, ShmError, Svc};
-use field::{DepositMsg, SamplePose};
+use field::SamplePose;
+use field::{Deposit, Kernel};
 use gateway_codec::{
     DecodeError, DepositReply, DepositRequest, DepositStatus, ErrorReason, Frame, Message,
     PirReply, PirRequest, StatusReply,
@@ -315,15 +316,17 @@ impl Gateway {
             self.counters.deposits_repeated += 1;
             return Ok(Some(reply(DepositStatus::Applied)));
         }
-        let mut msg = DepositMsg::z_shape(
-            d.channel as u32,
-            d.x_m,
-            d.y_m,
-            d.amount,
-            self.config.plateau_m,
-            self.config.slope_m,
-        );
-        msg.robot_id = id as u32;
+        let deposit = Deposit {
+            channel: d.channel as u32,
+            x_m: d.x_m,
+            y_m: d.y_m,
+            kernel: Kernel::ZShape {
+                amount: d.amount,
+                plateau_m: self.config.plateau_m,
+                slope_m: self.config.slope_m,
+            },
+        };
+        let msg = deposit.to_msg(id as u32, 0);
         match self.depositor.send_as(msg) {
             Ok(()) => {
                 self.clients[id as usize].remember(d.seq);

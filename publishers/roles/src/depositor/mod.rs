@@ -22,7 +22,7 @@
 //! that do not fit the `f32` deposit message) are rejected with a [`PoseRejection`] and counted
 //! by reason; no `DepositMsg` carrying a non-finite value is ever produced.
 
-use field::{DepositMsg, KernelKind};
+use field::{Deposit, DepositMsg, Kernel, KernelKind};
 use serde::{Deserialize, Serialize};
 
 use messages::PoseMsg;
@@ -43,6 +43,24 @@ impl EllipseKernel {
         match self {
             EllipseKernel::Ellipse => KernelKind::Ellipse,
             EllipseKernel::Paper => KernelKind::Paper,
+        }
+    }
+
+    /// This kernel with amount τ, covariance Σxy (m²), cut-off and cap.
+    pub fn with(self, tau: f32, cov_m2: [f32; 3], range_m: f32, gamma_max: f32) -> Kernel {
+        match self {
+            EllipseKernel::Ellipse => Kernel::Ellipse {
+                tau,
+                cov_m2,
+                range_m,
+                gamma_max,
+            },
+            EllipseKernel::Paper => Kernel::Paper {
+                tau,
+                cov_m2,
+                range_m,
+                gamma_max,
+            },
         }
     }
 }
@@ -422,7 +440,9 @@ impl Depositor {
         let y = to_f32("y_m", pose.y_m)?;
         let sign = if c.anti_pheromone { -1.0 } else { 1.0 };
         let [xx, xy, yy] = pose.cov_xy();
-        let mut msg = match c.mode {
+        let ellipse =
+            |cov_m2: [f32; 3]| c.kernel.with(sign * c.tau, cov_m2, c.range_m, c.gamma_max);
+        let kernel = match c.mode {
             DepositMode::UncertaintyAware => {
                 let floor = (c.min_sigma_m as f64).powi(2);
                 let xx32 = to_f32("cov_xx", xx.max(floor))?;
@@ -430,38 +450,25 @@ impl Depositor {
                 // Keep Σxy PSD after rounding to f32: |xy| ≤ √(xx·yy).
                 let bound = (xx32 as f64 * yy32 as f64).max(0.0).sqrt();
                 let xy32 = xy.clamp(-bound, bound) as f32;
-                DepositMsg::ellipse(
-                    c.channel,
-                    x,
-                    y,
-                    sign * c.tau,
-                    [xx32, xy32, yy32],
-                    c.range_m,
-                    c.gamma_max,
-                )
+                ellipse([xx32, xy32, yy32])
             }
             DepositMode::Constant => {
                 let s2 = c.constant_sigma_m * c.constant_sigma_m;
-                DepositMsg::ellipse(
-                    c.channel,
-                    x,
-                    y,
-                    sign * c.tau,
-                    [s2, 0.0, s2],
-                    c.range_m,
-                    c.gamma_max,
-                )
+                ellipse([s2, 0.0, s2])
             }
-            DepositMode::Saturating => {
-                let rho = saturating_rho(c.rho_max, c.rho_sigma0_m, xx, yy);
-                DepositMsg::saturating(c.channel, x, y, sign * rho, c.lambda_m, c.range_m)
-            }
+            DepositMode::Saturating => Kernel::Saturating {
+                rho: sign * saturating_rho(c.rho_max, c.rho_sigma0_m, xx, yy),
+                sigma_m: c.lambda_m,
+                range_m: c.range_m,
+            },
         };
-        if c.mode != DepositMode::Saturating {
-            msg.kernel = c.kernel.kind() as u32;
-        }
-        msg.stamp_ns = pose.stamp_ns;
-        msg.robot_id = pose.robot_id;
+        let deposit = Deposit {
+            channel: c.channel,
+            x_m: x,
+            y_m: y,
+            kernel,
+        };
+        let msg = deposit.to_msg(pose.robot_id, pose.stamp_ns);
         debug_assert!(msg_is_finite(&msg));
         Ok(msg)
     }

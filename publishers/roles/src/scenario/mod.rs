@@ -4,7 +4,6 @@
 
 use std::path::Path;
 
-use field::messages::KernelParams;
 use field::{DepositMsg, FieldConfig, KernelKind};
 use serde::{Deserialize, Serialize};
 
@@ -363,8 +362,8 @@ impl ScriptedDeposit {
             .kernel
             .parse::<KernelKind>()
             .map_err(|e| DepositError::Kernel(e.into()))?;
-        let params = KernelParams {
-            cov: self.cov,
+        let params = field::KernelParams {
+            cov_m2: self.cov,
             range_m: self.range_m,
             gamma_max: self.gamma_max,
             sigma_m: self.sigma_m,
@@ -372,7 +371,12 @@ impl ScriptedDeposit {
             slope_m: self.slope_m,
         };
         let one = |x_m: f32, y_m: f32| {
-            DepositMsg::with_params(kernel, self.channel, x_m, y_m, self.amount, &params)
+            DepositMsg::from(field::Deposit {
+                channel: self.channel,
+                x_m,
+                y_m,
+                kernel: field::Kernel::from_params(kernel, self.amount, &params),
+            })
         };
         match (self.to_x_m, self.to_y_m, self.spacing_m) {
             (None, None, None) => Ok(vec![one(self.x_m, self.y_m)]),
