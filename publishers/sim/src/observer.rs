@@ -211,8 +211,7 @@ impl Observer {
         let (t_s, applied) = (frame.header.sim_time_s, frame.header.deposits_this_tick);
         self.lockstep.ack(step, lockstep::role::OBSERVER, 0)?;
         if let Some(f) = self.mcap.as_mut() {
-            f.step(step, t_s, applied);
-            f.frames(&self.rec);
+            f.step(step, t_s, applied, &self.rec);
         }
         Ok(())
     }

@@ -2,7 +2,12 @@
 //! deposits and frames, in the same order, as the single-process runner hands it, so both
 //! modes write the same file for a seed.
 //!
-//! The poses are the world's truths and the localizers' poses the observer receives. The
+//! The poses are the world's truths and the localizers' poses the observer receives. A
+//! localizer whose robot has no depositor does not acknowledge before the tick, so its pose of
+//! step k may come after the frame of step k (before the frame of step k + 1, when the robot
+//! has a follower that waits for it): each step is held until every robot's truth and pose of
+//! it are in ([`HOLD_STEPS`] steps at most), then its poses, deposits and frames go out
+//! together, in the single-process runner's order. The
 //! deposits the field applied are on no service it reads: it predicts them, as the field makes
 //! them, from what it has — the scenario's scripted deposits due by the step's time (the world
 //! sends them) and the deposits its copies of the robots' depositors make — checked with the
@@ -21,6 +26,18 @@ use ros2::record::RecordError;
 
 use crate::record::Recording;
 use crate::ros_record::{McapTotals, PoseRow, SimMcap};
+
+/// The most steps held back waiting for a late pose; the oldest then goes out without it.
+pub const HOLD_STEPS: usize = 64;
+
+/// A step the field has ticked, waiting for its poses.
+struct Tick {
+    step: u64,
+    t_s: f64,
+    deposits: Vec<DepositMsg>,
+    /// The recording's snapshots once this step's frame was recorded.
+    snapshots: usize,
+}
 
 /// One robot's messages of the steps not recorded yet.
 #[derive(Default)]
@@ -41,6 +58,7 @@ pub struct McapFeed {
     geometry: GridGeometry,
     /// In the world's order of robots, as the single-process runner writes them.
     robots: Vec<Pending>,
+    held: VecDeque<Tick>,
 }
 
 impl McapFeed {
@@ -60,6 +78,7 @@ impl McapFeed {
                     ..Pending::default()
                 })
                 .collect(),
+            held: VecDeque::new(),
         }
     }
 
@@ -84,15 +103,45 @@ impl McapFeed {
         }
     }
 
-    /// The field's frame of `step` (field time `frame_t_s`) says it applied `applied` deposits:
-    /// records the poses of the steps up to `step` and the deposits of `step`.
-    pub fn step(&mut self, step: u64, frame_t_s: f64, applied: u32) {
+    /// The field's frame of `step` (field time `frame_t_s`) says it applied `applied` deposits,
+    /// and `rec` has recorded it: the step is held until its poses are in, then written with
+    /// its deposits and frames.
+    pub fn step(&mut self, step: u64, frame_t_s: f64, applied: u32, rec: &Recording) {
         let t_s = self
             .robots
             .iter()
             .find_map(|r| r.truths.get(&step).map(|t| t.0))
             .unwrap_or(frame_t_s);
-        self.rows_through(Some(step));
+        let deposits = self.deposits_of(step, t_s, applied);
+        self.held.push_back(Tick {
+            step,
+            t_s,
+            deposits,
+            snapshots: rec.snapshots.len(),
+        });
+        while let Some(t) = self.held.front() {
+            let complete = self
+                .robots
+                .iter()
+                .all(|r| r.truths.contains_key(&t.step) && r.poses.contains_key(&t.step));
+            if !complete && self.held.len() <= HOLD_STEPS {
+                break;
+            }
+            let t = self.held.pop_front().expect("checked");
+            self.release(t, rec);
+        }
+    }
+
+    /// Writes a held step: the poses up to it, its deposits, the frames recorded with it.
+    fn release(&mut self, t: Tick, rec: &Recording) {
+        self.rows_through(Some(t.step));
+        self.out.deposits(t.t_s, &t.deposits);
+        self.out.frames_up_to(rec, t.snapshots);
+    }
+
+    /// The deposits the field applied at `step` (simulated time `t_s`), as predicted; `applied`
+    /// is the field's own count.
+    fn deposits_of(&mut self, step: u64, t_s: f64, applied: u32) -> Vec<DepositMsg> {
         let mut list = Vec::new();
         while self.scripted.front().is_some_and(|(ts, _)| *ts <= t_s + 1e-9) {
             list.push(self.scripted.pop_front().expect("checked").1);
@@ -118,7 +167,7 @@ impl McapFeed {
             }
             self.out.deposit_mismatches += 1;
         }
-        self.out.deposits(t_s, &list);
+        list
     }
 
     /// Sends the rows of every step up to `last` (all when None) that have a true pose.
@@ -152,13 +201,11 @@ impl McapFeed {
         self.out.poses(rows);
     }
 
-    /// The snapshots the recording took since the last call.
-    pub fn frames(&mut self, rec: &Recording) {
-        self.out.frames(rec);
-    }
-
-    /// The remaining rows and frames, then the file's end.
+    /// The steps still held, the remaining rows and frames, then the file's end.
     pub fn finish(mut self, rec: &Recording) -> Result<McapTotals, RecordError> {
+        while let Some(t) = self.held.pop_front() {
+            self.release(t, rec);
+        }
         self.rows_through(None);
         self.out.frames(rec);
         self.out.finish()

@@ -160,7 +160,12 @@ impl SimMcap {
 
     /// The snapshots `rec` took since the last call.
     pub fn frames(&mut self, rec: &Recording) {
-        while self.snapshots_sent < rec.snapshots.len() {
+        self.frames_up_to(rec, rec.snapshots.len());
+    }
+
+    /// The snapshots of `rec` not sent yet among its first `n`.
+    pub fn frames_up_to(&mut self, rec: &Recording, n: usize) {
+        while self.snapshots_sent < n.min(rec.snapshots.len()) {
             let s = rec.snapshots[self.snapshots_sent].clone();
             self.snapshots_sent += 1;
             self.send(Event::Frame(s));
