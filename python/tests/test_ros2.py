@@ -19,10 +19,10 @@ import time
 
 import numpy as np
 import pytest
+from ros_msgs import GRID, register_grid_map
 
 import pheromone
 from conftest import BIN, STARTED_PIDS, deadline_loop, probe, run_cli
-from ros_msgs import GRID, register_grid_map
 
 REQUIRED = os.environ.get("PHEROMONE_REQUIRE_ZENOH") == "1"
 

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ros_msgs import GRID, register_grid_map
 
 from conftest import BIN, STARTED_PIDS, run_cli
-from ros_msgs import GRID, register_grid_map
 
 try:
     from mcap.reader import make_reader
@@ -91,7 +91,8 @@ def test_a_process_run_records_every_message_rosbags_reads(tmp_path):
     assert rec["deposit_mismatches"] == 0
 
     # The field: one GridMap and OccupancyGrid per frame the run pictured (its snapshot PNGs).
-    shot_times = sorted(float(p.name.rsplit("_t", 1)[1][:-5]) for p in out.glob("field_trail_t*s.png"))
+    shots = out.glob("field_trail_t*s.png")
+    shot_times = sorted(float(p.name.rsplit("_t", 1)[1][:-5]) for p in shots)
     grids = by_topic["/pheromone/grid_map"]
     assert len(grids) == len(shot_times) == 2
     assert [round(t / 1e9, 1) for t, _, _ in grids] == shot_times
@@ -114,7 +115,8 @@ def test_a_process_run_records_every_message_rosbags_reads(tmp_path):
         ests = by_topic[f"/robot_{r}/estimated_pose"]
         assert len(truths) == len(ests) == len(rows) == steps
         stamps = [t for t, _, _ in truths]
-        assert all(a < b for a, b in zip(stamps, stamps[1:])) and 0 < stamps[0] and stamps[-1] <= end_ns
+        assert all(a < b for a, b in zip(stamps, stamps[1:]))
+        assert stamps[0] > 0 and stamps[-1] <= end_ns
         assert [t for t, _, _ in ests] == stamps
         for (t, m, _), row in zip(truths, rows):
             assert t == pytest.approx(float(row["t_s"]) * 1e9, abs=1)
@@ -141,7 +143,7 @@ def test_a_process_run_records_every_message_rosbags_reads(tmp_path):
     deps = by_topic["/pheromone/deposits"]
     assert len(deps) == metrics["field"]["deposits_applied"] > 0
     dstamps = [t for t, _, _ in deps]
-    assert dstamps == sorted(dstamps) and 0 < dstamps[0] and dstamps[-1] <= end_ns
+    assert dstamps == sorted(dstamps) and dstamps[0] > 0 and dstamps[-1] <= end_ns
     for _, d, _ in deps:
         assert d.robot_id == 0 and d.kernel == "ellipse" and d.channel == 0
         assert 0 < d.peak <= d.gamma_max and d.covariance[0] > 0
