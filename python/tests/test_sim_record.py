@@ -9,17 +9,22 @@ unless PHEROMONE_REQUIRE_ZENOH=1 (tests/all.sh), where they fail instead."""
 import csv
 import json
 import os
+import signal
 import subprocess
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 from ros_msgs import GRID, register_grid_map
 
-from conftest import BIN, STARTED_PIDS, run_cli
+from conftest import BIN, STARTED_PIDS, deadline_loop, run_cli
 
 try:
+    from mcap.exceptions import EndOfFile, RecordLengthLimitExceeded
     from mcap.reader import make_reader
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 except ImportError as e:
     if os.environ.get("PHEROMONE_REQUIRE_ZENOH") == "1":
@@ -169,3 +174,53 @@ def test_an_unwritable_record_path_is_refused_up_front(tmp_path):
     assert p.returncode == 2, err
     assert f"--record {bad}" in err
     assert not Path(bad).exists()
+
+
+def _streamed_topics(path):
+    """Topics of the messages a streaming reader reads from a file still being written: up to
+    the chunk being written (the mcap crate writes its length, u64::MAX, when it closes it)."""
+    topics, names = [], {}
+    with open(path, "rb") as fh:
+        try:
+            for r in StreamReader(fh).records:
+                if isinstance(r, Channel):
+                    names[r.id] = r.topic
+                elif isinstance(r, Message):
+                    topics.append(names[r.channel_id])
+        except (EndOfFile, RecordLengthLimitExceeded):
+            pass
+    return topics
+
+
+def test_an_interrupted_run_leaves_a_finished_file(tmp_path):
+    """Readable while the run goes; Ctrl-C stops every process and finishes the file."""
+    mcap = tmp_path / "int.mcap"
+    err = open(tmp_path / "sim.stderr", "wb")
+    p = subprocess.Popen([str(BIN), "sim", "blind-leader", "--duration", "600", "--no-out",
+                          "--record", str(mcap)], stdout=subprocess.DEVNULL, stderr=err)
+    STARTED_PIDS.add(p.pid)
+    try:
+        for _ in deadline_loop(120, "a field frame (at 20 s simulated) in the file being written"):
+            if mcap.exists() and "/pheromone/grid_map" in _streamed_topics(mcap):
+                break
+            time.sleep(0.05)
+        seen = len(_streamed_topics(mcap))
+        p.send_signal(signal.SIGINT)
+        p.wait(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+        err.close()
+    text = (tmp_path / "sim.stderr").read_text(errors="replace")
+    assert p.returncode != 0 and "interrupted" in text, text
+    with open(mcap, "rb") as fh:
+        summary = make_reader(fh).get_summary()
+    assert summary is not None, "the interrupted run's file has no summary"
+    by_topic, _ = read_mcap(mcap)
+    total = sum(len(v) for v in by_topic.values())
+    assert total >= seen > 0
+    assert summary.statistics.message_count == total
+    truths = [t for t, _, _ in by_topic["/robot_0/true_pose"]]
+    assert truths == sorted(truths) and truths[-1] < 600e9
+    assert len(by_topic["/pheromone/grid_map"]) >= 1

@@ -9,10 +9,10 @@ use std::time::Instant;
 
 use roles::follower::StrategyKind;
 use roles::scenario::{Overrides, Scenario};
+use ros2::record::McapRecorder;
 use serde_json::{json, Value};
 use sim::metrics::{mean_sd, metrics_json, scenario_metrics, welch_t};
 use sim::processes::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
-use ros2::record::McapRecorder;
 use sim::record::Recording;
 use sim::ros_record::SimMcap;
 use sim::single::{run_single_process, RunSummary, SingleProcessOptions};

@@ -95,7 +95,8 @@ mod tests {
     fn a_pose_reads_back_with_its_yaw_and_covariance() {
         let cov3 = [0.1, 0.02, 0.003, 0.02, 0.2, 0.004, 0.003, 0.004, 0.05];
         let cov = covariance_6x6(&cov3);
-        let b = pose_with_covariance_cdr(Stamp { sec: 3, nanosec: 5 }, "map", [1.0, -2.0, 0.7], &cov);
+        let b =
+            pose_with_covariance_cdr(Stamp { sec: 3, nanosec: 5 }, "map", [1.0, -2.0, 0.7], &cov);
         let p = PoseWithCovarianceStamped::from_cdr(&b).unwrap();
         assert_eq!((p.stamp_ns, p.frame_id.as_str()), (3_000_000_005, "map"));
         assert_eq!(&p.position[..2], &[1.0, -2.0]);
@@ -108,7 +109,11 @@ mod tests {
     #[test]
     fn a_path_lists_its_poses() {
         let s = |sec| Stamp { sec, nanosec: 0 };
-        let b = path_cdr(s(9), "map", &[(s(1), [0.0, 1.0, 0.0]), (s(2), [2.0, 3.0, 0.0])]);
+        let b = path_cdr(
+            s(9),
+            "map",
+            &[(s(1), [0.0, 1.0, 0.0]), (s(2), [2.0, 3.0, 0.0])],
+        );
         let mut r = CdrReader::new(&b).unwrap();
         assert_eq!((r.i32("").unwrap(), r.u32("").unwrap()), (9, 0));
         assert_eq!(r.string("").unwrap(), "map");

@@ -161,7 +161,10 @@ impl Observer {
                 let row = r.rows.entry(p.step).or_insert_with(|| empty_row(f64::NAN));
                 row.est_pose = Some([p.x_m, p.y_m, p.theta_rad]);
                 row.est_sigma_m = Some(sigma_max_m(&p));
-                let deposit = r.depositor.as_mut().and_then(|d| d.process(&p).ok().flatten());
+                let deposit = r
+                    .depositor
+                    .as_mut()
+                    .and_then(|d| d.process(&p).ok().flatten());
                 if r.depositor.is_some() {
                     row.deposit_peak = deposit.as_ref().map(deposit_peak);
                 }

@@ -143,7 +143,11 @@ impl McapFeed {
     /// is the field's own count.
     fn deposits_of(&mut self, step: u64, t_s: f64, applied: u32) -> Vec<DepositMsg> {
         let mut list = Vec::new();
-        while self.scripted.front().is_some_and(|(ts, _)| *ts <= t_s + 1e-9) {
+        while self
+            .scripted
+            .front()
+            .is_some_and(|(ts, _)| *ts <= t_s + 1e-9)
+        {
             list.push(self.scripted.pop_front().expect("checked").1);
         }
         let mut mine: Vec<DepositMsg> = self
@@ -174,7 +178,11 @@ impl McapFeed {
     fn rows_through(&mut self, last: Option<u64>) {
         let mut steps: Vec<u64> = Vec::new();
         for r in &self.robots {
-            steps.extend(r.truths.keys().take_while(|k| last.is_none_or(|l| **k <= l)));
+            steps.extend(
+                r.truths
+                    .keys()
+                    .take_while(|k| last.is_none_or(|l| **k <= l)),
+            );
         }
         steps.sort_unstable();
         steps.dedup();
