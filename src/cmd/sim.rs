@@ -9,12 +9,12 @@ use std::time::Instant;
 
 use roles::follower::StrategyKind;
 use roles::scenario::{Overrides, Scenario};
-use ros2::record::McapRecorder;
+use ros2::record::{McapRecorder, RecordError};
 use serde_json::{json, Value};
 use sim::metrics::{mean_sd, metrics_json, scenario_metrics, welch_t};
 use sim::processes::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
 use sim::record::Recording;
-use sim::ros_record::SimMcap;
+use sim::ros_record::{McapTotals, SimMcap};
 use sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 
 use super::roles::load_scenario;
@@ -75,29 +75,9 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             "separate processes"
         }
     );
-    let mut record = start_record(&a, &scenario)?;
+    let record = start_record(&a, &scenario)?;
     let started = Instant::now();
-    let bar = progress_bar(scenario.steps());
-    let (summary, rec, processes, record) = if a.single_process {
-        let mut tick = |k: u64, _n: u64| bar.set_position(k);
-        let out = run_single_process(
-            &scenario,
-            SingleProcessOptions {
-                slam: a.slam,
-                progress: Some(&mut tick),
-                record: record.as_mut(),
-            },
-        )?;
-        let totals = record.map(SimMcap::finish).transpose();
-        (out.0, out.1, None, totals)
-    } else {
-        let dt = scenario.world.dt_s;
-        let mut tick = |t: f64| bar.set_position((t / dt).round() as u64);
-        let (summary, rec, info) = run_processes(&a, &scenario, Some(&mut tick), record)?;
-        let totals = Ok(info.record.clone());
-        (summary, rec, Some(info), totals)
-    };
-    bar.finish_and_clear();
+    let (summary, rec, processes, record) = run_once(&a, &scenario, record)?;
     let wall_s = started.elapsed().as_secs_f64();
     let mut metrics = metrics_json(&scenario, &summary, &rec);
     metrics["mode"] = json!(if a.single_process {
@@ -143,6 +123,45 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         println!("{metrics}");
     }
     Ok(record?)
+}
+
+/// What one run gives: its summary, recording, processes and, with `--record`, what the file
+/// holds (or why it could not be written).
+type RunOutcome = (
+    RunSummary,
+    Recording,
+    Option<ProcessRunInfo>,
+    Result<Option<McapTotals>, RecordError>,
+);
+
+/// The scenario run once, in the mode of `a`, with a progress bar.
+fn run_once(
+    a: &SimArgs,
+    scenario: &Scenario,
+    mut record: Option<SimMcap>,
+) -> anyhow::Result<RunOutcome> {
+    let bar = progress_bar(scenario.steps());
+    let out = if a.single_process {
+        let mut tick = |k: u64, _n: u64| bar.set_position(k);
+        let out = run_single_process(
+            scenario,
+            SingleProcessOptions {
+                slam: a.slam,
+                progress: Some(&mut tick),
+                record: record.as_mut(),
+            },
+        )?;
+        let totals = record.map(SimMcap::finish).transpose();
+        (out.0, out.1, None, totals)
+    } else {
+        let dt = scenario.world.dt_s;
+        let mut tick = |t: f64| bar.set_position((t / dt).round() as u64);
+        let (summary, rec, info) = run_processes(a, scenario, Some(&mut tick), record)?;
+        let totals = Ok(info.record.clone());
+        (summary, rec, Some(info), totals)
+    };
+    bar.finish_and_clear();
+    Ok(out)
 }
 
 /// `--record FILE`: the file created (refused with exit 2 if it cannot be) and its writer
