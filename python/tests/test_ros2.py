@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 import pytest
+from ros_msgs import GRID, register_grid_map
 
 import pheromone
 from conftest import BIN, STARTED_PIDS, deadline_loop, probe, run_cli
@@ -34,21 +35,6 @@ except ImportError as e:
         raise
     pytest.skip(f"pip install './python[zenoh]' rosbags mcap for these tests ({e})",
                 allow_module_level=True)
-
-# grid_map_msgs, branch jazzy of ANYbotics/grid_map (comments left out).
-GRID_MAP_MSG = """std_msgs/Header header
-GridMapInfo info
-string[] layers
-string[] basic_layers
-std_msgs/Float32MultiArray[] data
-uint16 outer_start_index
-uint16 inner_start_index
-"""
-GRID_MAP_INFO_MSG = """float64 resolution
-float64 length_x
-float64 length_y
-geometry_msgs/Pose pose
-"""
 
 TWO_CHANNELS = """
 width = 40
@@ -67,19 +53,13 @@ name = "other"
 evaporation = { model = "none" }
 """
 
-GRID = "grid_map_msgs/msg/GridMap"
 OCC = "nav_msgs/msg/OccupancyGrid"
 POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 
 
 @pytest.fixture(scope="module")
 def store():
-    ts = get_typestore(Stores.ROS2_JAZZY)
-    types = {}
-    types.update(get_types_from_msg(GRID_MAP_MSG, GRID))
-    types.update(get_types_from_msg(GRID_MAP_INFO_MSG, "grid_map_msgs/msg/GridMapInfo"))
-    ts.register(types)
-    return ts
+    return register_grid_map(get_typestore(Stores.ROS2_JAZZY), get_types_from_msg)
 
 
 def dds(name):

@@ -9,10 +9,12 @@ use std::time::Instant;
 
 use roles::follower::StrategyKind;
 use roles::scenario::{Overrides, Scenario};
+use ros2::record::{McapRecorder, RecordError};
 use serde_json::{json, Value};
 use sim::metrics::{mean_sd, metrics_json, scenario_metrics, welch_t};
 use sim::processes::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
 use sim::record::Recording;
+use sim::ros_record::{McapTotals, SimMcap};
 use sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 
 use super::roles::load_scenario;
@@ -29,6 +31,12 @@ fn follower_strategy(a: &SimArgs) -> anyhow::Result<Option<StrategyKind>> {
 
 pub fn run(a: SimArgs) -> anyhow::Result<()> {
     if super::graph::is_regions(&a.scenario) {
+        if a.record.is_some() {
+            return Err(bad(format!(
+                "--record: '{}' is a node-graph scenario: it has no field to record",
+                a.scenario
+            )));
+        }
         return super::graph::run_sim(&a);
     }
     let mut scenario = load_scenario(&a.scenario)?;
@@ -67,25 +75,9 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             "separate processes"
         }
     );
+    let record = start_record(&a, &scenario)?;
     let started = Instant::now();
-    let bar = progress_bar(scenario.steps());
-    let (summary, rec, processes) = if a.single_process {
-        let mut tick = |k: u64, _n: u64| bar.set_position(k);
-        let out = run_single_process(
-            &scenario,
-            SingleProcessOptions {
-                slam: a.slam,
-                progress: Some(&mut tick),
-            },
-        )?;
-        (out.0, out.1, None)
-    } else {
-        let dt = scenario.world.dt_s;
-        let mut tick = |t: f64| bar.set_position((t / dt).round() as u64);
-        let (summary, rec, info) = run_processes(&a, &scenario, Some(&mut tick))?;
-        (summary, rec, Some(info))
-    };
-    bar.finish_and_clear();
+    let (summary, rec, processes, record) = run_once(&a, &scenario, record)?;
     let wall_s = started.elapsed().as_secs_f64();
     let mut metrics = metrics_json(&scenario, &summary, &rec);
     metrics["mode"] = json!(if a.single_process {
@@ -101,6 +93,20 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         metrics["startup_s"] = json!(info.startup_s);
         metrics["processes"] = serde_json::to_value(&info.reports)?;
     }
+    // A file that could not be written fails the run, after its other outputs.
+    let record = record.map(|totals| {
+        if let Some(t) = totals {
+            eprintln!(
+                "sim: recorded {} messages ({} frames, {} poses, {} deposits) in {}",
+                t.messages,
+                t.frames,
+                t.poses,
+                t.deposits,
+                t.file.display()
+            );
+            metrics["record"] = json!(t);
+        }
+    });
     print_summary(&metrics);
     if let Some(dir) = out_dir(&a, &scenario) {
         let mut files =
@@ -116,7 +122,57 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     if a.json {
         println!("{metrics}");
     }
-    Ok(())
+    Ok(record?)
+}
+
+/// What one run gives: its summary, recording, processes and, with `--record`, what the file
+/// holds (or why it could not be written).
+type RunOutcome = (
+    RunSummary,
+    Recording,
+    Option<ProcessRunInfo>,
+    Result<Option<McapTotals>, RecordError>,
+);
+
+/// The scenario run once, in the mode of `a`, with a progress bar.
+fn run_once(
+    a: &SimArgs,
+    scenario: &Scenario,
+    mut record: Option<SimMcap>,
+) -> anyhow::Result<RunOutcome> {
+    let bar = progress_bar(scenario.steps());
+    let out = if a.single_process {
+        let mut tick = |k: u64, _n: u64| bar.set_position(k);
+        let out = run_single_process(
+            scenario,
+            SingleProcessOptions {
+                slam: a.slam,
+                progress: Some(&mut tick),
+                record: record.as_mut(),
+            },
+        )?;
+        let totals = record.map(SimMcap::finish).transpose();
+        (out.0, out.1, None, totals)
+    } else {
+        let dt = scenario.world.dt_s;
+        let mut tick = |t: f64| bar.set_position((t / dt).round() as u64);
+        let (summary, rec, info) = run_processes(a, scenario, Some(&mut tick), record)?;
+        let totals = Ok(info.record.clone());
+        (summary, rec, Some(info), totals)
+    };
+    bar.finish_and_clear();
+    Ok(out)
+}
+
+/// `--record FILE`: the file created (refused with exit 2 if it cannot be) and its writer
+/// started.
+fn start_record(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<Option<SimMcap>> {
+    let Some(path) = &a.record else {
+        return Ok(None);
+    };
+    let file = McapRecorder::create(path)
+        .map_err(|e| bad(format!("--record {}: {}", path.display(), e)))?;
+    Ok(Some(SimMcap::start(file, scenario)?))
 }
 
 fn out_dir(a: &SimArgs, scenario: &Scenario) -> Option<PathBuf> {
@@ -209,11 +265,12 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
                     SingleProcessOptions {
                         slam: a.slam,
                         progress: None,
+                        record: None,
                     },
                 )?
                 .1
             } else {
-                run_processes(a, &s, None)?.1
+                run_processes(a, &s, None, None)?.1
             };
             let m = scenario_metrics(&s, &rec);
             values.push(m["exploration"]["mean"].as_f64().unwrap_or(f64::NAN));
@@ -270,6 +327,7 @@ fn run_processes(
     a: &SimArgs,
     scenario: &Scenario,
     progress: Option<&mut dyn FnMut(f64)>,
+    record: Option<SimMcap>,
 ) -> anyhow::Result<(RunSummary, Recording, ProcessRunInfo)> {
     let stall = super::seconds("stall-timeout", a.stall_timeout)?;
     if let Some(v) = &a.view {
@@ -292,6 +350,7 @@ fn run_processes(
             view: a.view.clone(),
             remote: a.remote,
             follower_wait: a.follower_wait,
+            record,
         },
     )?)
 }

@@ -44,6 +44,18 @@ pub struct SimArgs {
     /// Write no files.
     #[arg(long, conflicts_with = "out")]
     pub no_out: bool,
+    /// Also write the run, as it goes, to this ROS 2 MCAP file (profile ros2, CDR; for Foxglove
+    /// and `ros2 bag play`), stamped with simulated time: the field as
+    /// grid_map_msgs/msg/GridMap (/pheromone/grid_map) and one nav_msgs/msg/OccupancyGrid per
+    /// channel at each frame the run records (snapshots_s and the last), every robot's true
+    /// and estimated pose at every step (/robot_<ID>/true_pose, …/estimated_pose:
+    /// geometry_msgs/msg/PoseWithCovarianceStamped) and its paths so far with each field frame
+    /// (…/true_path, …/estimated_path: nav_msgs/msg/Path), and every deposit the field applied
+    /// (/pheromone/deposits: pheromone_msgs/msg/Deposit). Both modes write the same messages;
+    /// a run that fails or is interrupted leaves a file readable up to its last message
+    /// (docs/ros2.md). Not with --trials or node-graph scenarios.
+    #[arg(long, value_name = "FILE.mcap", conflicts_with = "trials")]
+    pub record: Option<PathBuf>,
     /// Print one JSON metrics object on stdout.
     #[arg(long)]
     pub json: bool,

@@ -62,18 +62,24 @@ pub fn frame_messages(reader: &FieldReader, frame_id: &str) -> Option<FrameMessa
         stamp: Stamp::from_ns(wall_from_monotonic_ns(h.stamp_ns)),
         frame_id,
     };
-    let mut messages = Vec::with_capacity(1 + channels);
-    messages.push(grid_map_cdr(&f));
-    for c in 0..channels {
-        messages.push(occupancy_grid_cdr(&f, c).0);
-    }
     Some(FrameMessages {
         sequence: h.sequence,
         stamp_mono_ns: h.stamp_ns,
         stamp: f.stamp,
         channels,
-        messages,
+        messages: frame_cdr(&f),
     })
+}
+
+/// A frame's messages in topic order (see [`FieldTopics`]): the GridMap, then each channel's
+/// OccupancyGrid. What `pheromone ros2` publishes, `pheromone record` and `sim --record` write.
+pub fn frame_cdr(f: &FrameRef<'_>) -> Vec<Vec<u8>> {
+    let mut messages = Vec::with_capacity(1 + f.channels);
+    messages.push(grid_map_cdr(f));
+    for c in 0..f.channels {
+        messages.push(occupancy_grid_cdr(f, c).0);
+    }
+    messages
 }
 
 /// One frame's messages.

@@ -37,6 +37,11 @@ impl Stamp {
         }
     }
 
+    /// From seconds (a simulated time), rounded to the nanosecond.
+    pub fn from_secs(t_s: f64) -> Self {
+        Self::from_ns((t_s * 1e9).round() as i64)
+    }
+
     pub fn as_ns(self) -> i64 {
         self.sec as i64 * 1_000_000_000 + self.nanosec as i64
     }
@@ -65,7 +70,8 @@ pub fn layer_name(c: usize) -> String {
     format!("channel_{c}")
 }
 
-fn header(w: &mut CdrWriter, stamp: Stamp, frame_id: &str) {
+/// A `std_msgs/msg/Header`.
+pub(crate) fn header(w: &mut CdrWriter, stamp: Stamp, frame_id: &str) {
     w.i32(stamp.sec);
     w.u32(stamp.nanosec);
     w.string(frame_id);

@@ -5,6 +5,8 @@
 //! - [`cdr`]: the CDR writer and reader.
 //! - [`grid`]: a frame as `grid_map_msgs/msg/GridMap` and `nav_msgs/msg/OccupancyGrid`.
 //! - [`pose`]: `geometry_msgs/msg/PoseWithCovarianceStamped` → the depositor's pose.
+//! - [`robot`]: poses (`PoseWithCovarianceStamped`), paths (`nav_msgs/msg/Path`) and deposits
+//!   (`pheromone_msgs/msg/Deposit`), what `pheromone sim --record` writes besides the field.
 //! - [`graph`]: rmw_zenoh's key expressions, liveliness tokens, GIDs and attachments.
 //! - [`frames`]: the topics of a field and the messages of its current frame.
 //! - [`record`]: ROS 2 MCAP files.
@@ -19,4 +21,5 @@ pub mod grid;
 pub mod node;
 pub mod pose;
 pub mod record;
+pub mod robot;
 pub mod types;

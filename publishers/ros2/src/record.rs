@@ -55,6 +55,11 @@ impl McapRecorder {
         })
     }
 
+    /// The file's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
     fn err(&self, action: &'static str, e: impl std::fmt::Display) -> RecordError {
         RecordError {
             path: self.path.clone(),

@@ -117,6 +117,9 @@ const MA_LAYOUT: &str = "std_msgs/msg/MultiArrayLayout";
 const F32_MULTI: &str = "std_msgs/msg/Float32MultiArray";
 const GRID_MAP_INFO: &str = "grid_map_msgs/msg/GridMapInfo";
 pub const GRID_MAP: &str = "grid_map_msgs/msg/GridMap";
+/// This project's deposit message (docs/ros2.md, "Deposits"): no standard ROS type carries a
+/// deposit's kernel and parameters.
+pub const DEPOSIT: &str = "pheromone_msgs/msg/Deposit";
 
 /// The fields of message type `name` (`pkg/msg/Name`), if this crate knows it.
 pub fn fields(name: &str) -> Option<&'static [Field]> {
@@ -171,6 +174,26 @@ pub fn fields(name: &str) -> Option<&'static [Field]> {
             seq("data", Msg(F32_MULTI)),
             f("outer_start_index", Uint16),
             f("inner_start_index", Uint16),
+        ],
+        DEPOSIT => fields![
+            f("header", Msg(HEADER)),
+            f("robot_id", Uint32),
+            f("channel", Uint32),
+            f("kernel", Str),
+            f("x", Float32),
+            f("y", Float32),
+            f("amount", Float32),
+            f("peak", Float32),
+            Field {
+                name: "covariance",
+                elem: Float32,
+                shape: Shape::Array(3),
+            },
+            f("range", Float32),
+            f("gamma_max", Float32),
+            f("sigma", Float32),
+            f("plateau", Float32),
+            f("slope", Float32),
         ],
         _ => return None,
     })

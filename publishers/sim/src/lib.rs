@@ -1,6 +1,7 @@
 //! Running a scenario: its file format ([`scenario`]), the single-process runner ([`single`]),
 //! the run as separate processes ([`processes`]) with its [`supervisor`] and [`observer`],
-//! what a run records ([`record`]) and the metrics computed from it ([`metrics`], seed 000's
+//! what a run records ([`record`]; as a ROS 2 MCAP file, [`ros_record`] and the observer's
+//! [`ros_feed`]) and the metrics computed from it ([`metrics`], seed 000's
 //! `wrong_area` in [`wrong_area`]), and seed 004's grid of experiments ([`sweep`], its statistics in
 //! [`sweep_stats`]).
 
@@ -9,6 +10,8 @@ pub mod metrics;
 pub mod observer;
 pub mod processes;
 pub mod record;
+pub mod ros_feed;
+pub mod ros_record;
 pub mod single;
 pub mod sweep;
 pub mod sweep_stats;

@@ -10,6 +10,9 @@
 //! robot's [`Depositor`] (the same library type, deterministic) on the poses it receives, which
 //! are the depositor process's input, and records the peak of each deposit that copy makes.
 //!
+//! With `--record` it also hands what it sees to a [`McapFeed`] (the MCAP file of the run),
+//! after acknowledging each frame; the feed's writer thread serializes and writes.
+//!
 //! When the scenario maps (seed 004), it also receives each robot's scan and rendezvous
 //! measurement from the world and, at the end, runs the run's [`MappingTeam`] on them and on the
 //! poses, step by step, as the single-process runner does.
@@ -24,6 +27,8 @@ use field::wire::{ready_service as wake, ROBOT_LINK};
 use iceoryx2::node::Node;
 
 use crate::record::{deposit_peak, Recording, RobotSample};
+use crate::ros_feed::McapFeed;
+use crate::ros_record::McapTotals;
 use crate::single::{sigma_max_m, FrameSchedule};
 use messages::{
     CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, RendezvousMsg, ScanMsg, TruthMsg,
@@ -32,6 +37,7 @@ use roles::depositor::Depositor;
 use roles::scenario::Scenario;
 use roles::team::MappingTeam;
 use roles::RobotServices;
+use ros2::record::RecordError;
 
 struct RobotLinks {
     id: u32,
@@ -62,6 +68,8 @@ pub struct Observer {
     /// Sequence of the newest frame recorded.
     last_sequence: Option<u64>,
     last_frame_time_s: f64,
+    /// `--record`: the run's MCAP file.
+    mcap: Option<McapFeed>,
 }
 
 impl Observer {
@@ -121,6 +129,7 @@ impl Observer {
             rec: Recording::default(),
             last_sequence: None,
             last_frame_time_s: -1.0,
+            mcap: None,
         })
     }
 
@@ -141,6 +150,9 @@ impl Observer {
                     .or_insert_with(|| empty_row(t.sim_time_s));
                 row.t_s = t.sim_time_s;
                 row.true_pose = [t.x_m, t.y_m, t.theta_rad];
+                if let Some(f) = self.mcap.as_mut() {
+                    f.truth(r.id, t.step, t.sim_time_s, row.true_pose);
+                }
             }
             while let Some(p) = r.pose.try_recv()? {
                 if r.mapping.is_some() {
@@ -149,8 +161,15 @@ impl Observer {
                 let row = r.rows.entry(p.step).or_insert_with(|| empty_row(f64::NAN));
                 row.est_pose = Some([p.x_m, p.y_m, p.theta_rad]);
                 row.est_sigma_m = Some(sigma_max_m(&p));
-                if let Some(d) = r.depositor.as_mut() {
-                    row.deposit_peak = d.process(&p).ok().flatten().map(|m| deposit_peak(&m));
+                let deposit = r
+                    .depositor
+                    .as_mut()
+                    .and_then(|d| d.process(&p).ok().flatten());
+                if r.depositor.is_some() {
+                    row.deposit_peak = deposit.as_ref().map(deposit_peak);
+                }
+                if let Some(f) = self.mcap.as_mut() {
+                    f.pose(r.id, &p, deposit);
                 }
             }
             if let Some((scans, rvs)) = &r.mapping {
@@ -192,12 +211,26 @@ impl Observer {
         };
         self.frames
             .on_frame(&mut self.rec, frame.header.sim_time_s, &frame.view);
+        let (t_s, applied) = (frame.header.sim_time_s, frame.header.deposits_this_tick);
         self.lockstep.ack(step, lockstep::role::OBSERVER, 0)?;
+        if let Some(f) = self.mcap.as_mut() {
+            f.step(step, t_s, applied, &self.rec);
+        }
         Ok(())
     }
 
+    /// `--record`: hands what it sees from now on to `feed`.
+    pub fn record_to(&mut self, feed: McapFeed) {
+        self.mcap = Some(feed);
+    }
+
     /// The recording; the last frame seen is pictured if it was not.
-    pub fn finish(mut self) -> Recording {
+    pub fn finish(self) -> Recording {
+        self.finish_with_mcap().0
+    }
+
+    /// The recording, and with `--record` the MCAP file finished (its last frame included).
+    pub fn finish_with_mcap(mut self) -> (Recording, Option<Result<McapTotals, RecordError>>) {
         if let Err(e) = self.drain() {
             eprintln!("observer: the last robot messages could not be read: {e}");
         }
@@ -241,7 +274,8 @@ impl Observer {
             }
             self.rec.mapping = Some(team.finish());
         }
-        self.rec
+        let mcap = self.mcap.take().map(|f| f.finish(&self.rec));
+        (self.rec, mcap)
     }
 
     /// Field time of the newest frame seen.

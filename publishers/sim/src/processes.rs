@@ -13,6 +13,8 @@ use serde::Serialize;
 
 use crate::observer::Observer;
 use crate::record::Recording;
+use crate::ros_feed::McapFeed;
+use crate::ros_record::{McapTotals, SimMcap};
 use crate::single::{role_name, FieldSummary, RobotResult, RunSummary};
 use roles::process::follower_antenna::AntennaRobotSummary;
 use roles::scenario::{Scenario, ScenarioError};
@@ -45,6 +47,9 @@ pub struct ProcessRunOptions<'a> {
     pub remote: bool,
     /// Passed to every follower that reads the field in shared memory as `--wait`.
     pub follower_wait: Option<field::shm::WaitPolicy>,
+    /// `--record`: the observer writes the run to this MCAP file (finished also when the run
+    /// fails).
+    pub record: Option<SimMcap>,
 }
 
 /// The robots of `scenario` whose follower uses the antenna strategy: the ones a `--remote` run
@@ -85,6 +90,8 @@ pub enum ProcessRunError {
     GatewayAddress { line: String },
     #[error("--remote: scenario '{scenario}' has no robot with an antenna follower")]
     NoRemoteRobot { scenario: String },
+    #[error("--record: {0}")]
+    Record(#[from] ros2::record::RecordError),
     #[error("interrupted: stopped every process of the run")]
     Interrupted,
     #[error("the run took longer than {timeout_s} s: stopped every process")]
@@ -111,6 +118,8 @@ pub struct ProcessRunInfo {
     /// Processes of the run (the observer not counted).
     pub processes: usize,
     pub reports: Vec<ProcessReport>,
+    /// `--record`: what the MCAP file holds.
+    pub record: Option<McapTotals>,
 }
 
 /// The effective scenario (after the flags) as a file every process reads, in a private
@@ -237,10 +246,13 @@ fn supervise(
     };
     let children = Children::spawn(scenario, &o, &args, &start, sup)?;
     let mut observer = join_observer(scenario, &args, &start, sup)?;
-    let walls = World::new(scenario.world.clone(), scenario.seed)
-        .map(|w| w.wall_segments().iter().map(|s| (s.a_m, s.b_m)).collect())
-        .unwrap_or_default();
-    observer.set_walls(walls);
+    let world = World::new(scenario.world.clone(), scenario.seed).ok();
+    let segments = world.as_ref().map_or(&[][..], |w| w.wall_segments());
+    observer.set_walls(segments.iter().map(|s| (s.a_m, s.b_m)).collect());
+    if let Some(out) = o.record.take() {
+        let scripted = scenario.scripted(segments)?;
+        observer.record_to(McapFeed::new(out, scenario, scripted));
+    }
     let startup = record_until_the_world_ends(&mut observer, children.world, &start, &mut o, sup)?;
     let world_summary: WorldSummary = sup.summary(children.world)?;
     // The other roles stop by themselves when the world announces the end.
@@ -251,7 +263,8 @@ fn supervise(
         reports.push(stop_gateway(sup, id, end_timeout)?);
     }
     reports.push(report("world", &world_summary));
-    let rec = observer.finish();
+    let (rec, mcap) = observer.finish_with_mcap();
+    let record = mcap.transpose()?;
     let summary = run_summary(scenario, &world_summary, &field_summary, &rec);
     Ok((
         summary,
@@ -260,6 +273,7 @@ fn supervise(
             startup_s: startup.unwrap_or_else(|| started.elapsed()).as_secs_f64(),
             processes: participants, // the observer counted in, the world not: as many
             reports,
+            record,
         },
     ))
 }

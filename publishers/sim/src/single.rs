@@ -9,7 +9,9 @@
 //! 4. the field ticks once (evaporation, then every deposit offered);
 //! 5. each follower reads the new frame and decides its command.
 //!
-//! The run also records what [`report`] draws and what the metrics need.
+//! The run also records what [`report`] draws and what the metrics need, and with `--record`
+//! hands each step's poses, applied deposits and recorded frames to a [`SimMcap`] (whose
+//! thread writes the MCAP file).
 
 use std::collections::{BTreeMap, VecDeque};
 
@@ -17,6 +19,7 @@ use field::{DepositMsg, FieldConfig, FrameView, OwnedField, RejectReason};
 use serde::Serialize;
 
 use crate::record::{deposit_peak, ProbeReading, Recording, RobotSample, Snapshot};
+use crate::ros_record::{PoseRow, SimMcap};
 use messages::{FollowerState, PoseMsg};
 use roles::depositor::Depositor;
 use roles::follower::{Follower, PoseSource};
@@ -123,6 +126,8 @@ pub struct SingleProcessOptions<'a> {
     pub slam: bool,
     /// Called after every step with (step, steps).
     pub progress: Option<&'a mut dyn FnMut(u64, u64)>,
+    /// `--record`: the run's MCAP file (the caller finishes it).
+    pub record: Option<&'a mut SimMcap>,
 }
 
 struct Robot {
@@ -221,6 +226,7 @@ pub fn run_single_process(
     mut options: SingleProcessOptions<'_>,
 ) -> Result<(RunSummary, Recording), ProcessError> {
     let mut run = SingleRun::new(scenario, options.slam)?;
+    run.record = options.record.take();
     let steps = scenario.steps();
     for k in 0..steps {
         run.step(k);
@@ -244,6 +250,7 @@ struct SingleRun<'a> {
     frames: FrameSchedule,
     /// Each robot's command, applied by the next step.
     commands: Vec<(f64, f64)>,
+    record: Option<&'a mut SimMcap>,
 }
 
 impl<'a> SingleRun<'a> {
@@ -282,6 +289,7 @@ impl<'a> SingleRun<'a> {
             rec,
             frames: FrameSchedule::new(scenario),
             commands,
+            record: None,
         })
     }
 
@@ -311,8 +319,17 @@ impl<'a> SingleRun<'a> {
         self.frames.on_frame(&mut self.rec, ft, &view);
         let dt = self.scenario.world.dt_s;
         let robots = self.robots.iter_mut().zip(&outputs);
+        let mut rows = Vec::new();
         for ((r, out), cmd) in robots.zip(self.commands.iter_mut()) {
             let pose = r.pose.expect("set above");
+            if self.record.is_some() {
+                rows.push(PoseRow {
+                    robot: r.id,
+                    t_s: t,
+                    truth: [out.truth.x_m, out.truth.y_m, out.truth.theta_rad],
+                    estimate: Some(pose),
+                });
+            }
             let (state, level) = r.follow(pose, out, &view, dt, cmd);
             self.rec.robots.entry(r.id).or_default().push(RobotSample {
                 t_s: t,
@@ -326,6 +343,11 @@ impl<'a> SingleRun<'a> {
                 deposit_peak: r.deposit_peak,
             });
         }
+        if let Some(out) = self.record.as_mut() {
+            out.poses(rows);
+            out.deposits(t, self.field.stepper.applied());
+            out.frames(&self.rec);
+        }
     }
 
     /// Pictures the last frame and sums up the run.
@@ -334,6 +356,9 @@ impl<'a> SingleRun<'a> {
         let field = &self.field;
         self.frames
             .finish(&mut self.rec, field.stepper.sim_time_s, field.cells());
+        if let Some(out) = self.record.as_mut() {
+            out.frames(&self.rec);
+        }
         self.rec.mapping = self.mapping.map(MappingTeam::finish);
         let rec = self.rec;
         let counters = &field.stepper.counters;
