@@ -11,12 +11,13 @@ use roles::follower::StrategyKind;
 use roles::scenario::{Overrides, Scenario};
 use serde_json::{json, Value};
 use sim::metrics::{mean_sd, metrics_json, scenario_metrics, welch_t};
-use sim::processes::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
+use sim::processes::{run_as_processes, ProcessRunError, ProcessRunInfo, ProcessRunOptions};
 use sim::record::Recording;
 use sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 
 use super::roles::load_scenario;
 pub use super::sim_args::SimArgs;
+use super::stop::{self, Stopped};
 use super::{bad, bad_from, bad_in};
 
 /// The follower strategy of --strategy (grid scenarios).
@@ -28,6 +29,8 @@ fn follower_strategy(a: &SimArgs) -> anyhow::Result<Option<StrategyKind>> {
 }
 
 pub fn run(a: SimArgs) -> anyhow::Result<()> {
+    // From here SIGINT/SIGTERM end the run with what it has (exit status 130/143).
+    super::stop::install()?;
     if super::graph::is_regions(&a.scenario) {
         return super::graph::run_sim(&a);
     }
@@ -69,6 +72,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     );
     let started = Instant::now();
     let bar = progress_bar(scenario.steps());
+    let stop = || stop::requested().is_some();
     let (summary, rec, processes) = if a.single_process {
         let mut tick = |k: u64, _n: u64| bar.set_position(k);
         let out = run_single_process(
@@ -76,6 +80,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             SingleProcessOptions {
                 slam: a.slam,
                 progress: Some(&mut tick),
+                stop: Some(&stop),
             },
         )?;
         (out.0, out.1, None)
@@ -86,8 +91,13 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         (summary, rec, Some(info))
     };
     bar.finish_and_clear();
+    let interrupted = match &processes {
+        Some(info) => info.interrupted,
+        None => stop(),
+    };
     let wall_s = started.elapsed().as_secs_f64();
     let mut metrics = metrics_json(&scenario, &summary, &rec);
+    metrics["interrupted"] = json!(interrupted);
     metrics["mode"] = json!(if a.single_process {
         "single-process"
     } else if a.remote {
@@ -116,6 +126,9 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     if a.json {
         println!("{metrics}");
     }
+    if interrupted {
+        return Err(Stopped::by_requested().into());
+    }
     Ok(())
 }
 
@@ -131,8 +144,13 @@ fn out_dir(a: &SimArgs, scenario: &Scenario) -> Option<PathBuf> {
 }
 
 fn print_summary(m: &Value) {
+    let how = if m["interrupted"].as_bool() == Some(true) {
+        "stopped by a signal, written as far as it ran"
+    } else {
+        "done"
+    };
     eprintln!(
-        "sim '{}' done: {} s simulated ({} ticks) in {:.2} s wall time ({:.1}× real time); {} deposits applied, {} NaN cells",
+        "sim '{}' {how}: {} s simulated ({} ticks) in {:.2} s wall time ({:.1}× real time); {} deposits applied, {} NaN cells",
         m["scenario"].as_str().unwrap_or(""),
         m["sim_time_s"],
         m["ticks"],
@@ -209,12 +227,17 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
                     SingleProcessOptions {
                         slam: a.slam,
                         progress: None,
+                        stop: Some(&|| stop::requested().is_some()),
                     },
                 )?
                 .1
             } else {
                 run_processes(a, &s, None)?.1
             };
+            if stop::requested().is_some() {
+                eprintln!("sim: trials stopped: nothing written");
+                return Err(Stopped::by_requested().into());
+            }
             let m = scenario_metrics(&s, &rec);
             values.push(m["exploration"]["mean"].as_f64().unwrap_or(f64::NAN));
             bar.inc(1);
@@ -279,7 +302,7 @@ fn run_processes(
         .attach_timeout
         .map(|v| super::seconds("attach-timeout", v))
         .transpose()?;
-    Ok(run_as_processes(
+    run_as_processes(
         scenario,
         ProcessRunOptions {
             exe: std::env::current_exe()?,
@@ -293,5 +316,12 @@ fn run_processes(
             remote: a.remote,
             follower_wait: a.follower_wait,
         },
-    )?)
+    )
+    .map_err(|e| match e {
+        ProcessRunError::Interrupted => {
+            eprintln!("sim: stopped before the run recorded a frame: nothing written");
+            Stopped::by_requested().into()
+        }
+        e => e.into(),
+    })
 }

@@ -123,6 +123,9 @@ pub struct SingleProcessOptions<'a> {
     pub slam: bool,
     /// Called after every step with (step, steps).
     pub progress: Option<&'a mut dyn FnMut(u64, u64)>,
+    /// Asked after every step: `true` ends the run there (SIGINT/SIGTERM); the summary and
+    /// recording are then those of the steps run, and `RunSummary::steps` says how many.
+    pub stop: Option<&'a dyn Fn() -> bool>,
 }
 
 struct Robot {
@@ -226,6 +229,9 @@ pub fn run_single_process(
         run.step(k);
         if let Some(p) = options.progress.as_mut() {
             p(k + 1, steps);
+        }
+        if options.stop.is_some_and(|stop| stop()) {
+            break;
         }
     }
     Ok(run.finish())
