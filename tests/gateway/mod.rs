@@ -7,6 +7,7 @@
 
 mod backup;
 mod follower_backup;
+mod refusals;
 mod remote;
 mod serial;
 

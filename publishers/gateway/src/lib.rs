@@ -26,8 +26,8 @@ pub mod udp;
 
 use std::time::Duration;
 
-use field::shm::{DepositPublisher, FieldReader, ShmError, Svc};
-use field::{DepositMsg, SamplePose};
+use field::shm::{ConfigSubscriber, DepositPublisher, FieldReader, ShmError, Svc};
+use field::{DepositMsg, FieldConfig, RejectReason, SamplePose};
 use gateway_codec::{
     DecodeError, DepositReply, DepositRequest, DepositStatus, ErrorReason, Frame, Message,
     PirReply, PirRequest, StatusReply,
@@ -108,6 +108,9 @@ pub struct GatewayCounters {
     /// Deposits the field did not take (none subscribed or its buffer full): not answered, so
     /// the client retries.
     pub deposits_undelivered: u64,
+    /// Deposits refused with the field's own checks (`field::deposit::prepare`), by the
+    /// field's reason (`out_of_limits`, `negative_on_unsigned`, …): answered, never sent.
+    pub deposits_refused: std::collections::BTreeMap<&'static str, u64>,
     pub pings: u64,
     /// Error replies sent, by M3 reason code (index 1–6).
     pub errors_sent: [u64; 7],
@@ -177,6 +180,10 @@ pub struct Gateway {
     allowed: [bool; 256],
     clients: Box<[Client; 256]>,
     counters: GatewayCounters,
+    /// The field's configuration once it has published it (with its next frame after the
+    /// gateway attached): its channels and limits check each deposit as the field will.
+    field_config: Option<FieldConfig>,
+    config_sub: Option<ConfigSubscriber>,
 }
 
 impl Gateway {
@@ -203,6 +210,14 @@ impl Gateway {
         for &id in &config.allow {
             allowed[id as usize] = true;
         }
+        let config_sub = ConfigSubscriber::attach(node, field)
+            .map_err(|e| {
+                eprintln!(
+                    "gateway: cannot read field '{field}''s configuration ({e}); deposits are \
+                     checked for their channel and reach only"
+                )
+            })
+            .ok();
         Ok(Self {
             field: field.to_string(),
             reader,
@@ -211,7 +226,19 @@ impl Gateway {
             allowed,
             clients: Box::new([Client::NEW; 256]),
             counters: GatewayCounters::default(),
+            field_config: None,
+            config_sub,
         })
+    }
+
+    /// The field's configuration, once it has arrived.
+    fn field_config(&mut self) -> Result<Option<&FieldConfig>, GatewayError> {
+        if let Some(sub) = &self.config_sub {
+            if let Some(c) = sub.latest()? {
+                self.field_config = Some(c);
+            }
+        }
+        Ok(self.field_config.as_ref())
     }
 
     pub fn field(&self) -> &str {
@@ -292,6 +319,27 @@ impl Gateway {
             client_id: id,
             message: Message::DepositReply(DepositReply { seq: d.seq, status }),
         };
+        let mut msg = DepositMsg::z_shape(
+            d.channel as u32,
+            d.x_m,
+            d.y_m,
+            d.amount,
+            self.config.plateau_m,
+            self.config.slope_m,
+        );
+        msg.robot_id = id as u32;
+        // The field's own checks, with its channels and limits: what it would refuse is answered
+        // here, never sent.
+        let refused = match self.field_config()? {
+            Some(c) => field::deposit::prepare(&msg, &c.geometry(), &c.channels, &c.limits).err(),
+            None => None,
+        };
+        if let Some(r) = refused {
+            *self.counters.deposits_refused.entry(r.reason.name()).or_default() += 1;
+            let reason = deposit_status(r.reason);
+            self.counters.errors_sent[reason as usize] += 1;
+            return Ok(Some(reply(DepositStatus::Rejected(reason))));
+        }
         let Some(f) = self.reader.frame() else {
             return Ok(Some(self.error(id, ErrorReason::BadValue)));
         };
@@ -315,15 +363,6 @@ impl Gateway {
             self.counters.deposits_repeated += 1;
             return Ok(Some(reply(DepositStatus::Applied)));
         }
-        let mut msg = DepositMsg::z_shape(
-            d.channel as u32,
-            d.x_m,
-            d.y_m,
-            d.amount,
-            self.config.plateau_m,
-            self.config.slope_m,
-        );
-        msg.robot_id = id as u32;
         match self.depositor.send_as(msg) {
             Ok(()) => {
                 self.clients[id as usize].remember(d.seq);
@@ -360,6 +399,21 @@ impl Gateway {
             client_id,
             message: Message::Error(reason),
         }
+    }
+}
+
+/// The deposit status (an M3 reason) for a deposit the field refuses: 4 for an unknown
+/// channel, 3 (a bad value) for everything else (non-finite, beyond the limits, negative on an
+/// unsigned channel, outside the grid).
+pub fn deposit_status(r: RejectReason) -> ErrorReason {
+    match r {
+        RejectReason::UnknownChannel => ErrorReason::UnknownChannel,
+        RejectReason::NonFinite
+        | RejectReason::NotPsd
+        | RejectReason::UnknownKernel
+        | RejectReason::OutOfLimits
+        | RejectReason::OutsideGrid
+        | RejectReason::NegativeOnUnsigned => ErrorReason::BadValue,
     }
 }
 
