@@ -67,7 +67,8 @@ type InputsFactory = iceoryx2::service::port_factory::publish_subscribe::PortFac
     [DepositMsg],
     InputsHeader,
 >;
-pub(super) type ConfigFactory = iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [u8], ()>;
+pub(super) type ConfigFactory =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [u8], ()>;
 
 fn inputs_service(node: &Node<Svc>, names: &FieldServices) -> Result<InputsFactory, ShmError> {
     node.service_builder(&service_name(&names.inputs)?)

@@ -335,7 +335,11 @@ impl Gateway {
             None => None,
         };
         if let Some(r) = refused {
-            *self.counters.deposits_refused.entry(r.reason.name()).or_default() += 1;
+            *self
+                .counters
+                .deposits_refused
+                .entry(r.reason.name())
+                .or_default() += 1;
             let reason = deposit_status(r.reason);
             self.counters.errors_sent[reason as usize] += 1;
             return Ok(Some(reply(DepositStatus::Rejected(reason))));

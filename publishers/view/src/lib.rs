@@ -51,9 +51,20 @@ impl std::error::Error for QueryError {}
 
 fn query_error(param: &str, value: &str, reason: impl Into<String>) -> QueryError {
     QueryError {
-        param: param.to_string(),
-        value: value.to_string(),
+        param: shown(param),
+        value: shown(value),
         reason: reason.into(),
+    }
+}
+
+/// Longest part of a request an error message repeats (chars); longer ones are cut with `…`.
+pub const ECHO_MAX_CHARS: usize = 32;
+
+/// `s` as an error message may repeat it: at most [`ECHO_MAX_CHARS`] chars.
+fn shown(s: &str) -> String {
+    match s.char_indices().nth(ECHO_MAX_CHARS) {
+        Some((at, _)) => format!("{}…", &s[..at]),
+        None => s.to_string(),
     }
 }
 
@@ -302,6 +313,14 @@ pub struct StatsTracker {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Stats {
     pub field: String,
+    /// `waiting` (no frame yet), `live`, `stalled` (its process is there but no new frame for
+    /// five tick periods, at least 1 s), `stopped` (no process publishes its frames: it died or
+    /// stopped; its last frame is still served).
+    pub state: &'static str,
+    /// The state in words, as the page shows it.
+    pub status: String,
+    /// Seconds since the view last saw a new frame.
+    pub last_frame_age_s: Option<f64>,
     /// Whether a frame has been seen at all.
     pub attached: bool,
     pub sequence: u64,
@@ -368,6 +387,13 @@ impl StatsTracker {
         let h = self.last.unwrap_or_default();
         Stats {
             field: field.to_string(),
+            state: if self.last.is_some() {
+                "live"
+            } else {
+                "waiting"
+            },
+            status: String::new(),
+            last_frame_age_s: None,
             attached: self.last.is_some(),
             sequence: h.sequence,
             sim_time_s: h.sim_time_s,
