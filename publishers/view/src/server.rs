@@ -1,5 +1,6 @@
 //! The view's HTTP side: one loop that takes the field's newest frame, the robots' poses and
-//! the page's requests in turn (`tiny_http`, synchronous; see the module above for why).
+//! the page's requests in turn (synchronous; the requests' heads are read, with bounds, on
+//! threads of `super::http`).
 //!
 //! | path | answer |
 //! | --- | --- |
@@ -9,7 +10,8 @@
 //! | `/api/robots` | `{"world": W, "robots": [`[`super::RobotTrack`]`]}` (empty without `--world`) |
 //!
 //! A bad parameter is a 400 with a plain-text message naming it and its value (each cut to 32
-//! characters), a request target over 2048 bytes a 414 that does not repeat it, an unknown path
+//! characters), a request target over 2048 bytes (or a request line over 4096 bytes, read no
+//! further) a 414 that does not repeat it, a request head over 16 KiB a 431, an unknown path
 //! a 404, another method than GET or HEAD a 405, and `/api/frame` before the first frame a 503
 //! with `Retry-After: 1` and a JSON body `{"field", "state": "waiting", "status"}`.
 
@@ -22,7 +24,8 @@ use field::shm::{FieldReader, ShmError, Svc};
 use field::wire::{ready_service, RobotServices, ROBOT_LINK};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
-use tiny_http::{Header, Method, Request, Response, Server};
+
+use super::http::{Request, Server};
 
 use super::{parse_frame_query, snapshot, QueryError, RobotPaths, StatsTracker};
 use messages::PoseMsg;
@@ -69,17 +72,11 @@ pub enum ViewError {
 /// Binds the HTTP server on `address` (e.g. `127.0.0.1:8080`; port 0 picks a free one) and
 /// returns it with the address it listens on.
 pub fn bind(address: &str) -> Result<(Server, SocketAddr), ViewError> {
-    let server = Server::http(address).map_err(|source| ViewError::Bind {
+    let server = Server::bind(address).map_err(|source| ViewError::Bind {
         address: address.to_string(),
-        source,
+        source: source.into(),
     })?;
-    let local = server
-        .server_addr()
-        .to_ip()
-        .ok_or_else(|| ViewError::Bind {
-            address: address.to_string(),
-            source: "not an IP address".into(),
-        })?;
+    let local = server.local_addr();
     Ok((server, local))
 }
 
@@ -362,34 +359,26 @@ impl View {
     }
 
     fn respond(&mut self, node: &Node<Svc>, request: Request) -> Result<(), ShmError> {
-        let reply = match request.method() {
-            Method::Get | Method::Head => {
+        let reply = match request.method.as_str() {
+            "GET" | "HEAD" => {
                 // The newest frame, not the one of the last slice.
                 self.poll(node)?;
-                self.answer(request.url())
+                self.answer(&request.target)
             }
             m => {
-                let m = super::shown(m.as_str());
+                let m = super::shown(m);
                 Reply::text(405, format!("method {m} not allowed: GET only"))
             }
         };
-        let mut response = Response::from_data(reply.body).with_status_code(reply.status);
-        // A field not there yet: ask again in a second.
-        let retry = if reply.status == 503 { "1" } else { "" };
-        for (k, v) in [
+        let mut headers = vec![
             ("Content-Type", reply.content_type),
             ("Cache-Control", "no-store"),
-            ("Retry-After", retry),
-        ] {
-            if v.is_empty() {
-                continue;
-            }
-            if let Ok(h) = Header::from_bytes(k.as_bytes(), v.as_bytes()) {
-                response.add_header(h);
-            }
+        ];
+        if reply.status == 503 {
+            // A field not there yet: ask again in a second.
+            headers.push(("Retry-After", "1"));
         }
-        // A page that went away mid-answer is no failure of the view.
-        let _ = request.respond(response);
+        request.respond(reply.status, &headers, &reply.body);
         Ok(())
     }
 }
@@ -405,11 +394,8 @@ fn stall_after(tick_hz: f64) -> Duration {
 pub fn serve(node: &Node<Svc>, server: &Server, view: &mut View) -> Result<(), ViewError> {
     while node.wait(Duration::ZERO).is_ok() {
         view.poll(node)?;
-        match server.recv_timeout(REQUEST_SLICE) {
-            Ok(Some(request)) => view.respond(node, request)?,
-            Ok(None) => {}
-            // A connection that failed to be accepted; the server goes on.
-            Err(e) => eprintln!("view: {e}"),
+        if let Some(request) = server.recv_timeout(REQUEST_SLICE) {
+            view.respond(node, request)?;
         }
     }
     Ok(())
