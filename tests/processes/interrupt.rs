@@ -176,3 +176,24 @@ fn sigint_and_sigterm_of_a_single_process_sim_write_the_run_so_far() {
         );
     }
 }
+
+#[test]
+fn sigterm_of_a_field_writes_its_summary_and_exits_143() {
+    let run = Run::new("ft");
+    let name = unique("ft");
+    let field = run.spawn(&["field", "--name", &name, "--tick-hz", "50", "--json"], "field");
+    let watch = FrameWatch::start(&run, &name);
+    let seen = watch.wait_newer(3, WAIT, "frames of the field");
+    drop(watch);
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(field.pid() as i32),
+        Signal::SIGTERM,
+    )
+    .unwrap();
+    let out = field.wait_exit(WAIT);
+    assert_eq!(out.status.code(), Some(143), "{}", run.log("field"));
+    let s = json(&out);
+    assert!(s["ticks"].as_u64().unwrap() >= seen, "{s}");
+    run.wait_nodes_gone(WAIT);
+    assert_eq!(run.shm_entries(), Vec::<String>::new());
+}
