@@ -29,11 +29,11 @@ fn follower_strategy(a: &SimArgs) -> anyhow::Result<Option<StrategyKind>> {
 }
 
 pub fn run(a: SimArgs) -> anyhow::Result<()> {
-    // From here SIGINT/SIGTERM end the run with what it has (exit status 130/143).
-    super::stop::install()?;
     if super::graph::is_regions(&a.scenario) {
         return super::graph::run_sim(&a);
     }
+    // From here SIGINT/SIGTERM end the run with what it has (exit status 130/143).
+    super::stop::install()?;
     let mut scenario = load_scenario(&a.scenario)?;
     scenario
         .apply(&Overrides {

@@ -181,7 +181,10 @@ fn sigint_and_sigterm_of_a_single_process_sim_write_the_run_so_far() {
 fn sigterm_of_a_field_writes_its_summary_and_exits_143() {
     let run = Run::new("ft");
     let name = unique("ft");
-    let field = run.spawn(&["field", "--name", &name, "--tick-hz", "50", "--json"], "field");
+    let field = run.spawn(
+        &["field", "--name", &name, "--tick-hz", "50", "--json"],
+        "field",
+    );
     let watch = FrameWatch::start(&run, &name);
     let seen = watch.wait_newer(3, WAIT, "frames of the field");
     drop(watch);

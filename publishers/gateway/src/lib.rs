@@ -46,6 +46,10 @@ pub struct GatewayConfig {
     /// Client IDs served; the others get reason 6. Default: 1–255 (ID 0 is left out: CRC-16/ARC
     /// does not protect a leading 0x00, see `docs/gateway-wire.md`).
     pub allow: Vec<u8>,
+    /// Client IDs served only from these UDP sources (`--allow ID@ADDR`: an IP address, any
+    /// port, or IP:PORT); a frame with such an ID from elsewhere, or on a serial line, gets
+    /// reason 6. An ID may be bound to several sources.
+    pub bound: Vec<(u8, Source)>,
     /// Requests per second each client may send (a bucket of as many, refilled continuously);
     /// 0 = unlimited. Over it: reason 5.
     pub rate_per_s: f64,
@@ -55,10 +59,41 @@ pub struct GatewayConfig {
     pub slope_m: f32,
 }
 
+/// Where a bound client ID may send from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// This IP address, any port.
+    Ip(std::net::IpAddr),
+    /// This IP address and port.
+    Socket(std::net::SocketAddr),
+}
+
+impl Source {
+    fn admits(self, from: std::net::SocketAddr) -> bool {
+        match self {
+            Source::Ip(ip) => from.ip() == ip,
+            Source::Socket(s) => from == s,
+        }
+    }
+}
+
+impl std::str::FromStr for Source {
+    type Err = std::net::AddrParseError;
+
+    /// `IP` or `IP:PORT` (`[v6]:PORT` for IPv6).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.parse::<std::net::SocketAddr>() {
+            Ok(a) => Ok(Source::Socket(a)),
+            Err(_) => s.parse().map(Source::Ip),
+        }
+    }
+}
+
 impl Default for GatewayConfig {
     fn default() -> Self {
         Self {
             allow: (1..=255).collect(),
+            bound: Vec::new(),
             rate_per_s: 100.0,
             plateau_m: 0.2,
             slope_m: 0.3,
@@ -265,12 +300,24 @@ impl Gateway {
         }
     }
 
-    /// Answers one decoded frame received at `now_ns` (CLOCK_MONOTONIC); `None` = no reply
-    /// (a deposit the field did not take: the client retries).
+    /// Answers one decoded frame received at `now_ns` (CLOCK_MONOTONIC) from a source with no
+    /// address (a serial line); `None` = no reply (a deposit the field did not take: the client
+    /// retries).
     pub fn handle(&mut self, frame: Frame, now_ns: u64) -> Result<Option<Frame>, GatewayError> {
+        self.handle_from(frame, now_ns, None)
+    }
+
+    /// [`Gateway::handle`] for a frame that came from `from` (UDP): a client ID bound to other
+    /// sources (`GatewayConfig::bound`) is not allowed (reason 6).
+    pub fn handle_from(
+        &mut self,
+        frame: Frame,
+        now_ns: u64,
+        from: Option<std::net::SocketAddr>,
+    ) -> Result<Option<Frame>, GatewayError> {
         self.counters.frames += 1;
         let id = frame.client_id;
-        if !self.allowed[id as usize] {
+        if !self.allowed[id as usize] || !self.source_admitted(id, from) {
             return Ok(Some(self.error(id, ErrorReason::ClientNotAllowed)));
         }
         if !self.clients[id as usize].admit(self.config.rate_per_s, now_ns) {
@@ -286,6 +333,20 @@ impl Gateway {
             _ => self.error(id, ErrorReason::UnknownOpcode),
         };
         Ok(Some(reply))
+    }
+
+    /// Whether client `id` may send from `from`: any source unless it is bound.
+    fn source_admitted(&self, id: u8, from: Option<std::net::SocketAddr>) -> bool {
+        let mut bound = self
+            .config
+            .bound
+            .iter()
+            .filter(|(b, _)| *b == id)
+            .peekable();
+        if bound.peek().is_none() {
+            return true;
+        }
+        from.is_some_and(|from| bound.any(|(_, s)| s.admits(from)))
     }
 
     fn pir(&mut self, id: u8, p: PirRequest) -> Frame {
