@@ -58,8 +58,11 @@ pub struct GatewayArgs {
 /// Where the gateway serves when neither --udp nor --serial is given.
 const DEFAULT_UDP: &str = "127.0.0.1:7402";
 
+/// Client IDs bound to a source, as `GatewayConfig::bound` takes them.
+type Bound = Vec<(u8, Source)>;
+
 /// The `ID@ADDR` items of --allow (each ID bound to its sources), and the others.
-fn parse_bound(items: &[String]) -> anyhow::Result<(Vec<(u8, Source)>, Vec<String>)> {
+fn parse_bound(items: &[String]) -> anyhow::Result<(Bound, Vec<String>)> {
     let mut bound = Vec::new();
     let mut rest = Vec::new();
     for item in items {
