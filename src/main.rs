@@ -110,6 +110,10 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.downcast_ref::<cmd::stop::Stopped>().is_some() => {
+            let stopped = e.downcast_ref::<cmd::stop::Stopped>().expect("checked");
+            ExitCode::from(stopped.exit_status())
+        }
         Err(e) => {
             eprintln!("error: {}", cmd::one_line(&e));
             if e.downcast_ref::<cmd::BadInput>().is_some() {

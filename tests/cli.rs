@@ -64,11 +64,11 @@ fn a_deposit_from_another_process_arrives_in_a_frame_then_evaporates() {
     let gone = json(&gone);
     assert!(gone["sequence"].as_u64().unwrap() > seen["sequence"].as_u64().unwrap());
     assert!(gone["sim_time_s"].as_f64().unwrap() > seen["sim_time_s"].as_f64().unwrap());
-    // Ctrl-C stops the field cleanly, with its summary.
+    // Ctrl-C stops the field cleanly, with its summary, and exit status 130 (128 + SIGINT).
     field.interrupt();
     let out = field.wait_exit(Duration::from_secs(10));
     assert!(
-        out.status.success(),
+        out.status.code() == Some(130),
         "field exit: {:?} {}",
         out.status,
         stderr(&out)

@@ -345,6 +345,8 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         us => us.map(|us| Duration::from_secs_f64(us / 1e6)),
     };
     realtime(&a)?;
+    // SIGINT/SIGTERM stop the field as before (summary written) and set its exit status.
+    super::stop::install()?;
     let node = create_node(&format!("field-{}", a.name))?;
     let options = FieldRunOptions {
         name: a.name.clone(),
@@ -365,6 +367,11 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         Err(e) if e.is_bad_input() => return Err(bad_from(e)),
         Err(e) => return Err(e.into()),
     };
+    finish(&a, summary)
+}
+
+/// Prints the `--json` summary; a field stopped by SIGINT or SIGTERM then exits 130 / 143.
+fn finish(a: &FieldArgs, summary: Option<field::run::FieldRunSummary>) -> anyhow::Result<()> {
     if a.json {
         match summary {
             Some(s) => println!("{}", serde_json::to_string(&s)?),
@@ -375,7 +382,10 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
             ),
         }
     }
-    Ok(())
+    match super::stop::requested() {
+        Some(signal) => Err(super::stop::Stopped { signal }.into()),
+        None => Ok(()),
+    }
 }
 
 /// `--rt-priority`: SCHED_FIFO, memory locked, optionally one CPU; says what it got.

@@ -3,7 +3,7 @@
 
 use clap::Args;
 use field::shm::create_node;
-use gateway::{serial, udp, Gateway, GatewayConfig};
+use gateway::{serial, udp, Gateway, GatewayConfig, Source};
 
 use super::bad;
 
@@ -30,7 +30,8 @@ pub struct GatewayArgs {
     #[arg(long, default_value_t = 9600, requires = "serial")]
     pub baud: u32,
     /// Client IDs served, e.g. `1,2,7` or `1-20`; default 1–255 (ID 0 is not protected by the
-    /// CRC's zero start value, see docs/gateway-wire.md).
+    /// CRC's zero start value, see docs/gateway-wire.md). `ID@ADDR` (ADDR an IP address or
+    /// IP:PORT) serves ID only from that UDP source (repeat it for several sources).
     #[arg(long, value_delimiter = ',')]
     pub allow: Vec<String>,
     /// Requests per second each client may send (0 = unlimited).
@@ -56,6 +57,33 @@ pub struct GatewayArgs {
 
 /// Where the gateway serves when neither --udp nor --serial is given.
 const DEFAULT_UDP: &str = "127.0.0.1:7402";
+
+/// Client IDs bound to a source, as `GatewayConfig::bound` takes them.
+type Bound = Vec<(u8, Source)>;
+
+/// The `ID@ADDR` items of --allow (each ID bound to its sources), and the others.
+fn parse_bound(items: &[String]) -> anyhow::Result<(Bound, Vec<String>)> {
+    let mut bound = Vec::new();
+    let mut rest = Vec::new();
+    for item in items {
+        let Some((id, addr)) = item.split_once('@') else {
+            rest.push(item.clone());
+            continue;
+        };
+        let id = id.trim().parse::<u8>().map_err(|e| {
+            bad(format!(
+                "--allow {item}: '{id}' is not a client ID 0–255: {e}"
+            ))
+        })?;
+        let source = addr.trim().parse::<Source>().map_err(|e| {
+            bad(format!(
+                "--allow {item}: '{addr}' is not an IP address or IP:PORT: {e}"
+            ))
+        })?;
+        bound.push((id, source));
+    }
+    Ok((bound, rest))
+}
 
 /// `1,2,7` and ranges `1-20`; every ID 0–255.
 fn parse_allow(items: &[String]) -> anyhow::Result<Vec<u8>> {
@@ -86,8 +114,24 @@ fn parse_allow(items: &[String]) -> anyhow::Result<Vec<u8>> {
 }
 
 pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
+    let (bound, ids) = parse_bound(&a.allow)?;
+    if !bound.is_empty() && a.serial.is_some() {
+        return Err(bad(
+            "--allow ID@ADDR: a serial line has no source address; bind IDs over --udp only",
+        ));
+    }
+    // Bound IDs are served (from their sources); with only bound IDs, only they are.
+    let mut allow = if ids.is_empty() && !bound.is_empty() {
+        Vec::new()
+    } else {
+        parse_allow(&ids)?
+    };
+    allow.extend(bound.iter().map(|(id, _)| *id));
+    allow.sort_unstable();
+    allow.dedup();
     let config = GatewayConfig {
-        allow: parse_allow(&a.allow)?,
+        allow,
+        bound,
         rate_per_s: a.rate_hz,
         plateau_m: a.plateau_m,
         slope_m: a.slope_m,

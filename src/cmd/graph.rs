@@ -208,6 +208,8 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
         "scenario": scenario.name,
         "seed": seed,
         "mode": if a.single_process { "single-process" } else { "processes" },
+        // A regions run stopped by Ctrl-C writes nothing (exit 1 as processes).
+        "interrupted": false,
         "wall_time_s": started.elapsed().as_secs_f64(),
         "comparison": comparison,
         "runs": runs,

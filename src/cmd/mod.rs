@@ -12,6 +12,7 @@ pub mod roles;
 pub mod ros2;
 pub mod sim;
 pub mod sim_args;
+pub mod stop;
 pub mod sweep;
 pub mod tune;
 pub mod view;

@@ -441,6 +441,7 @@ fn run_remote_follower(
             // A restarted robot does not reuse its last run's seqs (the gateway remembers 16).
             first_seq: (std::process::id() % 256) as u8,
             deposit_retry: DepositRetry::SameGateway,
+            ..ClientConfig::default()
         },
     );
     if let Some(b) = &a.backup {
@@ -464,7 +465,7 @@ fn run_remote_follower(
     )?;
     eprintln!(
         "follower r{} (gateway {}): {} steps, {} rejected, {} PIRs ({} stale), {} switch(es), \
-         deposits {} applied / {} failed",
+         {} rate-limited backoff(s), deposits {} applied / {} failed",
         a.robot,
         summary.source.active,
         summary.role.steps,
@@ -472,6 +473,7 @@ fn run_remote_follower(
         summary.source.reads,
         summary.source.stale_replies,
         summary.source.switches,
+        summary.source.rate_limited_backoffs,
         summary.source.deposits_applied,
         summary.source.deposits_failed
     );

@@ -12,13 +12,14 @@ use roles::scenario::{Overrides, Scenario};
 use ros2::record::{McapRecorder, RecordError};
 use serde_json::{json, Value};
 use sim::metrics::{mean_sd, metrics_json, scenario_metrics, welch_t};
-use sim::processes::{run_as_processes, ProcessRunInfo, ProcessRunOptions};
+use sim::processes::{run_as_processes, ProcessRunError, ProcessRunInfo, ProcessRunOptions};
 use sim::record::Recording;
 use sim::ros_record::{McapTotals, SimMcap};
 use sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 
 use super::roles::load_scenario;
 pub use super::sim_args::SimArgs;
+use super::stop::{self, Stopped};
 use super::{bad, bad_from, bad_in};
 
 /// The follower strategy of --strategy (grid scenarios).
@@ -39,6 +40,8 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         }
         return super::graph::run_sim(&a);
     }
+    // From here SIGINT/SIGTERM end the run with what it has (exit status 130/143).
+    super::stop::install()?;
     let mut scenario = load_scenario(&a.scenario)?;
     scenario
         .apply(&Overrides {
@@ -78,8 +81,13 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     let record = start_record(&a, &scenario)?;
     let started = Instant::now();
     let (summary, rec, processes, record) = run_once(&a, &scenario, record)?;
+    let interrupted = match &processes {
+        Some(info) => info.interrupted,
+        None => stop::requested().is_some(),
+    };
     let wall_s = started.elapsed().as_secs_f64();
     let mut metrics = metrics_json(&scenario, &summary, &rec);
+    metrics["interrupted"] = json!(interrupted);
     metrics["mode"] = json!(if a.single_process {
         "single-process"
     } else if a.remote {
@@ -122,7 +130,11 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     if a.json {
         println!("{metrics}");
     }
-    Ok(record?)
+    let record = record?;
+    if interrupted {
+        return Err(Stopped::by_requested().into());
+    }
+    Ok(record)
 }
 
 /// What one run gives: its summary, recording, processes and, with `--record`, what the file
@@ -134,13 +146,14 @@ type RunOutcome = (
     Result<Option<McapTotals>, RecordError>,
 );
 
-/// The scenario run once, in the mode of `a`, with a progress bar.
+/// The scenario run once, in the mode of `a`, with a progress bar; SIGINT/SIGTERM end it early.
 fn run_once(
     a: &SimArgs,
     scenario: &Scenario,
     mut record: Option<SimMcap>,
 ) -> anyhow::Result<RunOutcome> {
     let bar = progress_bar(scenario.steps());
+    let stop = || stop::requested().is_some();
     let out = if a.single_process {
         let mut tick = |k: u64, _n: u64| bar.set_position(k);
         let out = run_single_process(
@@ -149,6 +162,7 @@ fn run_once(
                 slam: a.slam,
                 progress: Some(&mut tick),
                 record: record.as_mut(),
+                stop: Some(&stop),
             },
         )?;
         let totals = record.map(SimMcap::finish).transpose();
@@ -187,8 +201,13 @@ fn out_dir(a: &SimArgs, scenario: &Scenario) -> Option<PathBuf> {
 }
 
 fn print_summary(m: &Value) {
+    let how = if m["interrupted"].as_bool() == Some(true) {
+        "stopped by a signal, written as far as it ran"
+    } else {
+        "done"
+    };
     eprintln!(
-        "sim '{}' done: {} s simulated ({} ticks) in {:.2} s wall time ({:.1}× real time); {} deposits applied, {} NaN cells",
+        "sim '{}' {how}: {} s simulated ({} ticks) in {:.2} s wall time ({:.1}× real time); {} deposits applied, {} NaN cells",
         m["scenario"].as_str().unwrap_or(""),
         m["sim_time_s"],
         m["ticks"],
@@ -266,12 +285,17 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
                         slam: a.slam,
                         progress: None,
                         record: None,
+                        stop: Some(&|| stop::requested().is_some()),
                     },
                 )?
                 .1
             } else {
                 run_processes(a, &s, None, None)?.1
             };
+            if stop::requested().is_some() {
+                eprintln!("sim: trials stopped: nothing written");
+                return Err(Stopped::by_requested().into());
+            }
             let m = scenario_metrics(&s, &rec);
             values.push(m["exploration"]["mean"].as_f64().unwrap_or(f64::NAN));
             bar.inc(1);
@@ -337,7 +361,7 @@ fn run_processes(
         .attach_timeout
         .map(|v| super::seconds("attach-timeout", v))
         .transpose()?;
-    Ok(run_as_processes(
+    run_as_processes(
         scenario,
         ProcessRunOptions {
             exe: std::env::current_exe()?,
@@ -352,5 +376,12 @@ fn run_processes(
             follower_wait: a.follower_wait,
             record,
         },
-    )?)
+    )
+    .map_err(|e| match e {
+        ProcessRunError::Interrupted => {
+            eprintln!("sim: stopped before the run recorded a frame: nothing written");
+            Stopped::by_requested().into()
+        }
+        e => e.into(),
+    })
 }

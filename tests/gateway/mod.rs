@@ -6,7 +6,9 @@
 //! here from its parameters, DLE stuffing, DLE ETX — and uses nothing of the codec crate.
 
 mod backup;
+mod bound;
 mod follower_backup;
+mod refusals;
 mod remote;
 mod serial;
 

@@ -80,7 +80,7 @@ fn a_deposit_is_published_at_once_instead_of_at_the_next_tick() {
     drop(reader);
     field.interrupt();
     let out = field.wait_exit(WAIT);
-    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
     let s = json(&out);
     assert!(
         s["frames_on_deposit"].as_u64().is_some_and(|n| n >= 3),

@@ -11,6 +11,8 @@ use std::time::Duration;
 use serde_json::Value;
 
 use crate::crash::{Run, WAIT};
+
+mod interrupt;
 use crate::harness::*;
 
 /// Keys whose values are wall-time measurements, or describe the mode: everything else must
@@ -70,6 +72,7 @@ pub(crate) fn assert_same_in_both_modes(scenario: &str, extra: &[&str]) -> Value
     args.push("--single-process");
     let single = sim_json(&args);
     assert_eq!(processes["mode"], "processes", "{processes}");
+    assert_eq!(processes["interrupted"], false, "{processes}");
     let mut diffs = Vec::new();
     differences(&processes, &single, "", &mut diffs);
     assert!(

@@ -89,7 +89,7 @@ fn readers_killed_while_holding_frames_are_cleaned_up_and_the_field_keeps_publis
     drop(reader);
     field.interrupt();
     let out = field.wait_exit(WAIT);
-    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
     let s = json(&out);
     assert!(s["longest_tick_gap_ms"].as_f64().unwrap() > 0.0, "{s}");
     eprintln!(
@@ -179,7 +179,7 @@ fn a_reader_keeps_its_frame_when_the_field_is_killed_and_sees_the_field_restarte
     drop(reader);
     field.interrupt();
     let out = field.wait_exit(WAIT);
-    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
 }
 
 #[test]
@@ -324,7 +324,7 @@ fn a_standby_takes_over_when_the_primary_is_killed_and_keeps_the_deposits() {
     drop(reader);
     standby.interrupt();
     let out = standby.wait_exit(WAIT);
-    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
     let s = json(&out);
     assert_eq!(s["standby"]["took_over"], true, "{s}");
     assert_eq!(s["deposits_applied"], 2, "{s}");

@@ -10,6 +10,8 @@ use serde_json::Value;
 
 use crate::harness::*;
 
+mod states;
+
 /// The browser the page test drives: Debian's `chromium` package.
 const CHROMIUM: &str = "/usr/bin/chromium";
 
@@ -192,7 +194,7 @@ fn the_view_serves_the_fields_frame_downsampled_with_its_stats() {
     let hz = s["tick_hz"].as_f64().unwrap();
     assert!(
         (35.0..65.0).contains(&hz),
-        "tick rate of a 50 Hz field: {hz}"
+        "tick rate of a 50 Hz field: {hz}: {s}"
     );
     assert!(s["readers"].as_u64().unwrap() >= 1, "{s}");
     assert!(s["sequence"].as_u64().unwrap() >= f["sequence"].as_u64().unwrap());

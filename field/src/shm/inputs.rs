@@ -67,7 +67,8 @@ type InputsFactory = iceoryx2::service::port_factory::publish_subscribe::PortFac
     [DepositMsg],
     InputsHeader,
 >;
-type ConfigFactory = iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [u8], ()>;
+pub(super) type ConfigFactory =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [u8], ()>;
 
 fn inputs_service(node: &Node<Svc>, names: &FieldServices) -> Result<InputsFactory, ShmError> {
     node.service_builder(&service_name(&names.inputs)?)
@@ -81,7 +82,10 @@ fn inputs_service(node: &Node<Svc>, names: &FieldServices) -> Result<InputsFacto
         .map_err(|e| service_err(&names.inputs, "open or create", e))
 }
 
-fn config_service(node: &Node<Svc>, names: &FieldServices) -> Result<ConfigFactory, ShmError> {
+pub(super) fn config_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+) -> Result<ConfigFactory, ShmError> {
     node.service_builder(&service_name(&names.config)?)
         .publish_subscribe::<[u8]>()
         .history_size(1)

@@ -27,6 +27,7 @@
 //! re-exported here; this file holds what
 //! they share (errors, names, nodes, service builders, frame pool sizing).
 
+mod config;
 mod deposit;
 mod inputs;
 mod reader;
@@ -46,6 +47,7 @@ use crate::engine::FieldConfig;
 use crate::messages::{DepositMsg, FrameHeader};
 use crate::wire::{self, LAYOUT_VERSION};
 
+pub use config::ConfigSubscriber;
 pub use deposit::DepositPublisher;
 pub use inputs::{
     f32s_from_bytes, wire_bytes, wire_from_bytes, wire_slice_bytes, wire_vec_from_bytes,

@@ -133,6 +133,11 @@ pub struct ClientConfig {
     /// remembered one as applied without applying it.
     pub first_seq: u8,
     pub deposit_retry: DepositRetry,
+    /// How long a request may keep backing off while its gateway answers "over your rate"
+    /// (M3 reason 5) before the request fails with that reply. The client waits 10 ms after the
+    /// first such answer, doubling up to 320 ms, then sends the same request again (a deposit
+    /// with the same seq); these waits use no attempt and cause no switch.
+    pub rate_limited_wait: Duration,
 }
 
 impl Default for ClientConfig {
@@ -143,9 +148,14 @@ impl Default for ClientConfig {
             retries: 2,
             first_seq: 0,
             deposit_retry: DepositRetry::AcrossSwitch,
+            rate_limited_wait: Duration::from_secs(5),
         }
     }
 }
+
+/// The first wait after a rate-limited answer, and the longest.
+const BACKOFF_FIRST: Duration = Duration::from_millis(10);
+const BACKOFF_MAX: Duration = Duration::from_millis(320);
 
 enum Link {
     Udp(UdpSocket),
@@ -350,6 +360,8 @@ pub struct GatewayClient {
     next_seq: u8,
     switches: u64,
     last_switch: Option<Instant>,
+    /// Rate-limited answers the client backed off on.
+    backoffs: u64,
 }
 
 impl GatewayClient {
@@ -365,7 +377,13 @@ impl GatewayClient {
             active: 0,
             switches: 0,
             last_switch: None,
+            backoffs: 0,
         }
+    }
+
+    /// How many times the client backed off because its gateway answered "over your rate".
+    pub fn backoffs(&self) -> u64 {
+        self.backoffs
     }
 
     /// Adds the backup gateway, used when the primary does not answer (and the other way
@@ -557,7 +575,9 @@ impl GatewayClient {
         self.last_switch = Some(Instant::now());
     }
 
-    /// Asks the active gateway, `1 + retries` times at most.
+    /// Asks the active gateway, `1 + retries` times at most; an answer "over your rate" (M3
+    /// reason 5) is waited out with a growing backoff (`rate_limited_wait` in all) and the same
+    /// request sent again, using no attempt.
     fn ask(
         &mut self,
         request: &'static str,
@@ -569,10 +589,14 @@ impl GatewayClient {
         let n = encode(message, id, &mut out)
             .map_err(|source| ClientError::Encode { request, source })?;
         let (timeout, attempts) = (self.config.timeout, 1 + self.config.retries);
+        let backoff_end = Instant::now() + self.config.rate_limited_wait;
+        let mut backoff = BACKOFF_FIRST;
         let transport = &mut self.endpoints[self.active].transport;
         let address = transport.name.clone();
         let (mut bad, mut refused) = (None, None);
-        for _ in 0..attempts {
+        let mut attempt = 0;
+        while attempt < attempts {
+            attempt += 1;
             transport.drain();
             match transport.send(&out[..n]) {
                 Ok(()) => {}
@@ -582,32 +606,29 @@ impl GatewayClient {
                 }
                 Err(source) => return Err(io(&address, "send")(source)),
             }
-            let deadline = Instant::now() + timeout;
-            loop {
-                match transport.recv(deadline) {
-                    Ok(None) => break,
-                    Ok(Some(Ok(frame))) => {
-                        if frame.client_id != id || !frame.message.is_reply() {
-                            continue;
-                        }
-                        if let Message::Error(reason) = frame.message {
-                            return Err(ClientError::ErrorReply {
-                                address,
-                                request,
-                                reason,
-                            });
-                        }
-                        if accept(&frame.message, message) {
-                            return Ok(frame.message);
-                        }
-                    }
-                    Ok(Some(Err(e))) => bad = Some(e),
-                    Err(e) if e.kind() == ErrorKind::ConnectionRefused => {
-                        refused = Some(e);
-                        break;
-                    }
-                    Err(source) => return Err(io(&address, "receive")(source)),
+            let answer = await_reply(transport, id, message, accept, Instant::now() + timeout);
+            match answer {
+                Ok(Answer::Reply(reply)) => return Ok(reply),
+                Ok(Answer::Error(ErrorReason::RateLimited))
+                    if Instant::now() + backoff <= backoff_end =>
+                {
+                    // Over the rate: wait (a late answer is read and dropped meanwhile), then
+                    // send the same request again; not an attempt.
+                    self.backoffs += 1;
+                    wait_out(transport, Instant::now() + backoff);
+                    backoff = (backoff * 2).min(BACKOFF_MAX);
+                    attempt -= 1;
                 }
+                Ok(Answer::Error(reason)) => {
+                    return Err(ClientError::ErrorReply {
+                        address,
+                        request,
+                        reason,
+                    })
+                }
+                Ok(Answer::None { bad_frame }) => bad = bad_frame.or(bad),
+                Err(e) if e.kind() == ErrorKind::ConnectionRefused => refused = Some(e),
+                Err(source) => return Err(io(&address, "receive")(source)),
             }
         }
         Err(if let Some(error) = bad {
@@ -630,6 +651,54 @@ impl GatewayClient {
                 timeout,
             }
         })
+    }
+}
+
+/// What one attempt got back.
+enum Answer {
+    /// The reply `accept` took.
+    Reply(Message),
+    /// An error reply (`0xFF`).
+    Error(ErrorReason),
+    /// Nothing usable before the deadline (the last bad frame, if one came).
+    None { bad_frame: Option<DecodeError> },
+}
+
+/// Reads until the reply to `message` from client `id` (or an error reply) arrives, or
+/// `deadline`.
+fn await_reply(
+    transport: &mut Transport,
+    id: u8,
+    message: &Message,
+    accept: &impl Fn(&Message, &Message) -> bool,
+    deadline: Instant,
+) -> std::io::Result<Answer> {
+    let mut bad_frame = None;
+    loop {
+        match transport.recv(deadline)? {
+            None => return Ok(Answer::None { bad_frame }),
+            Some(Ok(frame)) => {
+                if frame.client_id != id || !frame.message.is_reply() {
+                    continue;
+                }
+                if let Message::Error(reason) = frame.message {
+                    return Ok(Answer::Error(reason));
+                }
+                if accept(&frame.message, message) {
+                    return Ok(Answer::Reply(frame.message));
+                }
+            }
+            Some(Err(e)) => bad_frame = Some(e),
+        }
+    }
+}
+
+/// Reads and drops whatever arrives until `until`: the backoff after a rate-limited answer.
+fn wait_out(transport: &mut Transport, until: Instant) {
+    while Instant::now() < until {
+        if transport.recv(until).is_err() {
+            break;
+        }
     }
 }
 

@@ -373,3 +373,60 @@ fn over_a_pty_replies_arriving_a_byte_at_a_time_are_decoded() {
     assert_eq!(c.deposit(3.0, 4.0, 1.0, 0).unwrap(), 0);
     let _slave = responder.join().unwrap();
 }
+
+#[test]
+fn a_rate_limited_request_backs_off_and_is_sent_again_without_switching() {
+    // "Over your rate" to the first four requests, then honest.
+    let limited = |f: Frame, nth: usize| {
+        if nth < 4 {
+            vec![wire(f.client_id, Message::Error(ErrorReason::RateLimited))]
+        } else {
+            vec![honest(f)]
+        }
+    };
+    let fake = FakeUdp::new(Box::new(limited));
+    let backup = FakeUdp::new(Box::new(|f, _| vec![honest(f)]));
+    let mut c = GatewayClient::new(Transport::udp(&fake.address).unwrap(), config(200, 0))
+        .with_backup(Transport::udp(&backup.address).unwrap());
+    let started = Instant::now();
+    assert_eq!(c.deposit(2.0, 3.0, 1.0, 1).unwrap(), 0);
+    let waited = started.elapsed();
+    assert_eq!(c.backoffs(), 4);
+    assert_eq!(c.active(), Which::Primary, "no switch for a rate limit");
+    assert!(backup.seen().is_empty());
+    // 10 + 20 + 40 + 80 ms of backoff.
+    assert!(waited >= Duration::from_millis(150), "{waited:?}");
+    let seqs: Vec<u8> = fake
+        .seen()
+        .iter()
+        .map(|f| match f.message {
+            Message::Deposit(d) => d.seq,
+            m => panic!("{m:?}"),
+        })
+        .collect();
+    assert_eq!(seqs, vec![0; 5], "the same deposit, sent five times");
+    // A gateway that stays over the rate: the request fails with its reason once the
+    // backoff's budget is spent.
+    let always = FakeUdp::new(Box::new(|f: Frame, _| {
+        vec![wire(f.client_id, Message::Error(ErrorReason::RateLimited))]
+    }));
+    let mut c = GatewayClient::new(
+        Transport::udp(&always.address).unwrap(),
+        ClientConfig {
+            rate_limited_wait: Duration::from_millis(100),
+            ..config(200, 0)
+        },
+    );
+    let e = c.pir(1.0, 1.0, 0.0, 0.1, 0).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            ClientError::ErrorReply {
+                reason: ErrorReason::RateLimited,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(c.backoffs() >= 2, "{}", c.backoffs());
+}

@@ -26,9 +26,8 @@ pub mod udp;
 
 use std::time::Duration;
 
-use field::shm::{DepositPublisher, FieldReader, ShmError, Svc};
-use field::SamplePose;
-use field::{Deposit, Kernel};
+use field::shm::{ConfigSubscriber, DepositPublisher, FieldReader, ShmError, Svc};
+use field::{Deposit, FieldConfig, Kernel, RejectReason, SamplePose};
 use gateway_codec::{
     DecodeError, DepositReply, DepositRequest, DepositStatus, ErrorReason, Frame, Message,
     PirReply, PirRequest, StatusReply,
@@ -47,6 +46,10 @@ pub struct GatewayConfig {
     /// Client IDs served; the others get reason 6. Default: 1–255 (ID 0 is left out: CRC-16/ARC
     /// does not protect a leading 0x00, see `docs/gateway-wire.md`).
     pub allow: Vec<u8>,
+    /// Client IDs served only from these UDP sources (`--allow ID@ADDR`: an IP address, any
+    /// port, or IP:PORT); a frame with such an ID from elsewhere, or on a serial line, gets
+    /// reason 6. An ID may be bound to several sources.
+    pub bound: Vec<(u8, Source)>,
     /// Requests per second each client may send (a bucket of as many, refilled continuously);
     /// 0 = unlimited. Over it: reason 5.
     pub rate_per_s: f64,
@@ -56,10 +59,41 @@ pub struct GatewayConfig {
     pub slope_m: f32,
 }
 
+/// Where a bound client ID may send from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// This IP address, any port.
+    Ip(std::net::IpAddr),
+    /// This IP address and port.
+    Socket(std::net::SocketAddr),
+}
+
+impl Source {
+    fn admits(self, from: std::net::SocketAddr) -> bool {
+        match self {
+            Source::Ip(ip) => from.ip() == ip,
+            Source::Socket(s) => from == s,
+        }
+    }
+}
+
+impl std::str::FromStr for Source {
+    type Err = std::net::AddrParseError;
+
+    /// `IP` or `IP:PORT` (`[v6]:PORT` for IPv6).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.parse::<std::net::SocketAddr>() {
+            Ok(a) => Ok(Source::Socket(a)),
+            Err(_) => s.parse().map(Source::Ip),
+        }
+    }
+}
+
 impl Default for GatewayConfig {
     fn default() -> Self {
         Self {
             allow: (1..=255).collect(),
+            bound: Vec::new(),
             rate_per_s: 100.0,
             plateau_m: 0.2,
             slope_m: 0.3,
@@ -109,6 +143,9 @@ pub struct GatewayCounters {
     /// Deposits the field did not take (none subscribed or its buffer full): not answered, so
     /// the client retries.
     pub deposits_undelivered: u64,
+    /// Deposits refused with the field's own checks (`field::deposit::prepare`), by the
+    /// field's reason (`out_of_limits`, `negative_on_unsigned`, …): answered, never sent.
+    pub deposits_refused: std::collections::BTreeMap<&'static str, u64>,
     pub pings: u64,
     /// Error replies sent, by M3 reason code (index 1–6).
     pub errors_sent: [u64; 7],
@@ -178,6 +215,10 @@ pub struct Gateway {
     allowed: [bool; 256],
     clients: Box<[Client; 256]>,
     counters: GatewayCounters,
+    /// The field's configuration once it has published it (with its next frame after the
+    /// gateway attached): its channels and limits check each deposit as the field will.
+    field_config: Option<FieldConfig>,
+    config_sub: Option<ConfigSubscriber>,
 }
 
 impl Gateway {
@@ -204,6 +245,14 @@ impl Gateway {
         for &id in &config.allow {
             allowed[id as usize] = true;
         }
+        let config_sub = ConfigSubscriber::attach(node, field)
+            .map_err(|e| {
+                eprintln!(
+                    "gateway: cannot read field '{field}''s configuration ({e}); deposits are \
+                     checked for their channel and reach only"
+                )
+            })
+            .ok();
         Ok(Self {
             field: field.to_string(),
             reader,
@@ -212,7 +261,19 @@ impl Gateway {
             allowed,
             clients: Box::new([Client::NEW; 256]),
             counters: GatewayCounters::default(),
+            field_config: None,
+            config_sub,
         })
+    }
+
+    /// The field's configuration, once it has arrived.
+    fn field_config(&mut self) -> Result<Option<&FieldConfig>, GatewayError> {
+        if let Some(sub) = &self.config_sub {
+            if let Some(c) = sub.latest()? {
+                self.field_config = Some(c);
+            }
+        }
+        Ok(self.field_config.as_ref())
     }
 
     pub fn field(&self) -> &str {
@@ -239,12 +300,24 @@ impl Gateway {
         }
     }
 
-    /// Answers one decoded frame received at `now_ns` (CLOCK_MONOTONIC); `None` = no reply
-    /// (a deposit the field did not take: the client retries).
+    /// Answers one decoded frame received at `now_ns` (CLOCK_MONOTONIC) from a source with no
+    /// address (a serial line); `None` = no reply (a deposit the field did not take: the client
+    /// retries).
     pub fn handle(&mut self, frame: Frame, now_ns: u64) -> Result<Option<Frame>, GatewayError> {
+        self.handle_from(frame, now_ns, None)
+    }
+
+    /// [`Gateway::handle`] for a frame that came from `from` (UDP): a client ID bound to other
+    /// sources (`GatewayConfig::bound`) is not allowed (reason 6).
+    pub fn handle_from(
+        &mut self,
+        frame: Frame,
+        now_ns: u64,
+        from: Option<std::net::SocketAddr>,
+    ) -> Result<Option<Frame>, GatewayError> {
         self.counters.frames += 1;
         let id = frame.client_id;
-        if !self.allowed[id as usize] {
+        if !self.allowed[id as usize] || !self.source_admitted(id, from) {
             return Ok(Some(self.error(id, ErrorReason::ClientNotAllowed)));
         }
         if !self.clients[id as usize].admit(self.config.rate_per_s, now_ns) {
@@ -260,6 +333,20 @@ impl Gateway {
             _ => self.error(id, ErrorReason::UnknownOpcode),
         };
         Ok(Some(reply))
+    }
+
+    /// Whether client `id` may send from `from`: any source unless it is bound.
+    fn source_admitted(&self, id: u8, from: Option<std::net::SocketAddr>) -> bool {
+        let mut bound = self
+            .config
+            .bound
+            .iter()
+            .filter(|(b, _)| *b == id)
+            .peekable();
+        if bound.peek().is_none() {
+            return true;
+        }
+        from.is_some_and(|from| bound.any(|(_, s)| s.admits(from)))
     }
 
     fn pir(&mut self, id: u8, p: PirRequest) -> Frame {
@@ -293,6 +380,33 @@ impl Gateway {
             client_id: id,
             message: Message::DepositReply(DepositReply { seq: d.seq, status }),
         };
+        let deposit = Deposit {
+            channel: d.channel as u32,
+            x_m: d.x_m,
+            y_m: d.y_m,
+            kernel: Kernel::ZShape {
+                amount: d.amount,
+                plateau_m: self.config.plateau_m,
+                slope_m: self.config.slope_m,
+            },
+        };
+        let msg = deposit.to_msg(id as u32, 0);
+        // The field's own checks, with its channels and limits: what it would refuse is answered
+        // here, never sent.
+        let refused = match self.field_config()? {
+            Some(c) => field::deposit::prepare(&msg, &c.geometry(), &c.channels, &c.limits).err(),
+            None => None,
+        };
+        if let Some(r) = refused {
+            *self
+                .counters
+                .deposits_refused
+                .entry(r.reason.name())
+                .or_default() += 1;
+            let reason = deposit_status(r.reason);
+            self.counters.errors_sent[reason as usize] += 1;
+            return Ok(Some(reply(DepositStatus::Rejected(reason))));
+        }
         let Some(f) = self.reader.frame() else {
             return Ok(Some(self.error(id, ErrorReason::BadValue)));
         };
@@ -316,17 +430,6 @@ impl Gateway {
             self.counters.deposits_repeated += 1;
             return Ok(Some(reply(DepositStatus::Applied)));
         }
-        let deposit = Deposit {
-            channel: d.channel as u32,
-            x_m: d.x_m,
-            y_m: d.y_m,
-            kernel: Kernel::ZShape {
-                amount: d.amount,
-                plateau_m: self.config.plateau_m,
-                slope_m: self.config.slope_m,
-            },
-        };
-        let msg = deposit.to_msg(id as u32, 0);
         match self.depositor.send_as(msg) {
             Ok(()) => {
                 self.clients[id as usize].remember(d.seq);
@@ -363,6 +466,21 @@ impl Gateway {
             client_id,
             message: Message::Error(reason),
         }
+    }
+}
+
+/// The deposit status (an M3 reason) for a deposit the field refuses: 4 for an unknown
+/// channel, 3 (a bad value) for everything else (non-finite, beyond the limits, negative on an
+/// unsigned channel, outside the grid).
+pub fn deposit_status(r: RejectReason) -> ErrorReason {
+    match r {
+        RejectReason::UnknownChannel => ErrorReason::UnknownChannel,
+        RejectReason::NonFinite
+        | RejectReason::NotPsd
+        | RejectReason::UnknownKernel
+        | RejectReason::OutOfLimits
+        | RejectReason::OutsideGrid
+        | RejectReason::NegativeOnUnsigned => ErrorReason::BadValue,
     }
 }
 

@@ -77,7 +77,7 @@ pub fn serve(
             match decode(&datagram[..n]) {
                 None => gateway.rejected(&gateway_codec::DecodeError::Truncated { len: n }),
                 Some(Err(e)) => gateway.rejected(&e),
-                Some(Ok(frame)) => gateway.handle(frame, now_ns())?,
+                Some(Ok(frame)) => gateway.handle_from(frame, now_ns(), Some(from))?,
             }
         };
         if let Some(reply) = reply {

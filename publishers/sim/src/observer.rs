@@ -278,6 +278,11 @@ impl Observer {
         (self.rec, mcap)
     }
 
+    /// The header of the newest frame seen: the field's counters up to it.
+    pub fn last_header(&self) -> Option<field::FrameHeader> {
+        self.field.frame().map(|f| *f.header)
+    }
+
     /// Field time of the newest frame seen.
     pub fn sim_time_s(&self) -> Option<f64> {
         (self.last_frame_time_s >= 0.0).then_some(self.last_frame_time_s)

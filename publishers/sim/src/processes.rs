@@ -120,6 +120,9 @@ pub struct ProcessRunInfo {
     pub reports: Vec<ProcessReport>,
     /// `--record`: what the MCAP file holds.
     pub record: Option<McapTotals>,
+    /// Stopped early by SIGINT/SIGTERM: the run's world was stopped as Ctrl-C stops it, every
+    /// process has stopped, and the summary and recording are those up to the stop.
+    pub interrupted: bool,
 }
 
 /// The effective scenario (after the flags) as a file every process reads, in a private
@@ -253,7 +256,20 @@ fn supervise(
         let scripted = scenario.scripted(segments)?;
         observer.record_to(McapFeed::new(out, scenario, scripted));
     }
-    let startup = record_until_the_world_ends(&mut observer, children.world, &start, &mut o, sup)?;
+    let recorded = record_until_the_world_ends(&mut observer, children.world, &start, &mut o, sup)?;
+    if recorded.interrupted {
+        let startup_s = recorded.startup.unwrap_or_else(|| started.elapsed());
+        let out = finish_interrupted(scenario, observer, &children, sup, participants);
+        return Ok((
+            out.0,
+            out.1,
+            ProcessRunInfo {
+                startup_s: startup_s.as_secs_f64(),
+                ..out.2
+            },
+        ));
+    }
+    let startup = recorded.startup;
     let world_summary: WorldSummary = sup.summary(children.world)?;
     // The other roles stop by themselves when the world announces the end.
     let end_timeout = Duration::from_secs(15);
@@ -265,7 +281,8 @@ fn supervise(
     reports.push(report("world", &world_summary));
     let (rec, mcap) = observer.finish_with_mcap();
     let record = mcap.transpose()?;
-    let summary = run_summary(scenario, &world_summary, &field_summary, &rec);
+    let counters = FieldCounters::of(&field_summary);
+    let summary = run_summary(scenario, &world_summary, &counters, &rec);
     Ok((
         summary,
         rec,
@@ -274,8 +291,119 @@ fn supervise(
             processes: participants, // the observer counted in, the world not: as many
             reports,
             record,
+            interrupted: false,
         },
     ))
+}
+
+/// A run stopped by SIGINT/SIGTERM once recording: every process still running is stopped
+/// (SIGTERM, SIGKILL after 5 s), and the run is summed up from what the children printed as
+/// they stopped, or from the observer's recording where a child printed nothing (its last
+/// frame's counters for the field, the robots' last recorded poses for the world).
+fn finish_interrupted(
+    scenario: &Scenario,
+    observer: Observer,
+    children: &Children,
+    sup: &mut Supervisor,
+    participants: usize,
+) -> (RunSummary, Recording, ProcessRunInfo) {
+    let killed = sup.stop_all(Duration::from_secs(5));
+    if !killed.is_empty() {
+        eprintln!(
+            "sim: killed after 5 s without stopping: {}",
+            killed.join(", ")
+        );
+    }
+    let header = observer.last_header();
+    let sim_time_s = observer.sim_time_s().unwrap_or(0.0);
+    let world: Option<WorldSummary> = sup.last_summary(children.world);
+    let field: Option<FieldRunSummary> = sup.last_summary(children.field);
+    let reports = sup
+        .ids()
+        .into_iter()
+        .filter_map(|id| {
+            let summary: serde_json::Value = sup.last_summary(id)?;
+            Some(ProcessReport {
+                role: sup.spec(id).who(),
+                summary,
+            })
+        })
+        .collect();
+    let (rec, mcap) = observer.finish_with_mcap();
+    let record = match mcap.transpose() {
+        Ok(totals) => totals,
+        Err(e) => {
+            eprintln!("sim: the --record file could not be finished: {e}");
+            None
+        }
+    };
+    let counters = match (&field, header) {
+        (Some(f), _) => FieldCounters::of(f),
+        (None, Some(h)) => FieldCounters {
+            ticks: h.sequence,
+            deposits_applied: h.deposits_applied,
+            deposits_rejected: crate::single::rejected_by_reason(&h.deposits_rejected),
+        },
+        (None, None) => FieldCounters::default(),
+    };
+    let world = world.unwrap_or_else(|| world_from_recording(&rec, sim_time_s));
+    let summary = run_summary(scenario, &world, &counters, &rec);
+    let info = ProcessRunInfo {
+        startup_s: 0.0,
+        processes: participants,
+        reports,
+        record,
+        interrupted: true,
+    };
+    (summary, rec, info)
+}
+
+/// The world's summary from the recording, for a world that printed none: the steps and
+/// robots recorded, the last frame's time.
+fn world_from_recording(rec: &Recording, sim_time_s: f64) -> WorldSummary {
+    WorldSummary {
+        steps: rec
+            .robots
+            .values()
+            .map(|r| r.len() as u64)
+            .max()
+            .unwrap_or(0),
+        sim_time_s,
+        robots: rec
+            .robots
+            .iter()
+            .filter_map(|(&id, rows)| {
+                Some(roles::RobotSummary {
+                    id,
+                    true_pose: rows.last()?.true_pose,
+                    distance_travelled_m: rec.distance_travelled_m(id),
+                    collisions: 0,
+                })
+            })
+            .collect(),
+        deposits_sent: 0,
+        interrupted: true,
+        startup_s: 0.0,
+        participants: 0,
+    }
+}
+
+/// The field's counters a run's summary takes.
+#[derive(Default)]
+struct FieldCounters {
+    ticks: u64,
+    deposits_applied: u64,
+    deposits_rejected: std::collections::BTreeMap<String, u64>,
+}
+
+impl FieldCounters {
+    fn of(f: &FieldRunSummary) -> Self {
+        Self {
+            ticks: f.ticks,
+            deposits_applied: f.deposits_applied,
+            deposits_rejected: f.deposits_rejected.clone(),
+        }
+    }
 }
 
 /// `v` as owned arguments.
@@ -611,28 +739,53 @@ fn join_observer(
     }
 }
 
-/// Records until the world ends (watching children, Ctrl-C, the time limit); the startup time.
+/// How the recording ended: the startup time, and whether SIGINT/SIGTERM stopped it.
+struct Recorded {
+    startup: Option<Duration>,
+    interrupted: bool,
+}
+
+/// After SIGINT/SIGTERM, how long the world may take to stop and announce the end while the
+/// observer records its last frames.
+const WIND_DOWN: Duration = Duration::from_secs(5);
+
+/// Records until the world ends (watching children, Ctrl-C, the time limit). On SIGINT or
+/// SIGTERM the world is stopped as Ctrl-C stops it (it announces the end, the roles stop on
+/// it) and the frames until then are recorded, `WIND_DOWN` at most; no child's failure ends
+/// the recording then.
 fn record_until_the_world_ends(
     observer: &mut Observer,
     world: ChildId,
     start: &RunStart<'_>,
     o: &mut ProcessRunOptions<'_>,
     sup: &mut Supervisor,
-) -> Result<Option<Duration>, ProcessRunError> {
+) -> Result<Recorded, ProcessRunError> {
     let deadline = start.started + o.timeout;
     let mut startup = None;
+    let mut wind_down: Option<Instant> = None;
     while sup.exit_status(world).is_none() {
-        if start.node.wait(Duration::ZERO).is_err() {
-            return Err(ProcessRunError::Interrupted);
+        if wind_down.is_none() && !field::shm::wait_or_stop(start.node, Duration::ZERO) {
+            sup.signal(world, nix::sys::signal::Signal::SIGTERM);
+            wind_down = Some(Instant::now() + WIND_DOWN);
         }
-        sup.check()?;
-        if Instant::now() > deadline {
-            return Err(ProcessRunError::Timeout {
-                timeout_s: o.timeout.as_secs_f64(),
-            });
+        match wind_down {
+            Some(end) if Instant::now() > end => break,
+            Some(_) => sup.poll(Duration::ZERO),
+            None => {
+                sup.check()?;
+                if Instant::now() > deadline {
+                    return Err(ProcessRunError::Timeout {
+                        timeout_s: o.timeout.as_secs_f64(),
+                    });
+                }
+            }
         }
         // Woken by the next frame; a child's exit is seen at most one round later.
-        observer.poll(Duration::from_millis(20))?;
+        match observer.poll(Duration::from_millis(20)) {
+            Ok(()) => {}
+            Err(_) if wind_down.is_some() => break,
+            Err(e) => return Err(e.into()),
+        }
         if let Some(t) = observer.sim_time_s() {
             if startup.is_none() && t > 0.0 {
                 startup = Some(start.started.elapsed());
@@ -642,7 +795,10 @@ fn record_until_the_world_ends(
             }
         }
     }
-    Ok(startup)
+    Ok(Recorded {
+        startup,
+        interrupted: wind_down.is_some(),
+    })
 }
 
 /// The address a gateway child prints on its first stdout line once it serves
@@ -689,7 +845,7 @@ fn report(role: &str, s: &impl Serialize) -> ProcessReport {
 fn run_summary(
     scenario: &Scenario,
     world: &WorldSummary,
-    field: &FieldRunSummary,
+    field: &FieldCounters,
     rec: &Recording,
 ) -> RunSummary {
     let mut fs = match rec.snapshots.last() {

@@ -128,6 +128,9 @@ pub struct SingleProcessOptions<'a> {
     pub progress: Option<&'a mut dyn FnMut(u64, u64)>,
     /// `--record`: the run's MCAP file (the caller finishes it).
     pub record: Option<&'a mut SimMcap>,
+    /// Asked after every step: `true` ends the run there (SIGINT/SIGTERM); the summary and
+    /// recording are then those of the steps run, and `RunSummary::steps` says how many.
+    pub stop: Option<&'a dyn Fn() -> bool>,
 }
 
 struct Robot {
@@ -232,6 +235,9 @@ pub fn run_single_process(
         run.step(k);
         if let Some(p) = options.progress.as_mut() {
             p(k + 1, steps);
+        }
+        if options.stop.is_some_and(|stop| stop()) {
+            break;
         }
     }
     Ok(run.finish())

@@ -15,7 +15,9 @@ fn topics(path: &std::path::Path) -> BTreeMap<String, Vec<u64>> {
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
         assert_eq!(m.channel.message_encoding, "cdr");
-        out.entry(m.channel.topic.clone()).or_default().push(m.log_time);
+        out.entry(m.channel.topic.clone())
+            .or_default()
+            .push(m.log_time);
     }
     out
 }
@@ -42,7 +44,11 @@ fn a_single_process_run_records_its_rows_frames_and_deposits() {
     let totals = out.finish().unwrap();
     let t = topics(&path);
     assert_eq!(t["/pheromone/grid_map"].len(), rec.snapshots.len());
-    assert_eq!(rec.snapshots.len(), 2, "the snapshot at 20 s and the last frame");
+    assert_eq!(
+        rec.snapshots.len(),
+        2,
+        "the snapshot at 20 s and the last frame"
+    );
     let shots: Vec<u64> = rec
         .snapshots
         .iter()

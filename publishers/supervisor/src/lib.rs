@@ -433,6 +433,20 @@ impl Supervisor {
         })
     }
 
+    /// The summary a child that has exited printed last on stdout, whatever its exit status
+    /// (a child stopped by SIGINT/SIGTERM prints its summary and exits 130/143); `None` when it
+    /// is still running, printed none, or the line is not one JSON `T`.
+    pub fn last_summary<T: DeserializeOwned>(&mut self, id: ChildId) -> Option<T> {
+        self.children[id.0].exit?;
+        self.drain_stdout(id);
+        let line = self.children[id.0]
+            .stdout_lines
+            .iter()
+            .rev()
+            .find(|l| !l.trim().is_empty())?;
+        serde_json::from_str(line).ok()
+    }
+
     /// The next line the child prints on stdout, waiting up to `timeout`; `None` on timeout.
     /// A child that closed its stdout (exited) before printing one is an error naming it.
     pub fn next_line(

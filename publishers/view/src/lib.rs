@@ -3,14 +3,15 @@
 //! This module is the pure part: the newest frame → a downsampled snapshot the page draws
 //! ([`snapshot`], [`downsample`]), the query parsing of the API ([`parse_frame_query`]), the
 //! statistics measured from the frames seen ([`StatsTracker`]) and the robots' recent paths
-//! ([`RobotPaths`]). [`server`] is the HTTP side: one thread, `tiny_http`, the field read with a
-//! `FieldReader` (no copy of the frame; only the downsampled snapshot is built per request).
+//! ([`RobotPaths`]). [`server`] is the HTTP side: one loop, the field read with a `FieldReader`
+//! (no copy of the frame; only the downsampled snapshot is built per request); [`http`] reads
+//! each request's head on a thread of its own, with bounds.
 //!
-//! Why `tiny_http`: the view serves a handful of GETs per second to one page on loopback. A
-//! synchronous server with four small dependencies (`ascii`, `chunked_transfer`, `httpdate`,
-//! `log`) compiles in seconds on these 2-core machines and runs in the same loop that polls the
-//! field's iceoryx2 ports (which are not `Send`), where an async stack (axum, tokio, hyper)
-//! would add a runtime and ~60 crates for nothing the view needs.
+//! Why its own small HTTP/1.x server: the view serves a handful of GETs per second to one page
+//! on loopback, in the same loop that polls the field's iceoryx2 ports (which are not `Send`),
+//! where an async stack (axum, tokio, hyper) would add a runtime and ~60 crates for nothing the
+//! view needs. `tiny_http`, used before, reads a request line of any length into memory (a
+//! 32 MiB query took the view from 19 to 52 MB, 84 MB at its peak); [`http`] stops at 4 KiB.
 //!
 //! Downsampling is a *max-magnitude pool*: each output cell takes the input value of largest
 //! magnitude in its block, sign kept. A narrow trail or a small blob stays visible at any zoom
@@ -18,6 +19,7 @@
 //! output value is a value of the frame, so the frame's min and max (computed at full
 //! resolution, with the hottest cell's position) bound the snapshot.
 
+pub mod http;
 pub mod server;
 
 use std::collections::{BTreeMap, VecDeque};
@@ -51,9 +53,20 @@ impl std::error::Error for QueryError {}
 
 fn query_error(param: &str, value: &str, reason: impl Into<String>) -> QueryError {
     QueryError {
-        param: param.to_string(),
-        value: value.to_string(),
+        param: shown(param),
+        value: shown(value),
         reason: reason.into(),
+    }
+}
+
+/// Longest part of a request an error message repeats (chars); longer ones are cut with `…`.
+pub const ECHO_MAX_CHARS: usize = 32;
+
+/// `s` as an error message may repeat it: at most [`ECHO_MAX_CHARS`] chars.
+fn shown(s: &str) -> String {
+    match s.char_indices().nth(ECHO_MAX_CHARS) {
+        Some((at, _)) => format!("{}…", &s[..at]),
+        None => s.to_string(),
     }
 }
 
@@ -302,6 +315,14 @@ pub struct StatsTracker {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Stats {
     pub field: String,
+    /// `waiting` (no frame yet), `live`, `stalled` (its process is there but no new frame for
+    /// five tick periods, at least 1 s), `stopped` (no process publishes its frames: it died or
+    /// stopped; its last frame is still served).
+    pub state: &'static str,
+    /// The state in words, as the page shows it.
+    pub status: String,
+    /// Seconds since the view last saw a new frame.
+    pub last_frame_age_s: Option<f64>,
     /// Whether a frame has been seen at all.
     pub attached: bool,
     pub sequence: u64,
@@ -368,6 +389,13 @@ impl StatsTracker {
         let h = self.last.unwrap_or_default();
         Stats {
             field: field.to_string(),
+            state: if self.last.is_some() {
+                "live"
+            } else {
+                "waiting"
+            },
+            status: String::new(),
+            last_frame_age_s: None,
             attached: self.last.is_some(),
             sequence: h.sequence,
             sim_time_s: h.sim_time_s,

@@ -1,5 +1,6 @@
 //! The view's HTTP side: one loop that takes the field's newest frame, the robots' poses and
-//! the page's requests in turn (`tiny_http`, synchronous; see the module above for why).
+//! the page's requests in turn (synchronous; the requests' heads are read, with bounds, on
+//! threads of `super::http`).
 //!
 //! | path | answer |
 //! | --- | --- |
@@ -8,8 +9,11 @@
 //! | `/api/stats` | [`super::Stats`] as JSON |
 //! | `/api/robots` | `{"world": W, "robots": [`[`super::RobotTrack`]`]}` (empty without `--world`) |
 //!
-//! A bad parameter is a 400 with a plain-text message naming it and its value, an unknown path
-//! a 404, another method than GET or HEAD a 405, and `/api/frame` before the first frame a 503.
+//! A bad parameter is a 400 with a plain-text message naming it and its value (each cut to 32
+//! characters), a request target over 2048 bytes (or a request line over 4096 bytes, read no
+//! further) a 414 that does not repeat it, a request head over 16 KiB a 431, an unknown path
+//! a 404, another method than GET or HEAD a 405, and `/api/frame` before the first frame a 503
+//! with `Retry-After: 1` and a JSON body `{"field", "state": "waiting", "status"}`.
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -20,7 +24,8 @@ use field::shm::{FieldReader, ShmError, Svc};
 use field::wire::{ready_service, RobotServices, ROBOT_LINK};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
-use tiny_http::{Header, Method, Request, Response, Server};
+
+use super::http::{Request, Server};
 
 use super::{parse_frame_query, snapshot, QueryError, RobotPaths, StatsTracker};
 use messages::PoseMsg;
@@ -36,6 +41,10 @@ const REQUEST_SLICE: Duration = Duration::from_millis(5);
 const RESCAN: Duration = Duration::from_secs(1);
 /// How often a field not there yet is looked for.
 const REATTACH: Duration = Duration::from_millis(200);
+/// How often whether the field's process is still there is looked at.
+const ALIVE_CHECK: Duration = Duration::from_millis(500);
+/// The longest request target (path and query) answered; a longer one gets a 414.
+pub const MAX_URL_BYTES: usize = 2048;
 
 /// What `pheromone view` serves.
 #[derive(Debug, Clone)]
@@ -63,17 +72,11 @@ pub enum ViewError {
 /// Binds the HTTP server on `address` (e.g. `127.0.0.1:8080`; port 0 picks a free one) and
 /// returns it with the address it listens on.
 pub fn bind(address: &str) -> Result<(Server, SocketAddr), ViewError> {
-    let server = Server::http(address).map_err(|source| ViewError::Bind {
+    let server = Server::bind(address).map_err(|source| ViewError::Bind {
         address: address.to_string(),
-        source,
+        source: source.into(),
     })?;
-    let local = server
-        .server_addr()
-        .to_ip()
-        .ok_or_else(|| ViewError::Bind {
-            address: address.to_string(),
-            source: "not an IP address".into(),
-        })?;
+    let local = server.local_addr();
     Ok((server, local))
 }
 
@@ -160,6 +163,11 @@ pub struct View {
     stats: StatsTracker,
     next_scan: Instant,
     next_attach: Instant,
+    /// When the view last saw a new frame.
+    last_new_frame: Option<Instant>,
+    /// Whether a process publishes the field's frames (looked at every `ALIVE_CHECK`).
+    alive: bool,
+    next_alive_check: Instant,
 }
 
 impl View {
@@ -176,7 +184,47 @@ impl View {
             stats: StatsTracker::default(),
             next_scan: Instant::now(),
             next_attach: Instant::now(),
+            last_new_frame: None,
+            alive: false,
+            next_alive_check: Instant::now(),
         }
+    }
+
+    /// The field's state and what the page says about it: waiting, live, stalled, stopped.
+    fn field_state(&self, s: &mut super::Stats) {
+        let f = &self.config.field;
+        let age = self.last_new_frame.map(|t| t.elapsed());
+        s.last_frame_age_s = age.map(|a| a.as_secs_f64());
+        let (state, status) = match age {
+            _ if !s.attached => ("waiting", format!("waiting for field '{f}'")),
+            None => ("waiting", format!("waiting for field '{f}'")),
+            Some(age) if !self.alive => (
+                "stopped",
+                format!(
+                    "field '{f}' stopped: no process publishes it; last frame {} ({:.1} s ago)",
+                    s.sequence,
+                    age.as_secs_f64()
+                ),
+            ),
+            Some(age) if age > stall_after(s.tick_hz) => (
+                "stalled",
+                format!(
+                    "field '{f}': no new frame for {:.1} s (its process is there); last frame {}",
+                    age.as_secs_f64(),
+                    s.sequence
+                ),
+            ),
+            Some(_) => (
+                "live",
+                format!("field '{f}', frame {}, {:.1} Hz", s.sequence, s.tick_hz),
+            ),
+        };
+        if state == "stopped" {
+            // The rate of frames that no longer come.
+            s.tick_hz = 0.0;
+        }
+        s.state = state;
+        s.status = status;
     }
 
     /// Takes what arrived: the newest frame (attaching to the field when it appears) and the
@@ -199,9 +247,20 @@ impl View {
             }
         }
         if let Some(reader) = &mut self.reader {
-            reader.update()?;
+            if reader.update()? {
+                // A new frame: something publishes it.
+                self.last_new_frame = Some(now);
+                self.alive = true;
+            }
             if let Some(f) = reader.frame() {
                 self.stats.record(f.header);
+            }
+            // Only a field that sent nothing since the last look can have stopped (a field
+            // starting may have its service before its publisher).
+            if now >= self.next_alive_check {
+                self.next_alive_check = now + ALIVE_CHECK;
+                let quiet = self.last_new_frame.is_none_or(|t| now - t >= ALIVE_CHECK);
+                self.alive = !quiet || reader.field_alive();
             }
         }
         if let Some(robots) = &mut self.robots {
@@ -215,6 +274,16 @@ impl View {
 
     /// The answer to a GET of `url` (path and query).
     pub fn answer(&self, url: &str) -> Reply {
+        if url.len() > MAX_URL_BYTES {
+            // Not repeated: it could be anything, of any size.
+            return Reply::text(
+                414,
+                format!(
+                    "request target of {} bytes: at most {MAX_URL_BYTES}",
+                    url.len()
+                ),
+            );
+        }
         let (path, query) = match url.split_once('?') {
             Some((p, q)) => (p, Some(q)),
             None => (url, None),
@@ -240,11 +309,13 @@ impl View {
                 |e| e,
                 |()| {
                     let readers = self.reader.as_ref().map(|r| r.readers());
-                    Reply::json(&self.stats.stats(&self.config.field, readers))
+                    let mut stats = self.stats.stats(&self.config.field, readers);
+                    self.field_state(&mut stats);
+                    Reply::json(&stats)
                 },
             ),
             "/api/robots" => no_params().map_or_else(|e| e, |()| self.robots()),
-            _ => Reply::text(404, format!("not found: {path}")),
+            _ => Reply::text(404, format!("not found: {}", super::shown(path))),
         }
     }
 
@@ -254,10 +325,15 @@ impl View {
             Err(e) => return Reply::bad(e),
         };
         let Some(sample) = self.reader.as_ref().and_then(|r| r.sample()) else {
-            return Reply::text(
-                503,
-                format!("no frame yet from field '{}'", self.config.field),
-            );
+            // Not an error of the request: the field has not started (yet).
+            let f = &self.config.field;
+            let mut reply = Reply::json(&serde_json::json!({
+                "field": f,
+                "state": "waiting",
+                "status": format!("waiting for field '{f}'"),
+            }));
+            reply.status = 503;
+            return reply;
         };
         let header = sample.user_header();
         if let Err(e) = q.check_channel(header.channels) {
@@ -283,38 +359,43 @@ impl View {
     }
 
     fn respond(&mut self, node: &Node<Svc>, request: Request) -> Result<(), ShmError> {
-        let reply = match request.method() {
-            Method::Get | Method::Head => {
+        let reply = match request.method.as_str() {
+            "GET" | "HEAD" => {
                 // The newest frame, not the one of the last slice.
                 self.poll(node)?;
-                self.answer(request.url())
+                self.answer(&request.target)
             }
-            m => Reply::text(405, format!("method {m} not allowed: GET only")),
+            m => {
+                let m = super::shown(m);
+                Reply::text(405, format!("method {m} not allowed: GET only"))
+            }
         };
-        let mut response = Response::from_data(reply.body).with_status_code(reply.status);
-        for (k, v) in [
+        let mut headers = vec![
             ("Content-Type", reply.content_type),
             ("Cache-Control", "no-store"),
-        ] {
-            if let Ok(h) = Header::from_bytes(k.as_bytes(), v.as_bytes()) {
-                response.add_header(h);
-            }
+        ];
+        if reply.status == 503 {
+            // A field not there yet: ask again in a second.
+            headers.push(("Retry-After", "1"));
         }
-        // A page that went away mid-answer is no failure of the view.
-        let _ = request.respond(response);
+        request.respond(reply.status, &headers, &reply.body);
         Ok(())
     }
+}
+
+/// How long without a new frame a field whose process is there counts as stalled: five tick
+/// periods at the rate measured, at least 1 s.
+fn stall_after(tick_hz: f64) -> Duration {
+    let periods = if tick_hz > 0.0 { 5.0 / tick_hz } else { 0.0 };
+    Duration::from_secs_f64(periods.clamp(1.0, 3600.0))
 }
 
 /// Serves `view` on `server` until the node sees a termination request (Ctrl-C, SIGTERM).
 pub fn serve(node: &Node<Svc>, server: &Server, view: &mut View) -> Result<(), ViewError> {
     while node.wait(Duration::ZERO).is_ok() {
         view.poll(node)?;
-        match server.recv_timeout(REQUEST_SLICE) {
-            Ok(Some(request)) => view.respond(node, request)?,
-            Ok(None) => {}
-            // A connection that failed to be accepted; the server goes on.
-            Err(e) => eprintln!("view: {e}"),
+        if let Some(request) = server.recv_timeout(REQUEST_SLICE) {
+            view.respond(node, request)?;
         }
     }
     Ok(())

@@ -69,6 +69,9 @@ pub struct SourceStats {
     pub stale_replies: u64,
     /// Switches between the primary and the backup gateway.
     pub switches: u64,
+    /// Answers "over your rate" (M3 reason 5) the client waited out before asking again.
+    #[serde(default)]
+    pub rate_limited_backoffs: u64,
     /// The gateway used at the end.
     pub active: String,
     /// Deposits the gateway answered as applied.
@@ -277,6 +280,7 @@ impl AntennaSource for GatewaySource {
     fn stats(&self) -> SourceStats {
         SourceStats {
             switches: self.client.switches().0,
+            rate_limited_backoffs: self.client.backoffs(),
             active: self.client.active_address().to_string(),
             ..self.stats.clone()
         }

@@ -223,16 +223,21 @@ async function getJson(path) {
 async function tick() {
   const started = performance.now();
   try {
-    const q = `channel=${$("channel").value}&max_side=${$("max-side").value}`;
-    const [frame, stats, robots] = await Promise.all([
-      getJson(`/api/frame?${q}`), getJson("/api/stats"), getJson("/api/robots"),
-    ]);
-    state.robots = robots.robots;
+    // The field's state first: before it starts there is no frame to ask for.
+    const stats = await getJson("/api/stats");
     showStats(stats);
-    showRobots(robots);
-    state.frame = frame;
-    drawFrame(frame);
-    setStatus("live", `field '${stats.field}', frame ${frame.sequence}`);
+    if (stats.state !== "waiting") {
+      const q = `channel=${$("channel").value}&max_side=${$("max-side").value}`;
+      const [frame, robots] = await Promise.all([
+        getJson(`/api/frame?${q}`), getJson("/api/robots"),
+      ]);
+      state.robots = robots.robots;
+      showRobots(robots);
+      state.frame = frame;
+      drawFrame(frame);
+    }
+    // waiting, live, stalled or stopped, in the view's words.
+    setStatus(stats.state, stats.status);
   } catch (e) {
     setStatus("error", String(e.message || e));
   }
