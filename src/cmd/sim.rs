@@ -88,33 +88,11 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     let wall_s = started.elapsed().as_secs_f64();
     let mut metrics = metrics_json(&scenario, &summary, &rec);
     metrics["interrupted"] = json!(interrupted);
-    metrics["mode"] = json!(if a.single_process {
-        "single-process"
-    } else if a.remote {
-        "processes-remote"
-    } else {
-        "processes"
-    });
     metrics["wall_time_s"] = json!(wall_s);
     metrics["sim_time_per_wall_time"] = json!(summary.sim_time_s / wall_s.max(1e-9));
-    if let Some(info) = processes {
-        metrics["startup_s"] = json!(info.startup_s);
-        metrics["processes"] = serde_json::to_value(&info.reports)?;
-    }
+    add_run_facts(&a, &mut metrics, processes)?;
     // A file that could not be written fails the run, after its other outputs.
-    let record = record.map(|totals| {
-        if let Some(t) = totals {
-            eprintln!(
-                "sim: recorded {} messages ({} frames, {} poses, {} deposits) in {}",
-                t.messages,
-                t.frames,
-                t.poses,
-                t.deposits,
-                t.file.display()
-            );
-            metrics["record"] = json!(t);
-        }
-    });
+    let record = record.map(|totals| add_record(&mut metrics, totals));
     print_summary(&metrics);
     if let Some(dir) = out_dir(&a, &scenario) {
         let mut files =
@@ -130,11 +108,46 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     if a.json {
         println!("{metrics}");
     }
-    let record = record?;
+    record?;
     if interrupted {
         return Err(Stopped::by_requested().into());
     }
-    Ok(record)
+    Ok(())
+}
+
+/// The run's mode and, in process mode, its startup and each process's report.
+fn add_run_facts(
+    a: &SimArgs,
+    metrics: &mut Value,
+    processes: Option<ProcessRunInfo>,
+) -> anyhow::Result<()> {
+    metrics["mode"] = json!(if a.single_process {
+        "single-process"
+    } else if a.remote {
+        "processes-remote"
+    } else {
+        "processes"
+    });
+    if let Some(info) = processes {
+        metrics["startup_s"] = json!(info.startup_s);
+        metrics["processes"] = serde_json::to_value(&info.reports)?;
+    }
+    Ok(())
+}
+
+/// `--record`: what the file holds, printed and in the metrics.
+fn add_record(metrics: &mut Value, totals: Option<McapTotals>) {
+    if let Some(t) = totals {
+        eprintln!(
+            "sim: recorded {} messages ({} frames, {} poses, {} deposits) in {}",
+            t.messages,
+            t.frames,
+            t.poses,
+            t.deposits,
+            t.file.display()
+        );
+        metrics["record"] = json!(t);
+    }
 }
 
 /// What one run gives: its summary, recording, processes and, with `--record`, what the file
