@@ -9,10 +9,11 @@ use anyhow::Context;
 use clap::Args;
 use field::shm::create_node;
 use graph::agent::{GraphStrategy, RegionsScenario, Until, BUILTIN_REGIONS};
-use graph::compare::{compare, comparison_text};
+use graph::compare::{compare, comparison_text, Comparison};
 use graph::processes::{run_graph_robot, run_graph_writer, WriterOptions};
 use graph::run::{simulate, tables_text, RunReport};
-use serde_json::json;
+use serde::Serialize;
+use sim::metrics::RunMode;
 
 use super::sim_args::SimArgs;
 use super::{bad, bad_from, bad_in};
@@ -204,21 +205,25 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
     };
     eprint!("{cmp_text}");
     text += &cmp_text;
-    let metrics = json!({
-        "scenario": scenario.name,
-        "seed": seed,
-        "mode": if a.single_process { "single-process" } else { "processes" },
+    let metrics = RegionsMetrics {
+        scenario: scenario.name.clone(),
+        seed,
+        mode: if a.single_process {
+            RunMode::SingleProcess
+        } else {
+            RunMode::Processes
+        },
         // A regions run stopped by Ctrl-C writes nothing (exit 1 as processes).
-        "interrupted": false,
-        "wall_time_s": started.elapsed().as_secs_f64(),
-        "comparison": comparison,
-        "runs": runs,
-    });
+        interrupted: false,
+        wall_time_s: started.elapsed().as_secs_f64(),
+        comparison,
+        runs,
+    };
     if !a.no_out {
-        write_sim_out(a, &scenario, &metrics, &text, &runs)?;
+        write_sim_out(a, &scenario, &metrics, &text)?;
     }
     if a.json {
-        println!("{metrics}");
+        println!("{}", serde_json::to_string(&metrics)?);
     }
     Ok(())
 }
@@ -292,14 +297,28 @@ fn run_each(
     Ok((runs, text))
 }
 
+/// The metrics of a regions run (`--json`, `metrics.json`).
+#[derive(Debug, Serialize)]
+struct RegionsMetrics {
+    scenario: String,
+    seed: u64,
+    mode: RunMode,
+    interrupted: bool,
+    wall_time_s: f64,
+    /// Per robot count, the strategies against each other (Fig. 4c).
+    comparison: Vec<Comparison>,
+    /// Every run, by robot count then strategy.
+    runs: Vec<RunReport>,
+}
+
 /// Writes `metrics.json`, `tables.txt` and a picture of the graph per run into the out dir.
 fn write_sim_out(
     a: &SimArgs,
     scenario: &RegionsScenario,
-    metrics: &serde_json::Value,
+    metrics: &RegionsMetrics,
     text: &str,
-    runs: &[RunReport],
 ) -> anyhow::Result<()> {
+    let runs = &metrics.runs;
     let dir = a
         .out
         .clone()

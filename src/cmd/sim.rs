@@ -10,8 +10,8 @@ use std::time::Instant;
 use roles::follower::StrategyKind;
 use roles::scenario::{Overrides, Scenario};
 use ros2::record::{McapRecorder, RecordError};
-use serde_json::{json, Value};
-use sim::metrics::{mean_sd, metrics_json, scenario_metrics, welch_t};
+use serde::Serialize;
+use sim::metrics::{mean_sd, scenario_metrics, welch_t, RunMetrics, RunMode};
 use sim::processes::{run_as_processes, ProcessRunError, ProcessRunInfo, ProcessRunOptions};
 use sim::record::Recording;
 use sim::ros_record::{McapTotals, SimMcap};
@@ -86,11 +86,12 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         None => stop::requested().is_some(),
     };
     let wall_s = started.elapsed().as_secs_f64();
-    let mut metrics = metrics_json(&scenario, &summary, &rec);
-    metrics["interrupted"] = json!(interrupted);
-    metrics["wall_time_s"] = json!(wall_s);
-    metrics["sim_time_per_wall_time"] = json!(summary.sim_time_s / wall_s.max(1e-9));
-    add_run_facts(&a, &mut metrics, processes)?;
+    let mut metrics = RunMetrics::new(&scenario, &summary, &rec, run_mode(&a), wall_s);
+    metrics.interrupted = interrupted;
+    if let Some(info) = processes {
+        metrics.startup_s = Some(info.startup_s);
+        metrics.processes = Some(info.reports);
+    }
     // A file that could not be written fails the run, after its other outputs.
     let record = record.map(|totals| add_record(&mut metrics, totals));
     print_summary(&metrics);
@@ -106,7 +107,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         );
     }
     if a.json {
-        println!("{metrics}");
+        println!("{}", serde_json::to_string(&metrics)?);
     }
     record?;
     if interrupted {
@@ -115,28 +116,18 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The run's mode and, in process mode, its startup and each process's report.
-fn add_run_facts(
-    a: &SimArgs,
-    metrics: &mut Value,
-    processes: Option<ProcessRunInfo>,
-) -> anyhow::Result<()> {
-    metrics["mode"] = json!(if a.single_process {
-        "single-process"
+fn run_mode(a: &SimArgs) -> RunMode {
+    if a.single_process {
+        RunMode::SingleProcess
     } else if a.remote {
-        "processes-remote"
+        RunMode::ProcessesRemote
     } else {
-        "processes"
-    });
-    if let Some(info) = processes {
-        metrics["startup_s"] = json!(info.startup_s);
-        metrics["processes"] = serde_json::to_value(&info.reports)?;
+        RunMode::Processes
     }
-    Ok(())
 }
 
 /// `--record`: what the file holds, printed and in the metrics.
-fn add_record(metrics: &mut Value, totals: Option<McapTotals>) {
+fn add_record(metrics: &mut RunMetrics, totals: Option<McapTotals>) {
     if let Some(t) = totals {
         eprintln!(
             "sim: recorded {} messages ({} frames, {} poses, {} deposits) in {}",
@@ -146,7 +137,7 @@ fn add_record(metrics: &mut Value, totals: Option<McapTotals>) {
             t.deposits,
             t.file.display()
         );
-        metrics["record"] = json!(t);
+        metrics.record = Some(t);
     }
 }
 
@@ -213,37 +204,33 @@ fn out_dir(a: &SimArgs, scenario: &Scenario) -> Option<PathBuf> {
     )
 }
 
-fn print_summary(m: &Value) {
-    let how = if m["interrupted"].as_bool() == Some(true) {
+fn print_summary(m: &RunMetrics) {
+    let how = if m.interrupted {
         "stopped by a signal, written as far as it ran"
     } else {
         "done"
     };
     eprintln!(
         "sim '{}' {how}: {} s simulated ({} ticks) in {:.2} s wall time ({:.1}× real time); {} deposits applied, {} NaN cells",
-        m["scenario"].as_str().unwrap_or(""),
-        m["sim_time_s"],
-        m["ticks"],
-        m["wall_time_s"].as_f64().unwrap_or(0.0),
-        m["sim_time_per_wall_time"].as_f64().unwrap_or(0.0),
-        m["field"]["deposits_applied"],
-        m["field"]["nan_cells"],
+        m.scenario,
+        m.sim_time_s,
+        m.ticks,
+        m.wall_time_s,
+        m.sim_time_per_wall_time,
+        m.field.deposits_applied,
+        m.field.nan_cells,
     );
-    for r in m["robots"].as_array().into_iter().flatten() {
-        let abandoned = match r["trail_abandoned_at_s"].as_f64() {
+    for r in &m.robots {
+        let abandoned = match r.trail_abandoned_at_s {
             Some(t) => format!(", gave the trail up at {t:.1} s"),
             None => String::new(),
         };
         eprintln!(
             "  robot {} ({}): travelled {:.2} m, ends at ({:.2}, {:.2}){abandoned}",
-            r["id"],
-            r["role"].as_str().unwrap_or(""),
-            r["distance_travelled_m"].as_f64().unwrap_or(0.0),
-            r["true_pose"][0].as_f64().unwrap_or(f64::NAN),
-            r["true_pose"][1].as_f64().unwrap_or(f64::NAN),
+            r.id, r.role, r.distance_travelled_m, r.true_pose[0], r.true_pose[1],
         );
     }
-    if let Some(o) = m["metrics"].as_object() {
+    if let Ok(serde_json::Value::Object(o)) = serde_json::to_value(&m.metrics) {
         for (k, v) in o {
             eprintln!("  {k}: {v}");
         }
@@ -280,9 +267,9 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
     };
     let base_seed = scenario.seed;
     let bar = progress_bar(2 * trials as u64);
-    let mut results = Vec::new();
-    for kind in [ours, other] {
-        let mut values = Vec::new();
+    let mut results = [(ours, Vec::new()), (other, Vec::new())];
+    for (kind, values) in &mut results {
+        let kind = *kind;
         for t in 0..trials {
             let mut s = scenario.clone();
             s.apply(&Overrides {
@@ -309,41 +296,29 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
                 eprintln!("sim: trials stopped: nothing written");
                 return Err(Stopped::by_requested().into());
             }
+            // The scenario was checked above to have an exploration metric.
             let m = scenario_metrics(&s, &rec);
-            values.push(m["exploration"]["mean"].as_f64().unwrap_or(f64::NAN));
+            values.push(m.exploration.map_or(f64::NAN, |e| e.mean));
             bar.inc(1);
         }
-        results.push((kind, values));
     }
     bar.finish_and_clear();
-    let (m1, s1) = mean_sd(&results[0].1);
-    let (m2, s2) = mean_sd(&results[1].1);
-    let (t, df) = welch_t(m1, s1, m2, s2, trials as f64);
-    let out = json!({
-        "scenario": scenario.name,
-        "trials": trials,
-        "seeds": [base_seed, base_seed + trials as u64 - 1],
-        "robots": scenario.world.robots.len(),
-        "sim_time_s": scenario.duration_s,
-        "exploration": {
-            results[0].0.name(): {"mean": m1, "sd": s1, "per_trial": results[0].1},
-            results[1].0.name(): {"mean": m2, "sd": s2, "per_trial": results[1].1},
-        },
-        "welch_t": t,
-        "welch_df": df,
-    });
+    let out = Trials::of(scenario, &results);
+    let (x, y) = (&out.exploration[0], &out.exploration[1]);
     eprintln!(
-        "{} trials of '{}' with {} robot(s), {:.0} s each: exploration {} {:.3} ± {:.3}, {} {:.3} ± {:.3}; Welch t = {t:.2} (df {df:.1})",
+        "{} trials of '{}' with {} robot(s), {:.0} s each: exploration {} {:.3} ± {:.3}, {} {:.3} ± {:.3}; Welch t = {:.2} (df {:.1})",
         trials,
         scenario.name,
-        scenario.world.robots.len(),
-        scenario.duration_s,
-        results[0].0,
-        m1,
-        s1,
-        results[1].0,
-        m2,
-        s2
+        out.robots,
+        out.sim_time_s,
+        x.strategy,
+        x.mean,
+        x.sd,
+        y.strategy,
+        y.mean,
+        y.sd,
+        out.welch_t,
+        out.welch_df,
     );
     if let Some(dir) = out_dir(a, scenario) {
         std::fs::create_dir_all(&dir)?;
@@ -352,9 +327,62 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
         eprintln!("wrote {}", path.display());
     }
     if a.json {
-        println!("{out}");
+        println!("{}", serde_json::to_string(&out)?);
     }
     Ok(())
+}
+
+/// `--trials`: the exploration of each strategy over the same seeds, and Welch's t between them
+/// (`trials.json`).
+#[derive(Debug, Serialize)]
+struct Trials {
+    scenario: String,
+    trials: usize,
+    /// The first and last seed.
+    seeds: [u64; 2],
+    robots: usize,
+    sim_time_s: f64,
+    /// Ours first, then the other strategy.
+    exploration: [StrategyTrials; 2],
+    welch_t: f64,
+    welch_df: f64,
+}
+
+/// One strategy's `exploration.mean` over the trials.
+#[derive(Debug, Serialize)]
+struct StrategyTrials {
+    strategy: &'static str,
+    mean: f64,
+    sd: f64,
+    per_trial: Vec<f64>,
+}
+
+impl Trials {
+    fn of(scenario: &Scenario, results: &[(StrategyKind, Vec<f64>); 2]) -> Self {
+        let stats = |(kind, values): &(StrategyKind, Vec<f64>)| {
+            let (mean, sd) = mean_sd(values);
+            StrategyTrials {
+                strategy: kind.name(),
+                mean,
+                sd,
+                per_trial: values.clone(),
+            }
+        };
+        let exploration = [stats(&results[0]), stats(&results[1])];
+        let n = results[0].1.len();
+        let (x, y) = (&exploration[0], &exploration[1]);
+        let (welch_t, welch_df) = welch_t(x.mean, x.sd, y.mean, y.sd, n as f64);
+        Self {
+            scenario: scenario.name.clone(),
+            trials: n,
+            seeds: [scenario.seed, scenario.seed + n as u64 - 1],
+            robots: scenario.world.robots.len(),
+            sim_time_s: scenario.duration_s,
+            exploration,
+            welch_t,
+            welch_df,
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------------------------

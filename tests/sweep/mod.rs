@@ -96,3 +96,50 @@ fn bad_lists_exit_with_status_2_naming_the_option_and_the_value() {
         assert!(!dir.exists(), "{args:?}: nothing written");
     }
 }
+
+#[test]
+fn sim_trials_reports_each_strategy_over_the_same_seeds_as_single_runs_measure_them() {
+    let dir = std::env::temp_dir().join(unique("trials"));
+    let out = dir.to_str().unwrap();
+    let common = ["--robots", "2", "--duration", "30", "--single-process"];
+    let mut args = vec!["sim", "ias-ss", "--trials", "2", "--seed", "7", "--json"];
+    args.extend(common);
+    args.extend(["--out", out]);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let t = crate::harness::json(&o);
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("trials.json")).unwrap()).unwrap();
+    assert_eq!(file, t, "trials.json is what --json prints");
+    assert_eq!(t["trials"], 2);
+    assert_eq!(t["seeds"], serde_json::json!([7, 8]));
+    assert_eq!(t["robots"], 2);
+    let strategies: Vec<&str> = t["exploration"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["strategy"].as_str().unwrap())
+        .collect();
+    assert_eq!(strategies, ["inverse", "uniform"], "{t}");
+    assert!(t["welch_t"].as_f64().unwrap().is_finite(), "{t}");
+    // Each trial is the run `sim --seed S` would make with that strategy.
+    for (k, strategy) in strategies.iter().enumerate() {
+        let e = &t["exploration"][k];
+        let per_trial = e["per_trial"].as_array().unwrap();
+        for (i, seed) in ["7", "8"].into_iter().enumerate() {
+            let mut single = vec!["sim", "ias-ss", "--seed", seed, "--strategy", strategy];
+            single.extend(common);
+            single.extend(["--no-out", "--json"]);
+            let o = run(&single);
+            assert!(o.status.success(), "{}", stderr(&o));
+            let m = crate::harness::json(&o);
+            assert_eq!(
+                per_trial[i], m["metrics"]["exploration"]["mean"],
+                "{strategy}, seed {seed}"
+            );
+        }
+        let mean = (per_trial[0].as_f64().unwrap() + per_trial[1].as_f64().unwrap()) / 2.0;
+        assert!((e["mean"].as_f64().unwrap() - mean).abs() < 1e-12, "{e}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -93,7 +93,7 @@ pub const PROBES_CSV_HEADER: &str = "t_s,x_m,y_m,channel,value";
 pub fn write_outputs(
     dir: &Path,
     rec: &Recording,
-    metrics: &serde_json::Value,
+    metrics: &impl serde::Serialize,
     marks: &[Mark],
 ) -> Result<Vec<PathBuf>, ReportError> {
     for snap in &rec.snapshots {

@@ -17,7 +17,8 @@ fn metrics(robots: usize, seed: u64, merge: Option<bool>, duration_s: f64) -> se
     .unwrap();
     let (summary, rec) = run_single_process(&s, SingleProcessOptions::default()).unwrap();
     assert_eq!(summary.field.nan_cells, 0);
-    scenario_metrics(&s, &rec)
+    // As the user reads them: the JSON of `metrics`, mapping keys beside the others.
+    serde_json::to_value(scenario_metrics(&s, &rec)).unwrap()
 }
 
 fn known_mean(m: &serde_json::Value) -> f64 {

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use report::series::{exploration_over_time, leader_deposits, path_distances, probe_curves};
 use report::{write_outputs, write_plots, PLOT_H_PX, PLOT_W_PX};
 use roles::scenario::{Overrides, Scenario};
-use sim::metrics::{distance_to_polyline_m, metrics_json, scenario_metrics};
+use sim::metrics::{distance_to_polyline_m, scenario_metrics, RunMetrics, RunMode};
 use sim::record::Recording;
 use sim::single::{run_single_process, SingleProcessOptions};
 
@@ -44,7 +44,8 @@ fn run(name: &str, duration_s: Option<f64>) -> (Scenario, Recording, serde_json:
     })
     .unwrap();
     let (summary, rec) = run_single_process(&s, SingleProcessOptions::default()).unwrap();
-    let m = metrics_json(&s, &summary, &rec);
+    let m = RunMetrics::new(&s, &summary, &rec, RunMode::SingleProcess, 1.0);
+    let m = serde_json::to_value(m).unwrap();
     (s, rec, m)
 }
 
@@ -210,7 +211,7 @@ fn path_distance_chart_draws_the_trajectories_and_the_metric() {
         }
         assert_eq!(
             p.mean_m,
-            metrics["mean_path_error_m"][&p.name].as_f64(),
+            metrics.mean_path_error_m.as_ref().unwrap()[&p.name],
             "the dashed mean is the run's metric"
         );
         // Within the window the robot is on its path (seed 002's evaluation).

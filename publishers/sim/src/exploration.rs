@@ -102,48 +102,55 @@ pub fn exploration_known(
     })
 }
 
-/// The mapping keys of the metrics: `exploration_known`, `known_threshold`, `known_logodds`,
-/// `merge`, `rc_m`, `merges`, `merges_rejected`, `exchanges_refused_lost` and
-/// `merge_alignment_error_m` (`mean`, `max`; null without merges).
-pub fn mapping_metrics(
-    scenario: &Scenario,
-    rec: &MappingRecord,
-) -> serde_json::Map<String, serde_json::Value> {
-    use serde_json::json;
-    let mut out = serde_json::Map::new();
-    let Some(c) = scenario.mapping() else {
-        return out;
-    };
-    if let Some(m) = &scenario.metrics.exploration {
-        out.insert(
-            "exploration_known".into(),
-            serde_json::to_value(exploration_known(scenario, m, rec)).unwrap_or_default(),
-        );
-    }
-    out.insert("known_threshold".into(), json!(c.known_share));
-    out.insert("known_logodds".into(), json!(c.known_logodds));
-    out.insert("merge".into(), json!(c.merge));
-    out.insert("rc_m".into(), json!(c.rc_m));
-    out.insert("merges".into(), json!(rec.merges.len()));
-    let rejected: u64 = rec
-        .counters
-        .values()
-        .flat_map(|k| k.merges_rejected.values())
-        .sum();
-    out.insert("merges_rejected".into(), json!(rejected));
-    let lost: u64 = rec.counters.values().map(|k| k.refused_lost).sum();
-    out.insert("exchanges_refused_lost".into(), json!(lost));
+/// Where merged maps landed against where they belong (m).
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct AlignmentError {
+    pub mean: f64,
+    pub max: f64,
+}
+
+/// The metrics of a run with `[mapping]` on; in the JSON they sit beside the scenario's other
+/// metrics.
+#[derive(Debug, Clone, Serialize)]
+pub struct MappingMetrics {
+    /// Sectors known, visited or merged (with an exploration metric).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exploration_known: Option<KnownExploration>,
+    pub known_threshold: f64,
+    pub known_logodds: f32,
+    pub merge: bool,
+    pub rc_m: f64,
+    pub merges: usize,
+    pub merges_rejected: u64,
+    pub exchanges_refused_lost: u64,
+    /// `None` (null) without merges.
+    pub merge_alignment_error_m: Option<AlignmentError>,
+}
+
+/// The mapping metrics; `None` when the scenario maps nothing.
+pub fn mapping_metrics(scenario: &Scenario, rec: &MappingRecord) -> Option<MappingMetrics> {
+    let c = scenario.mapping()?;
     let errors: Vec<f64> = rec.merges.iter().map(|e| e.alignment_error_m).collect();
-    out.insert(
-        "merge_alignment_error_m".into(),
-        if errors.is_empty() {
-            serde_json::Value::Null
-        } else {
-            json!({
-                "mean": errors.iter().sum::<f64>() / errors.len() as f64,
-                "max": errors.iter().copied().fold(0.0, f64::max),
-            })
-        },
-    );
-    out
+    Some(MappingMetrics {
+        exploration_known: scenario
+            .metrics
+            .exploration
+            .as_ref()
+            .and_then(|m| exploration_known(scenario, m, rec)),
+        known_threshold: c.known_share,
+        known_logodds: c.known_logodds,
+        merge: c.merge,
+        rc_m: c.rc_m,
+        merges: rec.merges.len(),
+        merges_rejected: rec
+            .counters
+            .values()
+            .flat_map(|k| k.merges_rejected.values())
+            .sum(),
+        exchanges_refused_lost: rec.counters.values().map(|k| k.refused_lost).sum(),
+        merge_alignment_error_m: (!errors.is_empty()).then(|| AlignmentError {
+            mean: errors.iter().sum::<f64>() / errors.len() as f64,
+            max: errors.iter().copied().fold(0.0, f64::max),
+        }),
+    })
 }

@@ -12,46 +12,133 @@
 //!   `team`), `known_threshold`, `known_logodds`, `merge`, `rc_m`, `merges`, `merges_rejected`,
 //!   `exchanges_refused_lost`, `merge_alignment_error_m` (`mean`, `max`).
 
+use std::collections::BTreeMap;
+
 use serde::Serialize;
 
-use crate::record::Recording;
+use crate::exploration::MappingMetrics;
+use crate::processes::ProcessReport;
+use crate::record::{ProbeReading, Recording};
+use crate::ros_record::McapTotals;
+use crate::single::{FieldSummary, RobotResult, RunSummary};
+use crate::wrong_area::WrongArea;
 use roles::scenario::{BlindLeaderMetric, ExplorationMetric, PathMetric, Scenario};
 
-/// Every metric the scenario asks for, as one JSON object.
-pub fn scenario_metrics(scenario: &Scenario, rec: &Recording) -> serde_json::Value {
-    let mut out = serde_json::Map::new();
-    if !scenario.metrics.paths.is_empty() {
-        let by_name: serde_json::Map<String, serde_json::Value> = scenario
-            .metrics
-            .paths
-            .iter()
-            .map(|p| (p.name.clone(), serde_json::json!(mean_path_error_m(p, rec))))
-            .collect();
-        out.insert("mean_path_error_m".into(), by_name.into());
+/// Every metric the scenario asks for; those it does not ask for are left out of the JSON.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct ScenarioMetrics {
+    /// Seed 002: each path metric's mean distance to its path (m), by the metric's name; `None`
+    /// when the run has no sample in its window.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_path_error_m: Option<BTreeMap<String, Option<f64>>>,
+    /// Seed 004: sectors visited.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exploration: Option<Exploration>,
+    /// Seed 000's corridor.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub blind_leader: Option<BlindLeader>,
+    /// Seed 000's wrong area.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wrong_area: Option<WrongArea>,
+    /// With `[mapping]` on: its keys sit beside the others (`exploration_known`, `merges`…).
+    #[serde(flatten)]
+    pub mapping: Option<MappingMetrics>,
+}
+
+/// Every metric the scenario asks for.
+pub fn scenario_metrics(scenario: &Scenario, rec: &Recording) -> ScenarioMetrics {
+    let m = &scenario.metrics;
+    ScenarioMetrics {
+        mean_path_error_m: (!m.paths.is_empty()).then(|| {
+            m.paths
+                .iter()
+                .map(|p| (p.name.clone(), mean_path_error_m(p, rec)))
+                .collect()
+        }),
+        exploration: m.exploration.as_ref().map(|e| exploration(e, rec)),
+        blind_leader: m
+            .blind_leader
+            .as_ref()
+            .map(|b| blind_leader(scenario, b, rec)),
+        wrong_area: m
+            .wrong_area
+            .as_ref()
+            .map(|w| crate::wrong_area::wrong_area(scenario, w, rec)),
+        mapping: rec
+            .mapping
+            .as_ref()
+            .and_then(|r| crate::exploration::mapping_metrics(scenario, r)),
     }
-    if let Some(e) = &scenario.metrics.exploration {
-        out.insert(
-            "exploration".into(),
-            serde_json::to_value(exploration(e, rec)).unwrap_or_default(),
-        );
+}
+
+/// How a run was made (`mode` in the metrics).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RunMode {
+    SingleProcess,
+    Processes,
+    /// Processes, with the antenna followers as thin clients of the gateway (`--remote`).
+    ProcessesRemote,
+}
+
+/// The metrics of a run (`--json`, `metrics.json`): the keys every scenario has, how the run
+/// was made, and the scenario's own metrics under `metrics`.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunMetrics {
+    pub scenario: String,
+    pub seed: u64,
+    pub sim_time_s: f64,
+    pub steps: u64,
+    pub ticks: u64,
+    pub field: FieldSummary,
+    pub robots: Vec<RobotResult>,
+    pub probes: Vec<ProbeReading>,
+    pub metrics: ScenarioMetrics,
+    pub mode: RunMode,
+    /// Stopped early by SIGINT/SIGTERM; everything is as far as the run went.
+    pub interrupted: bool,
+    pub wall_time_s: f64,
+    pub sim_time_per_wall_time: f64,
+    /// Process runs: from the first process started until the field's first lockstep frame (s).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub startup_s: Option<f64>,
+    /// Process runs: what each process reported as it stopped.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub processes: Option<Vec<ProcessReport>>,
+    /// `--record`: what the MCAP file holds.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub record: Option<McapTotals>,
+}
+
+impl RunMetrics {
+    /// The metrics of a run that took `wall_time_s`; the process facts and the record are
+    /// added by whoever has them.
+    pub fn new(
+        scenario: &Scenario,
+        s: &RunSummary,
+        rec: &Recording,
+        mode: RunMode,
+        wall_time_s: f64,
+    ) -> Self {
+        Self {
+            scenario: scenario.name.clone(),
+            seed: scenario.seed,
+            sim_time_s: s.sim_time_s,
+            steps: s.steps,
+            ticks: s.ticks,
+            field: s.field.clone(),
+            robots: s.robots.clone(),
+            probes: rec.probes.clone(),
+            metrics: scenario_metrics(scenario, rec),
+            mode,
+            interrupted: false,
+            wall_time_s,
+            sim_time_per_wall_time: s.sim_time_s / wall_time_s.max(1e-9),
+            startup_s: None,
+            processes: None,
+            record: None,
+        }
     }
-    if let Some(b) = &scenario.metrics.blind_leader {
-        out.insert(
-            "blind_leader".into(),
-            serde_json::to_value(blind_leader(scenario, b, rec)).unwrap_or_default(),
-        );
-    }
-    if let Some(w) = &scenario.metrics.wrong_area {
-        out.insert(
-            "wrong_area".into(),
-            serde_json::to_value(crate::wrong_area::wrong_area(scenario, w, rec))
-                .unwrap_or_default(),
-        );
-    }
-    if let Some(m) = &rec.mapping {
-        out.extend(crate::exploration::mapping_metrics(scenario, m));
-    }
-    serde_json::Value::Object(out)
 }
 
 /// Distance from a point to a polyline (m).
@@ -224,25 +311,6 @@ pub fn blind_leader(scenario: &Scenario, m: &BlindLeaderMetric, rec: &Recording)
         follower_max_off_leader_path_m: off,
         follower_distance_travelled_m: rec.distance_travelled_m(m.follower),
     }
-}
-
-/// The metrics object of a run: the keys every scenario has, then the scenario's own.
-pub fn metrics_json(
-    scenario: &Scenario,
-    s: &crate::single::RunSummary,
-    rec: &Recording,
-) -> serde_json::Value {
-    serde_json::json!({
-        "scenario": scenario.name,
-        "seed": scenario.seed,
-        "sim_time_s": s.sim_time_s,
-        "steps": s.steps,
-        "ticks": s.ticks,
-        "field": s.field,
-        "robots": s.robots,
-        "probes": rec.probes,
-        "metrics": scenario_metrics(scenario, rec),
-    })
 }
 
 /// Mean and sample standard deviation of `v` (n − 1 in the denominator).

@@ -4,11 +4,11 @@
 
 use roles::follower::StrategyKind;
 use roles::scenario::{Overrides, Scenario, BUILTIN};
-use sim::metrics::scenario_metrics;
+use sim::metrics::{scenario_metrics, ScenarioMetrics};
 use sim::record::Recording;
 use sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 
-fn run(name: &str, o: Overrides) -> (Scenario, RunSummary, Recording, serde_json::Value) {
+fn run(name: &str, o: Overrides) -> (Scenario, RunSummary, Recording, ScenarioMetrics) {
     let mut s = Scenario::load(name).unwrap();
     s.apply(&o).unwrap();
     let (summary, rec) = run_single_process(&s, SingleProcessOptions::default()).unwrap();
@@ -42,16 +42,16 @@ fn the_same_seed_gives_the_same_run_bit_for_bit() {
 #[test]
 fn blind_leader_follower_stops_where_the_leader_got_lost_unless_deposits_are_constant() {
     let (_, summary, _, m) = run("blind-leader", Overrides::default());
-    let b = &m["blind_leader"];
-    let lost_m = b["leader_lost_at_m"].as_f64().unwrap();
+    let b = m.blind_leader.unwrap();
+    let lost_m = b.leader_lost_at_m.unwrap();
     // Uncertainty-aware: the follower gives the trail up within 3 m after the point where the
     // leader lost its localization (its deposits fade to almost nothing there).
-    let at = b["follower_abandoned_at_m"]
-        .as_f64()
-        .unwrap_or_else(|| panic!("the follower never gave the trail up: {b}"));
+    let at = b
+        .follower_abandoned_at_m
+        .unwrap_or_else(|| panic!("the follower never gave the trail up: {b:?}"));
     assert!(
         at > lost_m - 1.0 && at < lost_m + 3.0,
-        "gave up at {at:.2} m, the leader got lost at {lost_m:.2} m: {b}"
+        "gave up at {at:.2} m, the leader got lost at {lost_m:.2} m: {b:?}"
     );
     assert!(summary.robots[1].trail_abandoned_at_s.is_some());
     // Constant deposits: the follower follows the lost leader's trail far beyond that point.
@@ -62,13 +62,11 @@ fn blind_leader_follower_stops_where_the_leader_got_lost_unless_deposits_are_con
             ..Overrides::default()
         },
     );
-    let beyond = m["blind_leader"]["follower_beyond_loss_m"]
-        .as_f64()
-        .unwrap();
+    let b = m.blind_leader.unwrap();
+    let beyond = b.follower_beyond_loss_m.unwrap();
     assert!(
         beyond > 6.0,
-        "with constant deposits the follower went only {beyond:.2} m past the loss: {}",
-        m["blind_leader"]
+        "with constant deposits the follower went only {beyond:.2} m past the loss: {b:?}"
     );
 }
 
@@ -76,7 +74,7 @@ fn blind_leader_follower_stops_where_the_leader_got_lost_unless_deposits_are_con
 fn trail_following_stays_within_a_tenth_of_a_metre_of_both_paths() {
     let (_, _, _, m) = run("trail-following", Overrides::default());
     for path in ["straight", "curved"] {
-        let e = m["mean_path_error_m"][path].as_f64().unwrap();
+        let e = m.mean_path_error_m.as_ref().unwrap()[path].unwrap();
         assert!(e < 0.15, "{path}: mean path error {e:.3} m");
     }
 }
@@ -98,7 +96,7 @@ fn inverse_explores_more_than_uniform_over_several_seeds() {
                     ..Overrides::default()
                 },
             );
-            sum[i] += m["exploration"]["mean"].as_f64().unwrap();
+            sum[i] += m.exploration.unwrap().mean;
         }
     }
     assert!(
