@@ -52,7 +52,7 @@ enum Command {
     /// Read a running field: print its header and the value at a point (a minimal reader).
     Probe(cmd::probe::ProbeArgs),
     /// Send one deposit to a running field.
-    Deposit(cmd::probe::DepositArgs),
+    Deposit(cmd::deposit::DepositArgs),
     /// List the fields on this host: grid, tick rate, sequence, readers, depositors, alive.
     List(cmd::list::ListArgs),
     /// Save a running field's next frame as NumPy .npy or as a ROS map_server map (PGM + YAML).
@@ -97,7 +97,7 @@ fn main() -> ExitCode {
         Command::Graph(a) => cmd::graph::run_writer(a),
         Command::GraphRobot(a) => cmd::graph::run_robot(a),
         Command::Probe(a) => cmd::probe::run_probe(a),
-        Command::Deposit(a) => cmd::probe::run_deposit(a),
+        Command::Deposit(a) => cmd::deposit::run_deposit(a),
         Command::List(a) => cmd::list::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Gateway(a) => cmd::gateway::run(a),

@@ -1,6 +1,7 @@
 //! Integration tests that run the real `pheromone` binary as separate processes.
 
 mod bench;
+mod confirm;
 mod crash;
 mod gateway;
 mod graph;
@@ -83,18 +84,23 @@ fn rejected_deposits_are_counted_by_reason() {
     let name = unique("reject");
     let field = Proc::spawn(&Cmd::field(&name).grid(64, 64).duration(60).json().argv());
     // Not positive semi-definite (|xy| > √(xx·yy)), outside the grid, negative on an unsigned channel.
+    // Each is refused by the field's receipt: exit 2, naming the value.
     let deposit = Cmd::deposit(&name);
-    for args in [
-        deposit
-            .clone()
-            .at(1, 1)
-            .amount(1)
-            .opt("--cov", "0.01,0.5,0.01"),
-        deposit.clone().at(500, 1).amount(1),
-        deposit.at(1, 1).amount(-1),
+    for (args, says) in [
+        (
+            deposit
+                .clone()
+                .at(1, 1)
+                .amount(1)
+                .opt("--cov", "0.01,0.5,0.01"),
+            "not positive semi-definite",
+        ),
+        (deposit.clone().at(500, 1).amount(1), "outside_grid"),
+        (deposit.at(1, 1).amount(-1), "negative_on_unsigned"),
     ] {
         let o = run(&args.argv());
-        assert!(o.status.success(), "{}", stderr(&o));
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(stderr(&o).contains(says), "{}", stderr(&o));
     }
     let probe = run(&Cmd::probe(&name).json().argv());
     assert!(probe.status.success(), "{}", stderr(&probe));

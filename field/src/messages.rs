@@ -96,6 +96,39 @@ pub struct DepositMsg {
 // repr(C): numbers and arrays of numbers only.
 crate::wire_type!(DepositMsg, "DepositMsg", size = 64, align = 8);
 
+/// `DepositMsg::kernel` of a flush request on the confirm service: it deposits nothing, and its
+/// receipt (`RECEIPT_FLUSHED`) comes once the field has taken every deposit the same process
+/// published before it.
+pub const KERNEL_FLUSH: u32 = u32::MAX;
+
+/// [`DepositReceipt::status`]: the deposit is in frame `sequence`.
+pub const RECEIPT_APPLIED: u32 = 0;
+/// The field refused the deposit; `reason` is the [`crate::RejectReason`] code (the index of
+/// its counter in the frame header).
+pub const RECEIPT_REJECTED: u32 = 1;
+/// A flush request: every deposit published before it is in frame `sequence` or earlier (or was
+/// refused and counted there).
+pub const RECEIPT_FLUSHED: u32 = 2;
+/// A mirror took the deposit and forwards it to its origin, which applies or refuses it there;
+/// nothing more is known here.
+pub const RECEIPT_FORWARDED: u32 = 3;
+
+/// The field's answer to a deposit sent on `pheromone/F/deposit-confirm` (request-response): sent
+/// after the frame that applied it is published, before readers are woken.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(C)]
+pub struct DepositReceipt {
+    /// The frame that applied (or refused) the deposit.
+    pub sequence: u64,
+    /// `RECEIPT_APPLIED`, `RECEIPT_REJECTED`, `RECEIPT_FLUSHED` or `RECEIPT_FORWARDED`.
+    pub status: u32,
+    /// With `RECEIPT_REJECTED`, the reason's code; 0 otherwise.
+    pub reason: u32,
+}
+
+// repr(C): numbers only.
+crate::wire_type!(DepositReceipt, "DepositReceipt", size = 16, align = 8);
+
 /// Header of every published frame. Counters are cumulative since the field started (or was
 /// restored).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -152,6 +152,8 @@ pub struct FieldServices {
     pub frame: String,
     pub frame_ready: String,
     pub deposit: String,
+    /// Deposits that want an answer (request-response, [`crate::messages::DepositReceipt`]).
+    pub deposit_confirm: String,
     /// The event depositors notify after each deposit; created only by a field that publishes
     /// on deposit (`pheromone field --publish-on-deposit-ms`).
     pub deposit_ready: String,
@@ -168,6 +170,7 @@ impl FieldServices {
             frame: format!("pheromone/{field}/frame"),
             frame_ready: format!("pheromone/{field}/frame-ready"),
             deposit: format!("pheromone/{field}/deposit"),
+            deposit_confirm: format!("pheromone/{field}/deposit-confirm"),
             deposit_ready: format!("pheromone/{field}/deposit-ready"),
             inputs: format!("pheromone/{field}/inputs"),
             config: format!("pheromone/{field}/config"),
@@ -187,6 +190,11 @@ pub fn field_of_frame_service(service: &str) -> Option<&str> {
 pub const INPUTS_SUBSCRIBER_BUFFER: usize = 256;
 /// Subscribers (bridges) of the inputs and config services.
 pub const INPUTS_SUBSCRIBERS: usize = 4;
+
+/// Most confirmed deposits one client may have waiting for their receipts.
+pub const CONFIRM_ACTIVE_REQUESTS: usize = 4;
+/// Servers of the confirm service: the field, and a standby taking over.
+pub const CONFIRM_SERVERS: usize = 2;
 
 /// Frames each subscriber buffers (a reader only ever wants the newest).
 pub const FRAME_SUBSCRIBER_BUFFER: usize = 1;

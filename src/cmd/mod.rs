@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod bridge;
+pub mod deposit;
 pub mod export;
 pub mod field;
 pub mod gateway;

@@ -1,11 +1,10 @@
-//! `pheromone probe` and `pheromone deposit`: a minimal reader and depositor for scripts, tests
-//! and first steps (the same as the `read` / `deposit` examples).
+//! `pheromone probe`: a minimal reader for scripts, tests and first steps (the same as the
+//! `read` example).
 
 use std::time::Duration;
 
 use clap::Args;
-use field::shm::{create_node, DepositPublisher, FieldReader, Frame, Svc};
-use field::{DepositMsg, KernelKind};
+use field::shm::{create_node, FieldReader, Frame, Svc};
 use iceoryx2::prelude::Node;
 
 use super::{bad, seconds_or_zero};
@@ -174,87 +173,4 @@ fn follow(
             return Ok(());
         }
     }
-}
-
-/// Send one deposit to a running field.
-#[derive(Args, Debug)]
-pub struct DepositArgs {
-    /// Field name.
-    #[arg(long, default_value = "main")]
-    pub field: String,
-    /// Robot id stamped on the deposit.
-    #[arg(long, default_value_t = 0)]
-    pub robot: u32,
-    /// Channel index.
-    #[arg(long, default_value_t = 0)]
-    pub channel: u32,
-    /// Kernel: ellipse, paper, saturating or z-shape.
-    #[arg(long, default_value = "ellipse")]
-    pub kernel: KernelKind,
-    /// World x of the centre (m).
-    #[arg(long, allow_negative_numbers = true)]
-    pub x: f32,
-    /// World y of the centre (m).
-    #[arg(long, allow_negative_numbers = true)]
-    pub y: f32,
-    /// τ (ellipse, paper), ρt (saturating) or Q (z-shape); negative for anti-pheromone.
-    #[arg(long, allow_negative_numbers = true)]
-    pub amount: f32,
-    /// Position covariance Σxy as xx,xy,yy (m²).
-    #[arg(long, value_delimiter = ',', default_values_t = [0.01, 0.0, 0.01], allow_negative_numbers = true)]
-    pub cov: Vec<f32>,
-    /// Cut-off radius z_rng (m).
-    #[arg(long, default_value_t = 1.0)]
-    pub range: f32,
-    /// γ cap (ellipse, paper).
-    #[arg(long, default_value_t = 100.0)]
-    pub gamma_max: f32,
-    /// λ (m), saturating kernel.
-    #[arg(long, default_value_t = 0.1)]
-    pub sigma: f32,
-    /// Z-shape plateau c (m).
-    #[arg(long, default_value_t = 0.2)]
-    pub plateau: f32,
-    /// Z-shape slope length σ (m).
-    #[arg(long, default_value_t = 0.3)]
-    pub slope: f32,
-    /// Seconds to wait for the field to exist.
-    #[arg(long, default_value_t = 10.0)]
-    pub timeout: f64,
-}
-
-pub fn run_deposit(a: DepositArgs) -> anyhow::Result<()> {
-    let timeout = seconds_or_zero("timeout", a.timeout)?;
-    let node = create_node(&format!("deposit-{}", std::process::id()))?;
-    if a.cov.len() != 3 {
-        return Err(bad(format!(
-            "--cov needs three values xx,xy,yy, got {}",
-            a.cov.len()
-        )));
-    }
-    let mut publisher = DepositPublisher::attach_within(&node, &a.field, a.robot, timeout)?;
-    let params = field::KernelParams {
-        cov_m2: [a.cov[0], a.cov[1], a.cov[2]],
-        range_m: a.range,
-        gamma_max: a.gamma_max,
-        sigma_m: a.sigma,
-        plateau_m: a.plateau,
-        slope_m: a.slope,
-    };
-    let msg = DepositMsg::from(field::Deposit {
-        channel: a.channel,
-        x_m: a.x,
-        y_m: a.y,
-        kernel: field::Kernel::from_params(a.kernel, a.amount, &params),
-    });
-    publisher.send(msg)?;
-    eprintln!(
-        "deposit sent to field '{}': {} at ({}, {}) amount {}",
-        a.field,
-        a.kernel.name(),
-        a.x,
-        a.y,
-        a.amount
-    );
-    Ok(())
 }

@@ -6,6 +6,7 @@ use std::time::Duration;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
 
+use super::confirm::DepositClient;
 use super::{
     deposit_ready_service, deposit_service, frame_ready_service, now_ns, retry_attach, service_err,
     FieldServices, ShmError, Svc,
@@ -16,7 +17,9 @@ use crate::messages::DepositMsg;
 ///
 /// iceoryx2 drops samples whose publisher disappears before the subscriber first connected to
 /// it, so a publisher that sent deposits waits, when dropped (or on `flush`), until the field has
-/// published two more frames — by then its drain loop has taken everything that was sent.
+/// taken everything that was sent: it sends a flush request on the confirm service
+/// ([`super::DepositClient::flush`]), which the field answers once it has drained its queue
+/// (the deposits are then applied in that frame, or refused and counted in its header).
 ///
 /// Attach to the field `main` as robot 7 and deposit:
 ///
@@ -51,6 +54,9 @@ pub struct DepositPublisher {
     /// Wakes a field that publishes on deposit; `None` when the field had no such event when
     /// this publisher attached (its deposits then wait for the field's next regular tick).
     deposit_ready: Option<iceoryx2::port::notifier::Notifier<Svc>>,
+    /// Flush requests; `None` when the field's confirm service could not be opened (the flush
+    /// then waits for two frames instead).
+    confirm: Option<DepositClient>,
     robot_id: u32,
     unflushed: bool,
     /// Longest wait in `Drop` for the field to take what was sent.
@@ -70,11 +76,13 @@ impl DepositPublisher {
             .create()
             .map_err(|e| service_err(&names.frame_ready, "create listener", e))?;
         let deposit_ready = open_deposit_ready(node, &names);
+        let confirm = DepositClient::attach(node, field, robot_id).ok();
         Ok(Self {
             names,
             publisher,
             frame_ready,
             deposit_ready,
+            confirm,
             robot_id,
             unflushed: false,
             flush_timeout: Duration::from_secs(1),
@@ -86,6 +94,11 @@ impl DepositPublisher {
     pub fn flush(&mut self, timeout: Duration) -> bool {
         if !self.unflushed {
             return true;
+        }
+        if let Some(c) = &mut self.confirm {
+            let flushed = matches!(c.flush(timeout), Ok(super::Receipt::Flushed { .. }));
+            self.unflushed &= !flushed;
+            return flushed;
         }
         let deadline = std::time::Instant::now() + timeout;
         let mut frames = 0u64;
@@ -156,7 +169,7 @@ impl DepositPublisher {
 }
 
 /// The notifier of the field's `deposit-ready` event, if the field has one.
-fn open_deposit_ready(
+pub(super) fn open_deposit_ready(
     node: &Node<Svc>,
     names: &FieldServices,
 ) -> Option<iceoryx2::port::notifier::Notifier<Svc>> {

@@ -28,6 +28,7 @@
 //! they share (errors, names, nodes, service builders, frame pool sizing).
 
 mod config;
+mod confirm;
 mod deposit;
 mod inputs;
 mod reader;
@@ -48,6 +49,8 @@ use crate::messages::{DepositMsg, FrameHeader};
 use crate::wire::{self, LAYOUT_VERSION};
 
 pub use config::ConfigSubscriber;
+pub use confirm::{DepositClient, Receipt};
+use deposit::open_deposit_ready;
 pub use deposit::DepositPublisher;
 pub use inputs::{
     f32s_from_bytes, wire_bytes, wire_from_bytes, wire_slice_bytes, wire_vec_from_bytes,
@@ -148,6 +151,12 @@ pub enum ShmError {
         #[source]
         source: Cause,
     },
+    /// A confirmed deposit got no receipt in time: it may still be applied, once.
+    #[error(
+        "no receipt from the field on '{service}' within {timeout_s} s: the deposit may still be \
+         applied (once), or not at all"
+    )]
+    Unconfirmed { service: String, timeout_s: f64 },
     #[error("the standby cannot mirror field '{field}': {detail}")]
     StandbyMismatch { field: String, detail: String },
 }
@@ -164,6 +173,11 @@ pub fn wait_or_stop(node: &Node<Svc>, d: Duration) -> bool {
             !iceoryx2_bb_posix::signal::SignalHandler::termination_requested()
         }
     }
+}
+
+/// Whether SIGINT or SIGTERM asked this process to stop.
+fn stop_requested() -> bool {
+    iceoryx2_bb_posix::signal::SignalHandler::termination_requested()
 }
 
 /// Waits on a listener; a signal that interrupts the wait (any caught one, not only Ctrl-C) is
@@ -500,6 +514,9 @@ pub struct FieldStatus {
     pub depositors: usize,
     /// Deposit subscribers: the field, and a standby.
     pub deposit_subscribers: usize,
+    /// Clients of the confirm service (`DepositClient`s, and the flush port of each
+    /// `DepositPublisher`).
+    pub confirm_clients: usize,
 }
 
 /// Watches the ports attached to a field's services. Opening a service cleans up dead nodes
@@ -507,6 +524,7 @@ pub struct FieldStatus {
 pub struct FieldWatch {
     frames: FrameFactory,
     deposits: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, DepositMsg, ()>,
+    confirm: confirm::ConfirmFactory,
 }
 
 impl FieldWatch {
@@ -516,6 +534,7 @@ impl FieldWatch {
         Ok(Self {
             frames: frame_service(node, &names, None)?,
             deposits: deposit_service(node, &names, None)?,
+            confirm: confirm::confirm_service(node, &names, None)?,
         })
     }
 
@@ -526,6 +545,7 @@ impl FieldWatch {
             subscribers: f.number_of_subscribers(),
             depositors: d.number_of_publishers(),
             deposit_subscribers: d.number_of_subscribers(),
+            confirm_clients: self.confirm.dynamic_config().number_of_clients(),
         }
     }
 }

@@ -6,6 +6,7 @@
 
 use iceoryx2::prelude::*;
 
+use super::confirm::ConfirmServer;
 use super::inputs::InputsPublisher;
 use super::{
     check_shm_space, deposit_service, frame_ready_service, frame_service, now_ns, service_err,
@@ -36,6 +37,8 @@ pub struct FieldServer {
     own: FrameSubscriber,
     previous: Option<FrameSample>,
     deposits: DepositSubscriber,
+    /// Confirmed deposits, answered once their frame is out.
+    confirm: ConfirmServer,
     notifier: iceoryx2::port::notifier::Notifier<Svc>,
     /// Each frame's inputs for a bridge (`publish_inputs`).
     inputs: Option<InputsPublisher>,
@@ -46,6 +49,7 @@ pub(super) struct Ports {
     pub(super) publisher: FramePublisher,
     pub(super) own: FrameSubscriber,
     pub(super) deposits: DepositSubscriber,
+    pub(super) confirm: ConfirmServer,
     pub(super) notifier: iceoryx2::port::notifier::Notifier<Svc>,
 }
 
@@ -126,6 +130,7 @@ impl FieldServer {
             .map_err(|e| service_err(&names.deposit, "create subscriber", e))?;
         let (publisher, notifier) =
             create_publisher(&names, &config, &frame_service, &ready_service)?;
+        let confirm = ConfirmServer::create(node, &names, &config)?;
         Self::launch(
             field,
             names,
@@ -134,6 +139,7 @@ impl FieldServer {
                 publisher,
                 own,
                 deposits,
+                confirm,
                 notifier,
             },
             first_frame,
@@ -155,6 +161,7 @@ impl FieldServer {
             publisher,
             own,
             deposits,
+            confirm,
             notifier,
         } = ports;
         let config = stepper.config().clone();
@@ -209,6 +216,7 @@ impl FieldServer {
             own,
             previous,
             deposits,
+            confirm,
             notifier,
             inputs: None,
         })
@@ -230,6 +238,8 @@ impl FieldServer {
     /// its origin, which applies them and sends them back in its inputs).
     pub fn take_local_deposits(&mut self) -> Result<Vec<DepositMsg>, ShmError> {
         let mut out = Vec::new();
+        // Confirm requests first, as a tick takes them (a flush answers after the queue).
+        self.confirm.take_forwarded(&mut out)?;
         while let Some(sample) = self
             .deposits
             .receive()
@@ -323,6 +333,8 @@ impl FieldServer {
         *next.user_header_mut() = self.stepper.header(done, compute_ns, &report);
         next.send()
             .map_err(|e| service_err(&self.names.frame, "send", e))?;
+        // Receipts before the wake-up: a client woken by this frame finds its answer.
+        self.confirm.answer(self.stepper.sequence);
         // A failed wake-up only delays readers to their own wait deadline; the frame is out.
         let _ = self.notifier.notify();
         self.previous = self
@@ -396,9 +408,11 @@ impl FieldServer {
 
     /// Whether deposits wait in the queue for the next tick.
     pub fn deposits_waiting(&self) -> Result<bool, ShmError> {
-        self.deposits
+        let queued = self
+            .deposits
             .has_samples()
-            .map_err(|e| service_err(&self.names.deposit, "look at the queue", e))
+            .map_err(|e| service_err(&self.names.deposit, "look at the queue", e))?;
+        Ok(queued || self.confirm.waiting()?)
     }
 
     /// Drains the deposit queue (validating each), computes the next frame from the previous one
@@ -414,7 +428,9 @@ impl FieldServer {
     }
 
     fn tick_by(&mut self, dt_s: Option<f32>) -> Result<TickOutcome, ShmError> {
-        let mut rejected = 0;
+        // Confirm requests before the queue: a flush request's receipt then covers every
+        // deposit its process published before it.
+        let mut rejected = self.confirm.take(&mut self.stepper)?;
         loop {
             match self.deposits.receive() {
                 Ok(Some(sample)) => {

@@ -5,6 +5,7 @@ use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
 
+use super::confirm::ConfirmServer;
 use super::server::{create_publisher, FirstFrame, Ports};
 use super::{
     check_shm_space, cleanup_dead_nodes, deposit_service, frame_ready_service, frame_service,
@@ -321,10 +322,12 @@ impl Standby {
         // The mirrored sample is released once the first own frame is computed from it; the
         // mirroring subscription becomes the field's own (it receives only this publisher's
         // frames from now on: the primary is dead and its last frames were taken above).
+        let confirm = ConfirmServer::create(node, &names, stepper.config())?;
         let ports = Ports {
             publisher,
             own: frames,
             deposits,
+            confirm,
             notifier,
         };
         let server = FieldServer::launch(&field, names, stepper, ports, first, &pending)?;

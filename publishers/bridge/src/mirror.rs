@@ -522,9 +522,9 @@ impl Mirror {
             }
             let (h, deposits) = self.pending.pop_first().expect("just looked").1;
             let server = self.server.as_mut().expect("checked above");
-            // A local depositor takes two new frames as the sign that its deposits left the
-            // queue (`DepositPublisher::flush`), as they do on a field, whose every tick drains
-            // the queue first; so does every frame here, also when one round applies several.
+            // Every frame drains the local queue, as a field's tick does (also when one round
+            // applies several): confirmed deposits are answered "forwarded", and a local
+            // depositor's flush request "flushed", once they left the queue.
             self.outbox.extend(server.take_local_deposits()?);
             let refused = server.apply_inputs(&h, &deposits)?;
             if refused > 0 {

@@ -1,0 +1,336 @@
+//! Confirmed deposits: the request-response service `pheromone/F/deposit-confirm`.
+//!
+//! A client sends a [`DepositMsg`]; the field takes it at its next tick with the deposits of
+//! that tick, publishes the frame, and answers a [`DepositReceipt`] (applied in frame N, or
+//! refused with the reason) before it wakes the readers. A flush request
+//! ([`KERNEL_FLUSH`]) deposits nothing: the field takes the requests *before* it drains the
+//! publish-subscribe deposit queue, so its receipt says that everything the same process
+//! published before it has been taken.
+//!
+//! Semantics (docs/field.md): at most once. A deposit is applied once or not at all; a client
+//! that gave up waiting (timeout) or was killed does not know which, and a deposit whose sender
+//! died before the field connected to it is not applied.
+
+use std::time::{Duration, Instant};
+
+use iceoryx2::active_request::ActiveRequest;
+use iceoryx2::pending_response::PendingResponse;
+use iceoryx2::port::client::Client;
+use iceoryx2::port::server::Server;
+use iceoryx2::prelude::*;
+
+use super::{
+    frame_ready_service, open_deposit_ready, retry_attach, service_err, service_name,
+    wait_interruptible, FieldServices, ShmError, Svc,
+};
+use crate::engine::{FieldConfig, Stepper};
+use crate::messages::{
+    DepositMsg, DepositReceipt, KERNEL_FLUSH, RECEIPT_APPLIED, RECEIPT_FLUSHED, RECEIPT_FORWARDED,
+    RECEIPT_REJECTED,
+};
+use crate::reject::RejectReason;
+use crate::wire;
+
+pub(super) type ConfirmFactory = iceoryx2::service::port_factory::request_response::PortFactory<
+    Svc,
+    DepositMsg,
+    (),
+    DepositReceipt,
+    (),
+>;
+type Request = ActiveRequest<Svc, DepositMsg, (), DepositReceipt, ()>;
+
+/// The confirm service of field `names`: created with the field's configuration, or opened.
+pub(super) fn confirm_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+    config: Option<&FieldConfig>,
+) -> Result<ConfirmFactory, ShmError> {
+    let name = service_name(&names.deposit_confirm)?;
+    let builder = node
+        .service_builder(&name)
+        .request_response::<DepositMsg, DepositReceipt>();
+    match config {
+        Some(c) => builder
+            .max_clients(c.max_depositors)
+            .max_servers(wire::CONFIRM_SERVERS)
+            .max_nodes(c.max_depositors + wire::CONFIRM_SERVERS)
+            .max_active_requests_per_client(wire::CONFIRM_ACTIVE_REQUESTS)
+            .max_response_buffer_size(wire::CONFIRM_ACTIVE_REQUESTS)
+            .open_or_create()
+            .map_err(|e| service_err(&names.deposit_confirm, "open or create", e)),
+        None => builder.open().map_err(|e| {
+            use iceoryx2::service::builder::request_response::RequestResponseOpenError as E;
+            match e {
+                E::DoesNotExist => ShmError::NoField {
+                    field: field_of(names),
+                    service: names.deposit_confirm.clone(),
+                },
+                e => service_err(&names.deposit_confirm, "open", e),
+            }
+        }),
+    }
+}
+
+fn field_of(names: &FieldServices) -> String {
+    names
+        .deposit_confirm
+        .split('/')
+        .nth(1)
+        .unwrap_or_default()
+        .to_string()
+}
+
+/// What the field did with a request, known when it took it.
+enum Taken {
+    Applied,
+    Rejected(RejectReason),
+    Flush,
+}
+
+/// The field's side: the requests taken this tick, answered once their frame is out.
+pub(super) struct ConfirmServer {
+    service: String,
+    server: Server<Svc, DepositMsg, (), DepositReceipt, ()>,
+    held: Vec<(Request, Taken)>,
+}
+
+impl ConfirmServer {
+    pub(super) fn create(
+        node: &Node<Svc>,
+        names: &FieldServices,
+        config: &FieldConfig,
+    ) -> Result<Self, ShmError> {
+        let server = confirm_service(node, names, Some(config))?
+            .server_builder()
+            .create()
+            .map_err(|e| service_err(&names.deposit_confirm, "create server", e))?;
+        Ok(Self {
+            service: names.deposit_confirm.clone(),
+            server,
+            held: Vec::new(),
+        })
+    }
+
+    /// Whether requests wait for the next tick.
+    pub(super) fn waiting(&self) -> Result<bool, ShmError> {
+        self.server
+            .has_requests()
+            .map_err(|e| service_err(&self.service, "look at the queue", e))
+    }
+
+    /// Takes every waiting request, offering its deposit to `stepper`; returns how many it
+    /// refused (counted in the stepper like any refused deposit).
+    pub(super) fn take(&mut self, stepper: &mut Stepper) -> Result<u64, ShmError> {
+        let mut rejected = 0;
+        while let Some(request) = self
+            .server
+            .receive()
+            .map_err(|e| service_err(&self.service, "receive", e))?
+        {
+            let msg = *request.payload();
+            let taken = if msg.kernel == KERNEL_FLUSH {
+                Taken::Flush
+            } else {
+                match stepper.offer(&msg) {
+                    Ok(()) => Taken::Applied,
+                    Err(r) => {
+                        rejected += 1;
+                        Taken::Rejected(r.reason)
+                    }
+                }
+            };
+            self.held.push((request, taken));
+        }
+        Ok(rejected)
+    }
+
+    /// A mirror: takes every waiting request's deposit to forward it, and answers
+    /// `RECEIPT_FORWARDED` (flush requests: `RECEIPT_FLUSHED`, as the mirror's own queue is
+    /// drained after them).
+    pub(super) fn take_forwarded(&mut self, out: &mut Vec<DepositMsg>) -> Result<(), ShmError> {
+        while let Some(request) = self
+            .server
+            .receive()
+            .map_err(|e| service_err(&self.service, "receive", e))?
+        {
+            let msg = *request.payload();
+            let status = if msg.kernel == KERNEL_FLUSH {
+                RECEIPT_FLUSHED
+            } else {
+                out.push(msg);
+                RECEIPT_FORWARDED
+            };
+            // A client that went away no longer waits for its receipt.
+            let _ = request.send_copy(DepositReceipt {
+                sequence: 0,
+                status,
+                reason: 0,
+            });
+        }
+        Ok(())
+    }
+
+    /// Answers every request taken since the last frame: frame `sequence` holds them.
+    pub(super) fn answer(&mut self, sequence: u64) {
+        for (request, taken) in self.held.drain(..) {
+            let (status, reason) = match taken {
+                Taken::Applied => (RECEIPT_APPLIED, 0),
+                Taken::Rejected(r) => (RECEIPT_REJECTED, r as u32),
+                Taken::Flush => (RECEIPT_FLUSHED, 0),
+            };
+            // A client that went away (timed out, killed) no longer waits for its receipt.
+            let _ = request.send_copy(DepositReceipt {
+                sequence,
+                status,
+                reason,
+            });
+        }
+    }
+}
+
+/// What the field did with a confirmed deposit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Receipt {
+    /// In frame `sequence`.
+    Applied { sequence: u64 },
+    /// Refused at frame `sequence` (and counted in its header under `reason`).
+    Rejected { sequence: u64, reason: RejectReason },
+    /// Every deposit published before the flush is in frame `sequence` or earlier.
+    Flushed { sequence: u64 },
+    /// A mirror forwards it to its origin.
+    Forwarded,
+}
+
+impl Receipt {
+    /// The receipt a field sent; `None` for a status or reason this build does not know.
+    pub fn from_wire(r: &DepositReceipt) -> Option<Self> {
+        let sequence = r.sequence;
+        match r.status {
+            RECEIPT_APPLIED => Some(Self::Applied { sequence }),
+            RECEIPT_REJECTED => RejectReason::ALL
+                .get(r.reason as usize)
+                .map(|&reason| Self::Rejected { sequence, reason }),
+            RECEIPT_FLUSHED => Some(Self::Flushed { sequence }),
+            RECEIPT_FORWARDED => Some(Self::Forwarded),
+            _ => None,
+        }
+    }
+}
+
+/// Deposits that wait for the field's answer ([`Receipt`]), for one-off senders: `pheromone
+/// deposit`, scripts. A loop that deposits every step uses `DepositPublisher` instead.
+pub struct DepositClient {
+    names: FieldServices,
+    client: Client<Svc, DepositMsg, (), DepositReceipt, ()>,
+    frame_ready: iceoryx2::port::listener::Listener<Svc>,
+    deposit_ready: Option<iceoryx2::port::notifier::Notifier<Svc>>,
+    robot_id: u32,
+}
+
+impl DepositClient {
+    pub fn attach(node: &Node<Svc>, field: &str, robot_id: u32) -> Result<Self, ShmError> {
+        let names = FieldServices::new(field)?;
+        let client = confirm_service(node, &names, None)?
+            .client_builder()
+            .create()
+            .map_err(|e| service_err(&names.deposit_confirm, "create client", e))?;
+        let frame_ready = frame_ready_service(node, &names, false)?
+            .listener_builder()
+            .create()
+            .map_err(|e| service_err(&names.frame_ready, "create listener", e))?;
+        let deposit_ready = open_deposit_ready(node, &names);
+        Ok(Self {
+            names,
+            client,
+            frame_ready,
+            deposit_ready,
+            robot_id,
+        })
+    }
+
+    pub fn attach_within(
+        node: &Node<Svc>,
+        field: &str,
+        robot_id: u32,
+        timeout: Duration,
+    ) -> Result<Self, ShmError> {
+        retry_attach(node, timeout, || Self::attach(node, field, robot_id))
+    }
+
+    /// Sends a deposit (stamped with this client's robot id) and waits at most `timeout` for
+    /// the field's receipt. `ShmError::Unconfirmed` after the timeout: the deposit may still be
+    /// applied, once.
+    pub fn deposit(&mut self, mut msg: DepositMsg, timeout: Duration) -> Result<Receipt, ShmError> {
+        msg.robot_id = self.robot_id;
+        if msg.stamp_ns == 0 {
+            msg.stamp_ns = super::now_ns();
+        }
+        self.request(msg, timeout)
+    }
+
+    /// Waits (at most `timeout`) until the field has taken every deposit this process
+    /// published before, through any port.
+    pub fn flush(&mut self, timeout: Duration) -> Result<Receipt, ShmError> {
+        let msg = DepositMsg {
+            robot_id: self.robot_id,
+            kernel: KERNEL_FLUSH,
+            ..DepositMsg::default()
+        };
+        self.request(msg, timeout)
+    }
+
+    fn request(&mut self, msg: DepositMsg, timeout: Duration) -> Result<Receipt, ShmError> {
+        let service = &self.names.deposit_confirm;
+        // Frame events from before this request say nothing about it; a broken listener shows
+        // in the wait below.
+        let _ = self.frame_ready.try_wait(|_| {});
+        let pending = self
+            .client
+            .send_copy(msg)
+            .map_err(|e| service_err(service, "send", e))?;
+        if pending.number_of_server_connections() == 0 {
+            return Err(ShmError::NoSubscriber {
+                service: service.clone(),
+            });
+        }
+        if let Some(n) = &self.deposit_ready {
+            // A failed wake-up only delays the deposit to the field's next regular tick.
+            let _ = n.notify();
+        }
+        wait_receipt(&pending, &self.frame_ready, service, timeout)
+    }
+}
+
+/// Waits for the receipt of `pending`, waking on each frame (the field answers before it
+/// wakes the readers).
+fn wait_receipt(
+    pending: &PendingResponse<Svc, DepositMsg, (), DepositReceipt, ()>,
+    frame_ready: &iceoryx2::port::listener::Listener<Svc>,
+    service: &str,
+    timeout: Duration,
+) -> Result<Receipt, ShmError> {
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Some(r) = pending
+            .receive()
+            .map_err(|e| service_err(service, "receive receipt", e))?
+        {
+            return Receipt::from_wire(&r).ok_or_else(|| {
+                service_err(
+                    service,
+                    "read receipt",
+                    format!("unknown status {} or reason {}", r.status, r.reason),
+                )
+            });
+        }
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() || super::stop_requested() {
+            return Err(ShmError::Unconfirmed {
+                service: service.to_string(),
+                timeout_s: timeout.as_secs_f64(),
+            });
+        }
+        wait_interruptible(frame_ready, left, service)?;
+    }
+}
