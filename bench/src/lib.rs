@@ -82,6 +82,8 @@ pub enum BenchError {
     Child(#[from] supervisor::SupervisorError),
 }
 
+field::from_shm_errors!(BenchError);
+
 /// How much to measure.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]

@@ -12,23 +12,16 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
-use crate::shm::{service_name, Cause, ShmError, Svc};
+use crate::shm::{service_err as err, service_name, AttachError, ReceiveError, SendError, Svc};
 
 pub use crate::wire::LinkOptions;
-
-fn err(service: &str, action: &'static str, e: impl Into<Cause>) -> ShmError {
-    ShmError::Service {
-        service: service.to_string(),
-        action,
-        source: e.into(),
-    }
-}
 
 fn pubsub<T: Debug + ZeroCopySend>(
     node: &Node<Svc>,
     service: &str,
     o: LinkOptions,
-) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, T, ()>, ShmError> {
+) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, T, ()>, AttachError>
+{
     use iceoryx2::service::builder::publish_subscribe::{
         PublishSubscribeOpenError as OpenErr, PublishSubscribeOpenOrCreateError as E,
     };
@@ -56,12 +49,12 @@ fn pubsub<T: Debug + ZeroCopySend>(
                 attempt += 1;
             }
             Err(E::PublishSubscribeOpenError(OpenErr::IncompatibleTypes)) => {
-                return Err(ShmError::Layout {
+                return Err(AttachError::Layout {
                     service: service.to_string(),
                     ours: std::any::type_name::<T>(),
                 })
             }
-            Err(e) => return Err(err(service, "open or create", e)),
+            Err(e) => return Err(err(service, "open or create", e).into()),
         }
     }
 }
@@ -77,16 +70,17 @@ fn event(
     node: &Node<Svc>,
     service: &str,
     o: LinkOptions,
-) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ShmError> {
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, AttachError> {
     let notifiers = o.max_publishers.max(256);
     let listeners = o.max_subscribers.max(64);
-    node.service_builder(&service_name(service)?)
+    Ok(node
+        .service_builder(&service_name(service)?)
         .event()
         .max_notifiers(notifiers)
         .max_listeners(listeners)
         .max_nodes(notifiers + listeners)
         .open_or_create()
-        .map_err(|e| err(service, "open or create", e))
+        .map_err(|e| err(service, "open or create", e))?)
 }
 
 /// The sending end: publishes a message and wakes the receivers.
@@ -105,7 +99,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sender<T> {
         service: &str,
         wake: &str,
         options: LinkOptions,
-    ) -> Result<Self, ShmError> {
+    ) -> Result<Self, AttachError> {
         let factory = pubsub::<T>(node, service, options)?;
         let publisher = factory
             .publisher_builder()
@@ -131,7 +125,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Sender<T> {
     }
 
     /// Sends a copy of `msg` and notifies; returns how many receivers got it.
-    pub fn send(&self, msg: T) -> Result<usize, ShmError> {
+    pub fn send(&self, msg: T) -> Result<usize, SendError> {
         let n = self
             .publisher
             .send_copy(msg)
@@ -157,7 +151,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
         service: &str,
         wake: &str,
         options: LinkOptions,
-    ) -> Result<Self, ShmError> {
+    ) -> Result<Self, AttachError> {
         let factory = pubsub::<T>(node, service, options)?;
         let subscriber = factory
             .subscriber_builder()
@@ -177,15 +171,16 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
     }
 
     /// The next buffered message, if any.
-    pub fn try_recv(&self) -> Result<Option<T>, ShmError> {
-        self.subscriber
+    pub fn try_recv(&self) -> Result<Option<T>, ReceiveError> {
+        Ok(self
+            .subscriber
             .receive()
             .map(|s| s.map(|s| *s.payload()))
-            .map_err(|e| err(&self.service, "receive", e))
+            .map_err(|e| err(&self.service, "receive", e))?)
     }
 
     /// The newest buffered message, dropping older ones.
-    pub fn latest(&self) -> Result<Option<T>, ShmError> {
+    pub fn latest(&self) -> Result<Option<T>, ReceiveError> {
         let mut last = None;
         while let Some(m) = self.try_recv()? {
             last = Some(m);
@@ -194,7 +189,7 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
     }
 
     /// The next message, waiting up to `timeout` for a sender's notification.
-    pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<T>, ShmError> {
+    pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<T>, ReceiveError> {
         let deadline = Instant::now() + timeout;
         loop {
             if let Some(m) = self.try_recv()? {
@@ -209,8 +204,12 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
     }
 
     /// Blocks until a sender notifies (or `timeout`), consuming the notifications.
-    pub fn wait(&self, timeout: Duration) -> Result<(), ShmError> {
-        crate::shm::wait_interruptible(&self.listener, timeout, &self.service)
+    pub fn wait(&self, timeout: Duration) -> Result<(), ReceiveError> {
+        Ok(crate::shm::wait_interruptible(
+            &self.listener,
+            timeout,
+            &self.service,
+        )?)
     }
 
     /// Senders currently attached to the service (0 once the other side has gone).

@@ -31,7 +31,9 @@ use iceoryx2::port::notifier::Notifier;
 
 use crate::link::{Receiver, Sender};
 use crate::messages::ClockMsg;
-use crate::shm::{now_ns, service_name, Cause, ShmError, Svc};
+use crate::shm::{
+    now_ns, service_err, service_name, AttachError, ReceiveError, SendError, ShmError, Svc,
+};
 
 /// Who acknowledges a step (`StepAck::role`).
 pub mod role {
@@ -78,19 +80,16 @@ use crate::wire::{
 fn attached_event(
     node: &Node<Svc>,
     world: &str,
-) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ShmError> {
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, AttachError> {
     let service = attached_service(world);
-    node.service_builder(&service_name(&service)?)
+    Ok(node
+        .service_builder(&service_name(&service)?)
         .event()
         .max_notifiers(MAX_PARTICIPANTS)
         .max_listeners(4)
         .max_nodes(MAX_PARTICIPANTS + 4)
         .open_or_create()
-        .map_err(|e| ShmError::Service {
-            service,
-            action: "open or create",
-            source: e.into(),
-        })
+        .map_err(|e| service_err(&service, "open or create", e))?)
 }
 
 /// The conductor's side of the joins: woken by each participant that joins.
@@ -101,15 +100,11 @@ pub struct JoinWatch {
 
 impl JoinWatch {
     /// Listens for the joins of world `world`'s participants. Create it before counting them.
-    pub fn create(node: &Node<Svc>, world: &str) -> Result<Self, ShmError> {
+    pub fn create(node: &Node<Svc>, world: &str) -> Result<Self, AttachError> {
         let listener = attached_event(node, world)?
             .listener_builder()
             .create()
-            .map_err(|e| ShmError::Service {
-                service: attached_service(world),
-                action: "create listener",
-                source: e.into(),
-            })?;
+            .map_err(|e| service_err(&attached_service(world), "create listener", e))?;
         Ok(Self {
             world: world.to_string(),
             listener,
@@ -155,12 +150,8 @@ impl JoinWatch {
             {
                 Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
                 Err(e) => {
-                    return Err(ShmError::Service {
-                        service: attached_service(&self.world),
-                        action: "wait",
-                        source: e.into(),
-                    }
-                    .into())
+                    let e = service_err(&attached_service(&self.world), "wait", e);
+                    return Err(ReceiveError::from(e).into());
                 }
             }
         }
@@ -169,19 +160,17 @@ impl JoinWatch {
 
 /// Tells world `world`'s conductor that this process has joined (call it once every port of
 /// the process exists). Keep the notifier for as long as the process takes part.
-pub fn announce_join(node: &Node<Svc>, world: &str) -> Result<Notifier<Svc>, ShmError> {
-    let err = |action: &'static str, e: Cause| ShmError::Service {
-        service: attached_service(world),
-        action,
-        source: e,
-    };
+pub fn announce_join(node: &Node<Svc>, world: &str) -> Result<Notifier<Svc>, AttachError> {
+    let service = attached_service(world);
     let notifier = attached_event(node, world)?
         .notifier_builder()
         .create()
-        .map_err(|e| err("create notifier", e.into()))?;
+        .map_err(|e| service_err(&service, "create notifier", e))?;
     // No listener yet (the conductor starts later) is fine: it counts the participants when it
     // starts waiting.
-    notifier.notify().map_err(|e| err("notify", e.into()))?;
+    notifier
+        .notify()
+        .map_err(|e| service_err(&service, "notify", e))?;
     Ok(notifier)
 }
 
@@ -255,6 +244,8 @@ pub enum LockstepError {
     Interrupted { world: String },
 }
 
+crate::from_shm_errors!(LockstepError);
+
 /// The conductor's end of the protocol: the clock, the acknowledgements, the joins.
 pub struct Conductor {
     world: String,
@@ -269,7 +260,7 @@ pub struct Conductor {
 impl Conductor {
     /// The conductor of world `world`; `lockstep` false for a world on wall time, which
     /// collects no acknowledgements.
-    pub fn create(node: &Node<Svc>, world: &str, lockstep: bool) -> Result<Self, ShmError> {
+    pub fn create(node: &Node<Svc>, world: &str, lockstep: bool) -> Result<Self, AttachError> {
         let joins = JoinWatch::create(node, world)?;
         let (clock_service, clock_wake) = clock_services(world);
         let (ack_service, ack_wake) = step_done_services(world);
@@ -305,7 +296,7 @@ impl Conductor {
     }
 
     /// Sends clock message `step` (the field ticks once for it).
-    pub fn tick(&self, step: u64, sim_time_s: f64, dt_s: f64) -> Result<(), ShmError> {
+    pub fn tick(&self, step: u64, sim_time_s: f64, dt_s: f64) -> Result<(), SendError> {
         self.clock.send(ClockMsg {
             stamp_ns: now_ns(),
             step,
@@ -318,7 +309,7 @@ impl Conductor {
     }
 
     /// Announces the end of the run: every participant stops.
-    pub fn finish(&self, steps: u64, sim_time_s: f64, dt_s: f64) -> Result<(), ShmError> {
+    pub fn finish(&self, steps: u64, sim_time_s: f64, dt_s: f64) -> Result<(), SendError> {
         self.clock.send(ClockMsg {
             stamp_ns: now_ns(),
             step: steps,
@@ -400,7 +391,7 @@ pub struct Participant {
 impl Participant {
     /// Joins world `world`. Create every other port first: the conductor starts the run once all
     /// participants have joined, and sends to whatever exists by then.
-    pub fn join(node: &Node<Svc>, world: &str) -> Result<Self, ShmError> {
+    pub fn join(node: &Node<Svc>, world: &str) -> Result<Self, AttachError> {
         let (ack_service, ack_wake) = step_done_services(world);
         let acks = Sender::create(node, &ack_service, &ack_wake, ACK_LINK)?;
         let (clock_service, clock_wake) = clock_services(world);
@@ -418,7 +409,7 @@ impl Participant {
     /// Acknowledges `step` as `role` (robot `robot_id`); returns whether a conductor got it.
     /// Nobody does for a world on wall time; a lockstep world that misses one reports the
     /// stall itself, naming who did not acknowledge.
-    pub fn ack(&self, step: u64, role: u32, robot_id: u32) -> Result<bool, ShmError> {
+    pub fn ack(&self, step: u64, role: u32, robot_id: u32) -> Result<bool, SendError> {
         let n = self.acks.send(StepAck {
             stamp_ns: now_ns(),
             step,
@@ -429,7 +420,7 @@ impl Participant {
     }
 
     /// The next clock message, waiting up to `timeout`.
-    pub fn next_clock(&self, timeout: Duration) -> Result<Option<ClockMsg>, ShmError> {
+    pub fn next_clock(&self, timeout: Duration) -> Result<Option<ClockMsg>, ReceiveError> {
         let m = self.clock.recv_timeout(timeout)?;
         if let Some(m) = m {
             if m.finished != 0 {
@@ -442,7 +433,7 @@ impl Participant {
 
     /// True once the conductor has announced the end, or has gone after it was seen (drains
     /// the clock queue: for roles that only watch for the end).
-    pub fn finished(&self) -> Result<bool, ShmError> {
+    pub fn finished(&self) -> Result<bool, ReceiveError> {
         let mut done = false;
         while let Some(m) = self.clock.try_recv()? {
             if m.finished != 0 {

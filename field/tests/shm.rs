@@ -2,7 +2,9 @@
 
 use std::time::Duration;
 
-use field::shm::{create_node, DepositPublisher, FieldReader, FieldServer, ShmError};
+use field::shm::{
+    create_node, AttachError, DepositPublisher, FieldReader, FieldServer, StartError,
+};
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
 use field::{Deposit, Kernel};
 
@@ -140,7 +142,7 @@ fn a_reader_without_a_field_gets_a_clear_error() {
     let name = unique("nofield");
     let node = create_node(&name).unwrap();
     let err = FieldReader::attach(&node, &name).err().unwrap();
-    assert!(matches!(err, ShmError::NoField { .. }), "{err}");
+    assert!(matches!(err, AttachError::NoField { .. }), "{err}");
     assert!(err.to_string().contains(&name));
 }
 
@@ -153,7 +155,7 @@ fn a_second_field_with_the_same_name_is_refused() {
     let err = FieldServer::start(&node, &name, small_config(Evaporation::None), None)
         .err()
         .unwrap();
-    assert!(matches!(err, ShmError::AlreadyRunning { .. }), "{err}");
+    assert!(matches!(err, StartError::AlreadyRunning { .. }), "{err}");
 }
 
 /// `DepositMsg` as a build with the next layout version would declare it: the same bytes, the
@@ -215,7 +217,7 @@ fn a_client_with_another_message_layout_gets_a_clear_error() {
         .open_or_create()
         .unwrap();
     let err = DepositPublisher::attach(&node, &name, 1).err().unwrap();
-    assert!(matches!(err, ShmError::Layout { .. }), "{err}");
+    assert!(matches!(err, AttachError::Layout { .. }), "{err}");
     assert!(
         err.to_string()
             .contains(field::wire_type_name!("DepositMsg")),

@@ -4,7 +4,7 @@
 use std::cell::RefCell;
 use std::fmt::{self, Write};
 
-use field::shm::ShmError;
+use field::shm::{AttachError, NameError, ReceiveError, SendError};
 
 use crate::types::{PheromoneStatus, PHEROMONE_ERROR_CAPACITY};
 
@@ -73,18 +73,55 @@ pub fn last_message() -> String {
     })
 }
 
-/// A field error as a status and message: the error and its sources, outermost first.
-pub fn from_shm(what: &str, e: &ShmError) -> Failure {
-    let status = match e {
-        ShmError::NoField { .. } => PheromoneStatus::NoField,
-        ShmError::Layout { .. } => PheromoneStatus::Layout,
-        ShmError::Name { .. } | ShmError::IceoryxName { .. } => PheromoneStatus::BadArgument,
-        ShmError::NoSubscriber { .. } | ShmError::NotDelivered { .. } => {
-            PheromoneStatus::NotDelivered
+/// A field error's status.
+pub trait Status: std::error::Error {
+    fn status(&self) -> PheromoneStatus;
+}
+
+impl Status for NameError {
+    fn status(&self) -> PheromoneStatus {
+        PheromoneStatus::BadArgument
+    }
+}
+
+impl Status for AttachError {
+    fn status(&self) -> PheromoneStatus {
+        match self {
+            AttachError::NoField { .. } => PheromoneStatus::NoField,
+            AttachError::Layout { .. } => PheromoneStatus::Layout,
+            AttachError::Name(e) => e.status(),
+            AttachError::Node { .. } | AttachError::BadFrame { .. } | AttachError::Service(_) => {
+                PheromoneStatus::ShmError
+            }
         }
-        _ => PheromoneStatus::ShmError,
-    };
-    fail(status, format_args!("{what}: {}", Chain(e)))
+    }
+}
+
+impl Status for SendError {
+    fn status(&self) -> PheromoneStatus {
+        match self {
+            SendError::NoSubscriber { .. } | SendError::NotDelivered { .. } => {
+                PheromoneStatus::NotDelivered
+            }
+            // The C ABI sends without waiting for receipts (libpheromone has no confirmed
+            // deposit yet): a timeout is what it would be.
+            SendError::Unconfirmed { .. } => PheromoneStatus::Timeout,
+            SendError::Service(_) => PheromoneStatus::ShmError,
+        }
+    }
+}
+
+impl Status for ReceiveError {
+    fn status(&self) -> PheromoneStatus {
+        match self {
+            ReceiveError::BadFrame { .. } | ReceiveError::Service(_) => PheromoneStatus::ShmError,
+        }
+    }
+}
+
+/// A field error as a status and message: the error and its sources, outermost first.
+pub fn from_shm(what: &str, e: &impl Status) -> Failure {
+    fail(e.status(), format_args!("{what}: {}", Chain(e)))
 }
 
 /// An error with its sources, `a: b: c`.

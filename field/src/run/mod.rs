@@ -11,7 +11,8 @@ use crate::checkpoint::{self, Checkpoint, CheckpointError};
 use crate::deposit::RejectReason;
 use crate::lockstep::{self, Participant};
 use crate::shm::{
-    wait_or_stop, FieldServer, ShmError, Standby, StandbyEvent, Svc, Takeover, TickOutcome,
+    wait_or_stop, FieldServer, ShmError, Standby, StandbyError, StandbyEvent, StartError, Svc,
+    Takeover, TickError, TickOutcome,
 };
 use crate::FieldConfig;
 
@@ -57,10 +58,15 @@ pub enum FieldRunError {
     Checkpoint(#[from] CheckpointError),
 }
 
+crate::from_shm_errors!(FieldRunError);
+
 impl FieldRunError {
     /// The error is the user's input (a standby whose configuration is not the primary's).
     pub fn is_bad_input(&self) -> bool {
-        matches!(self, FieldRunError::Shm(ShmError::StandbyMismatch { .. }))
+        matches!(
+            self,
+            FieldRunError::Shm(ShmError::Standby(StandbyError::Mismatch { .. }))
+        )
     }
 }
 
@@ -150,7 +156,7 @@ pub fn run_field(
     };
     server
         .set_threads(o.threads)
-        .map_err(|source| ShmError::Config {
+        .map_err(|source| StartError::Config {
             field: o.name.clone(),
             source,
         })?;
@@ -379,7 +385,7 @@ trait Pace {
         server: &mut FieldServer,
         _last_frame_at: Instant,
     ) -> Result<TickOutcome, ShmError> {
-        server.tick()
+        Ok(server.tick()?)
     }
 
     /// Frames published between ticks because deposits arrived (a field that publishes on
@@ -467,7 +473,7 @@ impl Pace for OnDeposit {
         last_frame_at: Instant,
     ) -> Result<TickOutcome, ShmError> {
         // Stepped by the real time since the last frame (at most one period).
-        server.tick_dt(last_frame_at.elapsed().as_secs_f32())
+        Ok(server.tick_dt(last_frame_at.elapsed().as_secs_f32())?)
     }
 
     fn frames_on_deposit(&self) -> Option<u64> {
@@ -669,9 +675,9 @@ impl DepositWake {
         field: &str,
         config: &FieldConfig,
         min_interval: Duration,
-    ) -> Result<Self, ShmError> {
+    ) -> Result<Self, StartError> {
         let names = crate::shm::FieldServices::new(field)?;
-        let listener = crate::shm::deposit_ready_service(node, &names, Some(config))?
+        let listener = crate::shm::create_deposit_ready_service(node, &names, config)?
             .listener_builder()
             .create()
             .map_err(|e| crate::shm::service_err(&names.deposit_ready, "create listener", e))?;
@@ -687,7 +693,7 @@ impl DepositWake {
         server: &FieldServer,
         deadline: Instant,
         last_frame_at: Instant,
-    ) -> Result<Wake, ShmError> {
+    ) -> Result<Wake, TickError> {
         loop {
             if node.wait(Duration::ZERO).is_err() {
                 return Ok(Wake::Stop);
@@ -721,7 +727,8 @@ impl DepositWake {
                         "deposit-ready",
                         "wait",
                         crate::shm::Iceoryx(e),
-                    ))
+                    )
+                    .into())
                 }
             }
         }
@@ -735,7 +742,7 @@ fn wait_serving_readers(
     node: &Node<Svc>,
     server: &FieldServer,
     deadline: Instant,
-) -> Result<bool, ShmError> {
+) -> Result<bool, TickError> {
     loop {
         let left = deadline.saturating_duration_since(Instant::now());
         if left.is_zero() {

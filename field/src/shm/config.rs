@@ -6,7 +6,7 @@
 use iceoryx2::port::subscriber::Subscriber;
 
 use super::inputs::config_service;
-use super::{service_err, FieldServices, ShmError, Svc};
+use super::{service_err, AttachError, FieldServices, ReceiveError, Svc};
 use crate::engine::FieldConfig;
 
 /// A subscriber to a field's configuration.
@@ -17,9 +17,9 @@ pub struct ConfigSubscriber {
 
 impl ConfigSubscriber {
     /// Subscribes to field `field`'s configuration (one of `wire::INPUTS_SUBSCRIBERS` slots).
-    pub fn attach(node: &iceoryx2::node::Node<Svc>, field: &str) -> Result<Self, ShmError> {
+    pub fn attach(node: &iceoryx2::node::Node<Svc>, field: &str) -> Result<Self, AttachError> {
         let names = FieldServices::new(field)?;
-        let subscriber = config_service(node, &names)?
+        let subscriber = config_service::<AttachError>(node, &names)?
             .subscriber_builder()
             .create()
             .map_err(|e| service_err(&names.config, "create subscriber", e))?;
@@ -30,7 +30,7 @@ impl ConfigSubscriber {
     }
 
     /// The newest configuration received, if one arrived since the last call.
-    pub fn latest(&self) -> Result<Option<FieldConfig>, ShmError> {
+    pub fn latest(&self) -> Result<Option<FieldConfig>, ReceiveError> {
         let mut last = None;
         while let Some(s) = self
             .subscriber
@@ -39,10 +39,11 @@ impl ConfigSubscriber {
         {
             last = Some(String::from_utf8_lossy(s.payload()).into_owned());
         }
-        last.map(|text| {
-            FieldConfig::from_toml(&text)
-                .map_err(|e| service_err(&self.service, "read the configuration", e))
-        })
-        .transpose()
+        Ok(last
+            .map(|text| {
+                FieldConfig::from_toml(&text)
+                    .map_err(|e| service_err(&self.service, "read the configuration", e))
+            })
+            .transpose()?)
     }
 }

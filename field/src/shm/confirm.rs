@@ -20,8 +20,9 @@ use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
 
 use super::{
-    frame_ready_service, open_deposit_ready, retry_attach, service_err, service_name,
-    wait_interruptible, FieldServices, ShmError, Svc,
+    open_deposit_ready, open_frame_ready_service, retry_attach, service_err, service_name,
+    wait_interruptible, AttachError, FieldServices, SendError, ServiceError, StartError, Svc,
+    TickError,
 };
 use crate::engine::{FieldConfig, Stepper};
 use crate::messages::{
@@ -40,36 +41,40 @@ pub(super) type ConfirmFactory = iceoryx2::service::port_factory::request_respon
 >;
 type Request = ActiveRequest<Svc, DepositMsg, (), DepositReceipt, ()>;
 
-/// The confirm service of field `names`: created with the field's configuration, or opened.
-pub(super) fn confirm_service(
+/// Opens or creates the confirm service of a field that starts.
+fn create_confirm_service(
     node: &Node<Svc>,
     names: &FieldServices,
-    config: Option<&FieldConfig>,
-) -> Result<ConfirmFactory, ShmError> {
-    let name = service_name(&names.deposit_confirm)?;
-    let builder = node
-        .service_builder(&name)
-        .request_response::<DepositMsg, DepositReceipt>();
-    match config {
-        Some(c) => builder
-            .max_clients(c.max_depositors)
-            .max_servers(wire::CONFIRM_SERVERS)
-            .max_nodes(c.max_depositors + wire::CONFIRM_SERVERS)
-            .max_active_requests_per_client(wire::CONFIRM_ACTIVE_REQUESTS)
-            .max_response_buffer_size(wire::CONFIRM_ACTIVE_REQUESTS)
-            .open_or_create()
-            .map_err(|e| service_err(&names.deposit_confirm, "open or create", e)),
-        None => builder.open().map_err(|e| {
-            use iceoryx2::service::builder::request_response::RequestResponseOpenError as E;
-            match e {
-                E::DoesNotExist => ShmError::NoField {
-                    field: field_of(names),
-                    service: names.deposit_confirm.clone(),
-                },
-                e => service_err(&names.deposit_confirm, "open", e),
-            }
-        }),
-    }
+    c: &FieldConfig,
+) -> Result<ConfirmFactory, StartError> {
+    Ok(node
+        .service_builder(&service_name(&names.deposit_confirm)?)
+        .request_response::<DepositMsg, DepositReceipt>()
+        .max_clients(c.max_depositors)
+        .max_servers(wire::CONFIRM_SERVERS)
+        .max_nodes(c.max_depositors + wire::CONFIRM_SERVERS)
+        .max_active_requests_per_client(wire::CONFIRM_ACTIVE_REQUESTS)
+        .max_response_buffer_size(wire::CONFIRM_ACTIVE_REQUESTS)
+        .open_or_create()
+        .map_err(|e| service_err(&names.deposit_confirm, "open or create", e))?)
+}
+
+/// Opens the confirm service of a running field.
+pub(super) fn open_confirm_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+) -> Result<ConfirmFactory, AttachError> {
+    use iceoryx2::service::builder::request_response::RequestResponseOpenError as E;
+    node.service_builder(&service_name(&names.deposit_confirm)?)
+        .request_response::<DepositMsg, DepositReceipt>()
+        .open()
+        .map_err(|e| match e {
+            E::DoesNotExist => AttachError::NoField {
+                field: field_of(names),
+                service: names.deposit_confirm.clone(),
+            },
+            e => service_err(&names.deposit_confirm, "open", e).into(),
+        })
 }
 
 fn field_of(names: &FieldServices) -> String {
@@ -100,8 +105,8 @@ impl ConfirmServer {
         node: &Node<Svc>,
         names: &FieldServices,
         config: &FieldConfig,
-    ) -> Result<Self, ShmError> {
-        let server = confirm_service(node, names, Some(config))?
+    ) -> Result<Self, StartError> {
+        let server = create_confirm_service(node, names, config)?
             .server_builder()
             .create()
             .map_err(|e| service_err(&names.deposit_confirm, "create server", e))?;
@@ -113,7 +118,7 @@ impl ConfirmServer {
     }
 
     /// Whether requests wait for the next tick.
-    pub(super) fn waiting(&self) -> Result<bool, ShmError> {
+    pub(super) fn waiting(&self) -> Result<bool, ServiceError> {
         self.server
             .has_requests()
             .map_err(|e| service_err(&self.service, "look at the queue", e))
@@ -121,7 +126,7 @@ impl ConfirmServer {
 
     /// Takes every waiting request, offering its deposit to `stepper`; returns how many it
     /// refused (counted in the stepper like any refused deposit).
-    pub(super) fn take(&mut self, stepper: &mut Stepper) -> Result<u64, ShmError> {
+    pub(super) fn take(&mut self, stepper: &mut Stepper) -> Result<u64, ServiceError> {
         let mut rejected = 0;
         while let Some(request) = self
             .server
@@ -148,7 +153,7 @@ impl ConfirmServer {
     /// A mirror: takes every waiting request's deposit to forward it, and answers
     /// `RECEIPT_FORWARDED` (flush requests: `RECEIPT_FLUSHED`, as the mirror's own queue is
     /// drained after them).
-    pub(super) fn take_forwarded(&mut self, out: &mut Vec<DepositMsg>) -> Result<(), ShmError> {
+    pub(super) fn take_forwarded(&mut self, out: &mut Vec<DepositMsg>) -> Result<(), TickError> {
         while let Some(request) = self
             .server
             .receive()
@@ -229,13 +234,13 @@ pub struct DepositClient {
 }
 
 impl DepositClient {
-    pub fn attach(node: &Node<Svc>, field: &str, robot_id: u32) -> Result<Self, ShmError> {
+    pub fn attach(node: &Node<Svc>, field: &str, robot_id: u32) -> Result<Self, AttachError> {
         let names = FieldServices::new(field)?;
-        let client = confirm_service(node, &names, None)?
+        let client = open_confirm_service(node, &names)?
             .client_builder()
             .create()
             .map_err(|e| service_err(&names.deposit_confirm, "create client", e))?;
-        let frame_ready = frame_ready_service(node, &names, false)?
+        let frame_ready = open_frame_ready_service(node, &names)?
             .listener_builder()
             .create()
             .map_err(|e| service_err(&names.frame_ready, "create listener", e))?;
@@ -254,14 +259,23 @@ impl DepositClient {
         field: &str,
         robot_id: u32,
         timeout: Duration,
-    ) -> Result<Self, ShmError> {
-        retry_attach(node, timeout, || Self::attach(node, field, robot_id))
+    ) -> Result<Self, AttachError> {
+        retry_attach(
+            node,
+            timeout,
+            || Self::attach(node, field, robot_id),
+            AttachError::field_not_up_yet,
+        )
     }
 
     /// Sends a deposit (stamped with this client's robot id) and waits at most `timeout` for
-    /// the field's receipt. `ShmError::Unconfirmed` after the timeout: the deposit may still be
+    /// the field's receipt. `SendError::Unconfirmed` after the timeout: the deposit may still be
     /// applied, once.
-    pub fn deposit(&mut self, mut msg: DepositMsg, timeout: Duration) -> Result<Receipt, ShmError> {
+    pub fn deposit(
+        &mut self,
+        mut msg: DepositMsg,
+        timeout: Duration,
+    ) -> Result<Receipt, SendError> {
         msg.robot_id = self.robot_id;
         if msg.stamp_ns == 0 {
             msg.stamp_ns = super::now_ns();
@@ -271,7 +285,7 @@ impl DepositClient {
 
     /// Waits (at most `timeout`) until the field has taken every deposit this process
     /// published before, through any port.
-    pub fn flush(&mut self, timeout: Duration) -> Result<Receipt, ShmError> {
+    pub fn flush(&mut self, timeout: Duration) -> Result<Receipt, SendError> {
         let msg = DepositMsg {
             robot_id: self.robot_id,
             kernel: KERNEL_FLUSH,
@@ -280,7 +294,7 @@ impl DepositClient {
         self.request(msg, timeout)
     }
 
-    fn request(&mut self, msg: DepositMsg, timeout: Duration) -> Result<Receipt, ShmError> {
+    fn request(&mut self, msg: DepositMsg, timeout: Duration) -> Result<Receipt, SendError> {
         let service = &self.names.deposit_confirm;
         // Frame events from before this request say nothing about it; a broken listener shows
         // in the wait below.
@@ -290,7 +304,7 @@ impl DepositClient {
             .send_copy(msg)
             .map_err(|e| service_err(service, "send", e))?;
         if pending.number_of_server_connections() == 0 {
-            return Err(ShmError::NoSubscriber {
+            return Err(SendError::NoSubscriber {
                 service: service.clone(),
             });
         }
@@ -309,7 +323,7 @@ fn wait_receipt(
     frame_ready: &iceoryx2::port::listener::Listener<Svc>,
     service: &str,
     timeout: Duration,
-) -> Result<Receipt, ShmError> {
+) -> Result<Receipt, SendError> {
     let deadline = Instant::now() + timeout;
     loop {
         if let Some(r) = pending
@@ -322,11 +336,12 @@ fn wait_receipt(
                     "read receipt",
                     format!("unknown status {} or reason {}", r.status, r.reason),
                 )
+                .into()
             });
         }
         let left = deadline.saturating_duration_since(Instant::now());
         if left.is_zero() || super::stop_requested() {
-            return Err(ShmError::Unconfirmed {
+            return Err(SendError::Unconfirmed {
                 service: service.to_string(),
                 timeout_s: timeout.as_secs_f64(),
             });

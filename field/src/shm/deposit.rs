@@ -8,8 +8,8 @@ use iceoryx2::prelude::*;
 
 use super::confirm::DepositClient;
 use super::{
-    deposit_ready_service, deposit_service, frame_ready_service, now_ns, retry_attach, service_err,
-    FieldServices, ShmError, Svc,
+    now_ns, open_deposit_ready_service, open_deposit_service, open_frame_ready_service,
+    retry_attach, service_err, AttachError, FieldServices, SendError, Svc,
 };
 use crate::messages::DepositMsg;
 
@@ -64,14 +64,14 @@ pub struct DepositPublisher {
 }
 
 impl DepositPublisher {
-    pub fn attach(node: &Node<Svc>, field: &str, robot_id: u32) -> Result<Self, ShmError> {
+    pub fn attach(node: &Node<Svc>, field: &str, robot_id: u32) -> Result<Self, AttachError> {
         let names = FieldServices::new(field)?;
-        let publisher = deposit_service(node, &names, None)?
+        let publisher = open_deposit_service(node, &names)?
             .publisher_builder()
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
             .map_err(|e| service_err(&names.deposit, "create publisher", e))?;
-        let frame_ready = frame_ready_service(node, &names, false)?
+        let frame_ready = open_frame_ready_service(node, &names)?
             .listener_builder()
             .create()
             .map_err(|e| service_err(&names.frame_ready, "create listener", e))?;
@@ -121,20 +121,25 @@ impl DepositPublisher {
         field: &str,
         robot_id: u32,
         timeout: Duration,
-    ) -> Result<Self, ShmError> {
-        retry_attach(node, timeout, || Self::attach(node, field, robot_id))
+    ) -> Result<Self, AttachError> {
+        retry_attach(
+            node,
+            timeout,
+            || Self::attach(node, field, robot_id),
+            AttachError::field_not_up_yet,
+        )
     }
 
     /// Sends a deposit, stamped with this publisher's robot id and the monotonic clock. Fails
-    /// with `NoSubscriber` if no field took it (none running, or its buffer is full).
-    pub fn send(&mut self, mut msg: DepositMsg) -> Result<(), ShmError> {
+    /// with `SendError::NoSubscriber` if no field took it (none running, or its buffer is full).
+    pub fn send(&mut self, mut msg: DepositMsg) -> Result<(), SendError> {
         msg.robot_id = self.robot_id;
         self.send_as(msg)
     }
 
     /// Sends a deposit with the robot ID it carries (a gateway that deposits for its clients);
     /// otherwise as [`send`](Self::send).
-    pub fn send_as(&mut self, mut msg: DepositMsg) -> Result<(), ShmError> {
+    pub fn send_as(&mut self, mut msg: DepositMsg) -> Result<(), SendError> {
         if msg.stamp_ns == 0 {
             msg.stamp_ns = now_ns();
         }
@@ -142,7 +147,7 @@ impl DepositPublisher {
         // Draining can only fail on a broken listener, which the flush's own wait reports.
         let _ = self.frame_ready.try_wait(|_| {});
         match self.publisher.send_copy(msg) {
-            Ok(0) => Err(ShmError::NoSubscriber {
+            Ok(0) => Err(SendError::NoSubscriber {
                 service: self.names.deposit.clone(),
             }),
             Ok(_) => {
@@ -150,7 +155,7 @@ impl DepositPublisher {
                 self.wake_field();
                 Ok(())
             }
-            Err(e) => Err(ShmError::NotDelivered {
+            Err(e) => Err(SendError::NotDelivered {
                 service: self.names.deposit.clone(),
                 source: e.into(),
             }),
@@ -173,7 +178,7 @@ pub(super) fn open_deposit_ready(
     node: &Node<Svc>,
     names: &FieldServices,
 ) -> Option<iceoryx2::port::notifier::Notifier<Svc>> {
-    deposit_ready_service(node, names, None)
+    open_deposit_ready_service(node, names)
         .ok()?
         .notifier_builder()
         .create()

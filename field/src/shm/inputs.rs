@@ -10,7 +10,10 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
-use super::{service_err, service_name, FieldServices, ShmError, Svc};
+use super::{
+    service_err, service_name, AttachError, FieldServices, NameError, ReceiveError, ServiceError,
+    StartError, Svc, TickError,
+};
 use crate::messages::{DepositMsg, InputsHeader};
 use crate::wire::{self, ZeroCopySend};
 
@@ -70,8 +73,14 @@ type InputsFactory = iceoryx2::service::port_factory::publish_subscribe::PortFac
 pub(super) type ConfigFactory =
     iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [u8], ()>;
 
-fn inputs_service(node: &Node<Svc>, names: &FieldServices) -> Result<InputsFactory, ShmError> {
-    node.service_builder(&service_name(&names.inputs)?)
+/// Opens or creates `pheromone/F/inputs` (the field's side and the bridge's alike; `E`: the
+/// error of the caller's operation).
+fn inputs_service<E: From<NameError> + From<ServiceError>>(
+    node: &Node<Svc>,
+    names: &FieldServices,
+) -> Result<InputsFactory, E> {
+    Ok(node
+        .service_builder(&service_name(&names.inputs)?)
         .publish_subscribe::<[DepositMsg]>()
         .user_header::<InputsHeader>()
         .subscriber_max_buffer_size(wire::INPUTS_SUBSCRIBER_BUFFER)
@@ -79,21 +88,23 @@ fn inputs_service(node: &Node<Svc>, names: &FieldServices) -> Result<InputsFacto
         .max_publishers(wire::FRAME_PUBLISHERS)
         .history_size(0)
         .open_or_create()
-        .map_err(|e| service_err(&names.inputs, "open or create", e))
+        .map_err(|e| service_err(&names.inputs, "open or create", e))?)
 }
 
-pub(super) fn config_service(
+/// Opens or creates `pheromone/F/config` (`E`: the error of the caller's operation).
+pub(super) fn config_service<E: From<NameError> + From<ServiceError>>(
     node: &Node<Svc>,
     names: &FieldServices,
-) -> Result<ConfigFactory, ShmError> {
-    node.service_builder(&service_name(&names.config)?)
+) -> Result<ConfigFactory, E> {
+    Ok(node
+        .service_builder(&service_name(&names.config)?)
         .publish_subscribe::<[u8]>()
         .history_size(1)
         .subscriber_max_buffer_size(1)
         .max_subscribers(wire::INPUTS_SUBSCRIBERS)
         .max_publishers(wire::FRAME_PUBLISHERS)
         .open_or_create()
-        .map_err(|e| service_err(&names.config, "open or create", e))
+        .map_err(|e| service_err(&names.config, "open or create", e))?)
 }
 
 /// The field's side: publishes each frame's inputs (`FieldServer::publish_inputs`).
@@ -113,15 +124,15 @@ impl InputsPublisher {
         names: &FieldServices,
         config_toml: &str,
         max_deposits: usize,
-    ) -> Result<Self, ShmError> {
-        let publisher = inputs_service(node, names)?
+    ) -> Result<Self, StartError> {
+        let publisher = inputs_service::<StartError>(node, names)?
             .publisher_builder()
             .initial_max_slice_len(max_deposits.max(1))
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .max_loaned_samples(1)
             .create()
             .map_err(|e| service_err(&names.inputs, "create publisher", e))?;
-        let config = config_service(node, names)?
+        let config = config_service::<StartError>(node, names)?
             .publisher_builder()
             .initial_max_slice_len(config_toml.len().max(1))
             .create()
@@ -142,7 +153,7 @@ impl InputsPublisher {
     }
 
     /// Publishes the inputs of one frame.
-    pub fn send(&self, mut header: InputsHeader, deposits: &[DepositMsg]) -> Result<(), ShmError> {
+    pub fn send(&self, mut header: InputsHeader, deposits: &[DepositMsg]) -> Result<(), TickError> {
         header.epoch = self.epoch;
         header.count = deposits.len() as u32;
         let mut sample = self
@@ -171,14 +182,14 @@ pub struct InputsSubscriber {
 }
 
 impl InputsSubscriber {
-    pub fn attach(node: &Node<Svc>, field: &str) -> Result<Self, ShmError> {
+    pub fn attach(node: &Node<Svc>, field: &str) -> Result<Self, AttachError> {
         let names = FieldServices::new(field)?;
-        let subscriber = inputs_service(node, &names)?
+        let subscriber = inputs_service::<AttachError>(node, &names)?
             .subscriber_builder()
             .buffer_size(wire::INPUTS_SUBSCRIBER_BUFFER)
             .create()
             .map_err(|e| service_err(&names.inputs, "create subscriber", e))?;
-        let config = config_service(node, &names)?
+        let config = config_service::<AttachError>(node, &names)?
             .subscriber_builder()
             .create()
             .map_err(|e| service_err(&names.config, "create subscriber", e))?;
@@ -191,7 +202,7 @@ impl InputsSubscriber {
     }
 
     /// The configuration the field published (its latest), if one arrived.
-    pub fn config_toml(&self) -> Result<Option<String>, ShmError> {
+    pub fn config_toml(&self) -> Result<Option<String>, ReceiveError> {
         let mut last = None;
         while let Some(s) = self
             .config
@@ -204,7 +215,7 @@ impl InputsSubscriber {
     }
 
     /// The next frame's inputs, if any.
-    pub fn receive(&self) -> Result<Option<(InputsHeader, Vec<DepositMsg>)>, ShmError> {
+    pub fn receive(&self) -> Result<Option<(InputsHeader, Vec<DepositMsg>)>, ReceiveError> {
         Ok(self
             .subscriber
             .receive()

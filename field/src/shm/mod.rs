@@ -21,15 +21,25 @@
 //! and receive the frames of a field restarted under the same name. A `Standby` mirrors a running
 //! field and becomes its publisher when the primary dies.
 //!
+//! Errors, one per operation (`error`): `create_node` and every attach return an
+//! `AttachError` (`NoField` when no such field runs, `Layout` for another layout version);
+//! `FieldServer::start` and `FrameWriter::start` a `StartError`; `DepositPublisher::send` a
+//! `SendError` (`NoSubscriber` when no field took the deposit); `FieldReader::update` and its
+//! waits a `ReceiveError`; `FieldServer::tick` and the other frame publications a `TickError`;
+//! `Standby` a `StandbyError`. Names fail with a `NameError`; every failed iceoryx2 operation is
+//! a `ServiceError` inside them. `ShmError` is their sum, for callers that mix operations
+//! (`from_shm_errors!` for an error of another crate that holds one).
+//!
 //! Submodules: `server` (`FieldServer`), `reader` (`FieldReader`), `deposit`
 //! (`DepositPublisher`), `standby` (`Standby`), `survey` (the fields of a host, for
-//! `pheromone list`) and `writer` (`FrameWriter`, frames computed elsewhere: a mapper's map), all
-//! re-exported here; this file holds what
-//! they share (errors, names, nodes, service builders, frame pool sizing).
+//! `pheromone list`), `writer` (`FrameWriter`, frames computed elsewhere: a mapper's map) and
+//! `error`, all re-exported here; this file holds what they share (names, nodes, service
+//! builders, frame pool sizing).
 
 mod config;
 mod confirm;
 mod deposit;
+mod error;
 mod inputs;
 mod reader;
 mod server;
@@ -46,12 +56,17 @@ use iceoryx2::sample::Sample;
 
 use crate::engine::FieldConfig;
 use crate::messages::{DepositMsg, FrameHeader};
-use crate::wire::{self, LAYOUT_VERSION};
+use crate::wire;
 
 pub use config::ConfigSubscriber;
 pub use confirm::{DepositClient, Receipt};
 use deposit::open_deposit_ready;
 pub use deposit::DepositPublisher;
+pub(crate) use error::service_err;
+pub use error::{
+    AttachError, Cause, Iceoryx, NameError, ReceiveError, SendError, ServiceError, ShmError,
+    StandbyError, StartError, TickError,
+};
 pub use inputs::{
     f32s_from_bytes, wire_bytes, wire_from_bytes, wire_slice_bytes, wire_vec_from_bytes,
     InputsPublisher, InputsSubscriber,
@@ -68,98 +83,6 @@ pub type Svc = ipc::Service;
 pub use crate::wire::READER_BORROWED_FRAMES;
 /// Deposit publishers' and readers' event id for "frame ready".
 const FRAME_READY: EventId = EventId::new(0);
-
-/// The cause of a failed iceoryx2 operation: iceoryx2's own error, kept as the source of a
-/// [`ShmError`] (`{:#}` or the source chain shows it).
-pub type Cause = Box<dyn std::error::Error + Send + Sync + 'static>;
-
-/// An iceoryx2 error type that does not implement `std::error::Error` (e.g. a listener's wait
-/// error), kept as it is; it displays as its debug form.
-#[derive(Debug)]
-pub struct Iceoryx<E: std::fmt::Debug>(pub E);
-
-impl<E: std::fmt::Debug> std::fmt::Display for Iceoryx<E> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{:?}", self.0)
-    }
-}
-
-impl<E: std::fmt::Debug> std::error::Error for Iceoryx<E> {}
-
-/// Everything that can go wrong with the field's shared memory, each naming what it was doing
-/// and keeping iceoryx2's error as its source.
-#[derive(Debug, thiserror::Error)]
-pub enum ShmError {
-    #[error("invalid name '{name}': {reason}")]
-    Name { name: String, reason: String },
-    #[error("invalid iceoryx2 name '{name}'")]
-    IceoryxName {
-        name: String,
-        #[source]
-        source: Cause,
-    },
-    #[error("cannot create the iceoryx2 node '{name}'")]
-    Node {
-        name: String,
-        #[source]
-        source: iceoryx2::node::NodeCreationFailure,
-    },
-    #[error("no field called '{field}' is running (service '{service}' does not exist)")]
-    NoField { field: String, service: String },
-    #[error(
-        "service '{service}' was created with another message layout: this build speaks \
-         {ours} (layout v{LAYOUT_VERSION}); rebuild the client and the field from the same version"
-    )]
-    Layout { service: String, ours: &'static str },
-    #[error("service '{service}': {action} failed")]
-    Service {
-        service: String,
-        action: &'static str,
-        #[source]
-        source: Cause,
-    },
-    #[error("field '{field}': the configuration is invalid")]
-    Config {
-        field: String,
-        #[source]
-        source: crate::ConfigError,
-    },
-    #[error("another field process already publishes '{field}'")]
-    AlreadyRunning { field: String },
-    #[error(
-        "the field needs {needed_bytes} bytes of shared memory ({frames} frames of {frame_bytes} \
-         bytes) but /dev/shm has {available_bytes} free; shrink the grid or --max-readers, or \
-         enlarge /dev/shm"
-    )]
-    NoMemory {
-        needed_bytes: u64,
-        available_bytes: u64,
-        frames: u64,
-        frame_bytes: u64,
-    },
-    #[error("the frame received has {got} cells but its header says {expected}")]
-    BadFrame { got: usize, expected: usize },
-    #[error("the restored frame has {got} cells, the configuration needs {expected}")]
-    RestoreMismatch { got: usize, expected: usize },
-    #[error(
-        "deposit not delivered: no field is subscribed to '{service}' or its deposit buffer is full"
-    )]
-    NoSubscriber { service: String },
-    #[error("deposit on '{service}' not delivered")]
-    NotDelivered {
-        service: String,
-        #[source]
-        source: Cause,
-    },
-    /// A confirmed deposit got no receipt in time: it may still be applied, once.
-    #[error(
-        "no receipt from the field on '{service}' within {timeout_s} s: the deposit may still be \
-         applied (once), or not at all"
-    )]
-    Unconfirmed { service: String, timeout_s: f64 },
-    #[error("the standby cannot mirror field '{field}': {detail}")]
-    StandbyMismatch { field: String, detail: String },
-}
 
 /// Waits on the node for `d`; `false` once SIGINT or SIGTERM asked the process to stop. Any other
 /// signal that cuts the sleep short (SIGCONT after a SIGSTOP or Ctrl-Z, SIGCHLD…) is not a
@@ -187,19 +110,10 @@ pub(crate) fn wait_interruptible(
     listener: &iceoryx2::port::listener::Listener<Svc>,
     timeout: Duration,
     service: &str,
-) -> Result<(), ShmError> {
+) -> Result<(), ServiceError> {
     match listener.timed_wait(|_| {}, timeout) {
         Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => Ok(()),
         Err(e) => Err(service_err(service, "wait", Iceoryx(e))),
-    }
-}
-
-/// A failed iceoryx2 operation `action` on `service`, keeping iceoryx2's error.
-pub(crate) fn service_err(service: &str, action: &'static str, e: impl Into<Cause>) -> ShmError {
-    ShmError::Service {
-        service: service.to_string(),
-        action,
-        source: e.into(),
     }
 }
 
@@ -224,14 +138,14 @@ pub use crate::wire::FieldServices;
 
 impl FieldServices {
     /// The service names of field `field`, once its name is checked.
-    pub fn new(field: &str) -> Result<Self, ShmError> {
+    pub fn new(field: &str) -> Result<Self, NameError> {
         check_name(field)?;
         Ok(Self::of(field))
     }
 }
 
 /// Field and robot names: 1–64 characters of `[A-Za-z0-9_-]`.
-pub fn check_name(name: &str) -> Result<(), ShmError> {
+pub fn check_name(name: &str) -> Result<(), NameError> {
     let ok = !name.is_empty()
         && name.len() <= 64
         && name
@@ -240,15 +154,15 @@ pub fn check_name(name: &str) -> Result<(), ShmError> {
     if ok {
         Ok(())
     } else {
-        Err(ShmError::Name {
+        Err(NameError::Invalid {
             name: name.to_string(),
             reason: "use 1–64 characters from A–Z, a–z, 0–9, '_' and '-'".into(),
         })
     }
 }
 
-pub(crate) fn service_name(name: &str) -> Result<ServiceName, ShmError> {
-    ServiceName::new(name).map_err(|e| ShmError::IceoryxName {
+pub(crate) fn service_name(name: &str) -> Result<ServiceName, NameError> {
+    ServiceName::new(name).map_err(|e| NameError::Iceoryx {
         name: name.to_string(),
         source: e.into(),
     })
@@ -260,18 +174,18 @@ pub const IOX_DOMAIN_ENV: &str = "PHEROMONE_IOX_DOMAIN";
 /// The iceoryx2 configuration of this process's domain: iceoryx2's global configuration, with
 /// the prefix `<D>_iox2_` when `PHEROMONE_IOX_DOMAIN` is `D` (two domains on one host share
 /// nothing, as two hosts would). `D` follows the field-name rules.
-pub fn domain_config() -> Result<Config, ShmError> {
+pub fn domain_config() -> Result<Config, NameError> {
     domain_config_of(std::env::var(IOX_DOMAIN_ENV).ok().as_deref())
 }
 
 /// The iceoryx2 configuration of domain `domain` (`None` or empty: iceoryx2's own).
-pub fn domain_config_of(domain: Option<&str>) -> Result<Config, ShmError> {
+pub fn domain_config_of(domain: Option<&str>) -> Result<Config, NameError> {
     let mut config = Config::global_config().clone();
     if let Some(d) = domain.filter(|d| !d.is_empty()) {
         check_name(d)?;
         let prefix = format!("{d}_iox2_");
         config.global.prefix =
-            FileName::new(prefix.as_bytes()).map_err(|e| ShmError::IceoryxName {
+            FileName::new(prefix.as_bytes()).map_err(|e| NameError::Iceoryx {
                 name: prefix.clone(),
                 source: Box::new(Iceoryx(e)),
             })?;
@@ -281,18 +195,18 @@ pub fn domain_config_of(domain: Option<&str>) -> Result<Config, ShmError> {
 
 /// Creates an iceoryx2 node that stops on SIGINT/SIGTERM (`node.wait` then returns an error) and
 /// first removes what dead nodes left behind.
-pub fn create_node(name: &str) -> Result<Node<Svc>, ShmError> {
+pub fn create_node(name: &str) -> Result<Node<Svc>, AttachError> {
     create_node_with(name, domain_config()?)
 }
 
 /// As [`create_node`], in iceoryx2 domain `domain` whatever the environment says (a test that
 /// stands for two hosts).
-pub fn create_node_in(name: &str, domain: Option<&str>) -> Result<Node<Svc>, ShmError> {
+pub fn create_node_in(name: &str, domain: Option<&str>) -> Result<Node<Svc>, AttachError> {
     create_node_with(name, domain_config_of(domain)?)
 }
 
-fn create_node_with(name: &str, domain: Config) -> Result<Node<Svc>, ShmError> {
-    let node_name = NodeName::new(name).map_err(|e| ShmError::IceoryxName {
+fn create_node_with(name: &str, domain: Config) -> Result<Node<Svc>, AttachError> {
+    let node_name = NodeName::new(name).map_err(|e| NameError::Iceoryx {
         name: name.to_string(),
         source: Box::new(Iceoryx(e)),
     })?;
@@ -316,7 +230,7 @@ fn create_node_with(name: &str, domain: Config) -> Result<Node<Svc>, ShmError> {
         .config(&domain)
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<Svc>()
-        .map_err(|e| ShmError::Node {
+        .map_err(|e| AttachError::Node {
             name: name.to_string(),
             source: e,
         });
@@ -523,18 +437,18 @@ pub struct FieldStatus {
 /// that use it; watching does not, so the counts show what the field itself has cleaned.
 pub struct FieldWatch {
     frames: FrameFactory,
-    deposits: iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, DepositMsg, ()>,
+    deposits: DepositFactory,
     confirm: confirm::ConfirmFactory,
 }
 
 impl FieldWatch {
-    /// Opens field `field`'s services; `ShmError::NoField` if they do not exist.
-    pub fn open(node: &Node<Svc>, field: &str) -> Result<Self, ShmError> {
+    /// Opens field `field`'s services; `AttachError::NoField` if they do not exist.
+    pub fn open(node: &Node<Svc>, field: &str) -> Result<Self, AttachError> {
         let names = FieldServices::new(field)?;
         Ok(Self {
-            frames: frame_service(node, &names, None)?,
-            deposits: deposit_service(node, &names, None)?,
-            confirm: confirm::confirm_service(node, &names, None)?,
+            frames: open_frame_service(node, &names)?,
+            deposits: open_deposit_service(node, &names)?,
+            confirm: confirm::open_confirm_service(node, &names)?,
         })
     }
 
@@ -568,148 +482,175 @@ type FrameSubscriber = Subscriber<Svc, [f32], FrameHeader>;
 type FrameFactory =
     iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [f32], FrameHeader>;
 type DepositSubscriber = Subscriber<Svc, DepositMsg, ()>;
+type DepositFactory =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, DepositMsg, ()>;
 type EventFactory = iceoryx2::service::port_factory::event::PortFactory<Svc>;
 /// A frame received from shared memory.
 pub type FrameSample = Sample<Svc, [f32], FrameHeader>;
 
-fn frame_service(
+/// The frame service's builder.
+fn frame_builder(
     node: &Node<Svc>,
-    names: &FieldServices,
-    config: Option<&FieldConfig>,
-) -> Result<FrameFactory, ShmError> {
-    let name = service_name(&names.frame)?;
-    let builder = node
-        .service_builder(&name)
+    name: &ServiceName,
+) -> iceoryx2::service::builder::publish_subscribe::Builder<[f32], FrameHeader, Svc> {
+    node.service_builder(name)
         .publish_subscribe::<[f32]>()
-        .user_header::<FrameHeader>();
-    match config {
-        Some(c) => builder
-            .history_size(wire::FRAME_HISTORY)
-            .subscriber_max_buffer_size(wire::FRAME_SUBSCRIBER_BUFFER)
-            .subscriber_max_borrowed_samples(READER_BORROWED_FRAMES)
-            // The readers and the field's own subscription.
-            .max_subscribers(c.max_readers + 1)
-            .max_publishers(wire::FRAME_PUBLISHERS)
-            .max_nodes(c.max_readers + wire::FRAME_EXTRA_NODES)
-            .open_or_create()
-            .map_err(|e| match e {
-                iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
-                    iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError::IncompatibleTypes,
-                ) => ShmError::Layout {
+        .user_header::<FrameHeader>()
+}
+
+/// Opens a running field's frame service.
+fn open_frame_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+) -> Result<FrameFactory, AttachError> {
+    frame_builder(node, &service_name(&names.frame)?)
+        .open()
+        .map_err(|e| open_failure(&names.frame, wire::type_name_of::<FrameHeader>(), e))
+}
+
+/// Opens or creates the frame service of a field that starts.
+fn create_frame_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+    c: &FieldConfig,
+) -> Result<FrameFactory, StartError> {
+    use iceoryx2::service::builder::publish_subscribe::{
+        PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError as E,
+    };
+    frame_builder(node, &service_name(&names.frame)?)
+        .history_size(wire::FRAME_HISTORY)
+        .subscriber_max_buffer_size(wire::FRAME_SUBSCRIBER_BUFFER)
+        .subscriber_max_borrowed_samples(READER_BORROWED_FRAMES)
+        // The readers and the field's own subscription.
+        .max_subscribers(c.max_readers + 1)
+        .max_publishers(wire::FRAME_PUBLISHERS)
+        .max_nodes(c.max_readers + wire::FRAME_EXTRA_NODES)
+        .open_or_create()
+        .map_err(|e| match e {
+            E::PublishSubscribeOpenError(PublishSubscribeOpenError::IncompatibleTypes) => {
+                StartError::Layout {
                     service: names.frame.clone(),
                     ours: wire::type_name_of::<FrameHeader>(),
-                },
-                e => service_err(&names.frame, "open or create", e),
-            }),
-        None => builder.open().map_err(|e| {
-            use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as E;
-            match e {
-                E::DoesNotExist => ShmError::NoField {
-                    field: names.frame.split('/').nth(1).unwrap_or_default().to_string(),
-                    service: names.frame.clone(),
-                },
-                E::IncompatibleTypes => ShmError::Layout {
-                    service: names.frame.clone(),
-                    ours: wire::type_name_of::<FrameHeader>(),
-                },
-                e => service_err(&names.frame, "open", e),
+                }
             }
-        }),
+            e => service_err(&names.frame, "open or create", e).into(),
+        })
+}
+
+/// Why opening the existing publish-subscribe service `service` of a field (whose messages are
+/// `ours`) failed.
+fn open_failure(
+    service: &str,
+    ours: &'static str,
+    e: iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError,
+) -> AttachError {
+    use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as E;
+    match e {
+        E::DoesNotExist => AttachError::NoField {
+            field: service.split('/').nth(1).unwrap_or_default().to_string(),
+            service: service.to_string(),
+        },
+        E::IncompatibleTypes => AttachError::Layout {
+            service: service.to_string(),
+            ours,
+        },
+        e => service_err(service, "open", e).into(),
     }
 }
 
-fn frame_ready_service(
+/// Opens a running field's `frame-ready` event.
+fn open_frame_ready_service(
     node: &Node<Svc>,
     names: &FieldServices,
-    create: bool,
-) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ShmError> {
-    let name = service_name(&names.frame_ready)?;
-    let b = node.service_builder(&name).event();
-    if create {
-        b.max_listeners(wire::FRAME_READY_LISTENERS)
-            .max_notifiers(wire::FRAME_READY_NOTIFIERS)
-            .max_nodes(wire::FRAME_READY_LISTENERS + wire::FRAME_READY_NOTIFIERS)
-            .open_or_create()
-            .map_err(|e| service_err(&names.frame_ready, "open or create", e))
-    } else {
-        b.open()
-            .map_err(|e| service_err(&names.frame_ready, "open", e))
-    }
+) -> Result<EventFactory, AttachError> {
+    Ok(node
+        .service_builder(&service_name(&names.frame_ready)?)
+        .event()
+        .open()
+        .map_err(|e| service_err(&names.frame_ready, "open", e))?)
 }
 
-/// The `deposit-ready` event: created (with room for `max_depositors` notifiers) by a field that
-/// publishes on deposit; opened by depositors, who notify it after each deposit when it exists.
-pub(crate) fn deposit_ready_service(
+/// Opens or creates the `frame-ready` event of a field that starts.
+fn create_frame_ready_service(
     node: &Node<Svc>,
     names: &FieldServices,
-    config: Option<&FieldConfig>,
-) -> Result<iceoryx2::service::port_factory::event::PortFactory<Svc>, ShmError> {
-    let name = service_name(&names.deposit_ready)?;
-    let b = node.service_builder(&name).event();
-    match config {
-        Some(c) => {
-            let notifiers = c.max_depositors + wire::DEPOSIT_READY_EXTRA_NOTIFIERS;
-            b.max_listeners(wire::DEPOSIT_READY_LISTENERS)
-                .max_notifiers(notifiers)
-                .max_nodes(wire::DEPOSIT_READY_LISTENERS + notifiers)
-                .open_or_create()
-                .map_err(|e| service_err(&names.deposit_ready, "open or create", e))
-        }
-        None => b
-            .open()
-            .map_err(|e| service_err(&names.deposit_ready, "open", e)),
-    }
+) -> Result<EventFactory, StartError> {
+    Ok(node
+        .service_builder(&service_name(&names.frame_ready)?)
+        .event()
+        .max_listeners(wire::FRAME_READY_LISTENERS)
+        .max_notifiers(wire::FRAME_READY_NOTIFIERS)
+        .max_nodes(wire::FRAME_READY_LISTENERS + wire::FRAME_READY_NOTIFIERS)
+        .open_or_create()
+        .map_err(|e| service_err(&names.frame_ready, "open or create", e))?)
 }
 
-fn deposit_service(
+/// Opens a field's `deposit-ready` event, which exists when the field publishes on deposit:
+/// depositors notify it after each deposit.
+fn open_deposit_ready_service(
     node: &Node<Svc>,
     names: &FieldServices,
-    config: Option<&FieldConfig>,
-) -> Result<
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, DepositMsg, ()>,
-    ShmError,
-> {
-    let name = service_name(&names.deposit)?;
-    let builder = node
-        .service_builder(&name)
-        .publish_subscribe::<DepositMsg>();
-    match config {
-        Some(c) => builder
-            .max_publishers(c.max_depositors)
-            .max_subscribers(wire::DEPOSIT_SUBSCRIBERS)
-            .max_nodes(c.max_depositors + wire::DEPOSIT_SUBSCRIBERS)
-            .subscriber_max_buffer_size(c.deposit_buffer)
-            .history_size(wire::DEPOSIT_HISTORY)
-            .enable_safe_overflow(false)
-            .open_or_create()
-            .map_err(|e| service_err(&names.deposit, "open or create", e)),
-        None => builder.open().map_err(|e| {
-            use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as E;
-            match e {
-                E::DoesNotExist => ShmError::NoField {
-                    field: names
-                        .deposit
-                        .split('/')
-                        .nth(1)
-                        .unwrap_or_default()
-                        .to_string(),
-                    service: names.deposit.clone(),
-                },
-                E::IncompatibleTypes => ShmError::Layout {
-                    service: names.deposit.clone(),
-                    ours: wire::type_name_of::<DepositMsg>(),
-                },
-                e => service_err(&names.deposit, "open", e),
-            }
-        }),
-    }
+) -> Result<EventFactory, AttachError> {
+    Ok(node
+        .service_builder(&service_name(&names.deposit_ready)?)
+        .event()
+        .open()
+        .map_err(|e| service_err(&names.deposit_ready, "open", e))?)
 }
 
-fn check_shm_space(config: &FieldConfig) -> Result<(), ShmError> {
+/// Opens or creates the `deposit-ready` event of a field that publishes on deposit, with room
+/// for `max_depositors` notifiers.
+pub(crate) fn create_deposit_ready_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+    c: &FieldConfig,
+) -> Result<EventFactory, StartError> {
+    let notifiers = c.max_depositors + wire::DEPOSIT_READY_EXTRA_NOTIFIERS;
+    Ok(node
+        .service_builder(&service_name(&names.deposit_ready)?)
+        .event()
+        .max_listeners(wire::DEPOSIT_READY_LISTENERS)
+        .max_notifiers(notifiers)
+        .max_nodes(wire::DEPOSIT_READY_LISTENERS + notifiers)
+        .open_or_create()
+        .map_err(|e| service_err(&names.deposit_ready, "open or create", e))?)
+}
+
+/// Opens a running field's deposit service.
+fn open_deposit_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+) -> Result<DepositFactory, AttachError> {
+    node.service_builder(&service_name(&names.deposit)?)
+        .publish_subscribe::<DepositMsg>()
+        .open()
+        .map_err(|e| open_failure(&names.deposit, wire::type_name_of::<DepositMsg>(), e))
+}
+
+/// Opens or creates the deposit service of a field that starts.
+fn create_deposit_service(
+    node: &Node<Svc>,
+    names: &FieldServices,
+    c: &FieldConfig,
+) -> Result<DepositFactory, StartError> {
+    Ok(node
+        .service_builder(&service_name(&names.deposit)?)
+        .publish_subscribe::<DepositMsg>()
+        .max_publishers(c.max_depositors)
+        .max_subscribers(wire::DEPOSIT_SUBSCRIBERS)
+        .max_nodes(c.max_depositors + wire::DEPOSIT_SUBSCRIBERS)
+        .subscriber_max_buffer_size(c.deposit_buffer)
+        .history_size(wire::DEPOSIT_HISTORY)
+        .enable_safe_overflow(false)
+        .open_or_create()
+        .map_err(|e| service_err(&names.deposit, "open or create", e))?)
+}
+
+fn check_shm_space(config: &FieldConfig) -> Result<(), StartError> {
     let (frames, needed) = frame_pool(config);
     if let Some(available) = shm_available_bytes() {
         if needed > available {
-            return Err(ShmError::NoMemory {
+            return Err(StartError::NoMemory {
                 needed_bytes: needed,
                 available_bytes: available,
                 frames,
@@ -720,16 +661,20 @@ fn check_shm_space(config: &FieldConfig) -> Result<(), ShmError> {
     Ok(())
 }
 
-fn retry_attach<T>(
+/// Calls `attach` until it succeeds, for at most `timeout`, while its error is one `retry`
+/// accepts (no field yet, a service half-made); waits with `node.wait` between tries (returns
+/// early on a termination request).
+fn retry_attach<T, E>(
     node: &Node<Svc>,
     timeout: Duration,
-    mut attach: impl FnMut() -> Result<T, ShmError>,
-) -> Result<T, ShmError> {
+    mut attach: impl FnMut() -> Result<T, E>,
+    retry: impl Fn(&E) -> bool,
+) -> Result<T, E> {
     let deadline = std::time::Instant::now() + timeout;
     loop {
         match attach() {
             Ok(t) => return Ok(t),
-            Err(e @ ShmError::NoField { .. }) | Err(e @ ShmError::Service { .. }) => {
+            Err(e) if retry(&e) => {
                 let left = deadline.saturating_duration_since(std::time::Instant::now());
                 if left.is_zero() || node.wait(left.min(Duration::from_millis(20))).is_err() {
                     return Err(e);
@@ -737,5 +682,13 @@ fn retry_attach<T>(
             }
             Err(e) => return Err(e),
         }
+    }
+}
+
+impl AttachError {
+    /// The field may not be up yet: its services do not exist, or opening them failed (they
+    /// are being created). What the `attach_within`s retry on.
+    pub(crate) fn field_not_up_yet(&self) -> bool {
+        matches!(self, Self::NoField { .. } | Self::Service(_))
     }
 }

@@ -6,8 +6,8 @@ use std::time::Duration;
 use iceoryx2::prelude::*;
 
 use super::{
-    frame_ready_service, frame_service, retry_attach, service_err, wait_interruptible,
-    FieldServices, FrameFactory, FrameSample, FrameSubscriber, ShmError, Svc,
+    open_frame_ready_service, open_frame_service, retry_attach, service_err, wait_interruptible,
+    AttachError, FieldServices, FrameFactory, FrameSample, FrameSubscriber, ReceiveError, Svc,
 };
 use crate::messages::FrameHeader;
 use crate::sample::FrameView;
@@ -152,16 +152,17 @@ pub struct FieldReader {
 }
 
 impl FieldReader {
-    /// Attaches to the running field `field`; fails with `ShmError::NoField` if there is none.
-    pub fn attach(node: &Node<Svc>, field: &str) -> Result<Self, ShmError> {
+    /// Attaches to the running field `field`; fails with `AttachError::NoField` if there is
+    /// none.
+    pub fn attach(node: &Node<Svc>, field: &str) -> Result<Self, AttachError> {
         let names = FieldServices::new(field)?;
-        let service = frame_service(node, &names, None)?;
+        let service = open_frame_service(node, &names)?;
         let subscriber = service
             .subscriber_builder()
             .buffer_size(1)
             .create()
             .map_err(|e| service_err(&names.frame, "create subscriber", e))?;
-        let listener = frame_ready_service(node, &names, false)?
+        let listener = open_frame_ready_service(node, &names)?
             .listener_builder()
             .create()
             .map_err(|e| service_err(&names.frame_ready, "create listener", e))?;
@@ -174,7 +175,11 @@ impl FieldReader {
             latest: None,
             replaced: None,
         };
-        reader.update()?;
+        // The current frame (the field's history), if it has come already.
+        reader.update().map_err(|e| match e {
+            ReceiveError::BadFrame { got, expected } => AttachError::BadFrame { got, expected },
+            ReceiveError::Service(e) => AttachError::Service(e),
+        })?;
         Ok(reader)
     }
 
@@ -184,8 +189,13 @@ impl FieldReader {
         node: &Node<Svc>,
         field: &str,
         timeout: Duration,
-    ) -> Result<Self, ShmError> {
-        retry_attach(node, timeout, || Self::attach(node, field))
+    ) -> Result<Self, AttachError> {
+        retry_attach(
+            node,
+            timeout,
+            || Self::attach(node, field),
+            AttachError::field_not_up_yet,
+        )
     }
 
     /// Whether a live field process publishes this field. False when no field is attached or
@@ -202,7 +212,7 @@ impl FieldReader {
     }
 
     /// Takes the newest frame that has arrived (if any); returns whether it is new.
-    pub fn update(&mut self) -> Result<bool, ShmError> {
+    pub fn update(&mut self) -> Result<bool, ReceiveError> {
         // At most `READER_BORROWED_FRAMES` (2) samples are held: `latest` and `replaced`, so the
         // replaced one goes before each receive.
         self.replaced = None;
@@ -214,7 +224,7 @@ impl FieldReader {
             match self.subscriber.receive() {
                 Ok(Some(s)) => {
                     if s.payload().len() != s.user_header().len() {
-                        return Err(ShmError::BadFrame {
+                        return Err(ReceiveError::BadFrame {
                             got: s.payload().len(),
                             expected: s.user_header().len(),
                         });
@@ -223,13 +233,13 @@ impl FieldReader {
                     fresh = true;
                 }
                 Ok(None) => return Ok(fresh),
-                Err(e) => return Err(service_err(&self.names.frame, "receive", e)),
+                Err(e) => return Err(service_err(&self.names.frame, "receive", e).into()),
             }
         }
     }
 
     /// Waits up to `timeout` for a frame newer than the one held; returns whether one came.
-    pub fn wait_frame(&mut self, timeout: Duration) -> Result<bool, ShmError> {
+    pub fn wait_frame(&mut self, timeout: Duration) -> Result<bool, ReceiveError> {
         if self.update()? {
             return Ok(true);
         }
@@ -244,7 +254,7 @@ impl FieldReader {
         &mut self,
         policy: WaitPolicy,
         timeout: Duration,
-    ) -> Result<bool, ShmError> {
+    ) -> Result<bool, ReceiveError> {
         let start = std::time::Instant::now();
         let spin = match policy {
             WaitPolicy::Event => Duration::ZERO,
@@ -280,7 +290,7 @@ impl FieldReader {
         &mut self,
         timeout: Duration,
         mut pred: impl FnMut(&Frame<'_>) -> bool,
-    ) -> Result<Option<Frame<'_>>, ShmError> {
+    ) -> Result<Option<Frame<'_>>, ReceiveError> {
         let deadline = std::time::Instant::now() + timeout;
         loop {
             if self.frame().as_ref().is_some_and(&mut pred) {

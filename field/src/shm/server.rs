@@ -9,9 +9,10 @@ use iceoryx2::prelude::*;
 use super::confirm::ConfirmServer;
 use super::inputs::InputsPublisher;
 use super::{
-    check_shm_space, deposit_service, frame_ready_service, frame_service, now_ns, service_err,
-    DepositSubscriber, EventFactory, FieldServices, FrameFactory, FramePublisher, FrameSample,
-    FrameSubscriber, ShmError, Svc, FRAME_READY,
+    check_shm_space, create_deposit_service, create_frame_ready_service, create_frame_service,
+    now_ns, service_err, DepositSubscriber, EventFactory, FieldServices, FrameFactory,
+    FramePublisher, FrameSample, FrameSubscriber, ServiceError, StartError, Svc, TickError,
+    FRAME_READY,
 };
 use crate::engine::{FieldConfig, Stepper, TickReport};
 use crate::messages::{DepositMsg, FrameHeader, InputsHeader};
@@ -58,7 +59,7 @@ pub(super) fn create_publisher(
     config: &FieldConfig,
     frame_service: &FrameFactory,
     ready_service: &EventFactory,
-) -> Result<(FramePublisher, iceoryx2::port::notifier::Notifier<Svc>), ShmError> {
+) -> Result<(FramePublisher, iceoryx2::port::notifier::Notifier<Svc>), ServiceError> {
     let publisher = frame_service
         .publisher_builder()
         .initial_max_slice_len(config.frame_len())
@@ -90,7 +91,7 @@ impl FieldServer {
         field: &str,
         config: FieldConfig,
         restore: Option<(FrameHeader, &[f32])>,
-    ) -> Result<Self, ShmError> {
+    ) -> Result<Self, StartError> {
         let first = match restore {
             Some((h, cells)) => FirstFrame::Restore(h, cells),
             None => FirstFrame::Zeros,
@@ -103,27 +104,27 @@ impl FieldServer {
         field: &str,
         config: FieldConfig,
         first_frame: FirstFrame<'_>,
-    ) -> Result<Self, ShmError> {
+    ) -> Result<Self, StartError> {
         let names = FieldServices::new(field)?;
-        let stepper = Stepper::new(config).map_err(|source| ShmError::Config {
+        let stepper = Stepper::new(config).map_err(|source| StartError::Config {
             field: field.to_string(),
             source,
         })?;
         let config = stepper.config().clone();
         check_shm_space(&config)?;
-        let frame_service = frame_service(node, &names, Some(&config))?;
+        let frame_service = create_frame_service(node, &names, &config)?;
         if frame_service.dynamic_config().number_of_publishers() > 0 {
-            return Err(ShmError::AlreadyRunning {
+            return Err(StartError::AlreadyRunning {
                 field: field.into(),
             });
         }
-        let ready_service = frame_ready_service(node, &names, true)?;
+        let ready_service = create_frame_ready_service(node, &names)?;
         let own = frame_service
             .subscriber_builder()
             .buffer_size(1)
             .create()
             .map_err(|e| service_err(&names.frame, "create own subscriber", e))?;
-        let deposits = deposit_service(node, &names, Some(&config))?
+        let deposits = create_deposit_service(node, &names, &config)?
             .subscriber_builder()
             .buffer_size(config.deposit_buffer)
             .create()
@@ -156,7 +157,7 @@ impl FieldServer {
         ports: Ports,
         first_frame: FirstFrame<'_>,
         pending: &[DepositMsg],
-    ) -> Result<Self, ShmError> {
+    ) -> Result<Self, StartError> {
         let Ports {
             publisher,
             own,
@@ -172,7 +173,7 @@ impl FieldServer {
             .map_err(|e| service_err(&names.frame, "loan first frame", e))?;
         if let FirstFrame::Restore(_, cells) | FirstFrame::Continue(_, cells) = &first_frame {
             if cells.len() != len {
-                return Err(ShmError::RestoreMismatch {
+                return Err(StartError::RestoreMismatch {
                     got: cells.len(),
                     expected: len,
                 });
@@ -224,7 +225,7 @@ impl FieldServer {
 
     /// From now on, publishes each frame's inputs on `pheromone/F/inputs` and the configuration
     /// on `pheromone/F/config`, for `pheromone bridge`. Returns the run's epoch.
-    pub fn publish_inputs(&mut self, node: &Node<Svc>) -> Result<u64, ShmError> {
+    pub fn publish_inputs(&mut self, node: &Node<Svc>) -> Result<u64, StartError> {
         let config = self.stepper.config();
         let toml = toml::to_string(config)
             .map_err(|e| service_err(&self.names.config, "serialize the configuration", e))?;
@@ -236,7 +237,7 @@ impl FieldServer {
 
     /// Takes the deposits offered on this host without applying them (a mirror forwards them to
     /// its origin, which applies them and sends them back in its inputs).
-    pub fn take_local_deposits(&mut self) -> Result<Vec<DepositMsg>, ShmError> {
+    pub fn take_local_deposits(&mut self) -> Result<Vec<DepositMsg>, TickError> {
         let mut out = Vec::new();
         // Confirm requests first, as a tick takes them (a flush answers after the queue).
         self.confirm.take_forwarded(&mut out)?;
@@ -252,10 +253,10 @@ impl FieldServer {
 
     /// A mirror: publishes `cells` with `header`'s sequence and counters (a keyframe), dropping
     /// whatever frame came before.
-    pub fn reset_to(&mut self, header: &FrameHeader, cells: &[f32]) -> Result<(), ShmError> {
+    pub fn reset_to(&mut self, header: &FrameHeader, cells: &[f32]) -> Result<(), TickError> {
         let len = self.stepper.config().frame_len();
         if cells.len() != len {
-            return Err(ShmError::RestoreMismatch {
+            return Err(TickError::RestoreMismatch {
                 got: cells.len(),
                 expected: len,
             });
@@ -276,7 +277,7 @@ impl FieldServer {
         &mut self,
         header: &InputsHeader,
         deposits: &[DepositMsg],
-    ) -> Result<u32, ShmError> {
+    ) -> Result<u32, TickError> {
         let mut refused = 0;
         self.stepper.sequence = header.sequence.wrapping_sub(1);
         self.publish_with(|stepper, prev, next| {
@@ -298,21 +299,19 @@ impl FieldServer {
     fn publish_with(
         &mut self,
         compute: impl FnOnce(&mut Stepper, &[f32], &mut [f32]) -> TickReport,
-    ) -> Result<(TickReport, u64), ShmError> {
+    ) -> Result<(TickReport, u64), TickError> {
         let started = now_ns();
         let len = self.stepper.config().frame_len();
         let previous = match self.previous.take() {
             Some(p) => p,
             None => {
-                return Err(service_err(
-                    &self.names.frame,
-                    "tick",
-                    "the previous frame was lost",
-                ))
+                return Err(
+                    service_err(&self.names.frame, "tick", "the previous frame was lost").into(),
+                )
             }
         };
         if previous.payload().len() != len {
-            return Err(ShmError::BadFrame {
+            return Err(TickError::BadFrame {
                 got: previous.payload().len(),
                 expected: len,
             });
@@ -383,11 +382,12 @@ impl FieldServer {
     /// Connects readers that attached since the last frame and hands them the current frame
     /// (the history). Call it while idle (e.g. a lockstep field waiting for its clock), so a late
     /// reader does not wait for the next tick.
-    pub fn serve_new_readers(&self) -> Result<(), ShmError> {
+    pub fn serve_new_readers(&self) -> Result<(), TickError> {
         use iceoryx2::port::update_connections::UpdateConnections;
-        self.publisher
+        Ok(self
+            .publisher
             .update_connections()
-            .map_err(|e| service_err(&self.names.frame, "update connections", e))
+            .map_err(|e| service_err(&self.names.frame, "update connections", e))?)
     }
 
     /// The last published frame.
@@ -407,7 +407,7 @@ impl FieldServer {
     }
 
     /// Whether deposits wait in the queue for the next tick.
-    pub fn deposits_waiting(&self) -> Result<bool, ShmError> {
+    pub fn deposits_waiting(&self) -> Result<bool, TickError> {
         let queued = self
             .deposits
             .has_samples()
@@ -417,17 +417,17 @@ impl FieldServer {
 
     /// Drains the deposit queue (validating each), computes the next frame from the previous one
     /// straight into a loaned sample, publishes it and wakes the readers.
-    pub fn tick(&mut self) -> Result<TickOutcome, ShmError> {
+    pub fn tick(&mut self) -> Result<TickOutcome, TickError> {
         self.tick_by(None)
     }
 
     /// As `tick`, stepping the field by `dt_s` seconds instead of one tick period (clamped to
     /// (0, period]; see `Stepper::step_dt`): a field that publishes as soon as deposits arrive.
-    pub fn tick_dt(&mut self, dt_s: f32) -> Result<TickOutcome, ShmError> {
+    pub fn tick_dt(&mut self, dt_s: f32) -> Result<TickOutcome, TickError> {
         self.tick_by(Some(dt_s))
     }
 
-    fn tick_by(&mut self, dt_s: Option<f32>) -> Result<TickOutcome, ShmError> {
+    fn tick_by(&mut self, dt_s: Option<f32>) -> Result<TickOutcome, TickError> {
         // Confirm requests before the queue: a flush request's receipt then covers every
         // deposit its process published before it.
         let mut rejected = self.confirm.take(&mut self.stepper)?;
@@ -439,7 +439,7 @@ impl FieldServer {
                     }
                 }
                 Ok(None) => break,
-                Err(e) => return Err(service_err(&self.names.deposit, "receive", e)),
+                Err(e) => return Err(service_err(&self.names.deposit, "receive", e).into()),
             }
         }
         let (report, compute_ns) = self.publish_with(|stepper, prev, next| match dt_s {

@@ -8,9 +8,10 @@ use iceoryx2::prelude::*;
 use super::confirm::ConfirmServer;
 use super::server::{create_publisher, FirstFrame, Ports};
 use super::{
-    check_shm_space, cleanup_dead_nodes, deposit_service, frame_ready_service, frame_service,
-    now_ns, retry_attach, service_err, wait_interruptible, DepositSubscriber, FieldServer,
-    FieldServices, FrameFactory, FramePublisher, FrameSample, FrameSubscriber, ShmError, Svc,
+    check_shm_space, cleanup_dead_nodes, now_ns, open_deposit_service, open_frame_ready_service,
+    open_frame_service, retry_attach, service_err, wait_interruptible, AttachError,
+    DepositSubscriber, FieldServer, FieldServices, FrameFactory, FramePublisher, FrameSample,
+    FrameSubscriber, StandbyError, StartError, Svc,
 };
 use crate::engine::{FieldConfig, Stepper};
 use crate::messages::{DepositMsg, FrameHeader};
@@ -109,24 +110,28 @@ impl Standby {
     /// Attaches to the running field `field` as its standby. `config` must describe the same
     /// grid (checked against every mirrored frame). The primary counts as gone once it sent no
     /// frame for two tick periods and its process is dead or its publisher absent.
-    pub fn attach(node: &Node<Svc>, field: &str, config: FieldConfig) -> Result<Self, ShmError> {
-        let names = FieldServices::new(field)?;
-        config.validate().map_err(|e| ShmError::StandbyMismatch {
+    pub fn attach(
+        node: &Node<Svc>,
+        field: &str,
+        config: FieldConfig,
+    ) -> Result<Self, StandbyError> {
+        let names = FieldServices::new(field).map_err(AttachError::from)?;
+        config.validate().map_err(|e| StandbyError::Mismatch {
             field: field.into(),
             detail: e.to_string(),
         })?;
-        let service = frame_service(node, &names, None)?;
+        let service = open_frame_service(node, &names)?;
         let frames = service
             .subscriber_builder()
             .buffer_size(1)
             .create()
             .map_err(|e| service_err(&names.frame, "create standby subscriber", e))?;
-        let ready_service = frame_ready_service(node, &names, false)?;
+        let ready_service = open_frame_ready_service(node, &names)?;
         let listener = ready_service
             .listener_builder()
             .create()
             .map_err(|e| service_err(&names.frame_ready, "create listener", e))?;
-        let deposits = deposit_service(node, &names, None)?
+        let deposits = open_deposit_service(node, &names)?
             .subscriber_builder()
             .buffer_size(config.deposit_buffer)
             .create()
@@ -162,8 +167,17 @@ impl Standby {
         field: &str,
         config: FieldConfig,
         timeout: Duration,
-    ) -> Result<Self, ShmError> {
-        retry_attach(node, timeout, || Self::attach(node, field, config.clone()))
+    ) -> Result<Self, StandbyError> {
+        retry_attach(
+            node,
+            timeout,
+            || Self::attach(node, field, config.clone()),
+            |e| match e {
+                StandbyError::Attach(e) => e.field_not_up_yet(),
+                StandbyError::Start(StartError::Service(_)) | StandbyError::Service(_) => true,
+                StandbyError::Mismatch { .. } | StandbyError::Start(_) => false,
+            },
+        )
     }
 
     pub fn field(&self) -> &str {
@@ -182,7 +196,7 @@ impl Standby {
 
     /// Takes the newest frame that arrived, checks it fits the configuration; returns whether
     /// one came.
-    fn receive_frames(&mut self) -> Result<bool, ShmError> {
+    fn receive_frames(&mut self) -> Result<bool, StandbyError> {
         let mut fresh = false;
         loop {
             match self.frames.receive() {
@@ -194,7 +208,7 @@ impl Standby {
                         || s.payload().len() != c.frame_len()
                         || h.dt_s != c.dt_s()
                     {
-                        return Err(ShmError::StandbyMismatch {
+                        return Err(StandbyError::Mismatch {
                             field: self.field.clone(),
                             detail: format!(
                                 "the primary publishes {}×{} cells × {} channel(s) of {} m at \
@@ -222,7 +236,7 @@ impl Standby {
                     fresh = true;
                 }
                 Ok(None) => break,
-                Err(e) => return Err(service_err(&self.names.frame, "receive", e)),
+                Err(e) => return Err(service_err(&self.names.frame, "receive", e).into()),
             }
         }
         if fresh {
@@ -233,7 +247,7 @@ impl Standby {
     }
 
     /// Takes the deposits queued for the standby: dropped when `keep` is false, else kept.
-    fn drain_deposits(&mut self, keep: bool) -> Result<(), ShmError> {
+    fn drain_deposits(&mut self, keep: bool) -> Result<(), StandbyError> {
         loop {
             match self.deposits.receive() {
                 Ok(Some(d)) => {
@@ -247,14 +261,14 @@ impl Standby {
                     }
                 }
                 Ok(None) => return Ok(()),
-                Err(e) => return Err(service_err(&self.names.deposit, "receive", e)),
+                Err(e) => return Err(service_err(&self.names.deposit, "receive", e).into()),
             }
         }
     }
 
     /// Waits up to `timeout` for the primary's next frame and mirrors it; tells when the primary
     /// is gone.
-    pub fn poll(&mut self, timeout: Duration) -> Result<StandbyEvent, ShmError> {
+    pub fn poll(&mut self, timeout: Duration) -> Result<StandbyEvent, StandbyError> {
         let mut fresh = self.receive_frames()?;
         if !fresh {
             // Wake up no later than when the silence reaches the takeover threshold.
@@ -287,7 +301,7 @@ impl Standby {
     /// Becomes the field: creates the publisher (after removing what the dead primary left) and
     /// publishes the next frame, computed from the last mirrored one with the deposits kept
     /// since. Call it after `poll` said `PrimaryGone`.
-    pub fn take_over(mut self, node: &Node<Svc>) -> Result<(FieldServer, Takeover), ShmError> {
+    pub fn take_over(mut self, node: &Node<Svc>) -> Result<(FieldServer, Takeover), StandbyError> {
         let detected_stamp_ns = now_ns();
         // Frames the primary sent just before it died are still queued: take them first.
         if self.receive_frames()? {
@@ -315,7 +329,7 @@ impl Standby {
             Some(s) => FirstFrame::Continue(*s.user_header(), s.payload()),
             None => FirstFrame::Zeros,
         };
-        let stepper = Stepper::new(config).map_err(|source| ShmError::Config {
+        let stepper = Stepper::new(config).map_err(|source| StartError::Config {
             field: field.to_string(),
             source,
         })?;

@@ -7,7 +7,9 @@ use std::time::{Duration, Instant};
 use iceoryx2::prelude::*;
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern;
 
-use super::{service_err, FieldReader, FieldWatch, Iceoryx, ShmError, Svc};
+use super::{
+    service_err, AttachError, FieldReader, FieldWatch, Iceoryx, ServiceError, ShmError, Svc,
+};
 use crate::wire;
 
 /// What `pheromone list` shows of one field.
@@ -38,7 +40,7 @@ pub struct FieldInfo {
 }
 
 /// Names of the fields whose frame service exists on this host, sorted.
-pub fn field_names(config: &Config) -> Result<Vec<String>, ShmError> {
+pub fn field_names(config: &Config) -> Result<Vec<String>, ServiceError> {
     let mut names = Vec::new();
     Svc::list(config, |s| {
         if matches!(
@@ -64,14 +66,14 @@ pub fn field_names(config: &Config) -> Result<Vec<String>, ShmError> {
 /// to, or that publishes no frame at all, is left out.
 pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmError> {
     let mut open = Vec::new();
-    for name in field_names(node.config())? {
+    for name in field_names(node.config()).map_err(AttachError::from)? {
         match (
             FieldReader::attach(node, &name),
             FieldWatch::open(node, &name),
         ) {
             (Ok(reader), Ok(watch)) => open.push((name, reader, watch, None)),
-            (Err(ShmError::NoField { .. }), _) | (_, Err(ShmError::NoField { .. })) => {}
-            (Err(e), _) | (_, Err(e)) => return Err(e),
+            (Err(AttachError::NoField { .. }), _) | (_, Err(AttachError::NoField { .. })) => {}
+            (Err(e), _) | (_, Err(e)) => return Err(e.into()),
         }
     }
     let started = Instant::now();

@@ -4,7 +4,7 @@
 //!
 //! It creates the field's frame, frame-ready and deposit services exactly as `FieldServer` does
 //! (same layout, same limits), but takes no deposits: nobody subscribes to its deposit service,
-//! so a deposit sent to it is refused to its sender (`ShmError::NoSubscriber`). It keeps one
+//! so a deposit sent to it is refused to its sender (`SendError::NoSubscriber`). It keeps one
 //! subscription of its own frames, as a field does, so `pheromone list` counts its readers the
 //! same way.
 
@@ -12,8 +12,9 @@ use iceoryx2::prelude::*;
 
 use super::server::create_publisher;
 use super::{
-    check_shm_space, deposit_service, frame_ready_service, frame_service, now_ns, service_err,
-    FieldServices, FramePublisher, FrameSubscriber, ShmError, Svc,
+    check_shm_space, create_deposit_service, create_frame_ready_service, create_frame_service,
+    now_ns, service_err, DepositFactory, FieldServices, FramePublisher, FrameSubscriber,
+    StartError, Svc, TickError,
 };
 use crate::engine::FieldConfig;
 use crate::messages::FrameHeader;
@@ -29,30 +30,26 @@ pub struct FrameWriter {
     /// Held so the frame service counts this writer as a field counts itself.
     _own: FrameSubscriber,
     /// Held so the deposit service exists while the frames do (`pheromone list` opens it).
-    _deposits: iceoryx2::service::port_factory::publish_subscribe::PortFactory<
-        Svc,
-        crate::messages::DepositMsg,
-        (),
-    >,
+    _deposits: DepositFactory,
 }
 
 impl FrameWriter {
     /// Creates field `field`'s services for frames of `config`'s geometry and channels (its
     /// deposit and evaporation settings are not used). Fails if another process publishes it.
-    pub fn start(node: &Node<Svc>, field: &str, config: FieldConfig) -> Result<Self, ShmError> {
+    pub fn start(node: &Node<Svc>, field: &str, config: FieldConfig) -> Result<Self, StartError> {
         let names = FieldServices::new(field)?;
-        config.validate().map_err(|source| ShmError::Config {
+        config.validate().map_err(|source| StartError::Config {
             field: field.to_string(),
             source,
         })?;
         check_shm_space(&config)?;
-        let frame_service = frame_service(node, &names, Some(&config))?;
+        let frame_service = create_frame_service(node, &names, &config)?;
         if frame_service.dynamic_config().number_of_publishers() > 0 {
-            return Err(ShmError::AlreadyRunning {
+            return Err(StartError::AlreadyRunning {
                 field: field.into(),
             });
         }
-        let ready_service = frame_ready_service(node, &names, true)?;
+        let ready_service = create_frame_ready_service(node, &names)?;
         let own = frame_service
             .subscriber_builder()
             .buffer_size(1)
@@ -60,7 +57,7 @@ impl FrameWriter {
             .map_err(|e| service_err(&names.frame, "create own subscriber", e))?;
         // The deposit service must exist for `FieldWatch`; a subscriber would accept deposits
         // nobody applies, so there is none: the factory alone keeps the service.
-        let deposits = deposit_service(node, &names, Some(&config))?;
+        let deposits = create_deposit_service(node, &names, &config)?;
         let (publisher, notifier) =
             create_publisher(&names, &config, &frame_service, &ready_service)?;
         Ok(Self {
@@ -90,7 +87,7 @@ impl FrameWriter {
         sequence: u64,
         sim_time_s: f64,
         write: impl FnOnce(&mut [f32]),
-    ) -> Result<(), ShmError> {
+    ) -> Result<(), TickError> {
         let len = self.frame_len();
         let mut sample = self
             .publisher
@@ -124,10 +121,11 @@ impl FrameWriter {
     }
 
     /// Connects readers that attached since the last frame and hands them the current frame.
-    pub fn serve_new_readers(&self) -> Result<(), ShmError> {
+    pub fn serve_new_readers(&self) -> Result<(), TickError> {
         use iceoryx2::port::update_connections::UpdateConnections;
-        self.publisher
+        Ok(self
+            .publisher
             .update_connections()
-            .map_err(|e| service_err(&self.names.frame, "update connections", e))
+            .map_err(|e| service_err(&self.names.frame, "update connections", e))?)
     }
 }

@@ -28,6 +28,8 @@ pub enum BridgeError {
     Timeout(String),
 }
 
+field::from_shm_errors!(BridgeError);
+
 pub(crate) fn zerr(action: &str, e: impl std::fmt::Display) -> BridgeError {
     BridgeError::Zenoh {
         action: action.to_string(),

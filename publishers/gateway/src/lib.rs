@@ -26,7 +26,7 @@ pub mod udp;
 
 use std::time::Duration;
 
-use field::shm::{ConfigSubscriber, DepositPublisher, FieldReader, ShmError, Svc};
+use field::shm::{ConfigSubscriber, DepositPublisher, FieldReader, SendError, ShmError, Svc};
 use field::{Deposit, FieldConfig, Kernel, RejectReason, SamplePose};
 use gateway_codec::{
     DecodeError, DepositReply, DepositRequest, DepositStatus, ErrorReason, Frame, Message,
@@ -129,6 +129,8 @@ pub enum GatewayError {
         source: std::io::Error,
     },
 }
+
+field::from_shm_errors!(GatewayError);
 
 /// Counters of one gateway, logged once a second and printed at the end.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
@@ -436,7 +438,7 @@ impl Gateway {
                 self.counters.deposits += 1;
                 Ok(Some(reply(DepositStatus::Applied)))
             }
-            Err(ShmError::NoSubscriber { .. }) => {
+            Err(SendError::NoSubscriber { .. }) => {
                 self.counters.deposits_undelivered += 1;
                 Ok(None)
             }

@@ -64,6 +64,8 @@ impl From<field::shm::ShmError> for GraphRunError {
     }
 }
 
+field::from_shm_errors!(GraphRunError);
+
 impl From<super::GraphError> for GraphRunError {
     fn from(e: super::GraphError) -> Self {
         GraphRunError::Shm(e.into())

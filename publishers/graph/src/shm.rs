@@ -421,6 +421,8 @@ pub enum GraphShmError {
     Conflict(#[from] ConflictError),
 }
 
+field::from_shm_errors!(GraphShmError);
+
 /// How a snapshot's structure differs from the scenario's graph.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SnapshotMismatch {

@@ -41,6 +41,8 @@ pub enum Ros2Error {
     NoFrame(String),
 }
 
+field::from_shm_errors!(Ros2Error);
+
 fn zerr(action: impl Into<String>, e: impl std::fmt::Display) -> Ros2Error {
     Ros2Error::Zenoh {
         action: action.into(),

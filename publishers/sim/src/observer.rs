@@ -22,7 +22,7 @@ use std::time::Duration;
 
 use field::link::Receiver;
 use field::lockstep::{self, Participant};
-use field::shm::{FieldReader, ShmError, Svc};
+use field::shm::{AttachError, FieldReader, ShmError, Svc};
 use field::wire::{ready_service as wake, ROBOT_LINK};
 use iceoryx2::node::Node;
 
@@ -81,7 +81,7 @@ impl Observer {
         world: &str,
         field: &str,
         timeout: Duration,
-    ) -> Result<Self, ShmError> {
+    ) -> Result<Self, AttachError> {
         // The robots' links as the roles create them: in lockstep the observer is at most a
         // step behind, far less than a link's buffer.
         let options = ROBOT_LINK;

@@ -20,7 +20,7 @@ use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use field::link::Receiver;
-use field::shm::{FieldReader, ShmError, Svc};
+use field::shm::{AttachError, FieldReader, ShmError, Svc};
 use field::wire::{ready_service, RobotServices, ROBOT_LINK};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
@@ -242,8 +242,8 @@ impl View {
                     eprintln!("view: attached to field '{}'", self.config.field);
                     self.reader = Some(r);
                 }
-                Err(ShmError::NoField { .. }) => {}
-                Err(e) => return Err(e),
+                Err(AttachError::NoField { .. }) => {}
+                Err(e) => return Err(e.into()),
             }
         }
         if let Some(reader) = &mut self.reader {

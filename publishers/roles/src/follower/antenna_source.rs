@@ -58,6 +58,8 @@ pub enum AntennaSourceError {
     NoDeposits { source_name: String },
 }
 
+field::from_shm_errors!(AntennaSourceError);
+
 /// What a source did, for the role's summary.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct SourceStats {

@@ -4,7 +4,7 @@ use std::time::Duration;
 
 use field::link::{Receiver, Sender};
 use field::lockstep::Participant;
-use field::shm::{now_ns, FieldReader, ShmError, Svc};
+use field::shm::{now_ns, AttachError, FieldReader, Svc};
 use iceoryx2::node::Node;
 
 use crate::follower::{Follower, PoseSource};
@@ -105,10 +105,11 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
                 reader.wait_frame(Duration::from_secs(5))?;
             }
             let Some(frame) = reader.frame() else {
-                return Err(ProcessError::Shm(ShmError::NoField {
+                return Err(AttachError::NoField {
                     field: field_name.to_string(),
                     service: format!("pheromone/{field_name}/frame"),
-                }));
+                }
+                .into());
             };
             let (cmd, status) = match follower.step_pose(&frame.view, &p, dt_s) {
                 Ok(out) => (out.cmd, Some(out.status)),

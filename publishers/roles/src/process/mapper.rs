@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 
 use field::link::Receiver;
 use field::lockstep::{role, Participant};
-use field::shm::{FieldReader, FrameWriter, ShmError, Svc};
+use field::shm::{AttachError, FieldReader, FrameWriter, Svc};
 use field::{ChannelSpec, Evaporation, FieldConfig};
 use iceoryx2::node::Node;
 
@@ -269,10 +269,11 @@ fn hold_peer_frames(
             }
         }
         if !held {
-            return Err(ProcessError::Shm(ShmError::NoField {
+            return Err(AttachError::NoField {
                 field: p.field.clone(),
                 service: format!("frame {k} of map '{}' did not come", p.field),
-            }));
+            }
+            .into());
         }
         p.pose = recv_latest_step(&p.poses, k)?.or(p.pose);
     }

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use field::link::{Receiver, Sender};
 use field::lockstep::{LockstepError, Participant};
-use field::shm::{ShmError, Svc};
+use field::shm::{AttachError, ShmError, Svc};
 use field::ConfigError;
 use iceoryx2::node::Node;
 
@@ -75,6 +75,8 @@ pub enum ProcessError {
     },
 }
 
+field::from_shm_errors!(ProcessError);
+
 pub use field::wire::RobotServices;
 use field::wire::{ready_service as wake, ROBOT_LINK};
 
@@ -86,14 +88,14 @@ fn robot_prefix(robot: &Option<u32>) -> String {
 pub(crate) fn sender<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,
     service: &str,
-) -> Result<Sender<T>, ShmError> {
+) -> Result<Sender<T>, AttachError> {
     Sender::create(node, service, &wake(service), ROBOT_LINK)
 }
 
 pub(crate) fn receiver<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,
     service: &str,
-) -> Result<Receiver<T>, ShmError> {
+) -> Result<Receiver<T>, AttachError> {
     Receiver::create(node, service, &wake(service), ROBOT_LINK)
 }
 

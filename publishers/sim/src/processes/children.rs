@@ -1,6 +1,7 @@
 //! A run's children: their command lines, spawning the field, world, roles and gateway in order, waiting for the observer to join, and their reports.
 
 use super::*;
+use field::shm::AttachError;
 
 /// `v` as owned arguments.
 pub(super) fn args(v: &[&str]) -> Vec<String> {
@@ -320,12 +321,12 @@ pub(super) fn join_observer(
             Duration::from_millis(100),
         ) {
             Ok(obs) => return Ok(obs),
-            Err(ShmError::NoField { .. }) | Err(ShmError::Service { .. })
+            Err(AttachError::NoField { .. }) | Err(AttachError::Service(_))
                 if Instant::now() < field_deadline =>
             {
                 continue
             }
-            Err(ShmError::NoField { .. }) => {
+            Err(AttachError::NoField { .. }) => {
                 return Err(ProcessRunError::NoField {
                     timeout_s: start.attach_timeout.as_secs_f64(),
                 })

@@ -108,6 +108,8 @@ pub enum ProcessRunError {
     NotStopped { who: String, timeout_s: f64 },
 }
 
+field::from_shm_errors!(ProcessRunError);
+
 /// One child's summary, as `metrics.json` lists them.
 #[derive(Debug, Clone, Serialize)]
 pub struct ProcessReport {
