@@ -180,10 +180,13 @@ impl Run {
             let (alive, _) = self.nodes();
             if alive.is_empty() {
                 cleaned += field::shm::cleanup_dead_nodes_of(&self.config);
+                // A process killed while it created its node leaves an entry iceoryx2 lists as
+                // dead but cannot read ("?"), nor remove.
+                cleaned += self.remove_half_created_nodes();
             }
             let (alive, dead) = self.nodes();
             if alive.is_empty() && dead.is_empty() {
-                return cleaned + self.remove_half_created_nodes();
+                return cleaned;
             }
             assert!(
                 Instant::now() < deadline,
@@ -202,18 +205,32 @@ impl Run {
         let root = self.config.global.node_dir().to_string();
         let mut removed = 0;
         for dir in std::fs::read_dir(&root).into_iter().flatten().flatten() {
-            let half_created = std::fs::read_dir(dir.path())
+            if !dir.path().is_dir() {
+                continue;
+            }
+            let ours: Vec<_> = std::fs::read_dir(dir.path())
                 .into_iter()
                 .flatten()
                 .flatten()
-                .any(|f| {
-                    let name = f.file_name().to_string_lossy().into_owned();
-                    name.starts_with(&self.prefix)
-                        && name.ends_with("node.details")
-                        && f.metadata().is_ok_and(|m| m.len() == 0)
-                });
-            if half_created && std::fs::remove_dir_all(dir.path()).is_ok() {
-                removed += 1;
+                .filter(|f| f.file_name().to_string_lossy().starts_with(&self.prefix))
+                .collect();
+            // Killed before its details were written (empty or missing): iceoryx2 cannot read
+            // the node, nor remove it.
+            let readable = ours.iter().any(|f| {
+                f.file_name().to_string_lossy().ends_with("node.details")
+                    && f.metadata().is_ok_and(|m| m.len() > 0)
+            });
+            if ours.is_empty() || readable || std::fs::remove_dir_all(dir.path()).is_err() {
+                continue;
+            }
+            removed += 1;
+            // Its monitor files beside the directory: `<prefix><id>.node_monitor…`.
+            let id = dir.file_name().to_string_lossy().into_owned();
+            let monitor = format!("{}{id}.node_monitor", self.prefix);
+            for f in std::fs::read_dir(&root).into_iter().flatten().flatten() {
+                if f.file_name().to_string_lossy().starts_with(&monitor) {
+                    let _ = std::fs::remove_file(f.path());
+                }
             }
         }
         if removed > 0 {

@@ -8,8 +8,8 @@ use iceoryx2::prelude::*;
 
 use super::confirm::DepositClient;
 use super::{
-    now_ns, open_deposit_ready_service, open_deposit_service, open_frame_ready_service,
-    retry_attach, service_err, AttachError, FieldServices, SendError, Svc,
+    now_ns, open_deposit_ready, open_deposit_service, open_frame_ready_service, retry_attach,
+    service_err, AttachError, FieldServices, SendError, Svc,
 };
 use crate::messages::DepositMsg;
 
@@ -171,18 +171,6 @@ impl DepositPublisher {
             let _ = n.notify();
         }
     }
-}
-
-/// The notifier of the field's `deposit-ready` event, if the field has one.
-pub(super) fn open_deposit_ready(
-    node: &Node<Svc>,
-    names: &FieldServices,
-) -> Option<iceoryx2::port::notifier::Notifier<Svc>> {
-    open_deposit_ready_service(node, names)
-        .ok()?
-        .notifier_builder()
-        .create()
-        .ok()
 }
 
 impl Drop for DepositPublisher {

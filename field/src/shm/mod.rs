@@ -60,7 +60,6 @@ use crate::wire;
 
 pub use config::ConfigSubscriber;
 pub use confirm::{DepositClient, Receipt};
-use deposit::open_deposit_ready;
 pub use deposit::DepositPublisher;
 pub(crate) use error::service_err;
 pub use error::{
@@ -96,6 +95,18 @@ pub fn wait_or_stop(node: &Node<Svc>, d: Duration) -> bool {
             !iceoryx2_bb_posix::signal::SignalHandler::termination_requested()
         }
     }
+}
+
+/// The notifier of the field's `deposit-ready` event, if the field has one.
+fn open_deposit_ready(
+    node: &Node<Svc>,
+    names: &FieldServices,
+) -> Option<iceoryx2::port::notifier::Notifier<Svc>> {
+    open_deposit_ready_service(node, names)
+        .ok()?
+        .notifier_builder()
+        .create()
+        .ok()
 }
 
 /// Whether SIGINT or SIGTERM asked this process to stop.
