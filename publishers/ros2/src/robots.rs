@@ -8,12 +8,12 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
+use crate::deps::{PoseMsg, TruthMsg};
 use field::link::Receiver;
 use field::shm::{AttachError, ReceiveError, Svc};
 use field::wire::{ready_service, RobotServices, ROBOT_LINK};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
-use crate::deps::{PoseMsg, TruthMsg};
 
 use crate::graph::{resolve_topic, NameError};
 use crate::grid::Stamp;
@@ -114,8 +114,7 @@ impl RobotFeed {
         while let Some(m) = self.pose.try_recv()? {
             fresh.received += 1;
             let stamp = Stamp::from_ns(m.stamp_ns.min(i64::MAX as u64) as i64);
-            self.estimated_path
-                .push(stamp, [m.x_m, m.y_m, m.theta_rad]);
+            self.estimated_path.push(stamp, [m.x_m, m.y_m, m.theta_rad]);
             last_pose = Some((stamp, m));
         }
         fresh.true_pose =
@@ -217,8 +216,14 @@ mod tests {
         let t = robot_topics("/", 3).unwrap();
         assert_eq!(t[0].0, "/robot_3/true_pose");
         assert_eq!(t[3].0, "/robot_3/estimated_path");
-        assert_eq!(t[1].1.dds_name, "geometry_msgs::msg::dds_::PoseWithCovarianceStamped_");
+        assert_eq!(
+            t[1].1.dds_name,
+            "geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"
+        );
         assert_eq!(t[2].1.dds_name, "nav_msgs::msg::dds_::Path_");
-        assert_eq!(robot_topics("/ns", 0).unwrap()[1].0, "/ns/robot_0/estimated_pose");
+        assert_eq!(
+            robot_topics("/ns", 0).unwrap()[1].0,
+            "/ns/robot_0/estimated_pose"
+        );
     }
 }
