@@ -99,6 +99,25 @@ pub struct Ros2Args {
     pub deposit_from: Vec<String>,
     #[command(flatten)]
     pub deposit: RosDepositArgs,
+    /// Also publish the robots of simulated world W (`pheromone sim`'s world, or `pheromone
+    /// world --name W`): per robot <ns>/robot_<ID>/true_pose and …/estimated_pose
+    /// (geometry_msgs/msg/PoseWithCovarianceStamped: the world's truth with a zero covariance,
+    /// the localizer's estimate with its x, y, yaw covariance), the newest of each as it comes,
+    /// and …/true_path, …/estimated_path (nav_msgs/msg/Path) every 1/--path-rate-hz s, stamped
+    /// with simulated time. Robots are found as their services appear (checked every second).
+    #[arg(long, value_name = "W")]
+    pub world: Option<String>,
+    /// With --world: only these robot ids (comma-separated) [default: every robot found,
+    /// ids 0–63].
+    #[arg(long, value_name = "IDS", value_delimiter = ',', requires = "world")]
+    pub robots: Option<Vec<u32>>,
+    /// With --world: paths published per second.
+    #[arg(long, value_name = "HZ", default_value_t = 1.0)]
+    pub path_rate_hz: f64,
+    /// With --world: poses a path keeps at most; beyond it the oldest pose is dropped (and
+    /// counted: path_poses_dropped in --json).
+    #[arg(long, value_name = "N", default_value_t = 10_000)]
+    pub path_max_poses: usize,
     /// Seconds to wait for the field and its first frame.
     #[arg(long, value_name = "SECS", default_value_t = 10.0)]
     pub timeout: f64,
@@ -154,6 +173,7 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
         .collect::<anyhow::Result<Vec<_>>>()?;
     let depositor = a.deposit.config();
     depositor.validate().map_err(bad_from)?;
+    let world = world_options(&a)?;
     let node = field::shm::create_node(&format!("ros2-{}", std::process::id()))?;
     let options = Ros2Options {
         field: a.field.clone(),
@@ -167,6 +187,7 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
         deposit_from,
         depositor,
         admin_space: a.print_address,
+        world,
     };
     let mut ros = Ros2Node::start(&node, options, timeout).map_err(|e| match e {
         ros2::node::Ros2Error::Name(_) | ros2::node::Ros2Error::Depositor(_) => bad_from(e),
@@ -177,17 +198,22 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
     let mut last_log = Instant::now();
     while node.wait(Duration::ZERO).is_ok() && duration.is_none_or(|d| started.elapsed() < d) {
         ros.step(Duration::from_millis(20))?;
+        ros.step_robots(&node)?;
         if last_log.elapsed() >= Duration::from_secs(5) {
             last_log = Instant::now();
             let s = &ros.stats;
             eprintln!(
-                "ros2 '{}': {} frames published ({} bytes), {} poses, {} deposits, {} refused",
+                "ros2 '{}': {} frames published ({} bytes), {} poses, {} deposits, {} refused, \
+                 {} robots ({} poses, {} paths published)",
                 a.field,
                 s.frames_published,
                 s.bytes_published,
                 s.poses_received,
                 s.deposits_sent,
-                s.refused_total()
+                s.refused_total(),
+                s.robots_found,
+                s.robot_poses_published,
+                s.robot_paths_published,
             );
         }
     }
@@ -206,6 +232,29 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
         println!("{summary}");
     }
     Ok(())
+}
+
+#[cfg(feature = "zenoh")]
+fn world_options(a: &Ros2Args) -> anyhow::Result<Option<ros2::node::WorldOptions>> {
+    let Some(world) = &a.world else {
+        return Ok(None);
+    };
+    field::shm::check_name(world).map_err(bad_from)?;
+    if !(a.path_rate_hz.is_finite() && a.path_rate_hz > 0.0 && a.path_rate_hz <= 1000.0) {
+        return Err(bad(format!(
+            "--path-rate-hz {}: must be within (0, 1000]",
+            a.path_rate_hz
+        )));
+    }
+    if a.path_max_poses == 0 {
+        return Err(bad("--path-max-poses must be at least 1"));
+    }
+    Ok(Some(ros2::node::WorldOptions {
+        world: world.clone(),
+        robots: a.robots.clone(),
+        path_rate_hz: a.path_rate_hz,
+        path_max_poses: a.path_max_poses,
+    }))
 }
 
 #[cfg(feature = "zenoh")]

@@ -398,6 +398,14 @@ fn run_processes(
     if let Some(v) = &a.view {
         eprintln!("sim: view: http://{v}/ (stops with the run)");
     }
+    if a.ros2.is_some() && !cfg!(feature = "zenoh") {
+        return Err(super::bad(
+            "--ros2: this build has no Zenoh: rebuild with `cargo build --release --features zenoh`",
+        ));
+    }
+    if let Some(e) = &a.ros2 {
+        eprintln!("sim: ros2: connecting to {e} (stops with the run)");
+    }
     let attach = a
         .attach_timeout
         .map(|v| super::seconds("attach-timeout", v))
@@ -413,6 +421,7 @@ fn run_processes(
             stall_timeout: stall,
             progress,
             view: a.view.clone(),
+            ros2: a.ros2.clone(),
             remote: a.remote,
             follower_wait: a.follower_wait,
             record,

@@ -78,6 +78,17 @@ pub struct SimArgs {
     /// (`--single-process` has no processes to put a gateway between).
     #[arg(long, conflicts_with = "single_process")]
     pub remote: bool,
+    /// Show the run in ROS 2 while it runs (a build with --features zenoh; separate processes
+    /// only): starts `pheromone ros2 --field F --world W --robots IDS --connect ENDPOINT` as a
+    /// child, stopped with the run, which publishes the field (/pheromone/grid_map,
+    /// /pheromone/occupancy/channel_<c>) and every robot's /robot_<ID>/true_pose,
+    /// …/estimated_pose and …/true_path, …/estimated_path over Zenoh in rmw_zenoh_cpp's format.
+    /// ENDPOINT [default: tcp/127.0.0.1:7447, where `ros2 run rmw_zenoh_cpp rmw_zenohd`
+    /// listens] is the Zenoh router or peer to connect to (docs/ros2.md). Add --realtime to
+    /// watch the run at the speed of simulated time.
+    #[arg(long, value_name = "ENDPOINT", num_args = 0..=1,
+          default_missing_value = "tcp/127.0.0.1:7447", conflicts_with = "single_process")]
+    pub ros2: Option<String>,
     /// How every follower process waits for the frame of its step (`pheromone follower
     /// --wait`): event, spin:US or busy-poll. The metrics do not depend on it; separate
     /// processes only.

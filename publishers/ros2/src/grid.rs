@@ -20,8 +20,8 @@ use field::geometry::GridGeometry;
 
 use crate::cdr::CdrWriter;
 
-/// A ROS time (`builtin_interfaces/msg/Time`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// A ROS time (`builtin_interfaces/msg/Time`); ordered by time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
 pub struct Stamp {
     pub sec: i32,
     pub nanosec: u32,

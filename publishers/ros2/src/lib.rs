@@ -7,6 +7,8 @@
 //! - [`pose`]: `geometry_msgs/msg/PoseWithCovarianceStamped` → the depositor's pose.
 //! - [`robot`]: poses (`PoseWithCovarianceStamped`), paths (`nav_msgs/msg/Path`) and deposits
 //!   (`pheromone_msgs/msg/Deposit`), what `pheromone sim --record` writes besides the field.
+//! - [`robots`]: a simulated world's robots (truth and localizer links) as pose and path
+//!   messages, for the node's `--world`.
 //! - [`graph`]: rmw_zenoh's key expressions, liveliness tokens, GIDs and attachments.
 //! - [`frames`]: the topics of a field and the messages of its current frame.
 //! - [`record`]: ROS 2 MCAP files.
@@ -22,4 +24,5 @@ pub mod node;
 pub mod pose;
 pub mod record;
 pub mod robot;
+pub mod robots;
 pub mod types;

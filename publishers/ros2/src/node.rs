@@ -3,7 +3,9 @@
 //! the field's frame-ready event wakes it, and turns the `PoseWithCovarianceStamped`s of its
 //! `--deposit-from` topics into seed 000 deposits through the depositor library. Liveliness
 //! tokens announce the node, its publishers and its subscriptions to the ROS graph; every
-//! sample carries rmw_zenoh's attachment ([`crate::graph`]).
+//! sample carries rmw_zenoh's attachment ([`crate::graph`]). With a world (`--world`), it also
+//! publishes each robot's true and estimated pose and paths ([`crate::robots`]), declaring a
+//! robot's publishers when the robot is found.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -25,6 +27,7 @@ use crate::graph::{
     self, split_topic_key, topic_key, Attachment, EntityKind, NameError, NodeIdentity, Qos,
 };
 use crate::pose::{check_pose, PoseWithCovarianceStamped};
+use crate::robots::{robot_topics, WorldRobots};
 use crate::types::{TypeInfo, POSE_COV_STAMPED};
 
 #[derive(Debug, Error)]
@@ -70,6 +73,20 @@ pub struct Ros2Options {
     pub deposit_from: Vec<DepositFrom>,
     pub depositor: DepositorConfig,
     pub admin_space: bool,
+    /// The simulated world whose robots to publish, if any.
+    pub world: Option<WorldOptions>,
+}
+
+/// `--world W [--robots IDS] [--path-rate-hz HZ] [--path-max-poses N]`.
+#[derive(Debug, Clone)]
+pub struct WorldOptions {
+    pub world: String,
+    /// The robots to publish; `None`: every robot found (ids below `robots::DISCOVER_MAX`).
+    pub robots: Option<Vec<u32>>,
+    /// Paths published per second (each robot's two).
+    pub path_rate_hz: f64,
+    /// Poses a path keeps at most (the newest).
+    pub path_max_poses: usize,
 }
 
 /// What the node did, cumulative.
@@ -92,6 +109,13 @@ pub struct Ros2Stats {
     pub refused_frame: u64,
     /// Refused poses by reason (`non_finite`, `not_psd`, `not_positive_definite`, …).
     pub refused_pose: BTreeMap<String, u64>,
+    /// `--world`: robots found, truths and estimates received from their links, poses and
+    /// paths published, and poses the paths dropped at `--path-max-poses` (oldest first).
+    pub robots_found: u64,
+    pub robot_messages_received: u64,
+    pub robot_poses_published: u64,
+    pub robot_paths_published: u64,
+    pub path_poses_dropped: u64,
 }
 
 impl Ros2Stats {
@@ -145,6 +169,10 @@ pub struct Ros2Node {
     publishers: Vec<RosPublisher>,
     subscriptions: Vec<RosSubscription>,
     pose_type: TypeInfo,
+    identity: NodeIdentity,
+    /// The next entity id a publisher gets.
+    next_entity: u32,
+    world: Option<WorldBridge>,
     period: Duration,
     /// When the next frame is due (`None`: the first frame is).
     next_publish: Option<Instant>,
@@ -222,6 +250,8 @@ impl Ros2Node {
             )?);
         }
         let period = Duration::from_secs_f64(1.0 / o.rate_hz);
+        let next_entity = (1 + publishers.len() + subscriptions.len()) as u32;
+        let world = o.world.as_ref().map(WorldBridge::new);
         Ok(Self {
             o,
             session,
@@ -232,6 +262,9 @@ impl Ros2Node {
             publishers,
             subscriptions,
             pose_type,
+            identity,
+            next_entity,
+            world,
             period,
             next_publish: None,
             latencies_us: Vec::new(),
@@ -263,6 +296,82 @@ impl Ros2Node {
         }
         self.take_poses();
         Ok(())
+    }
+
+    /// `--world`: looks for new robots (once a second), publishes the newest true and
+    /// estimated pose of every robot that sent one, and the paths when they are due.
+    pub fn step_robots(&mut self, node: &Node<Svc>) -> Result<(), Ros2Error> {
+        let Some(w) = self.world.as_mut() else {
+            return Ok(());
+        };
+        if Instant::now() >= w.next_scan {
+            w.next_scan = Instant::now() + ROBOT_SCAN_PERIOD;
+            for id in w.robots.scan(node)? {
+                let mut pubs = Vec::with_capacity(4);
+                for (topic, t) in robot_topics(&self.identity.namespace, id)? {
+                    pubs.push(declare_publisher(
+                        &self.session,
+                        &self.identity,
+                        self.next_entity,
+                        &topic,
+                        &t,
+                    )?);
+                    self.next_entity += 1;
+                }
+                w.publishers.insert(id, pubs);
+                self.stats.robots_found += 1;
+                eprintln!("ros2: robot {id} of world {}", w.name);
+            }
+        }
+        let paths_due = Instant::now() >= w.next_path;
+        if paths_due {
+            w.next_path = Instant::now() + w.path_period;
+        }
+        let frame_id = self.o.frame_id.as_str();
+        for (id, feed) in w.robots.robots.iter_mut() {
+            let Some(pubs) = w.publishers.get_mut(id) else {
+                continue;
+            };
+            let fresh = feed.drain(frame_id)?;
+            self.stats.robot_messages_received += fresh.received;
+            for (i, m) in [(0, fresh.true_pose), (1, fresh.estimated_pose)] {
+                if let Some(m) = m {
+                    self.stats.bytes_published += m.len() as u64;
+                    pubs[i].put(m)?;
+                    self.stats.robot_poses_published += 1;
+                    self.stats.messages_published += 1;
+                }
+            }
+            if paths_due {
+                let paths = [
+                    (2, feed.true_path.cdr(frame_id)),
+                    (3, feed.estimated_path.cdr(frame_id)),
+                ];
+                for (i, m) in paths {
+                    if let Some(m) = m {
+                        self.stats.bytes_published += m.len() as u64;
+                        pubs[i].put(m)?;
+                        self.stats.robot_paths_published += 1;
+                        self.stats.messages_published += 1;
+                    }
+                }
+            }
+        }
+        self.stats.path_poses_dropped = w
+            .robots
+            .robots
+            .values()
+            .map(|f| f.true_path.dropped + f.estimated_path.dropped)
+            .sum();
+        Ok(())
+    }
+
+    /// The robots published so far (`--world`).
+    pub fn robot_ids(&self) -> Vec<u32> {
+        self.world
+            .as_ref()
+            .map(|w| w.publishers.keys().copied().collect())
+            .unwrap_or_default()
     }
 
     /// Whether a frame arriving now is published: a tenth of a period early counts as on time,
@@ -336,6 +445,33 @@ impl Ros2Node {
             d.flush(Duration::from_secs(1));
         }
         let _ = self.session.close().wait();
+    }
+}
+
+/// How often `--world` looks for robots it has not found yet.
+const ROBOT_SCAN_PERIOD: Duration = Duration::from_secs(1);
+
+/// `--world`: the robots' links and their publishers (true pose, estimated pose, true path,
+/// estimated path, in this order).
+struct WorldBridge {
+    name: String,
+    robots: WorldRobots,
+    publishers: BTreeMap<u32, Vec<RosPublisher>>,
+    path_period: Duration,
+    next_path: Instant,
+    next_scan: Instant,
+}
+
+impl WorldBridge {
+    fn new(o: &WorldOptions) -> Self {
+        Self {
+            name: o.world.clone(),
+            robots: WorldRobots::new(&o.world, o.robots.clone(), o.path_max_poses),
+            publishers: BTreeMap::new(),
+            path_period: Duration::from_secs_f64(1.0 / o.path_rate_hz),
+            next_path: Instant::now(),
+            next_scan: Instant::now(),
+        }
     }
 }
 

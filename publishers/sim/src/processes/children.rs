@@ -66,6 +66,25 @@ impl ChildArgs {
         ])
     }
 
+    /// The ROS 2 bridge's arguments: the field and the robots `robots`, connecting to `connect`.
+    pub(super) fn ros2(&self, connect: &str, robots: &[u32]) -> Vec<String> {
+        let ids: Vec<String> = robots.iter().map(u32::to_string).collect();
+        let mut v = args(&[
+            "ros2",
+            "--field",
+            &self.field,
+            "--world",
+            &self.world,
+            "--connect",
+            connect,
+            "--json",
+        ]);
+        if !ids.is_empty() {
+            v.extend(args(&["--robots", &ids.join(",")]));
+        }
+        v
+    }
+
     /// The gateway's arguments: UDP loopback on any port, printing its address.
     pub(super) fn gateway(&self, attach_timeout: Duration) -> Vec<String> {
         args(&[
@@ -135,6 +154,11 @@ impl Children {
         // run (a view that cannot listen fails the run, as any child does).
         if let Some(listen) = &o.view {
             sup.spawn(ChildSpec::new("view", None, a.view(listen)))?;
+        }
+        // --ros2: no lockstep participant either; it finds the robots as their roles start.
+        if let Some(connect) = &o.ros2 {
+            let ids: Vec<u32> = scenario.world.robots.iter().map(|r| r.id).collect();
+            sup.spawn(ChildSpec::new("ros2", None, a.ros2(connect, &ids)))?;
         }
         // --remote: the gateway serves the field to the antenna robots; they start once it serves.
         let remote = if o.remote {

@@ -48,6 +48,9 @@ pub struct ProcessRunOptions<'a> {
     pub progress: Option<&'a mut dyn FnMut(f64)>,
     /// Serve `pheromone view` of the run's field and robots on this HTTP address.
     pub view: Option<String>,
+    /// Start `pheromone ros2 --field F --world W --robots IDS --connect ENDPOINT` (the field and
+    /// the robots on ROS 2 over Zenoh), connecting to this Zenoh endpoint.
+    pub ros2: Option<String>,
     /// The antenna robots read the field only through a `pheromone gateway` child (seed 002's
     /// thin clients, PIR over UDP loopback) instead of shared memory.
     pub remote: bool,
