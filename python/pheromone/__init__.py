@@ -4,12 +4,22 @@
     with pheromone.Field.attach("main") as field:
         print(field.shape, field.cell_size_m, field.origin)  # the grid: fixed for the field's life
         header, cells = field.frame()  # cells: read-only (channels, height, width) float32, no copy
-        field.deposit(1.0, 2.0, 0.005, cov=(0.01, 0.0, 0.01))
+        receipt = field.deposit(1.0, 2.0, 0.005, cov=(0.01, 0.0, 0.01))  # waits for the field
+        print(receipt.sequence)  # applied (at most once) in this frame
 """
 
-from ._wire import KERNELS, LAYOUT_VERSION, DepositMsg, FrameHeader, wire_type_name
+from ._wire import (
+    KERNELS,
+    LAYOUT_VERSION,
+    DepositMsg,
+    DepositReceipt,
+    FrameHeader,
+    wire_type_name,
+)
 from .field import (
     DepositNotDelivered,
+    DepositRejected,
+    DepositUnconfirmed,
     Field,
     FieldNotFound,
     Frame,
@@ -17,6 +27,7 @@ from .field import (
     Header,
     LayoutMismatch,
     PheromoneError,
+    Receipt,
 )
 from .sample import gradient, sample
 
@@ -25,6 +36,9 @@ __all__ = [
     "LAYOUT_VERSION",
     "DepositMsg",
     "DepositNotDelivered",
+    "DepositReceipt",
+    "DepositRejected",
+    "DepositUnconfirmed",
     "Field",
     "FieldNotFound",
     "Frame",
@@ -33,6 +47,7 @@ __all__ = [
     "Header",
     "LayoutMismatch",
     "PheromoneError",
+    "Receipt",
     "gradient",
     "sample",
     "wire_type_name",

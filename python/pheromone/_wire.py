@@ -59,6 +59,12 @@ def deposit_service(field: str) -> str:
     return f"pheromone/{field}/deposit"
 
 
+def deposit_confirm_service(field: str) -> str:
+    """The request-response service of confirmed deposits: request `DepositMsg`, response
+    `DepositReceipt`."""
+    return f"pheromone/{field}/deposit-confirm"
+
+
 def deposit_ready_service(field: str) -> str:
     """The event a field started with `--publish-on-deposit-ms` listens on: depositors notify
     it after each deposit, and the field publishes a frame with it at once."""
@@ -135,8 +141,45 @@ class DepositMsg(ctypes.Structure):
         return wire_type_name("DepositMsg")
 
 
+#: `DepositMsg.kernel` of a flush request on the confirm service (`messages::KERNEL_FLUSH`): it
+#: deposits nothing, and its receipt (`RECEIPT_FLUSHED`) comes once the field has taken every
+#: deposit the same process published before it.
+KERNEL_FLUSH = 0xFFFF_FFFF
+
+#: `DepositReceipt.status` (`messages::RECEIPT_*`): the deposit is in frame `sequence`.
+RECEIPT_APPLIED = 0
+#: The field refused the deposit; `reason` indexes `REJECT_REASON_NAMES`.
+RECEIPT_REJECTED = 1
+#: A flush request: every deposit published before it is in frame `sequence` or earlier.
+RECEIPT_FLUSHED = 2
+#: A mirror took the deposit and forwards it to its origin.
+RECEIPT_FORWARDED = 3
+
+#: Names of the receipt statuses, by code.
+RECEIPT_STATUS_NAMES = ("applied", "rejected", "flushed", "forwarded")
+
+
+class DepositReceipt(ctypes.Structure):
+    """`field::messages::DepositReceipt`: the field's answer to a confirmed deposit (16 bytes,
+    align 8), sent after the frame `sequence` is published and before readers are woken."""
+
+    _fields_ = [
+        ("sequence", ctypes.c_uint64),
+        ("status", ctypes.c_uint32),
+        ("reason", ctypes.c_uint32),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return wire_type_name("DepositReceipt")
+
+
 #: The wire types and the Rust names they mirror (checked against the Rust sources).
-WIRE_TYPES = {"FrameHeader": FrameHeader, "DepositMsg": DepositMsg}
+WIRE_TYPES = {
+    "FrameHeader": FrameHeader,
+    "DepositMsg": DepositMsg,
+    "DepositReceipt": DepositReceipt,
+}
 
 
 def ellipse(

@@ -5,8 +5,11 @@ The services, as the Rust side builds them (`field/src/shm/`):
 - `pheromone/<F>/frame`: publish-subscribe of `[f32]` (here `iox2.Slice[ctypes.c_float]`) with
   the user header `FrameHeader`; a reader opens it and creates a subscriber with a buffer of 1;
 - `pheromone/<F>/frame-ready`: an event the field notifies after each frame; a reader waits on it;
-- `pheromone/<F>/deposit`: publish-subscribe of `DepositMsg`; a depositor opens it and creates a
-  publisher that discards instead of blocking when the field's queue is full.
+- `pheromone/<F>/deposit-confirm`: request-response, request `DepositMsg`, response
+  `DepositReceipt`; `Field.deposit` sends on it and waits for the field's receipt (and `flush`
+  sends a flush request on it);
+- `pheromone/<F>/deposit`: publish-subscribe of `DepositMsg`; `deposit(wait=False)` opens it and
+  creates a publisher that discards instead of blocking when the field's queue is full.
 
 Clients only *open* these services (never create them), so every identity option is the field's.
 """
@@ -14,12 +17,13 @@ Clients only *open* these services (never create them), so every identity option
 import contextlib
 import ctypes
 import dataclasses
+import math
 import os
 import re
 import sys
 import time
 from collections.abc import Iterator
-from typing import Any, Optional
+from typing import Any, Literal, Optional, overload
 
 import iceoryx2 as iox2
 import numpy as np
@@ -54,7 +58,44 @@ class FramesHeld(PheromoneError):
 
 
 class DepositNotDelivered(PheromoneError):
-    """No field took the deposit (none subscribed, or its deposit buffer is full)."""
+    """No field took the deposit (none subscribed, or its deposit buffer is full): it was not
+    applied, and sending it again cannot apply it twice."""
+
+
+class DepositRejected(PheromoneError, ValueError):
+    """The field refused the deposit (its receipt says why): it was not applied. `reason` is the
+    rejection reason's name (`unknown_channel`, `not_psd`, …, see `Header.deposits_rejected`),
+    `sequence` the frame whose header counts it, `msg` the `DepositMsg` sent."""
+
+    def __init__(
+        self,
+        message: str,
+        reason: str = "",
+        sequence: int = 0,
+        msg: Optional["_wire.DepositMsg"] = None,
+    ) -> None:
+        super().__init__(message)
+        self.reason, self.sequence, self.msg = reason, sequence, msg
+
+
+class DepositUnconfirmed(PheromoneError, TimeoutError):
+    """No receipt came within the timeout: the deposit may still be applied, once, or not at all
+    (at most once; never twice). Not a `DepositNotDelivered`: sending it again may apply it
+    twice."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Receipt:
+    """The field's answer to a confirmed deposit.
+
+    `status` is `"applied"` (the deposit is in frame `sequence`: the frame was published before
+    the receipt was sent) or `"forwarded"` (a mirror took it and forwards it to its origin, which
+    applies or refuses it there; `sequence` is 0). Refusals are raised as `DepositRejected`, so
+    `reason` is None on a returned receipt."""
+
+    status: str
+    sequence: int
+    reason: Optional[str] = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -161,6 +202,64 @@ class Frame:
         )
 
 
+#: How long `deposit()`, `flush()` and `close()` wait for the field's receipt by default
+#: (seconds), as `pheromone deposit --receipt-timeout`: the field answers at its next tick.
+DEFAULT_RECEIPT_TIMEOUT_S = 60.0
+
+#: The parameters each kernel uses (`deposit` refuses the others).
+_KERNEL_PARAMS = {
+    "ellipse": ("cov", "range_m", "gamma_max"),
+    "paper": ("cov", "range_m", "gamma_max"),
+    "saturating": ("sigma_m", "range_m"),
+    "z-shape": ("plateau_m", "slope_m"),
+}
+
+#: `DepositMsg` fields that are not `f32`.
+_INTEGER_FIELDS = ("stamp_ns", "robot_id", "channel", "kernel")
+
+
+def _finite(name: str, value: Any) -> float:
+    """`value` as a float that is finite, also as the wire's `float32`; else `ValueError` naming
+    `name` and the value."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} {value!r}: must be a finite number") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{name} {value!r}: must be a finite number")
+    if not math.isfinite(ctypes.c_float(v).value):
+        raise ValueError(f"{name} {value!r}: must be a finite number within float32's range")
+    return v
+
+
+def _channel(channel: Any) -> int:
+    if isinstance(channel, bool) or not isinstance(channel, int) or not 0 <= channel < 2**32:
+        raise ValueError(f"channel {channel!r}: must be an integer from 0 to 2³²−1")
+    return channel
+
+
+def _check_timeout(timeout_s: Any) -> None:
+    if not (isinstance(timeout_s, (int, float)) and timeout_s >= 0):  # also refuses NaN
+        raise ValueError(f"timeout_s {timeout_s!r}: must be a number of seconds >= 0")
+
+
+def _describe(msg: "_wire.DepositMsg") -> str:
+    """The values a deposit carries, as sent (`float32`), for error messages."""
+    kernels = {v: k for k, v in _wire.KERNELS.items()}
+    kernel = kernels.get(msg.kernel, f"kernel {msg.kernel}")
+    params = _KERNEL_PARAMS.get(kernel, ())
+    parts = [
+        f"{kernel} channel {msg.channel} at x_m {msg.x_m:.7g}, y_m {msg.y_m:.7g}",
+        f"amount {msg.amount:.7g}",
+    ]
+    for p in params:
+        if p == "cov":
+            parts.append(f"cov ({msg.cov_xx:.7g}, {msg.cov_xy:.7g}, {msg.cov_yy:.7g})")
+        else:
+            parts.append(f"{p} {getattr(msg, p):.7g}")
+    return ", ".join(parts)
+
+
 def _duration(seconds: float) -> Any:
     return iox2.Duration.from_nanos(max(0, int(seconds * 1e9)))
 
@@ -199,7 +298,8 @@ class Field:
 
     Create it with `Field.attach(name)`. Close it (or use `with`) to remove its iceoryx2 node and
     ports from shared memory; `close()` also waits (at most `flush_timeout_s`) until the field
-    has taken the deposits sent, as Rust's `DepositPublisher` does when dropped.
+    has taken the deposits sent with `wait=False`, as Rust's `DepositPublisher` does when
+    dropped (`flush()`).
 
     The grid's geometry is read from the field's first frame at `attach` and is fixed for the
     life of the field (its frame service is created for exactly that many cells).
@@ -219,7 +319,8 @@ class Field:
     origin_y_m: float
     #: Robot id stamped on this client's deposits.
     robot_id: int
-    #: How long `close()` waits for the field to take the deposits sent (seconds).
+    #: How long `close()` waits for the field to take the deposits sent with `wait=False`
+    #: (seconds): a field answers the flush at its next tick, one that has gone away at once.
     flush_timeout_s: float
     #: The iceoryx2 domain (`pheromone --iox-domain D`), or None for iceoryx2's own.
     domain: Optional[str]
@@ -262,7 +363,7 @@ class Field:
         """This client's state and its iceoryx2 node; no service is opened yet."""
         self.name = name
         self.robot_id = robot_id
-        self.flush_timeout_s = 1.0
+        self.flush_timeout_s = DEFAULT_RECEIPT_TIMEOUT_S
         # Set from the first frame by `_attach`.
         self.width = self.height = self.channels = 0
         self.cell_size_m = self.origin_x_m = self.origin_y_m = 0.0
@@ -275,10 +376,13 @@ class Field:
         self._frames: Any = None
         self._ready: Any = None
         self._deposits: Any = None
+        self._client: Any = None
+        self._confirm: Any = None
         self._unflushed_after: Optional[int] = None
         self._frame_service = _wire.frame_service(name)
         self._ready_service = _wire.frame_ready_service(name)
         self._deposit_service = _wire.deposit_service(name)
+        self._confirm_service = _wire.deposit_confirm_service(name)
         iox2.set_log_level(iox2.LogLevel.Fatal)
         # Python keeps Ctrl-C (KeyboardInterrupt): iceoryx2 installs no signal handler.
         # iceoryx2's configuration (a config/iceoryx2.toml if there is one), with the prefix
@@ -474,6 +578,46 @@ class Field:
 
     # ---- deposits -------------------------------------------------------------------------
 
+    @overload
+    def deposit(
+        self,
+        x_m: float,
+        y_m: float,
+        amount: float,
+        cov: Optional[tuple[float, float, float]] = ...,
+        kernel: str = ...,
+        channel: int = ...,
+        *,
+        range_m: Optional[float] = ...,
+        gamma_max: Optional[float] = ...,
+        sigma_m: Optional[float] = ...,
+        plateau_m: Optional[float] = ...,
+        slope_m: Optional[float] = ...,
+        stamp_ns: Optional[int] = ...,
+        wait: Literal[True] = ...,
+        timeout_s: float = ...,
+    ) -> Receipt: ...
+
+    @overload
+    def deposit(
+        self,
+        x_m: float,
+        y_m: float,
+        amount: float,
+        cov: Optional[tuple[float, float, float]] = ...,
+        kernel: str = ...,
+        channel: int = ...,
+        *,
+        range_m: Optional[float] = ...,
+        gamma_max: Optional[float] = ...,
+        sigma_m: Optional[float] = ...,
+        plateau_m: Optional[float] = ...,
+        slope_m: Optional[float] = ...,
+        stamp_ns: Optional[int] = ...,
+        wait: bool,
+        timeout_s: float = ...,
+    ) -> Optional[Receipt]: ...
+
     def deposit(
         self,
         x_m: float,
@@ -489,12 +633,36 @@ class Field:
         plateau_m: Optional[float] = None,
         slope_m: Optional[float] = None,
         stamp_ns: Optional[int] = None,
-    ) -> None:
+        wait: bool = True,
+        timeout_s: float = DEFAULT_RECEIPT_TIMEOUT_S,
+    ) -> Optional[Receipt]:
         """Sends one deposit, built as Rust's constructor of that kernel builds it
-        (`DepositMsg::ellipse`, `::saturating`, `::z_shape`; `paper` fills the ellipse's fields).
+        (`DepositMsg::ellipse`, `::saturating`, `::z_shape`; `paper` fills the ellipse's fields),
+        and waits for the field's receipt.
+
         Parameters a kernel does not use are refused; omitted ones take `pheromone deposit`'s
         defaults (cov 0.01,0,0.01 m², range 1 m, γmax 100, σ 0.1 m, plateau 0.2 m, slope 0.3 m).
-        Raises `DepositNotDelivered` if no field took it."""
+        Every number is checked before anything is sent: NaN, ±inf or a value beyond `float32`
+        raises `ValueError` naming the parameter and the value.
+
+        Semantics: **at most once**. The deposit is applied once or not at all, never twice.
+        The field takes it at its next tick (a field that publishes on deposit, at once) and
+        answers after publishing that frame, so this waits at most one tick period of a running
+        field (at most `timeout_s`, default 60 s, as `pheromone deposit --receipt-timeout`):
+
+        - returns `Receipt("applied", sequence)`: the deposit is in frame `receipt.sequence`
+          (and `frame()` then holds that frame or a newer one, unless the caller holds two
+          frames), or `Receipt("forwarded", 0)`: a mirror forwards it to its origin;
+        - raises `DepositRejected` (a `ValueError`) naming the reason (`unknown_channel`,
+          `not_psd`, …) and the values sent: it was not applied;
+        - raises `DepositNotDelivered` when no field serves deposits (it was not applied);
+        - raises `DepositUnconfirmed` (a `TimeoutError`) without a receipt within `timeout_s`:
+          it may still be applied, once, or not at all. A script killed (or interrupted) while
+          waiting does not know either; sending again may apply it twice.
+
+        `wait=False` sends it without a receipt on the publish-subscribe deposit service (the
+        stream a loop sends every step) and returns None; `flush()` (and `close()`) then waits
+        until the field has taken it."""
         self._check_open()
         given: dict[str, Any] = {
             "cov": cov,
@@ -504,17 +672,11 @@ class Field:
             "plateau_m": plateau_m,
             "slope_m": slope_m,
         }
-        used = {
-            "ellipse": ("cov", "range_m", "gamma_max"),
-            "paper": ("cov", "range_m", "gamma_max"),
-            "saturating": ("sigma_m", "range_m"),
-            "z-shape": ("plateau_m", "slope_m"),
-        }
-        if kernel not in used:
+        if kernel not in _KERNEL_PARAMS:
             raise ValueError(
                 f"unknown kernel '{kernel}' (expected ellipse, paper, saturating or z-shape)"
             )
-        unused = [k for k, v in given.items() if v is not None and k not in used[kernel]]
+        unused = [k for k, v in given.items() if v is not None and k not in _KERNEL_PARAMS[kernel]]
         if unused:
             raise ValueError(f"kernel '{kernel}' does not use {', '.join(unused)}")
         d: dict[str, Any] = {
@@ -526,28 +688,181 @@ class Field:
             "slope_m": 0.3,
         }
         d.update({k: v for k, v in given.items() if v is not None})
-        if len(tuple(d["cov"])) != 3:
+        cov_t = tuple(d["cov"])
+        if len(cov_t) != 3:
             raise ValueError("cov needs three values (xx, xy, yy)")
+        x, y, a = _finite("x_m", x_m), _finite("y_m", y_m), _finite("amount", amount)
+        for i, part in enumerate(("xx", "xy", "yy")):
+            _finite(f"cov {part}", cov_t[i])
+        for k in ("range_m", "gamma_max", "sigma_m", "plateau_m", "slope_m"):
+            d[k] = _finite(k, d[k])
+        ch = _channel(channel)
         if kernel in ("ellipse", "paper"):
             build = _wire.ellipse if kernel == "ellipse" else _wire.paper
-            msg = build(channel, x_m, y_m, amount, tuple(d["cov"]), d["range_m"], d["gamma_max"])
+            msg = build(ch, x, y, a, cov_t, d["range_m"], d["gamma_max"])
         elif kernel == "saturating":
-            msg = _wire.saturating(channel, x_m, y_m, amount, d["sigma_m"], d["range_m"])
+            msg = _wire.saturating(ch, x, y, a, d["sigma_m"], d["range_m"])
         else:
-            msg = _wire.z_shape(channel, x_m, y_m, amount, d["plateau_m"], d["slope_m"])
-        self.send(msg, stamp_ns=stamp_ns)
+            msg = _wire.z_shape(ch, x, y, a, d["plateau_m"], d["slope_m"])
+        return self.send(msg, stamp_ns=stamp_ns, wait=wait, timeout_s=timeout_s)
 
-    def send(self, msg: "_wire.DepositMsg", stamp_ns: Optional[int] = None) -> None:
+    @overload
+    def send(
+        self,
+        msg: "_wire.DepositMsg",
+        stamp_ns: Optional[int] = ...,
+        *,
+        wait: Literal[True] = ...,
+        timeout_s: float = ...,
+    ) -> Receipt: ...
+
+    @overload
+    def send(
+        self,
+        msg: "_wire.DepositMsg",
+        stamp_ns: Optional[int] = ...,
+        *,
+        wait: bool,
+        timeout_s: float = ...,
+    ) -> Optional[Receipt]: ...
+
+    def send(
+        self,
+        msg: "_wire.DepositMsg",
+        stamp_ns: Optional[int] = None,
+        *,
+        wait: bool = True,
+        timeout_s: float = DEFAULT_RECEIPT_TIMEOUT_S,
+    ) -> Optional[Receipt]:
         """Sends a ready-made `DepositMsg`, stamped with this client's robot id and, unless it
-        has one, CLOCK_MONOTONIC (as `DepositPublisher::send`)."""
+        has one, CLOCK_MONOTONIC (as `DepositPublisher::send`); waits for its receipt as
+        `deposit` does (at most once), or with `wait=False` sends it without one. Its numbers
+        are checked first (`ValueError` naming the field and the value)."""
         self._check_open()
-        if self._publisher is None:
-            self._open_deposits()
+        for f in _wire.DepositMsg._fields_:
+            name = f[0]
+            if name not in _INTEGER_FIELDS:
+                _finite(f"DepositMsg.{name}", getattr(msg, name))
+        if msg.kernel == _wire.KERNEL_FLUSH:
+            raise ValueError(
+                f"DepositMsg.kernel {_wire.KERNEL_FLUSH:#x} is a flush request: use flush()"
+            )
+        if stamp_ns is not None and not 0 <= stamp_ns < 2**64:
+            raise ValueError(f"stamp_ns {stamp_ns!r}: must be a u64 (ns of CLOCK_MONOTONIC)")
+        _check_timeout(timeout_s)
         msg.robot_id = self.robot_id
         if stamp_ns is not None:
             msg.stamp_ns = stamp_ns
         if msg.stamp_ns == 0:
             msg.stamp_ns = time.monotonic_ns()
+        if wait:
+            return self._confirmed(msg, timeout_s)
+        self._publish(msg)
+        return None
+
+    def _confirmed(self, msg: "_wire.DepositMsg", timeout_s: float) -> Receipt:
+        """Sends `msg` on the confirm service and turns the field's receipt into a `Receipt` or
+        an exception."""
+        r = self._request(msg, timeout_s)
+        if r is None:
+            raise DepositUnconfirmed(
+                f"field '{self.name}' sent no receipt within {timeout_s} s for the deposit "
+                f"{_describe(msg)}: it may still be applied, once, or not at all (at most once; "
+                "sending it again may apply it twice)"
+            )
+        status, sequence = r.status, int(r.sequence)
+        if status == _wire.RECEIPT_APPLIED:
+            return Receipt("applied", sequence, None)
+        if status == _wire.RECEIPT_FORWARDED:
+            return Receipt("forwarded", sequence, None)
+        if status == _wire.RECEIPT_REJECTED and r.reason < len(_wire.REJECT_REASON_NAMES):
+            reason = _wire.REJECT_REASON_NAMES[r.reason]
+            raise DepositRejected(
+                f"field '{self.name}' refused the deposit (frame {sequence}): {reason}: "
+                f"{_describe(msg)}{self._hint(reason, msg)}",
+                reason,
+                sequence,
+                msg,
+            )
+        raise PheromoneError(
+            f"field '{self.name}': receipt with unknown status {status} or reason {r.reason} "
+            f"(frame {sequence}) for the deposit {_describe(msg)}: use the Python package and "
+            "the field of the same version"
+        )
+
+    def _hint(self, reason: str, msg: "_wire.DepositMsg") -> str:
+        """What the field's geometry says about a refusal (the field's checks are its own)."""
+        if reason == "unknown_channel":
+            return f" (the field's channels are 0 to {self.channels - 1})"
+        if reason == "outside_grid":
+            x1 = self.origin_x_m + self.width * self.cell_size_m
+            y1 = self.origin_y_m + self.height * self.cell_size_m
+            return (
+                f" (the grid spans x {self.origin_x_m:.7g}–{x1:.7g} m, "
+                f"y {self.origin_y_m:.7g}–{y1:.7g} m)"
+            )
+        if reason == "not_psd" and msg.kernel in (_wire.KERNELS["ellipse"], _wire.KERNELS["paper"]):
+            return (
+                f" (covariance [[{msg.cov_xx:.7g}, {msg.cov_xy:.7g}], [{msg.cov_xy:.7g}, "
+                f"{msg.cov_yy:.7g}]] is not positive semi-definite)"
+            )
+        return ""
+
+    def _request(self, msg: "_wire.DepositMsg", timeout_s: float) -> Any:
+        """Sends a request on the confirm service and waits (at most `timeout_s`) for the
+        field's receipt: a `DepositReceipt` copy, or None without one in time. Raises
+        `DepositNotDelivered` if no field serves the service."""
+        if self._client is None:
+            self._open_confirm()
+        # Frame events from before this request say nothing about it (the field answers before
+        # it notifies the frame that took it); a broken listener shows in the wait below.
+        with contextlib.suppress(iox2.ListenerWaitError):
+            self._listener.try_wait()
+        deadline = time.monotonic() + timeout_s
+        try:
+            pending = self._client.send_copy(msg)
+        except (iox2.RequestSendError, iox2.LoanError) as e:
+            raise DepositNotDelivered(
+                f"deposit on '{self._confirm_service}' not sent: {_open_error(e) or e!r}"
+            ) from e
+        try:
+            if pending.number_of_server_connections == 0:
+                raise DepositNotDelivered(
+                    f"deposit not delivered: no field serves '{self._confirm_service}' (it "
+                    "stopped)"
+                )
+            self._wake_field()
+            while True:
+                try:
+                    response = pending.receive()
+                except iox2.ReceiveError as e:
+                    raise PheromoneError(
+                        f"service '{self._confirm_service}': receiving the receipt failed: {e!r}"
+                    ) from e
+                if response is not None:
+                    try:
+                        c = response.payload().contents
+                        receipt = _wire.DepositReceipt(c.sequence, c.status, c.reason)
+                    finally:
+                        response.delete()
+                    # The frame that holds it was published before the receipt was sent.
+                    with contextlib.suppress(FramesHeld):
+                        self.update()
+                    return receipt
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return None
+                # Woken by the frame whose receipts were sent just before; the 0.1 s cap only
+                # bounds a wake-up that never comes (a mirror answers as it forwards).
+                self._wait_event(min(left, 0.1))
+        finally:
+            # A receipt that comes later finds no client waiting: the field drops it.
+            pending.delete()
+
+    def _publish(self, msg: "_wire.DepositMsg") -> None:
+        """`wait=False`: publishes on the deposit service, without a receipt."""
+        if self._publisher is None:
+            self._open_deposits()
         try:
             delivered = self._publisher.send_copy(msg)
         except iox2.SendError as e:
@@ -559,14 +874,49 @@ class Field:
                 f"deposit not delivered: no field is subscribed to '{self._deposit_service}' "
                 "or its deposit buffer is full"
             )
+        self._wake_field()
+        # For a field without a confirm service: it takes it at its next tick, two frames after
+        # the newest one held.
+        self.update()
+        seq = self._latest.header.sequence if self._latest is not None else 0
+        self._unflushed_after = seq
+
+    def _wake_field(self) -> None:
+        """Tells a field that publishes on deposit that one is waiting."""
         if self._deposit_ready is not None:
             # A failed wake-up only delays the deposit to the field's next tick.
             with contextlib.suppress(Exception):
                 self._deposit_ready.notify()
-        # The field takes it at its next tick: two frames after the newest one held.
-        self.update()
-        seq = self._latest.header.sequence if self._latest is not None else 0
-        self._unflushed_after = seq
+
+    def _open_confirm(self) -> None:
+        svc = self._confirm_service
+        try:
+            self._confirm = (
+                self._node.service_builder(iox2.ServiceName.new(svc))
+                .request_response(_wire.DepositMsg, _wire.DepositReceipt)
+                .open()
+            )
+        except iox2.RequestResponseOpenError as e:
+            err = _open_error(e)
+            if err == "DoesNotExist":
+                raise FieldNotFound(
+                    f"field '{self.name}' takes no confirmed deposits: service '{svc}' does not "
+                    "exist (the field stopped, or it is older than this package; "
+                    "deposit(wait=False) sends without a receipt)"
+                ) from None
+            if err.startswith("Incompatible") and "Type" in err:
+                ours = f"{_wire.DepositMsg.type_name()} → {_wire.DepositReceipt.type_name()}"
+                raise LayoutMismatch(svc, ours, None) from None
+            raise PheromoneError(f"service '{svc}': open failed: {e!r}") from e
+        try:
+            self._client = self._confirm.client_builder().create()
+        except iox2.ClientCreateError as e:
+            self._confirm = None
+            raise PheromoneError(
+                f"service '{svc}': no client port: {_open_error(e) or e!r} (the field admits "
+                "--max-depositors of them)"
+            ) from e
+        self._open_deposit_ready()
 
     def _open_deposits(self) -> None:
         try:
@@ -593,8 +943,19 @@ class Field:
             .backpressure_strategy(iox2.BackpressureStrategy.DiscardData)
             .create()
         )
+        self._open_deposit_ready()
+        # The flush requests of `flush()`, opened now (as `DepositPublisher` does): a field that
+        # has gone by then answers no flush at once. A field without the service (older) gets
+        # the two-frame wait instead.
+        if self._client is None:
+            with contextlib.suppress(PheromoneError):
+                self._open_confirm()
+
+    def _open_deposit_ready(self) -> None:
         # A field that publishes on deposit has this event; any other field has not, and its
         # deposits wait for the next tick (as `DepositPublisher` does in Rust).
+        if self._deposit_ready is not None:
+            return
         try:
             ready = iox2.ServiceName.new(_wire.deposit_ready_service(self.name))
             self._deposit_ready = (
@@ -607,10 +968,30 @@ class Field:
         except iox2.EventOpenError:
             self._deposit_ready = None
 
-    def flush(self, timeout_s: float = 1.0) -> bool:
-        """Waits (at most `timeout_s`) until the field has taken every deposit sent so far: two
-        frames past the newest one held when the last was sent. Returns whether it has."""
+    def flush(self, timeout_s: float = DEFAULT_RECEIPT_TIMEOUT_S) -> bool:
+        """Waits (at most `timeout_s`) until the field has taken every deposit sent so far with
+        `wait=False`; returns whether it has (at once if none is outstanding).
+
+        Sends a flush request on the confirm service (`DepositMsg.kernel` = 0xFFFFFFFF, which
+        deposits nothing): the field answers it at its next tick, after it has taken every
+        deposit this process published before, so this waits at most one tick period of a
+        running field and returns False at once if the field has gone. Taken means applied or
+        refused (counted in the header): a refusal is not reported here. A field without the
+        confirm service (older) is waited for two frames past the last deposit."""
+        _check_timeout(timeout_s)
         if self._unflushed_after is None:
+            return True
+        if self._client is not None:
+            flush = _wire.DepositMsg(
+                robot_id=self.robot_id, kernel=_wire.KERNEL_FLUSH, stamp_ns=time.monotonic_ns()
+            )
+            try:
+                r = self._request(flush, timeout_s)
+            except DepositNotDelivered:
+                return False
+            if r is None or r.status != _wire.RECEIPT_FLUSHED:
+                return False
+            self._unflushed_after = None
             return True
         deadline = time.monotonic() + timeout_s
         while True:
@@ -635,8 +1016,8 @@ class Field:
         return self._node is None
 
     def close(self) -> None:
-        """Flushes deposits (at most `flush_timeout_s`), releases the frames and removes this
-        client's iceoryx2 node and ports."""
+        """Flushes the deposits sent with `wait=False` (`flush(flush_timeout_s)`), releases the
+        frames and removes this client's iceoryx2 node and ports."""
         if self._node is None:
             return
         # Closing never raises for a field that went away meanwhile.
@@ -646,11 +1027,14 @@ class Field:
         if self._latest is not None:
             self._latest.close()
             self._latest = None
-        for port in (self._publisher, self._subscriber, self._listener, self._deposit_ready):
+        ports = (self._publisher, self._client, self._subscriber, self._listener,
+                 self._deposit_ready)
+        for port in ports:
             if port is not None:
                 port.delete()
-        self._publisher = self._subscriber = self._listener = self._deposit_ready = None
-        self._frames = self._ready = self._deposits = None
+        self._publisher = self._client = self._subscriber = self._listener = None
+        self._deposit_ready = None
+        self._frames = self._ready = self._deposits = self._confirm = None
         self._node = None
 
     def __enter__(self) -> "Field":

@@ -163,16 +163,26 @@ class FieldProcess:
         self.name = name
         self.args = args
         self.stderr_path = tmp_path / f"{name}.stderr"
+        self.stdout_path = tmp_path / f"{name}.stdout"
         self._stderr = open(self.stderr_path, "wb")
+        self._stdout = open(self.stdout_path, "wb")
         self.proc = subprocess.Popen(
             [str(BIN), "field", "--name", name, *args],
-            stdout=subprocess.DEVNULL,
+            stdout=self._stdout,
             stderr=self._stderr,
         )
         STARTED_PIDS.add(self.proc.pid)
 
     def stderr(self):
         return self.stderr_path.read_text(errors="replace")
+
+    def summary(self):
+        """Stops the field (SIGINT) and returns its `--json` summary (start it with `--json`)."""
+        rc = self.stop()
+        assert rc in (0, -signal.SIGINT, 130), f"field {self.name} exited with {rc}"
+        out = self.stdout_path.read_text()
+        assert out.strip(), f"field {self.name} printed no summary (--json?): {self.stderr()}"
+        return json.loads(out.strip().splitlines()[-1])
 
     def stop(self):
         if self.proc.poll() is None:
@@ -186,6 +196,7 @@ class FieldProcess:
                     f"field {self.name} did not stop on SIGINT: {self.stderr()}"
                 ) from None
         self._stderr.close()
+        self._stdout.close()
         return self.proc.returncode
 
 

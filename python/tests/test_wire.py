@@ -91,12 +91,27 @@ def test_layout_version_is_the_rust_one():
     )
     assert _wire.FrameHeader.type_name() == f"pheromone::FrameHeader/v{rust}"
     assert _wire.DepositMsg.type_name() == f"pheromone::DepositMsg/v{rust}"
+    assert _wire.DepositReceipt.type_name() == f"pheromone::DepositReceipt/v{rust}"
 
 
 def test_reject_reasons_are_the_rust_ones():
     assert rust_consts()["REJECT_REASONS"] == _wire.REJECT_REASONS
     names = re.findall(r'RejectReason::\w+ => "(\w+)"', (FIELD_SRC / "reject.rs").read_text())
     assert tuple(names) == _wire.REJECT_REASON_NAMES
+
+
+def test_receipt_statuses_flush_kernel_and_confirm_service_are_the_rust_ones():
+    src = (FIELD_SRC / "messages.rs").read_text()
+    consts = dict(re.findall(r"pub const ((?:RECEIPT|KERNEL)_\w+): u32 = ([\w:]+);", src))
+    consts = {k: 0xFFFF_FFFF if v == "u32::MAX" else int(v) for k, v in consts.items()}
+    ours = {n: getattr(_wire, n) for n in dir(_wire) if n.startswith(("RECEIPT_", "KERNEL_"))}
+    ours.pop("RECEIPT_STATUS_NAMES")
+    assert consts == ours
+    for code, name in enumerate(_wire.RECEIPT_STATUS_NAMES):
+        assert consts[f"RECEIPT_{name.upper()}"] == code
+    m = re.search(r'deposit_confirm: format!\("([^"]*)"', (FIELD_SRC / "wire.rs").read_text())
+    assert m, "deposit_confirm's service name not found in field/src/wire.rs"
+    assert _wire.deposit_confirm_service("F") == m.group(1).replace("{field}", "F")
 
 
 def test_kernel_codes_are_the_rust_ones():
