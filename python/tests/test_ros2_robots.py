@@ -125,7 +125,7 @@ def test_sim_ros2_publishes_poses_and_paths_that_match_the_run(tmp_path):
         samples = got.get(key, [])
         for _, att in samples:
             seq, stamp_ns = struct.unpack_from("<qq", att)
-            assert len(att) == 33 and att[16] == 16 and seq >= 1
+            assert len(att) == 33 and att[16] == 16 and seq >= 1 and stamp_ns > 0
         return [store.deserialize_cdr(b, t) for b, _ in samples]
 
     truths, estimates = msgs("true_pose", POSE), msgs("estimated_pose", POSE)
