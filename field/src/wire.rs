@@ -108,11 +108,15 @@ macro_rules! wire_type {
                 )
             );
         };
-        const _: fn() = || {
-            fn plain_data<T: Copy + Send + 'static>() {}
-            plain_data::<$t>();
-        };
+        const _: fn() = $crate::wire::assert_plain_data::<$t>;
     };
+}
+
+/// Compiles only for plain data (`Copy + Send + 'static`): [`wire_type!`] names it for each wire
+/// type, so a type that holds a reference or a non-`Copy` field is refused at compile time.
+#[doc(hidden)]
+pub fn assert_plain_data<T: Copy + Send + 'static>() {
+    // Nothing to do at run time: the bounds are the check.
 }
 
 /// The type name a wire type is registered under (for error messages).
