@@ -194,6 +194,29 @@ impl FrameHeader {
     }
 }
 
+/// What a mirror says about itself (blackboard `pheromone/F/mirror`, key 0), so readers on its
+/// host can tell a live copy from one whose origin went silent: the frames of a stale mirror
+/// stay at `last_sequence` while the origin may have moved on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(C)]
+pub struct MirrorState {
+    /// 1 while the mirror has no live inputs from its origin (none for `--stale-after-s`, or
+    /// none applied since its last keyframe); 0 while it follows the origin.
+    pub stale: u32,
+    pub _reserved: u32,
+    /// CLOCK_MONOTONIC (ns) when the newest inputs came from the origin; 0 before any.
+    pub last_inputs_ns: u64,
+    /// CLOCK_MONOTONIC (ns) when the mirror last went stale; 0 while live.
+    pub stale_since_ns: u64,
+    /// Times the mirror went stale after following its origin.
+    pub stale_periods: u64,
+    /// Sequence of the newest frame the mirror published.
+    pub last_sequence: u64,
+}
+
+// repr(C): numbers only.
+crate::wire_type!(MirrorState, "MirrorState", size = 40, align = 8);
+
 /// A simulation clock tick: the world publishes one per step; a field run with `--clock` ticks
 /// once per message instead of on wall time (lockstep simulation).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

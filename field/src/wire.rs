@@ -165,6 +165,8 @@ pub struct FieldServices {
     pub inputs: String,
     /// The field's configuration as TOML (`[u8]`, history 1), for a bridge.
     pub config: String,
+    /// A mirror's state (blackboard, [`crate::messages::MirrorState`]); only mirrors have it.
+    pub mirror: String,
 }
 
 impl FieldServices {
@@ -178,6 +180,7 @@ impl FieldServices {
             deposit_ready: format!("pheromone/{field}/deposit-ready"),
             inputs: format!("pheromone/{field}/inputs"),
             config: format!("pheromone/{field}/config"),
+            mirror: format!("pheromone/{field}/mirror"),
         }
     }
 }

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use clap::Args;
-use field::shm::{create_node, FieldReader, Frame};
+use field::shm::{create_node, mirror_info, FieldReader, Frame};
 use report::export::npy::write_npy;
 use report::export::ros_map::{write_ros_map, PlaneRef};
 
@@ -20,7 +20,7 @@ use super::{bad, seconds};
 ///
 /// It waits up to --timeout-s for the field and then for a frame newer than the one it finds;
 /// a field that publishes none in that time (paused, or waiting for its clock) is exported as
-/// its current frame.
+/// its current frame, as is a mirror whose origin went silent (at once, and said so).
 #[derive(Args, Debug)]
 pub struct ExportArgs {
     /// Field name.
@@ -57,7 +57,19 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     let timeout = seconds("timeout-s", a.timeout_s)?;
     let node = create_node(&format!("export-{}", std::process::id()))?;
     let mut reader = FieldReader::attach_within(&node, &a.field, timeout)?;
-    let fresh = wait_fresh(&node, &mut reader, &a.field, timeout)?;
+    // A stale mirror publishes nothing until its origin is back: its current frame is all
+    // there is, exported at once and said to be stale.
+    let mirror = mirror_info(&node, &a.field)?;
+    let stale_mirror = mirror.filter(|m| m.stale);
+    let fresh = match stale_mirror {
+        Some(_) => {
+            if reader.frame().is_none() {
+                reader.wait_frame(timeout)?;
+            }
+            false
+        }
+        None => wait_fresh(&node, &mut reader, &a.field, timeout)?,
+    };
     let Some(frame) = reader.frame() else {
         anyhow::bail!(
             "field '{}' published no frame within {} s",
@@ -65,7 +77,14 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
             a.timeout_s
         );
     };
-    if !fresh {
+    if let Some(m) = stale_mirror {
+        eprintln!(
+            "field '{}' is stale ({}): exporting its current frame {}",
+            a.field,
+            m.describe(),
+            frame.header.sequence
+        );
+    } else if !fresh {
         eprintln!(
             "field '{}' published no new frame within {} s: exporting its current frame {}",
             a.field, a.timeout_s, frame.header.sequence
@@ -76,7 +95,7 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     let mut report = serde_json::json!({
         "field": a.field, "out": a.out, "sequence": h.sequence, "sim_time_s": h.sim_time_s,
         "fresh": fresh, "shape": [c, height, width], "cell_size_m": h.cell_size_m,
-        "origin_m": [h.origin_x_m, h.origin_y_m],
+        "origin_m": [h.origin_x_m, h.origin_y_m], "mirror": mirror,
     });
     match format {
         Format::Npy => {

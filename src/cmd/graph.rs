@@ -194,8 +194,9 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
         Some(s) => vec![parse_strategy(s)?],
         None => scenario.strategies.clone(),
     };
+    super::stop::install()?;
     let started = Instant::now();
-    let (runs, mut text) = run_each(a, &scenario, &counts, &strategies, seed)?;
+    let (runs, mut text, interrupted) = run_each(a, &scenario, &counts, &strategies, seed)?;
     let comparison = compare(&runs);
     // A run for a fixed time (Sec. 6.2) has no goal to reach: nothing to compare.
     let cmp_text = if scenario.regions_sim.until == Until::Time {
@@ -213,8 +214,8 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
         } else {
             RunMode::Processes
         },
-        // A regions run stopped by Ctrl-C writes nothing (exit 1 as processes).
-        interrupted: false,
+        // Stopped by Ctrl-C or SIGTERM: the runs that finished before it.
+        interrupted,
         wall_time_s: started.elapsed().as_secs_f64(),
         comparison,
         runs,
@@ -224,6 +225,9 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
     }
     if a.json {
         println!("{}", serde_json::to_string(&metrics)?);
+    }
+    if interrupted {
+        return Err(super::stop::Stopped::by_requested().into());
     }
     Ok(())
 }
@@ -267,22 +271,34 @@ fn robot_counts(a: &SimArgs, scenario: &RegionsScenario) -> anyhow::Result<Vec<u
 }
 
 /// Runs every robot count with every strategy: the reports and their tables' text.
+/// Every run, by robot count then strategy, and their tables as text; stopped early (`true`)
+/// by SIGINT or SIGTERM, with the runs that finished before it (a run in progress as processes
+/// ends with its children; one in this process ends first).
 fn run_each(
     a: &SimArgs,
     scenario: &RegionsScenario,
     counts: &[usize],
     strategies: &[GraphStrategy],
     seed: u64,
-) -> anyhow::Result<(Vec<RunReport>, String)> {
+) -> anyhow::Result<(Vec<RunReport>, String, bool)> {
     let mut runs: Vec<RunReport> = Vec::new();
     let mut text = String::new();
+    let stopped = || super::stop::requested().is_some();
     for &n in counts {
         for &strategy in strategies {
+            if stopped() {
+                return Ok((runs, text, true));
+            }
             let run_started = Instant::now();
             let report = if a.single_process {
                 simulate(scenario, strategy, n, seed)?
             } else {
-                run_as_processes(a, strategy, n, seed)?
+                match run_as_processes(a, strategy, n, seed) {
+                    Ok(r) => r,
+                    // The children got the terminal's Ctrl-C too: whatever ended the run first.
+                    Err(_) if stopped() => return Ok((runs, text, true)),
+                    Err(e) => return Err(e),
+                }
             };
             let t = tables_text(&report);
             eprintln!(
@@ -294,7 +310,7 @@ fn run_each(
             runs.push(report);
         }
     }
-    Ok((runs, text))
+    Ok((runs, text, stopped()))
 }
 
 /// The metrics of a regions run (`--json`, `metrics.json`).

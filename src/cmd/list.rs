@@ -9,7 +9,8 @@ use super::seconds;
 /// List the fields running on this host: name, grid, channels, cell size, the tick rate
 /// measured over --window-s and the newest sequence, readers (subscribers of the frame
 /// service) and depositors (publishers of the deposit service), and whether frames still come
-/// ("alive") or not ("stale": the field died, or it is paused waiting for its clock).
+/// ("alive") or not ("stale": the field died, or it is paused waiting for its clock, or it is a
+/// mirror whose origin went silent: then it says for how long).
 #[derive(Args, Debug)]
 pub struct ListArgs {
     /// Seconds over which the tick rate is measured.
@@ -47,10 +48,12 @@ pub fn run(a: ListArgs) -> anyhow::Result<()> {
 }
 
 fn row(f: &FieldInfo) -> String {
-    let state = match (f.alive, f.publisher_alive) {
-        (true, _) => "alive",
-        (false, true) => "stale (no frame in the window)",
-        (false, false) => "stale (no live publisher)",
+    let state = match (f.alive, f.publisher_alive, &f.mirror) {
+        (_, true, Some(m)) if m.stale => format!("stale ({})", m.describe()),
+        (true, _, Some(_)) => "alive (mirror)".to_string(),
+        (true, _, None) => "alive".to_string(),
+        (false, true, _) => "stale (no frame in the window)".to_string(),
+        (false, false, _) => "stale (no live publisher)".to_string(),
     };
     format!(
         "{:<24} {:>11} {:>3} {:>8} {:>9.1} {:>10} {:>7} {:>10}  {state}",

@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use clap::Args;
-use field::shm::{create_node, FieldReader, Frame, Svc};
+use field::shm::{create_node, mirror_info, FieldReader, Frame, Svc};
 use iceoryx2::prelude::Node;
 
 use super::{bad, seconds_or_zero};
@@ -110,6 +110,15 @@ pub fn run_probe(a: ProbeArgs) -> anyhow::Result<()> {
     }
     let h = frame.header;
     let value = frame.view.value(ch, x, y);
+    let mirror = mirror_info(&node, &a.field)?;
+    if let Some(m) = mirror.filter(|m| m.stale) {
+        eprintln!(
+            "field '{}' is stale ({}): frame {} may be behind its origin",
+            a.field,
+            m.describe(),
+            h.sequence
+        );
+    }
     if a.json {
         println!(
             "{}",
@@ -117,7 +126,7 @@ pub fn run_probe(a: ProbeArgs) -> anyhow::Result<()> {
                 "field": a.field, "sequence": h.sequence, "sim_time_s": h.sim_time_s,
                 "width": h.width, "height": h.height, "channels": h.channels, "cell_size_m": h.cell_size_m,
                 "deposits_applied": h.deposits_applied, "deposits_rejected": h.deposits_rejected_total(),
-                "x": x, "y": y, "channel": ch, "value": value,
+                "x": x, "y": y, "channel": ch, "value": value, "mirror": mirror,
             })
         );
     } else {

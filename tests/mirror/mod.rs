@@ -409,3 +409,97 @@ fn corrupted_lists_and_keyframes_are_rejected_and_counted() {
     assert_eq!(s["checksum_mismatches"], 0, "{s}");
     assert_eq!(s["gaps"], 0, "{s}");
 }
+
+/// `pheromone list`, `probe` and `export` on the mirror's host, before and after its origin
+/// went away: the mirror is listed (not "no field is running"), marked stale with how long its
+/// origin has been silent, and its current frame is still read and exported.
+#[test]
+fn list_probe_and_export_see_a_mirror_that_lost_its_origin_and_mark_it_stale() {
+    let _clean = CleanDomains;
+    let name = unique("mir7");
+    let field = origin_field(&name);
+    let bridge = bridge(&name);
+    let m = mirror(&name, &bridge.endpoint);
+    let mut hosts = Hosts::attach(&name);
+    assert_identical(&hosts.common(5, |_| true));
+    let listed = |window: &str| -> serde_json::Value {
+        let o = run(&[
+            "list",
+            "--iox-domain",
+            MIRROR,
+            "--json",
+            "--window-s",
+            window,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let j = json(&o);
+        j["fields"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|f| f["name"] == name.as_str())
+            .cloned()
+            .unwrap_or_else(|| panic!("the mirror '{name}' is not listed: {j}"))
+    };
+    let live = listed("0.5");
+    assert_eq!(live["alive"], true, "{live}");
+    assert_eq!(live["mirror"]["stale"], false, "{live}");
+    // The origin goes, and the bridge with it (SIGKILL).
+    field.interrupt();
+    field.wait_exit(Duration::from_secs(20));
+    bridge.kill();
+    until_quiet(&mut hosts.mirror, Duration::from_secs(1));
+    let last = hosts.mirror.frame().unwrap().header.sequence;
+    let stale = listed("0.3");
+    assert_eq!(stale["alive"], false, "{stale}");
+    assert_eq!(stale["publisher_alive"], true, "{stale}");
+    assert_eq!(stale["sequence"], last, "{stale}");
+    assert_eq!(stale["mirror"]["stale"], true, "{stale}");
+    assert_eq!(stale["mirror"]["last_sequence"], last, "{stale}");
+    assert!(
+        stale["mirror"]["inputs_age_s"].as_f64().unwrap() >= 0.5,
+        "{stale}"
+    );
+    let text = run(&["list", "--iox-domain", MIRROR, "--window-s", "0.3"]);
+    let row = stdout(&text)
+        .lines()
+        .find(|l| l.starts_with(name.as_str()))
+        .map(str::to_string)
+        .unwrap_or_else(|| panic!("no row for {name}: {}", stdout(&text)));
+    assert!(
+        row.contains("stale (mirror: no inputs from its origin for "),
+        "{row}"
+    );
+    let probe = run(&["probe", "--iox-domain", MIRROR, "--field", &name, "--json"]);
+    assert!(probe.status.success(), "{}", stderr(&probe));
+    let p = json(&probe);
+    assert_eq!(p["sequence"], last, "{p}");
+    assert_eq!(p["mirror"]["stale"], true, "{p}");
+    assert!(
+        stderr(&probe).contains("is stale (mirror: "),
+        "{}",
+        stderr(&probe)
+    );
+    let dir = std::env::temp_dir().join(unique("mir7out"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("mirror.npy");
+    let export = run(&[
+        "export",
+        "--iox-domain",
+        MIRROR,
+        "--field",
+        &name,
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(export.status.success(), "{}", stderr(&export));
+    let e = json(&export);
+    assert_eq!(e["sequence"], last, "{e}");
+    assert_eq!(e["fresh"], false, "{e}");
+    assert_eq!(e["mirror"]["stale"], true, "{e}");
+    assert!(out.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+    let j = mirror_exit(m);
+    assert_eq!(j["stale"], true, "{j}");
+}

@@ -41,6 +41,7 @@ mod confirm;
 mod deposit;
 mod error;
 mod inputs;
+mod mirror_state;
 mod reader;
 mod server;
 mod standby;
@@ -70,6 +71,7 @@ pub use inputs::{
     f32s_from_bytes, wire_bytes, wire_from_bytes, wire_slice_bytes, wire_vec_from_bytes,
     InputsPublisher, InputsSubscriber,
 };
+pub use mirror_state::{mirror_info, MirrorInfo, MirrorStateWriter};
 pub use reader::{FieldReader, Frame, ParseWaitPolicyError, WaitPolicy};
 pub use server::{FieldServer, TickOutcome};
 pub use standby::{Standby, StandbyEvent, Takeover};

@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use iceoryx2::prelude::*;
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern;
 
+use super::mirror_state::{mirror_info, MirrorInfo};
 use super::{
     service_err, AttachError, FieldReader, FieldWatch, Iceoryx, ServiceError, ShmError, Svc,
 };
@@ -37,6 +38,9 @@ pub struct FieldInfo {
     pub alive: bool,
     /// A live process publishes the frames.
     pub publisher_alive: bool,
+    /// The field is a mirror of a field on another host (`field --mirror`): its own account
+    /// of whether it follows its origin (`null` for a field that is not a mirror).
+    pub mirror: Option<MirrorInfo>,
 }
 
 /// Names of the fields whose frame service exists on this host, sorted.
@@ -92,6 +96,7 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
         reader.update()?;
         let status = watch.status();
         let publisher_alive = reader.field_alive();
+        let mirror = mirror_info(node, &name)?;
         let (Some(frame), Some((first_seq, first_stamp_ns, first_at))) = (reader.frame(), first)
         else {
             continue;
@@ -121,6 +126,7 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
             depositors: status.depositors,
             alive: ticks > 0,
             publisher_alive,
+            mirror,
         });
     }
     Ok(out)

@@ -13,7 +13,8 @@ use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
 
 use field::messages::InputsHeader;
-use field::shm::{now_ns, FieldServer, Svc};
+use field::messages::MirrorState;
+use field::shm::{now_ns, FieldServer, MirrorStateWriter, Svc};
 use field::{DepositMsg, FieldConfig, FrameHeader};
 use iceoryx2::node::Node;
 use zenoh::handlers::FifoChannelHandler;
@@ -93,6 +94,11 @@ pub struct Mirror {
     last_input_at: Instant,
     last_request: Option<Instant>,
     stale: bool,
+    /// What readers on this host see of the mirror (created with the local field).
+    state: Option<MirrorStateWriter>,
+    /// CLOCK_MONOTONIC (ns) of the newest inputs, and of the last time it went stale.
+    last_input_ns: u64,
+    stale_since_ns: u64,
     /// Origin publish → mirror publish (ns, CLOCK_MONOTONIC: meaningful when both run on one
     /// host, as in `pheromone bench`), one per applied frame, the latest 100 000.
     pub lags_ns: VecDeque<u64>,
@@ -165,6 +171,9 @@ impl Mirror {
             last_input_at: Instant::now(),
             last_request: None,
             stale: true,
+            state: None,
+            last_input_ns: 0,
+            stale_since_ns: now_ns(),
             lags_ns: VecDeque::new(),
             stats: MirrorStats::default(),
         })
@@ -240,6 +249,7 @@ impl Mirror {
         let silent = self.last_input_at.elapsed() >= self.o.stale_after;
         if silent && !self.stale {
             self.stale = true;
+            self.stale_since_ns = now_ns();
             self.need_keyframe = true;
             self.stats.stale_periods += 1;
             eprintln!(
@@ -249,6 +259,30 @@ impl Mirror {
                 self.stats.last_sequence
             );
         }
+        self.publish_state(node)
+    }
+
+    /// Tells readers on this host the mirror's state, and hands readers that attached since the
+    /// last frame the current one: a stale mirror publishes no frames, and iceoryx2 delivers a
+    /// publisher's history only when it sends or updates its connections.
+    fn publish_state(&mut self, node: &Node<Svc>) -> Result<(), BridgeError> {
+        let Some(server) = &self.server else {
+            return Ok(());
+        };
+        server.serve_new_readers()?;
+        if self.state.is_none() {
+            self.state = Some(MirrorStateWriter::create(node, &self.o.field)?);
+        }
+        if let Some(w) = &self.state {
+            w.set(MirrorState {
+                stale: u32::from(self.stale),
+                _reserved: 0,
+                last_inputs_ns: self.last_input_ns,
+                stale_since_ns: if self.stale { self.stale_since_ns } else { 0 },
+                stale_periods: self.stats.stale_periods,
+                last_sequence: self.stats.last_sequence,
+            });
+        }
         Ok(())
     }
 
@@ -256,6 +290,7 @@ impl Mirror {
         match codec::decode_inputs(bytes) {
             Ok((h, deposits)) => {
                 self.last_input_at = Instant::now();
+                self.last_input_ns = now_ns();
                 if h.epoch != self.input_epoch {
                     // A new origin run (restart): its sequence starts again. The local field
                     // changes run only with a keyframe and the configuration of that run.
