@@ -270,7 +270,6 @@ fn robot_counts(a: &SimArgs, scenario: &RegionsScenario) -> anyhow::Result<Vec<u
     Ok(counts)
 }
 
-/// Runs every robot count with every strategy: the reports and their tables' text.
 /// Every run, by robot count then strategy, and their tables as text; stopped early (`true`)
 /// by SIGINT or SIGTERM, with the runs that finished before it (a run in progress as processes
 /// ends with its children; one in this process ends first).

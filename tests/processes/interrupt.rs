@@ -200,3 +200,69 @@ fn sigterm_of_a_field_writes_its_summary_and_exits_143() {
     run.wait_nodes_gone(WAIT);
     assert_eq!(run.shm_entries(), Vec::<String>::new());
 }
+
+/// A regions sim of many runs (the same 2 robots over and over, both strategies), signalled
+/// once its first run finished: it writes the runs that finished, marked interrupted, and exits
+/// with 128 + the signal, in both modes.
+#[test]
+fn sigint_and_sigterm_of_a_regions_sim_write_the_runs_that_finished() {
+    let example = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenarios/regions.toml"),
+    )
+    .unwrap();
+    assert!(
+        example.contains("robots = [2, 3, 4]"),
+        "the example changed"
+    );
+    // Runs of 2 robots: about 0.6 s each as processes, a few ms in one process.
+    for (signal, single, counts) in [(Signal::SIGINT, false, 10), (Signal::SIGTERM, true, 2000)] {
+        let robots = vec!["2"; counts].join(", ");
+        let scenario = example.replace("robots = [2, 3, 4]", &format!("robots = [{robots}]"));
+        let run = Run::new(if single { "rgs" } else { "rgp" });
+        let file = run.dir.join("many.toml");
+        std::fs::write(&file, &scenario).unwrap();
+        let out = run.dir.join("out");
+        let mut args = vec![
+            "sim",
+            file.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if single {
+            args.push("--single-process");
+        }
+        let sim = run.spawn(&args, "sim");
+        let deadline = Instant::now() + WAIT;
+        while !run.log("sim").contains("wall time)") {
+            assert!(
+                Instant::now() < deadline,
+                "no run finished: {}",
+                run.log("sim")
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let pid = nix::unistd::Pid::from_raw(sim.pid() as i32);
+        nix::sys::signal::kill(pid, signal).unwrap();
+        let o = sim.wait_exit(Duration::from_secs(60));
+        let log = run.log("sim");
+        assert_eq!(
+            o.status.code(),
+            Some(128 + signal as i32),
+            "{:?}: {log}",
+            o.status
+        );
+        let m: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap())
+                .unwrap();
+        assert_eq!(m["interrupted"], true, "{m}");
+        let runs = m["runs"].as_array().unwrap().len();
+        assert!(
+            (1..2 * counts).contains(&runs),
+            "{runs} of {} runs written: {log}",
+            2 * counts
+        );
+        assert!(out.join("tables.txt").is_file(), "{log}");
+        assert_eq!(run.wait_nodes_gone(WAIT), 0, "dead nodes left: {log}");
+        assert_eq!(run.shm_entries(), Vec::<String>::new());
+    }
+}
