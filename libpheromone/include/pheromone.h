@@ -36,6 +36,22 @@
 #define PHEROMONE_ERROR_CAPACITY 512
 
 /**
+ * `PheromoneReceipt::status`: the deposit is in frame `sequence`.
+ */
+#define PHEROMONE_RECEIPT_APPLIED 0
+
+/**
+ * `PheromoneReceipt::status`: the field refused it in frame `sequence`, for `reason`.
+ */
+#define PHEROMONE_RECEIPT_REJECTED 1
+
+/**
+ * `PheromoneReceipt::status`: the field is a mirror; it forwarded the deposit to its origin,
+ * which applies or refuses it there.
+ */
+#define PHEROMONE_RECEIPT_FORWARDED 3
+
+/**
  * `PheromoneWaitPolicy::kind`: sleep on the frame event until the field notifies.
  */
 #define PHEROMONE_WAIT_EVENT 0
@@ -119,6 +135,11 @@ typedef enum {
    * detached.
    */
   PHEROMONE_STATUS_INTERNAL = 9,
+  /**
+   * `pheromone_deposit_confirmed`: the field refused the deposit (by its own checks, e.g.
+   * outside its grid); the receipt's `reason` and the last error say why. Nothing was applied.
+   */
+  PHEROMONE_STATUS_REJECTED = 10,
 } PheromoneStatus;
 
 /**
@@ -304,6 +325,26 @@ typedef struct {
 } PheromoneDeposit;
 
 /**
+ * The field's answer to `pheromone_deposit_confirmed` (its `DepositReceipt`).
+ */
+typedef struct {
+  /**
+   * The frame that applied (or refused) the deposit; 0 when forwarded.
+   */
+  uint64_t sequence;
+  /**
+   * `PHEROMONE_RECEIPT_APPLIED`, `_REJECTED` or `_FORWARDED`.
+   */
+  uint32_t status;
+  /**
+   * With `PHEROMONE_RECEIPT_REJECTED`, the field's reason code (the index of its counter in
+   * the frame header: 0 non-finite, 1 covariance not PSD, 2 unknown channel, 3 unknown
+   * kernel, 4 out of limits, 5 outside the grid, 6 negative on an unsigned channel); else 0.
+   */
+  uint32_t reason;
+} PheromoneReceipt;
+
+/**
  * A pose estimate for `pheromone_deposit_pose`: mean (m, rad) and its 3×3 covariance
  * (row-major, order x, y, θ), as a localizer publishes it.
  */
@@ -460,6 +501,29 @@ PheromoneStatus pheromone_sample_sectors(const PheromoneField *field, uint32_t c
  * `field` is a live handle; `deposit` is valid for reads.
  */
 PheromoneStatus pheromone_deposit(PheromoneField *field, const PheromoneDeposit *deposit);
+
+/**
+ * Sends a deposit as `pheromone_deposit` does, then waits at most `timeout_ns` for the field's
+ * receipt (any tick rate: the field answers with the frame that applied it):
+ * - `PHEROMONE_STATUS_OK`: applied in frame `receipt->sequence` (`PHEROMONE_RECEIPT_APPLIED`),
+ *   or taken by a mirror for its origin (`PHEROMONE_RECEIPT_FORWARDED`);
+ * - `PHEROMONE_STATUS_REJECTED`: the field refused it; `receipt->reason` and the last error
+ *   say why; nothing was applied;
+ * - `PHEROMONE_STATUS_TIMEOUT`: no receipt in time; the deposit may still be applied, at most
+ *   once (do not resend it blindly);
+ * - `PHEROMONE_STATUS_BAD_ARGUMENT` (before sending) and `_NOT_DELIVERED` as
+ *   `pheromone_deposit`.
+ *
+ * `receipt` may be NULL; it is written only with an answer (OK or REJECTED). Blocks the calling thread until the receipt or the timeout: for a
+ * loop that deposits every step, `pheromone_deposit` does not wait.
+ *
+ * Thread safety: not concurrently with any other call on this handle.
+ *
+ * # Safety
+ * `field` is a live handle; `deposit` is valid for reads; `receipt` is NULL or valid for
+ * writes.
+ */
+PheromoneStatus pheromone_deposit_confirmed(PheromoneField *field, const PheromoneDeposit *deposit, uint64_t timeout_ns, PheromoneReceipt *receipt);
 
 /**
  * Sends seed 000's uncertainty-aware deposit for a pose estimate, as the Rust depositor does:

@@ -65,6 +65,7 @@ inline const char* status_name(PheromoneStatus s) noexcept {
     case PHEROMONE_STATUS_NOT_DELIVERED: return "PHEROMONE_STATUS_NOT_DELIVERED";
     case PHEROMONE_STATUS_SHM_ERROR: return "PHEROMONE_STATUS_SHM_ERROR";
     case PHEROMONE_STATUS_INTERNAL: return "PHEROMONE_STATUS_INTERNAL";
+    case PHEROMONE_STATUS_REJECTED: return "PHEROMONE_STATUS_REJECTED";
   }
   return "PHEROMONE_STATUS_?";
 }
@@ -235,6 +236,15 @@ class Field {
   }
 
   void deposit(const PheromoneDeposit& d) { check(pheromone_deposit(handle_, &d)); }
+
+  /// Sends a deposit and waits up to `timeout` for the field's receipt (applied in frame N, or
+  /// forwarded by a mirror). Throws `Error` with PHEROMONE_STATUS_REJECTED when the field refused
+  /// it, and PHEROMONE_STATUS_TIMEOUT when no receipt came (it may still be applied, once).
+  PheromoneReceipt deposit_confirmed(const PheromoneDeposit& d, std::chrono::nanoseconds timeout) {
+    PheromoneReceipt r{};
+    check(pheromone_deposit_confirmed(handle_, &d, static_cast<uint64_t>(timeout.count()), &r));
+    return r;
+  }
 
   /// Seed 000's uncertainty-aware ellipse deposit for a pose estimate.
   void deposit_pose(const PheromonePoseEstimate& pose,

@@ -103,8 +103,8 @@ impl Status for SendError {
             SendError::NoSubscriber { .. } | SendError::NotDelivered { .. } => {
                 PheromoneStatus::NotDelivered
             }
-            // The C ABI sends without waiting for receipts (libpheromone has no confirmed
-            // deposit yet): a timeout is what it would be.
+            // `pheromone_deposit_confirmed` got no receipt in time: it may still be applied,
+            // once.
             SendError::Unconfirmed { .. } => PheromoneStatus::Timeout,
             SendError::Service(_) => PheromoneStatus::ShmError,
         }

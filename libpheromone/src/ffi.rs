@@ -375,6 +375,49 @@ pub unsafe extern "C" fn pheromone_deposit(
     })
 }
 
+/// Sends a deposit as `pheromone_deposit` does, then waits at most `timeout_ns` for the field's
+/// receipt (any tick rate: the field answers with the frame that applied it):
+/// - `PHEROMONE_STATUS_OK`: applied in frame `receipt->sequence` (`PHEROMONE_RECEIPT_APPLIED`),
+///   or taken by a mirror for its origin (`PHEROMONE_RECEIPT_FORWARDED`);
+/// - `PHEROMONE_STATUS_REJECTED`: the field refused it; `receipt->reason` and the last error
+///   say why; nothing was applied;
+/// - `PHEROMONE_STATUS_TIMEOUT`: no receipt in time; the deposit may still be applied, at most
+///   once (do not resend it blindly);
+/// - `PHEROMONE_STATUS_BAD_ARGUMENT` (before sending) and `_NOT_DELIVERED` as
+///   `pheromone_deposit`.
+///
+/// `receipt` may be NULL; it is written only with an answer (OK or REJECTED). Blocks the calling thread until the receipt or the timeout: for a
+/// loop that deposits every step, `pheromone_deposit` does not wait.
+///
+/// Thread safety: not concurrently with any other call on this handle.
+///
+/// # Safety
+/// `field` is a live handle; `deposit` is valid for reads; `receipt` is NULL or valid for
+/// writes.
+#[no_mangle]
+pub unsafe extern "C" fn pheromone_deposit_confirmed(
+    field: *mut PheromoneField,
+    deposit: *const PheromoneDeposit,
+    timeout_ns: u64,
+    receipt: *mut PheromoneReceipt,
+) -> PheromoneStatus {
+    guard(|| {
+        // SAFETY: forwarded from this function's contract.
+        let f = unsafe { arg_mut(field, "field") }?;
+        // SAFETY: forwarded from this function's contract.
+        let d = unsafe { arg(deposit, "deposit") }?;
+        let mut got = PheromoneReceipt::default();
+        let result = f.deposit_confirmed(d, timeout_ns, &mut got);
+        let answered = matches!(result, Ok(()) | Err(Failure(PheromoneStatus::Rejected)));
+        // Without an answer (timeout, not delivered, a bad argument) the receipt is untouched.
+        if answered && !receipt.is_null() {
+            // SAFETY: non-null, valid for writes per this function's contract.
+            unsafe { receipt.write(got) };
+        }
+        result
+    })
+}
+
 /// Sends seed 000's uncertainty-aware deposit for a pose estimate, as the Rust depositor does:
 /// the ellipse of the pose's Σxy block, amount τ (γ = τ / det Σxy ≤ γmax, computed by the
 /// field), cut at z_rng. A pose with a non-finite number or a covariance that is not symmetric

@@ -8,7 +8,7 @@ use std::time::Duration;
 use field::messages::FrameHeader;
 use field::sample::FrameView;
 use field::sample::SamplePose;
-use field::shm::{DepositPublisher, FieldReader, Svc, WaitPolicy};
+use field::shm::{DepositPublisher, FieldReader, Receipt, Svc, WaitPolicy};
 use field::{DepositMsg, KernelKind};
 use iceoryx2::prelude::*;
 
@@ -16,8 +16,9 @@ use crate::borrowed::Borrowed;
 use crate::error::{bail, fail, from_shm, Failure};
 use crate::types::{
     PheromoneAttachOptions, PheromoneDeposit, PheromoneEllipseParams, PheromoneFrameView,
-    PheromonePose, PheromonePoseEstimate, PheromoneStatus, PheromoneWaitPolicy,
-    PHEROMONE_LAYOUT_VERSION, PHEROMONE_MAX_CHANNELS, PHEROMONE_WAIT_BUSY_POLL,
+    PheromonePose, PheromonePoseEstimate, PheromoneReceipt, PheromoneStatus, PheromoneWaitPolicy,
+    PHEROMONE_LAYOUT_VERSION, PHEROMONE_MAX_CHANNELS, PHEROMONE_RECEIPT_APPLIED,
+    PHEROMONE_RECEIPT_FORWARDED, PHEROMONE_RECEIPT_REJECTED, PHEROMONE_WAIT_BUSY_POLL,
     PHEROMONE_WAIT_EVENT, PHEROMONE_WAIT_SPIN,
 };
 
@@ -253,7 +254,51 @@ impl PheromoneField {
         self.send(msg)
     }
 
-    fn send(&mut self, msg: DepositMsg) -> Result<(), Failure> {
+    /// Sends a deposit and waits at most `timeout_ns` for the field's receipt, written to
+    /// `out` when one came (also when the field refused the deposit: `Rejected`).
+    pub fn deposit_confirmed(
+        &mut self,
+        d: &PheromoneDeposit,
+        timeout_ns: u64,
+        out: &mut PheromoneReceipt,
+    ) -> Result<(), Failure> {
+        let msg = deposit_msg(d)?;
+        self.check_channel(&msg)?;
+        let p = self.publisher()?;
+        let receipt = p
+            .send_confirmed(msg, Duration::from_nanos(timeout_ns))
+            .map_err(|e| from_shm("deposit", &e))?;
+        let (sequence, status, reason) = match receipt {
+            Receipt::Applied { sequence } => (sequence, PHEROMONE_RECEIPT_APPLIED, None),
+            Receipt::Forwarded => (0, PHEROMONE_RECEIPT_FORWARDED, None),
+            Receipt::Rejected { sequence, reason } => {
+                (sequence, PHEROMONE_RECEIPT_REJECTED, Some(reason))
+            }
+            Receipt::Flushed { .. } => bail!(
+                PheromoneStatus::Internal,
+                "field '{}' answered a deposit as a flush",
+                self.name
+            ),
+        };
+        *out = PheromoneReceipt {
+            sequence,
+            status,
+            reason: reason.map_or(0, |r| r as u32),
+        };
+        if let Some(r) = reason {
+            bail!(
+                PheromoneStatus::Rejected,
+                "field '{}' refused the deposit in frame {sequence}: {} (reason {}); nothing was \
+                 applied",
+                self.name,
+                r.name(),
+                r as u32
+            );
+        }
+        Ok(())
+    }
+
+    fn check_channel(&self, msg: &DepositMsg) -> Result<(), Failure> {
         if let Some(f) = self.reader.frame() {
             if msg.channel >= f.header.channels {
                 bail!(
@@ -265,13 +310,23 @@ impl PheromoneField {
                 );
             }
         }
-        let Some(p) = self.deposit.as_mut() else {
-            bail!(
+        Ok(())
+    }
+
+    fn publisher(&mut self) -> Result<&mut DepositPublisher, Failure> {
+        match self.deposit.as_mut() {
+            Some(p) => Ok(p),
+            None => bail!(
                 BAD,
                 "field '{}' was attached without deposits (options.deposits = 0)",
                 self.name
-            );
-        };
+            ),
+        }
+    }
+
+    fn send(&mut self, msg: DepositMsg) -> Result<(), Failure> {
+        self.check_channel(&msg)?;
+        let p = self.publisher()?;
         p.send(msg).map_err(|e| from_shm("deposit", &e))
     }
 }

@@ -47,6 +47,31 @@ pub enum PheromoneStatus {
     /// A bug in the library was caught at the boundary (a Rust panic); the handle should be
     /// detached.
     Internal = 9,
+    /// `pheromone_deposit_confirmed`: the field refused the deposit (by its own checks, e.g.
+    /// outside its grid); the receipt's `reason` and the last error say why. Nothing was applied.
+    Rejected = 10,
+}
+
+/// `PheromoneReceipt::status`: the deposit is in frame `sequence`.
+pub const PHEROMONE_RECEIPT_APPLIED: u32 = 0;
+/// `PheromoneReceipt::status`: the field refused it in frame `sequence`, for `reason`.
+pub const PHEROMONE_RECEIPT_REJECTED: u32 = 1;
+/// `PheromoneReceipt::status`: the field is a mirror; it forwarded the deposit to its origin,
+/// which applies or refuses it there.
+pub const PHEROMONE_RECEIPT_FORWARDED: u32 = 3;
+
+/// The field's answer to `pheromone_deposit_confirmed` (its `DepositReceipt`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PheromoneReceipt {
+    /// The frame that applied (or refused) the deposit; 0 when forwarded.
+    pub sequence: u64,
+    /// `PHEROMONE_RECEIPT_APPLIED`, `_REJECTED` or `_FORWARDED`.
+    pub status: u32,
+    /// With `PHEROMONE_RECEIPT_REJECTED`, the field's reason code (the index of its counter in
+    /// the frame header: 0 non-finite, 1 covariance not PSD, 2 unknown channel, 3 unknown
+    /// kernel, 4 out of limits, 5 outside the grid, 6 negative on an unsigned channel); else 0.
+    pub reason: u32,
 }
 
 /// `PheromoneWaitPolicy::kind`: sleep on the frame event until the field notifies.

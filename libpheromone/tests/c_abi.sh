@@ -9,6 +9,8 @@
 #     across frames, and a C pose deposit is visible to `pheromone probe`;
 #   - that deposit equals the Rust depositor's for the same pose (`pheromone deposit` of the
 #     ellipse the depositor makes, on a twin field, read back by probe at 5 points);
+#   - confirmed deposits: applied in the frame the receipt names, refused with the field's reason
+#     (nothing applied), no receipt with a zero timeout;
 #   - the C example's attach/read/release/detach loop and the C++ test are clean under valgrind;
 #   - the C++ test (shared and static) reads probe's value zero-copy and deposits.
 # Needs cc, c++, cmake, pkg-config, valgrind and python3. Env: PHEROMONE_BIN (the `pheromone`
@@ -118,6 +120,10 @@ for p in "-0.5 1.0" "-0.3 1.1" "-0.6 0.8" "0.0 1.0" "-0.5 1.6"; do
     same_f32 "$va" "$vb" || { echo "at ($p): C deposit $va, Rust depositor's $vb" >&2; exit 1; }
 done
 echo "equal at 5 points"
+
+echo "-- confirmed deposits from C: applied in the receipt's frame, refused with the reason"
+"$work/abi_test" confirm "$a" 2.5 -1.0
+"$BIN" probe --field "$a" --x 2.5 --y -1.0 --above 0 --timeout 10 >/dev/null
 
 echo "-- valgrind: the C example's attach/read/release/detach loop"
 valgrind --error-exitcode=99 --leak-check=full --errors-for-leak-kinds=definite,indirect \

@@ -137,6 +137,24 @@ impl DepositPublisher {
         self.send_as(msg)
     }
 
+    /// Sends a deposit (stamped with this publisher's robot id) on the field's confirm service
+    /// and waits at most `timeout` for its receipt, as [`super::DepositClient::deposit`]: the
+    /// field's answer (applied in frame N, refused for a reason, or forwarded by a mirror), or
+    /// `SendError::Unconfirmed` (it may still be applied, once). A field without the confirm
+    /// service is `SendError::NoSubscriber` on it.
+    pub fn send_confirmed(
+        &mut self,
+        msg: DepositMsg,
+        timeout: Duration,
+    ) -> Result<super::Receipt, SendError> {
+        match &mut self.confirm {
+            Some(c) => c.deposit(msg, timeout),
+            None => Err(SendError::NoSubscriber {
+                service: self.names.deposit_confirm.clone(),
+            }),
+        }
+    }
+
     /// Sends a deposit with the robot ID it carries (a gateway that deposits for its clients);
     /// otherwise as [`send`](Self::send).
     pub fn send_as(&mut self, mut msg: DepositMsg) -> Result<(), SendError> {

@@ -4,6 +4,9 @@
  *   abi_test sample FIELD X,Y ...              prints "x y value" per point, from one frame
  *   abi_test frames FIELD X Y                  planes inside the shared-memory mapping, frame
  *                                              bytes changing, a pose deposit from C
+ *   abi_test confirm FIELD X Y                 confirmed deposits: applied in frame N (and
+ *                                              seen there), refused with the field's reason,
+ *                                              no receipt within a zero timeout
  *
  * Exits 0 when every check holds, 1 (with the reason on stderr) otherwise. */
 #include <inttypes.h>
@@ -242,11 +245,85 @@ static int run_frames(const char *name, float x, float y) {
     return failures ? 1 : 0;
 }
 
+/* Confirmed deposits: one at (x, y) is applied in the frame its receipt names, and that frame
+ * shows it; one far outside the grid is refused with reason 5 (outside_grid) and leaves the
+ * counter of applied deposits alone; with a zero timeout there is no receipt (TIMEOUT) and the
+ * receipt is left untouched. */
+static int run_confirm(const char *name, float x, float y) {
+    PheromoneField *h = attach(name);
+    const PheromoneWaitPolicy event = {PHEROMONE_WAIT_EVENT, 0};
+    PheromoneDeposit d = {0};
+    d.kernel = PHEROMONE_KERNEL_ELLIPSE;
+    d.x_m = x;
+    d.y_m = y;
+    d.amount = 0.05f;
+    d.cov_xx = 0.04f;
+    d.cov_yy = 0.04f;
+    d.range_m = 1.0f;
+    d.gamma_max = 100.0f;
+    PheromoneReceipt r = {0, 99, 99};
+    MUST(pheromone_deposit_confirmed(h, &d, 10 * SECOND_NS, &r));
+    CHECK(r.status == PHEROMONE_RECEIPT_APPLIED && r.sequence > 0 && r.reason == 0,
+          "receipt %u seq %" PRIu64 " reason %u", r.status, r.sequence, r.reason);
+    /* The frame named by the receipt (or a newer one) holds the deposit. */
+    PheromoneFrameView v;
+    for (int i = 0; i < 100; i++) {
+        pheromone_wait_frame(h, event, SECOND_NS);
+        MUST(pheromone_frame_borrow(h, &v));
+        uint64_t seq = v.sequence;
+        MUST(pheromone_frame_release(h));
+        if (seq >= r.sequence) break;
+    }
+    MUST(pheromone_frame_borrow(h, &v));
+    CHECK(v.sequence >= r.sequence, "frame %" PRIu64 " < receipt's %" PRIu64, v.sequence,
+          r.sequence);
+    float value = 0.0f;
+    MUST(pheromone_sample_value(h, 0, x, y, &value));
+    CHECK(value > 0.0f, "the value at the applied deposit is %g", value);
+    uint64_t applied = v.deposits_applied;
+    MUST(pheromone_frame_release(h));
+
+    d.x_m = 1000.0f;
+    PheromoneReceipt refused = {0, 99, 99};
+    PheromoneStatus s = pheromone_deposit_confirmed(h, &d, 10 * SECOND_NS, &refused);
+    CHECK(s == PHEROMONE_STATUS_REJECTED && says("outside_grid"), "outside: %d %s", (int)s,
+          pheromone_last_error());
+    CHECK(refused.status == PHEROMONE_RECEIPT_REJECTED && refused.reason == 5 &&
+              refused.sequence >= r.sequence,
+          "refused receipt %u reason %u seq %" PRIu64, refused.status, refused.reason,
+          refused.sequence);
+    CHECK(pheromone_deposit_confirmed(h, &d, 10 * SECOND_NS, NULL) == PHEROMONE_STATUS_REJECTED,
+          "a NULL receipt is allowed");
+    pheromone_wait_frame(h, event, SECOND_NS);
+    MUST(pheromone_frame_borrow(h, &v));
+    CHECK(v.deposits_applied == applied, "a refused deposit was applied: %" PRIu64 " -> %" PRIu64,
+          applied, v.deposits_applied);
+    MUST(pheromone_frame_release(h));
+
+    d.x_m = x;
+    d.amount = NAN;
+    s = pheromone_deposit_confirmed(h, &d, SECOND_NS, &r);
+    CHECK(s == PHEROMONE_STATUS_BAD_ARGUMENT && says("amount = NaN"), "NaN: %d %s", (int)s,
+          pheromone_last_error());
+    d.amount = 0.01f;
+    PheromoneReceipt untouched = {7, 77, 777};
+    s = pheromone_deposit_confirmed(h, &d, 0, &untouched);
+    CHECK(s == PHEROMONE_STATUS_TIMEOUT, "zero timeout: %d %s", (int)s, pheromone_last_error());
+    CHECK(untouched.sequence == 7 && untouched.status == 77 && untouched.reason == 777,
+          "the receipt was written without an answer");
+    MUST(pheromone_field_detach(h));
+    if (failures == 0) printf("confirm: applied in frame %" PRIu64 ", refused (reason 5): ok\n",
+                              r.sequence);
+    return failures ? 1 : 0;
+}
+
 int main(int argc, char **argv) {
     if (argc >= 4 && strcmp(argv[1], "errors") == 0) return run_errors(argv[2], argv[3]);
     if (argc >= 3 && strcmp(argv[1], "sample") == 0) return run_sample(argv[2], argc - 3, argv + 3);
     if (argc == 5 && strcmp(argv[1], "frames") == 0)
         return run_frames(argv[2], strtof(argv[3], NULL), strtof(argv[4], NULL));
-    fprintf(stderr, "usage: abi_test errors MISSING LIVE | sample FIELD X,Y... | frames FIELD X Y\n");
+    if (argc == 5 && strcmp(argv[1], "confirm") == 0)
+        return run_confirm(argv[2], strtof(argv[3], NULL), strtof(argv[4], NULL));
+    fprintf(stderr, "usage: abi_test errors MISSING LIVE | sample FIELD X,Y... | frames FIELD X Y | confirm FIELD X Y\n");
     return 2;
 }

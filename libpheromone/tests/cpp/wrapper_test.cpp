@@ -64,6 +64,24 @@ int main(int argc, char** argv) {
       after = field.borrow().value(0, x + 0.5f, y);
     }
     check(after > before, "the deposit never showed: " + std::to_string(after));
+    PheromoneDeposit d{};
+    d.kernel = PHEROMONE_KERNEL_ELLIPSE;
+    d.x_m = x + 0.5f;
+    d.y_m = y;
+    d.amount = 0.01f;
+    d.cov_xx = 0.02f;
+    d.cov_yy = 0.02f;
+    d.range_m = 1.0f;
+    d.gamma_max = 100.0f;
+    PheromoneReceipt r = field.deposit_confirmed(d, std::chrono::seconds(10));
+    check(r.status == PHEROMONE_RECEIPT_APPLIED && r.sequence > 0, "confirmed deposit receipt");
+    d.x_m = 1000.0f;
+    try {
+      field.deposit_confirmed(d, std::chrono::seconds(10));
+      check(false, "a deposit outside the grid was not refused");
+    } catch (const pheromone::Error& e) {
+      check(e.status() == PHEROMONE_STATUS_REJECTED, e.what());
+    }
     std::printf("wrapper: value %.9g equals probe's, deposit %.9g -> %.9g\n", expected, before,
                 after);
   } catch (const pheromone::Error& e) {
