@@ -263,9 +263,11 @@ def session_config(
 class FrameSubscriber:
     """Subscribes to `pheromone/<field>/frames` on a bridge; `recv` returns decoded frames.
 
-    Messages are queued as they arrive (the newest `queue` ones; older ones are dropped, as the
-    bridge itself drops frames for a slow consumer) and decoded by `recv`. A message the decoder
-    refuses is counted in `rejected`, its error kept in `last_error`, and skipped.
+    Messages are kept as they arrive, the newest `queue` ones (default 1: a slow consumer gets
+    the newest frame, never a backlog; older ones are dropped, as the bridge itself drops frames
+    for a slow network), and decoded by `recv`. A larger `queue` keeps that many, for a consumer
+    that wants every frame of a burst. A message the decoder refuses is counted in `rejected`,
+    its error kept in `last_error`, and skipped.
     """
 
     def __init__(
@@ -273,11 +275,13 @@ class FrameSubscriber:
         connect: Union[str, Sequence[str]],
         field: str = "main",
         timeout_s: float = 5.0,
-        queue: int = 8,
+        queue: int = 1,
         mode: str = "client",
     ):
         import zenoh
 
+        if queue < 1:
+            raise ValueError(f"queue = {queue}: must be at least 1")
         self.field = field
         self.rejected = 0
         self.last_error: Optional[WireError] = None

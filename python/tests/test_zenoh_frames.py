@@ -17,6 +17,7 @@ import signal
 import socket
 import struct
 import subprocess
+import time
 
 import numpy as np
 import pytest
@@ -178,6 +179,42 @@ def test_bridge_frames_decode_in_python_to_the_fields_block_means(start_field, s
     assert re.search(r"^cell_size_m = 0\.1", toml, re.M)
 
     _corrupted_messages_are_refused(raws[0])
+
+
+def test_bridge_frames_are_sent_once_each_and_a_slow_consumer_gets_the_newest(start_field,
+                                                                             start_bridge):
+    """`--frames` as documented: each sequence at most once (the bridge used to resend the held
+    frame in rounds without a new one), and a consumer that reads one frame a second is never
+    served a backlog: the frame it gets is at most a few ticks behind the field."""
+    # Frames held 100 ms, rounds of the bridge every 20 ms at most, --rate-hz above the tick rate.
+    f = start_field("zfs", "--tick-hz", "10")
+    endpoint = start_bridge(f.name, "--frames", "--rate-hz", "50")
+    with zf.FrameSubscriber(endpoint, field=f.name, timeout_s=10, queue=1024) as sub:
+        first = sub.recv(timeout_s=20)
+        assert first is not None, "no frame from the bridge in 20 s"
+        seqs = [first.sequence]
+        for _ in deadline_loop(30, "30 frames from the bridge"):
+            fr = sub.recv(timeout_s=1.0)
+            if fr is not None:
+                seqs.append(fr.sequence)
+            if len(seqs) >= 30:
+                break
+    assert len(seqs) == len(set(seqs)), f"sequences sent more than once: {seqs}"
+    assert seqs == sorted(seqs), seqs
+
+    with pheromone.Field.attach(f.name, timeout_s=10) as field, \
+            zf.FrameSubscriber(endpoint, field=f.name, timeout_s=10) as slow:
+        lags = []
+        for _ in range(3):
+            fr = slow.recv(timeout_s=20)
+            assert fr is not None, "no frame from the bridge in 20 s"
+            field.wait_frame(1.0)
+            with field.frame() as newest:
+                lags.append(newest.header.sequence - fr.sequence)
+            # The consumer's own work: one frame a second, while 10 a second arrive.
+            time.sleep(1.0)
+    # 10 frames arrived between two reads; the one read is the newest (a tick or two old).
+    assert all(0 <= lag <= 5 for lag in lags), f"frames behind the field: {lags}"
 
 
 def _corrupted_messages_are_refused(raw):

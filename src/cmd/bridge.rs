@@ -24,8 +24,10 @@ pub struct BridgeArgs {
     /// The field to bridge (it must run on this host, in this iceoryx2 domain).
     #[arg(long, default_value = "main")]
     pub field: String,
-    /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).
-    #[arg(long, value_name = "ENDPOINT", required = true)]
+    /// Zenoh endpoint to listen on (repeatable). Loopback by default: mirrors on other hosts
+    /// need an address they reach, e.g. tcp/0.0.0.0:7447 (every interface) — the link has no
+    /// authentication or encryption, so only on a network you trust.
+    #[arg(long, value_name = "ENDPOINT", default_value = "tcp/127.0.0.1:7447")]
     pub listen: Vec<String>,
     /// Publish a frame checksum every N frames (sequence numbers divisible by N).
     #[arg(long, value_name = "N", default_value_t = 10)]

@@ -87,6 +87,8 @@ pub struct Bridge {
     last_checksum: u64,
     last_keyframe: Instant,
     last_frame: Instant,
+    /// The (epoch, sequence) of the last frame put on `pheromone/F/frames`.
+    last_frame_sent: Option<(u64, u64)>,
     pub stats: BridgeStats,
 }
 
@@ -164,6 +166,7 @@ impl Bridge {
             last_checksum: u64::MAX,
             last_keyframe: Instant::now(),
             last_frame: Instant::now() - Duration::from_secs(3600),
+            last_frame_sent: None,
             stats: BridgeStats::default(),
         })
     }
@@ -250,8 +253,11 @@ impl Bridge {
                 puts.push((1, codec::encode_keyframe(epoch, &h, cells)));
             }
             if let Some(f) = self.o.frames {
-                if self.last_frame.elapsed().as_secs_f64() * f.rate_hz >= 1.0 {
+                // Each frame once: a round without a new frame sends nothing.
+                let new = self.last_frame_sent != Some((epoch, h.sequence));
+                if new && self.last_frame.elapsed().as_secs_f64() * f.rate_hz >= 1.0 {
                     self.last_frame = Instant::now();
+                    self.last_frame_sent = Some((epoch, h.sequence));
                     puts.push((2, codec::encode_frame(epoch, &h, cells, f.downsample)));
                 }
             }
