@@ -217,6 +217,29 @@ pub struct MirrorState {
 // repr(C): numbers only.
 crate::wire_type!(MirrorState, "MirrorState", size = 40, align = 8);
 
+/// How well the field keeps its period (blackboard `pheromone/F/timing`, written after every
+/// frame), for `pheromone list` and monitors on its host: the run's totals so far.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(C)]
+pub struct FieldTiming {
+    /// Frames published by this run.
+    pub ticks: u64,
+    /// Wall-time ticks that started more than the slack after their deadline.
+    pub missed_deadlines: u64,
+    /// The latest tick start after its deadline (ns); `u64::MAX` while no tick had a deadline
+    /// (a lockstep field, or none yet).
+    pub max_lateness_ns: u64,
+    /// The longest time between two published frames (ns).
+    pub longest_gap_ns: u64,
+    /// The longest tick compute (ns).
+    pub max_compute_ns: u64,
+    /// A tick later than this after its deadline is missed (ns).
+    pub slack_ns: u64,
+}
+
+// repr(C): numbers only.
+crate::wire_type!(FieldTiming, "FieldTiming", size = 48, align = 8);
+
 /// A simulation clock tick: the world publishes one per step; a field run with `--clock` ticks
 /// once per message instead of on wall time (lockstep simulation).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

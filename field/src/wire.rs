@@ -167,6 +167,8 @@ pub struct FieldServices {
     pub config: String,
     /// A mirror's state (blackboard, [`crate::messages::MirrorState`]); only mirrors have it.
     pub mirror: String,
+    /// The field's tick timing (blackboard, [`crate::messages::FieldTiming`]).
+    pub timing: String,
 }
 
 impl FieldServices {
@@ -181,6 +183,7 @@ impl FieldServices {
             inputs: format!("pheromone/{field}/inputs"),
             config: format!("pheromone/{field}/config"),
             mirror: format!("pheromone/{field}/mirror"),
+            timing: format!("pheromone/{field}/timing"),
         }
     }
 }

@@ -8,7 +8,8 @@ use super::seconds;
 
 /// List the fields running on this host: name, grid, channels, cell size, the tick rate
 /// measured over --window-s and the newest sequence, readers (subscribers of the frame
-/// service) and depositors (publishers of the deposit service), and whether frames still come
+/// service) and depositors (publishers of the deposit service), missed deadlines and the
+/// longest gap between two frames (ms) since the field started, and whether frames still come
 /// ("alive") or not ("stale": the field died, or it is paused waiting for its clock, or it is a
 /// mirror whose origin went silent: then it says for how long).
 #[derive(Args, Debug)]
@@ -38,8 +39,17 @@ pub fn run(a: ListArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{:<24} {:>11} {:>3} {:>8} {:>9} {:>10} {:>7} {:>10}  state",
-        "field", "grid", "ch", "cell_m", "tick_hz", "sequence", "readers", "depositors"
+        "{:<24} {:>11} {:>3} {:>8} {:>9} {:>10} {:>7} {:>10} {:>6} {:>8}  state",
+        "field",
+        "grid",
+        "ch",
+        "cell_m",
+        "tick_hz",
+        "sequence",
+        "readers",
+        "depositors",
+        "missed",
+        "gap_ms"
     );
     for f in &fields {
         println!("{}", row(f));
@@ -55,8 +65,16 @@ fn row(f: &FieldInfo) -> String {
         (false, true, _) => "stale (no frame in the window)".to_string(),
         (false, false, _) => "stale (no live publisher)".to_string(),
     };
+    // Missed deadlines and the longest gap between frames, when the field keeps them.
+    let (missed, gap_ms) = match &f.timing {
+        Some(t) => (
+            t.missed_deadlines.to_string(),
+            format!("{:.1}", t.longest_tick_gap_ms),
+        ),
+        None => ("-".to_string(), "-".to_string()),
+    };
     format!(
-        "{:<24} {:>11} {:>3} {:>8} {:>9.1} {:>10} {:>7} {:>10}  {state}",
+        "{:<24} {:>11} {:>3} {:>8} {:>9.1} {:>10} {:>7} {:>10} {missed:>6} {gap_ms:>8}  {state}",
         f.name,
         format!("{}×{}", f.width, f.height),
         f.channels,

@@ -58,7 +58,7 @@ fn sched_fifo_without_the_permission_is_refused_naming_it_unless_best_effort() {
 }
 
 #[test]
-fn a_tick_held_up_on_purpose_is_a_missed_deadline_in_the_summary() {
+fn a_tick_held_up_on_purpose_is_a_missed_deadline_in_list_and_the_summary() {
     let name = unique("rt-late");
     let field = Proc::spawn(
         &Cmd::field(&name)
@@ -94,6 +94,32 @@ fn a_tick_held_up_on_purpose_is_a_missed_deadline_in_the_summary() {
     std::thread::sleep(Duration::from_millis(300));
     kill(pid, Signal::SIGCONT).unwrap();
     ticked_past(before + 5);
+    // `pheromone list` shows them while the field runs.
+    let o = run(&["list", "--json", "--window-s", "0.2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let listed = json(&o);
+    let f = listed["fields"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|f| f["name"] == name.as_str())
+        .cloned()
+        .unwrap_or_else(|| panic!("{name} not listed: {listed}"));
+    let t = &f["timing"];
+    assert!(t["missed_deadlines"].as_u64().unwrap() >= 1, "{f}");
+    assert!(t["longest_tick_gap_ms"].as_f64().unwrap() >= 250.0, "{f}");
+    assert!(t["max_tick_lateness_ms"].as_f64().unwrap() >= 50.0, "{f}");
+    assert_eq!(t["deadline_slack_ms"], 50.0, "{f}");
+    let text = run(&["list", "--window-s", "0.2"]);
+    let row = stdout(&text)
+        .lines()
+        .find(|l| l.starts_with(name.as_str()))
+        .map(str::to_string)
+        .unwrap_or_else(|| panic!("no row for {name}: {}", stdout(&text)));
+    let columns: Vec<&str> = row.split_whitespace().collect();
+    // field grid ch cell_m tick_hz sequence readers depositors missed gap_ms state
+    assert!(columns[8].parse::<u64>().unwrap() >= 1, "{row}");
+    assert!(columns[9].parse::<f64>().unwrap() >= 250.0, "{row}");
     field.interrupt();
     let out = field.wait_exit(Duration::from_secs(60));
     assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));

@@ -179,6 +179,7 @@ pub fn run_field(
     };
     let slack = o.deadline_slack.unwrap_or(period / 10);
     let mut stats = TickStats::new(longest_gap_ns, slack);
+    stats.keep_timing_board(node, &o.name);
     let deposit_wake = match (wakes_on_deposit, deposit_wake) {
         (Some(min_interval), None) => Some(DepositWake::new(node, &o.name, config, min_interval)?),
         (_, wake) => wake,

@@ -4,7 +4,8 @@
 use std::time::{Duration, Instant};
 
 use crate::deposit::RejectReason;
-use crate::shm::{cleanup_dead_nodes, Svc, TickOutcome};
+use crate::messages::FieldTiming;
+use crate::shm::{cleanup_dead_nodes, Svc, TickOutcome, TimingWriter};
 use crate::Stepper;
 use iceoryx2::node::Node;
 
@@ -22,6 +23,8 @@ pub(crate) struct TickStats {
     /// When the last frame was published (the start, before the first).
     pub(crate) last_frame_at: Instant,
     window: Window,
+    /// The totals for `pheromone list` (`pheromone/F/timing`), updated after every frame.
+    board: Option<TimingWriter>,
 }
 
 impl TickStats {
@@ -37,6 +40,19 @@ impl TickStats {
             max_lateness_ns: None,
             last_frame_at: Instant::now(),
             window: Window::new(Instant::now()),
+            board: None,
+        }
+    }
+
+    /// Keeps the totals on field `field`'s timing board from now on. Monitoring only: a field
+    /// that cannot create it (e.g. a dead primary's is still there) runs without it, and says so.
+    pub(crate) fn keep_timing_board(&mut self, node: &Node<Svc>, field: &str) {
+        cleanup_dead_nodes(node);
+        self.board = TimingWriter::create(node, field)
+            .map_err(|e| eprintln!("field '{field}': `pheromone list` will show no timing: {e}"))
+            .ok();
+        if let Some(b) = &self.board {
+            b.set(self.timing());
         }
     }
 
@@ -57,6 +73,21 @@ impl TickStats {
         self.ticks += 1;
         self.max_compute_ns = self.max_compute_ns.max(out.compute_ns);
         self.window.add(out, gap_ns);
+        if let Some(b) = &self.board {
+            b.set(self.timing());
+        }
+    }
+
+    /// The run's timing so far, as `pheromone list` reads it (`pheromone/F/timing`).
+    pub(crate) fn timing(&self) -> FieldTiming {
+        FieldTiming {
+            ticks: self.ticks,
+            missed_deadlines: self.missed_deadlines,
+            max_lateness_ns: self.max_lateness_ns.unwrap_or(u64::MAX),
+            longest_gap_ns: self.longest_gap_ns,
+            max_compute_ns: self.max_compute_ns,
+            slack_ns: self.slack.as_nanos().try_into().unwrap_or(u64::MAX),
+        }
     }
 
     /// Once a second: frees what clients killed since the last second held (their ports and

@@ -1,63 +1,34 @@
-//! A mirror's state on its host (`pheromone/F/mirror`, an iceoryx2 blackboard with one entry,
+//! A mirror's state on its host (`pheromone/F/mirror`, a one-value blackboard (`board`):
 //! [`MirrorState`]): written by the mirror each round, read by `pheromone list`, `probe` and
 //! `export` without the mirror sending anything, so a mirror whose origin went silent is still
 //! seen, and seen as stale.
 
-use iceoryx2::port::writer::{EntryHandleMut, Writer};
 use iceoryx2::prelude::*;
-use iceoryx2::service::builder::blackboard::BlackboardOpenError;
-use iceoryx2::service::port_factory::blackboard::PortFactory;
 
-use super::{now_ns, service_err, service_name, AttachError, FieldServices, StartError, Svc};
+use super::board::{read_board, Board};
+use super::{now_ns, AttachError, FieldServices, StartError, Svc};
 use crate::messages::MirrorState;
-
-/// The blackboard's one key.
-const KEY: u64 = 0;
-/// Readers at once (`list`, `probe`, `export`, views…).
-const MAX_READERS: usize = 64;
 
 /// The mirror's side: creates the blackboard and updates its entry.
 pub struct MirrorStateWriter {
-    // Dropped in this order: the entry, the writer port, the service.
-    entry: EntryHandleMut<Svc, u64, MirrorState>,
-    _writer: Writer<Svc, u64>,
-    _service: PortFactory<Svc, u64>,
+    board: Board<MirrorState>,
 }
 
 impl MirrorStateWriter {
     /// Creates field `field`'s mirror blackboard, stale until [`Self::set`] says otherwise.
     pub fn create(node: &Node<Svc>, field: &str) -> Result<Self, StartError> {
         let names = FieldServices::new(field)?;
-        let name = &names.mirror;
-        let service = node
-            .service_builder(&service_name(name)?)
-            .blackboard_creator::<u64>()
-            .max_readers(MAX_READERS)
-            .add::<MirrorState>(
-                KEY,
-                MirrorState {
-                    stale: 1,
-                    ..MirrorState::default()
-                },
-            )
-            .create()
-            .map_err(|e| service_err(name, "create", e))?;
-        let writer = service
-            .writer_builder()
-            .create()
-            .map_err(|e| service_err(name, "create writer", e))?;
-        let entry = writer
-            .entry::<MirrorState>(&KEY)
-            .map_err(|e| service_err(name, "open the entry", e))?;
+        let initial = MirrorState {
+            stale: 1,
+            ..MirrorState::default()
+        };
         Ok(Self {
-            entry,
-            _writer: writer,
-            _service: service,
+            board: Board::create(node, &names.mirror, initial)?,
         })
     }
 
     pub fn set(&self, state: MirrorState) {
-        self.entry.update_with_copy(state);
+        self.board.set(state);
     }
 }
 
@@ -104,25 +75,7 @@ impl MirrorInfo {
 /// Field `field`'s mirror state, or `None` when the field is not a mirror (no blackboard).
 pub fn mirror_info(node: &Node<Svc>, field: &str) -> Result<Option<MirrorInfo>, AttachError> {
     let names = FieldServices::new(field)?;
-    let name = &names.mirror;
-    let service = match node
-        .service_builder(&service_name(name)?)
-        .blackboard_opener::<u64>()
-        .open()
-    {
-        Ok(s) => s,
-        Err(BlackboardOpenError::DoesNotExist) => return Ok(None),
-        Err(e) => return Err(service_err(name, "open", e).into()),
-    };
-    let reader = service
-        .reader_builder()
-        .create()
-        .map_err(|e| service_err(name, "create reader", e))?;
-    let entry = reader
-        .entry::<MirrorState>(&KEY)
-        .map_err(|e| service_err(name, "open the entry", e))?;
-    let state = *entry.get();
-    Ok(Some(MirrorInfo::of(state, now_ns())))
+    Ok(read_board::<MirrorState>(node, &names.mirror)?.map(|s| MirrorInfo::of(s, now_ns())))
 }
 
 #[cfg(test)]

@@ -36,6 +36,7 @@
 //! `error`, all re-exported here; this file holds what they share (names, nodes, service
 //! builders, frame pool sizing).
 
+mod board;
 mod config;
 mod confirm;
 mod deposit;
@@ -46,6 +47,7 @@ mod reader;
 mod server;
 mod standby;
 mod survey;
+mod timing;
 mod writer;
 
 use std::time::Duration;
@@ -76,6 +78,7 @@ pub use reader::{FieldReader, Frame, ParseWaitPolicyError, WaitPolicy};
 pub use server::{FieldServer, TickOutcome};
 pub use standby::{Standby, StandbyEvent, Takeover};
 pub use survey::{field_names, survey, FieldInfo};
+pub use timing::{field_timing, TimingInfo, TimingWriter};
 pub use writer::FrameWriter;
 
 /// iceoryx2 service flavour used everywhere: inter-process.

@@ -8,6 +8,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern;
 
 use super::mirror_state::{mirror_info, MirrorInfo};
+use super::timing::{field_timing, TimingInfo};
 use super::{
     service_err, AttachError, FieldReader, FieldWatch, Iceoryx, ServiceError, ShmError, Svc,
 };
@@ -41,6 +42,9 @@ pub struct FieldInfo {
     /// The field is a mirror of a field on another host (`field --mirror`): its own account
     /// of whether it follows its origin (`null` for a field that is not a mirror).
     pub mirror: Option<MirrorInfo>,
+    /// How well the field keeps its period: missed deadlines, the latest tick start, the
+    /// longest gap between frames (`null` for a field that keeps no timing, e.g. a mirror).
+    pub timing: Option<TimingInfo>,
 }
 
 /// Names of the fields whose frame service exists on this host, sorted.
@@ -97,6 +101,7 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
         let status = watch.status();
         let publisher_alive = reader.field_alive();
         let mirror = mirror_info(node, &name)?;
+        let timing = field_timing(node, &name)?;
         let (Some(frame), Some((first_seq, first_stamp_ns, first_at))) = (reader.frame(), first)
         else {
             continue;
@@ -127,6 +132,7 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
             alive: ticks > 0,
             publisher_alive,
             mirror,
+            timing,
         });
     }
     Ok(out)
