@@ -4,7 +4,7 @@ mod cmd;
 
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 /// A zero-copy shared-memory pheromone field for robots on one host.
 ///
@@ -72,6 +72,9 @@ enum Command {
     /// One peer process of `pheromone bench` (started by it).
     #[command(hide = true)]
     BenchPeer(cmd::bench::BenchPeerArgs),
+    /// Every value-taking flag of every subcommand with its type (for the flag-fuzzing test).
+    #[command(name = "__flags", hide = true)]
+    Flags,
 }
 
 fn main() -> ExitCode {
@@ -107,6 +110,7 @@ fn main() -> ExitCode {
         Command::Record(a) => cmd::ros2::run_record(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::BenchPeer(a) => cmd::bench::run_peer(a),
+        Command::Flags => cmd::flags::print(Cli::command()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

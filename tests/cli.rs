@@ -3,6 +3,7 @@
 mod bench;
 mod confirm;
 mod crash;
+mod flags;
 mod gateway;
 mod graph;
 mod harness;

@@ -5,6 +5,7 @@ pub mod bridge;
 pub mod deposit;
 pub mod export;
 pub mod field;
+pub mod flags;
 pub mod gateway;
 pub mod graph;
 pub mod list;
@@ -137,6 +138,121 @@ pub fn seconds_or_zero(flag: &str, v: f64) -> anyhow::Result<std::time::Duration
             num(v)
         )))
     }
+}
+
+/// The largest magnitude a numeric flag may give where nothing smaller bounds it (a coordinate
+/// in metres, an amount): beyond it the value is a typo, and `f32` would lose every decimal.
+pub const MAX_MAGNITUDE: f64 = 1e9;
+
+/// A numeric flag's accepted values: `lo ≤ v ≤ hi`, or `lo < v ≤ hi` when `lo_open`; never NaN
+/// or infinite. Its parsers give clap the message (clap prints `invalid value 'V' for
+/// '--flag <V>': must be …` and exits with status 2).
+#[derive(Clone, Copy, Debug)]
+struct Bounds {
+    lo: f64,
+    hi: f64,
+    lo_open: bool,
+}
+
+impl Bounds {
+    fn check(self, s: &str) -> Result<f64, String> {
+        let v: f64 = s
+            .trim()
+            .parse()
+            .map_err(|_| format!("not a number; {}", self.expected()))?;
+        let above_lo = if self.lo_open {
+            v > self.lo
+        } else {
+            v >= self.lo
+        };
+        if v.is_finite() && above_lo && v <= self.hi {
+            Ok(v)
+        } else {
+            Err(self.expected())
+        }
+    }
+
+    fn expected(self) -> String {
+        if self.lo_open {
+            format!(
+                "must be a number above {}, at most {}",
+                num(self.lo),
+                num(self.hi)
+            )
+        } else {
+            format!("must be a number from {} to {}", num(self.lo), num(self.hi))
+        }
+    }
+
+    /// As `f32`: a value that rounds to 0 is refused where 0 is.
+    fn check_f32(self, s: &str) -> Result<f32, String> {
+        let v = self.check(s)? as f32;
+        if self.lo_open && v <= self.lo as f32 {
+            return Err(self.expected());
+        }
+        Ok(v)
+    }
+}
+
+/// A clap value parser: a finite `f64` from `lo` to `hi`.
+pub fn f64_in(lo: f64, hi: f64) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
+    let b = Bounds {
+        lo,
+        hi,
+        lo_open: false,
+    };
+    move |s| b.check(s)
+}
+
+/// A clap value parser: a finite `f64` above 0, at most `hi`.
+pub fn f64_pos(hi: f64) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
+    let b = Bounds {
+        lo: 0.0,
+        hi,
+        lo_open: true,
+    };
+    move |s| b.check(s)
+}
+
+/// A clap value parser: a finite `f32` from `lo` to `hi`.
+pub fn f32_in(lo: f64, hi: f64) -> impl Fn(&str) -> Result<f32, String> + Clone + Send + Sync {
+    let b = Bounds {
+        lo,
+        hi,
+        lo_open: false,
+    };
+    move |s| b.check_f32(s)
+}
+
+/// A clap value parser: a finite `f32` above 0, at most `hi`.
+pub fn f32_pos(hi: f64) -> impl Fn(&str) -> Result<f32, String> + Clone + Send + Sync {
+    let b = Bounds {
+        lo: 0.0,
+        hi,
+        lo_open: true,
+    };
+    move |s| b.check_f32(s)
+}
+
+/// A clap value parser: a positive number of seconds, at most `MAX_SECONDS`.
+pub fn secs() -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
+    f64_pos(MAX_SECONDS)
+}
+
+/// A clap value parser: a number of seconds from 0 to `MAX_SECONDS`.
+pub fn secs0() -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
+    f64_in(0.0, MAX_SECONDS)
+}
+
+/// A clap value parser: a finite `f32` of magnitude at most `MAX_MAGNITUDE` (a coordinate, an
+/// amount, a level).
+pub fn f32_any() -> impl Fn(&str) -> Result<f32, String> + Clone + Send + Sync {
+    f32_in(-MAX_MAGNITUDE, MAX_MAGNITUDE)
+}
+
+/// A clap value parser: a finite `f64` of magnitude at most `MAX_MAGNITUDE`.
+pub fn f64_any() -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
+    f64_in(-MAX_MAGNITUDE, MAX_MAGNITUDE)
 }
 
 #[cfg(test)]

@@ -29,13 +29,13 @@ pub struct SimArgs {
     #[arg(default_value = DEFAULT_SCENARIO)]
     pub scenario: String,
     /// Number of robots (the first N the scenario places).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=512), value_name = "N")]
     pub robots: Option<usize>,
     /// Seed of the run (world noise, the followers' random draws).
     #[arg(long, value_name = "S")]
     pub seed: Option<u64>,
     /// Simulated seconds (default: the scenario's duration_s).
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS")]
     pub duration: Option<f64>,
     /// Write heat maps (PNG, with the robots' true and estimated trajectories), a CSV per robot
     /// and metrics.json into this directory [default: pheromone-out/<SCENARIO>].
@@ -109,7 +109,7 @@ pub struct SimArgs {
     /// Run T trials (seeds S, S+1, …) with the strategy and with the other sector strategy
     /// (inverse vs uniform) and report mean, standard deviation and Welch's t of the
     /// exploration (scenarios with an exploration metric).
-    #[arg(long, value_name = "T")]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(2..=100_000), value_name = "T")]
     pub trials: Option<u32>,
     /// Run on a ROS map_server map (map.yaml + its PGM): its occupied cells replace the
     /// scenario's walls, and the field and the exploration sectors cover the map.
@@ -125,20 +125,20 @@ pub struct SimArgs {
     #[arg(long)]
     pub no_merge: bool,
     /// The communication radius R_C of --merge (m, finite and > 0).
-    #[arg(long, value_name = "R", allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f64_pos(1e6), value_name = "R", allow_negative_numbers = true)]
     pub rc_m: Option<f64>,
     /// EKF-SLAM localizers (the map of landmarks is not given to them).
     #[arg(long)]
     pub slam: bool,
     /// Seconds the whole run may take before it is stopped as failed (separate processes).
-    #[arg(long, default_value_t = 900.0, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), default_value_t = 900.0, value_name = "SECS")]
     pub timeout: f64,
     /// Seconds every process may take to start and join the run (separate processes)
     /// [default: 10 s + 0.5 s per process].
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS")]
     pub attach_timeout: Option<f64>,
     /// Seconds a lockstep step may make no progress before the run fails (separate processes).
-    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), default_value_t = 30.0, value_name = "SECS")]
     pub stall_timeout: f64,
 }
 
