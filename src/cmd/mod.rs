@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod bridge;
+pub mod check;
 pub mod deposit;
 pub mod export;
 pub mod field;

@@ -73,7 +73,7 @@ pub struct SweepArgs {
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024), value_name = "N")]
     pub jobs: Option<usize>,
     /// Directory for the files [default: pheromone-out/sweep-<SCENARIO>].
-    #[arg(long, value_name = "DIR")]
+    #[arg(long, value_name = "DIR", value_parser = super::check::out_dir)]
     pub out: Option<PathBuf>,
     /// Print sweep.json on stdout as well.
     #[arg(long)]

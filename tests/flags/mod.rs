@@ -679,3 +679,95 @@ fn every_numeric_flag_of_every_subcommand_refuses_values_outside_its_domain_with
         failures.join("\n")
     );
 }
+
+/// Addresses, endpoints, the iceoryx2 domain, output directories and files: each bad one is
+/// refused with exit status 2 naming the flag and the value, before anything starts (no run
+/// line, no field, no process).
+#[test]
+fn every_place_a_flag_names_is_checked_before_anything_starts() {
+    let dir = std::env::temp_dir().join(unique("fz-places"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("a-file");
+    std::fs::write(&file, b"x").unwrap();
+    let file = file.to_string_lossy().into_owned();
+    let under_file = format!("{file}/sub");
+    let dir_s = dir.to_string_lossy().into_owned();
+    let cases: Vec<(Vec<&str>, &str, &str)> = vec![
+        (vec!["list"], "--iox-domain", "a b"),
+        (vec!["sim", "trail", "--no-out"], "--view", "999.1.1.1:80"),
+        (vec!["sim", "trail", "--no-out"], "--ros2", "nonsense"),
+        (vec!["sim", "trail"], "--out", &file),
+        (vec!["sim", "trail"], "--out", &under_file),
+        (
+            vec!["sim", "trail", "--no-out"],
+            "--record",
+            "/nonexistent/x.mcap",
+        ),
+        (vec!["sweep", "ias-ss"], "--out", &file),
+        (
+            vec!["field", "--name", "fz-p"],
+            "--checkpoint",
+            "/nonexistent/cp",
+        ),
+        (vec!["field", "--name", "fz-p"], "--checkpoint", &dir_s),
+        (
+            vec!["field", "--name", "fz-p"],
+            "--mirror",
+            "zenoh:nonsense",
+        ),
+        (
+            vec!["field", "--name", "fz-p"],
+            "--mirror",
+            "tcp/127.0.0.1:7447",
+        ),
+        (vec!["gateway", "--field", "fz-p"], "--udp", "nonsense"),
+        (vec!["view", "--field", "fz-p"], "--listen", "nonsense"),
+        (vec!["bridge", "--field", "fz-p"], "--listen", "nonsense"),
+        (
+            vec!["bridge", "--field", "fz-p"],
+            "--listen",
+            "tcp/127.0.0.1:99999",
+        ),
+        (vec!["ros2", "--field", "fz-p"], "--connect", "tcp/"),
+        (vec!["ros2", "--field", "fz-p"], "--listen", "udp/host"),
+        (
+            vec!["record", "--field", "fz-p"],
+            "--mcap",
+            "/nonexistent/x.mcap",
+        ),
+        (
+            vec!["export", "--field", "fz-p"],
+            "--out",
+            "/nonexistent/x.npy",
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (head, flag, value) in &cases {
+        let mut argv: Vec<String> = head.iter().map(|s| s.to_string()).collect();
+        argv.push(format!("{flag}={value}"));
+        let o = run_bounded(&bin(), &dir, &argv);
+        let named = names_flag(&o.stderr, flag) && o.stderr.contains(value);
+        // Nothing started: no run line of `sim`, no field, no waiting for one.
+        let started = o.stderr.contains("field '") || o.stderr.contains("sim '");
+        if o.code != Some(2) || !named || started || o.stderr.contains("panicked") {
+            failures.push(format!(
+                "pheromone {}: exit {:?}: {}",
+                argv.join(" "),
+                o.code,
+                o.stderr.trim()
+            ));
+        }
+    }
+    // The inherited domain too.
+    let o = Command::new(bin())
+        .args(["list", "--window-s", "0.1"])
+        .env("PHEROMONE_IOX_DOMAIN", "a/b")
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    if o.status.code() != Some(2) || !err.contains("PHEROMONE_IOX_DOMAIN=a/b") {
+        failures.push(format!("PHEROMONE_IOX_DOMAIN=a/b: {:?}: {err}", o.status));
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
