@@ -224,10 +224,7 @@ fn field_threads_are_checked_and_a_threaded_ambient_field_ticks() {
             .argv());
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
         let e = stderr(&o);
-        assert!(
-            e.contains(&format!("invalid value '{bad}' for '--threads")) && e.contains("1..=256"),
-            "{e}"
-        );
+        assert!(e.contains(&format!("--threads {bad}")), "{e}");
     }
     let o = run(&Cmd::field(&unique("thr"))
         .grid(300, 200)

@@ -28,7 +28,7 @@ pub struct BridgeArgs {
     #[arg(long, value_name = "ENDPOINT", required = true, value_parser = super::check::zenoh_endpoint)]
     pub listen: Vec<String>,
     /// Publish a frame checksum every N frames (sequence numbers divisible by N).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_000_000), value_name = "N", default_value_t = 10)]
+    #[arg(long, value_parser = super::int::<u32>(1, 1_000_000), value_name = "N", default_value_t = 10)]
     pub checksum_every: u32,
     /// Seconds between two periodic keyframes (keyframes are also sent on request).
     #[arg(long, value_parser = super::secs(), value_name = "K", default_value_t = 5.0)]
@@ -40,7 +40,7 @@ pub struct BridgeArgs {
     #[arg(long, value_parser = super::f64_pos(1000.0), value_name = "R", default_value_t = 5.0, requires = "frames")]
     pub rate_hz: f64,
     /// Average N × N cell blocks into one with --frames.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096), value_name = "N", default_value_t = 1, requires = "frames")]
+    #[arg(long, value_parser = super::int::<u32>(1, 4096), value_name = "N", default_value_t = 1, requires = "frames")]
     pub downsample: u32,
     /// Seconds to wait for the field to appear.
     #[arg(long, value_parser = super::secs(), value_name = "SECS", default_value_t = 10.0)]

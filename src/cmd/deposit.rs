@@ -26,7 +26,7 @@ pub struct DepositArgs {
     #[arg(long, default_value_t = 0)]
     pub robot: u32,
     /// Channel index.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=63), default_value_t = 0)]
+    #[arg(long, value_parser = super::int::<u32>(0, 63), default_value_t = 0)]
     pub channel: u32,
     /// Kernel: ellipse, paper, saturating or z-shape.
     #[arg(long, default_value = "ellipse")]

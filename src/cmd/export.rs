@@ -31,7 +31,7 @@ pub struct ExportArgs {
     #[arg(long, value_name = "FILE", value_parser = super::check::out_file)]
     pub out: PathBuf,
     /// Channel of a map_server map.
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=63), default_value_t = 0)]
+    #[arg(long, value_parser = super::int::<usize>(0, 63), default_value_t = 0)]
     pub channel: usize,
     /// The value that becomes pixel 0 of a map [default: min(0, the channel's smallest)].
     #[arg(long, value_parser = super::f32_any(), allow_negative_numbers = true)]

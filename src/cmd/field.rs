@@ -54,10 +54,10 @@ pub struct FieldArgs {
     #[arg(long)]
     pub scenario: Option<String>,
     /// Grid width in cells [default: 512].
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65_536))]
+    #[arg(long, value_parser = super::int::<u32>(1, 65_536))]
     pub width: Option<u32>,
     /// Grid height in cells [default: 512].
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65_536))]
+    #[arg(long, value_parser = super::int::<u32>(1, 65_536))]
     pub height: Option<u32>,
     /// Cell size in metres [default: 0.05].
     #[arg(long, value_parser = super::f32_pos(1e6), value_name = "M")]
@@ -99,20 +99,20 @@ pub struct FieldArgs {
     #[arg(long)]
     pub signed: bool,
     /// Readers the frame service admits [default: 8].
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024))]
+    #[arg(long, value_parser = super::int::<usize>(1, 1024))]
     pub max_readers: Option<usize>,
     /// Deposit publishers the field admits [default: 64].
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=4096))]
+    #[arg(long, value_parser = super::int::<usize>(1, 4096))]
     pub max_depositors: Option<usize>,
     /// Deposits buffered between two ticks [default: 1024].
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1_048_576))]
+    #[arg(long, value_parser = super::int::<usize>(1, 1_048_576))]
     pub deposit_buffer: Option<usize>,
     /// Tick once per clock message of the simulated world NAME (lockstep simulation) instead of
     /// on wall time; the field stops when the world says it has finished.
     #[arg(long, value_name = "WORLD")]
     pub clock: Option<String>,
     /// Stop after this many ticks.
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1_000_000_000_000))]
+    #[arg(long, value_parser = super::int::<u64>(1, 1_000_000_000_000))]
     pub ticks: Option<u64>,
     /// Stop after this many seconds of wall time.
     #[arg(long, value_parser = super::secs0(), value_name = "SECS")]
@@ -147,16 +147,16 @@ pub struct FieldArgs {
     /// still read once and written once, and the frames are bit-identical to one thread's. Worth
     /// it for large grids with the ambient model; 1 (the default) keeps the tick on the field's
     /// own thread.
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=256), value_name = "N", default_value_t = 1)]
+    #[arg(long, value_parser = super::int::<usize>(1, 256), value_name = "N", default_value_t = 1)]
     pub threads: usize,
     /// Real-time scheduling: SCHED_FIFO at priority N (1–99) and every page locked in memory
     /// (mlockall, so the frame pool is faulted in before the first tick). Without CAP_SYS_NICE
     /// or a large enough RLIMIT_RTPRIO (and CAP_IPC_LOCK or RLIMIT_MEMLOCK) the field refuses
     /// to start and says which is missing, unless --rt-best-effort.
-    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99), value_name = "N")]
+    #[arg(long, value_parser = super::int::<i32>(1, 99), value_name = "N")]
     pub rt_priority: Option<i32>,
     /// With --rt-priority: run on this CPU only.
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=1023), value_name = "CPU", requires = "rt_priority")]
+    #[arg(long, value_parser = super::int::<usize>(0, 1023), value_name = "CPU", requires = "rt_priority")]
     pub rt_cpu: Option<usize>,
     /// With --rt-priority: start anyway without what the OS refuses, and say what it refused.
     #[arg(long, requires = "rt_priority")]

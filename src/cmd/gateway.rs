@@ -27,7 +27,7 @@ pub struct GatewayArgs {
     #[arg(long)]
     pub serial: Option<String>,
     /// Baud rate of --serial (a standard termios rate: 9600, 19200, 115200, …).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4_000_000), default_value_t = 9600, requires = "serial")]
+    #[arg(long, value_parser = super::int::<u32>(1, 4_000_000), default_value_t = 9600, requires = "serial")]
     pub baud: u32,
     /// Client IDs served, e.g. `1,2,7` or `1-20`; default 1–255 (ID 0 is not protected by the
     /// CRC's zero start value, see docs/gateway-wire.md). `ID@ADDR` (ADDR an IP address or
@@ -35,7 +35,7 @@ pub struct GatewayArgs {
     #[arg(long, value_delimiter = ',')]
     pub allow: Vec<String>,
     /// Requests per second each client may send (0 = unlimited).
-    #[arg(long, value_parser = super::f64_pos(1e6), default_value_t = 100.0)]
+    #[arg(long, value_parser = super::f64_in(0.0, 1e6), default_value_t = 100.0)]
     pub rate_hz: f64,
     /// Plateau c of the Z-shape deposit (m).
     #[arg(long, value_parser = super::f32_in(0.0, 1e6), default_value_t = 0.2)]

@@ -69,7 +69,7 @@ pub struct GraphArgs {
     #[arg(long, default_value = "graph")]
     pub name: String,
     /// Number of robot processes that take part (ids 1..=N).
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=512), value_name = "N")]
+    #[arg(long, value_parser = super::int::<usize>(1, 512), value_name = "N")]
     pub robots: usize,
     /// Strategy the robots use (recorded in the report): pheromone or shortest-path.
     #[arg(long, default_value = "pheromone")]
@@ -132,10 +132,10 @@ pub struct GraphRobotArgs {
     #[arg(long, default_value = "graph")]
     pub name: String,
     /// This robot's id (1..=N); robot k leaves the dock after (k − 1) × start_interval_s.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=512), value_name = "ID")]
+    #[arg(long, value_parser = super::int::<u32>(1, 512), value_name = "ID")]
     pub robot: u32,
     /// Number of robots of the run.
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=512), value_name = "N")]
+    #[arg(long, value_parser = super::int::<usize>(1, 512), value_name = "N")]
     pub robots: usize,
     /// pheromone (seed 001: anti-pheromone on links and region capture) or shortest-path
     /// (A* to the nearest region, conflicts resolved on arrival).

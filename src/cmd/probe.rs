@@ -27,7 +27,7 @@ pub struct ProbeArgs {
     #[arg(long, value_parser = super::f32_any(), default_value_t = 0.0, allow_negative_numbers = true)]
     pub y: f32,
     /// Channel index.
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=63), default_value_t = 0)]
+    #[arg(long, value_parser = super::int::<usize>(0, 63), default_value_t = 0)]
     pub channel: usize,
     /// Wait until the value is above this level.
     #[arg(long, value_parser = super::f32_any(), conflicts_with = "below")]

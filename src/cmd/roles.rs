@@ -230,7 +230,7 @@ pub struct DepositorArgs {
     #[arg(long, conflicts_with = "mode")]
     pub constant: bool,
     /// Field channel to deposit into.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=63))]
+    #[arg(long, value_parser = super::int::<u32>(0, 63))]
     pub channel: Option<u32>,
     /// Deposit anti-pheromone (negative amounts; the channel must be signed).
     #[arg(long)]
@@ -321,7 +321,7 @@ pub struct FollowerArgs {
     )]
     pub wait: WaitPolicy,
     /// Field channel to read.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=63))]
+    #[arg(long, value_parser = super::int::<u32>(0, 63))]
     pub channel: Option<u32>,
     /// Seed of the sector strategies' random choices.
     #[arg(long)]
@@ -340,10 +340,10 @@ pub struct FollowerArgs {
     #[arg(long, requires = "gateway")]
     pub client_id: Option<u8>,
     /// How long each PIR or deposit waits for the gateway's reply (ms).
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=3_600_000), default_value_t = 100, value_name = "MS", requires = "gateway")]
+    #[arg(long, value_parser = super::int::<u64>(1, 3_600_000), default_value_t = 100, value_name = "MS", requires = "gateway")]
     pub gateway_timeout_ms: u64,
     /// Attempts after the first on the same gateway before switching to the backup.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=1000), default_value_t = 2, requires = "gateway")]
+    #[arg(long, value_parser = super::int::<u32>(0, 1000), default_value_t = 2, requires = "gateway")]
     pub gateway_retries: u32,
     /// Deposit this amount at the robot's pose through the gateway every --deposit-every steps
     /// (a leader laying a trail remotely); a deposit is never resent to the other gateway, so
@@ -353,7 +353,7 @@ pub struct FollowerArgs {
     /// Steps between two --deposit-amount deposits.
     #[arg(
         long,
-        value_parser = clap::value_parser!(u64).range(1..=1_000_000_000),
+        value_parser = super::int::<u64>(1, 1_000_000_000),
         default_value_t = 10,
         value_name = "STEPS",
         requires = "deposit_amount"

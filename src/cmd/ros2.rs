@@ -29,7 +29,7 @@ pub struct RosDepositArgs {
     #[arg(long, value_parser = super::secs0(), default_value_t = 0.0)]
     pub interval_s: f64,
     /// Field channel the deposits go to.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=63), default_value_t = 0)]
+    #[arg(long, value_parser = super::int::<u32>(0, 63), default_value_t = 0)]
     pub channel: u32,
 }
 
@@ -76,7 +76,7 @@ pub struct Ros2Args {
     #[arg(long, value_parser = super::f64_pos(1000.0), value_name = "HZ", default_value_t = 10.0)]
     pub rate_hz: f64,
     /// ROS domain id (the first component of every key expression).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=232), default_value_t = 0)]
+    #[arg(long, value_parser = super::int::<u32>(0, 232), default_value_t = 0)]
     pub domain_id: u32,
     /// ROS namespace of the node and its relative topics.
     #[arg(long, default_value = "/")]
@@ -116,7 +116,7 @@ pub struct Ros2Args {
     pub path_rate_hz: f64,
     /// With --world: poses a path keeps at most; beyond it the oldest pose is dropped (and
     /// counted: path_poses_dropped in --json).
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=10_000_000), value_name = "N", default_value_t = 10_000)]
+    #[arg(long, value_parser = super::int::<usize>(1, 10_000_000), value_name = "N", default_value_t = 10_000)]
     pub path_max_poses: usize,
     /// Seconds to wait for the field and its first frame.
     #[arg(long, value_parser = super::secs(), value_name = "SECS", default_value_t = 10.0)]
@@ -314,7 +314,7 @@ pub struct RecordArgs {
     #[arg(long, value_parser = super::secs(), value_name = "SECS")]
     pub duration: Option<f64>,
     /// Stop after this many frames.
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1_000_000_000_000), value_name = "N")]
+    #[arg(long, value_parser = super::int::<u64>(1, 1_000_000_000_000), value_name = "N")]
     pub frames: Option<u64>,
     /// At exit, print one JSON summary on stdout.
     #[arg(long)]

@@ -29,7 +29,7 @@ pub struct SimArgs {
     #[arg(default_value = DEFAULT_SCENARIO)]
     pub scenario: String,
     /// Number of robots (the first N the scenario places).
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=512), value_name = "N")]
+    #[arg(long, value_parser = super::int::<usize>(1, 512), value_name = "N")]
     pub robots: Option<usize>,
     /// Seed of the run (world noise, the followers' random draws).
     #[arg(long, value_name = "S")]
@@ -109,7 +109,7 @@ pub struct SimArgs {
     /// Run T trials (seeds S, S+1, …) with the strategy and with the other sector strategy
     /// (inverse vs uniform) and report mean, standard deviation and Welch's t of the
     /// exploration (scenarios with an exploration metric).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(2..=100_000), value_name = "T")]
+    #[arg(long, value_parser = super::int::<u32>(2, 100_000), value_name = "T")]
     pub trials: Option<u32>,
     /// Run on a ROS map_server map (map.yaml + its PGM): its occupied cells replace the
     /// scenario's walls, and the field and the exploration sectors cover the map.

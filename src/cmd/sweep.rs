@@ -64,13 +64,13 @@ pub struct SweepArgs {
     #[arg(long, conflicts_with = "strategies")]
     pub uniform: bool,
     /// Trials per point (seeds 1..=T).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000), value_name = "T", default_value_t = 10)]
+    #[arg(long, value_parser = super::int::<u32>(1, 100_000), value_name = "T", default_value_t = 10)]
     pub trials: u32,
     /// Simulated seconds per run (one IAS-SS iteration a second: the paper's 1000 iterations).
     #[arg(long = "duration-s", value_parser = super::secs(), value_name = "S", default_value_t = 1000.0)]
     pub duration_s: f64,
     /// Worker threads [default: the available parallelism].
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024), value_name = "N")]
+    #[arg(long, value_parser = super::int::<usize>(1, 1024), value_name = "N")]
     pub jobs: Option<usize>,
     /// Directory for the files [default: pheromone-out/sweep-<SCENARIO>].
     #[arg(long, value_name = "DIR", value_parser = super::check::out_dir)]

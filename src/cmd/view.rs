@@ -25,10 +25,10 @@ pub struct ViewArgs {
     #[arg(long)]
     pub world: Option<String>,
     /// Robots r0..r<N-1> looked for in the world.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=4096), default_value_t = 32)]
+    #[arg(long, value_parser = super::int::<u32>(0, 4096), default_value_t = 32)]
     pub robots: u32,
     /// Largest side of a downsampled frame when the page asks for none (1–4096).
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=4096), default_value_t = 256)]
+    #[arg(long, value_parser = super::int::<usize>(1, 4096), default_value_t = 256)]
     pub max_side: usize,
 }
 

@@ -181,7 +181,7 @@ const DOMAINS: &[(&str, &str, Domain)] = &[
     ("export", "--max", ANY),
     ("export", "--timeout-s", SECS),
     ("gateway", "--baud", int(1.0, 4_000_000.0)),
-    ("gateway", "--rate-hz", pos(1e6)),
+    ("gateway", "--rate-hz", real(0.0, 1e6)),
     ("gateway", "--plateau-m", real(0.0, 1e6)),
     ("gateway", "--slope-m", real(0.0, 1e6)),
     ("gateway", "--attach-timeout", SECS0),

@@ -289,7 +289,7 @@ fn bad_parameters_get_a_400_naming_them_and_unknown_paths_a_404() {
     let o = run(&["view", "--max-side", "0"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(
-        stderr(&o).contains("invalid value '0' for '--max-side") && stderr(&o).contains("1..=4096"),
+        stderr(&o).contains("--max-side 0: must be between 1 and 4096"),
         "{}",
         stderr(&o)
     );
