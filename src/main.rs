@@ -19,7 +19,7 @@ struct Cli {
     /// iceoryx2 domain: services and nodes use the prefix `<D>_iox2_` instead of `iox2_`, so
     /// processes of two domains on one host share nothing (as on two hosts). Also taken from
     /// the environment variable PHEROMONE_IOX_DOMAIN, which children inherit.
-    #[arg(long, global = true, value_name = "D", value_parser = cmd::check::iox_domain)]
+    #[arg(long, global = true, value_name = "D", value_parser = cmd::check::iox_domain())]
     iox_domain: Option<String>,
     #[command(subcommand)]
     command: Command,
@@ -83,7 +83,7 @@ fn main() -> ExitCode {
     // The inherited domain is checked as the flag is, before anything starts.
     if cli.iox_domain.is_none() {
         if let Ok(d) = std::env::var(field::shm::IOX_DOMAIN_ENV) {
-            if let Err(e) = cmd::check::iox_domain(&d) {
+            if let Err(e) = cmd::check::parse_iox_domain(&d) {
                 eprintln!("error: {}={d}: {e}", field::shm::IOX_DOMAIN_ENV);
                 return ExitCode::from(2);
             }

@@ -25,7 +25,7 @@ pub struct BridgeArgs {
     #[arg(long, default_value = "main")]
     pub field: String,
     /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).
-    #[arg(long, value_name = "ENDPOINT", required = true, value_parser = super::check::zenoh_endpoint)]
+    #[arg(long, value_name = "ENDPOINT", required = true, value_parser = super::check::zenoh_endpoint())]
     pub listen: Vec<String>,
     /// Publish a frame checksum every N frames (sequence numbers divisible by N).
     #[arg(long, value_parser = super::int::<u32>(1, 1_000_000), value_name = "N", default_value_t = 10)]

@@ -6,15 +6,68 @@
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
+/// A clap value parser from a check: a refused value is `--flag VALUE: reason` (exit status 2).
+#[derive(Clone, Copy)]
+pub struct Place<T>(fn(&str) -> Result<T, String>);
+
+impl<T: Clone + Send + Sync + 'static> clap::builder::TypedValueParser for Place<T> {
+    type Value = T;
+
+    fn parse_ref(
+        &self,
+        cmd: &clap::Command,
+        arg: Option<&clap::Arg>,
+        value: &std::ffi::OsStr,
+    ) -> Result<T, clap::Error> {
+        let text = value.to_string_lossy();
+        (self.0)(&text).map_err(|reason| super::flag_error(cmd, arg, &text, &reason))
+    }
+}
+
+/// The value parser of [`parse_iox_domain`].
+pub fn iox_domain() -> Place<String> {
+    Place(parse_iox_domain)
+}
+
+/// The value parser of [`parse_socket_addr`].
+pub fn socket_addr() -> Place<String> {
+    Place(parse_socket_addr)
+}
+
+/// The value parser of [`parse_zenoh_endpoint`].
+pub fn zenoh_endpoint() -> Place<String> {
+    Place(parse_zenoh_endpoint)
+}
+
+/// The value parser of [`parse_mirror_endpoint`].
+pub fn mirror_endpoint() -> Place<String> {
+    Place(parse_mirror_endpoint)
+}
+
+/// The value parser of [`parse_out_dir`].
+pub fn out_dir() -> Place<PathBuf> {
+    Place(parse_out_dir)
+}
+
+/// The value parser of [`parse_out_file`].
+pub fn out_file() -> Place<PathBuf> {
+    Place(parse_out_file)
+}
+
 /// `--iox-domain D`: empty (iceoryx2's own domain) or a name giving a valid file prefix.
-pub fn iox_domain(s: &str) -> Result<String, String> {
-    field::shm::domain_config_of(Some(s))
-        .map(|_| s.to_owned())
+pub fn parse_iox_domain(s: &str) -> Result<String, String> {
+    // The field-name rules make `<D>_iox2_` a valid iceoryx2 prefix (`domain_config_of`);
+    // checked without loading iceoryx2's configuration (which logs before --verbose applies).
+    if s.is_empty() {
+        return Ok(String::new());
+    }
+    field::shm::check_name(s)
+        .map(|()| s.to_owned())
         .map_err(|e| e.to_string())
 }
 
 /// `IP:PORT` or `localhost:PORT` (a socket to bind or to send to).
-pub fn socket_addr(s: &str) -> Result<String, String> {
+pub fn parse_socket_addr(s: &str) -> Result<String, String> {
     if s.parse::<SocketAddr>().is_ok() {
         return Ok(s.to_owned());
     }
@@ -26,7 +79,7 @@ pub fn socket_addr(s: &str) -> Result<String, String> {
 
 /// A Zenoh endpoint `PROTOCOL/ADDRESS[?METADATA][#CONFIG]`; for tcp, udp, tls, quic and ws the
 /// address is `HOST:PORT`.
-pub fn zenoh_endpoint(s: &str) -> Result<String, String> {
+pub fn parse_zenoh_endpoint(s: &str) -> Result<String, String> {
     let expected = "expected a Zenoh endpoint PROTOCOL/HOST:PORT, e.g. tcp/127.0.0.1:7447";
     let (proto, rest) = s.split_once('/').ok_or(expected)?;
     let address = rest.split(['?', '#']).next().unwrap_or_default();
@@ -55,11 +108,11 @@ pub fn zenoh_endpoint(s: &str) -> Result<String, String> {
 }
 
 /// `zenoh:ENDPOINT` (a mirror's origin).
-pub fn mirror_endpoint(s: &str) -> Result<String, String> {
+pub fn parse_mirror_endpoint(s: &str) -> Result<String, String> {
     let endpoint = s
         .strip_prefix("zenoh:")
         .ok_or("expected zenoh:ENDPOINT, e.g. zenoh:tcp/10.0.0.1:7447")?;
-    zenoh_endpoint(endpoint).map(|_| s.to_owned())
+    parse_zenoh_endpoint(endpoint).map(|_| s.to_owned())
 }
 
 /// The nearest ancestor of `path` that exists (`.` for a relative path with none).
@@ -71,7 +124,7 @@ fn existing_ancestor(path: &Path) -> PathBuf {
 
 /// A directory to write into: an existing directory, or one that can be created (its nearest
 /// existing ancestor is a directory).
-pub fn out_dir(s: &str) -> Result<PathBuf, String> {
+pub fn parse_out_dir(s: &str) -> Result<PathBuf, String> {
     let path = PathBuf::from(s);
     if s.is_empty() {
         return Err("expected a directory".into());
@@ -90,7 +143,7 @@ pub fn out_dir(s: &str) -> Result<PathBuf, String> {
 }
 
 /// A file to write: not a directory, in a directory that exists.
-pub fn out_file(s: &str) -> Result<PathBuf, String> {
+pub fn parse_out_file(s: &str) -> Result<PathBuf, String> {
     let path = PathBuf::from(s);
     if s.is_empty() || path.is_dir() || s.ends_with('/') {
         return Err("expected a file name, not a directory".into());
@@ -111,10 +164,10 @@ mod tests {
 
     #[test]
     fn places_are_checked_before_anything_starts() {
-        assert!(iox_domain("").is_ok() && iox_domain("lab_2").is_ok());
-        assert!(iox_domain("a b").is_err() && iox_domain(&"x".repeat(65)).is_err());
+        assert!(parse_iox_domain("").is_ok() && parse_iox_domain("lab_2").is_ok());
+        assert!(parse_iox_domain("a b").is_err() && parse_iox_domain(&"x".repeat(65)).is_err());
         for ok in ["127.0.0.1:0", "[::1]:8080", "0.0.0.0:80", "localhost:7402"] {
-            assert_eq!(socket_addr(ok).as_deref(), Ok(ok));
+            assert_eq!(parse_socket_addr(ok).as_deref(), Ok(ok));
         }
         for bad in [
             "",
@@ -124,7 +177,7 @@ mod tests {
             "127.0.0.1:70000",
             "host:1",
         ] {
-            assert!(socket_addr(bad).is_err(), "{bad}");
+            assert!(parse_socket_addr(bad).is_err(), "{bad}");
         }
         for ok in [
             "tcp/127.0.0.1:7447",
@@ -133,7 +186,7 @@ mod tests {
             "tcp/10.0.0.1:7447#iface=eth0",
             "unixsock-stream//tmp/z.sock",
         ] {
-            assert_eq!(zenoh_endpoint(ok).as_deref(), Ok(ok));
+            assert_eq!(parse_zenoh_endpoint(ok).as_deref(), Ok(ok));
         }
         for bad in [
             "",
@@ -144,25 +197,25 @@ mod tests {
             "tcp/h:99999",
             "/x",
         ] {
-            assert!(zenoh_endpoint(bad).is_err(), "{bad}");
+            assert!(parse_zenoh_endpoint(bad).is_err(), "{bad}");
         }
-        assert!(mirror_endpoint("zenoh:tcp/127.0.0.1:7447").is_ok());
-        assert!(mirror_endpoint("tcp/127.0.0.1:7447").is_err());
-        assert!(mirror_endpoint("zenoh:tcp/nonsense").is_err());
+        assert!(parse_mirror_endpoint("zenoh:tcp/127.0.0.1:7447").is_ok());
+        assert!(parse_mirror_endpoint("tcp/127.0.0.1:7447").is_err());
+        assert!(parse_mirror_endpoint("zenoh:tcp/nonsense").is_err());
         let tmp = std::env::temp_dir();
         let file = tmp.join(format!("pheromone-check-{}", std::process::id()));
         std::fs::write(&file, b"x").unwrap();
         let s = |p: &Path| p.to_string_lossy().into_owned();
-        assert!(out_dir(&s(&tmp)).is_ok());
-        assert!(out_dir(&s(&tmp.join("new/deeper"))).is_ok());
-        assert!(out_dir(&s(&file)).is_err());
-        assert!(out_dir(&s(&file.join("sub"))).is_err());
-        assert!(out_dir("").is_err());
-        assert!(out_file(&s(&tmp.join("x.npy"))).is_ok());
-        assert!(out_file("x.npy").is_ok());
-        assert!(out_file(&s(&tmp)).is_err());
-        assert!(out_file(&s(&tmp.join("no-such-dir/x.npy"))).is_err());
-        assert!(out_file(&s(&file.join("x.npy"))).is_err());
+        assert!(parse_out_dir(&s(&tmp)).is_ok());
+        assert!(parse_out_dir(&s(&tmp.join("new/deeper"))).is_ok());
+        assert!(parse_out_dir(&s(&file)).is_err());
+        assert!(parse_out_dir(&s(&file.join("sub"))).is_err());
+        assert!(parse_out_dir("").is_err());
+        assert!(parse_out_file(&s(&tmp.join("x.npy"))).is_ok());
+        assert!(parse_out_file("x.npy").is_ok());
+        assert!(parse_out_file(&s(&tmp)).is_err());
+        assert!(parse_out_file(&s(&tmp.join("no-such-dir/x.npy"))).is_err());
+        assert!(parse_out_file(&s(&file.join("x.npy"))).is_err());
         std::fs::remove_file(&file).unwrap();
     }
 }

@@ -28,7 +28,7 @@ pub struct ExportArgs {
     pub field: String,
     /// Output file: `*.npy`, or `*.yaml` / `*.yml` (a map_server map; the PGM gets the same
     /// name with `.pgm`).
-    #[arg(long, value_name = "FILE", value_parser = super::check::out_file)]
+    #[arg(long, value_name = "FILE", value_parser = super::check::out_file())]
     pub out: PathBuf,
     /// Channel of a map_server map.
     #[arg(long, value_parser = super::int::<usize>(0, 63), default_value_t = 0)]

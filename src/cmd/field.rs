@@ -122,7 +122,7 @@ pub struct FieldArgs {
     pub print_config: bool,
     /// Save the current frame to FILE (header, planes and checksum; written to FILE.tmp,
     /// fsynced, then renamed) every --checkpoint-every seconds and when the field stops.
-    #[arg(long, value_name = "FILE", value_parser = super::check::out_file)]
+    #[arg(long, value_name = "FILE", value_parser = super::check::out_file())]
     pub checkpoint: Option<PathBuf>,
     /// Seconds between two checkpoints [default: 10].
     #[arg(long, value_parser = super::secs(), value_name = "SECS", requires = "checkpoint")]
@@ -172,7 +172,7 @@ pub struct FieldArgs {
     /// go to the origin. It asks for a keyframe on a checksum mismatch, a sequence gap, an
     /// origin restart or a lost connection, and logs `stale` while it has no origin. Needs a
     /// build with `--features zenoh`. Grid flags are ignored (the origin's apply).
-    #[arg(long, value_name = "zenoh:ENDPOINT", value_parser = super::check::mirror_endpoint, conflicts_with_all = ["standby", "restore", "clock", "checkpoint"])]
+    #[arg(long, value_name = "zenoh:ENDPOINT", value_parser = super::check::mirror_endpoint(), conflicts_with_all = ["standby", "restore", "clock", "checkpoint"])]
     pub mirror: Option<String>,
     /// A mirror is stale after this many seconds without inputs from its origin [default: 1].
     #[arg(long, value_parser = super::secs(), value_name = "SECS", requires = "mirror")]

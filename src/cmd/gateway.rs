@@ -20,7 +20,7 @@ pub struct GatewayArgs {
     #[arg(long, default_value = "main")]
     pub field: String,
     /// UDP address to serve on (default 127.0.0.1:7402 when --serial is not given).
-    #[arg(long, conflicts_with = "serial", value_parser = super::check::socket_addr)]
+    #[arg(long, conflicts_with = "serial", value_parser = super::check::socket_addr())]
     pub udp: Option<String>,
     /// Serve on this serial line instead (a tty such as /dev/ttyUSB0 or a pty /dev/pts/N):
     /// raw, 8N1, at --baud; frames are a byte stream, each answered on the same line.

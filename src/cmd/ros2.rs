@@ -88,10 +88,10 @@ pub struct Ros2Args {
     #[arg(long, default_value = "map")]
     pub frame_id: String,
     /// Zenoh endpoint to connect to, e.g. a router: tcp/127.0.0.1:7447 (repeatable).
-    #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint)]
+    #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint())]
     pub connect: Vec<String>,
     /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).
-    #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint)]
+    #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint())]
     pub listen: Vec<String>,
     /// Subscribe TOPIC (PoseWithCovarianceStamped) and deposit its poses as robot ROBOT_ID
     /// [default id: 0] (repeatable; a relative TOPIC is in --namespace).
@@ -296,7 +296,7 @@ pub struct RecordArgs {
     #[arg(long, default_value = "main")]
     pub field: String,
     /// Output MCAP file.
-    #[arg(long, value_name = "FILE", value_parser = super::check::out_file)]
+    #[arg(long, value_name = "FILE", value_parser = super::check::out_file())]
     pub mcap: PathBuf,
     /// Most frames recorded per second.
     #[arg(long, value_parser = super::f64_pos(1000.0), value_name = "HZ", default_value_t = 10.0)]

@@ -39,7 +39,7 @@ pub struct SimArgs {
     pub duration: Option<f64>,
     /// Write heat maps (PNG, with the robots' true and estimated trajectories), a CSV per robot
     /// and metrics.json into this directory [default: pheromone-out/<SCENARIO>].
-    #[arg(long, value_name = "DIR", value_parser = super::check::out_dir)]
+    #[arg(long, value_name = "DIR", value_parser = super::check::out_dir())]
     pub out: Option<PathBuf>,
     /// Write no files.
     #[arg(long, conflicts_with = "out")]
@@ -54,7 +54,7 @@ pub struct SimArgs {
     /// (/pheromone/deposits: pheromone_msgs/msg/Deposit). Both modes write the same messages;
     /// a run that fails or is interrupted leaves a file readable up to its last message
     /// (docs/ros2.md). Not with --trials or node-graph scenarios.
-    #[arg(long, value_name = "FILE.mcap", conflicts_with = "trials", value_parser = super::check::out_file)]
+    #[arg(long, value_name = "FILE.mcap", conflicts_with = "trials", value_parser = super::check::out_file())]
     pub record: Option<PathBuf>,
     /// Print one JSON metrics object on stdout.
     #[arg(long)]
@@ -68,7 +68,7 @@ pub struct SimArgs {
     /// Serve `pheromone view` of the run's field and robots on ADDR (default
     /// 127.0.0.1:8080) while it runs (separate processes only); with --realtime one can watch
     /// the scenario unfold.
-    #[arg(long, value_name = "ADDR", value_parser = super::check::socket_addr, num_args = 0..=1, default_missing_value = "127.0.0.1:8080",
+    #[arg(long, value_name = "ADDR", value_parser = super::check::socket_addr(), num_args = 0..=1, default_missing_value = "127.0.0.1:8080",
           conflicts_with = "single_process")]
     pub view: Option<String>,
     /// Seed 002's thin clients: the antenna robots read the field only through a `pheromone
@@ -86,7 +86,7 @@ pub struct SimArgs {
     /// ENDPOINT [default: tcp/127.0.0.1:7447, where `ros2 run rmw_zenoh_cpp rmw_zenohd`
     /// listens] is the Zenoh router or peer to connect to (docs/ros2.md). Add --realtime to
     /// watch the run at the speed of simulated time.
-    #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint, num_args = 0..=1,
+    #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint(), num_args = 0..=1,
           default_missing_value = "tcp/127.0.0.1:7447", conflicts_with = "single_process")]
     pub ros2: Option<String>,
     /// How every follower process waits for the frame of its step (`pheromone follower

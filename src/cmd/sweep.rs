@@ -73,7 +73,7 @@ pub struct SweepArgs {
     #[arg(long, value_parser = super::int::<usize>(1, 1024), value_name = "N")]
     pub jobs: Option<usize>,
     /// Directory for the files [default: pheromone-out/sweep-<SCENARIO>].
-    #[arg(long, value_name = "DIR", value_parser = super::check::out_dir)]
+    #[arg(long, value_name = "DIR", value_parser = super::check::out_dir())]
     pub out: Option<PathBuf>,
     /// Print sweep.json on stdout as well.
     #[arg(long)]

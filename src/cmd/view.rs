@@ -19,7 +19,7 @@ pub struct ViewArgs {
     #[arg(long, default_value = "main")]
     pub field: String,
     /// HTTP address to serve on (port 0: any free port; the address is printed).
-    #[arg(long, default_value = "127.0.0.1:8080", value_parser = super::check::socket_addr)]
+    #[arg(long, default_value = "127.0.0.1:8080", value_parser = super::check::socket_addr())]
     pub listen: String,
     /// World whose robots' poses are shown (`pheromone/W/r<ID>/pose`).
     #[arg(long)]
