@@ -4,7 +4,7 @@ mod cmd;
 
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 /// A zero-copy shared-memory pheromone field for robots on one host.
 ///
@@ -19,7 +19,7 @@ struct Cli {
     /// iceoryx2 domain: services and nodes use the prefix `<D>_iox2_` instead of `iox2_`, so
     /// processes of two domains on one host share nothing (as on two hosts). Also taken from
     /// the environment variable PHEROMONE_IOX_DOMAIN, which children inherit.
-    #[arg(long, global = true, value_name = "D")]
+    #[arg(long, global = true, value_name = "D", value_parser = cmd::check::iox_domain())]
     iox_domain: Option<String>,
     #[command(subcommand)]
     command: Command,
@@ -72,11 +72,23 @@ enum Command {
     /// One peer process of `pheromone bench` (started by it).
     #[command(hide = true)]
     BenchPeer(cmd::bench::BenchPeerArgs),
+    /// Every value-taking flag of every subcommand with its type (for the flag-fuzzing test).
+    #[command(name = "__flags", hide = true)]
+    Flags,
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     field::shm::set_verbose(cli.verbose);
+    // The inherited domain is checked as the flag is, before anything starts.
+    if cli.iox_domain.is_none() {
+        if let Ok(d) = std::env::var(field::shm::IOX_DOMAIN_ENV) {
+            if let Err(e) = cmd::check::parse_iox_domain(&d) {
+                eprintln!("error: {}={d}: {e}", field::shm::IOX_DOMAIN_ENV);
+                return ExitCode::from(2);
+            }
+        }
+    }
     if let Some(d) = &cli.iox_domain {
         // Single-threaded here: every node this process creates reads it (`domain_config`).
         std::env::set_var(field::shm::IOX_DOMAIN_ENV, d);
@@ -107,6 +119,7 @@ fn main() -> ExitCode {
         Command::Record(a) => cmd::ros2::run_record(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::BenchPeer(a) => cmd::bench::run_peer(a),
+        Command::Flags => cmd::flags::print(Cli::command()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -3,6 +3,7 @@
 mod bench;
 mod confirm;
 mod crash;
+mod flags;
 mod gateway;
 mod graph;
 mod harness;
@@ -498,7 +499,7 @@ fn every_time_flag_refuses_nan_infinity_negative_and_absurd_values_with_exit_2_n
         (&["sim", "--no-out"], "--timeout"),
         (&["sim", "--no-out"], "--stall-timeout"),
         (
-            &["export", "--field", "nf", "--out", "/nonexistent/x.npy"],
+            &["export", "--field", "nf", "--out", "fz-never-written.npy"],
             "--timeout-s",
         ),
         (&["gateway", "--field", "nf"], "--attach-timeout"),

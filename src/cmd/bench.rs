@@ -31,10 +31,10 @@ pub struct BenchArgs {
     #[arg(long, hide = true)]
     smoke: bool,
     /// Tick rate (Hz) of the field in the deposit-to-visible measurement.
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, value_parser = super::f32_pos(1e4), default_value_t = 100.0)]
     tick_hz: f32,
     /// Cells per side of the field in the deposit-to-visible measurement.
-    #[arg(long, default_value_t = 1024)]
+    #[arg(long, value_parser = super::int::<u32>(16, 4096), default_value_t = 1024)]
     visible_width: u32,
     /// Do not pin processes to cores.
     #[arg(long)]

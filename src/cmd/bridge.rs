@@ -27,28 +27,33 @@ pub struct BridgeArgs {
     /// Zenoh endpoint to listen on (repeatable). Loopback by default: mirrors on other hosts
     /// need an address they reach, e.g. tcp/0.0.0.0:7447 (every interface) — the link has no
     /// authentication or encryption, so only on a network you trust.
-    #[arg(long, value_name = "ENDPOINT", default_value = "tcp/127.0.0.1:7447")]
+    #[arg(
+        long,
+        value_name = "ENDPOINT",
+        default_value = "tcp/127.0.0.1:7447",
+        value_parser = super::check::zenoh_endpoint()
+    )]
     pub listen: Vec<String>,
     /// Publish a frame checksum every N frames (sequence numbers divisible by N).
-    #[arg(long, value_name = "N", default_value_t = 10)]
+    #[arg(long, value_parser = super::int::<u32>(1, 1_000_000), value_name = "N", default_value_t = 10)]
     pub checksum_every: u32,
     /// Seconds between two periodic keyframes (keyframes are also sent on request).
-    #[arg(long, value_name = "K", default_value_t = 5.0)]
+    #[arg(long, value_parser = super::secs(), value_name = "K", default_value_t = 5.0)]
     pub keyframe_every_s: f64,
     /// Also publish downsampled, zstd-compressed frames on pheromone/F/frames.
     #[arg(long)]
     pub frames: bool,
     /// Frames per second with --frames.
-    #[arg(long, value_name = "R", default_value_t = 5.0, requires = "frames")]
+    #[arg(long, value_parser = super::f64_pos(1000.0), value_name = "R", default_value_t = 5.0, requires = "frames")]
     pub rate_hz: f64,
     /// Average N × N cell blocks into one with --frames.
-    #[arg(long, value_name = "N", default_value_t = 1, requires = "frames")]
+    #[arg(long, value_parser = super::int::<u32>(1, 4096), value_name = "N", default_value_t = 1, requires = "frames")]
     pub downsample: u32,
     /// Seconds to wait for the field to appear.
-    #[arg(long, value_name = "SECS", default_value_t = 10.0)]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS", default_value_t = 10.0)]
     pub timeout: f64,
     /// Stop after this many seconds.
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS")]
     pub duration: Option<f64>,
     /// At exit, print one JSON summary object on stdout.
     #[arg(long)]

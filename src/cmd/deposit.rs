@@ -26,44 +26,44 @@ pub struct DepositArgs {
     #[arg(long, default_value_t = 0)]
     pub robot: u32,
     /// Channel index.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, value_parser = super::int::<u32>(0, 63), default_value_t = 0)]
     pub channel: u32,
     /// Kernel: ellipse, paper, saturating or z-shape.
     #[arg(long, default_value = "ellipse")]
     pub kernel: KernelKind,
     /// World x of the centre (m).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f32_any(), allow_negative_numbers = true)]
     pub x: f32,
     /// World y of the centre (m).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f32_any(), allow_negative_numbers = true)]
     pub y: f32,
     /// τ (ellipse, paper), ρt (saturating) or Q (z-shape); negative for anti-pheromone.
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f32_any(), allow_negative_numbers = true)]
     pub amount: f32,
     /// Position covariance Σxy as xx,xy,yy (m²).
-    #[arg(long, value_delimiter = ',', default_values_t = [0.01, 0.0, 0.01], allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f32_any(), value_delimiter = ',', default_values_t = [0.01, 0.0, 0.01], allow_negative_numbers = true)]
     pub cov: Vec<f32>,
     /// Cut-off radius z_rng (m).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_parser = super::f32_pos(1e6), default_value_t = 1.0)]
     pub range: f32,
     /// γ cap (ellipse, paper).
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, value_parser = super::f32_pos(1e9), default_value_t = 100.0)]
     pub gamma_max: f32,
     /// λ (m), saturating kernel.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, value_parser = super::f32_pos(1e6), default_value_t = 0.1)]
     pub sigma: f32,
     /// Z-shape plateau c (m).
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, value_parser = super::f32_in(0.0, 1e6), default_value_t = 0.2)]
     pub plateau: f32,
     /// Z-shape slope length σ (m).
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(long, value_parser = super::f32_in(0.0, 1e6), default_value_t = 0.3)]
     pub slope: f32,
     /// Seconds to wait for the field to exist.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, value_parser = super::secs0(), default_value_t = 10.0)]
     pub timeout: f64,
     /// Seconds to wait for the field's receipt (the field answers at its next tick: a field
     /// slower than one tick a minute needs more).
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, value_parser = super::secs(), default_value_t = 60.0)]
     pub receipt_timeout: f64,
     /// Send without waiting for a receipt (no confirmation that the field applied it).
     #[arg(long)]

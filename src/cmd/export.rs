@@ -28,19 +28,19 @@ pub struct ExportArgs {
     pub field: String,
     /// Output file: `*.npy`, or `*.yaml` / `*.yml` (a map_server map; the PGM gets the same
     /// name with `.pgm`).
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", value_parser = super::check::out_file())]
     pub out: PathBuf,
     /// Channel of a map_server map.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, value_parser = super::int::<usize>(0, 63), default_value_t = 0)]
     pub channel: usize,
     /// The value that becomes pixel 0 of a map [default: min(0, the channel's smallest)].
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f32_any(), allow_negative_numbers = true)]
     pub min: Option<f32>,
     /// The value that becomes pixel 255 of a map [default: the channel's largest].
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f32_any(), allow_negative_numbers = true)]
     pub max: Option<f32>,
     /// Seconds to wait for the field, and then for its next frame.
-    #[arg(long, default_value_t = 5.0, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), default_value_t = 5.0, value_name = "SECS")]
     pub timeout_s: f64,
     /// Print one JSON object on stdout (what was written, from which frame).
     #[arg(long)]

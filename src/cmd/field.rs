@@ -54,78 +54,78 @@ pub struct FieldArgs {
     #[arg(long)]
     pub scenario: Option<String>,
     /// Grid width in cells [default: 512].
-    #[arg(long)]
+    #[arg(long, value_parser = super::int::<u32>(1, 65_536))]
     pub width: Option<u32>,
     /// Grid height in cells [default: 512].
-    #[arg(long)]
+    #[arg(long, value_parser = super::int::<u32>(1, 65_536))]
     pub height: Option<u32>,
     /// Cell size in metres [default: 0.05].
-    #[arg(long, value_name = "M")]
+    #[arg(long, value_parser = super::f32_pos(1e6), value_name = "M")]
     pub cell_size: Option<f32>,
     /// World x of the grid's lower-left corner, metres [default: 0].
-    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f32_any(), value_name = "M", allow_negative_numbers = true)]
     pub origin_x: Option<f32>,
     /// World y of the grid's lower-left corner, metres [default: 0].
-    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f32_any(), value_name = "M", allow_negative_numbers = true)]
     pub origin_y: Option<f32>,
     /// Ticks per second [default: 50].
-    #[arg(long, value_name = "HZ")]
+    #[arg(long, value_parser = super::f32_pos(1e5), value_name = "HZ")]
     pub tick_hz: Option<f32>,
     /// Evaporation model of the first channel (replaces the file's).
     #[arg(long, value_enum)]
     pub model: Option<ModelArg>,
     /// Evaporation rate K per second (exponential, ambient) [default: 0.0057].
-    #[arg(long, value_name = "K", visible_alias = "decay-per-sec")]
+    #[arg(long, value_parser = super::f32_in(0.0, 1e9), value_name = "K", visible_alias = "decay-per-sec")]
     pub decay_per_s: Option<f32>,
     /// Ambient weight α in [0, 1] (ambient) [default: 0.5].
-    #[arg(long)]
+    #[arg(long, value_parser = super::f32_in(0.0, 1.0))]
     pub alpha: Option<f32>,
     /// Radius of the ambient mean window in metres (ambient) [default: 0.5].
-    #[arg(long, value_name = "M")]
+    #[arg(long, value_parser = super::f32_in(0.0, 1e6), value_name = "M")]
     pub ambient_radius: Option<f32>,
     /// Fraction ρ evaporated per tick (saturating) [default: 0.05].
-    #[arg(long)]
+    #[arg(long, value_parser = super::f32_in(0.0, 1.0))]
     pub rho_per_tick: Option<f32>,
     /// Counter quantum Q lost per time constant (quantum) [default: 1].
-    #[arg(long)]
+    #[arg(long, value_parser = super::f32_in(0.0, 1e9))]
     pub quantum: Option<f32>,
     /// Counter time constant τ in seconds (quantum) [default: 1].
-    #[arg(long, value_name = "SECS", visible_alias = "tau-secs")]
+    #[arg(long, value_parser = super::f32_pos(1e9), value_name = "SECS", visible_alias = "tau-secs")]
     pub tau_s: Option<f32>,
     /// Diffusion coefficient D in m²/s of the first channel (stability D·dt/h² ≤ ¼ is checked).
-    #[arg(long, value_name = "M2_PER_S")]
+    #[arg(long, value_parser = super::f32_in(0.0, 1e9), value_name = "M2_PER_S")]
     pub diffusion: Option<f32>,
     /// Let the first channel hold negative values (anti-pheromone).
     #[arg(long)]
     pub signed: bool,
     /// Readers the frame service admits [default: 8].
-    #[arg(long)]
+    #[arg(long, value_parser = super::int::<usize>(1, 1024))]
     pub max_readers: Option<usize>,
     /// Deposit publishers the field admits [default: 64].
-    #[arg(long)]
+    #[arg(long, value_parser = super::int::<usize>(1, 4096))]
     pub max_depositors: Option<usize>,
     /// Deposits buffered between two ticks [default: 1024].
-    #[arg(long)]
+    #[arg(long, value_parser = super::int::<usize>(1, 1_048_576))]
     pub deposit_buffer: Option<usize>,
     /// Tick once per clock message of the simulated world NAME (lockstep simulation) instead of
     /// on wall time; the field stops when the world says it has finished.
     #[arg(long, value_name = "WORLD")]
     pub clock: Option<String>,
     /// Stop after this many ticks.
-    #[arg(long)]
+    #[arg(long, value_parser = super::int::<u64>(1, 1_000_000_000_000))]
     pub ticks: Option<u64>,
     /// Stop after this many seconds of wall time.
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs0(), value_name = "SECS")]
     pub duration: Option<f64>,
     /// Print the configuration that would run, as TOML, and exit.
     #[arg(long)]
     pub print_config: bool,
     /// Save the current frame to FILE (header, planes and checksum; written to FILE.tmp,
     /// fsynced, then renamed) every --checkpoint-every seconds and when the field stops.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", value_parser = super::check::out_file())]
     pub checkpoint: Option<PathBuf>,
     /// Seconds between two checkpoints [default: 10].
-    #[arg(long, value_name = "SECS", requires = "checkpoint")]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS", requires = "checkpoint")]
     pub checkpoint_every: Option<f64>,
     /// Resume from a checkpoint file: its cells, sequence number, field time and counters. The
     /// grid (size, cell size, origin, channels) must be the configuration's; a truncated or
@@ -141,29 +141,29 @@ pub struct FieldArgs {
     /// frame, instead of waiting for the next tick (depositors wake the field through
     /// pheromone/<NAME>/deposit-ready). Every frame then steps evaporation by the real elapsed
     /// time (at most one tick period); regular ticks go on between deposits. Not with --clock.
-    #[arg(long, value_name = "MS", conflicts_with = "clock")]
+    #[arg(long, value_parser = super::f64_in(0.0, 1e12), value_name = "MS", conflicts_with = "clock")]
     pub publish_on_deposit_ms: Option<f64>,
     /// Threads of each tick's evaporation pass: the rows are split across N threads, each cell
     /// still read once and written once, and the frames are bit-identical to one thread's. Worth
     /// it for large grids with the ambient model; 1 (the default) keeps the tick on the field's
     /// own thread.
-    #[arg(long, value_name = "N", default_value_t = 1)]
+    #[arg(long, value_parser = super::int::<usize>(1, 256), value_name = "N", default_value_t = 1)]
     pub threads: usize,
     /// Real-time scheduling: SCHED_FIFO at priority N (1–99) and every page locked in memory
     /// (mlockall, so the frame pool is faulted in before the first tick). Without CAP_SYS_NICE
     /// or a large enough RLIMIT_RTPRIO (and CAP_IPC_LOCK or RLIMIT_MEMLOCK) the field refuses
     /// to start and says which is missing, unless --rt-best-effort.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_parser = super::int::<i32>(1, 99), value_name = "N")]
     pub rt_priority: Option<i32>,
     /// With --rt-priority: run on this CPU only.
-    #[arg(long, value_name = "CPU", requires = "rt_priority")]
+    #[arg(long, value_parser = super::int::<usize>(0, 1023), value_name = "CPU", requires = "rt_priority")]
     pub rt_cpu: Option<usize>,
     /// With --rt-priority: start anyway without what the OS refuses, and say what it refused.
     #[arg(long, requires = "rt_priority")]
     pub rt_best_effort: bool,
     /// A wall-time tick that starts more than this after its deadline counts as a missed
     /// deadline (µs; default a tenth of the period). Counted in the log and the --json summary.
-    #[arg(long, value_name = "US")]
+    #[arg(long, value_parser = super::f64_in(0.0, 1e15), value_name = "US")]
     pub deadline_slack_us: Option<f64>,
     /// Run as a mirror of the field of the same name on another host: `zenoh:tcp/HOST:PORT`,
     /// the address of its `pheromone bridge`. The mirror takes the origin's configuration,
@@ -172,10 +172,10 @@ pub struct FieldArgs {
     /// go to the origin. It asks for a keyframe on a checksum mismatch, a sequence gap, an
     /// origin restart or a lost connection, and logs `stale` while it has no origin. Needs a
     /// build with `--features zenoh`. Grid flags are ignored (the origin's apply).
-    #[arg(long, value_name = "zenoh:ENDPOINT", conflicts_with_all = ["standby", "restore", "clock", "checkpoint"])]
+    #[arg(long, value_name = "zenoh:ENDPOINT", value_parser = super::check::mirror_endpoint(), conflicts_with_all = ["standby", "restore", "clock", "checkpoint"])]
     pub mirror: Option<String>,
     /// A mirror is stale after this many seconds without inputs from its origin [default: 1].
-    #[arg(long, value_name = "SECS", requires = "mirror")]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS", requires = "mirror")]
     pub stale_after_s: Option<f64>,
     /// At exit, print one JSON summary object on stdout.
     #[arg(long)]

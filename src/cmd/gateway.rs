@@ -20,14 +20,14 @@ pub struct GatewayArgs {
     #[arg(long, default_value = "main")]
     pub field: String,
     /// UDP address to serve on (default 127.0.0.1:7402 when --serial is not given).
-    #[arg(long, conflicts_with = "serial")]
+    #[arg(long, conflicts_with = "serial", value_parser = super::check::socket_addr())]
     pub udp: Option<String>,
     /// Serve on this serial line instead (a tty such as /dev/ttyUSB0 or a pty /dev/pts/N):
     /// raw, 8N1, at --baud; frames are a byte stream, each answered on the same line.
     #[arg(long)]
     pub serial: Option<String>,
     /// Baud rate of --serial (a standard termios rate: 9600, 19200, 115200, …).
-    #[arg(long, default_value_t = 9600, requires = "serial")]
+    #[arg(long, value_parser = super::int::<u32>(1, 4_000_000), default_value_t = 9600, requires = "serial")]
     pub baud: u32,
     /// Client IDs served, e.g. `1,2,7` or `1-20`; default 1–255 (ID 0 is not protected by the
     /// CRC's zero start value, see docs/gateway-wire.md). `ID@ADDR` (ADDR an IP address or
@@ -35,16 +35,16 @@ pub struct GatewayArgs {
     #[arg(long, value_delimiter = ',')]
     pub allow: Vec<String>,
     /// Requests per second each client may send (0 = unlimited).
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, value_parser = super::f64_in(0.0, 1e6), default_value_t = 100.0)]
     pub rate_hz: f64,
     /// Plateau c of the Z-shape deposit (m).
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, value_parser = super::f32_in(0.0, 1e6), default_value_t = 0.2)]
     pub plateau_m: f32,
     /// Slope width σ of the Z-shape deposit (m).
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(long, value_parser = super::f32_in(0.0, 1e6), default_value_t = 0.3)]
     pub slope_m: f32,
     /// Seconds to wait for the field and its first frame.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, value_parser = super::secs0(), default_value_t = 10.0)]
     pub attach_timeout: f64,
     /// Print the final counters as one JSON object on stdout.
     #[arg(long)]

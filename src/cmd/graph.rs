@@ -69,7 +69,7 @@ pub struct GraphArgs {
     #[arg(long, default_value = "graph")]
     pub name: String,
     /// Number of robot processes that take part (ids 1..=N).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_parser = super::int::<usize>(1, 512), value_name = "N")]
     pub robots: usize,
     /// Strategy the robots use (recorded in the report): pheromone or shortest-path.
     #[arg(long, default_value = "pheromone")]
@@ -78,10 +78,10 @@ pub struct GraphArgs {
     #[arg(long, value_name = "S")]
     pub seed: Option<u64>,
     /// Seconds to wait for every robot to attach.
-    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), default_value_t = 30.0, value_name = "SECS")]
     pub attach_timeout: f64,
     /// Seconds one step may wait for the robots before the run fails.
-    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), default_value_t = 30.0, value_name = "SECS")]
     pub stall_timeout: f64,
     /// Print the report as one JSON object on stdout (the tables go to stderr either way).
     #[arg(long)]
@@ -132,10 +132,10 @@ pub struct GraphRobotArgs {
     #[arg(long, default_value = "graph")]
     pub name: String,
     /// This robot's id (1..=N); robot k leaves the dock after (k − 1) × start_interval_s.
-    #[arg(long, value_name = "ID")]
+    #[arg(long, value_parser = super::int::<u32>(1, 512), value_name = "ID")]
     pub robot: u32,
     /// Number of robots of the run.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_parser = super::int::<usize>(1, 512), value_name = "N")]
     pub robots: usize,
     /// pheromone (seed 001: anti-pheromone on links and region capture) or shortest-path
     /// (A* to the nearest region, conflicts resolved on arrival).
@@ -145,7 +145,7 @@ pub struct GraphRobotArgs {
     #[arg(long, value_name = "S")]
     pub seed: Option<u64>,
     /// Seconds to wait for the other robots and for each step.
-    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), default_value_t = 30.0, value_name = "SECS")]
     pub timeout: f64,
     /// Print this robot's summary as one JSON object on stdout.
     #[arg(long)]

@@ -15,7 +15,7 @@ use super::seconds;
 #[derive(Args, Debug)]
 pub struct ListArgs {
     /// Seconds over which the tick rate is measured.
-    #[arg(long, default_value_t = 1.0, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), default_value_t = 1.0, value_name = "SECS")]
     pub window_s: f64,
     /// Print one JSON object on stdout: `{"fields": [...]}`.
     #[arg(long)]

@@ -21,22 +21,22 @@ pub struct ProbeArgs {
     #[arg(long, default_value = "main")]
     pub field: String,
     /// World x of the probe point (m).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f32_any(), default_value_t = 0.0, allow_negative_numbers = true)]
     pub x: f32,
     /// World y of the probe point (m).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f32_any(), default_value_t = 0.0, allow_negative_numbers = true)]
     pub y: f32,
     /// Channel index.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, value_parser = super::int::<usize>(0, 63), default_value_t = 0)]
     pub channel: usize,
     /// Wait until the value is above this level.
-    #[arg(long, conflicts_with = "below")]
+    #[arg(long, value_parser = super::f32_any(), conflicts_with = "below")]
     pub above: Option<f32>,
     /// Wait until the value is below this level.
-    #[arg(long)]
+    #[arg(long, value_parser = super::f32_any())]
     pub below: Option<f32>,
     /// Seconds to wait for the field and the condition.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, value_parser = super::secs0(), default_value_t = 10.0)]
     pub timeout: f64,
     /// Print one JSON object on stdout.
     #[arg(long, conflicts_with = "follow")]
@@ -46,7 +46,7 @@ pub struct ProbeArgs {
     #[arg(long, conflicts_with_all = ["above", "below"])]
     pub follow: bool,
     /// Lines per second with --follow.
-    #[arg(long, default_value_t = 10.0, value_name = "R", requires = "follow")]
+    #[arg(long, value_parser = super::f64_pos(1e4), default_value_t = 10.0, value_name = "R", requires = "follow")]
     pub rate_hz: f64,
 }
 

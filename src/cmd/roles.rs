@@ -80,11 +80,11 @@ pub struct WorldArgs {
     pub common: Common,
     /// Lockstep: fail when a step has made no progress (no acknowledgement, no command) for
     /// this many seconds.
-    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), default_value_t = 30.0, value_name = "SECS")]
     pub stall_timeout: f64,
     /// Lockstep: how long every process of the run (field, localizers, depositors, followers,
     /// observer) may take to join [default: 10 s + 0.5 s per process].
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS")]
     pub attach_timeout: Option<f64>,
     /// An observer (`pheromone sim`) takes part in the lockstep: wait for it too.
     #[arg(long)]
@@ -230,22 +230,22 @@ pub struct DepositorArgs {
     #[arg(long, conflicts_with = "mode")]
     pub constant: bool,
     /// Field channel to deposit into.
-    #[arg(long)]
+    #[arg(long, value_parser = super::int::<u32>(0, 63))]
     pub channel: Option<u32>,
     /// Deposit anti-pheromone (negative amounts; the channel must be signed).
     #[arg(long)]
     pub anti_pheromone: bool,
     /// Deposit after moving this far (m); 0 = off.
-    #[arg(long, value_name = "M")]
+    #[arg(long, value_parser = super::f64_in(0.0, 1e6), value_name = "M")]
     pub interval_m: Option<f64>,
     /// Deposit after this much time (s); 0 = off.
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs0(), value_name = "SECS")]
     pub interval_s: Option<f64>,
     /// τ of seed 000 eq. 12.
-    #[arg(long)]
+    #[arg(long, value_parser = super::f32_pos(1e9))]
     pub tau: Option<f32>,
     /// Sensor range z_rng (m).
-    #[arg(long, value_name = "M")]
+    #[arg(long, value_parser = super::f32_pos(1e6), value_name = "M")]
     pub range: Option<f32>,
 }
 
@@ -321,7 +321,7 @@ pub struct FollowerArgs {
     )]
     pub wait: WaitPolicy,
     /// Field channel to read.
-    #[arg(long)]
+    #[arg(long, value_parser = super::int::<u32>(0, 63))]
     pub channel: Option<u32>,
     /// Seed of the sector strategies' random choices.
     #[arg(long)]
@@ -340,19 +340,20 @@ pub struct FollowerArgs {
     #[arg(long, requires = "gateway")]
     pub client_id: Option<u8>,
     /// How long each PIR or deposit waits for the gateway's reply (ms).
-    #[arg(long, default_value_t = 100, value_name = "MS", requires = "gateway")]
+    #[arg(long, value_parser = super::int::<u64>(1, 3_600_000), default_value_t = 100, value_name = "MS", requires = "gateway")]
     pub gateway_timeout_ms: u64,
     /// Attempts after the first on the same gateway before switching to the backup.
-    #[arg(long, default_value_t = 2, requires = "gateway")]
+    #[arg(long, value_parser = super::int::<u32>(0, 1000), default_value_t = 2, requires = "gateway")]
     pub gateway_retries: u32,
     /// Deposit this amount at the robot's pose through the gateway every --deposit-every steps
     /// (a leader laying a trail remotely); a deposit is never resent to the other gateway, so
     /// it is applied at most once.
-    #[arg(long, requires = "gateway")]
+    #[arg(long, value_parser = super::f32_pos(1e9), requires = "gateway")]
     pub deposit_amount: Option<f32>,
     /// Steps between two --deposit-amount deposits.
     #[arg(
         long,
+        value_parser = super::int::<u64>(1, 1_000_000_000),
         default_value_t = 10,
         value_name = "STEPS",
         requires = "deposit_amount"
@@ -361,6 +362,7 @@ pub struct FollowerArgs {
     /// Lockstep: seconds a step may wait for the frame of its step (from the gateway).
     #[arg(
         long,
+        value_parser = super::secs(),
         default_value_t = 30.0,
         value_name = "SECS",
         requires = "gateway"

@@ -14,22 +14,22 @@ use super::{bad, bad_from, seconds};
 pub struct RosDepositArgs {
     /// τ of seed 000 (pheromone·m⁴): a pose deposits γ = τ / det Σxy at its peak, capped at
     /// --gamma-max.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, value_parser = super::f32_pos(1e9), default_value_t = 0.2)]
     pub tau: f32,
     /// γmax, the cap on γ.
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, value_parser = super::f32_pos(1e9), default_value_t = 100.0)]
     pub gamma_max: f32,
     /// Sensor range z_rng (m): no cell farther than this from the pose receives pheromone.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_parser = super::f32_pos(1e6), default_value_t = 1.0)]
     pub range_m: f32,
     /// Deposit again once the robot moved this far (m) from its last deposit; 0 = off.
-    #[arg(long, default_value_t = 0.25)]
+    #[arg(long, value_parser = super::f64_in(0.0, 1e6), default_value_t = 0.25)]
     pub interval_m: f64,
     /// Deposit again once this many seconds (of the poses' stamps) elapsed; 0 = off.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, value_parser = super::secs0(), default_value_t = 0.0)]
     pub interval_s: f64,
     /// Field channel the deposits go to.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, value_parser = super::int::<u32>(0, 63), default_value_t = 0)]
     pub channel: u32,
 }
 
@@ -73,10 +73,10 @@ pub struct Ros2Args {
     #[arg(long, default_value = "main")]
     pub field: String,
     /// Most frames published per second.
-    #[arg(long, value_name = "HZ", default_value_t = 10.0)]
+    #[arg(long, value_parser = super::f64_pos(1000.0), value_name = "HZ", default_value_t = 10.0)]
     pub rate_hz: f64,
     /// ROS domain id (the first component of every key expression).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, value_parser = super::int::<u32>(0, 232), default_value_t = 0)]
     pub domain_id: u32,
     /// ROS namespace of the node and its relative topics.
     #[arg(long, default_value = "/")]
@@ -88,10 +88,10 @@ pub struct Ros2Args {
     #[arg(long, default_value = "map")]
     pub frame_id: String,
     /// Zenoh endpoint to connect to, e.g. a router: tcp/127.0.0.1:7447 (repeatable).
-    #[arg(long, value_name = "ENDPOINT")]
+    #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint())]
     pub connect: Vec<String>,
     /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).
-    #[arg(long, value_name = "ENDPOINT")]
+    #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint())]
     pub listen: Vec<String>,
     /// Subscribe TOPIC (PoseWithCovarianceStamped) and deposit its poses as robot ROBOT_ID
     /// [default id: 0] (repeatable; a relative TOPIC is in --namespace).
@@ -112,17 +112,17 @@ pub struct Ros2Args {
     #[arg(long, value_name = "IDS", value_delimiter = ',', requires = "world")]
     pub robots: Option<Vec<u32>>,
     /// With --world: paths published per second.
-    #[arg(long, value_name = "HZ", default_value_t = 1.0)]
+    #[arg(long, value_parser = super::f64_pos(1000.0), value_name = "HZ", default_value_t = 1.0)]
     pub path_rate_hz: f64,
     /// With --world: poses a path keeps at most; beyond it the oldest pose is dropped (and
     /// counted: path_poses_dropped in --json).
-    #[arg(long, value_name = "N", default_value_t = 10_000)]
+    #[arg(long, value_parser = super::int::<usize>(1, 10_000_000), value_name = "N", default_value_t = 10_000)]
     pub path_max_poses: usize,
     /// Seconds to wait for the field and its first frame.
-    #[arg(long, value_name = "SECS", default_value_t = 10.0)]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS", default_value_t = 10.0)]
     pub timeout: f64,
     /// Stop after this many seconds.
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS")]
     pub duration: Option<f64>,
     /// Once listening, print each endpoint with its port on stdout (as `bridge` does).
     #[arg(long)]
@@ -296,10 +296,10 @@ pub struct RecordArgs {
     #[arg(long, default_value = "main")]
     pub field: String,
     /// Output MCAP file.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", value_parser = super::check::out_file())]
     pub mcap: PathBuf,
     /// Most frames recorded per second.
-    #[arg(long, value_name = "HZ", default_value_t = 10.0)]
+    #[arg(long, value_parser = super::f64_pos(1000.0), value_name = "HZ", default_value_t = 10.0)]
     pub rate_hz: f64,
     /// ROS namespace of the topics.
     #[arg(long, default_value = "/")]
@@ -308,13 +308,13 @@ pub struct RecordArgs {
     #[arg(long, default_value = "map")]
     pub frame_id: String,
     /// Seconds to wait for the field and its first frame.
-    #[arg(long, value_name = "SECS", default_value_t = 10.0)]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS", default_value_t = 10.0)]
     pub timeout: f64,
     /// Stop after this many seconds.
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS")]
     pub duration: Option<f64>,
     /// Stop after this many frames.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_parser = super::int::<u64>(1, 1_000_000_000_000), value_name = "N")]
     pub frames: Option<u64>,
     /// At exit, print one JSON summary on stdout.
     #[arg(long)]

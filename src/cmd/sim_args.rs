@@ -29,17 +29,17 @@ pub struct SimArgs {
     #[arg(default_value = DEFAULT_SCENARIO)]
     pub scenario: String,
     /// Number of robots (the first N the scenario places).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_parser = super::int::<usize>(1, 512), value_name = "N")]
     pub robots: Option<usize>,
     /// Seed of the run (world noise, the followers' random draws).
     #[arg(long, value_name = "S")]
     pub seed: Option<u64>,
     /// Simulated seconds (default: the scenario's duration_s).
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS")]
     pub duration: Option<f64>,
     /// Write heat maps (PNG, with the robots' true and estimated trajectories), a CSV per robot
     /// and metrics.json into this directory [default: pheromone-out/<SCENARIO>].
-    #[arg(long, value_name = "DIR")]
+    #[arg(long, value_name = "DIR", value_parser = super::check::out_dir())]
     pub out: Option<PathBuf>,
     /// Write no files.
     #[arg(long, conflicts_with = "out")]
@@ -54,7 +54,7 @@ pub struct SimArgs {
     /// (/pheromone/deposits: pheromone_msgs/msg/Deposit). Both modes write the same messages;
     /// a run that fails or is interrupted leaves a file readable up to its last message
     /// (docs/ros2.md). Not with --trials or node-graph scenarios.
-    #[arg(long, value_name = "FILE.mcap", conflicts_with = "trials")]
+    #[arg(long, value_name = "FILE.mcap", conflicts_with = "trials", value_parser = super::check::out_file())]
     pub record: Option<PathBuf>,
     /// Print one JSON metrics object on stdout.
     #[arg(long)]
@@ -68,7 +68,7 @@ pub struct SimArgs {
     /// Serve `pheromone view` of the run's field and robots on ADDR (default
     /// 127.0.0.1:8080) while it runs (separate processes only); with --realtime one can watch
     /// the scenario unfold.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8080",
+    #[arg(long, value_name = "ADDR", value_parser = super::check::socket_addr(), num_args = 0..=1, default_missing_value = "127.0.0.1:8080",
           conflicts_with = "single_process")]
     pub view: Option<String>,
     /// Seed 002's thin clients: the antenna robots read the field only through a `pheromone
@@ -86,7 +86,7 @@ pub struct SimArgs {
     /// ENDPOINT [default: tcp/127.0.0.1:7447, where `ros2 run rmw_zenoh_cpp rmw_zenohd`
     /// listens] is the Zenoh router or peer to connect to (docs/ros2.md). Add --realtime to
     /// watch the run at the speed of simulated time.
-    #[arg(long, value_name = "ENDPOINT", num_args = 0..=1,
+    #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint(), num_args = 0..=1,
           default_missing_value = "tcp/127.0.0.1:7447", conflicts_with = "single_process")]
     pub ros2: Option<String>,
     /// How every follower process waits for the frame of its step (`pheromone follower
@@ -109,7 +109,7 @@ pub struct SimArgs {
     /// Run T trials (seeds S, S+1, …) with the strategy and with the other sector strategy
     /// (inverse vs uniform) and report mean, standard deviation and Welch's t of the
     /// exploration (scenarios with an exploration metric).
-    #[arg(long, value_name = "T")]
+    #[arg(long, value_parser = super::int::<u32>(2, 100_000), value_name = "T")]
     pub trials: Option<u32>,
     /// Run on a ROS map_server map (map.yaml + its PGM): its occupied cells replace the
     /// scenario's walls, and the field and the exploration sectors cover the map.
@@ -125,20 +125,20 @@ pub struct SimArgs {
     #[arg(long)]
     pub no_merge: bool,
     /// The communication radius R_C of --merge (m, finite and > 0).
-    #[arg(long, value_name = "R", allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f64_pos(1e6), value_name = "R", allow_negative_numbers = true)]
     pub rc_m: Option<f64>,
     /// EKF-SLAM localizers (the map of landmarks is not given to them).
     #[arg(long)]
     pub slam: bool,
     /// Seconds the whole run may take before it is stopped as failed (separate processes).
-    #[arg(long, default_value_t = 900.0, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), default_value_t = 900.0, value_name = "SECS")]
     pub timeout: f64,
     /// Seconds every process may take to start and join the run (separate processes)
     /// [default: 10 s + 0.5 s per process].
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), value_name = "SECS")]
     pub attach_timeout: Option<f64>,
     /// Seconds a lockstep step may make no progress before the run fails (separate processes).
-    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    #[arg(long, value_parser = super::secs(), default_value_t = 30.0, value_name = "SECS")]
     pub stall_timeout: f64,
 }
 

@@ -64,16 +64,16 @@ pub struct SweepArgs {
     #[arg(long, conflicts_with = "strategies")]
     pub uniform: bool,
     /// Trials per point (seeds 1..=T).
-    #[arg(long, value_name = "T", default_value_t = 10)]
+    #[arg(long, value_parser = super::int::<u32>(1, 100_000), value_name = "T", default_value_t = 10)]
     pub trials: u32,
     /// Simulated seconds per run (one IAS-SS iteration a second: the paper's 1000 iterations).
-    #[arg(long = "duration-s", value_name = "S", default_value_t = 1000.0)]
+    #[arg(long = "duration-s", value_parser = super::secs(), value_name = "S", default_value_t = 1000.0)]
     pub duration_s: f64,
     /// Worker threads [default: the available parallelism].
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_parser = super::int::<usize>(1, 1024), value_name = "N")]
     pub jobs: Option<usize>,
     /// Directory for the files [default: pheromone-out/sweep-<SCENARIO>].
-    #[arg(long, value_name = "DIR")]
+    #[arg(long, value_name = "DIR", value_parser = super::check::out_dir())]
     pub out: Option<PathBuf>,
     /// Print sweep.json on stdout as well.
     #[arg(long)]

@@ -15,16 +15,16 @@ enum TuneWhat {
     /// The evaporation rate K (1/s) that takes P0 down to P_tm in t_m seconds (eq. 23).
     K {
         /// Initial pheromone level P0.
-        #[arg(long)]
+        #[arg(long, value_parser = super::f64_any())]
         p0: f64,
         /// Level P_tm reached after t_m seconds.
-        #[arg(long)]
+        #[arg(long, value_parser = super::f64_any())]
         ptm: f64,
         /// Time t_m in seconds.
-        #[arg(long)]
+        #[arg(long, value_parser = super::secs())]
         tm: f64,
         /// Ambient pheromone level Pa.
-        #[arg(long, default_value_t = 0.0)]
+        #[arg(long, value_parser = super::f64_any(), default_value_t = 0.0)]
         pa: f64,
         /// Print one JSON object `{"k_per_s": …}` on stdout.
         #[arg(long)]
@@ -34,19 +34,19 @@ enum TuneWhat {
     /// (T = δ·P0).
     Threshold {
         /// Initial pheromone level P0.
-        #[arg(long)]
+        #[arg(long, value_parser = super::f64_any())]
         p0: f64,
         /// Evaporation rate K (1/s).
-        #[arg(long)]
+        #[arg(long, value_parser = super::f64_any())]
         k: f64,
         /// Threshold level T.
-        #[arg(long, conflicts_with = "delta", required_unless_present = "delta")]
+        #[arg(long, value_parser = super::f64_any(), conflicts_with = "delta", required_unless_present = "delta")]
         level: Option<f64>,
         /// Threshold as a fraction of P0 (T = δ·P0).
-        #[arg(long)]
+        #[arg(long, value_parser = super::f64_any())]
         delta: Option<f64>,
         /// Ambient pheromone level Pa.
-        #[arg(long, default_value_t = 0.0)]
+        #[arg(long, value_parser = super::f64_any(), default_value_t = 0.0)]
         pa: f64,
         /// Print one JSON object `{"time_to_threshold_s": …}` on stdout.
         #[arg(long)]

@@ -19,16 +19,16 @@ pub struct ViewArgs {
     #[arg(long, default_value = "main")]
     pub field: String,
     /// HTTP address to serve on (port 0: any free port; the address is printed).
-    #[arg(long, default_value = "127.0.0.1:8080")]
+    #[arg(long, default_value = "127.0.0.1:8080", value_parser = super::check::socket_addr())]
     pub listen: String,
     /// World whose robots' poses are shown (`pheromone/W/r<ID>/pose`).
     #[arg(long)]
     pub world: Option<String>,
     /// Robots r0..r<N-1> looked for in the world.
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, value_parser = super::int::<u32>(0, 4096), default_value_t = 32)]
     pub robots: u32,
     /// Largest side of a downsampled frame when the page asks for none (1–4096).
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, value_parser = super::int::<usize>(1, 4096), default_value_t = 256)]
     pub max_side: usize,
 }
 

@@ -72,29 +72,34 @@ fn items<'a>(option: &'static str, text: &'a str) -> Result<Vec<&'a str>, SweepE
     Ok(parts)
 }
 
-/// `--robots 1,2,4`: robot counts ≥ 1, each at most once.
+/// The most robots a sweep's run may have (`pheromone sim --robots` takes as many).
+pub const MAX_ROBOTS: usize = 512;
+/// The largest communication radius R_C a sweep takes (m).
+pub const MAX_RC_M: f64 = 1e6;
+
+/// `--robots 1,2,4`: robot counts from 1 to `MAX_ROBOTS`, each at most once.
 pub fn parse_robots(text: &str) -> Result<Vec<usize>, SweepError> {
     let mut out = Vec::new();
     for p in items("--robots", text)? {
         match p.parse::<usize>() {
-            Ok(n) if n >= 1 => {
+            Ok(n) if (1..=MAX_ROBOTS).contains(&n) => {
                 if out.contains(&n) {
                     return Err(list_error("--robots", p, "given twice"));
                 }
                 out.push(n)
             }
-            _ => return Err(list_error("--robots", p, "not a robot count ≥ 1")),
+            _ => return Err(list_error("--robots", p, "not a robot count from 1 to 512")),
         }
     }
     Ok(out)
 }
 
-/// `--rc-m 4,8,16`: finite distances > 0 (m), each at most once.
+/// `--rc-m 4,8,16`: distances > 0, at most `MAX_RC_M` (m), each at most once.
 pub fn parse_rc_m(text: &str) -> Result<Vec<f64>, SweepError> {
     let mut out = Vec::new();
     for p in items("--rc-m", text)? {
         match p.parse::<f64>() {
-            Ok(r) if r.is_finite() && r > 0.0 => {
+            Ok(r) if r.is_finite() && r > 0.0 && r <= MAX_RC_M => {
                 if out.contains(&r) {
                     return Err(list_error("--rc-m", p, "given twice"));
                 }
@@ -104,7 +109,7 @@ pub fn parse_rc_m(text: &str) -> Result<Vec<f64>, SweepError> {
                 return Err(list_error(
                     "--rc-m",
                     p,
-                    "not a communication radius > 0 (m)",
+                    "not a communication radius > 0, at most 1e6 (m)",
                 ))
             }
         }

@@ -655,6 +655,17 @@ mod tests {
             e.contains("duration_s") && e.contains("at most 1e9 s"),
             "{e}"
         );
+        let e = refused(&|s| {
+            s.robots[0]
+                .depositor
+                .as_mut()
+                .expect("trail's robot deposits")
+                .channel = 5
+        });
+        assert!(
+            e.contains("depositor channel = 5") && e.contains("the field has 2 channel(s)"),
+            "{e}"
+        );
     }
 
     #[test]

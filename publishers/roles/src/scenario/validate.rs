@@ -202,9 +202,20 @@ impl Scenario {
         Ok(())
     }
 
-    /// Each follower's channel and explorer (`after_loss`) channel: one of the field's `channels`.
+    /// Each depositor's channel, follower's channel and explorer (`after_loss`) channel: one of
+    /// the field's `channels`.
     fn validate_follower_channels(&self, channels: u32) -> Result<(), ScenarioError> {
         for r in &self.robots {
+            match &r.depositor {
+                Some(d) if d.channel >= channels => {
+                    return Err(ScenarioError::Channel {
+                        key: format!("robot {}: depositor channel", r.id),
+                        channel: d.channel,
+                        channels,
+                    })
+                }
+                _ => {}
+            }
             let Some(f) = &r.follower else { continue };
             let explorer = f.after_loss.as_ref().and_then(|a| a.channel);
             for (key, ch) in [

@@ -273,15 +273,17 @@ impl RawMapYaml {
         Ok(())
     }
 
-    /// The resolution, present, finite and > 0.
+    /// The resolution, present, finite and from `MIN_RESOLUTION_M` to `MAX_RESOLUTION_M`.
     fn resolution_m(&self) -> Result<f64, MapError> {
         let (resolution_m, line) = self.resolution.ok_or(MapError::MissingKey("resolution"))?;
-        if !(resolution_m.is_finite() && resolution_m > 0.0) {
+        if !(resolution_m.is_finite()
+            && (MIN_RESOLUTION_M..=MAX_RESOLUTION_M).contains(&resolution_m))
+        {
             return Err(MapError::InvalidValue {
                 line,
                 key: "resolution",
                 value: resolution_m,
-                expected: "finite and > 0",
+                expected: "a finite number of metres per cell from 0.001 to 1000",
             });
         }
         Ok(resolution_m)
@@ -352,6 +354,12 @@ impl RawMapYaml {
 }
 
 /// Parses and checks a map_server YAML file's text.
+/// The finest map resolution taken (m per cell): finer is a unit mistake (mm given as m), and
+/// its walls would be far below any field cell.
+pub const MIN_RESOLUTION_M: f64 = 1e-3;
+/// The coarsest map resolution taken (m per cell).
+pub const MAX_RESOLUTION_M: f64 = 1e3;
+
 fn parse_map_yaml(text: &str) -> Result<MapYaml, MapError> {
     let mut raw = RawMapYaml::default();
     for (i, line) in text.lines().enumerate() {
@@ -526,6 +534,31 @@ mod tests {
             OccupancyMap::from_parts(&format!("{MAP_YAML}bogus: 1\n"), &pgm),
             Err(MapError::Yaml { line: 7, .. })
         ));
+        // Absurd resolutions: named with the line, whatever the rest of the map.
+        for (res, ok) in [
+            ("1e-6", false),
+            ("0", false),
+            ("1e300", false),
+            ("0.001", true),
+        ] {
+            let yaml = MAP_YAML.replace("resolution: 0.5", &format!("resolution: {res}"));
+            assert_ne!(yaml, MAP_YAML, "MAP_YAML's resolution moved");
+            let r = OccupancyMap::from_parts(&yaml, &pgm);
+            if ok {
+                assert!(r.is_ok(), "resolution {res}: {r:?}");
+            } else {
+                assert!(
+                    matches!(
+                        r,
+                        Err(MapError::InvalidValue {
+                            key: "resolution",
+                            ..
+                        })
+                    ),
+                    "resolution {res}: {r:?}"
+                );
+            }
+        }
     }
 
     fn example_map() -> std::path::PathBuf {
