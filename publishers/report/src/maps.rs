@@ -444,12 +444,14 @@ mod tests {
     fn write_plots_writes_the_framed_maps() {
         use roles::team::MappingRecord;
         let m = map();
-        let mut rec = Recording::default();
-        rec.mapping = Some(MappingRecord {
-            maps: [(3, m.clone())].into(),
-            merges: Vec::new(),
-            counters: Default::default(),
-        });
+        let rec = Recording {
+            mapping: Some(MappingRecord {
+                maps: [(3, m.clone())].into(),
+                merges: Vec::new(),
+                counters: Default::default(),
+            }),
+            ..Recording::default()
+        };
         let dir = std::env::temp_dir().join(format!("maps-framed-{}", std::process::id()));
         let scenario = roles::scenario::Scenario::load("evaporation").unwrap();
         let written = crate::write_plots(&dir, &scenario, &rec).unwrap();
