@@ -21,8 +21,9 @@ use super::{bad, bad_from};
 /// per robot (Welch's t and its df; the paired t, the seeds match).
 ///
 /// Writes into --out: sweep.csv (one row per run), sweep.json (points and comparisons),
-/// sweep_robots.png (exploration vs robots, with and without merging) and sweep_rc.png
-/// (exploration vs R_C), mean ± sd error bars. A progress bar shows on a terminal only.
+/// sweep_robots.png (exploration vs robots, with and without merging) and, when --rc-m lists
+/// two radii or more, sweep_rc.png (exploration vs R_C; one radius makes no line, so no
+/// chart), mean ± sd error bars. A progress bar shows on a terminal only.
 ///
 /// Time (measured on a 2-core machine, release build): one 1000 s run takes 0.4 s (1 robot) to
 /// 3.4 s (8 robots), so the default sweep (robots 1,2,4,6,8 × merge on/off × 10 trials = 100
@@ -140,6 +141,9 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| PathBuf::from("pheromone-out").join(format!("sweep-{}", base.name)));
     let files = report::write_sweep(&dir, &result)?;
     eprintln!("wrote {} file(s) to {}", files.len(), dir.display());
+    if let [rc_m] = report::rc_values(&result)[..] {
+        eprintln!("no sweep_rc.png: the sweep has one R_C ({rc_m} m); give --rc-m two or more");
+    }
     if a.json {
         println!("{}", serde_json::to_string(&result)?);
     }

@@ -30,6 +30,10 @@ pub struct ViewArgs {
     /// Largest side of a downsampled frame when the page asks for none (1–4096).
     #[arg(long, value_parser = super::int::<usize>(1, 4096), default_value_t = 256)]
     pub max_side: usize,
+    /// Scenario (built-in name or TOML file) whose world's walls the page draws over the heat
+    /// map: a field's frames carry no walls. `sim --view` passes its own.
+    #[arg(long)]
+    pub scenario: Option<String>,
 }
 
 pub fn run(a: ViewArgs) -> anyhow::Result<()> {
@@ -40,6 +44,10 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         )));
     }
     field::shm::check_name(&a.field).map_err(super::bad_from)?;
+    let walls_m = match &a.scenario {
+        Some(name) => scenario_walls(name)?,
+        None => Vec::new(),
+    };
     let node = create_node(&format!("view-{}", std::process::id()))?;
     let (server, local) = bind(&a.listen).map_err(super::bad_from)?;
     eprintln!("view: http://{local}/ (field '{}')", a.field);
@@ -48,8 +56,21 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         world: a.world,
         max_robots: a.robots,
         default_max_side: a.max_side,
+        walls_m,
     });
     serve(&node, &server, &mut view)?;
     eprintln!("view: stopped");
     Ok(())
+}
+
+/// The wall segments of `scenario`'s world, `[x0, y0, x1, y1]` in metres (a bad scenario or
+/// world is bad input, exit status 2).
+fn scenario_walls(scenario: &str) -> anyhow::Result<Vec<[f64; 4]>> {
+    let s = super::roles::load_scenario(scenario)?;
+    let world = roles::world::World::new(s.world.clone(), s.seed).map_err(super::bad_from)?;
+    Ok(world
+        .wall_segments()
+        .iter()
+        .map(|w| [w.a_m[0], w.a_m[1], w.b_m[0], w.b_m[1]])
+        .collect())
 }

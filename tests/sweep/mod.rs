@@ -1,8 +1,8 @@
 //! `pheromone sweep ias-ss`: a tiny sweep's CSV, JSON and charts; bad lists exit with status 2.
 //!
 //! `pheromone sweep ias-ss` (seed 004's grid of experiments): a tiny sweep writes a CSV row per
-//! run, the JSON points and comparisons, and two valid PNG charts; bad lists exit with status 2
-//! naming the option and the value.
+//! run, the JSON points and comparisons, and the robots chart (no R_C chart for one radius);
+//! bad lists exit with status 2 naming the option and the value.
 
 use std::path::Path;
 
@@ -19,7 +19,7 @@ fn is_png(path: &Path) -> bool {
 }
 
 #[test]
-fn a_tiny_sweep_writes_a_row_per_run_the_points_and_two_pngs() {
+fn a_tiny_sweep_writes_a_row_per_run_the_points_and_the_robots_chart() {
     let dir = std::env::temp_dir().join(unique("sweep"));
     let out = dir.to_str().unwrap();
     let o = run(&[
@@ -68,9 +68,14 @@ fn a_tiny_sweep_writes_a_row_per_run_the_points_and_two_pngs() {
     assert!(comparisons.iter().all(|c| c["kind"] == "merge"));
     // --json prints the same object.
     assert_eq!(crate::harness::json(&o)["points"], json["points"]);
-    for png in ["sweep_robots.png", "sweep_rc.png"] {
-        assert!(is_png(&dir.join(png)), "{png}");
-    }
+    assert!(is_png(&dir.join("sweep_robots.png")));
+    // One R_C (the scenario's): no R_C chart, and the summary says why.
+    assert!(!dir.join("sweep_rc.png").exists());
+    assert!(
+        stderr(&o).contains("no sweep_rc.png: the sweep has one R_C (8 m)"),
+        "{}",
+        stderr(&o)
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -301,6 +301,9 @@ fn bad_parameters_get_a_400_naming_them_and_unknown_paths_a_404() {
         "{}",
         stderr(&o)
     );
+    let o = run(&["view", "--scenario", "no-such-scenario"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("no-such-scenario"), "{}", stderr(&o));
 }
 
 #[test]
@@ -421,7 +424,17 @@ fn attribute(dom: &str, tag: &str, name: &str) -> String {
 
 #[test]
 fn headless_chromium_shows_the_deposited_blob_on_the_page() {
-    let (name, _field, _view, port) = field_and_view("view-browser", &[]);
+    // With the walls of `trail` (two 12 m × 0.1 m rectangles, 8 segments, inside this 20 m ×
+    // 10 m field).
+    let (name, _field, _view, port) = field_and_view("view-browser", &["--scenario", "trail"]);
+    let walls = get_json(port, "/api/walls");
+    let segments = walls["walls"].as_array().unwrap();
+    assert_eq!(segments.len(), 8, "{walls}");
+    // The lower edge of the upper wall, as the scenario gives it (metres).
+    assert!(
+        segments.iter().any(|w| w[1] == 4.9 && w[3] == 4.9),
+        "{walls}"
+    );
     let (x, y) = (6.05f32, 8.25f32);
     deposit_and_wait(&name, port, x, y, "");
     let value = probe(&name, x, y);
@@ -468,6 +481,17 @@ fn headless_chromium_shows_the_deposited_blob_on_the_page() {
     let hz = number("stat-tick-hz");
     assert!((35.0..65.0).contains(&hz), "page tick rate {hz}");
     assert_eq!(attribute(&dom, "<span id=\"status\"", "data-state"), "live");
+    // The walls on the overlay, in the pictures' wall colour, and the colour bar's unit.
+    let overlay = "<canvas id=\"overlay\"";
+    assert_eq!(attribute(&dom, overlay, "data-walls"), "8");
+    assert_eq!(
+        attribute(&dom, overlay, "data-wall-pixel"),
+        "rgb(215, 215, 215)"
+    );
+    assert!(
+        dom.contains("<span id=\"bar-unit\">level (pheromone units)</span>"),
+        "no unit on the colour bar"
+    );
 }
 
 #[test]

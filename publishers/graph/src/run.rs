@@ -356,8 +356,8 @@ pub struct RunReport {
     pub robots: usize,
     pub seed: u64,
     pub until: Until,
-    /// Time until every region was served (or fully captured, `until = captured`); `None`:
-    /// not within `max_time_s`.
+    /// Time until every region was served (or fully captured, `until = captured`; the last
+    /// step's time for `until = time`); `None`: not within `max_time_s`.
     pub finish_s: Option<f32>,
     pub steps: u64,
     pub captures: Vec<Capture>,
@@ -530,7 +530,10 @@ impl GraphWorld {
                 .regions()
                 .iter()
                 .all(|r| r.captured_by.len() as u32 >= r.max_r),
-            Until::Time => false,
+            // The goal is the end of max_time_s: reached by the step after which `finished`
+            // ends the run on time (the same test, one step ahead), so such a run is not
+            // reported "not reached" for running its whole time.
+            Until::Time => (self.step + 1) as f32 * self.params.dt_s > self.params.max_time_s,
         }
     }
 

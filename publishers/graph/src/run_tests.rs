@@ -102,6 +102,9 @@ mod backup_tests {
     fn a_robot_follows_positive_pheromone_to_the_leaders_goal() {
         let mut sc = RegionsScenario::builtin("regions-backup").unwrap();
         let r = simulate(&sc, GraphStrategy::Pheromone, 2, 1).unwrap();
+        // until = "time": the goal is the end of max_time_s (60 s), reached on its last step.
+        assert_eq!(r.finish_s, Some(60.0), "{}", tables_text(&r));
+        assert!(tables_text(&r).contains("the end of max_time_s when reached: 60.0 s"));
         let (r1, r2) = (&r.robot_reports[0], &r.robot_reports[1]);
         assert_eq!(r1.path.last().map(String::as_str), Some("E"), "{r1:?}");
         assert_eq!(r2.path, r1.path, "{}", tables_text(&r));

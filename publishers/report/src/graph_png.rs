@@ -238,17 +238,53 @@ fn draw_nodes(
     Ok(())
 }
 
-/// The picture's title: scenario, strategy, robots and when the goal was reached.
+/// The picture's title: scenario, strategy, robots and the goal (`until`), reached when or not.
 fn title(report: &graph::run::RunReport) -> String {
+    use graph::agent::Until;
+    let goal = match (report.until, report.finish_s) {
+        (Until::Served, Some(t)) => format!("every region served at {t:.1} s"),
+        (Until::Captured, Some(t)) => format!("every region captured at {t:.1} s"),
+        (Until::Time, Some(t)) => format!("ran its {t:.1} s (until = time)"),
+        (Until::Served, None) => "goal not reached: not every region served".to_string(),
+        (Until::Captured, None) => "goal not reached: not every region captured".to_string(),
+        (Until::Time, None) => "stopped before the end of max_time_s".to_string(),
+    };
     format!(
-        "{}: {}, {} robots, {}",
+        "{}: {}, {} robots, {goal}",
         report.scenario,
         report.strategy.name(),
         report.robots,
-        report
-            .finish_s
-            .map_or("goal not reached".to_string(), |t| format!(
-                "goal at {t:.1} s"
-            )),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use graph::agent::{GraphStrategy, RegionsScenario};
+    use graph::run::simulate;
+
+    /// Runs that reach their goal say so: a run for a fixed time (regions-backup, until =
+    /// time) was titled "goal not reached" before the time goal counted as reached.
+    #[test]
+    fn the_title_says_whether_the_goal_was_reached() {
+        let backup = RegionsScenario::builtin("regions-backup").unwrap();
+        let r = simulate(&backup, GraphStrategy::Pheromone, 2, 1).unwrap();
+        let t = title(&r);
+        assert!(t.contains("ran its 60.0 s"), "{t}");
+        assert!(!t.contains("not reached"), "{t}");
+        let regions = RegionsScenario::builtin("regions").unwrap();
+        let mut r = simulate(&regions, GraphStrategy::Pheromone, 2, 1).unwrap();
+        let t = title(&r);
+        assert!(t.contains("every region served at 120.2 s"), "{t}");
+        r.finish_s = None;
+        assert!(title(&r).contains("goal not reached"), "{}", title(&r));
+        // The picture itself is written.
+        let dir = std::env::temp_dir().join(format!("graph-png-{}", std::process::id()));
+        let path = dir.join("g.png");
+        let state = regions.validate().unwrap();
+        let dock = regions.dock_node(&state.graph).unwrap();
+        write_graph_png(&path, &state, &r, dock).unwrap();
+        assert_eq!(&fs::read(&path).unwrap()[..4], b"\x89PNG");
+        fs::remove_dir_all(&dir).unwrap();
+    }
 }

@@ -41,7 +41,7 @@ use sim::record::{Recording, Snapshot};
 pub use graph_png::write_graph_png;
 pub use marks::{marks, Mark, Shape};
 pub use plots::{PLOT_H_PX, PLOT_W_PX};
-pub use sweep::{sweep_csv, write_sweep, SWEEP_CSV_HEADER};
+pub use sweep::{rc_values, sweep_csv, write_sweep, SWEEP_CSV_HEADER};
 
 /// Writing the outputs of a run failed.
 #[derive(Debug, thiserror::Error)]
@@ -87,7 +87,8 @@ pub const PROBES_CSV_HEADER: &str = "t_s,x_m,y_m,channel,value";
 /// Writes every output of a run into `dir` (created if needed) and returns the paths written:
 /// `metrics.json`, `robot_<id>.csv` per robot, `probes.csv` if there are probes, one
 /// `field_<channel>_t<sss.s>s.png` per snapshot and channel, `field_final.png` (the last
-/// snapshot's first channel) and `field_final.npy` (the last snapshot, every channel:
+/// snapshot's only channel, or all its channels at once) with `field_final_<channel>.png` per
+/// channel when there are several, and `field_final.npy` (the last snapshot, every channel:
 /// `crate::export::npy`). The heat maps draw `marks` (from [`marks`]: the places the
 /// scenario's metrics name, such as `wrong_area`'s A and B).
 pub fn write_outputs(
@@ -136,8 +137,9 @@ pub fn write_outputs(
         written.push(path);
     }
 
-    let mut final_png = None;
+    let mut last_pngs = Vec::new();
     for snap in &rec.snapshots {
+        last_pngs.clear();
         for (c, name) in snap.channels.iter().enumerate() {
             let path = dir.join(snapshot_file_name(name, snap.t_s));
             let pic = render_snapshot(rec, snap, c, marks).map_err(|detail| ReportError::Draw {
@@ -145,24 +147,80 @@ pub fn write_outputs(
                 detail,
             })?;
             write_png(&path, &pic)?;
-            if c == 0 {
-                final_png = Some(path.clone());
-            }
+            last_pngs.push((name.clone(), path.clone()));
             written.push(path);
         }
     }
-    if let Some(last) = final_png {
-        let path = dir.join("field_final.png");
-        fs::copy(&last, &path).map_err(|source| ReportError::Io {
-            path: path.clone(),
-            source,
-        })?;
-        written.push(path);
-    }
+    written.extend(write_final_pngs(dir, rec, marks, &last_pngs)?);
     if let Some(last) = rec.snapshots.last() {
         written.push(crate::export::npy::write_snapshot(dir, last)?);
     }
     Ok(written)
+}
+
+/// The final pictures: `field_final_<channel>.png` per channel (copies of the last snapshot's)
+/// when the field has several, and `field_final.png`: the only channel's picture, or with
+/// several channels every channel at once ([`all_channels`]), so that no trail is missing.
+fn write_final_pngs(
+    dir: &Path,
+    rec: &Recording,
+    marks: &[Mark],
+    last_pngs: &[(String, PathBuf)],
+) -> Result<Vec<PathBuf>, ReportError> {
+    let copy = |from: &Path, to: PathBuf| {
+        fs::copy(from, &to).map_err(|source| ReportError::Io {
+            path: to.clone(),
+            source,
+        })?;
+        Ok::<_, ReportError>(to)
+    };
+    let mut written = Vec::new();
+    match (last_pngs, rec.snapshots.last()) {
+        ([(_, only)], _) => written.push(copy(only, dir.join("field_final.png"))?),
+        (several, Some(last)) if several.len() > 1 => {
+            for (name, png) in several {
+                written.push(copy(png, dir.join(final_file_name(name)))?);
+            }
+            let path = dir.join("field_final.png");
+            let all = all_channels(last);
+            let pic = render_snapshot(rec, &all, 0, marks).map_err(|detail| ReportError::Draw {
+                path: path.clone(),
+                detail,
+            })?;
+            write_png(&path, &pic)?;
+            written.push(path);
+        }
+        _ => {}
+    }
+    Ok(written)
+}
+
+/// `field_final_<channel>.png`, the channel name as in [`snapshot_file_name`].
+pub fn final_file_name(channel: &str) -> String {
+    format!("field_final_{}.png", file_safe(channel))
+}
+
+/// One plane holding every channel of `snap`: per cell the value of largest magnitude (a cell
+/// on any channel's trail shows), named after the channels it combines.
+fn all_channels(snap: &Snapshot) -> Snapshot {
+    let n = snap.width as usize * snap.height as usize;
+    let mut plane = snap.plane(0).to_vec();
+    for c in 1..snap.channels.len() {
+        for (v, &w) in plane.iter_mut().zip(snap.plane(c)) {
+            if w.is_nan() || w.abs() > v.abs() {
+                *v = w;
+            }
+        }
+    }
+    debug_assert_eq!(plane.len(), n);
+    Snapshot {
+        t_s: snap.t_s,
+        width: snap.width,
+        height: snap.height,
+        cell_size_m: snap.cell_size_m,
+        channels: vec![format!("{} (largest |level|)", snap.channels.join(" + "))],
+        planes: plane,
+    }
 }
 
 /// Header of `exploration.csv`: then one `r<id>` column per robot, then `team`.
@@ -247,11 +305,11 @@ pub fn write_plots(
         for (id, map) in &mapping.maps {
             written.push(draw(
                 &format!("map_r{id}.png"),
-                Ok(maps::own_frame(map, 2)),
+                maps::own_frame_picture(map, *id),
             )?);
             written.push(draw(
                 &format!("map_r{id}_world.png"),
-                Ok(maps::world_frame(map, rec, *id)),
+                maps::world_frame_picture(map, rec, *id),
             )?);
         }
     }
@@ -289,7 +347,13 @@ fn exploration_csv(s: &series::ExplorationSeries) -> String {
 /// digits (`field_trail_t012.0s.png`); characters other than letters, digits, `-` and `_` in
 /// the channel name become `_`.
 pub fn snapshot_file_name(channel: &str, t_s: f64) -> String {
-    let name: String = channel
+    format!("field_{}_t{t_s:05.1}s.png", file_safe(channel))
+}
+
+/// A channel name in a file name: characters other than letters, digits, `-` and `_` become
+/// `_`.
+fn file_safe(channel: &str) -> String {
+    channel
         .chars()
         .map(|ch| {
             if ch.is_ascii_alphanumeric() || ch == '-' || ch == '_' {
@@ -298,8 +362,7 @@ pub fn snapshot_file_name(channel: &str, t_s: f64) -> String {
                 '_'
             }
         })
-        .collect();
-    format!("field_{name}_t{t_s:05.1}s.png")
+        .collect()
 }
 
 fn check_snapshot(snap: &Snapshot) -> Result<(), ReportError> {

@@ -258,7 +258,13 @@ pub(super) fn path_distance_chart(paths: &[PathDistance], end_s: f64) -> Result<
             .draw()
             .map_err(msg)?;
         for (i, p) in paths.iter().enumerate() {
-            let rgb = series_rgb(i);
+            // The robot's colour of every picture, unless it follows two paths.
+            let shared = paths.iter().filter(|q| q.robot == p.robot).count() > 1;
+            let rgb = if shared {
+                series_rgb(i)
+            } else {
+                robot_rgb(p.robot)
+            };
             // The window, shaded unless it is the whole run.
             if p.from_s > 1e-9 || p.to_s < t_max - 1e-9 {
                 chart

@@ -23,7 +23,8 @@ pub(super) const WALL_RGB: Rgb = [215, 215, 215];
 pub(super) const STRIP_RGB: Rgb = [24, 24, 28];
 pub(super) const TEXT_RGB: Rgb = [235, 235, 235];
 pub(super) const OUTLINE_RGB: Rgb = [0, 0, 0];
-/// One colour per robot (by id, cycling), chosen to stand out on both colour maps and on white.
+/// The first robots' colours (ids 0–4), chosen to stand out on both colour maps and on white;
+/// [`robot_rgb`] continues the palette for any id.
 pub(super) const ROBOT_RGB: [Rgb; 5] = [
     [240, 40, 40],
     [0, 170, 240],
@@ -67,8 +68,116 @@ pub(super) const DIVERGING: [Rgb; 5] = [
     [255, 225, 120],
 ];
 
+/// Robot `id`'s colour, the same in every picture of a run (heat maps, charts, maps) since it
+/// depends on the id alone. Ids 0–4 get [`ROBOT_RGB`]; ids up to [`PALETTE_LEN`] − 1 continue
+/// a palette built greedily, each colour the candidate farthest (CIELAB ΔE) from every earlier
+/// one and from the colours the pictures reserve (NaN, walls, black, white); any larger id gets
+/// a golden-ratio hue step. Robots 0..64 are at least ΔE 18 apart (the tests check).
 pub(super) fn robot_rgb(id: u32) -> Rgb {
-    ROBOT_RGB[id as usize % ROBOT_RGB.len()]
+    match robot_palette().get(id as usize) {
+        Some(&c) => c,
+        None => {
+            let h = (f64::from(id) * 0.618_033_988_749_895).fract();
+            let (s, v) = [(0.9, 0.95), (0.6, 1.0), (1.0, 0.7)][id as usize % 3];
+            hsv_rgb(h, s, v)
+        }
+    }
+}
+
+/// Robots with a palette colour (ids 0..PALETTE_LEN).
+pub(super) const PALETTE_LEN: usize = 256;
+
+fn robot_palette() -> &'static [Rgb] {
+    static PALETTE: OnceLock<Vec<Rgb>> = OnceLock::new();
+    PALETTE.get_or_init(|| {
+        let mut candidates = Vec::new();
+        for h in (0..360).step_by(5) {
+            for s in [0.55, 0.75, 1.0] {
+                for v in [0.6, 0.8, 1.0] {
+                    candidates.push(hsv_rgb(f64::from(h) / 360.0, s, v));
+                }
+            }
+        }
+        let cand_lab: Vec<[f64; 3]> = candidates.iter().map(|&c| lab(c)).collect();
+        // Each candidate's distance to the nearest colour taken (or reserved) so far.
+        let mut nearest: Vec<f64> = vec![f64::INFINITY; candidates.len()];
+        let take = |c: Rgb, nearest: &mut Vec<f64>| {
+            let l = lab(c);
+            for (n, cl) in nearest.iter_mut().zip(&cand_lab) {
+                *n = n.min(delta_e(l, *cl));
+            }
+        };
+        for c in [NAN_RGB, WALL_RGB, STRIP_RGB, [255, 255, 255]] {
+            take(c, &mut nearest);
+        }
+        let mut palette: Vec<Rgb> = ROBOT_RGB.to_vec();
+        for &c in &ROBOT_RGB {
+            take(c, &mut nearest);
+        }
+        while palette.len() < PALETTE_LEN {
+            // The first farthest candidate: deterministic.
+            let (i, _) =
+                nearest
+                    .iter()
+                    .enumerate()
+                    .fold((0, f64::NEG_INFINITY), |best, (i, &d)| {
+                        if d > best.1 {
+                            (i, d)
+                        } else {
+                            best
+                        }
+                    });
+            palette.push(candidates[i]);
+            take(candidates[i], &mut nearest);
+        }
+        palette
+    })
+}
+
+/// HSV (each in [0, 1]) to 8-bit RGB.
+fn hsv_rgb(h: f64, s: f64, v: f64) -> Rgb {
+    let h6 = (h.rem_euclid(1.0)) * 6.0;
+    let f = h6 - h6.floor();
+    let (p, q, t) = (v * (1.0 - s), v * (1.0 - s * f), v * (1.0 - s * (1.0 - f)));
+    let (r, g, b) = match h6.floor() as u32 {
+        0 => (v, t, p),
+        1 => (q, v, p),
+        2 => (p, v, t),
+        3 => (p, q, v),
+        4 => (t, p, v),
+        _ => (v, p, q),
+    };
+    [r, g, b].map(|u| (u * 255.0).round().clamp(0.0, 255.0) as u8)
+}
+
+/// CIELAB (D65) of an sRGB colour.
+pub(super) fn lab(c: Rgb) -> [f64; 3] {
+    let lin = |u: u8| {
+        let u = f64::from(u) / 255.0;
+        if u <= 0.04045 {
+            u / 12.92
+        } else {
+            ((u + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    let [r, g, b] = c.map(lin);
+    let x = (0.4124 * r + 0.3576 * g + 0.1805 * b) / 0.95047;
+    let y = 0.2126 * r + 0.7152 * g + 0.0722 * b;
+    let z = (0.0193 * r + 0.1192 * g + 0.9505 * b) / 1.08883;
+    let f = |t: f64| {
+        if t > 216.0 / 24389.0 {
+            t.cbrt()
+        } else {
+            (24389.0 / 27.0 * t + 16.0) / 116.0
+        }
+    };
+    let (fx, fy, fz) = (f(x), f(y), f(z));
+    [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
+}
+
+/// CIE76 colour difference.
+pub(super) fn delta_e(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 pub(super) fn series_rgb(i: usize) -> Rgb {
@@ -235,6 +344,38 @@ mod tests {
         let empty = ColourMap::for_plane(&[0.0; 4]);
         assert_eq!(empty.colour(0.0), VIRIDIS[0]);
         assert_eq!(empty.range(), (0.0, 1.0));
+    }
+
+    #[test]
+    fn robot_colours_are_distinct_for_any_team_up_to_64_and_depend_on_the_id_alone() {
+        for n in 1..=64u32 {
+            let mut min = f64::INFINITY;
+            for a in 0..n {
+                for b in 0..a {
+                    min = min.min(delta_e(lab(robot_rgb(a)), lab(robot_rgb(b))));
+                }
+            }
+            let floor = if n <= 16 { 35.0 } else { 18.0 };
+            assert!(
+                min >= floor,
+                "{n} robots: two colours only ΔE {min:.1} apart"
+            );
+            // Never the NaN colour, nor the walls'.
+            let c = robot_rgb(n - 1);
+            assert!(delta_e(lab(c), lab(NAN_RGB)) > 15.0, "{n}: {c:?}");
+            assert!(delta_e(lab(c), lab(WALL_RGB)) > 15.0, "{n}: {c:?}");
+        }
+        // The first five are the fixed palette; a robot's colour is the same whatever else is
+        // drawn (no state: the same id gives the same colour in any order).
+        assert_eq!(robot_rgb(0), ROBOT_RGB[0]);
+        assert_eq!(robot_rgb(4), ROBOT_RGB[4]);
+        let later: Vec<Rgb> = (0..70).rev().map(robot_rgb).collect();
+        let earlier: Vec<Rgb> = (0..70).map(robot_rgb).collect();
+        assert_eq!(later.into_iter().rev().collect::<Vec<_>>(), earlier);
+        // Beyond the palette: still defined, and not all one colour.
+        let big = PALETTE_LEN as u32;
+        assert_ne!(robot_rgb(big), robot_rgb(big + 1));
+        assert_ne!(robot_rgb(big), robot_rgb(big - 1));
     }
 
     #[test]

@@ -1,14 +1,19 @@
 //! What `pheromone sweep` writes: `sweep.csv` (one row per run), `sweep.json` (the points with
-//! mean ± sd, the comparisons with Welch's and the paired t) and two charts drawn like the
+//! mean ± sd, the comparisons with Welch's and the paired t) and the charts drawn like the
 //! run's (plotters, `PLOT_W_PX` × `PLOT_H_PX`): `sweep_robots.png`, exploration against the
-//! number of robots with and without merging, and `sweep_rc.png`, exploration against R_C.
-//! Both plot `exploration_known` mean per robot, mean ± sd over the trials (error bars); merge
-//! off is dashed.
+//! number of robots (whole-number ticks) with and without merging, and `sweep_rc.png`,
+//! exploration against R_C, written only when the sweep has two radii or more (one radius is
+//! no line). Both plot `exploration_known` mean per robot, mean ± sd over the trials (error
+//! bars); merge on is a solid line with filled dots, merge off a dashed line with hollow dots,
+//! and each legend entry starts with "merge" or "no merge".
 
 use std::fmt::Write as _;
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use std::ops::Range;
+
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, Ranged};
 use plotters::coord::types::RangedCoordf64;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
@@ -51,8 +56,9 @@ pub fn sweep_csv(r: &SweepResult) -> String {
     text
 }
 
-/// Writes `sweep.csv`, `sweep.json`, `sweep_robots.png` and `sweep_rc.png` into `dir` (created
-/// if needed) and returns the paths written.
+/// Writes `sweep.csv`, `sweep.json`, `sweep_robots.png` and, when the sweep has two radii or
+/// more ([`rc_values`]), `sweep_rc.png` into `dir` (created if needed) and returns the paths
+/// written.
 pub fn write_sweep(dir: &Path, r: &SweepResult) -> Result<Vec<PathBuf>, ReportError> {
     fs::create_dir_all(dir).map_err(|source| ReportError::Io {
         path: dir.to_path_buf(),
@@ -73,10 +79,11 @@ pub fn write_sweep(dir: &Path, r: &SweepResult) -> Result<Vec<PathBuf>, ReportEr
         "'{}', {} s, {} trial(s) per point (seeds 1..={}); known: visited or merged, mean per robot over the {} sectors; mean ± sd",
         r.scenario, r.duration_s, r.trials, r.trials, r.sectors
     );
-    for (name, axis) in [
-        ("sweep_robots.png", Axis::Robots),
-        ("sweep_rc.png", Axis::Rc),
-    ] {
+    let mut charts = vec![("sweep_robots.png", Axis::Robots)];
+    if rc_values(r).len() > 1 {
+        charts.push(("sweep_rc.png", Axis::Rc));
+    }
+    for (name, axis) in charts {
         let path = dir.join(name);
         let pic = chart(&r.points, axis, &subtitle).map_err(|detail| ReportError::Draw {
             path: path.clone(),
@@ -86,6 +93,14 @@ pub fn write_sweep(dir: &Path, r: &SweepResult) -> Result<Vec<PathBuf>, ReportEr
         written.push(path);
     }
     Ok(written)
+}
+
+/// The distinct R_C values of the sweep's points, ascending.
+pub fn rc_values(r: &SweepResult) -> Vec<f64> {
+    let mut v: Vec<f64> = r.points.iter().map(|p| p.key.rc_m).collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    v
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -102,13 +117,71 @@ impl Axis {
         }
     }
 
-    /// The settings a line keeps fixed, in words.
+    /// The settings a line keeps fixed, in words, merge or not first.
     fn label(self, k: &PointKey) -> String {
         let merge = if k.merge { "merge" } else { "no merge" };
         match self {
-            Axis::Robots => format!("{}, {merge}, R_C = {} m", k.strategy.name(), k.rc_m),
-            Axis::Rc => format!("{}, {merge}, {} robot(s)", k.strategy.name(), k.robots),
+            Axis::Robots => format!("{merge}: {}, R_C = {} m", k.strategy.name(), k.rc_m),
+            Axis::Rc => format!("{merge}: {}, {} robot(s)", k.strategy.name(), k.robots),
         }
+    }
+
+    /// The x axis with its ticks: whole numbers for robots (at most about ten), plotters' round
+    /// values for R_C.
+    fn x_coord(self, lo: f64, hi: f64) -> Ticked {
+        let points = match self {
+            Axis::Robots => {
+                let (first, last) = (lo.ceil().max(0.0) as u64, hi.floor().max(0.0) as u64);
+                let step = (last.saturating_sub(first) / 10).max(1) as usize;
+                (first..=last).step_by(step).map(|n| n as f64).collect()
+            }
+            Axis::Rc => {
+                let r: RangedCoordf64 = (lo..hi).into();
+                r.key_points(10)
+            }
+        };
+        Ticked {
+            range: (lo..hi).into(),
+            ticks: points,
+        }
+    }
+
+    /// A tick label: `3` for robots, `12.5` or `8` for R_C.
+    fn tick(self, x: f64) -> String {
+        match self {
+            Axis::Robots => format!("{x:.0}"),
+            Axis::Rc => {
+                let s = format!("{x:.3}");
+                s.trim_end_matches('0').trim_end_matches('.').to_string()
+            }
+        }
+    }
+}
+
+/// An f64 axis with the ticks given (plotters' own f64 axis picks its ticks, 1.0, 1.5, …).
+struct Ticked {
+    range: RangedCoordf64,
+    ticks: Vec<f64>,
+}
+
+impl Ranged for Ticked {
+    type ValueType = f64;
+    type FormatOption = DefaultFormatting;
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        self.range.map(value, limit)
+    }
+
+    fn key_points<Hint: KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        if hint.weight().allow_light_points() {
+            Vec::new()
+        } else {
+            self.ticks.clone()
+        }
+    }
+
+    fn range(&self) -> Range<f64> {
+        self.range.range()
     }
 }
 
@@ -148,8 +221,7 @@ fn lines(points: &[Point], axis: Axis) -> Vec<Line<'_>> {
 }
 
 /// A sweep chart: exploration (%) against the axis' setting.
-type Chart<'a, 'b> =
-    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<Ticked, RangedCoordf64>>;
 
 /// The chart of one axis: each line's mean ± sd against the axis' setting.
 fn chart(points: &[Point], axis: Axis, subtitle: &str) -> Result<Picture, String> {
@@ -165,10 +237,12 @@ fn chart(points: &[Point], axis: Axis, subtitle: &str) -> Result<Picture, String
         let mut chart = ChartBuilder::on(&area)
             .x_label_area_size(44)
             .y_label_area_size(64)
-            .build_cartesian_2d((lo - pad)..(hi + pad), 0.0..105.0)
+            .build_cartesian_2d(axis.x_coord(lo - pad, hi + pad), 0.0..105.0)
             .map_err(msg)?;
+        let tick = |x: &f64| axis.tick(*x);
         chart
             .configure_mesh()
+            .x_label_formatter(&tick)
             .light_line_style(WHITE)
             .bold_line_style(RGBColor(225, 225, 225))
             .label_style(text(14))
@@ -236,6 +310,23 @@ fn colour_index(colours: &mut Vec<PointKey>, axis: Axis, key: &PointKey) -> usiz
     }
 }
 
+/// The legend's sample of a line at `$at`, 24 px wide: solid with a filled dot (merge), two
+/// dashes with a ring (no merge). A macro: both are the same composed element type, which
+/// plotters' legend closure needs.
+macro_rules! legend_sample {
+    ($merge:expr, $rgb:expr, $at:expr) => {{
+        let (merge, rgb): (bool, Rgb) = ($merge, $rgb);
+        let st = colour(rgb).stroke_width(2);
+        let (left, right) = if merge { (12, 12) } else { (3, 21) };
+        let fill = if merge { colour(rgb) } else { WHITE };
+        EmptyElement::at($at)
+            + PathElement::new(vec![(0, 0), (left, 0)], st)
+            + PathElement::new(vec![(right, 0), (24, 0)], st)
+            + Circle::new((12, 0), 4, fill.filled())
+            + Circle::new((12, 0), 4, st)
+    }};
+}
+
 /// Draws one line (dashed without merging), its legend entry, error bars and dots.
 fn draw_line<'a, 'b: 'a>(
     chart: &mut Chart<'a, 'b>,
@@ -269,28 +360,28 @@ fn draw_line<'a, 'b: 'a>(
             )))
             .map_err(msg)?
     };
-    let dashed = !l.key.merge;
+    let merge = l.key.merge;
     anno.label(line_label(l, axis, across))
-        .legend(move |(x, y)| {
-            let st = colour(rgb).stroke_width(2);
-            let mid = if dashed {
-                vec![]
-            } else {
-                vec![(9, 0), (15, 0)]
-            };
-            EmptyElement::at((x, y))
-                + PathElement::new(vec![(0, 0), (9, 0)], st)
-                + PathElement::new(mid, st)
-                + PathElement::new(vec![(15, 0), (24, 0)], st)
-                + Circle::new((12, 0), 4, colour(rgb).filled())
-        });
+        .legend(move |(x, y)| legend_sample!(merge, rgb, (x, y)));
     draw_error_bars(chart, l, axis, style, 0.12 * pad)?;
+    // The dots: filled with merging, rings (white inside) without.
+    let xy: Vec<(f64, f64)> = l
+        .points
+        .iter()
+        .map(|p| (axis.x(&p.key), 100.0 * p.known_mean.mean))
+        .collect();
+    let fill = if merge { colour(rgb) } else { WHITE };
     chart
-        .draw_series(l.points.iter().map(|p| {
-            let xy = (axis.x(&p.key), 100.0 * p.known_mean.mean);
-            Circle::new(xy, 4, colour(rgb).filled())
-        }))
+        .draw_series(xy.iter().map(|&p| Circle::new(p, 4, fill.filled())))
         .map_err(msg)?;
+    if !merge {
+        chart
+            .draw_series(
+                xy.iter()
+                    .map(|&p| Circle::new(p, 4, colour(rgb).stroke_width(2))),
+            )
+            .map_err(msg)?;
+    }
     Ok(())
 }
 
@@ -298,7 +389,7 @@ fn draw_line<'a, 'b: 'a>(
 fn line_label(l: &Line<'_>, axis: Axis, across: bool) -> String {
     if across {
         format!(
-            "{}, no merge, {} robot(s) (any R_C)",
+            "no merge: {}, {} robot(s) (any R_C)",
             l.key.strategy.name(),
             l.key.robots
         )
@@ -392,7 +483,10 @@ mod tests {
         assert_eq!(c.paired, None, "equal differences: undefined");
         let dir = std::env::temp_dir().join(format!("sweep-report-{}", std::process::id()));
         let files = write_sweep(&dir, &r).unwrap();
-        assert_eq!(files.len(), 4);
+        // One R_C (8 m): no R_C chart.
+        assert_eq!(rc_values(&r), [8.0]);
+        assert_eq!(files.len(), 3, "{files:?}");
+        assert!(!dir.join("sweep_rc.png").exists());
         let csv = fs::read_to_string(dir.join("sweep.csv")).unwrap();
         assert_eq!(csv.lines().count(), 1 + 8);
         assert!(csv
@@ -404,10 +498,72 @@ mod tests {
             serde_json::from_str(&fs::read_to_string(dir.join("sweep.json")).unwrap()).unwrap();
         assert_eq!(json["points"].as_array().unwrap().len(), 4);
         assert_eq!(json["points"][0]["strategy"], "inverse");
-        for png in ["sweep_robots.png", "sweep_rc.png"] {
-            let b = fs::read(dir.join(png)).unwrap();
-            assert_eq!(&b[..8], b"\x89PNG\r\n\x1a\n", "{png}");
+        let b = fs::read(dir.join("sweep_robots.png")).unwrap();
+        assert_eq!(&b[..8], b"\x89PNG\r\n\x1a\n");
+        // Two radii: both charts.
+        let mut runs = r.runs.clone();
+        for x in &r.runs {
+            runs.push(RunResult {
+                point: PointKey {
+                    rc_m: 4.0,
+                    ..x.point
+                },
+                ..x.clone()
+            });
         }
+        let pts = points(&runs);
+        let r2 = SweepResult {
+            comparisons: comparisons(&runs, &pts),
+            points: pts,
+            runs,
+            ..r
+        };
+        assert_eq!(rc_values(&r2), [4.0, 8.0]);
+        let files = write_sweep(&dir, &r2).unwrap();
+        assert_eq!(files.len(), 4, "{files:?}");
+        assert!(dir.join("sweep_rc.png").is_file());
         fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_robot_axis_has_whole_number_ticks_and_the_legend_names_merge_first() {
+        let x = Axis::Robots.x_coord(0.5, 8.5);
+        assert_eq!(x.ticks, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]);
+        assert_eq!(Axis::Robots.tick(3.0), "3");
+        let wide = Axis::Robots.x_coord(0.0, 40.0);
+        assert!(wide.ticks.iter().all(|v| v.fract() == 0.0));
+        assert!(wide.ticks.len() <= 11, "{:?}", wide.ticks);
+        assert_eq!(Axis::Rc.tick(12.5), "12.5");
+        assert_eq!(Axis::Rc.tick(8.0), "8");
+        let key = run(2, true, 1, 0.5).point;
+        assert_eq!(Axis::Robots.label(&key), "merge: inverse, R_C = 8 m");
+        let off = PointKey {
+            merge: false,
+            ..key
+        };
+        assert_eq!(Axis::Robots.label(&off), "no merge: inverse, R_C = 8 m");
+    }
+
+    /// The legend tells the two apart in pixels too: merge's sample is a solid line through a
+    /// filled dot, no merge's two dashes around a ring with a white centre.
+    #[test]
+    fn merge_and_no_merge_samples_differ() {
+        let mut pics = Vec::new();
+        for merge in [true, false] {
+            let mut pic = Picture::new(40, 20, [255, 255, 255]);
+            pic.draw(|root| {
+                root.draw(&legend_sample!(merge, [200, 0, 0], (8, 10)))
+                    .map_err(msg)
+            })
+            .unwrap();
+            pics.push(pic);
+        }
+        let red = |p: &Picture, x: usize| p.get(x, 10)[1] < 100;
+        // Between the dash and the ring (x = 8 + 5): line on, gap off.
+        assert!(red(&pics[0], 13) && !red(&pics[1], 13));
+        // The dot's centre (x = 20): filled on, white off.
+        assert!(red(&pics[0], 20) && !red(&pics[1], 20));
+        // Both have their ends.
+        assert!(red(&pics[0], 9) && red(&pics[1], 9));
     }
 }

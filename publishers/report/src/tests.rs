@@ -202,6 +202,49 @@ fn png_has_the_expected_size_trajectories_and_top_of_the_colour_map() {
         .count();
     assert!(text > 300, "{text} light pixels: no title or legend");
 }
+/// trail-following has two channels: each gets its final picture showing its own trail, and
+/// `field_final.png` shows both (it showed the first channel only).
+#[test]
+fn every_channel_has_a_final_picture_and_field_final_shows_them_all() {
+    let tmp = TempDir::new("channels");
+    let mut rec = scene();
+    let snap = &mut rec.snapshots[0];
+    let n = (snap.width * snap.height) as usize;
+    let mut second = vec![0.0f32; n];
+    second[20 * snap.width as usize + 20] = 3.0; // cell (20, 20): the "curved" trail
+    snap.planes.extend(second);
+    snap.channels.push("curved trail".into());
+    let written = write_outputs(&tmp.0, &rec, &serde_json::json!({}), &[]).unwrap();
+    let names = [
+        "field_final.png",
+        "field_final_trail.png",
+        "field_final_curved_trail.png",
+    ];
+    for name in names {
+        assert!(written.contains(&tmp.0.join(name)), "{name}: {written:?}");
+    }
+    assert_eq!(final_file_name("curved trail"), names[2]);
+    let [all, first, curved] = names.map(|n| decode(&tmp.0.join(n)));
+    // Cell (80, 40) (the first channel's max) and cell (20, 20) (the second's): columns
+    // 48 + 8x + 4, rows 28 + (49 − y)·8 + 4.
+    let at = |img: &(u32, u32, Vec<u8>), x: usize, y: usize| {
+        pixel(img, 48 + 8 * x + 4, 28 + (49 - y) * 8 + 4)
+    };
+    assert_eq!(at(&first, 80, 40), VIRIDIS[9]);
+    assert_eq!(
+        at(&first, 20, 20),
+        VIRIDIS[0],
+        "the first channel has no curved trail"
+    );
+    assert_eq!(at(&curved, 20, 20), VIRIDIS[9]);
+    assert_eq!(at(&curved, 80, 40), VIRIDIS[0]);
+    assert_ne!(first.2, curved.2);
+    // Both trails in field_final.png: the max at the top, the other above the bottom.
+    assert_eq!(at(&all, 80, 40), VIRIDIS[9]);
+    assert_ne!(at(&all, 20, 20), VIRIDIS[0]);
+    assert_eq!(at(&all, 50, 45), VIRIDIS[0]);
+}
+
 #[test]
 fn nan_cells_get_their_own_colour_without_panicking() {
     let tmp = TempDir::new("nan");

@@ -242,11 +242,15 @@ pub struct BlindLeader {
     pub follower_abandoned_at_s: Option<f64>,
     /// Where along the leader's path the follower gave up (m).
     pub follower_abandoned_at_m: Option<f64>,
-    /// The farthest point along the leader's path the follower reached (m).
+    /// The farthest point along the leader's path the follower reached in the whole run,
+    /// exploring after it gave the trail up included (m).
     pub follower_reached_m: f64,
-    /// How far the follower went past the point where the leader got lost (m): ≈ 0 when it
-    /// stops where the leader got lost, large when it follows the lost leader's trail.
-    pub follower_beyond_loss_m: Option<f64>,
+    /// How far along the leader's path the follower followed the trail past the point where
+    /// the leader got lost (m): the farthest point it reached before it gave the trail up (in
+    /// the whole run if it never did) minus `leader_lost_at_m`. ≈ 0 when it stops where the
+    /// leader got lost, large when it follows the lost leader's trail. (It measured the whole
+    /// run, exploring included, and so contradicted `wrong_area`'s figure for the same follower.)
+    pub follower_followed_past_loss_m: Option<f64>,
     /// The follower's largest distance from the leader's true path once it had reached it (m).
     pub follower_max_off_leader_path_m: f64,
     pub follower_distance_travelled_m: f64,
@@ -287,6 +291,7 @@ pub fn blind_leader(scenario: &Scenario, m: &BlindLeaderMetric, rec: &Recording)
             .map(|r| along(r.true_pose).1)
     });
     let mut reached = 0.0f64;
+    let mut reached_on_trail = 0.0f64;
     let mut off = 0.0f64;
     let mut on_path = false;
     for r in follower {
@@ -295,6 +300,9 @@ pub fn blind_leader(scenario: &Scenario, m: &BlindLeaderMetric, rec: &Recording)
         if on_path {
             reached = reached.max(s);
             off = off.max(d);
+            if abandoned.is_none_or(|t| r.t_s < t - 1e-9) {
+                reached_on_trail = reached_on_trail.max(s);
+            }
         }
     }
     BlindLeader {
@@ -307,7 +315,7 @@ pub fn blind_leader(scenario: &Scenario, m: &BlindLeaderMetric, rec: &Recording)
         follower_abandoned_at_s: abandoned,
         follower_abandoned_at_m: abandoned_at_m,
         follower_reached_m: reached,
-        follower_beyond_loss_m: lost_at_m.map(|l| reached - l),
+        follower_followed_past_loss_m: lost_at_m.map(|l| reached_on_trail - l),
         follower_max_off_leader_path_m: off,
         follower_distance_travelled_m: rec.distance_travelled_m(m.follower),
     }

@@ -61,8 +61,9 @@ pub struct FollowerOutcome {
     /// First step it reported the trail abandoned (`trail_abandoned` or `leader_lost`).
     pub abandoned_at_s: Option<f64>,
     pub abandoned_at_m: Option<[f64; 2]>,
-    /// Distance from there to the leader's true position when it got lost (m).
-    pub abandoned_from_loss_m: Option<f64>,
+    /// Straight-line distance from there to the leader's true position when it got lost (m);
+    /// `blind_leader.follower_followed_past_loss_m` measures along the leader's path.
+    pub abandoned_straight_from_loss_m: Option<f64>,
     /// First step it explored on its own (`leader_lost`).
     pub exploring_from_s: Option<f64>,
     pub exploring_from_m: Option<[f64; 2]>,
@@ -131,7 +132,9 @@ pub fn wrong_area(scenario: &Scenario, m: &WrongAreaMetric, rec: &Recording) -> 
                 reached_b_at_s,
                 abandoned_at_s: abandoned.map(|r| r.t_s),
                 abandoned_at_m,
-                abandoned_from_loss_m: abandoned_at_m.zip(lost_at_m).map(|(a, b)| dist(a, b)),
+                abandoned_straight_from_loss_m: abandoned_at_m
+                    .zip(lost_at_m)
+                    .map(|(a, b)| dist(a, b)),
                 exploring_from_s: exploring.map(|r| r.t_s),
                 exploring_from_m: exploring.map(|r| xy(r.true_pose)),
             }
@@ -241,7 +244,7 @@ mod tests {
         assert!(!b.ended_in_a && b.reached_b && b.time_in_a_s == 0.0);
         assert_eq!(b.reached_b_at_s, Some(lost_at + 2.0));
         assert_eq!(b.abandoned_at_s, Some(lost_at));
-        assert_eq!(b.abandoned_from_loss_m, Some(1.0));
+        assert_eq!(b.abandoned_straight_from_loss_m, Some(1.0));
         assert_eq!(b.exploring_from_m, Some([14.0, 1.5]));
         assert_eq!((w.followers_ended_in_a, w.followers_reached_b), (1, 1));
     }

@@ -63,7 +63,7 @@ fn blind_leader_follower_stops_where_the_leader_got_lost_unless_deposits_are_con
         },
     );
     let b = m.blind_leader.unwrap();
-    let beyond = b.follower_beyond_loss_m.unwrap();
+    let beyond = b.follower_followed_past_loss_m.unwrap();
     assert!(
         beyond > 6.0,
         "with constant deposits the follower went only {beyond:.2} m past the loss: {b:?}"

@@ -76,7 +76,7 @@ fn with_uncertainty_aware_deposits_the_followers_leave_the_trail_near_the_loss_a
         assert_the_leader_believes_it_is_in_a(&w, seed);
         let alice = &w["followers"][0];
         // "Leader lost" within a few metres of where the leader got lost, then exploring.
-        let d = f64_at(alice, "abandoned_from_loss_m");
+        let d = f64_at(alice, "abandoned_straight_from_loss_m");
         assert!(
             d < 4.0,
             "seed {seed}: gave up {d:.2} m from the loss: {alice}"
@@ -128,4 +128,28 @@ fn a_bad_explorer_channel_or_area_is_refused_naming_the_key_and_value() {
         all.contains("wa.toml") && all.contains("after_loss.strategy"),
         "{all}"
     );
+}
+
+/// One figure per quantity: how far Alice followed the trail past the loss. `blind_leader`
+/// measured her farthest point in the whole run (11.9 m past the loss at seed 0: she explored
+/// to B) while `wrong_area` said she gave up 1.5 m from it; now the trail figure stops where
+/// she gave the trail up, and agrees with where she did.
+#[test]
+fn the_follower_followed_past_the_loss_only_until_it_gave_the_trail_up() {
+    let s = Scenario::load("wrong-area").unwrap();
+    let (_, rec) = run_single_process(&s, SingleProcessOptions::default()).unwrap();
+    let m = scenario_metrics(&s, &rec);
+    let b = m.blind_leader.unwrap();
+    let lost = b.leader_lost_at_m.unwrap();
+    let past = b.follower_followed_past_loss_m.unwrap();
+    let gave_up = b.follower_abandoned_at_m.unwrap() - lost;
+    assert!(
+        (past - gave_up).abs() < 0.5 && past < 4.0,
+        "followed {past:.2} m past the loss, gave up {gave_up:.2} m past it: {b:?}"
+    );
+    // Exploring afterwards she got much farther along the path: that is follower_reached_m.
+    assert!(b.follower_reached_m - lost > past + 5.0, "{b:?}");
+    let alice = &m.wrong_area.unwrap().followers[0];
+    let straight = alice.abandoned_straight_from_loss_m.unwrap();
+    assert!((straight - past).abs() < 0.5, "{straight} vs {past}");
 }

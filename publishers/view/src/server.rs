@@ -8,6 +8,7 @@
 //! | `/api/frame?channel=C&max_side=N` | [`super::FrameSnapshot`] as JSON |
 //! | `/api/stats` | [`super::Stats`] as JSON |
 //! | `/api/robots` | `{"world": W, "robots": [`[`super::RobotTrack`]`]}` (empty without `--world`) |
+//! | `/api/walls` | `{"walls": [[x0, y0, x1, y1], …]}` in metres (empty without `--scenario`) |
 //!
 //! A bad parameter is a 400 with a plain-text message naming it and its value (each cut to 32
 //! characters), a request target over 2048 bytes (or a request line over 4096 bytes, read no
@@ -56,6 +57,9 @@ pub struct ViewConfig {
     pub max_robots: u32,
     /// `max_side` of `/api/frame` when the request gives none.
     pub default_max_side: usize,
+    /// The world's walls, `[x0, y0, x1, y1]` in metres (`pheromone view --scenario`): the
+    /// field's frames carry no walls, the page draws these over the heat map (`/api/walls`).
+    pub walls_m: Vec<[f64; 4]>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -315,6 +319,10 @@ impl View {
                 },
             ),
             "/api/robots" => no_params().map_or_else(|e| e, |()| self.robots()),
+            "/api/walls" => no_params().map_or_else(
+                |e| e,
+                |()| Reply::json(&serde_json::json!({ "walls": self.config.walls_m })),
+            ),
             _ => Reply::text(404, format!("not found: {}", super::shown(path))),
         }
     }

@@ -63,6 +63,8 @@ impl ChildArgs {
             &self.world,
             "--listen",
             listen,
+            "--scenario",
+            &self.scenario,
         ])
     }
 

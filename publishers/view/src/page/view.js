@@ -25,7 +25,8 @@ const LUT = (() => {
   return lut;
 })();
 
-const state = { frame: null, robots: [], framesDrawn: 0, channels: 0 };
+// walls: the world's wall segments [x0, y0, x1, y1] (m) from /api/walls; null until read.
+const state = { frame: null, robots: [], framesDrawn: 0, channels: 0, walls: null };
 
 function fmt(v, digits = 4) {
   if (v === null || v === undefined || !Number.isFinite(v)) return "–";
@@ -148,7 +149,43 @@ function drawColourBar() {
   }
 }
 
-const ROBOT_COLOURS = ["#ff5555", "#55aaff", "#ffffff", "#ff9f1c", "#e056fd", "#2ed573"];
+// By robot id, as in the pictures of a run (report's style.rs): its five fixed colours, then
+// golden-ratio hue steps.
+const ROBOT_COLOURS = ["rgb(240, 40, 40)", "rgb(0, 170, 240)", "rgb(255, 150, 0)",
+  "rgb(230, 90, 190)", "rgb(150, 110, 255)"];
+function robotColour(id) {
+  if (id < ROBOT_COLOURS.length) return ROBOT_COLOURS[id];
+  return `hsl(${Math.round(((id * 0.618033988749895) % 1) * 360)}, 90%, 55%)`;
+}
+// Walls, as in the pictures (report's WALL_RGB).
+const WALL_COLOUR = "rgb(215, 215, 215)";
+
+// The walls on the overlay, 3 px wide; the number drawn and the colour read back at the middle
+// of the first one inside the canvas go on the canvas' data- attributes (for tests).
+function drawWalls(ctx, frame, g, X, Y) {
+  const walls = state.walls || [];
+  ctx.strokeStyle = WALL_COLOUR;
+  ctx.lineWidth = 3;
+  ctx.beginPath();
+  for (const [x0, y0, x1, y1] of walls) {
+    ctx.moveTo(X(x0), Y(y0));
+    ctx.lineTo(X(x1), Y(y1));
+  }
+  ctx.stroke();
+  const ov = $("overlay");
+  ov.dataset.walls = String(walls.length);
+  const inside = walls.find(([x0, y0, x1, y1]) => {
+    const [mx, my] = [(X(x0) + X(x1)) / 2, (Y(y0) + Y(y1)) / 2];
+    return mx >= 0 && my >= 0 && mx <= g.w && my <= g.h;
+  });
+  if (inside) {
+    const [x0, y0, x1, y1] = inside;
+    const mx = Math.min(g.w - 1, Math.floor((X(x0) + X(x1)) / 2));
+    const my = Math.min(g.h - 1, Math.floor((Y(y0) + Y(y1)) / 2));
+    const px = ctx.getImageData(mx, my, 1, 1).data;
+    ov.dataset.wallPixel = `rgb(${px[0]}, ${px[1]}, ${px[2]})`;
+  }
+}
 
 function drawOverlay(frame) {
   const ov = $("overlay");
@@ -161,8 +198,9 @@ function drawOverlay(frame) {
   ctx.clearRect(0, 0, ov.width, ov.height);
   const X = (x) => (x - frame.origin_x_m) * g.pxPerM;
   const Y = (y) => g.h - (y - frame.origin_y_m) * g.pxPerM;
-  state.robots.forEach((r, i) => {
-    const colour = ROBOT_COLOURS[i % ROBOT_COLOURS.length];
+  drawWalls(ctx, frame, g, X, Y);
+  state.robots.forEach((r) => {
+    const colour = robotColour(r.id);
     ctx.strokeStyle = colour;
     ctx.lineWidth = 1.5;
     ctx.beginPath();
@@ -226,6 +264,7 @@ async function tick() {
     // The field's state first: before it starts there is no frame to ask for.
     const stats = await getJson("/api/stats");
     showStats(stats);
+    if (state.walls === null) state.walls = (await getJson("/api/walls")).walls;
     if (stats.state !== "waiting") {
       const q = `channel=${$("channel").value}&max_side=${$("max-side").value}`;
       const [frame, robots] = await Promise.all([
