@@ -541,7 +541,7 @@ fn clients_killed_at_any_instant_leave_the_field_ticking_and_attach_again() {
             Role::Localizer => Cmd::new("localizer").opt("--robot", 0),
             Role::Depositor => Cmd::new("depositor").opt("--robot", 0),
             Role::Follower => Cmd::new("follower").opt("--robot", 0),
-            Role::Reader => return Cmd::probe(&field).opt("--above", "1e30").timeout(3600),
+            Role::Reader => return Cmd::probe(&field).opt("--above", "1e9").timeout(3600),
             Role::OneShot => return Cmd::deposit(&field).at(3, 1).amount(0.1).timeout(20),
         };
         cmd.opt("--scenario", &scenario)

@@ -14,6 +14,7 @@ use supervisor::{ChildId, ChildSpec, Supervisor};
 
 use super::harness::*;
 
+mod netns;
 mod wire;
 
 /// The two "hosts" (fixed names: iceoryx2 keeps one management segment per domain prefix).
@@ -147,6 +148,12 @@ impl Hosts {
             mirror,
             _nodes: (on, mn),
         }
+    }
+
+    /// The origin's newest sequence now.
+    fn origin_sequence(&mut self) -> u64 {
+        self.origin.update().unwrap();
+        self.origin.frame().map_or(0, |f| f.header.sequence)
     }
 
     /// Records (sequence → checksum) on both hosts until `common` sequences were seen on both

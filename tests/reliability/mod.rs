@@ -63,7 +63,7 @@ fn readers_killed_while_holding_frames_are_cleaned_up_and_the_field_keeps_publis
     // holds frames (a probe waiting for a value that never comes holds the newest frame).
     let kills = 4;
     for i in 0..kills {
-        let reader = Proc::spawn(&Cmd::probe(&name).opt("--above", "1e20").timeout(60).argv());
+        let reader = Proc::spawn(&Cmd::probe(&name).opt("--above", "1e9").timeout(60).argv());
         eventually(WAIT, &format!("reader {i} to attach"), || {
             (w.status().subscribers == 2).then_some(())
         });
