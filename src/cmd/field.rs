@@ -149,18 +149,8 @@ pub struct FieldArgs {
     /// own thread.
     #[arg(long, value_parser = super::int::<usize>(1, 256), value_name = "N", default_value_t = 1)]
     pub threads: usize,
-    /// Real-time scheduling: SCHED_FIFO at priority N (1–99) and every page locked in memory
-    /// (mlockall, so the frame pool is faulted in before the first tick). Without CAP_SYS_NICE
-    /// or a large enough RLIMIT_RTPRIO (and CAP_IPC_LOCK or RLIMIT_MEMLOCK) the field refuses
-    /// to start and says which is missing, unless --rt-best-effort.
-    #[arg(long, value_parser = super::int::<i32>(1, 99), value_name = "N")]
-    pub rt_priority: Option<i32>,
-    /// With --rt-priority: run on this CPU only.
-    #[arg(long, value_parser = super::int::<usize>(0, 1023), value_name = "CPU", requires = "rt_priority")]
-    pub rt_cpu: Option<usize>,
-    /// With --rt-priority: start anyway without what the OS refuses, and say what it refused.
-    #[arg(long, requires = "rt_priority")]
-    pub rt_best_effort: bool,
+    #[command(flatten)]
+    pub rt: super::rt::RtArgs,
     /// A wall-time tick that starts more than this after its deadline counts as a missed
     /// deadline (µs; default a tenth of the period). Counted in the log and the --json summary.
     #[arg(long, value_parser = super::f64_in(0.0, 1e15), value_name = "US")]
@@ -344,7 +334,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         }
         us => us.map(|us| Duration::from_secs_f64(us / 1e6)),
     };
-    realtime(&a)?;
+    a.rt.apply(&format!("field '{}'", a.name))?;
     // SIGINT/SIGTERM stop the field as before (summary written) and set its exit status.
     super::stop::install()?;
     let node = create_node(&format!("field-{}", a.name))?;
@@ -386,41 +376,4 @@ fn finish(a: &FieldArgs, summary: Option<field::run::FieldRunSummary>) -> anyhow
         Some(signal) => Err(super::stop::Stopped { signal }.into()),
         None => Ok(()),
     }
-}
-
-/// `--rt-priority`: SCHED_FIFO, memory locked, optionally one CPU; says what it got.
-fn realtime(a: &FieldArgs) -> anyhow::Result<()> {
-    let Some(priority) = a.rt_priority else {
-        return Ok(());
-    };
-    let o = field::realtime::RealtimeOptions {
-        priority,
-        cpu: a.rt_cpu,
-        best_effort: a.rt_best_effort,
-    };
-    let applied = match field::realtime::apply(&o) {
-        Ok(applied) => applied,
-        Err(e @ field::realtime::RealtimeError::Priority(_)) => return Err(bad(e.to_string())),
-        Err(e) => return Err(e.into()),
-    };
-    for refused in &applied.refused {
-        eprintln!(
-            "field '{}': going on without it (--rt-best-effort): {refused}",
-            a.name
-        );
-    }
-    eprintln!(
-        "field '{}': real-time: SCHED_FIFO {}, memory {}, CPU {}",
-        a.name,
-        applied
-            .fifo_priority
-            .map_or("refused".to_string(), |p| format!("priority {p}")),
-        if applied.memory_locked {
-            "locked"
-        } else {
-            "not locked"
-        },
-        applied.cpu.map_or("any".to_string(), |c| c.to_string()),
-    );
-    Ok(())
 }

@@ -19,6 +19,8 @@ pub struct GatewayArgs {
     /// Field name.
     #[arg(long, default_value = "main")]
     pub field: String,
+    #[command(flatten)]
+    pub rt: super::rt::RtArgs,
     /// UDP address to serve on (default 127.0.0.1:7402 when --serial is not given).
     #[arg(long, conflicts_with = "serial", value_parser = super::check::socket_addr())]
     pub udp: Option<String>,
@@ -114,6 +116,7 @@ fn parse_allow(items: &[String]) -> anyhow::Result<Vec<u8>> {
 }
 
 pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
+    a.rt.apply("gateway")?;
     let (bound, ids) = parse_bound(&a.allow)?;
     if !bound.is_empty() && a.serial.is_some() {
         return Err(bad(

@@ -13,6 +13,7 @@ pub mod list;
 pub mod probe;
 pub mod roles;
 pub mod ros2;
+pub mod rt;
 pub mod sim;
 pub mod sim_args;
 pub mod stop;

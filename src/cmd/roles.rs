@@ -32,6 +32,8 @@ pub struct Common {
     /// run). Default: lockstep, as fast as the slowest process, and deterministic for a seed.
     #[arg(long)]
     pub realtime: bool,
+    #[command(flatten)]
+    pub rt: super::rt::RtArgs,
 }
 
 impl Common {
@@ -50,11 +52,12 @@ pub fn load_scenario(name: &str) -> anyhow::Result<Scenario> {
     Scenario::load(name).map_err(bad_from)
 }
 
-fn check_names(c: &Common) -> anyhow::Result<()> {
+/// Checks the names, then applies --rt-priority (as `who`, e.g. "depositor r3").
+fn check_names(c: &Common, who: &str) -> anyhow::Result<()> {
     for n in [&c.world, &c.field] {
         field::shm::check_name(n).map_err(bad_from)?;
     }
-    Ok(())
+    c.rt.apply(who)
 }
 
 fn print_json(json: bool, value: impl serde::Serialize) -> anyhow::Result<()> {
@@ -96,7 +99,7 @@ pub struct WorldArgs {
 }
 
 pub fn run_world_cmd(a: WorldArgs) -> anyhow::Result<()> {
-    check_names(&a.common)?;
+    check_names(&a.common, "world")?;
     let scenario = load_scenario(&a.common.scenario)?;
     let node = create_node(&format!("world-{}", a.common.world))?;
     let summary = run_world(
@@ -151,7 +154,7 @@ pub struct LocalizerArgs {
 }
 
 pub fn run_localizer_cmd(a: LocalizerArgs) -> anyhow::Result<()> {
-    check_names(&a.common)?;
+    check_names(&a.common, &format!("localizer r{}", a.robot))?;
     let mut scenario = load_scenario(&a.common.scenario)?;
     if let Some(region) = a.landmark_region {
         if let Some(r) = scenario.robots.iter_mut().find(|r| r.id == a.robot) {
@@ -187,7 +190,7 @@ pub struct MapperArgs {
 }
 
 pub fn run_mapper_cmd(a: MapperArgs) -> anyhow::Result<()> {
-    check_names(&a.common)?;
+    check_names(&a.common, &format!("mapper r{}", a.robot))?;
     let scenario = load_scenario(&a.common.scenario)?;
     let node = create_node(&format!("mapper-r{}-{}", a.robot, std::process::id()))?;
     let summary = run_mapper(&node, &scenario, &a.common.role_options(a.robot))?;
@@ -250,7 +253,7 @@ pub struct DepositorArgs {
 }
 
 pub fn run_depositor_cmd(a: DepositorArgs) -> anyhow::Result<()> {
-    check_names(&a.common)?;
+    check_names(&a.common, &format!("depositor r{}", a.robot))?;
     let scenario = load_scenario(&a.common.scenario)?;
     let mut config: DepositorConfig = scenario
         .roles(a.robot)
@@ -483,7 +486,7 @@ fn run_remote_follower(
 }
 
 pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
-    check_names(&a.common)?;
+    check_names(&a.common, &format!("follower r{}", a.robot))?;
     let scenario = load_scenario(&a.common.scenario)?;
     let mut config: FollowerConfig = scenario.follower_config(a.robot).unwrap_or_default();
     if let Some(s) = a.strategy {

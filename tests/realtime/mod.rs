@@ -1,4 +1,4 @@
-//! `field --rt-priority`: refused with the missing permission named, best effort on request, and
+//! `--rt-priority` (field, gateway, roles): refused with the missing permission named, best effort on request, and
 //! missed deadlines counted when a tick is held up on purpose.
 
 use std::process::Command;
@@ -130,4 +130,57 @@ fn a_tick_held_up_on_purpose_is_a_missed_deadline_in_list_and_the_summary() {
         .expect("max_tick_lateness_ms");
     println!("held 300 ms: {missed} missed deadline(s), latest tick {late_ms:.1} ms late");
     assert!(missed >= 1 && late_ms >= 50.0, "{s}");
+}
+
+/// The gateway and every robot role take the same options: refused with the missing permission
+/// named before they attach to anything, applied (as root here) and said so, as the field does.
+#[test]
+fn the_gateway_and_the_roles_take_rt_priority_and_are_refused_the_same_way() {
+    let name = unique("rt-roles");
+    // Each ends at once after the scheduling: no such field, no such scenario.
+    let cases: [&[&str]; 3] = [
+        &[
+            "gateway",
+            "--field",
+            &name,
+            "--udp",
+            "127.0.0.1:0",
+            "--attach-timeout",
+            "0",
+        ],
+        &[
+            "depositor",
+            "--robot",
+            "0",
+            "--scenario",
+            "no-such-scenario",
+        ],
+        &["follower", "--robot", "0", "--scenario", "no-such-scenario"],
+    ];
+    for head in cases {
+        let mut args = head.to_vec();
+        args.extend(["--rt-priority", "10"]);
+        let o = without_rt_permission(&args);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{head:?}: {err}");
+        assert!(
+            err.contains("SCHED_FIFO priority 10 refused") && err.contains("CAP_SYS_NICE"),
+            "{head:?}: {err}"
+        );
+        // With the permission (root here): applied and said, before the missing field or
+        // scenario ends it.
+        let mut args = head.to_vec();
+        args.extend(["--rt-priority", "5", "--rt-best-effort"]);
+        let o = run(&args);
+        let err = stderr(&o);
+        assert!(
+            err.contains(": real-time: SCHED_FIFO priority 5, memory locked"),
+            "{head:?}: {err}"
+        );
+        assert_ne!(
+            o.status.code(),
+            Some(0),
+            "{head:?}: nothing to run, yet {err}"
+        );
+    }
 }

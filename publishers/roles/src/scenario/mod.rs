@@ -434,7 +434,10 @@ impl Scenario {
             origin: origin.to_string(),
             source: Box::new(e),
         })?;
-        s.load_world_map(base_dir)
+        // It parsed as a scenario, so it parses as a table.
+        let table: toml::Table = toml::from_str(text).unwrap_or_default();
+        check_numbers(&table, "")
+            .and_then(|()| s.load_world_map(base_dir))
             .and_then(|()| s.validate())
             .map_err(|e| ScenarioError::Invalid {
                 origin: origin.to_string(),
@@ -603,6 +606,43 @@ impl Scenario {
     }
 }
 
+/// The largest magnitude a number in a scenario may have: beyond it a value is a mistake
+/// (`1e300` metres, seconds, amounts), as for the command line's numbers.
+pub const MAX_SCENARIO_MAGNITUDE: f64 = 1e9;
+
+/// Every float of a scenario file is finite and at most [`MAX_SCENARIO_MAGNITUDE`] in size (TOML
+/// allows `nan` and `inf`): the error names the key (`robots[1].start.x_m`) and the value.
+fn check_numbers(table: &toml::Table, prefix: &str) -> Result<(), ScenarioError> {
+    for (key, value) in table {
+        let path = if prefix.is_empty() {
+            key.clone()
+        } else {
+            format!("{prefix}.{key}")
+        };
+        check_value(value, &path)?;
+    }
+    Ok(())
+}
+
+fn check_value(value: &toml::Value, path: &str) -> Result<(), ScenarioError> {
+    match value {
+        toml::Value::Float(x) if !x.is_finite() => {
+            Err(ScenarioError::value(path, x, "must be a finite number"))
+        }
+        toml::Value::Float(x) if x.abs() > MAX_SCENARIO_MAGNITUDE => Err(ScenarioError::value(
+            path,
+            format!("{x:e}"),
+            "must be at most 1e9 in size",
+        )),
+        toml::Value::Table(t) => check_numbers(t, path),
+        toml::Value::Array(items) => items
+            .iter()
+            .enumerate()
+            .try_for_each(|(i, v)| check_value(v, &format!("{path}[{i}]"))),
+        _ => Ok(()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -666,6 +706,39 @@ mod tests {
             e.contains("depositor channel = 5") && e.contains("the field has 2 channel(s)"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn nan_infinite_and_absurd_numbers_anywhere_in_a_file_are_refused_naming_the_key() {
+        // Every float key of a file, at any depth, in tables and arrays of tables.
+        let cases = [
+            (
+                "duration_s = ",
+                "nan",
+                "duration_s = NaN: must be a finite number",
+            ),
+            (
+                "duration_s = ",
+                "inf",
+                "duration_s = inf: must be a finite number",
+            ),
+            (
+                "duration_s = ",
+                "-1e300",
+                "duration_s = -1e300: must be at most 1e9 in size",
+            ),
+        ];
+        for (key, value, says) in cases {
+            let text = format!("name = 'x'\n{key}{value}\n");
+            let e = Scenario::parse(&text, "n.toml").unwrap_err().to_string();
+            assert!(e.contains("n.toml") && e.contains(says), "{value}: {e}");
+        }
+        let nested = "name = 'x'\nduration_s = 5.0\n[[robots]]\nid = 0\n[[robots]]\nid = 1\n\
+                      [robots.depositor]\ntau = nan\n";
+        let e = check_numbers(&toml::from_str(nested).unwrap(), "")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "robots[1].depositor.tau = NaN: must be a finite number");
     }
 
     #[test]
