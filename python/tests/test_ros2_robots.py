@@ -5,6 +5,7 @@ with rosbags (Stores.ROS2_JAZZY) and compared with the run's `robot_0.csv` (docs
 Needs a `pheromone` binary built with `--features zenoh` and `pip install './python[zenoh]'
 rosbags`; skipped without them unless PHEROMONE_REQUIRE_ZENOH=1."""
 
+import contextlib
 import csv
 import json
 import math
@@ -13,7 +14,6 @@ import socket
 import struct
 import subprocess
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -95,7 +95,9 @@ def test_sim_ros2_publishes_poses_and_paths_that_match_the_run(tmp_path):
                 for r in z.liveliness().get("@ros2_lv/0/**", timeout=1.0):
                     if r.ok is not None:
                         tokens.add(str(r.ok.key_expr))
-                time.sleep(0.2)
+                # Between two looks, wait for the sim to end (not a fixed sleep).
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    p.wait(timeout=0.2)
             p.communicate(timeout=60)
         finally:
             if p.poll() is None:

@@ -165,6 +165,14 @@ impl Proc {
         self.sup.signal(self.id, Signal::SIGKILL);
     }
 
+    /// Waits up to `timeout` for the process to exit (woken by its exit); whether it still runs.
+    pub fn runs_after(&mut self, timeout: Duration) -> bool {
+        if self.sup.exit_status(self.id).is_none() {
+            self.sup.poll(timeout);
+        }
+        self.sup.exit_status(self.id).is_none()
+    }
+
     /// Whether the process is still running.
     pub fn is_running(&mut self) -> bool {
         self.sup.poll(Duration::ZERO);
