@@ -59,9 +59,9 @@ fn bridge(name: &str) -> BridgeProc {
     bridge_on(name, "tcp/127.0.0.1:0")
 }
 
-/// A bridge listening on `listen`; waits for the endpoint it prints.
-fn bridge_on(name: &str, listen: &str) -> BridgeProc {
-    let args = [
+/// The command line of the tests' bridges: field `name` of the origin domain, on `listen`.
+fn bridge_args<'a>(name: &'a str, listen: &'a str) -> [&'a str; 14] {
+    [
         "bridge",
         "--iox-domain",
         ORIGIN,
@@ -76,8 +76,13 @@ fn bridge_on(name: &str, listen: &str) -> BridgeProc {
         "--duration",
         "120",
         "--json",
-        "--print-address",
-    ];
+    ]
+}
+
+/// A bridge listening on `listen`; waits for the endpoint it prints.
+fn bridge_on(name: &str, listen: &str) -> BridgeProc {
+    let mut args = bridge_args(name, listen).to_vec();
+    args.push("--print-address");
     let mut sup = Supervisor::new(&bin());
     let id = sup
         .spawn(ChildSpec::new(

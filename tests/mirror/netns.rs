@@ -126,25 +126,7 @@ fn a_partitioned_mirror_is_stale_meanwhile_and_bit_identical_again_after_the_lin
     let name = unique("mirns");
     let _field = origin_field(&name);
     let endpoint = format!("tcp/{ADDR_A}:7447");
-    let _bridge = link.spawn_in(
-        &link.a,
-        "bridge",
-        &[
-            "bridge",
-            "--iox-domain",
-            ORIGIN,
-            "--field",
-            &name,
-            "--listen",
-            &endpoint,
-            "--checksum-every",
-            "5",
-            "--keyframe-every-s",
-            "2",
-            "--duration",
-            "120",
-        ],
-    );
+    let _bridge = link.spawn_in(&link.a, "bridge", &super::bridge_args(&name, &endpoint));
     let mirror = link.spawn_in(
         &link.b,
         "mirror",
