@@ -150,6 +150,7 @@ pub(crate) fn record(
     say_result(&PeerResult {
         samples_ns: samples,
         cpu_share,
+        field_timing: None,
     });
     Ok(())
 }

@@ -21,7 +21,7 @@ use field::SamplePose;
 use gateway::client::{ClientConfig, GatewayClient, Transport};
 use gateway_codec::{decode, encode, Message, PirRequest, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
 use serde::Serialize;
-use supervisor::{ChildSpec, Supervisor};
+use supervisor::{ChildId, ChildSpec, Supervisor};
 
 use crate::peer::{Launcher, Peer, PeerSpec};
 use crate::stats::Latency;
@@ -89,113 +89,210 @@ pub(crate) fn pin_pid(pid: u32, core: usize) {
     }
 }
 
-pub fn measure(
+/// A field peer and a `pheromone gateway` serving it on a loopback port.
+struct Served {
+    /// Held for its drop (the peer is stopped then).
+    _field: Peer,
+    sup: Supervisor,
+    gw: ChildId,
+    address: String,
+    name: String,
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        self.sup.stop_all(Duration::from_secs(5));
+    }
+}
+
+/// Starts the field peer (512², 100 Hz) and the gateway (`--rt-priority N --rt-best-effort`
+/// with `rt_priority`) and waits for the gateway's address.
+fn serve(
     launcher: &Launcher,
     tag: &str,
     run: GatewayRun,
-) -> Result<GatewayReport, BenchError> {
-    let width = 512;
-    let node = create_node(&format!("bench-gateway-{tag}"))?;
+    rt_priority: Option<i32>,
+) -> Result<Served, BenchError> {
     let name = format!("bench-{tag}");
     let mut field = Peer::spawn(
         launcher,
         &PeerSpec::Field {
             name: name.clone(),
-            width,
+            width: WIDTH,
             tick_hz: 100.0,
             core: run.pin.then_some(1),
             on_deposit: false,
+            rt_priority: None,
+            spin_us: 0,
         },
     )?;
     field.wait_ready(Duration::from_secs(20))?;
     let mut sup = Supervisor::new(&launcher.program);
     sup.echo_stderr = false;
-    let gw = sup.spawn(ChildSpec::new(
+    let mut args: Vec<String> = [
         "gateway",
-        None,
-        [
-            "gateway",
-            "--field",
-            &name,
-            "--udp",
-            "127.0.0.1:0",
-            "--rate-hz",
-            "0",
-            "--print-address",
-        ]
-        .iter()
-        .map(|s| s.to_string())
-        .collect(),
-    ))?;
-    let result = (|| {
-        let line = sup
-            .next_line(gw, Duration::from_secs(20))?
-            .ok_or_else(|| BenchError::Peer("the gateway did not serve within 20 s".into()))?;
-        let address = line
-            .trim()
-            .strip_prefix("udp://")
-            .ok_or_else(|| BenchError::Peer(format!("the gateway announced '{line}'")))?
-            .to_string();
-        if run.pin {
-            pin_pid(sup.pid(gw), 1);
-        }
-        let mut reader = FieldReader::attach_within(&node, &name, Duration::from_secs(10))?;
-        reader.wait_frame(Duration::from_secs(10))?;
-        // The middle of the field, heading along +x, antennas 0.15 m to each side.
-        let c = 0.5 * width as f32 * field::FieldConfig::default().cell_size_m;
-        let pose = SamplePose::new(c, c, 0.3);
-        let half_m = 0.15;
+        "--field",
+        &name,
+        "--udp",
+        "127.0.0.1:0",
+        "--rate-hz",
+        "0",
+        "--print-address",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    if let Some(p) = rt_priority {
+        args.extend([
+            "--rt-priority".into(),
+            p.to_string(),
+            "--rt-best-effort".into(),
+        ]);
+    }
+    let gw = sup.spawn(ChildSpec::new("gateway", None, args))?;
+    let line = sup
+        .next_line(gw, Duration::from_secs(20))?
+        .ok_or_else(|| BenchError::Peer("the gateway did not serve within 20 s".into()))?;
+    let address = line
+        .trim()
+        .strip_prefix("udp://")
+        .ok_or_else(|| BenchError::Peer(format!("the gateway announced '{line}'")))?
+        .to_string();
+    if run.pin {
+        pin_pid(sup.pid(gw), 1);
+    }
+    Ok(Served {
+        _field: field,
+        sup,
+        gw,
+        address,
+        name,
+    })
+}
 
-        let mut client = GatewayClient::new(
-            Transport::udp(&address).map_err(|e| BenchError::Peer(e.to_string()))?,
-            ClientConfig {
-                client_id: 1,
-                timeout: Duration::from_secs(1),
-                retries: 0,
-                ..ClientConfig::default()
-            },
-        );
-        let mut rtt = Vec::with_capacity(run.count);
-        for i in 0..run.warmup + run.count {
-            let t0 = Instant::now();
-            client
-                .pir(pose.x_m, pose.y_m, pose.theta_rad, half_m, 0)
-                .map_err(|e| BenchError::Peer(e.to_string()))?;
-            if i >= run.warmup {
-                rtt.push(t0.elapsed().as_nanos() as u64);
-            }
+/// Side of the field (cells) in the gateway measurements.
+const WIDTH: u32 = 512;
+
+/// The pose of every PIR: the middle of the field, heading along +x, antennas 0.15 m to each
+/// side.
+fn pir_pose() -> (SamplePose, f32) {
+    let c = 0.5 * WIDTH as f32 * field::FieldConfig::default().cell_size_m;
+    (SamplePose::new(c, c, 0.3), 0.15)
+}
+
+/// `warmup + count` PIRs one at a time from the thin client; the last `count` round trips (ns).
+fn round_trips(address: &str, warmup: usize, count: usize) -> Result<Vec<u64>, BenchError> {
+    let (pose, half_m) = pir_pose();
+    let mut client = GatewayClient::new(
+        Transport::udp(address).map_err(|e| BenchError::Peer(e.to_string()))?,
+        ClientConfig {
+            client_id: 1,
+            timeout: Duration::from_secs(1),
+            retries: 0,
+            ..ClientConfig::default()
+        },
+    );
+    let mut rtt = Vec::with_capacity(count);
+    for i in 0..warmup + count {
+        let t0 = Instant::now();
+        client
+            .pir(pose.x_m, pose.y_m, pose.theta_rad, half_m, 0)
+            .map_err(|e| BenchError::Peer(e.to_string()))?;
+        if i >= warmup {
+            rtt.push(t0.elapsed().as_nanos() as u64);
         }
-        let mut direct = Vec::with_capacity(run.count);
-        let mut sink = 0.0f32;
-        for i in 0..run.warmup + run.count {
-            let t0 = Instant::now();
-            reader.update()?;
-            let f = reader
-                .frame()
-                .ok_or_else(|| BenchError::Peer("no frame".into()))?;
-            let (l, r) = f.view.antennas(0, pose, 2.0 * half_m);
-            sink += l + r;
-            if i >= run.warmup {
-                direct.push(t0.elapsed().as_nanos() as u64);
-            }
+    }
+    Ok(rtt)
+}
+
+pub fn measure(
+    launcher: &Launcher,
+    tag: &str,
+    run: GatewayRun,
+) -> Result<GatewayReport, BenchError> {
+    let node = create_node(&format!("bench-gateway-{tag}"))?;
+    let served = serve(launcher, tag, run, None)?;
+    let mut reader = FieldReader::attach_within(&node, &served.name, Duration::from_secs(10))?;
+    reader.wait_frame(Duration::from_secs(10))?;
+    let (pose, half_m) = pir_pose();
+    let rtt = round_trips(&served.address, run.warmup, run.count)?;
+    let mut direct = Vec::with_capacity(run.count);
+    let mut sink = 0.0f32;
+    for i in 0..run.warmup + run.count {
+        let t0 = Instant::now();
+        reader.update()?;
+        let f = reader
+            .frame()
+            .ok_or_else(|| BenchError::Peer("no frame".into()))?;
+        let (l, r) = f.view.antennas(0, pose, 2.0 * half_m);
+        sink += l + r;
+        if i >= run.warmup {
+            direct.push(t0.elapsed().as_nanos() as u64);
         }
-        std::hint::black_box(sink);
-        let flood = flood(&address, sup.pid(gw), pose, half_m, run)?;
-        Ok(GatewayReport {
-            pir_round_trip_ns: Latency::from_ns(&rtt)
-                .ok_or_else(|| BenchError::Peer("PIR: no samples".into()))?,
-            shm_antennas_ns: Latency::from_ns(&direct)
-                .ok_or_else(|| BenchError::Peer("direct read: no samples".into()))?,
-            flood,
-            width,
-            method: "round trip: one PIR at a time from GatewayClient over UDP loopback; direct: \
-                     FieldReader::update + FrameView::antennas in this process; flood: a window \
-                     of PIRs in flight on one socket, gateway CPU from /proc/PID/schedstat",
-        })
-    })();
-    sup.stop_all(Duration::from_secs(5));
-    drop(field);
-    result
+    }
+    std::hint::black_box(sink);
+    let flood = flood(
+        &served.address,
+        served.sup.pid(served.gw),
+        pose,
+        half_m,
+        run,
+    )?;
+    drop(reader);
+    drop(served);
+    Ok(GatewayReport {
+        pir_round_trip_ns: Latency::from_ns(&rtt)
+            .ok_or_else(|| BenchError::Peer("PIR: no samples".into()))?,
+        shm_antennas_ns: Latency::from_ns(&direct)
+            .ok_or_else(|| BenchError::Peer("direct read: no samples".into()))?,
+        flood,
+        width: WIDTH,
+        method: "round trip: one PIR at a time from GatewayClient over UDP loopback; direct: \
+                 FieldReader::update + FrameView::antennas in this process; flood: a window \
+                 of PIRs in flight on one socket, gateway CPU from /proc/PID/schedstat",
+    })
+}
+
+/// The PIR round trip beside busy loops, the gateway and the client thread at `SCHED_FIFO`.
+#[derive(Debug, Clone, Serialize)]
+pub struct LoadedPirReport {
+    pub pir_round_trip_ns: Latency,
+    pub busy_loops: usize,
+    pub rt_priority: i32,
+    /// Whether both the gateway and the client thread got `SCHED_FIFO` (else the OS refused).
+    pub realtime: bool,
+}
+
+/// Issue 33: the PIR round trip beside `busy_loops` busy processes, with the gateway at
+/// `SCHED_FIFO rt_priority` and this thread (the client: on a robot, its own MCU) too.
+pub fn measure_loaded(
+    launcher: &Launcher,
+    tag: &str,
+    run: GatewayRun,
+    (busy_loops, rt_priority): (usize, i32),
+) -> Result<LoadedPirReport, BenchError> {
+    let mut busy = Vec::with_capacity(busy_loops);
+    for _ in 0..busy_loops {
+        let mut p = Peer::spawn(launcher, &PeerSpec::Busy { seconds: 600.0 })?;
+        p.wait_ready(Duration::from_secs(20))?;
+        busy.push(p);
+    }
+    let served = serve(launcher, tag, run, Some(rt_priority))?;
+    let client_rt = field::realtime::fifo_for_this_thread(rt_priority).is_ok();
+    let rtt = round_trips(&served.address, run.warmup, run.count);
+    field::realtime::default_scheduling_for_this_thread();
+    let mut served = served;
+    let gateway_said = served.sup.stderr_tail(served.gw);
+    drop(served);
+    drop(busy);
+    let rtt = rtt?;
+    Ok(LoadedPirReport {
+        pir_round_trip_ns: Latency::from_ns(&rtt)
+            .ok_or_else(|| BenchError::Peer("PIR under load: no samples".into()))?,
+        busy_loops,
+        rt_priority,
+        realtime: client_rt && !gateway_said.contains("going on without"),
+    })
 }
 
 /// Keeps `run.window` PIRs in flight for `run.flood`; counts the replies.

@@ -39,6 +39,7 @@ mod sections;
 pub mod stats;
 pub mod targets;
 pub mod tick;
+pub mod timing;
 pub mod visible;
 
 use std::collections::BTreeMap;
@@ -52,8 +53,8 @@ pub use stats::Latency;
 pub use tick::TickRow;
 
 use sections::{
-    measure_c_abi, measure_frames, measure_gateway, measure_hops, measure_mirror, measure_visible,
-    Ctx, FrameSize,
+    measure_c_abi, measure_frames, measure_gateway, measure_hops, measure_mirror, measure_timing,
+    measure_visible, Ctx, FrameSize,
 };
 
 /// Everything that can stop a bench run.
@@ -119,6 +120,8 @@ struct Plan {
     c_abi_frames: (usize, usize),
     c_abi_rounds: usize,
     c_abi_points: (usize, usize),
+    /// How long the field runs in each tick-timing configuration.
+    timing_run: Duration,
 }
 
 impl Mode {
@@ -140,6 +143,7 @@ impl Mode {
                 c_abi_frames: (150, 5),
                 c_abi_rounds: 3,
                 c_abi_points: (10_000, 21),
+                timing_run: Duration::from_secs(30),
             },
             Mode::Quick => Plan {
                 tick_widths: &[512, 1024, 2048, 4096],
@@ -157,6 +161,7 @@ impl Mode {
                 c_abi_frames: (60, 3),
                 c_abi_rounds: 2,
                 c_abi_points: (2_000, 9),
+                timing_run: Duration::from_secs(5),
             },
             Mode::Smoke => Plan {
                 tick_widths: &[512],
@@ -174,6 +179,7 @@ impl Mode {
                 c_abi_frames: (4, 1),
                 c_abi_rounds: 1,
                 c_abi_points: (200, 3),
+                timing_run: Duration::from_millis(500),
             },
         }
     }
@@ -198,10 +204,13 @@ pub enum Section {
     /// `c_abi`: libpheromone's C reader against the Rust reader.
     #[serde(rename = "c-abi")]
     CAbi,
+    /// `tick_timing`: the field's tick-start lateness beside busy loops, with and without
+    /// real-time scheduling.
+    Timing,
 }
 
 impl Section {
-    pub const ALL: [Section; 7] = [
+    pub const ALL: [Section; 8] = [
         Section::Tick,
         Section::Hop,
         Section::Frames,
@@ -209,6 +218,7 @@ impl Section {
         Section::Gateway,
         Section::Mirror,
         Section::CAbi,
+        Section::Timing,
     ];
 }
 
@@ -332,7 +342,14 @@ pub struct Report {
     pub deposit_to_visible_us: Option<VisibleReport>,
     /// The same with the field publishing as soon as deposits arrive (issue 18).
     pub deposit_to_visible_on_deposit_us: Option<VisibleReport>,
+    /// Publishing on deposit with real-time scheduling, the field spinning (`--spin-us` of a
+    /// period) and the follower busy-polling (issue 33).
+    pub deposit_to_visible_on_deposit_rt_us: Option<VisibleReport>,
+    /// Issue 33: tick-start lateness beside busy loops, with and without real-time scheduling.
+    pub tick_timing: Vec<timing::TimingRow>,
     pub gateway_pir: Option<gateway::GatewayReport>,
+    /// Issue 33: the PIR round trip beside 2 busy loops, gateway and client at `SCHED_FIFO`.
+    pub gateway_pir_loaded_rt: Option<gateway::LoadedPirReport>,
     /// Issue 15's field mirror over Zenoh; null in a build without Zenoh.
     pub mirror: Option<MirrorSection>,
     /// Issue 29: libpheromone's C reader against the Rust reader.
@@ -403,17 +420,16 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         };
         frame_ns.insert(key.to_string(), measure_frames(&mut cx, size)?);
     }
-    let (deposit_to_visible_us, deposit_to_visible_on_deposit_us) = match cx.runs(Section::Visible)
-    {
+    let visible = match cx.runs(Section::Visible) {
+        true => Some(measure_visible(&mut cx)?),
+        false => None,
+    };
+    let (gateway_pir, gateway_pir_loaded_rt) = match cx.runs(Section::Gateway) {
         true => {
-            let (on_tick, on_deposit) = measure_visible(&mut cx)?;
-            (Some(on_tick), Some(on_deposit))
+            let (g, loaded) = measure_gateway(&mut cx)?;
+            (Some(g), Some(loaded))
         }
         false => (None, None),
-    };
-    let gateway_pir = match cx.runs(Section::Gateway) {
-        true => Some(measure_gateway(&mut cx)?),
-        false => None,
     };
     let mirror = match cx.runs(Section::Mirror) {
         true => measure_mirror(&mut cx)?,
@@ -422,6 +438,10 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
     let c_abi = match cx.runs(Section::CAbi) {
         true => Some(measure_c_abi(&mut cx)?),
         false => None,
+    };
+    let tick_timing = match cx.runs(Section::Timing) {
+        true => measure_timing(&mut cx)?,
+        false => Vec::new(),
     };
     if pin {
         machine::unpin();
@@ -435,9 +455,12 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         tick_vs_memcpy,
         hop_ns,
         frame_ns,
-        deposit_to_visible_us,
-        deposit_to_visible_on_deposit_us,
+        deposit_to_visible_us: visible.as_ref().map(|v| v.on_tick.clone()),
+        deposit_to_visible_on_deposit_us: visible.as_ref().map(|v| v.on_deposit.clone()),
+        deposit_to_visible_on_deposit_rt_us: visible.map(|v| v.on_deposit_rt),
+        tick_timing,
         gateway_pir,
+        gateway_pir_loaded_rt,
         mirror,
         c_abi,
         targets: Vec::new(),
@@ -496,9 +519,25 @@ pub fn run_peer(spec_json: &str) -> Result<(), BenchError> {
             tick_hz,
             core,
             on_deposit,
+            rt_priority,
+            spin_us,
         } => {
             place(core);
-            visible::field(&name, width, tick_hz, on_deposit)
+            let wall = visible::WallField {
+                on_deposit,
+                rt_priority,
+                spin_us,
+            };
+            visible::field(&name, width, tick_hz, wall)
         }
+        PeerSpec::Busy { seconds } => timing::busy(seconds),
+        PeerSpec::TimedField {
+            name,
+            width,
+            tick_hz,
+            seconds,
+            rt_priority,
+            spin_us,
+        } => timing::timed_field(&name, (width, tick_hz), seconds, rt_priority, spin_us),
     }
 }

@@ -115,6 +115,23 @@ pub enum PeerSpec {
         /// deposits arrive.
         #[serde(default)]
         on_deposit: bool,
+        /// `SCHED_FIFO` priority of the field (with `on_deposit`).
+        #[serde(default)]
+        rt_priority: Option<i32>,
+        /// The field's spin before each deadline, µs (with `on_deposit`).
+        #[serde(default)]
+        spin_us: u32,
+    },
+    /// A core's worth of work for `seconds` (`timing`).
+    Busy { seconds: f64 },
+    /// `run_field` for `seconds`, then its tick timing (`timing`).
+    TimedField {
+        name: String,
+        width: u32,
+        tick_hz: f32,
+        seconds: f64,
+        rt_priority: Option<i32>,
+        spin_us: u32,
     },
 }
 
@@ -126,6 +143,8 @@ impl PeerSpec {
             PeerSpec::HopEcho { .. } => "hop-echo",
             PeerSpec::FrameReader { .. } => "frame-reader",
             PeerSpec::Field { .. } => "field",
+            PeerSpec::Busy { .. } => "busy loop",
+            PeerSpec::TimedField { .. } => "timed field",
         }
     }
 }
@@ -137,6 +156,9 @@ pub struct PeerResult {
     /// measured it (frame readers: what a wait policy costs).
     #[serde(default)]
     pub cpu_share: Option<f64>,
+    /// A timed field's tick timing.
+    #[serde(default)]
+    pub field_timing: Option<crate::timing::FieldTimingResult>,
 }
 
 /// One peer process, under the project's supervisor (`supervisor`): stopped with

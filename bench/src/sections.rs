@@ -201,14 +201,21 @@ pub(crate) fn measure_frames(cx: &mut Ctx, size: FrameSize) -> Result<FrameRepor
     })
 }
 
-/// The `deposit_to_visible_us` section: the field ticking, then publishing on deposit.
-pub(crate) fn measure_visible(cx: &mut Ctx) -> Result<(VisibleReport, VisibleReport), BenchError> {
+/// The three deposit-to-visible measurements.
+pub(crate) struct Visible {
+    pub(crate) on_tick: VisibleReport,
+    pub(crate) on_deposit: VisibleReport,
+    pub(crate) on_deposit_rt: VisibleReport,
+}
+
+/// The `deposit_to_visible_us` section: the field ticking, then publishing on deposit, then
+/// publishing on deposit with real-time scheduling, a spin of a period and a busy-polling reader.
+pub(crate) fn measure_visible(cx: &mut Ctx) -> Result<Visible, BenchError> {
     let opts = cx.opts;
+    let w = opts.visible_width;
     cx.say(&format!(
         "deposit to visible: {w}x{w} field at {} Hz ({} deposits)",
-        opts.tick_hz,
-        cx.plan.visible_count,
-        w = opts.visible_width
+        opts.tick_hz, cx.plan.visible_count,
     ));
     let visible_run = visible::VisibleRun {
         width: opts.visible_width,
@@ -218,6 +225,9 @@ pub(crate) fn measure_visible(cx: &mut Ctx) -> Result<(VisibleReport, VisibleRep
         pin: cx.pin,
         on_deposit: false,
         cpu_window: cx.plan.cpu_window,
+        rt_priority: None,
+        spin_us: 0,
+        reader_wait: ReaderWait::Event,
     };
     let v = visible::measure(&opts.launcher, &cx.tag(), visible_run)?;
     let on_tick = visible_report(opts, v, |compute_p99_us| {
@@ -227,18 +237,63 @@ pub(crate) fn measure_visible(cx: &mut Ctx) -> Result<(VisibleReport, VisibleRep
         "deposit to visible, publishing on deposit: {w}x{w} field ({} deposits), then its CPU \
          at 10, 100 and 1000 deposits/s",
         cx.plan.visible_count,
-        w = opts.visible_width
+    ));
+    let on_deposit_run = visible::VisibleRun {
+        on_deposit: true,
+        ..visible_run
+    };
+    let v = visible::measure(&opts.launcher, &cx.tag(), on_deposit_run)?;
+    let on_deposit = visible_report(opts, v, |compute_p99_us| compute_p99_us + 100.0)?;
+    let spin_us = (1e6 / opts.tick_hz as f64).round() as u32;
+    cx.say(&format!(
+        "deposit to visible, publishing on deposit with SCHED_FIFO {RT_PRIORITY}, the field \
+         spinning {spin_us} µs a period and the follower busy-polling"
     ));
     let v = visible::measure(
         &opts.launcher,
         &cx.tag(),
         visible::VisibleRun {
-            on_deposit: true,
-            ..visible_run
+            rt_priority: Some(RT_PRIORITY),
+            spin_us,
+            reader_wait: ReaderWait::BusyPoll,
+            ..on_deposit_run
         },
     )?;
-    let on_deposit = visible_report(opts, v, |compute_p99_us| compute_p99_us + 100.0)?;
-    Ok((on_tick, on_deposit))
+    let on_deposit_rt = visible_report(opts, v, |compute_p99_us| compute_p99_us + 100.0)?;
+    Ok(Visible {
+        on_tick,
+        on_deposit,
+        on_deposit_rt,
+    })
+}
+
+/// The `SCHED_FIFO` priority of the bench's real-time runs.
+pub(crate) const RT_PRIORITY: i32 = 80;
+
+/// The `tick_timing` section: a 512² field at 100 Hz and 1 kHz beside two busy loops, with the
+/// default scheduler, with `SCHED_FIFO`, and with `SCHED_FIFO` and a 200 µs spin.
+pub(crate) fn measure_timing(cx: &mut Ctx) -> Result<Vec<timing::TimingRow>, BenchError> {
+    let mut rows = Vec::new();
+    for tick_hz in [100.0f32, 1000.0] {
+        for (rt_priority, spin_us) in [(None, 0), (Some(RT_PRIORITY), 0), (Some(RT_PRIORITY), 200)]
+        {
+            let run = timing::TimingRun {
+                tick_hz,
+                width: 512,
+                duration: cx.plan.timing_run,
+                rt_priority,
+                spin_us,
+                busy_loops: 2,
+            };
+            cx.say(&format!(
+                "tick timing: 512x512 at {tick_hz} Hz for {:.1} s beside 2 busy loops, {}, spin {spin_us} µs",
+                run.duration.as_secs_f64(),
+                rt_priority.map_or("default scheduler".into(), |p| format!("SCHED_FIFO {p}")),
+            ));
+            rows.push(timing::measure(&cx.opts.launcher, &cx.tag(), run)?);
+        }
+    }
+    Ok(rows)
 }
 
 /// A deposit-to-visible report from its samples; `target_p99_us` of the tick compute's p99 (µs).
@@ -260,7 +315,9 @@ fn visible_report(
 }
 
 /// The `gateway_pir` section.
-pub(crate) fn measure_gateway(cx: &mut Ctx) -> Result<gateway::GatewayReport, BenchError> {
+pub(crate) fn measure_gateway(
+    cx: &mut Ctx,
+) -> Result<(gateway::GatewayReport, gateway::LoadedPirReport), BenchError> {
     let plan = cx.plan;
     cx.say(&format!(
         "gateway: {} PIR round trips over UDP loopback, {} direct reads, {:.1} s flood",
@@ -268,17 +325,20 @@ pub(crate) fn measure_gateway(cx: &mut Ctx) -> Result<gateway::GatewayReport, Be
         plan.pir_count.0,
         plan.flood.as_secs_f64()
     ));
-    gateway::measure(
-        &cx.opts.launcher,
-        &cx.tag(),
-        gateway::GatewayRun {
-            warmup: plan.pir_count.1,
-            count: plan.pir_count.0,
-            flood: plan.flood,
-            window: 32,
-            pin: cx.pin,
-        },
-    )
+    let run = gateway::GatewayRun {
+        warmup: plan.pir_count.1,
+        count: plan.pir_count.0,
+        flood: plan.flood,
+        window: 32,
+        pin: cx.pin,
+    };
+    let report = gateway::measure(&cx.opts.launcher, &cx.tag(), run)?;
+    cx.say(&format!(
+        "gateway: {} PIR round trips beside 2 busy loops, gateway and client at SCHED_FIFO {RT_PRIORITY}",
+        plan.pir_count.0
+    ));
+    let loaded = gateway::measure_loaded(&cx.opts.launcher, &cx.tag(), run, (2, RT_PRIORITY))?;
+    Ok((report, loaded))
 }
 
 /// The `mirror` section: an origin of `plan.mirror_width`² at 100 Hz, a bridge and a mirror.

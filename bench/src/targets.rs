@@ -47,10 +47,58 @@ pub fn targets(r: &Report) -> Vec<Target> {
     hop_targets(r, &mut t);
     frame_targets(r, &mut t);
     visible_targets(r, &mut t);
+    timing_targets(r, &mut t);
     gateway_targets(r, &mut t);
     mirror_targets(r, &mut t);
     c_abi_targets(r, &mut t);
     t
+}
+
+/// One target over several runs: its measured value's min / median / max and how often it was
+/// met.
+#[derive(Debug, Clone, Serialize)]
+pub struct Spread {
+    pub name: String,
+    pub op: &'static str,
+    pub limit: f64,
+    pub min: f64,
+    pub median: f64,
+    pub max: f64,
+    pub met: usize,
+    pub runs: usize,
+}
+
+/// Each target of the runs (by name, in the first run's order) over the runs that measured it.
+pub fn spread(runs: &[Report]) -> Vec<Spread> {
+    let Some(first) = runs.first() else {
+        return Vec::new();
+    };
+    first
+        .targets
+        .iter()
+        .map(|t0| {
+            let all: Vec<&Target> = runs
+                .iter()
+                .filter_map(|r| r.targets.iter().find(|t| t.name == t0.name))
+                .collect();
+            let mut v: Vec<f64> = all.iter().map(|t| t.measured).collect();
+            v.sort_by(f64::total_cmp);
+            let median = match v.len() % 2 {
+                1 => v[v.len() / 2],
+                _ => 0.5 * (v[v.len() / 2 - 1] + v[v.len() / 2]),
+            };
+            Spread {
+                name: t0.name.clone(),
+                op: t0.op,
+                limit: t0.limit,
+                min: v[0],
+                median,
+                max: v[v.len() - 1],
+                met: all.iter().filter(|t| t.met).count(),
+                runs: all.len(),
+            }
+        })
+        .collect()
 }
 
 /// A tick costs little more than copying the frame.
@@ -192,6 +240,36 @@ fn visible_targets(r: &Report, t: &mut Vec<Target>) {
             v.latency.p99,
         ));
     }
+    if let Some(v) = &r.deposit_to_visible_on_deposit_rt_us {
+        t.push(target(
+            "deposit-to-visible p99 µs, on deposit, SCHED_FIFO + spin + busy-poll (limit: tick compute p99 + 100 µs)",
+            "<=",
+            v.target_p99_us,
+            v.latency.p99,
+        ));
+    }
+}
+
+/// Issue 33: with real-time scheduling the field keeps its period beside busy loops.
+fn timing_targets(r: &Report, t: &mut Vec<Target>) {
+    for row in r.tick_timing.iter().filter(|row| row.realtime) {
+        let what = format!(
+            "{} Hz beside {} busy loops, SCHED_FIFO, spin {} µs",
+            row.tick_hz, row.busy_loops, row.spin_us
+        );
+        t.push(target(
+            &format!("longest tick gap in periods, {what}"),
+            "<=",
+            1.5,
+            row.field.longest_gap_periods,
+        ));
+        t.push(target(
+            &format!("tick-start lateness p99 µs, {what}"),
+            "<=",
+            100.0,
+            row.field.lateness.p99_us as f64,
+        ));
+    }
 }
 
 /// The gateway (issue 14).
@@ -210,6 +288,14 @@ fn gateway_targets(r: &Report, t: &mut Vec<Target>) {
             ">=",
             10_000.0,
             g.flood.pirs_per_cpu_s,
+        ));
+    }
+    if let Some(l) = r.gateway_pir_loaded_rt.as_ref().filter(|l| l.realtime) {
+        t.push(target(
+            "PIR round trip p99 µs beside 2 busy loops, gateway and client SCHED_FIFO",
+            "<=",
+            1000.0,
+            l.pir_round_trip_ns.p99 / 1e3,
         ));
     }
 }

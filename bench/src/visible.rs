@@ -12,7 +12,7 @@ use field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer
 use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
 use field::{Deposit, Kernel};
 
-use crate::peer::{say_ready, say_result, Launcher, Peer, PeerResult, PeerSpec};
+use crate::peer::{say_ready, say_result, Launcher, Peer, PeerResult, PeerSpec, ReaderWait};
 use crate::BenchError;
 
 #[derive(Debug, Clone, Copy)]
@@ -27,6 +27,21 @@ pub struct VisibleRun {
     pub on_deposit: bool,
     /// How long the field's CPU is measured at each deposit rate.
     pub cpu_window: Duration,
+    /// `SCHED_FIFO` priority of the field process (with `on_deposit`).
+    pub rt_priority: Option<i32>,
+    /// The field's spin before each deadline (µs, with `on_deposit`): deposits seen at once.
+    pub spin_us: u32,
+    /// How this process (the follower) waits for the frame: `Event` or `BusyPoll`.
+    pub reader_wait: ReaderWait,
+}
+
+/// How the bench's field process runs on wall time.
+#[derive(Debug, Clone, Copy)]
+pub struct WallField {
+    /// Publish as soon as deposits arrive (`run_field` with `publish_on_deposit` 0 ms).
+    pub on_deposit: bool,
+    pub rt_priority: Option<i32>,
+    pub spin_us: u32,
 }
 
 /// The field process's CPU while deposits arrive at a rate.
@@ -79,6 +94,8 @@ pub fn measure(
             tick_hz: run.tick_hz,
             core: run.pin.then_some(1),
             on_deposit: run.on_deposit,
+            rt_priority: run.rt_priority,
+            spin_us: run.spin_us,
         },
     )?;
     field.wait_ready(Duration::from_secs(20))?;
@@ -113,11 +130,10 @@ pub fn measure(
             .unwrap_or(0);
         let sent = now_ns();
         depositor.send(small_deposit(x_m, y_m))?;
-        let frame = reader
-            .wait_until(timeout, |f| f.header.deposits_applied > before)?
-            .ok_or_else(|| {
-                BenchError::Peer(format!("the deposit did not show within {timeout:?}"))
-            })?;
+        let frame = wait_for(&mut reader, run.reader_wait, timeout, |f| {
+            f.header.deposits_applied > before
+        })?
+        .ok_or_else(|| BenchError::Peer(format!("the deposit did not show within {timeout:?}")))?;
         let seen = now_ns();
         if i >= run.warmup {
             result.samples_ns.push(seen.saturating_sub(sent));
@@ -138,6 +154,27 @@ pub fn measure(
     drop(depositor);
     drop(field);
     Ok(result)
+}
+
+/// Waits (up to `timeout`, as `wait`) until a frame satisfies `pred`; returns it, or `None`.
+fn wait_for<'r>(
+    reader: &'r mut FieldReader,
+    wait: ReaderWait,
+    timeout: Duration,
+    mut pred: impl FnMut(&field::shm::Frame<'_>) -> bool,
+) -> Result<Option<field::shm::Frame<'r>>, BenchError> {
+    if wait == ReaderWait::Event {
+        return Ok(reader.wait_until(timeout, pred)?);
+    }
+    let deadline = Instant::now() + timeout;
+    while !reader.frame().as_ref().is_some_and(&mut pred) {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Ok(None);
+        }
+        reader.wait_frame_with(wait.policy(), left.min(Duration::from_millis(100)))?;
+    }
+    Ok(reader.frame())
 }
 
 /// The deposit both measurements send: small, at the field's centre.
@@ -192,9 +229,10 @@ fn cpu_at_rate(
 
 /// The field process: ticks at `tick_hz` until terminated (with `on_deposit`, also publishes
 /// as soon as deposits arrive: `field::run::run_field` as `pheromone field` runs it).
-pub fn field(name: &str, width: u32, tick_hz: f32, on_deposit: bool) -> Result<(), BenchError> {
+pub fn field(name: &str, width: u32, tick_hz: f32, wall: WallField) -> Result<(), BenchError> {
+    crate::timing::realtime(wall.rt_priority, "bench field")?;
     let node = create_node(&format!("bench-field-{}", std::process::id()))?;
-    if on_deposit {
+    if wall.on_deposit {
         let options = field::run::FieldRunOptions {
             name: name.to_string(),
             config: config(width, tick_hz),
@@ -208,6 +246,7 @@ pub fn field(name: &str, width: u32, tick_hz: f32, on_deposit: bool) -> Result<(
             publish_on_deposit: Some(Duration::ZERO),
             threads: 1,
             deadline_slack: None,
+            spin: Duration::from_micros(wall.spin_us as u64),
         };
         // The services exist once the first frame is out; say ready from a thread that sees it.
         let ready_name = name.to_string();

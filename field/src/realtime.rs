@@ -83,6 +83,25 @@ fn set_fifo(priority: i32) -> Result<(), RealtimeError> {
     }
 }
 
+/// `SCHED_FIFO` at `priority` for the calling thread only (no memory locking): a thread of a
+/// process that measures or serves something with its loop (`pheromone bench`).
+pub fn fifo_for_this_thread(priority: i32) -> Result<(), RealtimeError> {
+    if !(1..=99).contains(&priority) {
+        return Err(RealtimeError::Priority(priority));
+    }
+    set_fifo(priority)
+}
+
+/// Puts the calling thread back on the default scheduler (`SCHED_OTHER`), e.g. a helper thread
+/// of a real-time process that must not compete with its loop. Best effort: a failure leaves
+/// the thread as it was.
+pub fn default_scheduling_for_this_thread() {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: as in `set_fifo`: the pointer is to a live local read during the call only; pid 0
+    // is the calling thread. Lowering one's own policy needs no permission.
+    let _ = unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &param) };
+}
+
 /// Asks for everything `o` names, in order: the CPU, memory locking, then the priority.
 pub fn apply(o: &RealtimeOptions) -> Result<Applied, RealtimeError> {
     if !(1..=99).contains(&o.priority) {

@@ -42,6 +42,11 @@ pub struct BenchArgs {
     /// Run only these sections (comma-separated); the others are empty or null in --json.
     #[arg(long, value_enum, value_delimiter = ',', value_name = "SECTION")]
     only: Vec<SectionArg>,
+    /// Run the whole measurement N times: the tables of the last run, then every target's
+    /// min / median / max over the N runs, so the noise shows (--json: {"runs": [...],
+    /// "targets": [...]}). Default: 5 for the full run, 1 with --quick.
+    #[arg(long, value_parser = super::int::<usize>(1, 100), value_name = "N")]
+    repeats: Option<usize>,
 }
 
 /// A section of `pheromone bench` (`--only`).
@@ -61,6 +66,8 @@ enum SectionArg {
     Mirror,
     /// libpheromone's C reader against the Rust reader (frame latency, sampling cost).
     CAbi,
+    /// Tick-start lateness beside two busy loops, with and without real-time scheduling.
+    Timing,
 }
 
 impl From<SectionArg> for Section {
@@ -73,6 +80,7 @@ impl From<SectionArg> for Section {
             SectionArg::Gateway => Section::Gateway,
             SectionArg::Mirror => Section::Mirror,
             SectionArg::CAbi => Section::CAbi,
+            SectionArg::Timing => Section::Timing,
         }
     }
 }
@@ -121,13 +129,43 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             args: vec!["bench-peer".into()],
         },
     };
-    let report = pheromone_bench::run(&opts)?;
-    if a.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        print_tables(&report);
+    let repeats = a
+        .repeats
+        .unwrap_or(if opts.mode == Mode::Full { 5 } else { 1 });
+    let mut runs = Vec::with_capacity(repeats);
+    for i in 0..repeats {
+        if repeats > 1 {
+            eprintln!("bench: run {} of {repeats}", i + 1);
+        }
+        runs.push(pheromone_bench::run(&opts)?);
+    }
+    let spread = pheromone_bench::targets::spread(&runs);
+    match (a.json, runs.as_slice()) {
+        (true, [one]) => println!("{}", serde_json::to_string(one)?),
+        (true, _) => println!("{}", serde_json::json!({ "runs": runs, "targets": spread })),
+        (false, [.., last]) => {
+            print_tables(last);
+            if runs.len() > 1 {
+                print_spread(&spread, runs.len());
+            }
+        }
+        (false, []) => {}
     }
     Ok(())
+}
+
+/// Every target's measured value over the runs: min / median / max, and how often it was met.
+fn print_spread(spread: &[pheromone_bench::targets::Spread], runs: usize) {
+    println!(
+        "
+targets over {runs} runs                      min     median        max   met"
+    );
+    for t in spread {
+        println!(
+            "  {} {} {}\n      {:>10} {:>10} {:>10}   {}/{}",
+            t.name, t.op, t.limit, t.min, t.median, t.max, t.met, t.runs
+        );
+    }
 }
 
 pub fn run_peer(a: BenchPeerArgs) -> anyhow::Result<()> {
@@ -165,6 +203,7 @@ fn print_tables(r: &Report) {
     print_hop(r);
     print_frames(r);
     print_visible(r);
+    print_timing(r);
     print_gateway(r);
     if let Some(m) = &r.mirror {
         print_mirror(m);
@@ -251,13 +290,50 @@ fn print_visible(r: &Report) {
             lat(&o.latency, 1.0, "µs"),
             o.tick_compute_us.p50
         );
-        println!("field CPU (share of a core)   deposits/s  ticking  on deposit  frames/s");
-        for (t, d) in v.field_cpu.iter().zip(&o.field_cpu) {
+        let rt = r.deposit_to_visible_on_deposit_rt_us.as_ref();
+        if let Some(rt) = rt {
             println!(
-                "                              {:>10.0} {:>8.3} {:>10.3} {:>9.0}",
-                t.deposits_per_s, t.cpu_share, d.cpu_share, d.frames_per_s
+                "  on deposit, FIFO + spin + busy   {}",
+                lat(&rt.latency, 1.0, "µs")
             );
         }
+        println!(
+            "field CPU (share of a core)   deposits/s  ticking  on deposit  frames/s  FIFO+spin"
+        );
+        for (i, (t, d)) in v.field_cpu.iter().zip(&o.field_cpu).enumerate() {
+            let spin = rt
+                .and_then(|rt| rt.field_cpu.get(i))
+                .map_or("-".to_string(), |c| format!("{:.3}", c.cpu_share));
+            println!(
+                "                              {:>10.0} {:>8.3} {:>10.3} {:>9.0} {:>10}",
+                t.deposits_per_s, t.cpu_share, d.cpu_share, d.frames_per_s, spin
+            );
+        }
+    }
+}
+
+/// Tick-start lateness beside busy loops, if measured.
+fn print_timing(r: &Report) {
+    if r.tick_timing.is_empty() {
+        return;
+    }
+    println!("\ntick timing beside busy loops    lateness µs: p50    p99  p99.9    max  gap (periods) missed  CPU  steal ms");
+    for t in &r.tick_timing {
+        let l = &t.field.lateness;
+        println!(
+            "{:>5} Hz {:<12} spin {:>4} µs {:>16} {:>6} {:>6} {:>6} {:>14.2} {:>6} {:>4.2} {:>9}",
+            t.tick_hz,
+            if t.realtime { "SCHED_FIFO" } else { "default" },
+            t.spin_us,
+            l.p50_us,
+            l.p99_us,
+            l.p999_us,
+            l.max_us,
+            t.field.longest_gap_periods,
+            t.field.missed_deadlines,
+            t.field.cpu_share,
+            t.steal_ms.map_or("-".into(), |s| format!("{s:.0}"))
+        );
     }
 }
 
@@ -273,6 +349,14 @@ fn print_gateway(r: &Report) {
             "antennas from shm      {}",
             lat(&g.shm_antennas_ns, 1e-3, "µs")
         );
+        if let Some(l) = &r.gateway_pir_loaded_rt {
+            println!(
+                "PIR, {} busy, FIFO{} {}",
+                l.busy_loops,
+                if l.realtime { "  " } else { "? " },
+                lat(&l.pir_round_trip_ns, 1e-3, "µs")
+            );
+        }
         println!(
             "flood: {:.0} PIR/s over {:.1} s, gateway CPU {:.2} s → {:.0} PIR per CPU-second ({} in flight)",
             g.flood.pirs_per_s, g.flood.wall_s, g.flood.gateway_cpu_s, g.flood.pirs_per_cpu_s, g.flood.window

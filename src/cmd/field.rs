@@ -155,6 +155,12 @@ pub struct FieldArgs {
     /// deadline (µs; default a tenth of the period). Counted in the log and the --json summary.
     #[arg(long, value_parser = super::f64_in(0.0, 1e15), value_name = "US")]
     pub deadline_slack_us: Option<f64>,
+    /// Sleep until US microseconds before each tick's deadline, then poll until it: ticks start
+    /// on time (no OS wake-up delay), and with --publish-on-deposit-ms a deposit that arrives
+    /// meanwhile is seen at once. Costs up to US µs of CPU per period (a spin as long as the
+    /// period polls all the time: one core). 0 (the default) sleeps.
+    #[arg(long, value_parser = super::f64_in(0.0, 1e7), value_name = "US", default_value_t = 0.0, conflicts_with = "clock")]
+    pub spin_us: f64,
     /// Run as a mirror of the field of the same name on another host: `zenoh:tcp/HOST:PORT`,
     /// the address of its `pheromone bridge`. The mirror takes the origin's configuration,
     /// starts from a keyframe, applies each frame's deposits with the same stepper and publishes
@@ -351,6 +357,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         publish_on_deposit,
         threads: a.threads,
         deadline_slack,
+        spin: Duration::from_secs_f64(a.spin_us / 1e6),
     };
     let summary = match run_field(&node, &options) {
         Ok(s) => s,

@@ -115,11 +115,21 @@ fn bench_smoke_run_reports_every_figure_as_one_json_object() {
     );
     assert_eq!(v["tick_hz"].as_f64(), Some(200.0));
 
+    // Issue 33: publishing on deposit with SCHED_FIFO, the field spinning a period, the
+    // follower busy-polling; and the field's tick timing beside two busy loops.
+    let rt = &r["deposit_to_visible_on_deposit_rt_us"];
+    check_latency(rt, "deposit_to_visible_on_deposit_rt_us");
+    check_tick_timing(&r);
+
     // Seed 002's PIR through a gateway process beside the direct shared-memory read, and the
     // flood: replies counted, the gateway's CPU time measured.
     let g = &r["gateway_pir"];
     check_latency(&g["pir_round_trip_ns"], "gateway_pir.pir_round_trip_ns");
     check_latency(&g["shm_antennas_ns"], "gateway_pir.shm_antennas_ns");
+    check_latency(
+        &r["gateway_pir_loaded_rt"]["pir_round_trip_ns"],
+        "gateway_pir_loaded_rt.pir_round_trip_ns",
+    );
     let flood = &g["flood"];
     assert!(flood["replies"].as_u64().is_some_and(|n| n > 0), "{flood}");
     for k in ["pirs_per_s", "gateway_cpu_s", "pirs_per_cpu_s"] {
@@ -173,6 +183,67 @@ fn bench_smoke_run_reports_every_figure_as_one_json_object() {
         assert!(t["measured"].as_f64().is_some_and(|m| m > 0.0), "{t}");
     }
     assert!(targets.iter().all(|t| t["met"].is_boolean()));
+}
+
+/// `tick_timing`: 100 Hz and 1 kHz, each with the default scheduler, SCHED_FIFO, and SCHED_FIFO
+/// with a spin; lateness percentiles ordered, gaps of at least most of a period. As root (CI),
+/// the SCHED_FIFO rows got it, and each has its two targets.
+fn check_tick_timing(r: &Value) {
+    let rows = r["tick_timing"].as_array().expect("tick_timing");
+    let configs: Vec<(f64, u64)> = rows
+        .iter()
+        .map(|t| {
+            (
+                t["tick_hz"].as_f64().unwrap(),
+                t["spin_us"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        configs,
+        [
+            (100.0, 0),
+            (100.0, 0),
+            (100.0, 200),
+            (1000.0, 0),
+            (1000.0, 0),
+            (1000.0, 200)
+        ],
+        "{rows:?}"
+    );
+    for t in rows {
+        let l = &t["lateness"];
+        let get = |k: &str| l[k].as_u64().unwrap_or_else(|| panic!("lateness.{k}: {t}"));
+        assert!(
+            get("p50_us") <= get("p99_us") && get("p99_us") <= get("max_us"),
+            "{t}"
+        );
+        assert!(t["ticks"].as_u64().is_some_and(|n| n >= 2), "{t}");
+        assert!(
+            t["longest_gap_periods"].as_f64().is_some_and(|g| g > 0.5),
+            "{t}"
+        );
+        assert_eq!(t["busy_loops"], 2, "{t}");
+    }
+    let is_root = std::fs::read_to_string("/proc/self/status").is_ok_and(|s| {
+        s.lines()
+            .any(|l| l.starts_with("Uid:") && l.split_whitespace().nth(1) == Some("0"))
+    });
+    if is_root {
+        let realtime = rows.iter().filter(|t| t["realtime"] == true).count();
+        assert_eq!(realtime, 4, "{rows:?}");
+        let names: Vec<&str> = r["targets"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(|t| t["name"].as_str())
+            .collect();
+        let timing = names
+            .iter()
+            .filter(|n| n.contains("SCHED_FIFO, spin"))
+            .count();
+        assert_eq!(timing, 8, "{names:?}");
+    }
 }
 
 /// A positive finite number at `v[k]`.
@@ -247,6 +318,26 @@ fn bench_only_runs_the_sections_it_is_given() {
     assert!(r["frame_ns"].as_object().unwrap().is_empty(), "{r}");
     for k in ["hop_ns", "deposit_to_visible_us", "gateway_pir", "mirror"] {
         assert!(r[k].is_null(), "{k} measured with --only tick: {r}");
+    }
+    // Repeated: every run, and each target's min / median / max over them.
+    let out = run(&[
+        "bench",
+        "--smoke",
+        "--json",
+        "--only",
+        "tick",
+        "--repeats",
+        "3",
+    ]);
+    assert!(out.status.success(), "bench failed: {}", stderr(&out));
+    let r = json(&out);
+    assert_eq!(r["runs"].as_array().map(Vec::len), Some(3), "{r}");
+    let spread = r["targets"].as_array().expect("targets");
+    assert!(!spread.is_empty(), "{r}");
+    for t in spread {
+        let v = |k: &str| t[k].as_f64().unwrap_or_else(|| panic!("{k}: {t}"));
+        assert!(v("min") <= v("median") && v("median") <= v("max"), "{t}");
+        assert_eq!(t["runs"], 3, "{t}");
     }
     let out = run(&["bench", "--only", "everything"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));

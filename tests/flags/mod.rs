@@ -130,6 +130,7 @@ const DOMAINS: &[(&str, &str, Domain)] = &[
     ("follower", "--rt-priority", int(1.0, 99.0)),
     ("follower", "--rt-cpu", int(0.0, 1023.0)),
     ("field", "--deadline-slack-us", real(0.0, 1e15)),
+    ("field", "--spin-us", real(0.0, 1e7)),
     ("field", "--stale-after-s", SECS),
     ("tune k", "--p0", ANY),
     ("tune k", "--ptm", ANY),

@@ -130,6 +130,70 @@ fn a_tick_held_up_on_purpose_is_a_missed_deadline_in_list_and_the_summary() {
         .expect("max_tick_lateness_ms");
     println!("held 300 ms: {missed} missed deadline(s), latest tick {late_ms:.1} ms late");
     assert!(missed >= 1 && late_ms >= 50.0, "{s}");
+    // The lateness histogram and the gap in periods (10 ms) saw the held tick.
+    assert!(
+        s["tick_lateness"]["max_us"].as_u64().unwrap() >= 50_000,
+        "{s}"
+    );
+    let l = &s["tick_lateness"];
+    assert!(l["p50_us"].as_u64() <= l["p99_us"].as_u64(), "{s}");
+    assert!(
+        s["longest_tick_gap_periods"].as_f64().unwrap() >= 25.0,
+        "{s}"
+    );
+}
+
+/// `--spin-us` longer than the period: the field polls all the time and still ticks at its rate
+/// and stops at its end; publishing on deposit, a deposit is applied.
+#[test]
+fn a_field_that_spins_longer_than_its_period_ticks_at_its_rate_and_stops() {
+    let name = unique("rt-spin");
+    let field = Proc::spawn(
+        &Cmd::field(&name)
+            .grid(64, 64)
+            .tick_hz(100)
+            .duration(1)
+            .opt("--spin-us", 20_000)
+            .opt("--publish-on-deposit-ms", 0)
+            .json()
+            .argv(),
+    );
+    let node = create_node(&unique("rt-spin-depositor")).unwrap();
+    let mut reader = FieldReader::attach_within(&node, &name, Duration::from_secs(30)).unwrap();
+    let mut depositor =
+        field::shm::DepositPublisher::attach_within(&node, &name, 1, Duration::from_secs(10))
+            .unwrap();
+    depositor
+        .send(field::DepositMsg::from(field::Deposit {
+            channel: 0,
+            x_m: 1.0,
+            y_m: 1.0,
+            kernel: field::Kernel::Ellipse {
+                tau: 0.01,
+                cov_m2: [0.01, 0.0, 0.01],
+                range_m: 0.5,
+                gamma_max: 100.0,
+            },
+        }))
+        .unwrap();
+    eventually(Duration::from_secs(10), "the deposit in a frame", || {
+        reader.wait_frame(Duration::from_millis(100)).unwrap();
+        reader
+            .frame()
+            .is_some_and(|f| f.header.deposits_applied >= 1)
+            .then_some(())
+    });
+    drop((reader, depositor, node));
+    let out = field.wait_exit(Duration::from_secs(30));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let s = json(&out);
+    let ticks = s["ticks"].as_u64().unwrap();
+    // Never ahead of its period (a spin that ended early would tick faster); some ticks at all.
+    assert!(
+        (10..=105).contains(&ticks),
+        "{ticks} ticks in 1 s at 100 Hz: {s}"
+    );
+    assert!(s["tick_lateness"]["p99_us"].as_u64().is_some(), "{s}");
 }
 
 /// The gateway and every robot role take the same options: refused with the missing permission

@@ -16,8 +16,11 @@ use crate::shm::{
 };
 use crate::FieldConfig;
 
+mod housekeeping;
+mod spin;
 mod stats;
 use iceoryx2::node::Node;
+pub use stats::Lateness;
 use stats::TickStats;
 
 /// How a field process runs.
@@ -47,6 +50,9 @@ pub struct FieldRunOptions {
     /// A wall-time tick that starts later than this after its deadline is a missed deadline
     /// (`None`: a tenth of the period).
     pub deadline_slack: Option<Duration>,
+    /// Sleep until this long before each deadline, then poll until it (`spin`): ticks start on
+    /// time, and publishing on deposit sees a deposit at once, for up to this much CPU a period.
+    pub spin: Duration,
 }
 
 /// Why a field process stopped with an error.
@@ -126,6 +132,12 @@ pub struct FieldRunSummary {
     /// The latest a wall-time tick started after its deadline (ms).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_tick_lateness_ms: Option<f64>,
+    /// Wall-time ticks' start after their deadline: percentiles (µs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tick_lateness: Option<Lateness>,
+    /// The longest gap between frames in tick periods (wall-time fields).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub longest_tick_gap_periods: Option<f64>,
 }
 
 /// Runs a field until its end (ticks, duration, the world's end, Ctrl-C/SIGTERM); `Ok(None)`
@@ -172,17 +184,21 @@ pub fn run_field(
         .as_ref()
         .map(|path| Checkpointer::new(path.clone(), o.checkpoint_every));
     let period = Duration::from_secs_f64(1.0 / config.tick_hz as f64);
-    let metronome = Metronome {
-        period,
-        deadline: Instant::now() + period,
-        late: None,
-    };
     let slack = o.deadline_slack.unwrap_or(period / 10);
     let mut stats = TickStats::new(longest_gap_ns, slack);
     stats.keep_timing_board(node, &o.name);
     let deposit_wake = match (wakes_on_deposit, deposit_wake) {
         (Some(min_interval), None) => Some(DepositWake::new(node, &o.name, config, min_interval)?),
         (_, wake) => wake,
+    };
+    // The first deadline and the first gap count from here, after the set-up above (a start,
+    // not a tick; a standby's takeover gap is in `longest_gap_ns`).
+    stats.last_frame_at = Instant::now();
+    let metronome = Metronome {
+        period,
+        deadline: Instant::now() + period,
+        late: None,
+        spin: o.spin,
     };
     let mut pace: Box<dyn Pace> = match (clock, deposit_wake) {
         (Some(clock), _) => Box::new(Lockstep {
@@ -203,7 +219,7 @@ pub fn run_field(
         if let Some(c) = &mut checkpointer {
             c.maybe_write(&server);
         }
-        stats.every_second(node, &o.name, server.stepper());
+        stats.every_second(&o.name, server.stepper());
         if o.ticks.is_some_and(|n| stats.ticks >= n)
             || o.duration.is_some_and(|d| started.elapsed() >= d)
         {
@@ -344,9 +360,13 @@ fn summarize(
         max_tick_compute_ms: stats.max_compute_ns as f64 / 1e6,
         missed_deadlines: stats.max_lateness_ns.map(|_| stats.missed_deadlines),
         max_tick_lateness_ms: stats.max_lateness_ns.map(|ns| ns as f64 / 1e6),
+        tick_lateness: stats.lateness(),
+        longest_tick_gap_periods: stats
+            .max_lateness_ns
+            .map(|_| stats.longest_gap_ns as f64 * o.config.tick_hz as f64 / 1e9),
         frames_on_deposit: extras.frames_on_deposit,
         longest_tick_gap_ms: stats.longest_gap_ns as f64 / 1e6,
-        dead_nodes_cleaned: stats.dead_nodes_cleaned,
+        dead_nodes_cleaned: stats.dead_nodes_cleaned_total(),
         restored_sequence: o.restore.as_ref().map(|(_, c)| c.header.sequence),
         checkpoint: extras.checkpoint,
         standby: extras.standby,
@@ -402,6 +422,8 @@ struct Metronome {
     deadline: Instant,
     /// How late the last tick started after its deadline.
     late: Option<Duration>,
+    /// Poll for this long before each deadline instead of sleeping.
+    spin: Duration,
 }
 
 impl Metronome {
@@ -423,7 +445,10 @@ impl Pace for Metronome {
         server: &FieldServer,
         _last_frame_at: Instant,
     ) -> Result<Next, ShmError> {
-        if !wait_serving_readers(node, server, self.deadline)? {
+        let wake = spin::sleep_until(self.deadline, self.spin);
+        if !wait_serving_readers(node, server, wake)?
+            || spin::poll_until::<ShmError>(self.deadline, || Ok(false))? == spin::Polled::Stop
+        {
             return Ok(Next::Stop); // SIGINT / SIGTERM
         }
         self.advance();
@@ -452,7 +477,7 @@ impl Pace for OnDeposit {
     ) -> Result<Next, ShmError> {
         match self
             .wake
-            .wait(node, server, self.metronome.deadline, last_frame_at)?
+            .wait(node, server, &self.metronome, last_frame_at)?
         {
             Wake::Stop => return Ok(Next::Stop),
             Wake::Deposit => {
@@ -692,9 +717,11 @@ impl DepositWake {
         &self,
         node: &Node<Svc>,
         server: &FieldServer,
-        deadline: Instant,
+        metronome: &Metronome,
         last_frame_at: Instant,
     ) -> Result<Wake, TickError> {
+        let deadline = metronome.deadline;
+        let poll_from = spin::sleep_until(deadline, metronome.spin);
         loop {
             if node.wait(Duration::ZERO).is_err() {
                 return Ok(Wake::Stop);
@@ -717,9 +744,16 @@ impl DepositWake {
                 let _ = self.listener.try_wait(|_| {});
                 return Ok(Wake::Deposit);
             }
+            if now >= poll_from {
+                match spin::poll_until(deadline, || server.deposits_waiting())? {
+                    spin::Polled::Ready => continue,
+                    spin::Polled::Deadline => return Ok(Wake::Tick),
+                    spin::Polled::Stop => return Ok(Wake::Stop),
+                }
+            }
             // In slices of at most 100 ms: readers that attached meanwhile get the current frame
             // without waiting for a tick (which can be far off at a low tick rate).
-            let slice = deadline.saturating_duration_since(now).min(IDLE_SLICE);
+            let slice = poll_from.saturating_duration_since(now).min(IDLE_SLICE);
             match self.listener.timed_wait(|_| {}, slice) {
                 Ok(0) => server.serve_new_readers()?,
                 Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}

@@ -3,6 +3,7 @@
 
 use std::time::{Duration, Instant};
 
+use super::housekeeping::Housekeeper;
 use crate::deposit::RejectReason;
 use crate::messages::FieldTiming;
 use crate::shm::{cleanup_dead_nodes, Svc, TickOutcome, TimingWriter};
@@ -20,11 +21,15 @@ pub(crate) struct TickStats {
     pub(crate) missed_deadlines: u64,
     /// The latest tick start after its deadline (`None`: no tick had a deadline).
     pub(crate) max_lateness_ns: Option<u64>,
+    /// Every wall-time tick's start after its deadline, µs.
+    pub(crate) lateness_us: hdrhistogram::Histogram<u64>,
     /// When the last frame was published (the start, before the first).
     pub(crate) last_frame_at: Instant,
     window: Window,
     /// The totals for `pheromone list` (`pheromone/F/timing`), updated after every frame.
     board: Option<TimingWriter>,
+    /// Cleans up after dead clients off the tick thread (started by `keep_timing_board`).
+    housekeeper: Option<Housekeeper>,
 }
 
 impl TickStats {
@@ -38,9 +43,13 @@ impl TickStats {
             slack,
             missed_deadlines: 0,
             max_lateness_ns: None,
+            // 1 µs to 1000 s at 3 significant digits (≈ 160 KiB).
+            lateness_us: hdrhistogram::Histogram::new_with_bounds(1, 1_000_000_000, 3)
+                .expect("valid histogram bounds"),
             last_frame_at: Instant::now(),
             window: Window::new(Instant::now()),
             board: None,
+            housekeeper: None,
         }
     }
 
@@ -48,6 +57,10 @@ impl TickStats {
     /// that cannot create it (e.g. a dead primary's is still there) runs without it, and says so.
     pub(crate) fn keep_timing_board(&mut self, node: &Node<Svc>, field: &str) {
         cleanup_dead_nodes(node);
+        self.housekeeper = Some(Housekeeper::start(
+            node.config().clone(),
+            Duration::from_secs(1),
+        ));
         self.board = TimingWriter::create(node, field)
             .map_err(|e| eprintln!("field '{field}': `pheromone list` will show no timing: {e}"))
             .ok();
@@ -61,6 +74,7 @@ impl TickStats {
         if let Some(late) = late {
             let ns = late.as_nanos() as u64;
             self.max_lateness_ns = Some(self.max_lateness_ns.unwrap_or(0).max(ns));
+            self.lateness_us.saturating_record(ns / 1000);
             if late > self.slack {
                 self.missed_deadlines += 1;
                 self.window.missed += 1;
@@ -90,11 +104,14 @@ impl TickStats {
         }
     }
 
-    /// Once a second: frees what clients killed since the last second held (their ports and
-    /// frames), logs the window's line and starts the next window.
-    pub(crate) fn every_second(&mut self, node: &Node<Svc>, field: &str, stepper: &Stepper) {
+    /// Once a second: logs the window's line (with what the housekeeping thread freed of
+    /// clients killed meanwhile: their ports and frames) and starts the next window.
+    pub(crate) fn every_second(&mut self, field: &str, stepper: &Stepper) {
         if self.window.started.elapsed() >= Duration::from_secs(1) {
-            let cleaned = cleanup_dead_nodes(node);
+            let cleaned = self
+                .housekeeper
+                .as_ref()
+                .map_or(0, Housekeeper::take_cleaned);
             self.dead_nodes_cleaned += cleaned;
             self.window.log(field, stepper, cleaned);
             self.window = Window::new(Instant::now());
@@ -170,5 +187,37 @@ impl Window {
                 String::new()
             }
         );
+    }
+}
+
+/// Tick-start lateness over a run (µs), for the `--json` summary.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Lateness {
+    pub p50_us: u64,
+    pub p99_us: u64,
+    pub p999_us: u64,
+    pub max_us: u64,
+}
+
+impl TickStats {
+    /// Dead nodes removed over the run, including what the housekeeping thread removed since
+    /// the last log line.
+    pub(crate) fn dead_nodes_cleaned_total(&self) -> u64 {
+        self.dead_nodes_cleaned
+            + self
+                .housekeeper
+                .as_ref()
+                .map_or(0, Housekeeper::take_cleaned)
+    }
+
+    /// The lateness percentiles (`None` when no tick had a wall-time deadline).
+    pub(crate) fn lateness(&self) -> Option<Lateness> {
+        let h = &self.lateness_us;
+        (!h.is_empty()).then(|| Lateness {
+            p50_us: h.value_at_quantile(0.5),
+            p99_us: h.value_at_quantile(0.99),
+            p999_us: h.value_at_quantile(0.999),
+            max_us: h.max(),
+        })
     }
 }

@@ -115,7 +115,7 @@ fn open_deposit_ready(
 }
 
 /// Whether SIGINT or SIGTERM asked this process to stop.
-fn stop_requested() -> bool {
+pub(crate) fn stop_requested() -> bool {
     iceoryx2_bb_posix::signal::SignalHandler::termination_requested()
 }
 
