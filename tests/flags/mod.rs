@@ -225,6 +225,7 @@ const DOMAINS: &[(&str, &str, Domain)] = &[
     ("record", "--frames", int(1.0, 1e12)),
     ("bench", "--tick-hz", pos(1e4)),
     ("bench", "--visible-width", int(16.0, 4096.0)),
+    ("bench", "--repeats", int(1.0, 100.0)),
 ];
 
 /// Text flags that hold numbers (lists), checked the same way with the domain of each item.
