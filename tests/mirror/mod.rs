@@ -14,7 +14,9 @@ use supervisor::{ChildId, ChildSpec, Supervisor};
 
 use super::harness::*;
 
+mod faults;
 mod netns;
+mod secure;
 mod wire;
 
 /// The two "hosts" (fixed names: iceoryx2 keeps one management segment per domain prefix).

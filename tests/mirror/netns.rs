@@ -16,15 +16,15 @@ use crate::harness::*;
 
 /// Two namespaces and the veth pair between them; deleted when dropped (which removes the
 /// pair too).
-struct Link {
-    a: String,
-    b: String,
+pub(super) struct Link {
+    pub(super) a: String,
+    pub(super) b: String,
     /// The veth end in `a`.
     dev_a: String,
 }
 
-const ADDR_A: &str = "169.254.77.1";
-const ADDR_B: &str = "169.254.77.2";
+pub(super) const ADDR_A: &str = "169.254.77.1";
+pub(super) const ADDR_B: &str = "169.254.77.2";
 
 fn ip(args: &[&str]) -> Result<(), String> {
     let o = Command::new("ip")
@@ -44,7 +44,7 @@ fn ip(args: &[&str]) -> Result<(), String> {
 
 impl Link {
     /// `None` (with the reason) where namespaces cannot be made here.
-    fn make(tag: &str) -> Result<Self, String> {
+    pub(super) fn make(tag: &str) -> Result<Self, String> {
         let (va, vb) = (format!("{tag}a"), format!("{tag}b"));
         let (a, b) = (format!("{tag}A"), format!("{tag}B"));
         ip(&["netns", "add", &a])?;
@@ -72,7 +72,7 @@ impl Link {
     }
 
     /// `pheromone ARGS` inside namespace `ns`.
-    fn spawn_in(&self, ns: &str, role: &str, args: &[&str]) -> Proc {
+    pub(super) fn spawn_in(&self, ns: &str, role: &str, args: &[&str]) -> Proc {
         let bin = bin();
         let mut all = vec!["netns", "exec", ns, bin.to_str().unwrap()];
         all.extend_from_slice(args);
@@ -91,7 +91,7 @@ impl Drop for Link {
 }
 
 /// Waits (at most `timeout`) until the mirror says it is stale (`true`) or live.
-fn until_mirror(node: &iceoryx2::node::Node<field::shm::Svc>, name: &str, stale: bool) {
+pub(super) fn until_mirror(node: &iceoryx2::node::Node<field::shm::Svc>, name: &str, stale: bool) {
     eventually(
         Duration::from_secs(30),
         if stale {

@@ -23,7 +23,7 @@ use zenoh::sample::Sample;
 use zenoh::Wait;
 
 use super::codec::{self, frame_checksum};
-use super::{session_config, zerr, BridgeError, Keys, REQUEST_TIMEOUT};
+use super::{zerr, BridgeError, Keys, REQUEST_TIMEOUT};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct MirrorOptions {
@@ -32,6 +32,8 @@ pub struct MirrorOptions {
     pub connect: Vec<String>,
     /// No inputs for this long: the mirror is stale (and asks for keyframes).
     pub stale_after: Duration,
+    /// TLS, credentials and access control of the session.
+    pub security: super::Security,
 }
 
 /// What a mirror did, cumulative.
@@ -132,7 +134,8 @@ impl Mirror {
     /// Opens the session (it connects, and reconnects, in the background).
     pub fn start(o: MirrorOptions) -> Result<Self, BridgeError> {
         let keys = Keys::of(&o.field);
-        let session = zenoh::open(session_config(&[], &o.connect)?)
+        let config = super::session_config_with(&o.security, "peer", &[], &o.connect)?;
+        let session = zenoh::open(config)
             .wait()
             .map_err(|e| zerr(&format!("connect to {:?}", o.connect), e))?;
         let sub = |key: &str| {

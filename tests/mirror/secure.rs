@@ -1,0 +1,309 @@
+//! A mirror over TLS with a user and password, across network namespaces (as netns.rs): the
+//! test makes a CA, a certificate for the bridge's address and a second, untrusted CA with the
+//! `openssl` CLI; the mirror with the right CA and password becomes bit-identical, mirrors with
+//! a wrong password, no credentials or the untrusted CA exit non-zero saying what failed.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use super::netns::{Link, ADDR_A};
+use super::{assert_identical, deposit, origin_field, CleanDomains, Hosts, MIRROR, ORIGIN};
+use crate::harness::*;
+
+/// A private temporary directory with the test's keys and certificates, removed when dropped.
+struct Pki {
+    dir: PathBuf,
+}
+
+impl Drop for Pki {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn openssl(dir: &Path, args: &[&str]) -> Result<(), String> {
+    let o = Command::new("openssl")
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .map_err(|e| format!("openssl {}: {e}", args.join(" ")))?;
+    if o.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "openssl {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&o.stderr).trim()
+        ))
+    }
+}
+
+/// A self-signed CA `NAME.pem` / `NAME.key` (EC P-256, one day).
+fn make_ca(dir: &Path, name: &str) -> Result<(), String> {
+    let (pem, key, subj) = (
+        format!("{name}.pem"),
+        format!("{name}.key"),
+        format!("/CN={name}"),
+    );
+    openssl(
+        dir,
+        &[
+            "req",
+            "-x509",
+            "-newkey",
+            "ec",
+            "-pkeyopt",
+            "ec_paramgen_curve:P-256",
+            "-nodes",
+            "-keyout",
+            &key,
+            "-out",
+            &pem,
+            "-days",
+            "1",
+            "-subj",
+            &subj,
+            "-addext",
+            "basicConstraints=critical,CA:TRUE",
+            "-addext",
+            "keyUsage=critical,keyCertSign,cRLSign",
+        ],
+    )
+}
+
+impl Pki {
+    /// `ca.pem`, `bridge.pem`/`bridge.key` (signed by it, valid for `ip`), `other-ca.pem`,
+    /// the bridge's `users.txt` (robot:s3cret) and the password files `right.txt`, `wrong.txt`.
+    fn make(ip: &str) -> Result<Self, String> {
+        let dir = std::env::temp_dir().join(unique("mirtls"));
+        std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+        let pki = Self { dir };
+        let d = pki.dir.as_path();
+        make_ca(d, "ca")?;
+        make_ca(d, "other-ca")?;
+        openssl(
+            d,
+            &[
+                "req",
+                "-newkey",
+                "ec",
+                "-pkeyopt",
+                "ec_paramgen_curve:P-256",
+                "-nodes",
+                "-keyout",
+                "bridge.key",
+                "-out",
+                "bridge.csr",
+                "-subj",
+                "/CN=bridge",
+            ],
+        )?;
+        let ext = format!(
+            "subjectAltName=IP:{ip}\nbasicConstraints=CA:FALSE\nkeyUsage=digitalSignature\n\
+             extendedKeyUsage=serverAuth,clientAuth\n"
+        );
+        std::fs::write(d.join("bridge.ext"), ext).map_err(|e| e.to_string())?;
+        openssl(
+            d,
+            &[
+                "x509",
+                "-req",
+                "-in",
+                "bridge.csr",
+                "-CA",
+                "ca.pem",
+                "-CAkey",
+                "ca.key",
+                "-CAcreateserial",
+                "-out",
+                "bridge.pem",
+                "-days",
+                "1",
+                "-extfile",
+                "bridge.ext",
+            ],
+        )?;
+        for (f, text) in [
+            ("users.txt", "robot:s3cret\n"),
+            ("right.txt", "s3cret\n"),
+            ("wrong.txt", "guess\n"),
+        ] {
+            std::fs::write(d.join(f), text).map_err(|e| e.to_string())?;
+        }
+        Ok(pki)
+    }
+
+    fn path(&self, f: &str) -> String {
+        self.dir.join(f).to_string_lossy().into_owned()
+    }
+}
+
+/// The namespaces and the certificates, or `None` (said on stderr) where either cannot be made.
+fn setup(tag: &str) -> Option<(Link, Pki)> {
+    let link = match Link::make(tag) {
+        Ok(l) => l,
+        Err(why) => {
+            eprintln!("skipped: network namespaces cannot be made here ({why})");
+            return None;
+        }
+    };
+    match Pki::make(ADDR_A) {
+        Ok(p) => Some((link, p)),
+        Err(why) => {
+            eprintln!("skipped: the openssl CLI cannot make the test's certificates ({why})");
+            None
+        }
+    }
+}
+
+/// The bridge of field `name` in namespace A on `tls/ADDR_A:7447`, requiring the test's user.
+fn tls_bridge(link: &Link, pki: &Pki, name: &str, endpoint: &str) -> Proc {
+    let mut args = super::bridge_args(name, endpoint).to_vec();
+    let (cert, key, users) = (
+        pki.path("bridge.pem"),
+        pki.path("bridge.key"),
+        pki.path("users.txt"),
+    );
+    args.extend([
+        "--tls-cert",
+        &cert,
+        "--tls-key",
+        &key,
+        "--users-file",
+        &users,
+    ]);
+    link.spawn_in(&link.a, "bridge", &args)
+}
+
+/// A mirror of `name` in namespace B connecting to `endpoint` with the extra `security` flags.
+fn tls_mirror(link: &Link, name: &str, endpoint: &str, security: &[&str]) -> Proc {
+    let origin = format!("zenoh:{endpoint}");
+    let mut args = vec![
+        "field",
+        "--iox-domain",
+        MIRROR,
+        "--name",
+        name,
+        "--mirror",
+        &origin,
+        "--stale-after-s",
+        "0.5",
+        "--duration",
+        "120",
+        "--json",
+    ];
+    args.extend_from_slice(security);
+    link.spawn_in(&link.b, "mirror", &args)
+}
+
+#[test]
+fn a_mirror_over_tls_with_a_password_is_bit_identical_to_its_origin() {
+    let _clean = CleanDomains;
+    let tag = format!("pt{}", std::process::id() % 100_000);
+    let Some((link, pki)) = setup(&tag) else {
+        return;
+    };
+    let name = unique("mirtls");
+    let _field = origin_field(&name);
+    let endpoint = format!("tls/{ADDR_A}:7447");
+    let _bridge = tls_bridge(&link, &pki, &name, &endpoint);
+    let (ca, pw) = (pki.path("ca.pem"), pki.path("right.txt"));
+    let started = Instant::now();
+    let mirror = tls_mirror(
+        &link,
+        &name,
+        &endpoint,
+        &[
+            "--tls-root-ca",
+            &ca,
+            "--user",
+            "robot",
+            "--password-file",
+            &pw,
+        ],
+    );
+    let mut hosts = Hosts::attach(&name);
+    assert_identical(&hosts.common(10, |_| true));
+    let first = started.elapsed();
+    deposit(ORIGIN, &name, "2.5", "2.5");
+    assert_identical(&hosts.common(10, |f| super::value_at(f, 2.5, 2.5) > 0.1));
+    let node = field::shm::create_node_in(&unique("mirtls-watch"), Some(MIRROR)).unwrap();
+    super::netns::until_mirror(&node, &name, false);
+    println!(
+        "TLS + password mirror: 10 bit-identical frames {:.2} s after it started",
+        first.as_secs_f64()
+    );
+    let j = super::mirror_exit(mirror);
+    assert_eq!(j["mirror"]["checksum_mismatches"], 0, "{j}");
+    assert!(
+        j["mirror"]["checksums_matched"].as_u64().unwrap() >= 1,
+        "{j}"
+    );
+}
+
+#[test]
+fn mirrors_with_a_wrong_password_no_credentials_or_an_untrusted_ca_are_refused_saying_why() {
+    let _clean = CleanDomains;
+    let tag = format!("pr{}", std::process::id() % 100_000);
+    let Some((link, pki)) = setup(&tag) else {
+        return;
+    };
+    let name = unique("mirtlsno");
+    let _field = origin_field(&name);
+    let endpoint = format!("tls/{ADDR_A}:7447");
+    let _bridge = tls_bridge(&link, &pki, &name, &endpoint);
+    let (ca, other, right, wrong) = (
+        pki.path("ca.pem"),
+        pki.path("other-ca.pem"),
+        pki.path("right.txt"),
+        pki.path("wrong.txt"),
+    );
+    let cases: [(&str, Vec<&str>, &str); 3] = [
+        (
+            "wrong password",
+            vec![
+                "--tls-root-ca",
+                &ca,
+                "--user",
+                "robot",
+                "--password-file",
+                &wrong,
+            ],
+            "refused this side's credentials",
+        ),
+        (
+            "no credentials",
+            vec!["--tls-root-ca", &ca],
+            "refused this side's credentials",
+        ),
+        (
+            "untrusted CA",
+            vec![
+                "--tls-root-ca",
+                &other,
+                "--user",
+                "robot",
+                "--password-file",
+                &right,
+            ],
+            "not signed by the CA given",
+        ),
+    ];
+    // One after the other: they would share the mirror's services (same field, same domain).
+    for (what, flags, says) in &cases {
+        let started = Instant::now();
+        let out = tls_mirror(&link, &name, &endpoint, flags).wait_exit(Duration::from_secs(30));
+        let err = stderr(&out);
+        assert!(!out.status.success(), "{what}: the mirror exited 0: {err}");
+        assert!(
+            err.contains("refused the connection") && err.contains(says),
+            "{what}: the mirror's error does not say '{says}': {err}"
+        );
+        println!(
+            "{what}: refused after {:.2} s: {}",
+            started.elapsed().as_secs_f64(),
+            err.lines().last().unwrap_or_default()
+        );
+    }
+}
