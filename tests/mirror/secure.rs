@@ -307,3 +307,92 @@ fn mirrors_with_a_wrong_password_no_credentials_or_an_untrusted_ca_are_refused_s
         );
     }
 }
+
+/// Each security file is checked while the command line is parsed: a missing one exits with
+/// status 2 naming the flag and the path; the flags are a mirror's, not a plain field's; an
+/// empty password file is refused before the session opens.
+#[test]
+fn security_files_are_checked_before_anything_starts() {
+    let missing = std::env::temp_dir().join(unique("no-such-cert"));
+    let missing = missing.to_str().unwrap();
+    for args in [
+        vec![
+            "bridge",
+            "--field",
+            "x",
+            "--tls-cert",
+            missing,
+            "--tls-key",
+            missing,
+        ],
+        vec!["bridge", "--field", "x", "--zenoh-config", missing],
+        vec![
+            "ros2",
+            "--field",
+            "x",
+            "--connect",
+            "tcp/127.0.0.1:9",
+            "--users-file",
+            missing,
+        ],
+        vec![
+            "field",
+            "--name",
+            "x",
+            "--mirror",
+            "zenoh:tls/127.0.0.1:9",
+            "--tls-root-ca",
+            missing,
+        ],
+    ] {
+        let out = run(&args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains(missing) && err.contains("--"),
+            "{args:?}: {err}"
+        );
+    }
+    let dir = std::env::temp_dir().join(unique("mirtls-empty"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let empty = dir.join("empty.txt");
+    std::fs::write(&empty, "").unwrap();
+    let empty = empty.to_str().unwrap();
+    let plain = run(&[
+        "field",
+        "--name",
+        "x",
+        "--tls-root-ca",
+        empty,
+        "--duration",
+        "1",
+    ]);
+    let err = stderr(&plain);
+    assert_eq!(plain.status.code(), Some(2), "{err}");
+    assert!(err.contains("--mirror"), "{err}");
+    let name = unique("mirtls-pw");
+    let origin = "zenoh:tcp/127.0.0.1:9";
+    let args = [
+        "field",
+        "--iox-domain",
+        MIRROR,
+        "--name",
+        &name,
+        "--mirror",
+        origin,
+        "--user",
+        "robot",
+        "--password-file",
+        empty,
+        "--duration",
+        "5",
+    ];
+    let out = run(&args);
+    let err = stderr(&out);
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("--password-file") && err.contains("empty"),
+        "{err}"
+    );
+}
