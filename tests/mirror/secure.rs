@@ -396,3 +396,66 @@ fn security_files_are_checked_before_anything_starts() {
         "{err}"
     );
 }
+
+/// Access control from `--zenoh-config` (Zenoh's own `access_control` section): the bridge
+/// denies puts on `pheromone/*/deposit` from the user `viewer`. That mirror still follows its
+/// origin bit-identically, but its host's deposit never reaches the field, while the origin's
+/// own deposits still reach the mirror.
+#[test]
+fn an_access_control_rule_keeps_a_viewer_mirror_from_depositing() {
+    let _clean = CleanDomains;
+    let dir = Pki {
+        dir: std::env::temp_dir().join(unique("miracl")),
+    };
+    std::fs::create_dir_all(&dir.dir).unwrap();
+    let acl = r#"{
+  access_control: {
+    enabled: true,
+    default_permission: "allow",
+    rules: [{ id: "no-deposits", messages: ["put"], flows: ["ingress", "egress"],
+              permission: "deny", key_exprs: ["pheromone/*/deposit"] }],
+    subjects: [{ id: "viewers", usernames: ["viewer"] }],
+    policies: [{ rules: ["no-deposits"], subjects: ["viewers"] }],
+  },
+}
+"#;
+    for (f, text) in [
+        ("acl.json5", acl),
+        ("users.txt", "viewer:look\nrobot:s3cret\n"),
+        ("viewer.txt", "look\n"),
+    ] {
+        std::fs::write(dir.dir.join(f), text).unwrap();
+    }
+    let (acl, users, pw) = (
+        dir.path("acl.json5"),
+        dir.path("users.txt"),
+        dir.path("viewer.txt"),
+    );
+    let name = unique("miracl");
+    let _field = origin_field(&name);
+    let extra = [
+        "--users-file",
+        users.as_str(),
+        "--zenoh-config",
+        acl.as_str(),
+    ];
+    let b = super::bridge_with(&name, "tcp/127.0.0.1:0", &extra);
+    let viewer = ["--user", "viewer", "--password-file", pw.as_str()];
+    let m = super::mirror_with(&name, &b.endpoint, &viewer);
+    let mut hosts = Hosts::attach(&name);
+    assert_identical(&hosts.common(5, |_| true));
+    // Taken by the mirror and put on Zenoh; the bridge's access control drops it.
+    deposit(MIRROR, &name, "2.0", "3.0");
+    deposit(ORIGIN, &name, "4.5", "1.5");
+    assert_identical(&hosts.common(20, |f| super::value_at(f, 4.5, 1.5) > 0.1));
+    let o = hosts.origin.frame().unwrap();
+    assert_eq!(
+        super::value_at(&o, 2.0, 3.0),
+        0.0,
+        "the viewer's deposit was applied"
+    );
+    let s = super::mirror_summary(m);
+    assert_eq!(s["deposits_forwarded"], 1, "{s}");
+    let j = b.exit_json();
+    assert_eq!(j["bridge"]["deposits_forwarded"], 0, "{j}");
+}
