@@ -250,8 +250,8 @@ pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Until a connection to the bridge opens: one attempt a second, in a thread of its own (an
-/// attempt may take as long as a TCP connect and a TLS handshake), whose refusal for good (a
+/// Until a connection to the bridge opens: one attempt at a time, a second apart, in a thread
+/// of its own (an attempt may take as long as a TCP connect and a TLS handshake), whose refusal for good (a
 /// certificate, CA or password the bridge does not accept) is sent on the channel: the
 /// mirror's own session would retry it forever, logging nothing.
 #[cfg(feature = "zenoh")]
@@ -261,7 +261,7 @@ fn watch_refusal(
 ) -> std::sync::mpsc::Receiver<String> {
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || loop {
-        match bridge::try_connect(&security, &endpoint, Duration::from_secs(15)) {
+        match bridge::try_connect(&security, &endpoint) {
             Ok(()) => return,
             Err(e) => {
                 if let Some(why) = bridge::refusal(&e) {
