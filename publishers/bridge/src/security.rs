@@ -118,6 +118,12 @@ pub fn refusal(zenoh_error: &str) -> Option<String> {
     if let Some((_, why)) = tls.iter().find(|(k, _)| e.contains(k)) {
         return Some(format!("{why} ({zenoh_error})"));
     }
+    if e.contains("recv openack. expected extension") {
+        return Some(format!(
+            "the bridge asks for no credentials but this side presents some (--user): a bridge \
+             without --users-file, or another Zenoh peer ({zenoh_error})"
+        ));
+    }
     let auth = e.contains("usrpwd")
         || e.contains("close message")
         || e.contains("invalid user")
@@ -151,4 +157,35 @@ pub fn try_connect(security: &Security, endpoint: &str) -> Result<(), String> {
     let session = zenoh::open(c).wait().map_err(|e| e.to_string())?;
     let _ = session.close().wait();
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::refusal;
+
+    #[test]
+    fn refusals_for_good_are_told_apart_from_failures_that_may_pass() {
+        // Zenoh 1.10's texts, as the tests in tests/mirror/secure.rs saw them.
+        let ca = "Can not create a new TLS link bound to IpAddress(..): invalid peer certificate: UnknownIssuer at …";
+        assert!(refusal(ca).unwrap().contains("not signed by the CA given"));
+        let pw = "Received a close message (reason GENERIC) in response to an OpenSyn on: …";
+        assert!(refusal(pw)
+            .unwrap()
+            .contains("refused this side's credentials"));
+        let none = "Received a close message (reason 0) in response to an InitSyn on: …";
+        assert!(refusal(none)
+            .unwrap()
+            .contains("refused this side's credentials"));
+        let extra = "UsrPwd extension - Recv OpenAck. Expected extension.";
+        assert!(refusal(extra).unwrap().contains("asks for no credentials"));
+        let name = "invalid peer certificate: NotValidForName";
+        assert!(refusal(name).unwrap().contains("not valid for the address"));
+        for passing in [
+            "Can not create a new TCP link bound to 127.0.0.1:9: Connection refused (os error 111)",
+            "Unable to connect to any of [tcp/10.0.0.1:7447]! ",
+            "No route to host (os error 113)",
+        ] {
+            assert_eq!(refusal(passing), None, "{passing}");
+        }
+    }
 }
