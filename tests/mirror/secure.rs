@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use bridge::zenoh::Wait;
+
 use super::netns::{Link, ADDR_A};
 use super::{assert_identical, deposit, origin_field, CleanDomains, Hosts, MIRROR, ORIGIN};
 use crate::harness::*;
@@ -458,4 +460,85 @@ fn an_access_control_rule_keeps_a_viewer_mirror_from_depositing() {
     assert_eq!(s["deposits_forwarded"], 1, "{s}");
     let j = b.exit_json();
     assert_eq!(j["bridge"]["deposits_forwarded"], 0, "{j}");
+}
+
+/// `pheromone ros2` with the same flags: listening on `tls/127.0.0.1:PORT` with a certificate
+/// and a users file, it serves a Zenoh peer that presents the CA, user and password (a sample
+/// of the field's topics arrives), and refuses one with a wrong password.
+#[test]
+fn the_ros2_node_listens_over_tls_and_asks_for_credentials() {
+    let _clean = CleanDomains;
+    let pki = match Pki::make("127.0.0.1") {
+        Ok(p) => p,
+        Err(why) => {
+            eprintln!("skipped: the openssl CLI cannot make the test's certificates ({why})");
+            return;
+        }
+    };
+    let name = unique("ros2tls");
+    let _field = origin_field(&name);
+    let (cert, key, users) = (
+        pki.path("bridge.pem"),
+        pki.path("bridge.key"),
+        pki.path("users.txt"),
+    );
+    let args = [
+        "ros2",
+        "--iox-domain",
+        ORIGIN,
+        "--field",
+        &name,
+        "--listen",
+        "tls/127.0.0.1:0",
+        "--print-address",
+        "--tls-cert",
+        &cert,
+        "--tls-key",
+        &key,
+        "--users-file",
+        &users,
+        "--duration",
+        "60",
+    ];
+    let mut sup = supervisor::Supervisor::new(&bin());
+    let id = sup
+        .spawn(supervisor::ChildSpec::new(
+            "ros2",
+            None,
+            args.iter().map(|a| a.to_string()).collect(),
+        ))
+        .expect("spawn pheromone ros2");
+    let endpoint = sup
+        .next_line(id, Duration::from_secs(30))
+        .expect("the node runs")
+        .expect("the node prints its endpoint within 30 s")
+        .trim()
+        .to_string();
+    assert!(endpoint.starts_with("tls/127.0.0.1:"), "{endpoint}");
+    let security = |password: &str| bridge::Security {
+        tls_root_ca: Some(pki.dir.join("ca.pem")),
+        user: Some("robot".into()),
+        password_file: Some(pki.dir.join(password)),
+        ..Default::default()
+    };
+    let wrong = bridge::try_connect(&security("wrong.txt"), &endpoint).unwrap_err();
+    assert!(
+        bridge::refusal(&wrong).is_some_and(|w| w.contains("credentials")),
+        "{wrong}"
+    );
+    let config =
+        bridge::session_config_with(&security("right.txt"), "peer", &[], &[endpoint]).unwrap();
+    let session = bridge::zenoh::open(config).wait().unwrap();
+    let sub = session.declare_subscriber("**").wait().unwrap();
+    let sample = sub.recv_timeout(Duration::from_secs(20)).unwrap();
+    assert!(
+        sample.is_some(),
+        "no sample from the ROS 2 node over TLS in 20 s"
+    );
+    let _ = session.close().wait();
+    sup.signal(id, nix::sys::signal::Signal::SIGINT);
+    assert!(
+        sup.wait_exit(id, Duration::from_secs(20)),
+        "the ROS 2 node exits"
+    );
 }
