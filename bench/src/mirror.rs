@@ -195,6 +195,7 @@ fn bridge_worker(name: String, keyframe_every: Duration) -> Worker {
                 keyframe_every,
                 frames: None,
                 admin_space: true,
+                security: Default::default(),
             },
             Duration::from_secs(20),
         )
@@ -226,6 +227,7 @@ fn mirror_worker(name: String, endpoint: String, tag: String) -> Worker {
             field: name,
             connect: vec![endpoint],
             stale_after: Duration::from_secs(1),
+            security: Default::default(),
         })
         .map_err(|e| e.to_string())?;
         lock(shared).opened_at = Some(opened);

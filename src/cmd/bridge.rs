@@ -25,8 +25,9 @@ pub struct BridgeArgs {
     #[arg(long, default_value = "main")]
     pub field: String,
     /// Zenoh endpoint to listen on (repeatable). Loopback by default: mirrors on other hosts
-    /// need an address they reach, e.g. tcp/0.0.0.0:7447 (every interface) — the link has no
-    /// authentication or encryption, so only on a network you trust.
+    /// need an address they reach, e.g. tls/10.0.0.1:7447 with --tls-cert/--tls-key and
+    /// --users-file (plain tcp/ has no encryption and, without --users-file, no
+    /// authentication: only on a network you trust).
     #[arg(
         long,
         value_name = "ENDPOINT",
@@ -64,6 +65,8 @@ pub struct BridgeArgs {
     /// session's read-only admin space.
     #[arg(long)]
     pub print_address: bool,
+    #[command(flatten)]
+    pub zenoh: super::zenoh_args::ZenohArgs,
 }
 
 #[cfg(feature = "zenoh")]
@@ -109,9 +112,14 @@ pub fn run(a: BridgeArgs) -> anyhow::Result<()> {
                 downsample: a.downsample,
             }),
             admin_space: a.print_address,
+            security: a.zenoh.security(),
         },
         timeout,
-    )?;
+    )
+    .map_err(|e| match e {
+        bridge::BridgeError::Security(_) => bad_from(e),
+        e => e.into(),
+    })?;
     if a.print_address {
         let locators = bridge.listen_locators()?;
         eprintln!("bridge '{}': listening on {locators:?}", a.field);
@@ -179,16 +187,30 @@ pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
     let stale_after = positive("stale-after-s", a.stale_after_s.unwrap_or(1.0))?;
     let duration = a.duration.map(|d| positive("duration", d)).transpose()?;
     let node = field::shm::create_node(&format!("mirror-{}", a.name))?;
+    let security = a.zenoh.security();
     let mut mirror = Mirror::start(MirrorOptions {
         field: a.name.clone(),
         connect: vec![endpoint.to_string()],
         stale_after,
+        security: security.clone(),
+    })
+    .map_err(|e| match e {
+        bridge::BridgeError::Security(_) => bad_from(e),
+        e => e.into(),
     })?;
     eprintln!("mirror '{}': connecting to {endpoint}", a.name);
+    let refused = watch_refusal(security, endpoint.to_string());
     let started = Instant::now();
     let mut last_log = Instant::now();
     let mut last_cleanup = Instant::now();
     while node.wait(Duration::ZERO).is_ok() && duration.is_none_or(|d| started.elapsed() < d) {
+        if let Ok(why) = refused.try_recv() {
+            mirror.close();
+            anyhow::bail!(
+                "mirror '{}': {endpoint} refused the connection: {why}",
+                a.name
+            );
+        }
         if let Err(e) = mirror.step(&node, Duration::from_millis(20)) {
             match e {
                 bridge::BridgeError::Config(_) => return Err(bad_from(e)),
@@ -226,6 +248,31 @@ pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Until a connection to the bridge opens: one attempt at a time, a second apart, in a thread
+/// of its own (an attempt may take as long as a TCP connect and a TLS handshake), whose refusal for good (a
+/// certificate, CA or password the bridge does not accept) is sent on the channel: the
+/// mirror's own session would retry it forever, logging nothing.
+#[cfg(feature = "zenoh")]
+fn watch_refusal(
+    security: bridge::Security,
+    endpoint: String,
+) -> std::sync::mpsc::Receiver<String> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || loop {
+        match bridge::try_connect(&security, &endpoint) {
+            Ok(()) => return,
+            Err(e) => {
+                if let Some(why) = bridge::refusal(&e) {
+                    let _ = tx.send(why);
+                    return;
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_secs(1));
+    });
+    rx
 }
 
 #[cfg(not(feature = "zenoh"))]

@@ -44,6 +44,11 @@ pub fn mirror_endpoint() -> Place<String> {
     Place(parse_mirror_endpoint)
 }
 
+/// The value parser of [`parse_in_file`].
+pub fn in_file() -> Place<PathBuf> {
+    Place(parse_in_file)
+}
+
 /// The value parser of [`parse_out_dir`].
 pub fn out_dir() -> Place<PathBuf> {
     Place(parse_out_dir)
@@ -142,6 +147,22 @@ pub fn parse_out_dir(s: &str) -> Result<PathBuf, String> {
     Ok(path)
 }
 
+/// A file to read (a certificate, a key, a password): an existing regular file this process
+/// can open.
+pub fn parse_in_file(s: &str) -> Result<PathBuf, String> {
+    let path = PathBuf::from(s);
+    if s.is_empty() {
+        return Err("expected a file".into());
+    }
+    match std::fs::metadata(&path) {
+        Err(e) => return Err(format!("cannot read it: {e}")),
+        Ok(m) if !m.is_file() => return Err("is not a regular file".into()),
+        Ok(_) => {}
+    }
+    std::fs::File::open(&path).map_err(|e| format!("cannot open it: {e}"))?;
+    Ok(path)
+}
+
 /// A file to write: not a directory, in a directory that exists.
 pub fn parse_out_file(s: &str) -> Result<PathBuf, String> {
     let path = PathBuf::from(s);
@@ -216,6 +237,10 @@ mod tests {
         assert!(parse_out_file(&s(&tmp)).is_err());
         assert!(parse_out_file(&s(&tmp.join("no-such-dir/x.npy"))).is_err());
         assert!(parse_out_file(&s(&file.join("x.npy"))).is_err());
+        assert!(parse_in_file(&s(&file)).is_ok());
+        assert!(parse_in_file(&s(&tmp)).is_err());
+        assert!(parse_in_file(&s(&tmp.join("no-such-file.pem"))).is_err());
+        assert!(parse_in_file("").is_err());
         std::fs::remove_file(&file).unwrap();
     }
 }

@@ -173,6 +173,9 @@ pub struct FieldArgs {
     /// A mirror is stale after this many seconds without inputs from its origin [default: 1].
     #[arg(long, value_parser = super::secs(), value_name = "SECS", requires = "mirror")]
     pub stale_after_s: Option<f64>,
+    // With --mirror: TLS, credentials and access control (docs/mirrors.md, "Security").
+    #[command(flatten)]
+    pub zenoh: super::zenoh_args::ZenohArgs,
     /// At exit, print one JSON summary object on stdout.
     #[arg(long)]
     pub json: bool,
@@ -289,6 +292,12 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
     }
     // `--mirror` runs `bridge::run_mirror` instead (dispatched by main, as this module's
     // arguments are the mirror's too).
+    if a.zenoh.any() {
+        return Err(bad(
+            "--zenoh-config, --tls-*, --user, --password-file and --users-file are a mirror's \
+             (--mirror zenoh:ENDPOINT)",
+        ));
+    }
     let config = config_from_args(&a)?;
     field::shm::check_name(&a.name).map_err(bad_from)?;
     if a.print_config {

@@ -20,6 +20,7 @@ pub mod stop;
 pub mod sweep;
 pub mod tune;
 pub mod view;
+pub mod zenoh_args;
 
 use std::error::Error;
 use std::fmt;

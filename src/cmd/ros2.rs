@@ -90,7 +90,9 @@ pub struct Ros2Args {
     /// Zenoh endpoint to connect to, e.g. a router: tcp/127.0.0.1:7447 (repeatable).
     #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint())]
     pub connect: Vec<String>,
-    /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).
+    /// Zenoh endpoint to listen on, e.g. tcp/127.0.0.1:7448 (repeatable). None by default:
+    /// the node only connects (to a router, --connect). An address other hosts reach should be
+    /// a tls/ one with --tls-cert/--tls-key and --users-file (docs/mirrors.md, "Security").
     #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint())]
     pub listen: Vec<String>,
     /// Subscribe TOPIC (PoseWithCovarianceStamped) and deposit its poses as robot ROBOT_ID
@@ -127,6 +129,8 @@ pub struct Ros2Args {
     /// Once listening, print each endpoint with its port on stdout (as `bridge` does).
     #[arg(long)]
     pub print_address: bool,
+    #[command(flatten)]
+    pub zenoh: super::zenoh_args::ZenohArgs,
     /// At exit, print one JSON summary on stdout: counts, refusals, bytes, latency p50/p99.
     #[arg(long)]
     pub json: bool,
@@ -187,6 +191,7 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
         deposit_from,
         depositor,
         admin_space: a.print_address,
+        security: a.zenoh.security(),
         world,
     };
     let mut ros = Ros2Node::start(&node, options, timeout).map_err(|e| match e {

@@ -14,7 +14,9 @@ use supervisor::{ChildId, ChildSpec, Supervisor};
 
 use super::harness::*;
 
+mod faults;
 mod netns;
+mod secure;
 mod wire;
 
 /// The two "hosts" (fixed names: iceoryx2 keeps one management segment per domain prefix).
@@ -31,6 +33,18 @@ struct BridgeProc {
 impl BridgeProc {
     fn kill(&self) {
         self.sup.signal(self.id, nix::sys::signal::Signal::SIGKILL);
+    }
+
+    /// Its `--json` summary after Ctrl-C.
+    fn exit_json(mut self) -> serde_json::Value {
+        self.sup.signal(self.id, nix::sys::signal::Signal::SIGINT);
+        assert!(
+            self.sup.wait_exit(self.id, Duration::from_secs(20)),
+            "the bridge exits"
+        );
+        let (out, err) = self.sup.output(self.id);
+        serde_json::from_str(out.lines().last().unwrap_or_default())
+            .unwrap_or_else(|e| panic!("the bridge's summary: {e}: {out} {err}"))
     }
 }
 
@@ -81,8 +95,14 @@ fn bridge_args<'a>(name: &'a str, listen: &'a str) -> [&'a str; 14] {
 
 /// A bridge listening on `listen`; waits for the endpoint it prints.
 fn bridge_on(name: &str, listen: &str) -> BridgeProc {
+    bridge_with(name, listen, &[])
+}
+
+/// As [`bridge_on`], with `extra` flags.
+fn bridge_with(name: &str, listen: &str, extra: &[&str]) -> BridgeProc {
     let mut args = bridge_args(name, listen).to_vec();
     args.push("--print-address");
+    args.extend_from_slice(extra);
     let mut sup = Supervisor::new(&bin());
     let id = sup
         .spawn(ChildSpec::new(
@@ -105,6 +125,11 @@ fn bridge_on(name: &str, listen: &str) -> BridgeProc {
 }
 
 fn mirror(name: &str, endpoint: &str) -> Proc {
+    mirror_with(name, endpoint, &[])
+}
+
+/// As [`mirror`], with `extra` flags.
+fn mirror_with(name: &str, endpoint: &str, extra: &[&str]) -> Proc {
     Proc::spawn(
         &Cmd::new("field")
             .opt("--iox-domain", MIRROR)
@@ -113,6 +138,7 @@ fn mirror(name: &str, endpoint: &str) -> Proc {
             .opt("--stale-after-s", 0.5)
             .duration(120)
             .json()
+            .args(extra)
             .argv(),
     )
 }

@@ -16,15 +16,15 @@ use crate::harness::*;
 
 /// Two namespaces and the veth pair between them; deleted when dropped (which removes the
 /// pair too).
-struct Link {
-    a: String,
-    b: String,
+pub(super) struct Link {
+    pub(super) a: String,
+    pub(super) b: String,
     /// The veth end in `a`.
     dev_a: String,
 }
 
-const ADDR_A: &str = "169.254.77.1";
-const ADDR_B: &str = "169.254.77.2";
+pub(super) const ADDR_A: &str = "169.254.77.1";
+pub(super) const ADDR_B: &str = "169.254.77.2";
 
 fn ip(args: &[&str]) -> Result<(), String> {
     let o = Command::new("ip")
@@ -44,7 +44,7 @@ fn ip(args: &[&str]) -> Result<(), String> {
 
 impl Link {
     /// `None` (with the reason) where namespaces cannot be made here.
-    fn make(tag: &str) -> Result<Self, String> {
+    pub(super) fn make(tag: &str) -> Result<Self, String> {
         let (va, vb) = (format!("{tag}a"), format!("{tag}b"));
         let (a, b) = (format!("{tag}A"), format!("{tag}B"));
         ip(&["netns", "add", &a])?;
@@ -72,7 +72,7 @@ impl Link {
     }
 
     /// `pheromone ARGS` inside namespace `ns`.
-    fn spawn_in(&self, ns: &str, role: &str, args: &[&str]) -> Proc {
+    pub(super) fn spawn_in(&self, ns: &str, role: &str, args: &[&str]) -> Proc {
         let bin = bin();
         let mut all = vec!["netns", "exec", ns, bin.to_str().unwrap()];
         all.extend_from_slice(args);
@@ -91,7 +91,7 @@ impl Drop for Link {
 }
 
 /// Waits (at most `timeout`) until the mirror says it is stale (`true`) or live.
-fn until_mirror(node: &iceoryx2::node::Node<field::shm::Svc>, name: &str, stale: bool) {
+pub(super) fn until_mirror(node: &iceoryx2::node::Node<field::shm::Svc>, name: &str, stale: bool) {
     eventually(
         Duration::from_secs(30),
         if stale {
@@ -177,4 +177,85 @@ fn a_partitioned_mirror_is_stale_meanwhile_and_bit_identical_again_after_the_lin
     let s = &j["mirror"];
     assert!(s["stale_periods"].as_u64().unwrap() >= 1, "{s}");
     assert_eq!(s["checksum_mismatches"], 0, "{s}");
+}
+
+/// A deposit made on the mirror's host while the link is down for longer than Zenoh's lease
+/// (10 s: the session to the bridge is closed meanwhile) reaches the origin once, after the
+/// link heals: the bridge passes exactly one deposit to the field, and the mirror shows it.
+#[test]
+fn a_deposit_made_on_a_partitioned_mirror_is_applied_once_after_the_link_heals() {
+    let _clean = CleanDomains;
+    let tag = format!("pd{}", std::process::id() % 100_000);
+    let link = match Link::make(&tag) {
+        Ok(l) => l,
+        Err(why) => {
+            eprintln!("skipped: network namespaces cannot be made here ({why})");
+            return;
+        }
+    };
+    let name = unique("mirdep");
+    let _field = origin_field(&name);
+    let endpoint = format!("tcp/{ADDR_A}:7447");
+    let bridge = link.spawn_in(&link.a, "bridge", &super::bridge_args(&name, &endpoint));
+    let mirror = link.spawn_in(
+        &link.b,
+        "mirror",
+        &[
+            "field",
+            "--iox-domain",
+            MIRROR,
+            "--name",
+            &name,
+            "--mirror",
+            &format!("zenoh:{endpoint}"),
+            "--stale-after-s",
+            "0.5",
+            "--duration",
+            "120",
+            "--json",
+        ],
+    );
+    let mut hosts = Hosts::attach(&name);
+    assert_identical(&hosts.common(5, |_| true));
+    let node = create_node_in(&unique("mirdep-watch"), Some(MIRROR)).unwrap();
+    until_mirror(&node, &name, false);
+    link.set(false);
+    let cut = Instant::now();
+    until_mirror(&node, &name, true);
+    // Past the lease: the mirror's session has dropped the bridge.
+    let _ = node.wait(Duration::from_secs(11).saturating_sub(cut.elapsed()));
+    // Made on the mirror's host, in its namespace (iceoryx2's wake-ups do not cross network
+    // namespaces: from outside, the receipt would come only when the client's wait times out).
+    let args = Cmd::new("deposit")
+        .opt("--iox-domain", MIRROR)
+        .opt("--field", &name)
+        .at("4.0", "4.0")
+        .amount(2)
+        .opt("--cov", "0.02,0,0.02")
+        .timeout(20)
+        .into_args();
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = link
+        .spawn_in(&link.b, "deposit", &args)
+        .wait_exit(Duration::from_secs(20));
+    let said = stderr(&out);
+    assert!(
+        out.status.success() && said.contains("forwarded to its origin"),
+        "{said}"
+    );
+    let _ = node.wait(Duration::from_secs(12).saturating_sub(cut.elapsed()));
+    link.set(true);
+    let healed = Instant::now();
+    let both = hosts.common(5, |f| super::value_at(f, 4.0, 4.0) > 0.1);
+    assert_identical(&both);
+    println!(
+        "deposit made during a {:.1} s partition: on the mirror {:.2} s after the link came back",
+        (healed - cut).as_secs_f64(),
+        healed.elapsed().as_secs_f64()
+    );
+    let m = super::mirror_exit(mirror);
+    bridge.interrupt();
+    let b = json(&bridge.wait_exit(Duration::from_secs(20)));
+    assert_eq!(m["mirror"]["deposits_forwarded"], 1, "{m}");
+    assert_eq!(b["bridge"]["deposits_forwarded"], 1, "{b}");
 }

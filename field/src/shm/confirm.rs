@@ -317,7 +317,7 @@ impl DepositClient {
 }
 
 /// Waits for the receipt of `pending`, waking on each frame (the field answers before it
-/// wakes the readers).
+/// wakes the readers) and every [`RECEIPT_POLL`].
 fn wait_receipt(
     pending: &PendingResponse<Svc, DepositMsg, (), DepositReceipt, ()>,
     frame_ready: &iceoryx2::port::listener::Listener<Svc>,
@@ -346,6 +346,11 @@ fn wait_receipt(
                 timeout_s: timeout.as_secs_f64(),
             });
         }
-        wait_interruptible(frame_ready, left, service)?;
+        // A stale mirror answers ("forwarded") without publishing a frame: look again at least
+        // every RECEIPT_POLL.
+        wait_interruptible(frame_ready, left.min(RECEIPT_POLL), service)?;
     }
 }
+
+/// How long a deposit client waits for a frame before it looks for its receipt again.
+const RECEIPT_POLL: Duration = Duration::from_millis(20);

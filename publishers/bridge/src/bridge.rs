@@ -9,7 +9,7 @@ use zenoh::qos::CongestionControl;
 use zenoh::Wait;
 
 use super::codec::{self, frame_checksum};
-use super::{session_config, zerr, BridgeError, Keys, REQUEST_TIMEOUT};
+use super::{zerr, BridgeError, Keys, REQUEST_TIMEOUT};
 
 /// `--frames`: downsampled compressed frames for consumers without a mirror.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -31,6 +31,8 @@ pub struct BridgeOptions {
     /// Turn on the session's read-only admin space, so [`Bridge::listen_locators`] can tell the
     /// ports it listens on (`--print-address`).
     pub admin_space: bool,
+    /// TLS, credentials and access control of the session.
+    pub security: super::Security,
 }
 
 /// What a bridge did, cumulative.
@@ -103,7 +105,7 @@ impl Bridge {
         let inputs = InputsSubscriber::attach(node, &o.field)?;
         let depositor = DepositPublisher::attach(node, &o.field, u32::MAX)?;
         let keys = Keys::of(&o.field);
-        let mut config = session_config(&o.listen, &[])?;
+        let mut config = super::session_config_with(&o.security, "peer", &o.listen, &[])?;
         if o.admin_space {
             config = super::with_admin_space(config)?;
         }

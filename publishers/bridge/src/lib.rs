@@ -7,11 +7,13 @@
 mod bridge;
 pub mod codec;
 mod mirror;
+mod security;
 
 use std::time::Duration;
 
 pub use bridge::{Bridge, BridgeOptions, BridgeStats, FramesOptions};
 pub use mirror::{Mirror, MirrorOptions, MirrorStats};
+pub use security::{refusal, try_connect, Security};
 /// The Zenoh crate this build uses (tests and benches speak to bridges with it).
 pub use zenoh;
 
@@ -26,6 +28,10 @@ pub enum BridgeError {
     Config(String),
     #[error("{0}")]
     Timeout(String),
+    /// A security file that cannot be used (an unreadable password file, a Zenoh
+    /// configuration file that does not parse).
+    #[error("{0}")]
+    Security(String),
 }
 
 field::from_shm_errors!(BridgeError);
@@ -75,7 +81,18 @@ pub fn session_config_as(
     listen: &[String],
     connect: &[String],
 ) -> Result<zenoh::Config, BridgeError> {
-    let mut c = zenoh::Config::default();
+    session_config_with(&Security::default(), mode, listen, connect)
+}
+
+/// As [`session_config_as`], over the base configuration of `security` (TLS, credentials,
+/// access control): its mode, scouting, endpoints and connection retry are the ones set here.
+pub fn session_config_with(
+    security: &Security,
+    mode: &str,
+    listen: &[String],
+    connect: &[String],
+) -> Result<zenoh::Config, BridgeError> {
+    let mut c = security.base_config()?;
     let mut set = |k: &str, v: String| {
         c.insert_json5(k, &v)
             .map_err(|e| zerr(&format!("config {k} = {v}"), e))

@@ -2,7 +2,8 @@
 //! keyframe, replays each frame's deposit list with the same `Stepper`, publishes the frames with
 //! the origin's sequence numbers in local shared memory, checks the origin's checksums, and asks
 //! for a keyframe on a mismatch, a sequence gap, a new origin epoch or a silent origin (then it
-//! is `stale` until live inputs come again). Deposits made on its host go to the origin.
+//! is `stale` until live inputs come again). Deposits made on its host go to the origin; while
+//! it is stale they are held (at most `HELD_MAX`) and sent once it is live again.
 //!
 //! Requests never block a round: a keyframe (and, for a new origin run, its configuration) is
 //! asked with a Zenoh `get` whose replies are polled each round, while the inputs keep being
@@ -23,7 +24,7 @@ use zenoh::sample::Sample;
 use zenoh::Wait;
 
 use super::codec::{self, frame_checksum};
-use super::{session_config, zerr, BridgeError, Keys, REQUEST_TIMEOUT};
+use super::{zerr, BridgeError, Keys, REQUEST_TIMEOUT};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct MirrorOptions {
@@ -32,6 +33,8 @@ pub struct MirrorOptions {
     pub connect: Vec<String>,
     /// No inputs for this long: the mirror is stale (and asks for keyframes).
     pub stale_after: Duration,
+    /// TLS, credentials and access control of the session.
+    pub security: super::Security,
 }
 
 /// What a mirror did, cumulative.
@@ -48,6 +51,9 @@ pub struct MirrorStats {
     pub rejected_keyframes: u64,
     pub rejected_other: u64,
     pub deposits_forwarded: u64,
+    /// Local deposits refused because more than [`HELD_MAX`] waited for the origin (the oldest
+    /// go).
+    pub deposits_refused: u64,
     pub stale_periods: u64,
     pub last_sequence: u64,
     /// Wall time from the last keyframe request to the keyframe published locally (ms).
@@ -125,6 +131,9 @@ fn fits(config: &FieldConfig, h: &FrameHeader, cells: &[f32]) -> bool {
 const SUMS_KEPT: usize = 64;
 /// Inputs lists kept while a keyframe is awaited.
 const MAX_PENDING: usize = 4096;
+/// A stale mirror holds at most this many local deposits for its origin.
+pub const HELD_MAX: usize = 100_000;
+
 /// A keyframe request that got no usable answer is sent again this long after.
 const RETRY_AFTER: Duration = Duration::from_millis(200);
 
@@ -132,7 +141,8 @@ impl Mirror {
     /// Opens the session (it connects, and reconnects, in the background).
     pub fn start(o: MirrorOptions) -> Result<Self, BridgeError> {
         let keys = Keys::of(&o.field);
-        let session = zenoh::open(session_config(&[], &o.connect)?)
+        let config = super::session_config_with(&o.security, "peer", &[], &o.connect)?;
+        let session = zenoh::open(config)
             .wait()
             .map_err(|e| zerr(&format!("connect to {:?}", o.connect), e))?;
         let sub = |key: &str| {
@@ -633,6 +643,21 @@ impl Mirror {
         };
         self.outbox.extend(server.take_local_deposits()?);
         if self.outbox.is_empty() {
+            return Ok(());
+        }
+        if self.stale {
+            // No origin hears them now: a partition longer than Zenoh's lease closes the
+            // session, and a put no subscriber matches is dropped without a word. Held until
+            // live inputs come again, then sent once.
+            let excess = self.outbox.len().saturating_sub(HELD_MAX);
+            if excess > 0 {
+                self.outbox.drain(..excess);
+                self.stats.deposits_refused += excess as u64;
+                eprintln!(
+                    "mirror '{}': stale with {HELD_MAX} local deposits held; {excess} older ones refused",
+                    self.o.field
+                );
+            }
             return Ok(());
         }
         self.deposit_pub

@@ -6,4 +6,4 @@ pub use roles::depositor;
 
 /// The bridge's Zenoh session settings (peer mode, no multicast scouting, listen/connect).
 #[cfg(feature = "zenoh")]
-pub use bridge::{listen_locators, session_config, with_admin_space};
+pub use bridge::{listen_locators, session_config_with, with_admin_space, Security};

@@ -21,7 +21,7 @@ use zenoh::sample::Sample;
 use zenoh::Wait;
 
 use crate::deps::depositor::{Depositor, DepositorConfig, DepositorConfigError};
-use crate::deps::{session_config, with_admin_space};
+use crate::deps::{session_config_with, with_admin_space};
 use crate::frames::{frame_messages, wall_now_ns, FieldTopics};
 use crate::graph::{
     self, split_topic_key, topic_key, Attachment, EntityKind, NameError, NodeIdentity, Qos,
@@ -73,6 +73,8 @@ pub struct Ros2Options {
     pub deposit_from: Vec<DepositFrom>,
     pub depositor: DepositorConfig,
     pub admin_space: bool,
+    /// TLS, credentials and access control of the session.
+    pub security: crate::deps::Security,
     /// The simulated world whose robots to publish, if any.
     pub world: Option<WorldOptions>,
 }
@@ -211,8 +213,8 @@ impl Ros2Node {
         } else {
             Some(DepositPublisher::attach(node, &o.field, u32::MAX)?)
         };
-        let mut config =
-            session_config(&o.listen, &o.connect).map_err(|e| zerr("session config", e))?;
+        let mut config = session_config_with(&o.security, "peer", &o.listen, &o.connect)
+            .map_err(|e| zerr("session config", e))?;
         if o.admin_space {
             config = with_admin_space(config).map_err(|e| zerr("session config", e))?;
         }

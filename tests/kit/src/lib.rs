@@ -1,9 +1,10 @@
 //! The test kit shared by every test binary of the workspace (dev-only): names no other test
 //! uses ([`unique`]), the TOML mutator of the fuzz suites ([`toml_fuzz`]), the argv of a
 //! `pheromone` command ([`Cmd`]), a runner for the binary ([`Cli`]) and a background process
-//! under the project's supervisor ([`Proc`]).
+//! under the project's supervisor ([`Proc`]), a fault-injecting TCP proxy ([`proxy`]).
 
 mod cmd;
+pub mod proxy;
 pub use cmd::Cmd;
 
 use std::path::Path;

@@ -1,0 +1,63 @@
+//! The Zenoh security flags of `bridge`, `field --mirror` and `ros2` (docs/mirrors.md,
+//! "Security"): every file is checked while the command line is parsed.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+/// TLS, credentials and access control of a Zenoh session.
+#[derive(Args, Debug, Clone, Default)]
+pub struct ZenohArgs {
+    /// Zenoh's own JSON5 configuration file (as rmw_zenoh uses): TLS (transport.link.tls),
+    /// credentials (transport.auth.usrpwd), access control (access_control) and any other
+    /// Zenoh setting. The mode, scouting, listen/connect endpoints and connection retry are
+    /// set by this command's flags, over the file's.
+    #[arg(long, value_name = "FILE", value_parser = super::check::in_file())]
+    pub zenoh_config: Option<PathBuf>,
+    /// PEM certificate of the CA that signed the other side's certificate (tls/ endpoints).
+    #[arg(long, value_name = "FILE", value_parser = super::check::in_file())]
+    pub tls_root_ca: Option<PathBuf>,
+    /// PEM certificate this side presents (a listener's on tls/ endpoints; a connector's with
+    /// mutual TLS, enable_mtls in --zenoh-config).
+    #[arg(long, value_name = "FILE", value_parser = super::check::in_file(), requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// PEM private key of --tls-cert.
+    #[arg(long, value_name = "FILE", value_parser = super::check::in_file(), requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
+    /// User name this side presents when it connects (with --password-file).
+    #[arg(long, value_name = "NAME", requires = "password_file")]
+    pub user: Option<String>,
+    /// File whose first line is --user's password.
+    #[arg(long, value_name = "FILE", value_parser = super::check::in_file(), requires = "user")]
+    pub password_file: Option<PathBuf>,
+    /// `user:password` lines: a listening side refuses peers that present none of them.
+    #[arg(long, value_name = "FILE", value_parser = super::check::in_file())]
+    pub users_file: Option<PathBuf>,
+}
+
+impl ZenohArgs {
+    /// Whether any of the flags is given.
+    pub fn any(&self) -> bool {
+        self.zenoh_config.is_some()
+            || self.tls_root_ca.is_some()
+            || self.tls_cert.is_some()
+            || self.tls_key.is_some()
+            || self.user.is_some()
+            || self.password_file.is_some()
+            || self.users_file.is_some()
+    }
+
+    /// The bridge library's settings (the files are read when the session opens).
+    #[cfg(feature = "zenoh")]
+    pub fn security(&self) -> bridge::Security {
+        bridge::Security {
+            config_file: self.zenoh_config.clone(),
+            tls_root_ca: self.tls_root_ca.clone(),
+            tls_cert: self.tls_cert.clone(),
+            tls_key: self.tls_key.clone(),
+            user: self.user.clone(),
+            password_file: self.password_file.clone(),
+            users_file: self.users_file.clone(),
+        }
+    }
+}
