@@ -302,6 +302,8 @@ pub struct RobotServices {
     /// maps.
     pub scan: String,
     pub rendezvous: String,
+    /// Seed 000's laser range scan (world → localizer), when the world has a laser.
+    pub laser: String,
 }
 
 impl RobotServices {
@@ -314,6 +316,7 @@ impl RobotServices {
             status: format!("pheromone/{world}/r{robot}/status"),
             scan: format!("sim/{world}/r{robot}/scan"),
             rendezvous: format!("sim/{world}/r{robot}/rendezvous"),
+            laser: format!("sim/{world}/r{robot}/laser"),
         }
     }
 }

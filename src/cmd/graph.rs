@@ -241,6 +241,9 @@ fn refuse_grid_flags(a: &SimArgs) -> anyhow::Result<()> {
         (a.trials.is_some(), "--trials"),
         (a.slam, "--slam"),
         (a.map.is_some(), "--map"),
+        (a.filter.is_some(), "--filter"),
+        (a.particles.is_some(), "--particles"),
+        (a.no_scripted_loss, "--no-scripted-loss"),
     ] {
         if set {
             return Err(bad(format!(

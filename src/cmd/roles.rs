@@ -151,6 +151,23 @@ pub struct LocalizerArgs {
         conflicts_with = "slam"
     )]
     pub landmark_region: Option<[f64; 4]>,
+    /// The filter: ekf (landmarks, the default), ukf (landmarks, seed 000 eqs. 6–8) or pf
+    /// (particle filter with the world's laser). Overrides the scenario's `filter` of the robot.
+    #[arg(long, value_name = "ekf|ukf|pf", value_parser = parse_filter, conflicts_with = "slam")]
+    pub filter: Option<roles::localizer::FilterKind>,
+    /// Particles of the particle filter (10..=100000). Overrides the scenario's `pf.particles`.
+    #[arg(long, value_name = "N", value_parser = parse_particles)]
+    pub particles: Option<usize>,
+}
+
+/// `--filter ekf|ukf|pf`.
+pub fn parse_filter(text: &str) -> Result<roles::localizer::FilterKind, String> {
+    text.parse()
+}
+
+/// `--particles N`: an integer in [10, 100000].
+pub fn parse_particles(text: &str) -> Result<usize, String> {
+    roles::localizer::parse_particles(text)
 }
 
 pub fn run_localizer_cmd(a: LocalizerArgs) -> anyhow::Result<()> {
@@ -159,6 +176,14 @@ pub fn run_localizer_cmd(a: LocalizerArgs) -> anyhow::Result<()> {
     if let Some(region) = a.landmark_region {
         if let Some(r) = scenario.robots.iter_mut().find(|r| r.id == a.robot) {
             r.localizer.landmark_region_m = Some(region);
+        }
+    }
+    if let Some(r) = scenario.robots.iter_mut().find(|r| r.id == a.robot) {
+        if let Some(k) = a.filter {
+            r.filter = k;
+        }
+        if let Some(n) = a.particles {
+            r.pf.particles = n;
         }
     }
     let node = create_node(&format!("localizer-r{}-{}", a.robot, std::process::id()))?;

@@ -53,6 +53,9 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             map: a.map.clone(),
             merge: a.merge_flag(),
             rc_m: a.rc_m,
+            filter: a.filter,
+            particles: a.particles,
+            no_scripted_loss: a.no_scripted_loss,
         })
         .map_err(|e| bad_in(a.scenario.as_str(), e))?;
     if let Some(t) = a.trials {

@@ -130,6 +130,16 @@ pub struct SimArgs {
     /// EKF-SLAM localizers (the map of landmarks is not given to them).
     #[arg(long)]
     pub slam: bool,
+    /// Every localizer's filter: ekf (default), ukf, or pf (particle filter; turns the world's
+    /// laser of seed 000 Table 1 on).
+    #[arg(long, value_name = "ekf|ukf|pf", value_parser = super::roles::parse_filter, conflicts_with = "slam")]
+    pub filter: Option<roles::localizer::FilterKind>,
+    /// Particles of every particle filter (10..=100000).
+    #[arg(long, value_name = "N", value_parser = super::roles::parse_particles)]
+    pub particles: Option<usize>,
+    /// Turn every localizer's scripted loss (`loss.after_s`) off.
+    #[arg(long)]
+    pub no_scripted_loss: bool,
     /// Seconds the whole run may take before it is stopped as failed (separate processes).
     #[arg(long, value_parser = super::secs(), default_value_t = 900.0, value_name = "SECS")]
     pub timeout: f64,

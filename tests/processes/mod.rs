@@ -109,6 +109,27 @@ fn every_built_in_scenario_as_processes_gives_the_single_process_metrics() {
 }
 
 #[test]
+fn ukf_and_particle_filter_localizers_as_processes_give_the_single_process_metrics() {
+    // `--filter pf` turns the world's laser on: the localizers read its scans in both modes.
+    for filter in ["ukf", "pf"] {
+        let m = assert_same_in_both_modes(
+            "trail-following",
+            &[
+                "--duration",
+                "12",
+                "--seed",
+                "5",
+                "--filter",
+                filter,
+                "--particles",
+                "200",
+            ],
+        );
+        assert!(m["steps"].as_u64().unwrap() > 0, "{m}");
+    }
+}
+
+#[test]
 fn every_example_scenario_file_as_processes_gives_the_single_process_metrics() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenarios");
     let mut files: Vec<_> = std::fs::read_dir(&dir)

@@ -4,7 +4,7 @@
 //! Services (robot `r<ID>` of world `W`, named by `roles::RobotServices`):
 //! `pheromone/W/r<ID>/pose` ([`PoseMsg`]), `pheromone/W/r<ID>/cmd` ([`CmdMsg`]),
 //! `pheromone/W/r<ID>/status` ([`FollowerStatusMsg`]), `sim/W/r<ID>/sensors` ([`SensorMsg`]),
-//! `sim/W/r<ID>/truth` ([`TruthMsg`]); each has a `…-ready` event that wakes its receivers.
+//! `sim/W/r<ID>/truth` ([`TruthMsg`]), `sim/W/r<ID>/laser` ([`LaserMsg`]); each has a `…-ready` event that wakes its receivers.
 
 /// Most landmark observations one sensor message carries; the world reports the nearest ones.
 pub const MAX_OBSERVATIONS: usize = 32;
@@ -237,6 +237,80 @@ impl ScanMsg {
                 self.angle_min_rad + i as f32 * self.angle_step_rad,
                 self.ranges_m[i],
                 self.hits >> i & 1 == 1,
+            )
+        })
+    }
+}
+
+/// Most beams one [`LaserMsg`] carries (seed 000 Table 1's scanner has 129: 240° every 1.875°).
+pub const MAX_LASER_BEAMS: usize = 256;
+
+/// One scan of a robot's laser range scanner (seed 000 Table 1, a simulated URG-04LX): `count`
+/// beams from `angle_min_rad` (relative to the heading) every `angle_step_rad`. Beam `i`
+/// measured `ranges_m[i]` when bit `i % 64` of `returns[i / 64]` is set; otherwise it saw no
+/// wall within `range_max_m` and `ranges_m[i] = range_max_m`. Published by the world on
+/// `sim/W/r<ID>/laser` (before the step's [`SensorMsg`]) when the world has a laser.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C)]
+pub struct LaserMsg {
+    pub stamp_ns: u64,
+    pub step: u64,
+    pub robot_id: u32,
+    /// Valid entries of `ranges_m`.
+    pub count: u32,
+    pub angle_min_rad: f32,
+    pub angle_step_rad: f32,
+    pub range_min_m: f32,
+    pub range_max_m: f32,
+    /// Bit i % 64 of word i / 64: beam i returned from a wall.
+    pub returns: [u64; MAX_LASER_BEAMS / 64],
+    pub ranges_m: [f32; MAX_LASER_BEAMS],
+}
+
+// repr(C): numbers and arrays of numbers only.
+field::wire_type!(
+    LaserMsg,
+    "LaserMsg",
+    size = 40 + 8 * (MAX_LASER_BEAMS / 64) + 4 * MAX_LASER_BEAMS,
+    align = 8
+);
+
+impl Default for LaserMsg {
+    fn default() -> Self {
+        Self {
+            stamp_ns: 0,
+            step: 0,
+            robot_id: 0,
+            count: 0,
+            angle_min_rad: 0.0,
+            angle_step_rad: 0.0,
+            range_min_m: 0.0,
+            range_max_m: 0.0,
+            returns: [0; MAX_LASER_BEAMS / 64],
+            ranges_m: [0.0; MAX_LASER_BEAMS],
+        }
+    }
+}
+
+impl LaserMsg {
+    /// Whether beam `i` returned from a wall.
+    pub fn returned(&self, i: usize) -> bool {
+        i < MAX_LASER_BEAMS && self.returns[i / 64] >> (i % 64) & 1 == 1
+    }
+
+    /// Marks beam `i` (< [`MAX_LASER_BEAMS`]) as returned from a wall.
+    pub fn set_returned(&mut self, i: usize) {
+        self.returns[i / 64] |= 1 << (i % 64);
+    }
+
+    /// The valid beams as (bearing relative to the heading, range, returned).
+    pub fn beams(&self) -> impl Iterator<Item = (f32, f32, bool)> + '_ {
+        let n = (self.count as usize).min(MAX_LASER_BEAMS);
+        (0..n).map(move |i| {
+            (
+                self.angle_min_rad + i as f32 * self.angle_step_rad,
+                self.ranges_m[i],
+                self.returned(i),
             )
         })
     }

@@ -20,7 +20,7 @@ use serde::Serialize;
 
 use crate::record::{deposit_peak, ProbeReading, Recording, RobotSample, Snapshot};
 use crate::ros_record::{PoseRow, SimMcap};
-use messages::{FollowerState, PoseMsg};
+use messages::{FollowerState, LaserMsg, PoseMsg};
 use roles::depositor::Depositor;
 use roles::follower::{Follower, PoseSource};
 use roles::scenario::{ProbeSpec, Scenario};
@@ -175,11 +175,20 @@ impl Robot {
     }
 
     /// Step `k` (at `t_s`) before the tick: the pose from the sensors, and the deposit offered.
-    fn localize_and_deposit(&mut self, k: u64, t_s: f64, out: &StepOutput, field: &mut OwnedField) {
+    fn localize_and_deposit(
+        &mut self,
+        k: u64,
+        t_s: f64,
+        out: &StepOutput,
+        laser: Option<&LaserMsg>,
+        field: &mut OwnedField,
+    ) {
         self.collisions += out.truth.collided as u64;
         // A rejected sensor message: the localizer keeps its previous estimate, as the
         // process does (which also logs it).
-        let _ = self.filter.step(&out.sensor);
+        let _ = self
+            .filter
+            .step(&out.sensor, laser.filter(|_| self.filter.needs_laser()));
         let mut p = self.filter.to_msg(self.id, k);
         // Simulated time as the stamp: deterministic, and what interval_s measures.
         p.stamp_ns = (t_s * 1e9).round() as u64;
@@ -303,13 +312,14 @@ impl<'a> SingleRun<'a> {
     fn step(&mut self, k: u64) {
         let outputs = self.world.step(&self.commands);
         let sensed = self.world.mapping_outputs();
+        let lasers = self.world.laser_outputs();
         let t = self.world.sim_time_s();
         while self.scripted.front().is_some_and(|(ts, _)| *ts <= t + 1e-9) {
             let (_, m) = self.scripted.pop_front().expect("checked");
             let _ = self.field.offer(&m); // a rejection is counted by the field
         }
-        for (r, out) in self.robots.iter_mut().zip(&outputs) {
-            r.localize_and_deposit(k, t, out, &mut self.field);
+        for (i, (r, out)) in self.robots.iter_mut().zip(&outputs).enumerate() {
+            r.localize_and_deposit(k, t, out, lasers.get(i), &mut self.field);
         }
         if let Some(team) = self.mapping.as_mut() {
             let poses: Vec<PoseMsg> = self

@@ -26,13 +26,55 @@
 //! - Line 24 is replaced by the Joseph form (I − KH)Σ(I − KH)ᵀ + KQKᵀ, then symmetrized.
 
 mod ekf;
+mod likelihood;
 mod models;
+mod pf;
 mod slam;
 #[cfg(test)]
 pub(crate) mod test_support;
+#[cfg(test)]
+mod tests_filters;
+mod ukf;
 
 pub use ekf::Ekf;
+pub use likelihood::DistanceGrid;
+pub use pf::{parse_particles, ParticleFilter, PfConfig, MAX_PARTICLES, MIN_PARTICLES};
 pub use slam::{EkfSlam, SlamLandmark};
+pub use ukf::{Ukf, UkfConfig};
+
+/// Which filter a localizer runs (`--filter`, the scenario's `filter` key of a robot).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FilterKind {
+    /// Landmark EKF (seed 001 Algorithm 1), the default.
+    #[default]
+    Ekf,
+    /// Landmark UKF (seed 000 eqs. 6–8).
+    Ukf,
+    /// Particle filter with the laser (Monte Carlo localization).
+    Pf,
+}
+
+impl FilterKind {
+    pub const NAMES: [&'static str; 3] = ["ekf", "ukf", "pf"];
+
+    pub fn name(self) -> &'static str {
+        Self::NAMES[self as usize]
+    }
+}
+
+impl std::str::FromStr for FilterKind {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        match text {
+            "ekf" => Ok(Self::Ekf),
+            "ukf" => Ok(Self::Ukf),
+            "pf" => Ok(Self::Pf),
+            _ => Err(format!("--filter {text:?}: expected one of ekf, ukf, pf")),
+        }
+    }
+}
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -272,6 +314,9 @@ pub enum LocalizerError {
         value: String,
         expected: &'static str,
     },
+    /// A laser scan's beam count, header or a range is unusable.
+    #[error("laser scan: beam {beam}: range {range_m} m is not finite and >= 0 (or the count/header is bad)")]
+    BadLaser { beam: usize, range_m: f64 },
     /// A landmark filter names a landmark the map does not have.
     #[error("landmark index {index} is out of range (the map has {len})")]
     LandmarkIndexOutOfRange { index: usize, len: usize },
@@ -297,6 +342,7 @@ pub struct EkfCounters {
     pub rejected_non_finite_observation: u64,
     pub rejected_bad_range: u64,
     pub rejected_bad_count: u64,
+    pub rejected_bad_laser: u64,
 }
 
 impl EkfCounters {
@@ -308,6 +354,7 @@ impl EkfCounters {
             + self.rejected_non_finite_observation
             + self.rejected_bad_range
             + self.rejected_bad_count
+            + self.rejected_bad_laser
     }
 
     fn count(&mut self, e: &LocalizerError) {
@@ -320,6 +367,7 @@ impl EkfCounters {
             }
             LocalizerError::BadRange { .. } => self.rejected_bad_range += 1,
             LocalizerError::BadObservationCount { .. } => self.rejected_bad_count += 1,
+            LocalizerError::BadLaser { .. } => self.rejected_bad_laser += 1,
             LocalizerError::InvalidConfig { .. }
             | LocalizerError::InvalidRegion { .. }
             | LocalizerError::InvalidInitialState

@@ -1,17 +1,23 @@
-//! The localizer's process loop, and the filter it runs (EKF or EKF-SLAM).
+//! The localizer's process loop, and the filter it runs (EKF, UKF, particle filter or
+//! EKF-SLAM).
 
 use field::lockstep::Participant;
 use field::shm::Svc;
 use iceoryx2::node::Node;
 use nalgebra::Matrix3;
 
-use crate::localizer::{CheckedFilter, Ekf, EkfSlam, EkfSlamConfig, LocalizerError};
+use crate::localizer::{
+    CheckedFilter, Ekf, EkfSlam, EkfSlamConfig, FilterKind, LocalizerError, ParticleFilter, Ukf,
+};
 use crate::scenario::Scenario;
 use crate::{
     receiver, role_loop, sender, sim_stamp_ns, summary_of, ProcessError, RobotServices,
     RoleOptions, RoleSummary,
 };
-use messages::{PoseMsg, SensorMsg};
+use messages::{LaserMsg, PoseMsg, SensorMsg};
+
+/// Mixed into a particle filter's seed.
+const PF_SEED: u64 = 0x7061_7274_6963_6c65;
 
 /// The localizer process: sensors → EKF → pose with covariance. The pose is stamped with the
 /// step's simulated time: the robot's clock, which the depositor's interval rule reads.
@@ -25,6 +31,16 @@ pub fn run_localizer(
     let mut filter = Filter::for_robot(scenario, robot, slam)?;
     let s = RobotServices::new(&o.world, robot);
     let sensors = receiver::<SensorMsg>(node, &s.sensors)?;
+    let lasers = match filter.needs_laser() {
+        true => Some(receiver::<LaserMsg>(node, &s.laser)?),
+        false => None,
+    };
+    let mut laser_backlog = None;
+    let wait = if o.lockstep {
+        super::mapper::STEP_WAIT
+    } else {
+        super::mapper::REALTIME_WAIT
+    };
     let poses = sender::<PoseMsg>(node, &s.pose)?;
     let end = Participant::join(node, &o.world)?;
     let mut summary = summary_of(robot, "localizer");
@@ -37,7 +53,18 @@ pub fn run_localizer(
         |m: &SensorMsg| m.step,
         &mut summary,
         |m| {
-            if let Err(e) = filter.step(m) {
+            // The world sends a step's scan before its sensors: it is there already.
+            let laser = match &lasers {
+                Some(rx) => {
+                    let l = super::mapper::recv_step(node, rx, &mut laser_backlog, m.step, wait)?;
+                    if l.is_none() {
+                        eprintln!("localizer r{robot}: step {}: no laser scan", m.step);
+                    }
+                    l
+                }
+                None => None,
+            };
+            if let Err(e) = filter.step(m, laser.as_ref()) {
                 rejected += 1;
                 eprintln!("localizer r{robot}: step {} rejected: {e}", m.step);
             }
@@ -58,15 +85,19 @@ pub fn run_localizer(
     Ok(summary)
 }
 
-/// The localizer's filter: landmark-based EKF, or EKF-SLAM (faer) when the map is unknown.
+/// The localizer's filter: landmark-based EKF or UKF, a particle filter with the laser, or
+/// EKF-SLAM (faer) when the map is unknown.
 pub enum Filter {
     Ekf(Box<Ekf>),
+    Ukf(Box<Ukf>),
+    Pf(Box<ParticleFilter>),
     Slam(Box<EkfSlam>),
 }
 
 impl Filter {
-    /// The filter of robot `robot` as the scenario configures it (start pose, initial σ,
-    /// noise, loss); EKF-SLAM if `slam`.
+    /// The filter of robot `robot` as the scenario configures it (its `filter`, start pose,
+    /// initial σ, noise, loss); EKF-SLAM if `slam`. A particle filter's RNG is seeded from the
+    /// scenario's seed and the robot id.
     pub fn for_robot(scenario: &Scenario, robot: u32, slam: bool) -> Result<Self, ProcessError> {
         let roles = scenario
             .roles(robot)
@@ -98,21 +129,41 @@ impl Filter {
                 EkfSlam::new(config, start, cov0).map_err(ProcessError::Localizer)?,
             ))
         } else {
-            Filter::Ekf(Box::new(
-                Ekf::new(
-                    roles.localizer,
-                    scenario.world.landmarks.clone(),
-                    start,
-                    cov0,
-                )
-                .map_err(ProcessError::Localizer)?,
-            ))
+            let landmarks = scenario.world.landmarks.clone();
+            let cfg = roles.localizer;
+            let e = ProcessError::Localizer;
+            match roles.filter {
+                FilterKind::Ekf => {
+                    Filter::Ekf(Box::new(Ekf::new(cfg, landmarks, start, cov0).map_err(e)?))
+                }
+                FilterKind::Ukf => Filter::Ukf(Box::new(
+                    Ukf::new(cfg, roles.ukf, landmarks, start, cov0).map_err(e)?,
+                )),
+                FilterKind::Pf => {
+                    let walls = crate::world::wall_segments(&scenario.world.walls)
+                        .map_err(ProcessError::World)?;
+                    let seed = scenario.seed ^ (u64::from(robot) << 32) ^ PF_SEED;
+                    Filter::Pf(Box::new(
+                        ParticleFilter::new(cfg, roles.pf, landmarks, &walls, start, cov0, seed)
+                            .map_err(e)?,
+                    ))
+                }
+            }
         })
     }
 
-    pub fn step(&mut self, m: &SensorMsg) -> Result<(), LocalizerError> {
+    /// Whether the filter reads the world's laser.
+    pub fn needs_laser(&self) -> bool {
+        matches!(self, Filter::Pf(_))
+    }
+
+    /// One step on the sensors of `m` (and the step's laser scan, which only the particle
+    /// filter reads).
+    pub fn step(&mut self, m: &SensorMsg, laser: Option<&LaserMsg>) -> Result<(), LocalizerError> {
         match self {
             Filter::Ekf(f) => f.step(m).map(|_| ()),
+            Filter::Ukf(f) => f.step(m).map(|_| ()),
+            Filter::Pf(f) => f.step_with_laser(m, laser).map(|_| ()),
             Filter::Slam(f) => f.step(m).map(|_| ()),
         }
     }
@@ -120,6 +171,8 @@ impl Filter {
     pub fn to_msg(&self, robot: u32, step: u64) -> PoseMsg {
         match self {
             Filter::Ekf(f) => f.to_msg(robot, step),
+            Filter::Ukf(f) => f.to_msg(robot, step),
+            Filter::Pf(f) => f.to_msg(robot, step),
             Filter::Slam(f) => f.to_msg(robot, step),
         }
     }

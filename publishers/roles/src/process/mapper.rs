@@ -51,9 +51,9 @@ pub struct MapperSummary {
 
 /// How long a step may wait for an estimate or a peer's frame in lockstep (the world's stall
 /// timeout reports a mapper that waits longer).
-const STEP_WAIT: Duration = Duration::from_secs(30);
+pub(super) const STEP_WAIT: Duration = Duration::from_secs(30);
 /// The same on wall time, where nobody waits and a late message is skipped.
-const REALTIME_WAIT: Duration = Duration::from_millis(200);
+pub(super) const REALTIME_WAIT: Duration = Duration::from_millis(200);
 
 /// The map frame's field configuration: the map's geometry, [`MAP_CHANNELS`] (occupancy signed,
 /// log-odds), one frame per world step of `dt_s`, room for `max_readers` readers.
@@ -188,7 +188,9 @@ fn ack(end: &Participant, o: &RoleOptions, step: u64, robot: u32) -> Result<(), 
 
 /// The message of step `step` on `rx` (older ones are dropped; a newer one is kept in
 /// `backlog` for its step). `None` when it did not come within `wait`.
-fn recv_step<T: Copy + std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + HasStep + 'static>(
+pub(super) fn recv_step<
+    T: Copy + std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + HasStep + 'static,
+>(
     node: &Node<Svc>,
     rx: &Receiver<T>,
     backlog: &mut Option<T>,
@@ -216,11 +218,17 @@ fn recv_step<T: Copy + std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + HasSt
 }
 
 /// A message stamped with its world step.
-trait HasStep {
+pub(super) trait HasStep {
     fn step(&self) -> u64;
 }
 
 impl HasStep for PoseMsg {
+    fn step(&self) -> u64 {
+        self.step
+    }
+}
+
+impl HasStep for messages::LaserMsg {
     fn step(&self) -> u64 {
         self.step
     }

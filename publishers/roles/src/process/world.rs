@@ -12,7 +12,7 @@ use iceoryx2::node::Node;
 use crate::scenario::{Scenario, WORLD_DEPOSITOR_ID};
 use crate::world::{StepOutput, World, WorldPose};
 use crate::{receiver, sender, ProcessError, RobotServices};
-use messages::{CmdMsg, RendezvousMsg, ScanMsg, SensorMsg, TruthMsg};
+use messages::{CmdMsg, LaserMsg, RendezvousMsg, ScanMsg, SensorMsg, TruthMsg};
 
 /// Options of the world process.
 #[derive(Debug, Clone)]
@@ -109,6 +109,8 @@ struct RobotPorts {
     cmds: Vec<Option<Receiver<CmdMsg>>>,
     truths: Vec<Sender<TruthMsg>>,
     sensors: Vec<Sender<SensorMsg>>,
+    /// Seed 000's laser scan of each robot, when the world has a laser.
+    lasers: Vec<Sender<LaserMsg>>,
 }
 
 impl RobotPorts {
@@ -123,8 +125,12 @@ impl RobotPorts {
         let mut truths = Vec::new();
         let mut cmds = Vec::new();
         let mut mapping = Vec::new();
+        let mut lasers = Vec::new();
         for &id in ids {
             let s = RobotServices::new(world, id);
+            if scenario.world.laser.is_some() {
+                lasers.push(sender::<LaserMsg>(node, &s.laser)?);
+            }
             sensors.push(sender::<SensorMsg>(node, &s.sensors)?);
             truths.push(sender::<TruthMsg>(node, &s.truth)?);
             if scenario.mapping().is_some() {
@@ -146,17 +152,27 @@ impl RobotPorts {
             cmds,
             truths,
             sensors,
+            lasers,
         })
     }
 
-    /// Publishes step `k`'s sensors, truth, scans and rendezvous, stamped `stamp`.
+    /// Publishes step `k`'s laser scans, sensors, truth, scans and rendezvous, stamped
+    /// `stamp`. A laser scan goes first: the localizer has it when the step's sensors wake it.
     fn publish(
         &self,
         k: u64,
         stamp: u64,
         outputs: &[StepOutput],
         sensed: &[(ScanMsg, RendezvousMsg)],
+        lasers: &[LaserMsg],
     ) -> Result<(), ProcessError> {
+        for (tx, laser) in self.lasers.iter().zip(lasers) {
+            tx.send(LaserMsg {
+                stamp_ns: stamp,
+                step: k,
+                ..*laser
+            })?;
+        }
         for (i, out) in outputs.iter().enumerate() {
             let mut s = out.sensor;
             s.stamp_ns = stamp;
@@ -348,6 +364,7 @@ impl<'a> WorldRun<'a> {
     fn simulate(&mut self, k: u64) -> Result<(), ProcessError> {
         let outputs = self.world.step(&self.commands);
         let sensed = self.world.mapping_outputs();
+        let lasers = self.world.laser_outputs();
         for (i, p) in self.world.poses().iter().enumerate() {
             let last = &self.last_pose[i];
             self.distance[i] += ((p.x_m - last.x_m).powi(2) + (p.y_m - last.y_m).powi(2)).sqrt();
@@ -358,7 +375,7 @@ impl<'a> WorldRun<'a> {
         for (i, out) in outputs.iter().enumerate() {
             self.collisions[i] += out.truth.collided as u64;
         }
-        self.ports.publish(k, stamp, &outputs, &sensed)
+        self.ports.publish(k, stamp, &outputs, &sensed, &lasers)
     }
 
     /// Scripted deposits due by now: in the field's queue before its tick for this step.

@@ -94,6 +94,8 @@ pub enum ScenarioError {
         #[source]
         source: LocalizerError,
     },
+    #[error("robot {robot}: filter = \"pf\" needs the world's laser ([world.laser]; --filter pf turns it on)")]
+    PfWithoutLaser { robot: u32 },
     #[error("robot {robot} depositor: {source}")]
     Depositor {
         robot: u32,

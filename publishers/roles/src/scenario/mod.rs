@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::depositor::{DepositMode, DepositorConfig};
 use crate::follower::{FollowerConfig, StrategyKind};
-use crate::localizer::EkfConfig;
+use crate::localizer::{EkfConfig, FilterKind, PfConfig, UkfConfig};
 use crate::world::WorldConfig;
 
 mod error;
@@ -283,6 +283,13 @@ pub struct Overrides {
     pub merge: Option<bool>,
     /// `--rc-m R`: the communication radius R_C (m) of the exchanges.
     pub rc_m: Option<f64>,
+    /// `--filter`: every robot's localizer runs this filter; `pf` turns the world's laser on
+    /// (seed 000 Table 1) when the scenario has none.
+    pub filter: Option<FilterKind>,
+    /// `--particles N`: every robot's particle count (`pf.particles`).
+    pub particles: Option<usize>,
+    /// `--no-scripted-loss`: every localizer's loss script (`localizer.loss.after_s`) is off.
+    pub no_scripted_loss: bool,
 }
 
 /// What runs for one robot: a localizer always, a depositor and a follower if configured.
@@ -292,6 +299,16 @@ pub struct RobotRoles {
     pub id: u32,
     #[serde(default)]
     pub localizer: EkfConfig,
+    /// The localizer's filter (`ekf`, `ukf`, `pf`); its noise, limits and gate are
+    /// `localizer`'s. `pf` needs the world's laser (`[world.laser]`).
+    #[serde(default)]
+    pub filter: FilterKind,
+    /// The UKF's scaling parameters (`filter = "ukf"`).
+    #[serde(default)]
+    pub ukf: UkfConfig,
+    /// The particle filter's settings (`filter = "pf"`).
+    #[serde(default)]
+    pub pf: PfConfig,
     /// Standard deviation of the localizer's initial position estimate (m).
     #[serde(default = "default_initial_sigma_m")]
     pub initial_sigma_m: f64,
@@ -494,7 +511,26 @@ impl Scenario {
                 }
             }
         }
+        self.apply_localizers(o);
         self.validate()
+    }
+
+    /// `--filter`, `--particles` and `--no-scripted-loss` on every robot's localizer.
+    fn apply_localizers(&mut self, o: &Overrides) {
+        for r in &mut self.robots {
+            if let Some(k) = o.filter {
+                r.filter = k;
+            }
+            if let Some(n) = o.particles {
+                r.pf.particles = n;
+            }
+            if o.no_scripted_loss {
+                r.localizer.loss.after_s = None;
+            }
+        }
+        if o.filter == Some(FilterKind::Pf) && self.world.laser.is_none() {
+            self.world.laser = Some(crate::world::LaserConfig::default());
+        }
     }
 
     /// The follower settings of a robot, its RNG seed mixed with the scenario's seed so that

@@ -59,6 +59,7 @@ impl Scenario {
             r.localizer
                 .validate()
                 .map_err(|source| ScenarioError::Localizer { robot, source })?;
+            self.validate_filter(r)?;
             if let Some(d) = &r.depositor {
                 d.validate()
                     .map_err(|source| ScenarioError::Depositor { robot, source })?;
@@ -67,6 +68,27 @@ impl Scenario {
                 f.validate()
                     .map_err(|source| ScenarioError::Follower { robot, source })?;
             }
+        }
+        Ok(())
+    }
+
+    /// The robot's filter: its settings valid; the loss script only with the EKF; a particle
+    /// filter only with the world's laser.
+    fn validate_filter(&self, r: &super::RobotRoles) -> Result<(), ScenarioError> {
+        use crate::localizer::{FilterKind, LocalizerError};
+        let robot = r.id;
+        let err = |source| ScenarioError::Localizer { robot, source };
+        r.ukf.validate().map_err(err)?;
+        r.pf.validate().map_err(err)?;
+        if let (Some(t), true) = (r.localizer.loss.after_s, r.filter != FilterKind::Ekf) {
+            return Err(err(LocalizerError::InvalidConfig {
+                field: format!("loss.after_s (filter = {})", r.filter.name()),
+                value: t,
+                expected: "unset: the loss script is EKF-only (--no-scripted-loss)",
+            }));
+        }
+        if r.filter == FilterKind::Pf && self.world.laser.is_none() {
+            return Err(ScenarioError::PfWithoutLaser { robot });
         }
         Ok(())
     }

@@ -15,6 +15,7 @@
 //!
 //! Everything is deterministic for a seed (`ChaCha8Rng`).
 
+mod laser;
 mod map;
 mod scan;
 mod sensors;
@@ -22,9 +23,10 @@ mod sensors;
 mod test_support;
 mod walls;
 
+pub use laser::LaserConfig;
 pub use map::{MapError, OccupancyMap};
 pub use sensors::NoiseConfig;
-pub use walls::{Segment, WallConfig};
+pub use walls::{wall_segments, Segment, WallConfig};
 
 use std::f64::consts::TAU;
 
@@ -34,7 +36,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use messages::{SensorMsg, TruthMsg};
-use walls::{inside_rect, wall_segments, SegmentIndex};
+use walls::{inside_rect, SegmentIndex};
 
 /// A planar pose: metres and radians, θ counter-clockwise from +x.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -193,6 +195,10 @@ pub struct WorldConfig {
     /// `walls` and clears this key, so a [`World`] never sees it set.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub map: Option<String>,
+    /// Seed 000's laser range scanner on every robot (`laser.rs`); `None` = no laser. A
+    /// particle-filter localizer needs it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub laser: Option<LaserConfig>,
 }
 
 impl Default for WorldConfig {
@@ -211,6 +217,7 @@ impl Default for WorldConfig {
             walls: Vec::new(),
             landmarks: Vec::new(),
             map: None,
+            laser: None,
         }
     }
 }
@@ -259,6 +266,8 @@ pub struct World {
     rejected_commands: u64,
     /// Seed 004's range sensor and rendezvous measurement, when the scenario maps (`scan.rs`).
     mapping: Option<scan::MappingSensors>,
+    /// Seed 000's laser, when `config.laser` is set (`laser.rs`).
+    laser: Option<laser::Laser>,
 }
 
 impl World {
@@ -268,6 +277,10 @@ impl World {
             return Err(WorldError::UnloadedMap { path: path.clone() });
         }
         validate_config(&config)?;
+        if let Some(l) = &config.laser {
+            l.validate()?;
+        }
+        let laser = config.laser.map(|l| laser::Laser::new(l, seed));
         let segments = wall_segments(&config.walls)?;
         let walls = SegmentIndex::new(segments, config.robot_radius_m.max(0.5));
         for robot in &config.robots {
@@ -296,6 +309,7 @@ impl World {
             step: 0,
             rejected_commands: 0,
             mapping: None,
+            laser,
         })
     }
 

@@ -33,7 +33,9 @@ pub struct Segment {
     pub b_m: [f64; 2],
 }
 
-pub(super) fn wall_segments(walls: &[WallConfig]) -> Result<Vec<Segment>, WorldError> {
+/// The segments of `walls` (a rectangle as its four edges); a degenerate or non-finite wall is
+/// an error naming its index.
+pub fn wall_segments(walls: &[WallConfig]) -> Result<Vec<Segment>, WorldError> {
     let mut segs = Vec::new();
     for (index, wall) in walls.iter().enumerate() {
         match wall {
