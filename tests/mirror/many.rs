@@ -204,6 +204,44 @@ fn agree(hosts: &[Host], i: usize) -> usize {
     n
 }
 
+/// A mirror of `name` in each mirror namespace, in its own domain, connecting to the bridge.
+fn start_mirrors(star: &Star, name: &str) -> Vec<Proc> {
+    (0..3)
+        .map(|i| {
+            let endpoint = format!("zenoh:tcp/169.254.{}.1:7447", 80 + i);
+            spawn_in(
+                &star.mirrors[i],
+                "mirror",
+                &Cmd::new("field")
+                    .opt("--iox-domain", MIRRORS[i])
+                    .opt("--name", name)
+                    .opt("--mirror", &endpoint)
+                    .opt("--stale-after-s", 0.5)
+                    .duration(120)
+                    .json()
+                    .argv(),
+            )
+        })
+        .collect()
+}
+
+/// Each mirror forwarded its host's deposits, the bridge all of them, no checksum differed.
+fn check_exits(mirrors: Vec<Proc>, bridge: Proc, sent: &[u64]) {
+    for (i, m) in mirrors.into_iter().enumerate() {
+        let j = super::mirror_exit(m);
+        let s = &j["mirror"];
+        assert_eq!(s["checksum_mismatches"], 0, "mirror {i}: {s}");
+        assert_eq!(s["deposits_forwarded"], sent[i + 1], "mirror {i}: {s}");
+    }
+    bridge.interrupt();
+    let b = json(&bridge.wait_exit(Duration::from_secs(20)));
+    assert_eq!(
+        b["bridge"]["deposits_forwarded"],
+        sent[1..].iter().sum::<u64>(),
+        "{b}"
+    );
+}
+
 #[test]
 fn three_mirrors_with_local_depositors_all_see_one_order_of_deposits() {
     let _clean = CleanDomains;
@@ -224,23 +262,7 @@ fn three_mirrors_with_local_depositors_all_see_one_order_of_deposits() {
         &super::bridge_args(&name, "tcp/0.0.0.0:7447"),
     );
     let started = Instant::now();
-    let mirrors: Vec<Proc> = (0..3)
-        .map(|i| {
-            let endpoint = format!("zenoh:tcp/169.254.{}.1:7447", 80 + i);
-            spawn_in(
-                &star.mirrors[i],
-                "mirror",
-                &Cmd::new("field")
-                    .opt("--iox-domain", MIRRORS[i])
-                    .opt("--name", &name)
-                    .opt("--mirror", &endpoint)
-                    .opt("--stale-after-s", 0.5)
-                    .duration(120)
-                    .json()
-                    .argv(),
-            )
-        })
-        .collect();
+    let mirrors = start_mirrors(&star, &name);
     let mut hosts = vec![Host::attach(ORIGIN, &name)];
     hosts.extend(MIRRORS.iter().map(|d| Host::attach(d, &name)));
     // Each mirror showed 5 frames the origin showed too.
@@ -316,17 +338,5 @@ fn three_mirrors_with_local_depositors_all_see_one_order_of_deposits() {
         settled.as_secs_f64()
     );
     drop(hosts);
-    for (i, m) in mirrors.into_iter().enumerate() {
-        let j = super::mirror_exit(m);
-        let s = &j["mirror"];
-        assert_eq!(s["checksum_mismatches"], 0, "mirror {i}: {s}");
-        assert_eq!(s["deposits_forwarded"], sent[i + 1], "mirror {i}: {s}");
-    }
-    bridge.interrupt();
-    let b = json(&bridge.wait_exit(Duration::from_secs(20)));
-    assert_eq!(
-        b["bridge"]["deposits_forwarded"],
-        sent[1..].iter().sum::<u64>(),
-        "{b}"
-    );
+    check_exits(mirrors, bridge, &sent);
 }

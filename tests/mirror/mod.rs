@@ -15,6 +15,7 @@ use supervisor::{ChildId, ChildSpec, Supervisor};
 use super::harness::*;
 
 mod faults;
+mod kills;
 mod many;
 mod netns;
 mod secure;
