@@ -406,6 +406,12 @@ fn run_processes(
             "--ros2: this build has no Zenoh: rebuild with `cargo build --release --features zenoh`",
         ));
     }
+    if a.zenoh.any() && a.ros2.is_none() {
+        return Err(super::bad(
+            "--zenoh-config, --tls-*, --user, --password-file and --users-file are for the --ros2 \
+             child: give --ros2 too",
+        ));
+    }
     if let Some(e) = &a.ros2 {
         eprintln!("sim: ros2: connecting to {e} (stops with the run)");
     }
@@ -425,6 +431,7 @@ fn run_processes(
             progress,
             view: a.view.clone(),
             ros2: a.ros2.clone(),
+            ros2_args: a.zenoh.to_args(),
             remote: a.remote,
             follower_wait: a.follower_wait,
             record,

@@ -89,6 +89,10 @@ pub struct SimArgs {
     #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint(), num_args = 0..=1,
           default_missing_value = "tcp/127.0.0.1:7447", conflicts_with = "single_process")]
     pub ros2: Option<String>,
+    /// TLS, credentials and Zenoh configuration of the --ros2 child (`pheromone ros2`'s flags
+    /// of the same names, passed on to it; docs/mirrors.md, "Security"). Only with --ros2.
+    #[command(flatten)]
+    pub zenoh: super::zenoh_args::ZenohArgs,
     /// How every follower process waits for the frame of its step (`pheromone follower
     /// --wait`): event, spin:US or busy-poll. The metrics do not depend on it; separate
     /// processes only.

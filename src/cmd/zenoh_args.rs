@@ -47,6 +47,30 @@ impl ZenohArgs {
             || self.users_file.is_some()
     }
 
+    /// The flags as a command line, for a child that takes them too (`sim --ros2` passes them
+    /// to its `ros2` child); paths made absolute.
+    pub fn to_args(&self) -> Vec<String> {
+        let files = [
+            ("--zenoh-config", &self.zenoh_config),
+            ("--tls-root-ca", &self.tls_root_ca),
+            ("--tls-cert", &self.tls_cert),
+            ("--tls-key", &self.tls_key),
+            ("--password-file", &self.password_file),
+            ("--users-file", &self.users_file),
+        ];
+        let mut v = Vec::new();
+        for (flag, path) in files {
+            if let Some(p) = path {
+                let p = std::path::absolute(p).unwrap_or_else(|_| p.clone());
+                v.extend([flag.to_string(), p.to_string_lossy().into_owned()]);
+            }
+        }
+        if let Some(u) = &self.user {
+            v.extend(["--user".to_string(), u.clone()]);
+        }
+        v
+    }
+
     /// The bridge library's settings (the files are read when the session opens).
     #[cfg(feature = "zenoh")]
     pub fn security(&self) -> bridge::Security {

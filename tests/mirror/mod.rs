@@ -15,6 +15,8 @@ use supervisor::{ChildId, ChildSpec, Supervisor};
 use super::harness::*;
 
 mod faults;
+mod kills;
+mod many;
 mod netns;
 mod secure;
 mod wire;

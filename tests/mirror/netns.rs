@@ -26,7 +26,7 @@ pub(super) struct Link {
 pub(super) const ADDR_A: &str = "169.254.77.1";
 pub(super) const ADDR_B: &str = "169.254.77.2";
 
-fn ip(args: &[&str]) -> Result<(), String> {
+pub(super) fn ip(args: &[&str]) -> Result<(), String> {
     let o = Command::new("ip")
         .args(args)
         .output()

@@ -542,3 +542,42 @@ fn the_ros2_node_listens_over_tls_and_asks_for_credentials() {
         "the ROS 2 node exits"
     );
 }
+
+/// `sim --ros2` passes the security flags on to its `ros2` child: a `--zenoh-config` file that
+/// exists (so `sim` accepts it) but is no JSON5 fails the child's session, and the run ends with
+/// the child's error naming the flag and the file's absolute path, given relative to `sim`'s
+/// working directory. Without `--ros2` the flags are refused (exit 2).
+#[test]
+fn sim_passes_the_security_flags_to_its_ros2_child() {
+    let dir = std::env::temp_dir().join(unique("simros2"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let _rm = RemoveDir(dir.clone());
+    std::fs::write(dir.join("bad.json5"), "{ this is not json5").unwrap();
+    let sim = |extra: &[&str]| {
+        testkit::Cli::new(&bin())
+            .args(["sim", "trail", "--no-out", "--zenoh-config", "bad.json5"])
+            .args(extra)
+            .current_dir(&dir)
+            .output()
+    };
+    let out = sim(&["--ros2", "tcp/127.0.0.1:9"]);
+    let said = stderr(&out);
+    let abs = dir.join("bad.json5");
+    assert_eq!(out.status.code(), Some(1), "{said}");
+    assert!(
+        said.contains("ros2 failed") && said.contains(&format!("--zenoh-config {}", abs.display())),
+        "{said}"
+    );
+    let out = sim(&[]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--zenoh-config"), "{}", stderr(&out));
+}
+
+/// Removes a test's directory when dropped.
+struct RemoveDir(PathBuf);
+
+impl Drop for RemoveDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}

@@ -160,7 +160,9 @@ impl Children {
         // --ros2: no lockstep participant either; it finds the robots as their roles start.
         if let Some(connect) = &o.ros2 {
             let ids: Vec<u32> = scenario.world.robots.iter().map(|r| r.id).collect();
-            sup.spawn(ChildSpec::new("ros2", None, a.ros2(connect, &ids)))?;
+            let mut args = a.ros2(connect, &ids);
+            args.extend(o.ros2_args.iter().cloned());
+            sup.spawn(ChildSpec::new("ros2", None, args))?;
         }
         // --remote: the gateway serves the field to the antenna robots; they start once it serves.
         let remote = if o.remote {

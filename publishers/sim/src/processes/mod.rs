@@ -51,6 +51,9 @@ pub struct ProcessRunOptions<'a> {
     /// Start `pheromone ros2 --field F --world W --robots IDS --connect ENDPOINT` (the field and
     /// the robots on ROS 2 over Zenoh), connecting to this Zenoh endpoint.
     pub ros2: Option<String>,
+    /// More arguments of that `pheromone ros2` child (its TLS, credentials and Zenoh
+    /// configuration flags).
+    pub ros2_args: Vec<String>,
     /// The antenna robots read the field only through a `pheromone gateway` child (seed 002's
     /// thin clients, PIR over UDP loopback) instead of shared memory.
     pub remote: bool,
