@@ -28,7 +28,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Run a whole scenario as separate processes and report what happened.
-    Sim(cmd::sim::SimArgs),
+    Sim(Box<cmd::sim::SimArgs>),
     /// Run seed 004's grid of experiments on all cores: exploration vs robots, R_C, merging.
     Sweep(cmd::sweep::SweepArgs),
     /// Run a field process: owns the grid, ticks, publishes frames, applies deposits.
@@ -94,7 +94,7 @@ fn main() -> ExitCode {
         std::env::set_var(field::shm::IOX_DOMAIN_ENV, d);
     }
     let result = match cli.command {
-        Command::Sim(a) => cmd::sim::run(a),
+        Command::Sim(a) => cmd::sim::run(*a),
         Command::Sweep(a) => cmd::sweep::run(a),
         Command::Field(a) => match a.mirror.clone() {
             Some(endpoint) => cmd::bridge::run_mirror(&a, &endpoint),

@@ -133,7 +133,7 @@ pub(crate) fn record(
                 skipped += 1;
             } else {
                 if since.is_none() {
-                    since = Some((Instant::now(), crate::gateway::cpu_ns(me)?));
+                    since = Some((Instant::now(), crate::machine::cpu_ns(me)?));
                 }
                 samples.push(latency_ns);
             }
@@ -142,7 +142,7 @@ pub(crate) fn record(
     let cpu_share = match since {
         Some((t0, cpu0)) if samples.len() > 1 => {
             let wall_ns = t0.elapsed().as_nanos() as f64;
-            let cpu = crate::gateway::cpu_ns(me)?.saturating_sub(cpu0) as f64;
+            let cpu = crate::machine::cpu_ns(me)?.saturating_sub(cpu0) as f64;
             (wall_ns > 0.0).then(|| ((cpu / wall_ns) * 1000.0).round() / 1000.0)
         }
         _ => None,

@@ -23,6 +23,7 @@ use gateway_codec::{decode, encode, Message, PirRequest, MAX_ENCODED_BYTES, MAX_
 use serde::Serialize;
 use supervisor::{ChildId, ChildSpec, Supervisor};
 
+use crate::machine::cpu_ns;
 use crate::peer::{Launcher, Peer, PeerSpec};
 use crate::stats::Latency;
 use crate::BenchError;
@@ -64,19 +65,6 @@ pub struct GatewayReport {
     pub flood: FloodReport,
     pub width: u32,
     pub method: &'static str,
-}
-
-/// The process's CPU time (user + system) so far, from `/proc/PID/schedstat` (ns).
-pub(crate) fn cpu_ns(pid: u32) -> Result<u64, BenchError> {
-    let path = format!("/proc/{pid}/schedstat");
-    let text = std::fs::read_to_string(&path).map_err(|source| BenchError::Io {
-        what: format!("read {path}"),
-        source,
-    })?;
-    text.split_whitespace()
-        .next()
-        .and_then(|v| v.parse().ok())
-        .ok_or_else(|| BenchError::Peer(format!("{path}: '{}' has no CPU time", text.trim())))
 }
 
 pub(crate) fn pin_pid(pid: u32, core: usize) {

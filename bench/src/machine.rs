@@ -68,3 +68,18 @@ pub fn unpin() -> bool {
     }
     sched_setaffinity(Pid::from_raw(0), &set).is_ok()
 }
+
+/// The process's CPU time (user + system) so far, from `/proc/PID/schedstat` (ns).
+pub(crate) fn cpu_ns(pid: u32) -> Result<u64, crate::BenchError> {
+    let path = format!("/proc/{pid}/schedstat");
+    let text = std::fs::read_to_string(&path).map_err(|source| crate::BenchError::Io {
+        what: format!("read {path}"),
+        source,
+    })?;
+    text.split_whitespace()
+        .next()
+        .and_then(|v| v.parse().ok())
+        .ok_or_else(|| {
+            crate::BenchError::Peer(format!("{path}: '{}' has no CPU time", text.trim()))
+        })
+}

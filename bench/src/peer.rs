@@ -158,7 +158,7 @@ pub struct PeerResult {
     pub cpu_share: Option<f64>,
     /// A timed field's tick timing.
     #[serde(default)]
-    pub field_timing: Option<crate::timing::FieldTimingResult>,
+    pub field_timing: Option<FieldTimingResult>,
 }
 
 /// One peer process, under the project's supervisor (`supervisor`): stopped with
@@ -241,4 +241,17 @@ pub fn say_result(r: &PeerResult) {
         "{}",
         serde_json::to_string(r).expect("a list of integers serializes")
     );
+}
+
+/// What the field process reports back.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FieldTimingResult {
+    pub ticks: u64,
+    pub missed_deadlines: u64,
+    pub lateness: field::run::Lateness,
+    pub longest_gap_periods: f64,
+    /// The field process's CPU over its run (share of one core).
+    pub cpu_share: f64,
+    /// What the OS refused of the real-time scheduling asked for (the run went on without it).
+    pub rt_refused: Vec<String>,
 }

@@ -6,11 +6,12 @@
 
 use std::time::{Duration, Instant};
 
-use field::run::{run_field, FieldRunOptions, Lateness};
+use field::run::{run_field, FieldRunOptions};
 use field::shm::create_node;
 use field::{ChannelSpec, Evaporation, FieldConfig};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
+pub use crate::peer::FieldTimingResult;
 use crate::peer::{say_ready, say_result, Launcher, Peer, PeerResult, PeerSpec};
 use crate::BenchError;
 
@@ -26,19 +27,6 @@ pub struct TimingRun {
     pub spin_us: u32,
     /// Busy loops beside the field.
     pub busy_loops: usize,
-}
-
-/// What the field process reports back.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct FieldTimingResult {
-    pub ticks: u64,
-    pub missed_deadlines: u64,
-    pub lateness: Lateness,
-    pub longest_gap_periods: f64,
-    /// The field process's CPU over its run (share of one core).
-    pub cpu_share: f64,
-    /// What the OS refused of the real-time scheduling asked for (the run went on without it).
-    pub rt_refused: Vec<String>,
 }
 
 /// One row of `tick_timing`.
@@ -167,12 +155,12 @@ pub fn timed_field(
         deadline_slack: None,
         spin: Duration::from_micros(spin_us as u64),
     };
-    let cpu0 = crate::gateway::cpu_ns(std::process::id())?;
+    let cpu0 = crate::machine::cpu_ns(std::process::id())?;
     let started = Instant::now();
     let s = run_field(&node, &options)
         .map_err(|e| BenchError::Peer(format!("timed field: {e}")))?
         .ok_or_else(|| BenchError::Peer("timed field: no summary".into()))?;
-    let cpu_s = crate::gateway::cpu_ns(std::process::id())?.saturating_sub(cpu0) as f64 * 1e-9;
+    let cpu_s = crate::machine::cpu_ns(std::process::id())?.saturating_sub(cpu0) as f64 * 1e-9;
     let no = |what: &str| BenchError::Peer(format!("timed field: no {what} in its summary"));
     let result = FieldTimingResult {
         ticks: s.ticks,

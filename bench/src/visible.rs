@@ -204,7 +204,7 @@ fn cpu_at_rate(
 ) -> Result<CpuAtRate, BenchError> {
     reader.update()?;
     let seq0 = reader.frame().map(|f| f.header.sequence).unwrap_or(0);
-    let cpu0 = crate::gateway::cpu_ns(field_pid)?;
+    let cpu0 = crate::machine::cpu_ns(field_pid)?;
     let started = Instant::now();
     let interval = Duration::from_secs_f64(1.0 / rate);
     let mut next = started;
@@ -217,7 +217,7 @@ fn cpu_at_rate(
         }
     }
     let elapsed_s = started.elapsed().as_secs_f64();
-    let cpu_s = crate::gateway::cpu_ns(field_pid)?.saturating_sub(cpu0) as f64 * 1e-9;
+    let cpu_s = crate::machine::cpu_ns(field_pid)?.saturating_sub(cpu0) as f64 * 1e-9;
     reader.update()?;
     let seq1 = reader.frame().map(|f| f.header.sequence).unwrap_or(seq0);
     Ok(CpuAtRate {
