@@ -270,6 +270,8 @@ fn watch_refusal(
                 }
             }
         }
+        // The period between two connection attempts (a cadence, not a wait for a condition:
+        // the attempt itself is what waits for the bridge).
         std::thread::sleep(Duration::from_secs(1));
     });
     rx
