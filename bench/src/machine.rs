@@ -83,3 +83,22 @@ pub(crate) fn cpu_ns(pid: u32) -> Result<u64, crate::BenchError> {
             crate::BenchError::Peer(format!("{path}: '{}' has no CPU time", text.trim()))
         })
 }
+
+/// `SCHED_FIFO` at `priority` with `mlockall`, best effort: what the OS refused, each said on
+/// stderr as `who`.
+pub(crate) fn realtime(priority: Option<i32>, who: &str) -> Result<Vec<String>, crate::BenchError> {
+    let Some(priority) = priority else {
+        return Ok(Vec::new());
+    };
+    let o = field::realtime::RealtimeOptions {
+        priority,
+        cpu: None,
+        best_effort: true,
+    };
+    let applied =
+        field::realtime::apply(&o).map_err(|e| crate::BenchError::Peer(format!("{who}: {e}")))?;
+    for r in &applied.refused {
+        eprintln!("{who}: going on without it: {r}");
+    }
+    Ok(applied.refused)
+}

@@ -8,7 +8,6 @@ use std::time::{Duration, Instant};
 
 use field::run::{run_field, FieldRunOptions};
 use field::shm::create_node;
-use field::{ChannelSpec, Evaporation, FieldConfig};
 use serde::Serialize;
 
 pub use crate::peer::FieldTimingResult;
@@ -126,23 +125,11 @@ pub fn timed_field(
     rt_priority: Option<i32>,
     spin_us: u32,
 ) -> Result<(), BenchError> {
-    let rt_refused = realtime(rt_priority, "timed field")?;
+    let rt_refused = crate::machine::realtime(rt_priority, "timed field")?;
     let node = create_node(&format!("bench-timed-field-{}", std::process::id()))?;
     let options = FieldRunOptions {
         name: name.to_string(),
-        config: FieldConfig {
-            width,
-            height: width,
-            tick_hz,
-            max_readers: 2,
-            channels: vec![ChannelSpec::new(
-                "trail",
-                Evaporation::Exponential {
-                    decay_per_s: 0.0057,
-                },
-            )],
-            ..FieldConfig::default()
-        },
+        config: crate::visible::config(width, tick_hz),
         clock: None,
         ticks: None,
         duration: Some(Duration::from_secs_f64(seconds)),
@@ -175,23 +162,4 @@ pub fn timed_field(
         ..PeerResult::default()
     });
     Ok(())
-}
-
-/// `SCHED_FIFO` at `priority` with `mlockall`, best effort: what the OS refused, each said on
-/// stderr as `who`.
-pub(crate) fn realtime(priority: Option<i32>, who: &str) -> Result<Vec<String>, BenchError> {
-    let Some(priority) = priority else {
-        return Ok(Vec::new());
-    };
-    let o = field::realtime::RealtimeOptions {
-        priority,
-        cpu: None,
-        best_effort: true,
-    };
-    let applied =
-        field::realtime::apply(&o).map_err(|e| BenchError::Peer(format!("{who}: {e}")))?;
-    for r in &applied.refused {
-        eprintln!("{who}: going on without it: {r}");
-    }
-    Ok(applied.refused)
 }

@@ -63,7 +63,8 @@ pub struct VisibleResult {
     pub cpu: Vec<CpuAtRate>,
 }
 
-fn config(width: u32, tick_hz: f32) -> FieldConfig {
+/// The bench's field: `width`² cells, one exponential channel, 2 readers.
+pub(crate) fn config(width: u32, tick_hz: f32) -> FieldConfig {
     FieldConfig {
         width,
         height: width,
@@ -230,7 +231,7 @@ fn cpu_at_rate(
 /// The field process: ticks at `tick_hz` until terminated (with `on_deposit`, also publishes
 /// as soon as deposits arrive: `field::run::run_field` as `pheromone field` runs it).
 pub fn field(name: &str, width: u32, tick_hz: f32, wall: WallField) -> Result<(), BenchError> {
-    crate::timing::realtime(wall.rt_priority, "bench field")?;
+    crate::machine::realtime(wall.rt_priority, "bench field")?;
     let node = create_node(&format!("bench-field-{}", std::process::id()))?;
     if wall.on_deposit {
         let options = field::run::FieldRunOptions {

@@ -194,25 +194,7 @@ pub fn run_field(
     // The first deadline and the first gap count from here, after the set-up above (a start,
     // not a tick; a standby's takeover gap is in `longest_gap_ns`).
     stats.last_frame_at = Instant::now();
-    let metronome = Metronome {
-        period,
-        deadline: Instant::now() + period,
-        late: None,
-        spin: o.spin,
-    };
-    let mut pace: Box<dyn Pace> = match (clock, deposit_wake) {
-        (Some(clock), _) => Box::new(Lockstep {
-            clock,
-            last_step: None,
-            field: o.name.clone(),
-        }),
-        (None, Some(wake)) => Box::new(OnDeposit {
-            wake,
-            metronome,
-            early_frames: 0,
-        }),
-        (None, None) => Box::new(metronome),
-    };
+    let mut pace = pace(o, period, clock, deposit_wake);
     while pace.next_tick(node, &server, stats.last_frame_at)? == Next::Tick {
         let out = pace.tick(&mut server, stats.last_frame_at)?;
         stats.count(&out, pace.lateness());
@@ -244,6 +226,35 @@ pub fn run_field(
             frames_on_deposit: pace.frames_on_deposit(),
         },
     )))
+}
+
+/// How the loop waits for its ticks: the world's clock (lockstep), wall time and deposits, or
+/// wall time alone; a wall-time deadline one period from now.
+fn pace(
+    o: &FieldRunOptions,
+    period: Duration,
+    clock: Option<Participant>,
+    deposit_wake: Option<DepositWake>,
+) -> Box<dyn Pace> {
+    let metronome = Metronome {
+        period,
+        deadline: Instant::now() + period,
+        late: None,
+        spin: o.spin,
+    };
+    match (clock, deposit_wake) {
+        (Some(clock), _) => Box::new(Lockstep {
+            clock,
+            last_step: None,
+            field: o.name.clone(),
+        }),
+        (None, Some(wake)) => Box::new(OnDeposit {
+            wake,
+            metronome,
+            early_frames: 0,
+        }),
+        (None, None) => Box::new(metronome),
+    }
 }
 
 /// The field's server at the start of the loop, and what taking over (for a standby) measured.
