@@ -232,6 +232,7 @@ fn check_exits(mirrors: Vec<Proc>, bridge: Proc, sent: &[u64]) {
         let s = &j["mirror"];
         assert_eq!(s["checksum_mismatches"], 0, "mirror {i}: {s}");
         assert_eq!(s["deposits_forwarded"], sent[i + 1], "mirror {i}: {s}");
+        assert_eq!(s["deposits_confirmed"], sent[i + 1], "mirror {i}: {s}");
     }
     bridge.interrupt();
     let b = json(&bridge.wait_exit(Duration::from_secs(20)));

@@ -315,6 +315,8 @@ fn a_mirror_shows_bit_identical_frames_and_deposits_go_both_ways() {
     assert!(s["checksums_matched"].as_u64().unwrap() >= 5, "{s}");
     assert_eq!(s["checksum_mismatches"], 0, "{s}");
     assert_eq!(s["deposits_forwarded"], 1, "{s}");
+    assert_eq!(s["deposits_confirmed"], 1, "{s}");
+    assert_eq!(s["deposits_unconfirmed"], 0, "{s}");
     assert_eq!(j["stale"], false, "{j}");
 }
 

@@ -257,5 +257,6 @@ fn a_deposit_made_on_a_partitioned_mirror_is_applied_once_after_the_link_heals()
     bridge.interrupt();
     let b = json(&bridge.wait_exit(Duration::from_secs(20)));
     assert_eq!(m["mirror"]["deposits_forwarded"], 1, "{m}");
+    assert_eq!(m["mirror"]["deposits_confirmed"], 1, "{m}");
     assert_eq!(b["bridge"]["deposits_forwarded"], 1, "{b}");
 }

@@ -458,6 +458,10 @@ fn an_access_control_rule_keeps_a_viewer_mirror_from_depositing() {
     );
     let s = super::mirror_summary(m);
     assert_eq!(s["deposits_forwarded"], 1, "{s}");
+    // Never answered, so still kept and said: not dropped in silence.
+    assert_eq!(s["deposits_confirmed"], 0, "{s}");
+    assert_eq!(s["deposits_unconfirmed"], 1, "{s}");
+    assert!(s["deposit_batches_resent"].as_u64().unwrap() >= 1, "{s}");
     let j = b.exit_json();
     assert_eq!(j["bridge"]["deposits_forwarded"], 0, "{j}");
 }

@@ -67,3 +67,55 @@ fn keyframes_and_frames_round_trip() {
         Err(CodecError::Checksum { .. })
     ));
 }
+
+/// A deposit batch and its answer, built from the documented bytes alone: the mirror's id and
+/// batch number in the envelope's epoch and sequence, the answer's body two u32 counts.
+#[test]
+fn deposit_batches_and_their_answers_are_the_documented_bytes() {
+    let envelope = |kind: u8, id: u64, batch: u64, body: &[u8]| {
+        let mut b = b"PHMR".to_vec();
+        b.extend_from_slice(&[1, kind, 0, 0]);
+        b.extend_from_slice(&id.to_le_bytes());
+        b.extend_from_slice(&batch.to_le_bytes());
+        b.extend_from_slice(&(body.len() as u32).to_le_bytes());
+        b.extend_from_slice(&[0; 4]);
+        b.extend_from_slice(&xxhash_rust::xxh3::xxh3_64(body).to_le_bytes());
+        b.extend_from_slice(body);
+        b
+    };
+    let answer = DepositAck {
+        mirror_id: 0x1234_5678_9abc_def1,
+        batch: 42,
+        forwarded: 3,
+        refused: 1,
+    };
+    let mut body = 3u32.to_le_bytes().to_vec();
+    body.extend_from_slice(&1u32.to_le_bytes());
+    let bytes = envelope(7, answer.mirror_id, 42, &body);
+    assert_eq!(encode_deposit_ack(&answer), bytes);
+    assert_eq!(decode_deposit_ack(&bytes).unwrap(), answer);
+    for i in 0..bytes.len() {
+        let mut bad = bytes.clone();
+        bad[i] ^= 0x10;
+        assert_ne!(decode_deposit_ack(&bad).ok(), Some(answer), "byte {i}");
+    }
+    let short = envelope(7, 1, 1, &[0; 4]);
+    let err = decode_deposit_ack(&short).unwrap_err().to_string();
+    assert!(err.contains("4 bytes, expected 8"), "{err}");
+
+    let d = DepositMsg {
+        robot_id: 5,
+        amount: 2.0,
+        ..DepositMsg::default()
+    };
+    let batch = encode_deposits(answer.mirror_id, 9, &[d, d]);
+    let raw: Vec<u8> = [d, d]
+        .iter()
+        .flat_map(|m| field::shm::wire_bytes(m).to_vec())
+        .collect();
+    assert_eq!(batch, envelope(5, answer.mirror_id, 9, &raw));
+    assert_eq!(
+        decode_deposits(&batch).unwrap(),
+        (answer.mirror_id, 9, vec![d, d])
+    );
+}

@@ -3,11 +3,13 @@
 
 use std::time::{Duration, Instant};
 
-use field::shm::{DepositPublisher, FieldReader, InputsSubscriber, Svc};
+use field::shm::{DepositPublisher, FieldReader, InputsSubscriber, SendError, Svc};
+use field::DepositMsg;
 use iceoryx2::node::Node;
 use zenoh::qos::CongestionControl;
 use zenoh::Wait;
 
+use super::batches::Seen;
 use super::codec::{self, frame_checksum};
 use super::{zerr, BridgeError, Keys, REQUEST_TIMEOUT};
 
@@ -50,6 +52,12 @@ pub struct BridgeStats {
     pub other_bytes: u64,
     pub last_keyframe_bytes: u64,
     pub deposits_forwarded: u64,
+    /// Mirrors' deposits the origin's deposit service did not take (its queue refused them).
+    pub deposits_refused: u64,
+    /// Deposit batches answered, and those of them that came again (a mirror that missed the
+    /// answer): answered again, not handed to the field twice.
+    pub deposit_batches: u64,
+    pub deposit_batches_repeated: u64,
     /// Deposit messages from mirrors that failed their checks.
     pub bad_messages: u64,
     pub epoch: u64,
@@ -68,6 +76,9 @@ pub struct Bridge {
     config_q: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
     deposit_sub:
         zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    ack_pub: zenoh::pubsub::Publisher<'static>,
+    /// The mirrors' batches handed to the field.
+    seen: Seen,
     reader: FieldReader,
     inputs: InputsSubscriber,
     depositor: DepositPublisher,
@@ -127,6 +138,7 @@ impl Bridge {
         let inputs_pub = publisher(&keys.inputs, true)?;
         let checksum_pub = publisher(&keys.checksum, true)?;
         let keyframe_pub = publisher(&keys.keyframe, true)?;
+        let ack_pub = publisher(&keys.deposit_ack, true)?;
         let frames_pub = match o.frames {
             Some(_) => Some(publisher(&keys.frames, false)?),
             None => None,
@@ -154,6 +166,8 @@ impl Bridge {
             keyframe_q,
             config_q,
             deposit_sub,
+            ack_pub,
+            seen: Seen::default(),
             reader,
             inputs,
             depositor,
@@ -356,16 +370,8 @@ impl Bridge {
     fn forward_deposits(&mut self) -> Result<(), BridgeError> {
         while let Ok(Some(s)) = self.deposit_sub.try_recv() {
             match codec::decode_deposits(&s.payload().to_bytes()) {
-                Ok(deposits) => {
-                    for d in deposits {
-                        // Each keeps the robot id its mirror-host publisher stamped.
-                        match self.depositor.send_as(d) {
-                            Ok(()) => self.stats.deposits_forwarded += 1,
-                            Err(e) => {
-                                eprintln!("bridge '{}': deposit not forwarded: {e}", self.o.field)
-                            }
-                        }
-                    }
+                Ok((mirror_id, batch, deposits)) => {
+                    self.forward_batch(mirror_id, batch, deposits)?
                 }
                 Err(e) => {
                     self.stats.bad_messages += 1;
@@ -374,6 +380,67 @@ impl Bridge {
             }
         }
         Ok(())
+    }
+
+    /// Hands one mirror batch to the field, unless it did so before, and answers it. With no
+    /// field to take it, it neither hands nor answers: the mirror sends it again.
+    fn forward_batch(
+        &mut self,
+        mirror_id: u64,
+        batch: u64,
+        deposits: Vec<DepositMsg>,
+    ) -> Result<(), BridgeError> {
+        let answered = (mirror_id != 0)
+            .then(|| self.seen.earlier(mirror_id, batch))
+            .flatten();
+        let (forwarded, refused) = match answered {
+            Some(earlier) => {
+                self.stats.deposit_batches_repeated += 1;
+                earlier
+            }
+            None => {
+                let (mut forwarded, mut refused) = (0u32, 0u32);
+                for d in deposits {
+                    // Each keeps the robot id its mirror-host publisher stamped.
+                    match self.depositor.send_as(d) {
+                        Ok(()) => forwarded += 1,
+                        Err(SendError::NoSubscriber { .. }) if forwarded == 0 => {
+                            eprintln!(
+                                "bridge '{}': no field takes deposits now; batch {batch} of \
+                                 mirror {mirror_id:016x} waits for its resend",
+                                self.o.field
+                            );
+                            return Ok(());
+                        }
+                        Err(e) => {
+                            refused += 1;
+                            eprintln!("bridge '{}': deposit not forwarded: {e}", self.o.field)
+                        }
+                    }
+                }
+                self.stats.deposits_forwarded += u64::from(forwarded);
+                self.stats.deposits_refused += u64::from(refused);
+                if mirror_id != 0 {
+                    self.seen.record(mirror_id, batch, forwarded, refused);
+                }
+                (forwarded, refused)
+            }
+        };
+        if mirror_id == 0 {
+            return Ok(());
+        }
+        self.stats.deposit_batches += 1;
+        let ack = codec::encode_deposit_ack(&codec::DepositAck {
+            mirror_id,
+            batch,
+            forwarded,
+            refused,
+        });
+        self.stats.other_bytes += ack.len() as u64;
+        self.ack_pub
+            .put(ack)
+            .wait()
+            .map_err(|e| zerr("put a deposit answer", e))
     }
 
     /// The endpoints the bridge listens on, with the ports the system chose (needs

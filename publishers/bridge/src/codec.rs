@@ -35,11 +35,15 @@ pub enum Kind {
     Checksum = 3,
     /// A whole frame: `FrameHeader` + zstd of the cells (little-endian f32).
     Keyframe = 4,
-    /// Deposits made on a mirror's host, for the origin: n × `DepositMsg`.
+    /// Deposits made on a mirror's host, for the origin: n × `DepositMsg`. Envelope epoch: the
+    /// sending mirror's id; sequence: the batch's number in that mirror's run (from 1).
     Deposit = 5,
     /// A downsampled frame for consumers without a mirror: width, height, channels, downsample
     /// (4 × u32), then zstd of the cells (f32 little-endian, channel-major).
     Frame = 6,
+    /// The bridge's answer to a deposit batch (envelope epoch and sequence: the mirror id and
+    /// batch number it answers): deposits handed to the origin's field (u32), refused (u32).
+    DepositAck = 7,
 }
 
 impl Kind {
@@ -51,6 +55,7 @@ impl Kind {
             4 => Kind::Keyframe,
             5 => Kind::Deposit,
             6 => Kind::Frame,
+            7 => Kind::DepositAck,
             _ => return None,
         })
     }
@@ -317,14 +322,58 @@ pub fn decode_keyframe(bytes: &[u8]) -> Result<(u64, FrameHeader, Vec<f32>), Cod
     Ok((m.epoch, header, cells))
 }
 
-pub fn encode_deposits(deposits: &[DepositMsg]) -> Vec<u8> {
-    encode(Kind::Deposit, 0, 0, 0, wire_slice_bytes(deposits))
+/// A batch of a mirror's deposits: `mirror_id` (nonzero, one per mirror run) and `batch` (its
+/// number, from 1) let the bridge answer it and apply a batch sent again only once.
+pub fn encode_deposits(mirror_id: u64, batch: u64, deposits: &[DepositMsg]) -> Vec<u8> {
+    encode(
+        Kind::Deposit,
+        0,
+        mirror_id,
+        batch,
+        wire_slice_bytes(deposits),
+    )
 }
 
-pub fn decode_deposits(bytes: &[u8]) -> Result<Vec<DepositMsg>, CodecError> {
+/// A deposit batch: (mirror id, batch number, deposits). Id 0 is a sender that wants no answer.
+pub fn decode_deposits(bytes: &[u8]) -> Result<(u64, u64, Vec<DepositMsg>), CodecError> {
     let m = decode_kind(bytes, Kind::Deposit)?;
-    wire_vec_from_bytes(m.body)
-        .ok_or_else(|| body_err(Kind::Deposit, "not whole 64-byte deposit messages"))
+    let deposits = wire_vec_from_bytes(m.body)
+        .ok_or_else(|| body_err(Kind::Deposit, "not whole 64-byte deposit messages"))?;
+    Ok((m.epoch, m.sequence, deposits))
+}
+
+/// What the bridge did with one batch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DepositAck {
+    pub mirror_id: u64,
+    pub batch: u64,
+    /// Handed to the origin's field (now, or when the batch first came).
+    pub forwarded: u32,
+    /// Refused by the origin's deposit service (no field, or its queue refused them).
+    pub refused: u32,
+}
+
+pub fn encode_deposit_ack(a: &DepositAck) -> Vec<u8> {
+    let mut body = Vec::with_capacity(8);
+    body.extend_from_slice(&a.forwarded.to_le_bytes());
+    body.extend_from_slice(&a.refused.to_le_bytes());
+    encode(Kind::DepositAck, 0, a.mirror_id, a.batch, &body)
+}
+
+pub fn decode_deposit_ack(bytes: &[u8]) -> Result<DepositAck, CodecError> {
+    let m = decode_kind(bytes, Kind::DepositAck)?;
+    if m.body.len() != 8 {
+        return Err(body_err(
+            Kind::DepositAck,
+            format!("{} bytes, expected 8", m.body.len()),
+        ));
+    }
+    Ok(DepositAck {
+        mirror_id: m.epoch,
+        batch: m.sequence,
+        forwarded: u32_at(m.body, 0),
+        refused: u32_at(m.body, 4),
+    })
 }
 
 /// A frame for dashboards: `cells` (channel-major, `width × height` per channel) averaged over

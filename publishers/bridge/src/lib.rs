@@ -4,6 +4,7 @@
 //! `codec` holds the bytes both exchange.
 
 #[allow(clippy::module_inception)]
+mod batches;
 mod bridge;
 pub mod codec;
 mod mirror;
@@ -51,6 +52,7 @@ pub struct Keys {
     pub checksum: String,
     pub keyframe: String,
     pub deposit: String,
+    pub deposit_ack: String,
     pub frames: String,
 }
 
@@ -63,6 +65,7 @@ impl Keys {
             checksum: k("checksum"),
             keyframe: k("keyframe"),
             deposit: k("deposit"),
+            deposit_ack: k("deposit_ack"),
             frames: k("frames"),
         }
     }

@@ -2,8 +2,10 @@
 //! keyframe, replays each frame's deposit list with the same `Stepper`, publishes the frames with
 //! the origin's sequence numbers in local shared memory, checks the origin's checksums, and asks
 //! for a keyframe on a mismatch, a sequence gap, a new origin epoch or a silent origin (then it
-//! is `stale` until live inputs come again). Deposits made on its host go to the origin; while
-//! it is stale they are held (at most `HELD_MAX`) and sent once it is live again.
+//! is `stale` until live inputs come again). Deposits made on its host go to the origin in
+//! numbered batches, each kept until the bridge answers it and sent again while unanswered
+//! (`batches`); while the mirror is stale they are held (at most `HELD_MAX`) and sent once it is
+//! live again.
 //!
 //! Requests never block a round: a keyframe (and, for a new origin run, its configuration) is
 //! asked with a Zenoh `get` whose replies are polled each round, while the inputs keep being
@@ -23,6 +25,7 @@ use zenoh::query::Reply;
 use zenoh::sample::Sample;
 use zenoh::Wait;
 
+use super::batches::{self, Outbox};
 use super::codec::{self, frame_checksum};
 use super::{zerr, BridgeError, Keys, REQUEST_TIMEOUT};
 
@@ -50,10 +53,22 @@ pub struct MirrorStats {
     pub rejected_inputs: u64,
     pub rejected_keyframes: u64,
     pub rejected_other: u64,
+    /// Local deposits sent to the origin (each once; resends are counted in
+    /// `deposit_batches_resent`).
     pub deposits_forwarded: u64,
     /// Local deposits refused because more than [`HELD_MAX`] waited for the origin (the oldest
     /// go).
     pub deposits_refused: u64,
+    /// Deposits the bridge answered as handed to the origin's field, and as refused there.
+    pub deposits_confirmed: u64,
+    pub deposits_refused_by_origin: u64,
+    /// Local deposits sent or held, not answered yet (now).
+    pub deposits_unconfirmed: u64,
+    /// Batches sent again because no answer came within `batches::RESEND_AFTER`.
+    pub deposit_batches_resent: u64,
+    /// Batches unanswered `batches::UNANSWERED_WARN_AFTER` after their first send (each said
+    /// once on stderr).
+    pub deposit_batches_overdue: u64,
     pub stale_periods: u64,
     pub last_sequence: u64,
     /// Wall time from the last keyframe request to the keyframe published locally (ms).
@@ -83,8 +98,9 @@ pub struct Mirror {
     checksum_sub: Sub,
     keyframe_sub: Sub,
     deposit_pub: zenoh::pubsub::Publisher<'static>,
-    /// Local deposits taken from the field's queue, not yet sent to the origin.
-    outbox: Vec<DepositMsg>,
+    ack_sub: Sub,
+    /// Local deposits taken from the field's queue, kept until the bridge answers them.
+    outbox: Outbox,
     server: Option<FieldServer>,
     config: Option<FieldConfig>,
     /// The origin run the local frames come from (set from a keyframe and its configuration).
@@ -154,6 +170,7 @@ impl Mirror {
         let inputs_sub = sub(&keys.inputs)?;
         let checksum_sub = sub(&keys.checksum)?;
         let keyframe_sub = sub(&keys.keyframe)?;
+        let ack_sub = sub(&keys.deposit_ack)?;
         let deposit_pub = session
             .declare_publisher(keys.deposit.clone())
             .congestion_control(zenoh::qos::CongestionControl::Block)
@@ -167,7 +184,9 @@ impl Mirror {
             checksum_sub,
             keyframe_sub,
             deposit_pub,
-            outbox: Vec::new(),
+            ack_sub,
+            // One id per mirror run: the bridge tells its batches from another run's.
+            outbox: Outbox::new((now_ns() ^ (u64::from(std::process::id()) << 40)) | 1),
             server: None,
             config: None,
             epoch: 0,
@@ -520,7 +539,7 @@ impl Mirror {
             return Ok(false);
         }
         // Every frame published first takes the local deposits queued so far (`apply_pending`).
-        self.outbox.extend(server.take_local_deposits()?);
+        self.outbox.push(server.take_local_deposits()?);
         server.reset_to(h, cells)?;
         self.finish_keyframe(h, bytes, started);
         Ok(true)
@@ -570,7 +589,7 @@ impl Mirror {
             // Every frame drains the local queue, as a field's tick does (also when one round
             // applies several): confirmed deposits are answered "forwarded", and a local
             // depositor's flush request "flushed", once they left the queue.
-            self.outbox.extend(server.take_local_deposits()?);
+            self.outbox.push(server.take_local_deposits()?);
             let refused = server.apply_inputs(&h, &deposits)?;
             if refused > 0 {
                 eprintln!(
@@ -638,38 +657,88 @@ impl Mirror {
     }
 
     fn forward_deposits(&mut self) -> Result<(), BridgeError> {
+        self.take_answers();
         let Some(server) = self.server.as_mut() else {
             return Ok(());
         };
-        self.outbox.extend(server.take_local_deposits()?);
-        if self.outbox.is_empty() {
-            return Ok(());
+        self.outbox.push(server.take_local_deposits()?);
+        let excess = self.outbox.trim_to(HELD_MAX);
+        if excess > 0 {
+            self.stats.deposits_refused += excess;
+            eprintln!(
+                "mirror '{}': {HELD_MAX} local deposits wait for the origin; {excess} older ones refused",
+                self.o.field
+            );
         }
+        self.stats.deposits_unconfirmed = self.outbox.deposits() as u64;
         if self.stale {
             // No origin hears them now: a partition longer than Zenoh's lease closes the
             // session, and a put no subscriber matches is dropped without a word. Held until
-            // live inputs come again, then sent once.
-            let excess = self.outbox.len().saturating_sub(HELD_MAX);
-            if excess > 0 {
-                self.outbox.drain(..excess);
-                self.stats.deposits_refused += excess as u64;
-                eprintln!(
-                    "mirror '{}': stale with {HELD_MAX} local deposits held; {excess} older ones refused",
-                    self.o.field
-                );
-            }
+            // live inputs come again, then sent.
             return Ok(());
         }
-        self.deposit_pub
-            .put(codec::encode_deposits(&self.outbox))
-            .wait()
-            .map_err(|e| zerr("put deposits", e))?;
-        self.stats.deposits_forwarded += self.outbox.len() as u64;
-        self.outbox.clear();
+        let now = Instant::now();
+        for (batch, deposits, resend) in self.outbox.due(now) {
+            let bytes = codec::encode_deposits(self.outbox.mirror_id(), batch, &deposits);
+            self.deposit_pub
+                .put(bytes)
+                .wait()
+                .map_err(|e| zerr("put deposits", e))?;
+            if resend {
+                self.stats.deposit_batches_resent += 1;
+            } else {
+                self.stats.deposits_forwarded += deposits.len() as u64;
+            }
+        }
+        for (batch, n, times) in self.outbox.overdue(now) {
+            self.stats.deposit_batches_overdue += 1;
+            eprintln!(
+                "mirror '{}': batch {batch} ({n} deposits) unanswered by the origin's bridge \
+                 after {times} sends in {:.0} s; still sending it (an access rule denying puts \
+                 on {} would do this)",
+                self.o.field,
+                batches::UNANSWERED_WARN_AFTER.as_secs_f64(),
+                self.keys.deposit
+            );
+        }
         Ok(())
     }
 
+    /// The bridge's answers to this mirror's batches.
+    fn take_answers(&mut self) {
+        while let Ok(Some(s)) = self.ack_sub.try_recv() {
+            match codec::decode_deposit_ack(&s.payload().to_bytes()) {
+                Ok(ack) => {
+                    let Some(a) = self.outbox.answer(&ack) else {
+                        continue;
+                    };
+                    self.stats.deposits_confirmed += a.forwarded;
+                    self.stats.deposits_refused_by_origin += a.refused;
+                    if a.refused > 0 {
+                        eprintln!(
+                            "mirror '{}': the origin's field refused {} deposit(s) of batch {}",
+                            self.o.field, a.refused, ack.batch
+                        );
+                    }
+                }
+                Err(e) => {
+                    self.stats.rejected_other += 1;
+                    eprintln!("mirror '{}': rejected a deposit answer: {e}", self.o.field);
+                }
+            }
+        }
+    }
+
     pub fn close(self) {
+        let n = self.outbox.deposits();
+        if n > 0 {
+            eprintln!(
+                "mirror '{}': closing with {n} local deposit(s) in {} batch(es) the origin has not \
+                 confirmed (sent or held): they may be lost",
+                self.o.field,
+                self.outbox.batches()
+            );
+        }
         // A session that fails to close ends with the process.
         let _ = self.session.close().wait();
     }
