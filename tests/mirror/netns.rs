@@ -179,11 +179,13 @@ fn a_partitioned_mirror_is_stale_meanwhile_and_bit_identical_again_after_the_lin
     assert_eq!(s["checksum_mismatches"], 0, "{s}");
 }
 
-/// A deposit made on the mirror's host while the link is down for longer than Zenoh's lease
-/// (10 s: the session to the bridge is closed meanwhile) reaches the origin once, after the
-/// link heals: the bridge passes exactly one deposit to the field, and the mirror shows it.
+/// Two deposits made on the mirror's host while the link is down for longer than Zenoh's lease
+/// (10 s: the session to the bridge is closed meanwhile) each reach the origin once, after the
+/// link heals: one made just after the cut, which the mirror, not yet stale, puts on a session
+/// that then dies (so it is lost unless sent again), and one made 11 s in, which the stale
+/// mirror holds. The bridge passes exactly two deposits to the field, and the mirror shows both.
 #[test]
-fn a_deposit_made_on_a_partitioned_mirror_is_applied_once_after_the_link_heals() {
+fn deposits_made_on_a_partitioned_mirror_are_applied_once_after_the_link_heals() {
     let _clean = CleanDomains;
     let tag = format!("pd{}", std::process::id() % 100_000);
     let link = match Link::make(&tag) {
@@ -197,6 +199,8 @@ fn a_deposit_made_on_a_partitioned_mirror_is_applied_once_after_the_link_heals()
     let _field = origin_field(&name);
     let endpoint = format!("tcp/{ADDR_A}:7447");
     let bridge = link.spawn_in(&link.a, "bridge", &super::bridge_args(&name, &endpoint));
+    // Stale only 3 s after the cut: the first deposit surely comes while the mirror still
+    // sends.
     let mirror = link.spawn_in(
         &link.b,
         "mirror",
@@ -209,7 +213,7 @@ fn a_deposit_made_on_a_partitioned_mirror_is_applied_once_after_the_link_heals()
             "--mirror",
             &format!("zenoh:{endpoint}"),
             "--stale-after-s",
-            "0.5",
+            "3",
             "--duration",
             "120",
             "--json",
@@ -221,15 +225,51 @@ fn a_deposit_made_on_a_partitioned_mirror_is_applied_once_after_the_link_heals()
     until_mirror(&node, &name, false);
     link.set(false);
     let cut = Instant::now();
+    deposit_on_mirror_host(&link, &name, "2.0");
+    let early = cut.elapsed();
     until_mirror(&node, &name, true);
+    assert!(
+        early < Duration::from_secs(3),
+        "the first deposit came {early:?} after the cut, when the mirror may be stale"
+    );
     // Past the lease: the mirror's session has dropped the bridge.
     let _ = node.wait(Duration::from_secs(11).saturating_sub(cut.elapsed()));
-    // Made on the mirror's host, in its namespace (iceoryx2's wake-ups do not cross network
-    // namespaces: from outside, the receipt would come only when the client's wait times out).
+    deposit_on_mirror_host(&link, &name, "4.0");
+    let _ = node.wait(Duration::from_secs(12).saturating_sub(cut.elapsed()));
+    link.set(true);
+    let healed = Instant::now();
+    let both = hosts.common(5, |f| {
+        super::value_at(f, 4.0, 4.0) > 0.1 && super::value_at(f, 2.0, 2.0) > 0.1
+    });
+    assert_identical(&both);
+    println!(
+        "deposits made {:.2} s and 11 s into a {:.1} s partition: on the mirror {:.2} s after \
+         the link came back",
+        early.as_secs_f64(),
+        (healed - cut).as_secs_f64(),
+        healed.elapsed().as_secs_f64()
+    );
+    let m = super::mirror_exit(mirror);
+    bridge.interrupt();
+    let b = json(&bridge.wait_exit(Duration::from_secs(20)));
+    assert_eq!(m["mirror"]["deposits_forwarded"], 2, "{m}");
+    assert_eq!(m["mirror"]["deposits_confirmed"], 2, "{m}");
+    // The first went out before the cut was noticed and was lost with the session.
+    assert!(
+        m["mirror"]["deposit_batches_resent"].as_u64().unwrap() >= 1,
+        "{m}"
+    );
+    assert_eq!(b["bridge"]["deposits_forwarded"], 2, "{b}");
+}
+
+/// A deposit at (`x`, `x`) made on the mirror's host, in its namespace (iceoryx2's wake-ups do
+/// not cross network namespaces: from outside, the receipt would come only when the client's
+/// wait times out).
+fn deposit_on_mirror_host(link: &Link, name: &str, x: &str) {
     let args = Cmd::new("deposit")
         .opt("--iox-domain", MIRROR)
-        .opt("--field", &name)
-        .at("4.0", "4.0")
+        .opt("--field", name)
+        .at(x, x)
         .amount(2)
         .opt("--cov", "0.02,0,0.02")
         .timeout(20)
@@ -243,20 +283,4 @@ fn a_deposit_made_on_a_partitioned_mirror_is_applied_once_after_the_link_heals()
         out.status.success() && said.contains("forwarded to its origin"),
         "{said}"
     );
-    let _ = node.wait(Duration::from_secs(12).saturating_sub(cut.elapsed()));
-    link.set(true);
-    let healed = Instant::now();
-    let both = hosts.common(5, |f| super::value_at(f, 4.0, 4.0) > 0.1);
-    assert_identical(&both);
-    println!(
-        "deposit made during a {:.1} s partition: on the mirror {:.2} s after the link came back",
-        (healed - cut).as_secs_f64(),
-        healed.elapsed().as_secs_f64()
-    );
-    let m = super::mirror_exit(mirror);
-    bridge.interrupt();
-    let b = json(&bridge.wait_exit(Duration::from_secs(20)));
-    assert_eq!(m["mirror"]["deposits_forwarded"], 1, "{m}");
-    assert_eq!(m["mirror"]["deposits_confirmed"], 1, "{m}");
-    assert_eq!(b["bridge"]["deposits_forwarded"], 1, "{b}");
 }
