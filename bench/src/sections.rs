@@ -247,7 +247,7 @@ pub(crate) fn measure_visible(cx: &mut Ctx) -> Result<Visible, BenchError> {
     let spin_us = (1e6 / opts.tick_hz as f64).round() as u32;
     cx.say(&format!(
         "deposit to visible, publishing on deposit with SCHED_FIFO {RT_PRIORITY}, the field \
-         spinning {spin_us} µs a period and the follower busy-polling"
+         spinning {spin_us} µs a period and the follower busy-polling at SCHED_FIFO {RT_PRIORITY}"
     ));
     let v = visible::measure(
         &opts.launcher,

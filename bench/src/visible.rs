@@ -111,6 +111,9 @@ pub fn measure(
         c.height as f32 * c.cell_size_m / 2.0,
     );
     let mut result = VisibleResult::default();
+    // The follower at the field's priority too: a busy-polling reader preempted by the rest of
+    // the machine sees the frame late however fast the field published it.
+    let follower_rt = FollowerPriority::set(run.rt_priority);
     for i in 0..run.warmup + run.count {
         let last = reader.frame().map(|f| f.header.sequence).unwrap_or(0);
         if reader
@@ -141,6 +144,7 @@ pub fn measure(
             result.compute_ns.push(frame.header.tick_compute_ns);
         }
     }
+    drop(follower_rt);
     for rate in [10.0, 100.0, 1000.0] {
         result.cpu.push(cpu_at_rate(
             &node,
@@ -155,6 +159,33 @@ pub fn measure(
     drop(depositor);
     drop(field);
     Ok(result)
+}
+
+/// This thread at `SCHED_FIFO` until dropped (then back on the default scheduler).
+struct FollowerPriority(bool);
+
+impl FollowerPriority {
+    /// Best effort, as the bench's field: a refusal is said and the run goes on without it.
+    fn set(priority: Option<i32>) -> Self {
+        let Some(p) = priority else {
+            return Self(false);
+        };
+        match field::realtime::fifo_for_this_thread(p) {
+            Ok(()) => Self(true),
+            Err(e) => {
+                eprintln!("bench follower: going on without it: {e}");
+                Self(false)
+            }
+        }
+    }
+}
+
+impl Drop for FollowerPriority {
+    fn drop(&mut self) {
+        if self.0 {
+            field::realtime::default_scheduling_for_this_thread();
+        }
+    }
 }
 
 /// Waits (up to `timeout`, as `wait`) until a frame satisfies `pred`; returns it, or `None`.

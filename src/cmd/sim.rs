@@ -432,6 +432,7 @@ fn run_processes(
             view: a.view.clone(),
             ros2: a.ros2.clone(),
             ros2_args: a.zenoh.to_args(),
+            rt_args: rt_args(a.rt_priority, a.rt_best_effort),
             remote: a.remote,
             follower_wait: a.follower_wait,
             record,
@@ -444,4 +445,16 @@ fn run_processes(
         }
         e => e.into(),
     })
+}
+
+/// `--rt-priority N [--rt-best-effort]` for each child (none without a priority).
+fn rt_args(priority: Option<i32>, best_effort: bool) -> Vec<String> {
+    let Some(p) = priority else {
+        return Vec::new();
+    };
+    let mut v = vec!["--rt-priority".to_string(), p.to_string()];
+    if best_effort {
+        v.push("--rt-best-effort".to_string());
+    }
+    v
 }

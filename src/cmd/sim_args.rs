@@ -102,6 +102,16 @@ pub struct SimArgs {
         conflicts_with = "single_process"
     )]
     pub follower_wait: Option<field::shm::WaitPolicy>,
+    /// Real-time scheduling for the run's control loops: every child but the view and the ROS 2
+    /// bridge (the field, the world, each role and mapper, the gateway) gets `--rt-priority N`
+    /// (SCHED_FIFO N and memory locked, docs/field.md). A child the OS refuses fails the run
+    /// naming the missing permission, unless --rt-best-effort. Separate processes only.
+    #[arg(long, value_parser = super::int::<i32>(1, 99), value_name = "N",
+          conflicts_with = "single_process")]
+    pub rt_priority: Option<i32>,
+    /// With --rt-priority: every child starts anyway without what the OS refuses.
+    #[arg(long, requires = "rt_priority")]
+    pub rt_best_effort: bool,
     /// Every depositor deposits a constant amount, whatever its localization (the traditional
     /// scheme seed 000 argues against).
     #[arg(long)]

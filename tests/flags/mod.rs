@@ -129,6 +129,7 @@ const DOMAINS: &[(&str, &str, Domain)] = &[
     ("depositor", "--rt-priority", int(1.0, 99.0)),
     ("depositor", "--rt-cpu", int(0.0, 1023.0)),
     ("follower", "--rt-priority", int(1.0, 99.0)),
+    ("sim", "--rt-priority", int(1.0, 99.0)),
     ("follower", "--rt-cpu", int(0.0, 1023.0)),
     ("field", "--deadline-slack-us", real(0.0, 1e15)),
     ("field", "--spin-us", real(0.0, 1e7)),

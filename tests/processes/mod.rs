@@ -26,7 +26,7 @@ const WALL_KEYS: [&str; 5] = [
 ];
 
 /// The paths where two metrics objects differ (wall-time keys at the top level left out).
-fn differences(a: &Value, b: &Value, path: &str, out: &mut Vec<String>) {
+pub(crate) fn differences(a: &Value, b: &Value, path: &str, out: &mut Vec<String>) {
     match (a, b) {
         (Value::Object(x), Value::Object(y)) => {
             let mut keys: Vec<&String> = x.keys().chain(y.keys()).collect();

@@ -248,3 +248,98 @@ fn the_gateway_and_the_roles_take_rt_priority_and_are_refused_the_same_way() {
         );
     }
 }
+
+/// `sim --rt-priority N` (as root here) starts the field, the world and every role at
+/// SCHED_FIFO N, read from `/proc` while the run goes on, and the run's metrics are those of
+/// `--single-process` (real-time scheduling changes when a process runs, never what lockstep
+/// computes).
+#[test]
+fn sim_gives_its_control_loops_the_rt_priority_and_the_same_metrics() {
+    let args = [
+        "sim",
+        "trail-following",
+        "--no-out",
+        "--json",
+        "--duration",
+        "12",
+        "--seed",
+        "3",
+    ];
+    let mut child = Command::new(bin())
+        .args(args)
+        .args(["--rt-priority", "7"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start pheromone sim");
+    let sim_pid = child.id();
+    let node = create_node(&unique("rt-sim-watch")).unwrap();
+    let mut seen: std::collections::BTreeMap<u32, (String, u32, u32)> = Default::default();
+    while child.try_wait().unwrap().is_none() {
+        for (pid, role, policy, prio) in children_scheduling(sim_pid) {
+            // The latest sighting that shows a policy: the first may precede its setting.
+            let e = seen.entry(pid).or_insert((role, policy, prio));
+            if policy != 0 {
+                (e.1, e.2) = (policy, prio);
+            }
+        }
+        // A child's policy is read while the run goes on: /proc tells no one of a change.
+        let _ = node.wait(Duration::from_millis(5));
+    }
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let roles: std::collections::BTreeSet<&str> = seen.values().map(|v| v.0.as_str()).collect();
+    for role in ["field", "world", "localizer", "follower"] {
+        assert!(roles.contains(role), "no {role} child seen: {seen:?}");
+    }
+    for (pid, (role, policy, prio)) in &seen {
+        // 1 = SCHED_FIFO, at the priority asked; 0 only if never seen after it applied it.
+        if *policy != 0 {
+            assert_eq!((*policy, *prio), (1, 7), "{role} ({pid}): {seen:?}");
+        }
+    }
+    for role in ["field", "world", "localizer", "follower"] {
+        assert!(
+            seen.values().any(|v| v.0 == role && v.1 == 1),
+            "no {role} child seen at SCHED_FIFO: {seen:?}"
+        );
+    }
+    let processes = json(&out);
+    let mut single_args = args.to_vec();
+    single_args.push("--single-process");
+    let single = json(&run(&single_args));
+    let mut diffs = Vec::new();
+    crate::processes::differences(&processes, &single, "", &mut diffs);
+    assert!(diffs.is_empty(), "with --rt-priority: {diffs:#?}");
+}
+
+/// (pid, role, policy, rt priority) of each child of `parent` (`/proc/PID/stat` fields 4, 41 and
+/// 40; the role is the first argument of its command line).
+fn children_scheduling(parent: u32) -> Vec<(u32, String, u32, u32)> {
+    let mut out = Vec::new();
+    let Ok(dir) = std::fs::read_dir("/proc") else {
+        return out;
+    };
+    for e in dir.flatten() {
+        let Some(pid) = e.file_name().to_str().and_then(|s| s.parse::<u32>().ok()) else {
+            continue;
+        };
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+        let Some(after) = stat.rfind(')').map(|i| &stat[i + 2..]) else {
+            continue;
+        };
+        let f: Vec<&str> = after.split_whitespace().collect();
+        if f.len() < 39 || f[1].parse::<u32>().ok() != Some(parent) {
+            continue;
+        }
+        let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+        let role = cmdline
+            .split(|&b| b == 0)
+            .nth(1)
+            .map(|r| String::from_utf8_lossy(r).into_owned())
+            .unwrap_or_default();
+        let (prio, policy) = (f[37].parse().unwrap_or(0), f[38].parse().unwrap_or(0));
+        out.push((pid, role, policy, prio));
+    }
+    out
+}

@@ -15,6 +15,8 @@ pub(super) struct ChildArgs {
     /// The scenario file's path.
     pub(super) scenario: String,
     pub(super) realtime: bool,
+    /// Real-time scheduling arguments of the control-loop children.
+    pub(super) rt: Vec<String>,
 }
 
 impl ChildArgs {
@@ -36,12 +38,13 @@ impl ChildArgs {
         if self.realtime {
             v.push("--realtime".to_string());
         }
+        v.extend(self.rt.iter().cloned());
         v
     }
 
     /// The field's arguments: clocked by the world.
     pub(super) fn field(&self) -> Vec<String> {
-        args(&[
+        let mut v = args(&[
             "field",
             "--name",
             &self.field,
@@ -50,7 +53,9 @@ impl ChildArgs {
             "--clock",
             &self.world,
             "--json",
-        ])
+        ]);
+        v.extend(self.rt.iter().cloned());
+        v
     }
 
     /// The view's arguments, listening on `listen`.
@@ -89,7 +94,7 @@ impl ChildArgs {
 
     /// The gateway's arguments: UDP loopback on any port, printing its address.
     pub(super) fn gateway(&self, attach_timeout: Duration) -> Vec<String> {
-        args(&[
+        let mut v = args(&[
             "gateway",
             "--field",
             &self.field,
@@ -101,7 +106,9 @@ impl ChildArgs {
             &attach_timeout.as_secs_f64().to_string(),
             "--print-address",
             "--json",
-        ])
+        ]);
+        v.extend(self.rt.iter().cloned());
+        v
     }
 
     /// The world's arguments: in lockstep it waits for the observer and the mappers.

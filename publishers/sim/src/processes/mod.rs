@@ -54,6 +54,9 @@ pub struct ProcessRunOptions<'a> {
     /// More arguments of that `pheromone ros2` child (its TLS, credentials and Zenoh
     /// configuration flags).
     pub ros2_args: Vec<String>,
+    /// More arguments of every control-loop child (the field, the world, the roles, the
+    /// mappers, the gateway): `--rt-priority N`, `--rt-best-effort`.
+    pub rt_args: Vec<String>,
     /// The antenna robots read the field only through a `pheromone gateway` child (seed 002's
     /// thin clients, PIR over UDP loopback) instead of shared memory.
     pub remote: bool,
@@ -248,6 +251,7 @@ fn supervise(
         world: tag.to_string(),
         scenario: scenario_file.display().to_string(),
         realtime: o.realtime,
+        rt: o.rt_args.clone(),
     };
     let participants = lockstep_participants(scenario, true, true);
     let attach_timeout = o
