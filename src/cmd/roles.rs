@@ -7,7 +7,8 @@ use roles::depositor::{DepositMode, DepositorConfig};
 use roles::follower::{Follower, FollowerConfig, StrategyKind};
 use roles::scenario::Scenario;
 use roles::{
-    run_depositor, run_follower, run_localizer, run_mapper, run_world, RoleOptions, WorldOptions,
+    run_depositor, run_follower, run_localizer, run_mapper, run_world, OwnMap, RoleOptions,
+    WorldOptions,
 };
 
 use super::{bad, bad_from, seconds};
@@ -533,12 +534,18 @@ pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
         frame_wait: a.wait,
         ..a.common.role_options(a.robot)
     };
+    // Own-map steering (`[mapping] steer_on`): the robot's map frame, published by its mapper.
+    let own_map = scenario.own_map_start(a.robot).map(|start| OwnMap {
+        field: field::wire::map_field(&options.world, a.robot),
+        start,
+    });
     let summary = run_follower(
         &node,
         &options,
         follower,
         config.steer_by,
         scenario.world.dt_s,
+        own_map,
     )?;
     eprintln!(
         "follower r{}: {} steps, {} rejected",
