@@ -105,7 +105,7 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
                     reader.update()?;
                     if reader
                         .frame()
-                        .is_some_and(|f| frame_of_step(&f.header, p.step, start.is_some()))
+                        .is_some_and(|f| frame_of_step(f.header, p.step, start.is_some()))
                     {
                         break;
                     }
