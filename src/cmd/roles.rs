@@ -327,7 +327,9 @@ pub fn run_depositor_cmd(a: DepositorArgs) -> anyhow::Result<()> {
 /// inverse (seed 004 IAS-SS), uniform (seed 004's random baseline). Settings come from the
 /// scenario's `[robot.follower]`; flags override. With --gateway an antenna robot reads its two
 /// antennas only through PIR requests to `pheromone gateway` (seed 002's thin client), with an
-/// optional --backup gateway.
+/// optional --backup gateway. With the scenario's `[mapping] steer_on = "own-map"` (seed 004)
+/// a sector follower reads its robot's map, field `<WORLD>-map-r<ID>` published by `pheromone
+/// mapper`, at its estimate in the map's frame, instead of the shared field.
 #[derive(Args, Debug)]
 pub struct FollowerArgs {
     #[command(flatten)]
