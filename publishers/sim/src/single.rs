@@ -308,6 +308,7 @@ impl<'a> SingleRun<'a> {
             .robots
             .iter()
             .map(|r| {
+                scenario.follower_config(r.id)?;
                 let start = scenario.own_map_start(r.id)?;
                 let team = mapping.as_ref()?;
                 let map = &team.mapper(r.id)?.map;
