@@ -7,7 +7,8 @@ use roles::depositor::{DepositMode, DepositorConfig};
 use roles::follower::{Follower, FollowerConfig, StrategyKind};
 use roles::scenario::Scenario;
 use roles::{
-    run_depositor, run_follower, run_localizer, run_mapper, run_world, RoleOptions, WorldOptions,
+    run_depositor, run_follower, run_localizer, run_mapper, run_world, OwnMap, RoleOptions,
+    WorldOptions,
 };
 
 use super::{bad, bad_from, seconds};
@@ -326,7 +327,9 @@ pub fn run_depositor_cmd(a: DepositorArgs) -> anyhow::Result<()> {
 /// inverse (seed 004 IAS-SS), uniform (seed 004's random baseline). Settings come from the
 /// scenario's `[robot.follower]`; flags override. With --gateway an antenna robot reads its two
 /// antennas only through PIR requests to `pheromone gateway` (seed 002's thin client), with an
-/// optional --backup gateway.
+/// optional --backup gateway. With the scenario's `[mapping] steer_on = "own-map"` (seed 004)
+/// a sector follower reads its robot's map, field `<WORLD>-map-r<ID>` published by `pheromone
+/// mapper`, at its estimate in the map's frame, instead of the shared field.
 #[derive(Args, Debug)]
 pub struct FollowerArgs {
     #[command(flatten)]
@@ -533,12 +536,18 @@ pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
         frame_wait: a.wait,
         ..a.common.role_options(a.robot)
     };
+    // Own-map steering (`[mapping] steer_on`): the robot's map frame, published by its mapper.
+    let own_map = scenario.own_map_start(a.robot).map(|start| OwnMap {
+        field: field::wire::map_field(&options.world, a.robot),
+        start,
+    });
     let summary = run_follower(
         &node,
         &options,
         follower,
         config.steer_by,
         scenario.world.dt_s,
+        own_map,
     )?;
     eprintln!(
         "follower r{}: {} steps, {} rejected",

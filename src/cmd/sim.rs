@@ -56,6 +56,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             filter: a.filter,
             particles: a.particles,
             no_scripted_loss: a.no_scripted_loss,
+            steer_on: a.steer,
         })
         .map_err(|e| bad_in(a.scenario.as_str(), e))?;
     if let Some(t) = a.trials {

@@ -141,6 +141,11 @@ pub struct SimArgs {
     /// The communication radius R_C of --merge (m, finite and > 0).
     #[arg(long, value_parser = super::f64_pos(1e6), value_name = "R", allow_negative_numbers = true)]
     pub rc_m: Option<f64>,
+    /// What the sector followers steer on (seed 004, `[mapping] steer_on`): `own-map`, each
+    /// robot's own local map, merged maps included (needs --merge or --no-merge), or `shared`,
+    /// the shared field [default: the scenario's, shared].
+    #[arg(long, value_name = "own-map|shared")]
+    pub steer: Option<roles::mapper::SteerOn>,
     /// EKF-SLAM localizers (the map of landmarks is not given to them).
     #[arg(long)]
     pub slam: bool,

@@ -473,6 +473,58 @@ fn ias_ss_with_merging_as_processes_gives_the_single_process_metrics() {
 }
 
 #[test]
+fn ias_ss_steering_on_own_maps_with_merging_as_processes_gives_the_single_process_metrics() {
+    // Each follower reads its own mapper's map frame in shared memory (`<W>-map-r<ID>`), merged
+    // maps included: the same motion, step for step, as the single-process run.
+    let m = assert_same_in_both_modes(
+        "ias-ss",
+        &[
+            "--merge",
+            "--steer",
+            "own-map",
+            "--rc-m",
+            "30",
+            "--robots",
+            "3",
+            "--duration",
+            "130",
+            "--seed",
+            "2",
+        ],
+    );
+    let metrics = &m["metrics"];
+    assert_eq!(metrics["steer_on"], "own-map", "{metrics}");
+    assert!(
+        metrics["merges"].as_u64().is_some_and(|n| n > 0),
+        "{metrics}"
+    );
+    assert!(
+        metrics["exploration_merged"]["mean"]
+            .as_f64()
+            .is_some_and(|e| e >= metrics["exploration"]["mean"].as_f64().unwrap()),
+        "{metrics}"
+    );
+}
+
+#[test]
+fn steering_on_own_maps_without_local_maps_is_refused_with_exit_status_2() {
+    let o = run(&[
+        "sim",
+        "ias-ss",
+        "--steer",
+        "own-map",
+        "--no-out",
+        "--single-process",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("mapping.steer_on = own-map") && err.contains("--merge"),
+        "{err}"
+    );
+}
+
+#[test]
 fn a_mapper_map_frame_is_readable_while_it_runs_and_a_sigkilled_mapper_leaves_nothing() {
     let run = Run::new("m");
     let sim = run.spawn(

@@ -14,7 +14,7 @@ pub mod team;
 pub mod world;
 
 pub use process::depositor::run_depositor;
-pub use process::follower::run_follower;
+pub use process::follower::{run_follower, OwnMap};
 pub use process::localizer::{run_localizer, Filter};
 pub use process::mapper::{run_mapper, MapperSummary};
 pub(crate) use process::role_loop::{receiver, role_loop, sender, summary_of};

@@ -168,6 +168,11 @@ impl MappingTeam {
         }
     }
 
+    /// The mapper of robot `id`.
+    pub fn mapper(&self, id: u32) -> Option<&Mapper> {
+        self.mappers.iter().find(|m| m.id == id)
+    }
+
     /// The final maps, the merges and the counters.
     pub fn finish(self) -> MappingRecord {
         let mut rec = MappingRecord {

@@ -1,15 +1,20 @@
-//! Seed 004's exploration as the paper counts it (`exploration_known`): the share of the
-//! sectors a robot *knows*, visited or merged. A sector is known when at least `known_share`
-//! of its free cells are mapped (|log-odds| ≥ `known_logodds`) in the robot's final map. The
-//! free cells of a sector are the points of a grid of the map's cell size over the sector that
-//! lie neither in a wall nor within half a cell of one in the true world; each is looked up in
-//! the robot's map through the robot's true start pose (the frame of its map).
+//! Seed 004's exploration as the paper counts it, the share of the sectors a robot *knows*,
+//! in two figures:
+//! - `exploration_merged` (the paper's count): a sector counts for a robot when the robot
+//!   visited it or received it through a merge, transitively (a merge of robot i's map at step
+//!   k hands on every sector i counted at the end of step k − 1, received ones included);
+//! - `exploration_known` (sensor-mapped): a sector is known when at least `known_share` of its
+//!   free cells are mapped (|log-odds| ≥ `known_logodds`) in the robot's final map. The free
+//!   cells of a sector are the points of a grid of the map's cell size over the sector that lie
+//!   neither in a wall nor within half a cell of one in the true world; each is looked up in the
+//!   robot's map through the robot's true start pose (the frame of its map).
 
 use serde::Serialize;
 
+use crate::record::Recording;
 use roles::mapper::{pose_in_frame, MappingConfig};
 use roles::scenario::{ExplorationMetric, Scenario};
-use roles::team::{MappingRecord, RobotMap};
+use roles::team::{MappingRecord, MergeEvent, RobotMap};
 use roles::world::World;
 
 /// `exploration_known`, shaped like `exploration`.
@@ -102,6 +107,64 @@ pub fn exploration_known(
     })
 }
 
+/// Per robot (id order), the sectors it counts: visited, or received through a merge.
+type SectorSets = Vec<Vec<bool>>;
+
+/// `exploration_merged`: seed 004's count (see the module's documentation). The robots'
+/// samples (one per world step, at `t_s` = step · `dt_s`) give their visits; `merges` the
+/// hand-overs.
+pub fn exploration_merged(
+    m: &ExplorationMetric,
+    rec: &Recording,
+    merges: &[MergeEvent],
+    dt_s: f64,
+) -> KnownExploration {
+    let n = (m.cols * m.rows) as usize;
+    let ids: Vec<u32> = rec.robots.keys().copied().collect();
+    let mut counted: SectorSets = vec![vec![false; n]; ids.len()];
+    let mut next = vec![0usize; ids.len()];
+    // Every sample up to step `last` of every robot marks its sector.
+    let visit = |counted: &mut SectorSets, next: &mut [usize], last: u64| {
+        for (r, rows) in rec.robots.values().enumerate() {
+            while let Some(row) = rows
+                .get(next[r])
+                .filter(|row| (row.t_s / dt_s).round() as u64 <= last)
+            {
+                if let Some(s) = m.sector_index(row.true_pose[0], row.true_pose[1]) {
+                    counted[r][s] = true;
+                }
+                next[r] += 1;
+            }
+        }
+    };
+    let mut order: Vec<&MergeEvent> = merges.iter().collect();
+    order.sort_by_key(|e| e.step);
+    for group in order.chunk_by(|a, b| a.step == b.step) {
+        let k = group[0].step;
+        visit(&mut counted, &mut next, k.saturating_sub(1));
+        // Every merge of step k hands on what its source counted at the end of step k − 1.
+        let before = counted.clone();
+        for e in group {
+            let at = |id| ids.iter().position(|&i| i == id);
+            if let (Some(d), Some(s)) = (at(e.dst), at(e.src)) {
+                for (x, y) in counted[d].iter_mut().zip(&before[s]) {
+                    *x |= *y;
+                }
+            }
+        }
+    }
+    visit(&mut counted, &mut next, u64::MAX);
+    let share = |v: &[bool]| v.iter().filter(|x| **x).count() as f64 / n.max(1) as f64;
+    let per_robot: Vec<f64> = counted.iter().map(|v| share(v)).collect();
+    let team: Vec<bool> = (0..n).map(|s| counted.iter().any(|v| v[s])).collect();
+    KnownExploration {
+        sectors: n as u32,
+        mean: per_robot.iter().sum::<f64>() / per_robot.len().max(1) as f64,
+        team: share(&team),
+        per_robot,
+    }
+}
+
 /// Where merged maps landed against where they belong (m).
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct AlignmentError {
@@ -113,9 +176,16 @@ pub struct AlignmentError {
 /// metrics.
 #[derive(Debug, Clone, Serialize)]
 pub struct MappingMetrics {
-    /// Sectors known, visited or merged (with an exploration metric).
+    /// Sectors visited or received through a merge, transitively: the paper's count (with an
+    /// exploration metric).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exploration_merged: Option<KnownExploration>,
+    /// Sectors mapped by the sensor in the final map, own scans or merged (with an exploration
+    /// metric).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub exploration_known: Option<KnownExploration>,
+    /// What the sector followers steered on: `shared` or `own-map`.
+    pub steer_on: &'static str,
     pub known_threshold: f64,
     pub known_logodds: f32,
     pub merge: bool,
@@ -128,10 +198,17 @@ pub struct MappingMetrics {
 }
 
 /// The mapping metrics; `None` when the scenario maps nothing.
-pub fn mapping_metrics(scenario: &Scenario, rec: &MappingRecord) -> Option<MappingMetrics> {
+pub fn mapping_metrics(scenario: &Scenario, run: &Recording) -> Option<MappingMetrics> {
     let c = scenario.mapping()?;
+    let rec = run.mapping.as_ref()?;
     let errors: Vec<f64> = rec.merges.iter().map(|e| e.alignment_error_m).collect();
     Some(MappingMetrics {
+        exploration_merged: scenario
+            .metrics
+            .exploration
+            .as_ref()
+            .map(|m| exploration_merged(m, run, &rec.merges, scenario.world.dt_s)),
+        steer_on: c.steer_on.name(),
         exploration_known: scenario
             .metrics
             .exploration

@@ -8,8 +8,9 @@
 //! - `wrong_area` (seed 000 Figs. 1, 24; [`crate::wrong_area`]): whether the followers of a
 //!   lost leader end in the wrong area A or reach B, and where they gave the trail up.
 //! - with `[mapping]` on (seed 004, [`crate::exploration::mapping_metrics`]):
-//!   `exploration_known` (sectors known, visited or merged: `sectors`, `per_robot`, `mean`,
-//!   `team`), `known_threshold`, `known_logodds`, `merge`, `rc_m`, `merges`, `merges_rejected`,
+//!   `exploration_merged` (sectors visited or received through a merge, transitively: the
+//!   paper's count; `sectors`, `per_robot`, `mean`, `team`), `exploration_known` (sectors
+//!   mapped by the sensor in the final map, same shape), `steer_on`, `known_threshold`, `known_logodds`, `merge`, `rc_m`, `merges`, `merges_rejected`,
 //!   `exchanges_refused_lost`, `merge_alignment_error_m` (`mean`, `max`).
 
 use std::collections::BTreeMap;
@@ -64,10 +65,7 @@ pub fn scenario_metrics(scenario: &Scenario, rec: &Recording) -> ScenarioMetrics
             .wrong_area
             .as_ref()
             .map(|w| crate::wrong_area::wrong_area(scenario, w, rec)),
-        mapping: rec
-            .mapping
-            .as_ref()
-            .and_then(|r| crate::exploration::mapping_metrics(scenario, r)),
+        mapping: crate::exploration::mapping_metrics(scenario, rec),
     }
 }
 

@@ -7,7 +7,8 @@
 //! 2. scripted deposits due by then are offered to the field;
 //! 3. each localizer turns its sensors into a pose, each depositor the pose into a deposit;
 //! 4. the field ticks once (evaporation, then every deposit offered);
-//! 5. each follower reads the new frame and decides its command.
+//! 5. each follower reads the new frame and decides its command (with own-map steering, its
+//!    robot's map after the mapping team's step instead, at its estimate in the map's frame).
 //!
 //! The run also records what [`report`] draws and what the metrics need, and with `--record`
 //! hands each step's poses, applied deposits and recorded frames to a [`SimMcap`] (whose
@@ -23,6 +24,7 @@ use crate::ros_record::{PoseRow, SimMcap};
 use messages::{FollowerState, LaserMsg, PoseMsg};
 use roles::depositor::Depositor;
 use roles::follower::{Follower, PoseSource};
+use roles::mapper::{pose_msg_in_frame, Pose2, MAP_CHANNELS};
 use roles::scenario::{ProbeSpec, Scenario};
 use roles::team::MappingTeam;
 use roles::world::{StepOutput, World};
@@ -204,11 +206,12 @@ impl Robot {
     }
 
     /// After the tick: the follower's command into `cmd` (stop on error), its state and level.
+    /// `own_map`: the robot steers on its own map (`view`), whose frame has this origin.
     fn follow(
         &mut self,
         pose: PoseMsg,
         out: &StepOutput,
-        view: &FrameView<'_>,
+        (view, own_map): (&FrameView<'_>, Option<Pose2>),
         dt: f64,
         cmd: &mut (f64, f64),
     ) -> (Option<FollowerState>, Option<f32>) {
@@ -218,6 +221,10 @@ impl Robot {
             let steer = match source {
                 PoseSource::Estimate => pose,
                 PoseSource::Truth => messages::truth_as_pose(&out.truth),
+            };
+            let steer = match own_map {
+                Some(start) => pose_msg_in_frame(start, &steer),
+                None => steer,
             };
             match f.step_pose(view, &steer, dt) {
                 Ok(o) => {
@@ -265,6 +272,9 @@ struct SingleRun<'a> {
     frames: FrameSchedule,
     /// Each robot's command, applied by the next step.
     commands: Vec<(f64, f64)>,
+    /// Own-map steering: each robot's map frame origin and its map as a frame (both planes,
+    /// [`MAP_CHANNELS`]), refreshed after the mapping team's step; `None` on the shared field.
+    own_maps: Vec<Option<(Pose2, Vec<f32>)>>,
     record: Option<&'a mut SimMcap>,
 }
 
@@ -293,6 +303,19 @@ impl<'a> SingleRun<'a> {
             ..Recording::default()
         };
         let commands = vec![(0.0, 0.0); robots.len()];
+        let own_maps = scenario
+            .world
+            .robots
+            .iter()
+            .map(|r| {
+                scenario.follower_config(r.id)?;
+                let start = scenario.own_map_start(r.id)?;
+                let team = mapping.as_ref()?;
+                let map = &team.mapper(r.id)?.map;
+                let cells = MAP_CHANNELS.len() * map.geometry().cells();
+                Some((start, vec![0.0; cells]))
+            })
+            .collect();
         Ok(Self {
             scenario,
             world,
@@ -304,6 +327,7 @@ impl<'a> SingleRun<'a> {
             rec,
             frames: FrameSchedule::new(scenario),
             commands,
+            own_maps,
             record: None,
         })
     }
@@ -329,14 +353,15 @@ impl<'a> SingleRun<'a> {
                 .collect();
             team.step(self.world.step_count(), &poses, &sensed);
         }
+        self.refresh_own_maps();
         self.field.tick();
         let ft = self.field.stepper.sim_time_s;
         let view = self.field.view();
         self.frames.on_frame(&mut self.rec, ft, &view);
         let dt = self.scenario.world.dt_s;
-        let robots = self.robots.iter_mut().zip(&outputs);
+        let robots = self.robots.iter_mut().zip(&outputs).zip(&self.own_maps);
         let mut rows = Vec::new();
-        for ((r, out), cmd) in robots.zip(self.commands.iter_mut()) {
+        for (((r, out), own), cmd) in robots.zip(self.commands.iter_mut()) {
             let pose = r.pose.expect("set above");
             if self.record.is_some() {
                 rows.push(PoseRow {
@@ -346,7 +371,20 @@ impl<'a> SingleRun<'a> {
                     estimate: Some(pose),
                 });
             }
-            let (state, level) = r.follow(pose, out, &view, dt, cmd);
+            let (state, level) = match own {
+                Some((start, cells)) => {
+                    let g = *self
+                        .mapping
+                        .as_ref()
+                        .and_then(|t| t.mapper(r.id))
+                        .expect("own-map steering maps")
+                        .map
+                        .geometry();
+                    let map = FrameView::new(g, MAP_CHANNELS.len(), cells);
+                    r.follow(pose, out, (&map, Some(*start)), dt, cmd)
+                }
+                None => r.follow(pose, out, (&view, None), dt, cmd),
+            };
             self.rec.robots.entry(r.id).or_default().push(RobotSample {
                 t_s: t,
                 true_pose: [out.truth.x_m, out.truth.y_m, out.truth.theta_rad],
@@ -363,6 +401,19 @@ impl<'a> SingleRun<'a> {
             out.poses(rows);
             out.deposits(t, self.field.stepper.applied());
             out.frames(&self.rec);
+        }
+    }
+
+    /// Own-map steering: each robot's map of this step, as the frame its follower reads (the
+    /// frame its mapper process publishes).
+    fn refresh_own_maps(&mut self) {
+        let Some(team) = self.mapping.as_ref() else {
+            return;
+        };
+        for (r, own) in self.robots.iter().zip(self.own_maps.iter_mut()) {
+            if let (Some((_, cells)), Some(m)) = (own.as_mut(), team.mapper(r.id)) {
+                m.map.write_frame(cells);
+            }
         }
     }
 

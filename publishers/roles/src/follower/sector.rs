@@ -47,6 +47,10 @@ pub struct SectorConfig {
     pub obstacle_channel: Option<u32>,
     /// See `obstacle_channel`.
     pub obstacle_level: f32,
+    /// Set: `obstacle_channel` holds occupancy log-odds (a robot's own map, steering on it):
+    /// a sector's obstacle figure is then the share of its sample points whose log-odds are
+    /// ≥ this (cells the robot has seen occupied), blocked above `obstacle_level`.
+    pub obstacle_logodds: Option<f32>,
 }
 
 impl Default for SectorConfig {
@@ -63,6 +67,7 @@ impl Default for SectorConfig {
             saturation_level: 1.0,
             obstacle_channel: None,
             obstacle_level: 0.05,
+            obstacle_logodds: None,
         }
     }
 }
@@ -103,6 +108,9 @@ impl SectorConfig {
         check_positive("sectors.omega_max_rad_per_s", self.omega_max_rad_per_s)?;
         check_nonneg("sectors.decision_period_s", self.decision_period_s)?;
         check_nonneg("sectors.obstacle_level", self.obstacle_level as f64)?;
+        if let Some(l) = self.obstacle_logodds {
+            check_positive("sectors.obstacle_logodds", l as f64)?;
+        }
         if !(self.saturation_level.is_finite() && self.saturation_level != 0.0) {
             return Err(invalid(
                 "sectors.saturation_level",
@@ -179,6 +187,39 @@ pub fn choose_inverse(rng: &mut ChaCha8Rng, taus: &[f32], u_count: usize, v_coun
     *members.last().expect("at least one member")
 }
 
+/// Per sector of `n` over [−90°, 90°] about the heading, the share of its sample points (the
+/// points [`FrameView::sector_means`] averages) whose value on `channel` is ≥ `level`: how much
+/// of a sector a robot's own occupancy grid has seen occupied.
+pub fn sector_shares_at_least(
+    frame: &FrameView<'_>,
+    channel: usize,
+    pose: SamplePose,
+    radius_m: f32,
+    n: usize,
+    level: f32,
+) -> Vec<f32> {
+    let width = std::f32::consts::PI / n as f32;
+    let h = frame.geometry.cell_size_m;
+    let radial = ((radius_m / h).ceil() as usize).clamp(1, 64);
+    (0..n)
+        .map(|s| {
+            let a0 = pose.theta_rad - std::f32::consts::FRAC_PI_2 + s as f32 * width;
+            let (mut hits, mut count) = (0usize, 0usize);
+            for i in 0..radial {
+                let r = radius_m * (i as f32 + 0.5) / radial as f32;
+                let across = ((r * width / h).ceil() as usize).clamp(1, 64);
+                for j in 0..across {
+                    let a = a0 + width * (j as f32 + 0.5) / across as f32;
+                    let v = frame.value(channel, pose.x_m + r * a.cos(), pose.y_m + r * a.sin());
+                    hits += (v >= level) as usize;
+                    count += 1;
+                }
+            }
+            hits as f32 / count as f32
+        })
+        .collect()
+}
+
 /// What the sector strategies share: sensing, the RNG, and the eq. 2 steering.
 #[derive(Debug, Clone)]
 struct SectorSteer {
@@ -227,29 +268,39 @@ impl SectorSteer {
                 }
             })
             .collect();
-        if let Some(oc) = c.obstacle_channel.map(|o| o as usize) {
-            if oc < frame.channels {
-                let blocked = frame.sector_means(oc, pose, c.radius_m, c.half_sectors);
-                for (t, b) in taus.iter_mut().zip(blocked) {
-                    if b.is_nan() || b > c.obstacle_level {
-                        *t = 1.0;
-                    }
+        if let Some(blocked) = self.obstacles(frame, pose) {
+            for (t, b) in taus.iter_mut().zip(blocked) {
+                if b.is_nan() || b > c.obstacle_level {
+                    *t = 1.0;
                 }
             }
         }
         taus
     }
 
+    /// Each sector's obstacle figure: the mean of the obstacle channel, or with
+    /// `obstacle_logodds` the share of its points seen occupied; `None` without one.
+    fn obstacles(&self, frame: &FrameView<'_>, pose: SamplePose) -> Option<Vec<f32>> {
+        let c = &self.config;
+        let oc = c.obstacle_channel.map(|o| o as usize)?;
+        if oc >= frame.channels {
+            return None;
+        }
+        Some(match c.obstacle_logodds {
+            Some(level) => sector_shares_at_least(frame, oc, pose, c.radius_m, c.sectors(), level),
+            None => frame.sector_means(oc, pose, c.radius_m, c.half_sectors),
+        })
+    }
+
     /// 1 for the sectors blocked on the obstacle channel, 0 for the others.
     fn obstacle_taus(&self, frame: &FrameView<'_>, pose: SamplePose) -> Vec<f32> {
         let c = &self.config;
-        match c.obstacle_channel.map(|o| o as usize) {
-            Some(oc) if oc < frame.channels => frame
-                .sector_means(oc, pose, c.radius_m, c.half_sectors)
+        match self.obstacles(frame, pose) {
+            Some(b) => b
                 .into_iter()
                 .map(|b| if b <= c.obstacle_level { 0.0 } else { 1.0 })
                 .collect(),
-            _ => vec![0.0; c.sectors()],
+            None => vec![0.0; c.sectors()],
         }
     }
 
@@ -506,6 +557,72 @@ mod tests {
         };
         assert_eq!(run(3), run(3));
         assert_ne!(run(3), run(4));
+    }
+
+    #[test]
+    fn on_an_occupancy_grid_a_sector_with_cells_seen_occupied_is_blocked() {
+        // A robot's own map: occupancy log-odds (channel 0), pheromone (channel 1, empty). A
+        // wall seen occupied (log-odds 2) 1 m to the robot's left; free cells (−1) elsewhere.
+        let g = field::GridGeometry {
+            width: 50,
+            height: 50,
+            cell_size_m: 0.2,
+            origin_x_m: -5.0,
+            origin_y_m: -5.0,
+        };
+        let n = g.cells();
+        let mut cells = vec![0.0f32; 2 * n];
+        for y in 0..g.height {
+            for x in 0..g.width {
+                let (_, wy) = g.world_from_grid(x, y);
+                cells[g.index(x, y)] = if (wy - 1.0).abs() < 0.15 { 2.0 } else { -1.0 };
+            }
+        }
+        let frame = FrameView::new(g, 2, &cells);
+        let pose = SamplePose::new(0.0, 0.0, 0.0);
+        let shares = sector_shares_at_least(&frame, 0, pose, 2.0, 9, 0.4);
+        // Sector 0 is the rightmost (−90°), 8 the leftmost (+90°): the wall is on the left.
+        assert!(shares[..4].iter().all(|s| *s == 0.0), "{shares:?}");
+        assert!(shares[6..].iter().all(|s| *s > 0.02), "{shares:?}");
+        let cfg = SectorConfig {
+            radius_m: 2.0,
+            obstacle_channel: Some(0),
+            obstacle_logodds: Some(0.4),
+            obstacle_level: 0.02,
+            ..SectorConfig::default()
+        };
+        let mut s = SectorStrategy::uniform(1, cfg.clone(), 3).unwrap();
+        for _ in 0..200 {
+            s.decide(&frame, pose, 0.1);
+            assert!(s.last_sector().unwrap() < 6, "drew a blocked sector");
+        }
+        // Without the log-odds reading the mean of the plane (negative: mostly free) blocks
+        // nothing.
+        let mut plain = SectorStrategy::uniform(
+            1,
+            SectorConfig {
+                obstacle_logodds: None,
+                ..cfg.clone()
+            },
+            3,
+        )
+        .unwrap();
+        let drawn: std::collections::HashSet<usize> = (0..200)
+            .map(|_| {
+                plain.decide(&frame, pose, 0.1);
+                plain.last_sector().unwrap()
+            })
+            .collect();
+        assert!(drawn.iter().any(|&k| k >= 6), "{drawn:?}");
+        let bad = SectorConfig {
+            obstacle_logodds: Some(f32::NAN),
+            ..cfg
+        };
+        let e = SectorStrategy::inverse(1, bad, 0).unwrap_err().to_string();
+        assert!(
+            e.contains("sectors.obstacle_logodds") && e.contains("NaN"),
+            "{e}"
+        );
     }
 
     #[test]

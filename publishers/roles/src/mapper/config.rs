@@ -50,6 +50,57 @@ pub struct MappingConfig {
     pub logodds_occupied: f32,
     /// Log-odds are clamped to ±this.
     pub logodds_max: f32,
+    /// What the sector strategies (`inverse`, `uniform`) steer on: the shared field (every
+    /// robot's deposits, at any range) or each robot's own (merged) map, seed 004's setting.
+    pub steer_on: SteerOn,
+    /// How a merge combines two maps.
+    pub merge_rule: MergeRule,
+}
+
+/// `[mapping] steer_on` / `pheromone sim --steer`: the map a sector strategy reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SteerOn {
+    /// The shared field: τ_s from every robot's deposits, walls from the scenario's wall channel.
+    #[default]
+    Shared,
+    /// The robot's own local map (seed 004, Algorithm 2): τ_s from its pheromone plane (its
+    /// own deposits and what it merged), walls from its occupancy grid, at its estimate in its
+    /// own frame.
+    OwnMap,
+}
+
+impl SteerOn {
+    pub fn name(self) -> &'static str {
+        match self {
+            SteerOn::Shared => "shared",
+            SteerOn::OwnMap => "own-map",
+        }
+    }
+}
+
+impl std::str::FromStr for SteerOn {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "shared" => Ok(SteerOn::Shared),
+            "own-map" => Ok(SteerOn::OwnMap),
+            _ => Err(format!("'{s}': expected own-map or shared")),
+        }
+    }
+}
+
+/// `[mapping] merge_rule`: how the cells of two maps combine.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MergeRule {
+    /// Seed 004: every cell of the overlap is averaged, occupancy as probabilities (an unknown
+    /// cell is p = 0.5) and pheromone as levels.
+    #[default]
+    Average,
+    /// A cell unknown in one map (log-odds 0) takes the other's occupancy and pheromone; a cell
+    /// known in both averages both, occupancy in log-odds.
+    AdoptUnknown,
 }
 
 impl Default for MappingConfig {
@@ -75,6 +126,8 @@ impl Default for MappingConfig {
             logodds_free: -0.4,
             logodds_occupied: 0.85,
             logodds_max: 4.0,
+            steer_on: SteerOn::Shared,
+            merge_rule: MergeRule::Average,
         }
     }
 }

@@ -6,9 +6,9 @@ use field::{
     ChannelSpec, DepositMsg, Evaporation, FieldConfig, FrameHeader, GridGeometry, Stepper,
 };
 
-use super::config::MappingConfig;
+use super::config::{MappingConfig, MergeRule};
 use super::MapError;
-use messages::ScanMsg;
+use messages::{PoseMsg, ScanMsg};
 
 /// Channel names of a map frame, in plane order.
 pub const MAP_CHANNELS: [&str; 2] = ["occupancy", "pheromone"];
@@ -25,6 +25,19 @@ pub fn pose_in_frame(origin: Pose2, pose: Pose2) -> Pose2 {
         -s * dx + c * dy,
         messages::wrap_angle(pose[2] - origin[2]),
     ]
+}
+
+/// A pose message (world frame) with its position and heading moved into the frame whose
+/// origin is `origin` (a robot's map frame: what own-map steering reads the map at); the rest
+/// (step, covariance, stamps) is unchanged.
+pub fn pose_msg_in_frame(origin: Pose2, pose: &PoseMsg) -> PoseMsg {
+    let p = pose_in_frame(origin, [pose.x_m, pose.y_m, pose.theta_rad]);
+    PoseMsg {
+        x_m: p[0],
+        y_m: p[1],
+        theta_rad: p[2],
+        ..*pose
+    }
 }
 
 /// A point of frame `origin` (in the world) in the world.
@@ -49,6 +62,7 @@ pub struct LocalMap {
     logodds_free: f32,
     logodds_occupied: f32,
     logodds_max: f32,
+    merge_rule: MergeRule,
     /// Scans refused (non-finite pose or ray).
     pub scans_rejected: u64,
 }
@@ -95,6 +109,7 @@ impl LocalMap {
             logodds_free: config.logodds_free,
             logodds_occupied: config.logodds_occupied,
             logodds_max: config.logodds_max,
+            merge_rule: config.merge_rule,
             scans_rejected: 0,
         })
     }
@@ -110,6 +125,11 @@ impl LocalMap {
             occupancy: &self.occupancy,
             pheromone: &self.pheromone,
         }
+    }
+
+    /// How this map merges another ([`MergeRule`]) and its log-odds clamp.
+    pub fn merge_rule(&self) -> (MergeRule, f32) {
+        (self.merge_rule, self.logodds_max)
     }
 
     /// Both planes as one frame payload (`MAP_CHANNELS` order), what the mapper publishes.

@@ -8,14 +8,15 @@
 //! over the destination: each destination cell looks up the source cell its centre comes from
 //! (the inverse transform, nearest cell), one pass at memory speed.
 //!
-//! Averaging (our reading, MODELS.md M4): occupancy is averaged in log-odds (the cell's state —
-//! free, occupied, unknown — is the paper's probability average's whenever both maps agree, and
-//! the pass stays a linear one); a log-odds of exactly 0 (p = 0.5) is *unknown*: a cell unknown
-//! in one map takes the other map's occupancy and pheromone, a cell known in both averages
-//! both.
+//! Averaging ([`MergeRule`], MODELS.md M4): `average` (seed 004, the default) averages every
+//! cell of the overlap, occupancy as probabilities p = σ(log-odds) (an unknown cell, log-odds
+//! exactly 0, is p = 0.5) and pheromone as levels; the result is the same whichever map merges
+//! the other. `adopt-unknown` averages in log-odds where both maps know a cell, and a cell
+//! unknown in one map takes the other map's occupancy and pheromone.
 
 use field::GridGeometry;
 
+use super::config::MergeRule;
 use super::map::{reach_m, LocalMap, MapView, Pose2};
 use super::MapError;
 use messages::PeerObs;
@@ -138,9 +139,10 @@ impl MergeTransform {
 /// What one merge did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct MergeStats {
-    /// Destination cells that were unknown and took the source's values.
+    /// Destination cells that were unknown and took the source's values (`adopt-unknown`).
     pub adopted: usize,
-    /// Destination cells known in both maps, averaged.
+    /// Destination cells averaged: known in both maps (`adopt-unknown`), known or marked in
+    /// either (`average`; a cell unknown and unmarked in both stays as it is).
     pub averaged: usize,
 }
 
@@ -149,17 +151,25 @@ impl LocalMap {
     /// a transform [`MergeTransform::validate`] refuses is rejected before any cell changes.
     pub fn merge(&mut self, src: &MapView<'_>, t: &MergeTransform) -> Result<MergeStats, MapError> {
         let geometry = *self.geometry();
-        merge_planes(&geometry, &mut self.occupancy, &mut self.pheromone, src, t)
+        let rule = self.merge_rule();
+        merge_planes(
+            &geometry,
+            (&mut self.occupancy, &mut self.pheromone),
+            src,
+            t,
+            rule,
+        )
     }
 }
 
-/// The merge pass over destination planes of `geometry` (what [`LocalMap::merge`] runs).
+/// The merge pass over destination planes (occupancy, pheromone) of `geometry` (what
+/// [`LocalMap::merge`] runs), by `rule` with log-odds clamped to ±`logodds_max`.
 pub fn merge_planes(
     geometry: &GridGeometry,
-    occupancy: &mut [f32],
-    pheromone: &mut [f32],
+    (occupancy, pheromone): (&mut [f32], &mut [f32]),
     src: &MapView<'_>,
     t: &MergeTransform,
+    (rule, logodds_max): (MergeRule, f32),
 ) -> Result<MergeStats, MapError> {
     let plane = src.geometry.cells();
     if src.occupancy.len() != plane || src.pheromone.len() != plane {
@@ -227,14 +237,14 @@ pub fn merge_planes(
                     continue;
                 }
                 let (a, b) = merge_run(
-                    occupancy,
-                    pheromone,
+                    (&mut *occupancy, &mut *pheromone),
                     src,
                     (y * w + x_lo, x_hi - x_lo),
                     [g0[0] + y as f64 * gy[0], g0[1] + y as f64 * gy[1]],
                     x_lo,
                     gx,
                     (sw, sh),
+                    (rule, logodds_max),
                 );
                 stats.adopted += a;
                 stats.averaged += b;
@@ -253,14 +263,14 @@ const FIXED_ONE: f64 = (1u64 << 32) as f64;
 #[allow(clippy::too_many_arguments)]
 #[inline]
 fn merge_run(
-    occupancy: &mut [f32],
-    pheromone: &mut [f32],
+    (occupancy, pheromone): (&mut [f32], &mut [f32]),
     src: &MapView<'_>,
     (start, len): (usize, usize),
     [u0, v0]: [f64; 2],
     x_lo: usize,
     gx: [f64; 2],
     (sw, sh): (usize, usize),
+    (rule, logodds_max): (MergeRule, f32),
 ) -> (usize, usize) {
     let drow = &mut occupancy[start..start + len];
     let prow = &mut pheromone[start..start + len];
@@ -282,18 +292,43 @@ fn merge_run(
         let i = cv as usize * sw + cu as usize;
         let (so, sp) = (src.occupancy[i], src.pheromone[i]);
         let (od, op) = (*d, *p);
-        let known = so != 0.0;
-        let empty = od == 0.0;
-        let nd = if empty { so } else { 0.5 * (od + so) };
-        let np = if empty { sp } else { 0.5 * (op + sp) };
-        *d = if known { nd } else { od };
-        *p = if known { np } else { op };
-        adopted += (known & empty) as usize;
-        averaged += (known & !empty) as usize;
+        match rule {
+            MergeRule::AdoptUnknown => {
+                let known = so != 0.0;
+                let empty = od == 0.0;
+                let nd = if empty { so } else { 0.5 * (od + so) };
+                let np = if empty { sp } else { 0.5 * (op + sp) };
+                *d = if known { nd } else { od };
+                *p = if known { np } else { op };
+                adopted += (known & empty) as usize;
+                averaged += (known & !empty) as usize;
+            }
+            MergeRule::Average => {
+                if so != 0.0 || od != 0.0 || sp != 0.0 || op != 0.0 {
+                    *d = average_logodds(od, so, logodds_max);
+                    *p = 0.5 * (op + sp);
+                    averaged += 1;
+                }
+            }
+        }
         u += du;
         v += dv;
     }
     (adopted, averaged)
+}
+
+/// Seed 004's average of two occupancy log-odds as probabilities: σ⁻¹((σ(a) + σ(b))/2), both
+/// clamped to ±`max` first and the result clamped to ±`max` (so a finite input never gives
+/// NaN or ±∞). Symmetric in a and b; equal inputs (two unknown cells: 0) are returned as they
+/// are.
+#[inline]
+pub fn average_logodds(a: f32, b: f32, max: f32) -> f32 {
+    if a == b {
+        return a.clamp(-max, max);
+    }
+    let p = |l: f32| 1.0 / (1.0 + (-l.clamp(-max, max)).exp());
+    let q = 0.5 * (p(a) + p(b));
+    (q / (1.0 - q)).ln().clamp(-max, max)
 }
 
 /// The cells x in [x_lo, x_hi) of a destination row whose source coordinates

@@ -18,9 +18,9 @@ mod tests;
 
 use std::collections::BTreeMap;
 
-pub use config::{MappingConfig, MappingConfigError};
+pub use config::{MappingConfig, MappingConfigError, MergeRule, SteerOn};
 pub use map::MapView;
-pub use map::{pose_in_frame, LocalMap, Pose2, MAP_CHANNELS};
+pub use map::{pose_in_frame, pose_msg_in_frame, LocalMap, Pose2, MAP_CHANNELS};
 pub use merge::{merge_planes, MergeStats, MergeTransform};
 
 use crate::depositor::Depositor;

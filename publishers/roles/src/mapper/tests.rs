@@ -3,13 +3,25 @@ use field::{ChannelSpec, Evaporation, FrameHeader};
 use super::*;
 use messages::{PeerObs, PoseMsg, ScanMsg};
 
+/// The rule most tests here check geometry with: a cell unknown in the destination takes the
+/// source's values, so a merge into an empty map reproduces the source.
 fn config(extent_m: f32) -> MappingConfig {
     MappingConfig {
         enabled: true,
         cell_size_m: 0.2,
         extent_m,
+        merge_rule: MergeRule::AdoptUnknown,
         ..MappingConfig::default()
     }
+}
+
+/// A map that merges by seed 004's rule (`average`).
+fn averaging(extent_m: f32) -> LocalMap {
+    let c = MappingConfig {
+        merge_rule: MergeRule::Average,
+        ..config(extent_m)
+    };
+    LocalMap::new(&c, &channel(), 0.1).unwrap()
 }
 
 fn channel() -> ChannelSpec {
@@ -455,4 +467,87 @@ fn exchanges_start_after_the_start_iteration_and_repeat_every_interval() {
     assert!(m.due(1, 1010));
     m.last_exchange.insert(1, 101);
     assert!(!m.due(1, 1500) && m.due(1, 1510) && m.due(2, 1010));
+}
+
+#[test]
+fn seed_004_averaging_is_symmetric_in_the_averaged_cells_and_never_makes_nan() {
+    // Two maps with known, unknown and marked cells, extreme log-odds (±1e30, clamped) included.
+    let fill = |salt: u32| {
+        let mut m = averaging(6.0);
+        let p = patterned(6.0, salt);
+        m.occupancy.copy_from_slice(&p.occupancy);
+        m.pheromone.copy_from_slice(&p.pheromone);
+        m.occupancy[5] = 1e30;
+        m.occupancy[6] = -1e30;
+        m
+    };
+    // (A salt in the high bits: another pattern of unknown cells.)
+    let (a, b) = (fill(1), fill(0x5000_0000));
+    let (mut ab, mut ba) = (a.clone(), b.clone());
+    let sa = ab.merge(&b.view(), &MergeTransform::default()).unwrap();
+    let sb = ba.merge(&a.view(), &MergeTransform::default()).unwrap();
+    assert_eq!((sa.adopted, sb.adopted), (0, 0), "average adopts nothing");
+    assert!(
+        sa.averaged > 0 && sa.averaged == sb.averaged,
+        "{sa:?} {sb:?}"
+    );
+    // Symmetric: A merging B and B merging A leave the same cells, bit for bit.
+    assert_eq!(ab.occupancy, ba.occupancy);
+    assert_eq!(ab.pheromone, ba.pheromone);
+    assert!(ab
+        .occupancy
+        .iter()
+        .chain(&ab.pheromone)
+        .all(|v| v.is_finite()));
+    assert!(ab.occupancy.iter().all(|v| v.abs() <= 4.0));
+    let sigma = |l: f32| 1.0 / (1.0 + (-l.clamp(-4.0, 4.0)).exp());
+    let mut unknown_in_one = 0;
+    for i in 0..a.occupancy.len() {
+        let (x, y) = (a.occupancy[i], b.occupancy[i]);
+        // Probabilities averaged (an unknown cell counts as p = 0.5), pheromone averaged.
+        let want = 0.5 * (sigma(x) + sigma(y));
+        assert!(
+            (sigma(ab.occupancy[i]) - want).abs() < 1e-5,
+            "cell {i}: {x} {y}"
+        );
+        assert_eq!(ab.pheromone[i], 0.5 * (a.pheromone[i] + b.pheromone[i]));
+        if (x == 0.0) != (y == 0.0) {
+            unknown_in_one += 1;
+            // Unlike `adopt-unknown`, a cell one map does not know moves halfway to p = 0.5.
+            let known = if x == 0.0 { y } else { x };
+            assert!(ab.occupancy[i].abs() < known.abs().min(4.0), "cell {i}");
+            assert_eq!(ab.occupancy[i].signum(), known.signum(), "cell {i}");
+        }
+    }
+    assert!(unknown_in_one > 100, "{unknown_in_one}");
+    // Two unknown cells stay exactly unknown.
+    let (mut e, f) = (averaging(6.0), averaging(6.0));
+    e.merge(&f.view(), &MergeTransform::default()).unwrap();
+    assert!(e.occupancy.iter().all(|v| *v == 0.0));
+}
+
+#[test]
+fn an_averaging_merge_with_a_bad_transform_is_refused_counted_and_changes_nothing() {
+    let c = MappingConfig {
+        merge_rule: MergeRule::Average,
+        ..config(6.0)
+    };
+    let mut m = Mapper::new(0, &c, [0.0; 3], &channel(), 0.1, None).unwrap();
+    m.on_step(1, &PoseMsg::default(), &ScanMsg::default());
+    let src = patterned(6.0, 5);
+    let before = m.map.clone();
+    for (range_m, bearing_rad) in [(f64::INFINITY, 0.0), (1.0, f64::NAN), (1e9, 0.0)] {
+        let obs = PeerObs {
+            robot_id: 1,
+            range_m,
+            bearing_rad,
+            ..PeerObs::default()
+        };
+        let e = m.accept(1, &src.view(), [0.0; 3], &obs).unwrap_err();
+        assert!(matches!(e, MapError::Transform { .. }), "{e}");
+    }
+    assert_eq!(m.counters.merges_rejected["transform"], 3);
+    assert_eq!(m.counters.merges, 0);
+    assert_eq!(m.map.occupancy, before.occupancy);
+    assert_eq!(m.map.pheromone, before.pheromone);
 }

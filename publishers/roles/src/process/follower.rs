@@ -8,6 +8,7 @@ use field::shm::{now_ns, AttachError, FieldReader, Svc};
 use iceoryx2::node::Node;
 
 use crate::follower::{Follower, PoseSource};
+use crate::mapper::{pose_msg_in_frame, Pose2};
 use crate::{
     receiver, role_loop, sender, summary_of, ProcessError, RobotServices, RoleOptions, RoleSummary,
 };
@@ -15,21 +16,33 @@ use messages::{CmdMsg, FollowerStatusMsg, PoseMsg, TruthMsg};
 
 /// Steps without a new frame after which a follower checks whether its field is still alive.
 const STALE_STEPS: u32 = 10;
+
+/// Own-map steering (seed 004): the follower reads its robot's map frame, field `field`
+/// (`<world>-map-r<ID>`, published by its mapper), at its estimate moved into the map's frame,
+/// whose origin in the world is `start`.
+#[derive(Debug, Clone)]
+pub struct OwnMap {
+    pub field: String,
+    pub start: Pose2,
+}
+
 /// The follower process: pose + the frame of its step → command and status. The pose is the
-/// localizer's estimate, or the world's truth for a follower configured to steer by it.
+/// localizer's estimate, or the world's truth for a follower configured to steer by it. With
+/// `own_map` the frame is the robot's map frame of the step instead of the shared field's.
 pub fn run_follower(
     node: &Node<Svc>,
     o: &RoleOptions,
     follower: Follower,
     source: PoseSource,
     dt_s: f64,
+    own_map: Option<OwnMap>,
 ) -> Result<RoleSummary, ProcessError> {
     let s = RobotServices::new(&o.world, o.robot);
     match source {
         PoseSource::Estimate => follow(
             node,
             o,
-            follower,
+            (follower, own_map),
             dt_s,
             receiver::<PoseMsg>(node, &s.pose)?,
             |p: &PoseMsg| *p,
@@ -37,7 +50,7 @@ pub fn run_follower(
         PoseSource::Truth => follow(
             node,
             o,
-            follower,
+            (follower, own_map),
             dt_s,
             receiver::<TruthMsg>(node, &s.truth)?,
             messages::truth_as_pose,
@@ -45,15 +58,30 @@ pub fn run_follower(
     }
 }
 
+/// Whether `header` is the frame a follower steers on at link step `step`: the field's frame
+/// `step + 1` (its tick of the step), or with own-map steering the map frame `step` (the
+/// mapper's frame after the step; its frame 0 before the first step has field time 0).
+fn frame_of_step(header: &field::FrameHeader, step: u64, own_map: bool) -> bool {
+    if own_map {
+        header.sequence > step || (header.sequence == step && header.sim_time_s > 0.0)
+    } else {
+        header.sequence > step
+    }
+}
+
 fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,
     o: &RoleOptions,
-    mut follower: Follower,
+    (mut follower, own_map): (Follower, Option<OwnMap>),
     dt_s: f64,
     poses: Receiver<T>,
     to_pose: impl Fn(&T) -> PoseMsg,
 ) -> Result<RoleSummary, ProcessError> {
-    let (robot, field_name) = (o.robot, o.field.as_str());
+    let robot = o.robot;
+    let field_name = own_map
+        .as_ref()
+        .map_or(o.field.as_str(), |m| m.field.as_str());
+    let start = own_map.as_ref().map(|m| m.start);
     let s = RobotServices::new(&o.world, robot);
     let cmds = sender::<CmdMsg>(node, &s.cmd)?;
     let statuses = sender::<FollowerStatusMsg>(node, &s.status)?;
@@ -72,11 +100,13 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
         |m| {
             let p = to_pose(m);
             if o.lockstep {
-                // The frame the field computed for this step (sequence step + 1), and no other.
-                let want = p.step + 1;
+                // The frame of this step (`frame_of_step`), and no other.
                 loop {
                     reader.update()?;
-                    if reader.frame().is_some_and(|f| f.header.sequence >= want) {
+                    if reader
+                        .frame()
+                        .is_some_and(|f| frame_of_step(f.header, p.step, start.is_some()))
+                    {
                         break;
                     }
                     if end.conductor_gone() || node.wait(Duration::ZERO).is_err() {
@@ -110,6 +140,10 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
                     service: format!("pheromone/{field_name}/frame"),
                 }
                 .into());
+            };
+            let p = match start {
+                Some(origin) => pose_msg_in_frame(origin, &p),
+                None => p,
             };
             let (cmd, status) = match follower.step_pose(&frame.view, &p, dt_s) {
                 Ok(out) => (out.cmd, Some(out.status)),

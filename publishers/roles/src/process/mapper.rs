@@ -1,7 +1,8 @@
 //! The mapper's process loop (`pheromone mapper --robot ID`): one robot's [`Mapper`] fed the
 //! robot's pose estimate, its scan and its rendezvous measurement of each step, its local map
 //! published as a frame of field `<world>-map-r<ID>` ([`field::wire::map_field`]; two channels,
-//! [`MAP_CHANNELS`], in the robot's own frame), and Algorithm 1's exchanges made zero-copy: at a
+//! [`MAP_CHANNELS`], in the robot's own frame; with own-map steering its robot's follower steers
+//! on it, `process::follower`), and Algorithm 1's exchanges made zero-copy: at a
 //! rendezvous the mapper holds its peer's map frame in shared memory and merges from it
 //! ([`Mapper::accept_frame`]: [`MapView::from_frame`](crate::mapper::MapView::from_frame), which
 //! validates it, then the merge).

@@ -2,10 +2,14 @@
 //! `--merge` turns mapping on with exchanges at rendezvous, `--no-merge` turns it on without
 //! (each robot knows what it mapped itself: the paper's "integration inactive"); neither flag
 //! leaves the scenario's `[mapping]` as it is (off in every built-in scenario, so their runs are
-//! unchanged). `--rc-m R` sets R_C whether mapping is on or not.
+//! unchanged). `--rc-m R` sets R_C whether mapping is on or not. `--steer own-map` (`steer_on`)
+//! makes every sector follower steer on its robot's own map instead of the shared field: it
+//! reads τ_s from the map's pheromone plane and walls from its occupancy grid, at its estimate
+//! in its own frame ([`Scenario::own_map_start`]).
 
 use super::{Overrides, Scenario, ScenarioError};
-use crate::mapper::MappingConfig;
+use crate::follower::{FollowerConfig, StrategyKind};
+use crate::mapper::{MappingConfig, Pose2, SteerOn, MAP_CHANNELS};
 use messages::MAX_PEERS;
 
 impl Scenario {
@@ -25,12 +29,16 @@ impl Scenario {
             self.mapping.enabled = true;
             self.mapping.merge = merge;
         }
+        if let Some(steer) = o.steer_on {
+            self.mapping.steer_on = steer;
+        }
         Ok(())
     }
 
     /// `[mapping]`, when enabled: its values, and a world small enough for one rendezvous
     /// message per robot.
     pub(super) fn validate_mapping(&self) -> Result<(), ScenarioError> {
+        self.validate_steer_on()?;
         if !self.mapping.enabled {
             return Ok(());
         }
@@ -44,6 +52,59 @@ impl Scenario {
             }));
         }
         Ok(())
+    }
+
+    /// `steer_on = "own-map"`: the robots map (a map to steer on), and every follower is a
+    /// sector strategy (the only ones that read a map).
+    fn validate_steer_on(&self) -> Result<(), ScenarioError> {
+        if self.mapping.steer_on != SteerOn::OwnMap {
+            return Ok(());
+        }
+        let bad = |reason| ScenarioError::Value {
+            key: "mapping.steer_on".into(),
+            value: SteerOn::OwnMap.name().into(),
+            reason,
+        };
+        if !self.mapping.enabled {
+            return Err(bad(
+                "needs the robots' local maps: [mapping] enabled = true, or --merge / --no-merge",
+            ));
+        }
+        let sectors = [StrategyKind::Inverse, StrategyKind::Uniform];
+        if self
+            .robots
+            .iter()
+            .filter_map(|r| r.follower.as_ref())
+            .any(|f| !sectors.contains(&f.strategy) || f.after_loss.is_some())
+        {
+            return Err(bad(
+                "only the sector strategies (inverse, uniform) steer on a map; a follower here has another strategy or after_loss",
+            ));
+        }
+        Ok(())
+    }
+
+    /// With own-map steering, robot `id`'s map frame origin (its start pose in the world): its
+    /// follower steers on its map there. `None` when it steers on the shared field.
+    pub fn own_map_start(&self, id: u32) -> Option<Pose2> {
+        if self.mapping().is_none_or(|m| m.steer_on != SteerOn::OwnMap) {
+            return None;
+        }
+        let r = self.world.robots.iter().find(|r| r.id == id)?;
+        Some([r.start.x_m, r.start.y_m, r.start.theta_rad])
+    }
+
+    /// A sector follower's settings for own-map steering: τ_s from the map's pheromone plane,
+    /// walls from its occupancy plane (a sector is blocked above `obstacle_level` of its points
+    /// seen occupied, |log-odds| ≥ `known_logodds`).
+    pub(super) fn steer_on_own_map(&self, f: &mut FollowerConfig) {
+        if self.mapping().is_none_or(|m| m.steer_on != SteerOn::OwnMap) {
+            return;
+        }
+        f.channel = 1;
+        debug_assert_eq!(MAP_CHANNELS[1], "pheromone");
+        f.sectors.obstacle_channel = Some(0);
+        f.sectors.obstacle_logodds = Some(self.mapping.known_logodds);
     }
 
     /// The mapping settings of a run, if it maps.
@@ -97,6 +158,55 @@ mod tests {
                 .to_string();
             assert!(e.contains("--rc-m") && e.contains(&bad.to_string()), "{e}");
         }
+    }
+
+    #[test]
+    fn own_map_steering_reads_the_map_planes_and_needs_mapping_on() {
+        let steer = |merge| {
+            let mut s = Scenario::load("ias-ss").unwrap();
+            s.apply(&Overrides {
+                merge,
+                steer_on: Some(SteerOn::OwnMap),
+                ..Overrides::default()
+            })
+            .map(|_| s)
+        };
+        let e = steer(None).unwrap_err().to_string();
+        assert!(
+            e.contains("mapping.steer_on = own-map") && e.contains("--merge"),
+            "{e}"
+        );
+        let s = steer(Some(false)).unwrap();
+        let f = s.follower_config(0).unwrap();
+        assert_eq!(f.channel, 1, "the map's pheromone plane");
+        assert_eq!(f.sectors.obstacle_channel, Some(0), "the occupancy plane");
+        assert_eq!(f.sectors.obstacle_logodds, Some(s.mapping.known_logodds));
+        let start = s.world.robots[1].start;
+        assert_eq!(
+            s.own_map_start(1),
+            Some([start.x_m, start.y_m, start.theta_rad])
+        );
+        // Shared steering: the scenario's channels, no map.
+        let shared = Scenario::load("ias-ss").unwrap();
+        assert_eq!(shared.follower_config(0).unwrap().channel, 0);
+        assert_eq!(shared.own_map_start(0), None);
+        // In a file: the key, and a bad value named.
+        let text = |v: &str| {
+            format!(
+                "{}\n[mapping]\nenabled = true\nsteer_on = \"{v}\"\n",
+                crate::scenario::BUILTIN
+                    .iter()
+                    .find(|(n, _)| *n == "ias-ss")
+                    .unwrap()
+                    .1
+            )
+        };
+        let s = Scenario::parse(&text("own-map"), "m.toml").unwrap();
+        assert_eq!(s.mapping.steer_on, SteerOn::OwnMap);
+        let e = Scenario::parse(&text("theirs"), "m.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("m.toml") && e.contains("theirs"), "{e}");
     }
 
     #[test]

@@ -290,6 +290,8 @@ pub struct Overrides {
     pub particles: Option<usize>,
     /// `--no-scripted-loss`: every localizer's loss script (`localizer.loss.after_s`) is off.
     pub no_scripted_loss: bool,
+    /// `--steer own-map|shared`: what the sector followers steer on (`[mapping] steer_on`).
+    pub steer_on: Option<crate::mapper::SteerOn>,
 }
 
 /// What runs for one robot: a localizer always, a depositor and a follower if configured.
@@ -542,6 +544,7 @@ impl Scenario {
             .wrapping_mul(0x9E37_79B9_7F4A_7C15)
             .wrapping_add(self.seed.rotate_left(17))
             .wrapping_add(robot as u64);
+        self.steer_on_own_map(&mut f);
         Some(f)
     }
 
