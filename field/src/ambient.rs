@@ -51,14 +51,21 @@ pub fn band_rows(height: usize, r: usize) -> usize {
     BAND_ROWS_MIN.max(4 * r).min(height).max(1)
 }
 
+/// Rows the fast pass sums horizontally at once (one per SIMD lane, `Dispatch::prefix_rows4`).
+const GROUP_ROWS: usize = 4;
+
 /// Per-thread scratch of the band pass (O(width), never O(grid)).
 #[derive(Debug, Default, Clone)]
 pub struct BandScratch {
     col_sum: Vec<f64>,
-    prefix: Vec<f64>,
     inv_count_x: Vec<f64>,
-    inv_count: Vec<f64>,
     diffused: Vec<f32>,
+    /// Per row of a group (the reference pass uses the first only): the column sums, the
+    /// padded prefix sums, 1 / (cells of each window) and the window rows that one was made for.
+    cols: [Vec<f64>; GROUP_ROWS],
+    prefix: [Vec<f64>; GROUP_ROWS],
+    inv_count: [Vec<f64>; GROUP_ROWS],
+    inv_count_rows: [usize; GROUP_ROWS],
 }
 
 /// What a band pass writes for each cell.
@@ -81,7 +88,6 @@ pub(crate) fn band(
     s: &mut BandScratch,
     dispatch: Dispatch,
 ) {
-    let height = prev.len() / width;
     debug_assert_eq!(out.len(), (y1 - y0) * width);
     let (kappa, radius) = match output {
         Output::Step {
@@ -96,39 +102,151 @@ pub(crate) fn band(
         Output::Step { kappa, .. } => (kappa, None),
         Output::Mean { radius_cells } => (0.0, Some(radius_cells)),
     };
-    if kappa == 0.0 && radius.is_none() {
-        let src = &prev[y0 * width..y1 * width];
-        match output {
-            Output::Step {
-                plan: PlanePlan::Subtract { loss },
-                ..
-            } => {
-                for (o, &p) in out.iter_mut().zip(src) {
-                    *o = subtract_toward_zero(p, loss);
-                }
+    let rows = Rows {
+        output,
+        kappa,
+        width,
+        prev,
+        y0,
+    };
+    match radius {
+        None if kappa == 0.0 => no_window(output, &prev[y0 * width..y1 * width], out),
+        None => {
+            for y in y0..y1 {
+                rows.write(
+                    y,
+                    None,
+                    &mut out[(y - y0) * width..(y - y0 + 1) * width],
+                    s,
+                    0,
+                    dispatch,
+                );
             }
-            Output::Step {
-                plan: PlanePlan::Scale { factor },
-                ..
-            } => scale(src, out, factor),
-            // Ambient with α = 0: min(P, 0) = 0 for P ≥ 0, so P' = P·e.
-            Output::Step {
-                plan: PlanePlan::Ambient { factor, .. },
-                ..
-            } => ambient_no_mean(src, out, factor),
-            Output::Mean { .. } => unreachable!("the mean always has a radius"),
         }
-        return;
+        Some(r) if dispatch.is_reference() => band_reference(&rows, r, y1, out, s, dispatch),
+        Some(r) => band_grouped(&rows, r, y1, out, s, dispatch),
     }
-    let mut sums = radius.map(|r| ColumnSums::start(width, height, r, prev, y0, s, dispatch));
-    s.diffused.resize(width, 0.0);
-    for y in y0..y1 {
-        let row = &prev[y * width..(y + 1) * width];
-        let o = &mut out[(y - y0) * width..(y - y0 + 1) * width];
-        if let Some(sums) = sums.as_mut() {
-            sums.advance(y, y0, prev, s, dispatch);
+}
+
+/// The plans without a window mean or diffusion: each cell from its own previous value.
+fn no_window(output: Output, src: &[f32], out: &mut [f32]) {
+    match output {
+        Output::Step {
+            plan: PlanePlan::Subtract { loss },
+            ..
+        } => {
+            for (o, &p) in out.iter_mut().zip(src) {
+                *o = subtract_toward_zero(p, loss);
+            }
         }
-        let src: &[f32] = if kappa > 0.0 {
+        Output::Step {
+            plan: PlanePlan::Scale { factor },
+            ..
+        } => scale(src, out, factor),
+        // Ambient with α = 0: min(P, 0) = 0 for P ≥ 0, so P' = P·e.
+        Output::Step {
+            plan: PlanePlan::Ambient { factor, .. },
+            ..
+        } => ambient_no_mean(src, out, factor),
+        Output::Mean { .. } => unreachable!("the mean always has a radius"),
+    }
+}
+
+/// The reference pass: one row at a time, the row's prefix sums by `kernels::prefix_sum`.
+fn band_reference(
+    rows: &Rows<'_>,
+    radius: usize,
+    y1: usize,
+    out: &mut [f32],
+    s: &mut BandScratch,
+    d: Dispatch,
+) {
+    let (w, y0) = (rows.width, rows.y0);
+    let mut sums = ColumnSums::start(w, rows.prev, radius, y0, s, d);
+    let rx = sums.radius_x;
+    for y in y0..y1 {
+        let rows_in = sums.advance(y, y0, rows.prev, s, d);
+        sums.set_inv_count(s, 0, rows_in);
+        let prefix = &mut s.prefix[0];
+        d.prefix_sum(&s.col_sum, &mut prefix[rx..=rx + w]);
+        pad(prefix, rx, w);
+        let o = &mut out[(y - y0) * w..(y - y0 + 1) * w];
+        rows.write(y, Some(rx), o, s, 0, d);
+    }
+}
+
+/// The fast pass: the column sums of `GROUP_ROWS` consecutive rows, then their prefix sums at
+/// once (`Dispatch::prefix_rows4`, one row per lane), then the rows' outputs. Groups start at
+/// the band's first row, so they too are independent of the thread count.
+fn band_grouped(
+    rows: &Rows<'_>,
+    radius: usize,
+    y1: usize,
+    out: &mut [f32],
+    s: &mut BandScratch,
+    d: Dispatch,
+) {
+    let (w, y0) = (rows.width, rows.y0);
+    let mut sums = ColumnSums::start(w, rows.prev, radius, y0, s, d);
+    let rx = sums.radius_x;
+    for c in &mut s.cols {
+        c.clear();
+        c.resize(w, 0.0);
+    }
+    let mut y = y0;
+    while y < y1 {
+        let g = (y1 - y).min(GROUP_ROWS);
+        for k in 0..g {
+            let rows_in = sums.advance(y + k, y0, rows.prev, s, d);
+            sums.set_inv_count(s, k, rows_in);
+            s.cols[k].copy_from_slice(&s.col_sum);
+        }
+        // A short last group repeats its last row in the unused lanes (results unused).
+        let [c0, c1, c2, c3] = &s.cols;
+        let cols = [c0, c1, c2, c3].map(|c| c.as_slice());
+        let cols = std::array::from_fn(|k| cols[k.min(g - 1)]);
+        let [p0, p1, p2, p3] = &mut s.prefix;
+        d.prefix_rows4(cols, [p0, p1, p2, p3].map(|p| &mut p[rx..=rx + w]));
+        for k in 0..g {
+            pad(&mut s.prefix[k], rx, w);
+            let o = &mut out[(y + k - y0) * w..(y + k - y0 + 1) * w];
+            rows.write(y + k, Some(rx), o, s, k, d);
+        }
+        y += g;
+    }
+}
+
+/// Fills the right pad of a prefix row with the row's total (the left pad stays 0).
+fn pad(prefix: &mut [f64], rx: usize, w: usize) {
+    let total = prefix[rx + w];
+    prefix[rx + w + 1..].fill(total);
+}
+
+/// What every row of a band shares.
+struct Rows<'a> {
+    output: Output,
+    kappa: f32,
+    width: usize,
+    prev: &'a [f32],
+    y0: usize,
+}
+
+impl Rows<'_> {
+    /// Writes output row `y` into `o`, from the window sums of group row `k` of `s` (prefix
+    /// sums padded by `radius_x`, or no window).
+    fn write(
+        &self,
+        y: usize,
+        radius_x: Option<usize>,
+        o: &mut [f32],
+        s: &mut BandScratch,
+        k: usize,
+        d: Dispatch,
+    ) {
+        let (width, prev) = (self.width, self.prev);
+        let height = prev.len() / width;
+        let row = &prev[y * width..(y + 1) * width];
+        let src: &[f32] = if self.kappa > 0.0 {
             let up = if y > 0 {
                 &prev[(y - 1) * width..y * width]
             } else {
@@ -139,16 +257,16 @@ pub(crate) fn band(
             } else {
                 row
             };
-            diffuse_row(row, up, down, kappa, &mut s.diffused);
+            s.diffused.resize(width, 0.0);
+            diffuse_row(row, up, down, self.kappa, &mut s.diffused);
             &s.diffused
         } else {
             row
         };
-        match output {
-            Output::Mean { .. } => {
-                let rx = sums.as_ref().map_or(0, |c| c.radius_x);
-                dispatch.mean_row(&s.prefix, &s.inv_count, 2 * rx + 1, o);
-            }
+        let span = 2 * radius_x.unwrap_or(0) + 1;
+        let (prefix, inv) = (&s.prefix[k], &s.inv_count[k]);
+        match self.output {
+            Output::Mean { .. } => d.mean_row(prefix, inv, span, o),
             Output::Step { plan, .. } => match plan {
                 PlanePlan::Scale { factor } => scale(src, o, factor),
                 PlanePlan::Subtract { loss } => {
@@ -156,16 +274,8 @@ pub(crate) fn band(
                         *c = subtract_toward_zero(p, loss);
                     }
                 }
-                PlanePlan::Ambient { factor, alpha, .. } => match sums.as_ref() {
-                    Some(c) => dispatch.decay_row(
-                        &s.prefix,
-                        &s.inv_count,
-                        2 * c.radius_x + 1,
-                        src,
-                        o,
-                        factor,
-                        alpha,
-                    ),
+                PlanePlan::Ambient { factor, alpha, .. } => match radius_x {
+                    Some(_) => d.decay_row(prefix, inv, span, src, o, factor, alpha),
                     None => ambient_no_mean(src, o, factor),
                 },
             },
@@ -182,38 +292,42 @@ fn ambient_no_mean(src: &[f32], out: &mut [f32], factor: f32) {
     }
 }
 
-/// The vertical running sums of one band and the per-row prefix sums derived from them.
+/// The vertical running sums of one band (`BandScratch::col_sum`).
 struct ColumnSums {
     radius_y: usize,
     radius_x: usize,
     width: usize,
     height: usize,
-    inv_count_rows: usize,
 }
 
 impl ColumnSums {
     fn start(
         width: usize,
-        height: usize,
-        radius: usize,
         prev: &[f32],
+        radius: usize,
         y0: usize,
         s: &mut BandScratch,
         dispatch: Dispatch,
     ) -> Self {
+        let height = prev.len() / width;
         let (radius_x, radius_y) = (radius.min(width), radius.min(height));
         s.col_sum.clear();
         s.col_sum.resize(width, 0.0);
-        // The left pad stays 0 (= Σ of nothing); the rest is rewritten every row.
-        s.prefix.clear();
-        s.prefix.resize(width + 2 * radius_x + 1, 0.0);
+        // The left pads stay 0 (= Σ of nothing); the rest is rewritten every row.
+        for p in &mut s.prefix {
+            p.clear();
+            p.resize(width + 2 * radius_x + 1, 0.0);
+        }
         s.inv_count_x.clear();
         s.inv_count_x
             .extend((0..width).map(|x| {
                 1.0 / ((x + radius_x + 1).min(width) - x.saturating_sub(radius_x)) as f64
             }));
-        s.inv_count.clear();
-        s.inv_count.resize(width, 0.0);
+        for (c, rows) in s.inv_count.iter_mut().zip(&mut s.inv_count_rows) {
+            c.clear();
+            c.resize(width, 0.0);
+            *rows = 0;
+        }
         // The window of row y0 without its last row (row y0 + r enters in `advance`).
         for y in y0.saturating_sub(radius_y)..(y0 + radius_y).min(height) {
             dispatch.add_row(&mut s.col_sum, &prev[y * width..(y + 1) * width]);
@@ -223,14 +337,20 @@ impl ColumnSums {
             radius_x,
             width,
             height,
-            inv_count_rows: 0,
         }
     }
 
-    /// Moves the sums to row `y` (rows in order from the band's first row `y0`) and computes the
-    /// row's prefix sums into `s.prefix`.
-    fn advance(&mut self, y: usize, y0: usize, prev: &[f32], s: &mut BandScratch, d: Dispatch) {
-        let (w, r, rx) = (self.width, self.radius_y, self.radius_x);
+    /// Moves the sums to row `y` (rows in order from the band's first row `y0`); returns the
+    /// number of rows in row `y`'s window.
+    fn advance(
+        &mut self,
+        y: usize,
+        y0: usize,
+        prev: &[f32],
+        s: &mut BandScratch,
+        d: Dispatch,
+    ) -> usize {
+        let (w, r) = (self.width, self.radius_y);
         let row = |i: usize| &prev[i * w..(i + 1) * w];
         let enters = y + r < self.height;
         // Row y − r − 1 was summed only if it is a row of the band's start-up window or later.
@@ -250,17 +370,20 @@ impl ColumnSums {
             (false, true) => d.sub_row(&mut s.col_sum, row(y - r - 1)),
             (false, false) => {}
         }
-        let rows_in = (y + r).min(self.height - 1) - y.saturating_sub(r) + 1;
-        if rows_in != self.inv_count_rows {
-            let inv_rows = 1.0 / rows_in as f64;
-            for (c, &cx) in s.inv_count.iter_mut().zip(&s.inv_count_x) {
-                *c = cx * inv_rows;
-            }
-            self.inv_count_rows = rows_in;
+        (y + r).min(self.height - 1) - y.saturating_sub(r) + 1
+    }
+
+    /// Makes `s.inv_count[k]` 1 / (cells of each window of a row whose window has `rows_in`
+    /// rows).
+    fn set_inv_count(&self, s: &mut BandScratch, k: usize, rows_in: usize) {
+        if s.inv_count_rows[k] == rows_in {
+            return;
         }
-        d.prefix_sum(&s.col_sum, &mut s.prefix[rx..=rx + w]);
-        let total = s.prefix[rx + w];
-        s.prefix[rx + w + 1..].fill(total);
+        let inv_rows = 1.0 / rows_in as f64;
+        for (c, &cx) in s.inv_count[k].iter_mut().zip(&s.inv_count_x) {
+            *c = cx * inv_rows;
+        }
+        s.inv_count_rows[k] = rows_in;
     }
 }
 

@@ -397,25 +397,38 @@ fn print_c_abi(c: &pheromone_bench::c_abi::CAbiReport) {
 }
 
 fn print_ticks(r: &Report) {
-    println!("\ntick / memcpy            memcpy µs   plain µs  ratio   ambient µs  ratio");
+    println!(
+        "\ntick / memcpy            memcpy µs   plain µs  ratio   ambient µs  ratio   reference µs  ratio"
+    );
     for (size, t) in &r.tick_vs_memcpy {
         println!(
-            "{size:<22} {:>10.1} {:>10.1} {:>6.2} {:>12.1} {:>6.2}",
-            t.memcpy_us, t.exponential_us, t.exponential_ratio, t.ambient_us, t.ambient_ratio
+            "{size:<22} {:>10.1} {:>10.1} {:>6.2} {:>12.1} {:>6.2} {:>14.1} {:>6.2}",
+            t.memcpy_us,
+            t.exponential_us,
+            t.exponential_ratio,
+            t.ambient_us,
+            t.ambient_ratio,
+            t.ambient_reference_us,
+            t.ambient_reference_ratio
         );
     }
     println!(
-        "\nambient by radius ({} kernels)   radius cells: ratio …   2 threads µs  speedup",
+        "\nambient by radius ({} kernels)   radius cells: ratio (reference's) …   2 threads µs  speedup",
         { r.tick_vs_memcpy.values().next().map_or("-", |t| t.kernels) }
     );
     for (size, t) in &r.tick_vs_memcpy {
         let radii: Vec<String> = t
             .ambient_by_radius
             .iter()
-            .map(|b| format!("r{}: {:.2}", b.radius_cells, b.ambient_ratio))
+            .map(|b| {
+                format!(
+                    "r{}: {:.2} (ref {:.2})",
+                    b.radius_cells, b.ambient_ratio, b.reference_ratio
+                )
+            })
             .collect();
         println!(
-            "{size:<22} {:<28} {:>12.1} {:>8.2}",
+            "{size:<22} {:<52} {:>12.1} {:>8.2}",
             radii.join("  "),
             t.ambient_2_threads_us,
             t.ambient_thread_speedup
