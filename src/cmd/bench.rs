@@ -68,6 +68,8 @@ enum SectionArg {
     CAbi,
     /// Tick-start lateness beside two busy loops, with and without real-time scheduling.
     Timing,
+    /// Seed 004's map merge vs memcpy.
+    Merge,
 }
 
 impl From<SectionArg> for Section {
@@ -81,6 +83,7 @@ impl From<SectionArg> for Section {
             SectionArg::Mirror => Section::Mirror,
             SectionArg::CAbi => Section::CAbi,
             SectionArg::Timing => Section::Timing,
+            SectionArg::Merge => Section::Merge,
         }
     }
 }
@@ -199,6 +202,9 @@ fn print_tables(r: &Report) {
     );
     if !r.tick_vs_memcpy.is_empty() {
         print_ticks(r);
+    }
+    if !r.merge_vs_memcpy.is_empty() {
+        print_merges(r);
     }
     print_hop(r);
     print_frames(r);
@@ -394,6 +400,16 @@ fn print_c_abi(c: &pheromone_bench::c_abi::CAbiReport) {
          per point = {:.3}",
         c.frame_ratio_p50, c.frame_ratio_p99, c.sample_c_ns, c.sample_rust_ns, c.sample_ratio
     );
+}
+
+fn print_merges(r: &Report) {
+    println!("\nmerge / memcpy           memcpy µs   merge µs  ratio   reference µs  ratio");
+    for (size, m) in &r.merge_vs_memcpy {
+        println!(
+            "{size:<22} {:>10.1} {:>10.1} {:>6.2} {:>14.1} {:>6.2}",
+            m.memcpy_us, m.merge_us, m.merge_ratio, m.reference_us, m.reference_ratio
+        );
+    }
 }
 
 fn print_ticks(r: &Report) {

@@ -153,13 +153,53 @@ impl LocalMap {
     }
 }
 
-/// The merge pass over destination planes of `geometry` (what [`LocalMap::merge`] runs).
+/// The merge pass over destination planes of `geometry` (what [`LocalMap::merge`] runs): the
+/// reference pass's result bit for bit (`merge_planes_reference`), each run of destination
+/// cells merged eight at a time where the CPU has AVX2 (`merge_simd`).
 pub fn merge_planes(
     geometry: &GridGeometry,
     occupancy: &mut [f32],
     pheromone: &mut [f32],
     src: &MapView<'_>,
     t: &MergeTransform,
+) -> Result<MergeStats, MapError> {
+    merge_with(
+        geometry,
+        occupancy,
+        pheromone,
+        src,
+        t,
+        super::merge_simd::Runs::detect(),
+    )
+}
+
+/// The reference merge pass: every run of destination cells one cell at a time (`merge_run`).
+/// Kept for the tests and the bench, which compare [`merge_planes`] with it.
+#[doc(hidden)]
+pub fn merge_planes_reference(
+    geometry: &GridGeometry,
+    occupancy: &mut [f32],
+    pheromone: &mut [f32],
+    src: &MapView<'_>,
+    t: &MergeTransform,
+) -> Result<MergeStats, MapError> {
+    merge_with(
+        geometry,
+        occupancy,
+        pheromone,
+        src,
+        t,
+        super::merge_simd::Runs::Scalar,
+    )
+}
+
+fn merge_with(
+    geometry: &GridGeometry,
+    occupancy: &mut [f32],
+    pheromone: &mut [f32],
+    src: &MapView<'_>,
+    t: &MergeTransform,
+    runs: super::merge_simd::Runs,
 ) -> Result<MergeStats, MapError> {
     let plane = src.geometry.cells();
     if src.occupancy.len() != plane || src.pheromone.len() != plane {
@@ -178,27 +218,7 @@ pub fn merge_planes(
             value,
         });
     }
-    // The inverse transform in grid units: source cell coordinates of destination cell (x, y)
-    // are g0 + x·gx + y·gy (affine), so each row is a walk of additions.
-    let (h, hs) = (geometry.cell_size_m as f64, src.geometry.cell_size_m as f64);
-    let centre = |x: f64, y: f64| {
-        [
-            geometry.origin_x_m as f64 + (x + 0.5) * h,
-            geometry.origin_y_m as f64 + (y + 0.5) * h,
-        ]
-    };
-    let to_src_grid = |q: [f64; 2]| {
-        let p = t.inverse(q);
-        [
-            (p[0] - src.geometry.origin_x_m as f64) / hs,
-            (p[1] - src.geometry.origin_y_m as f64) / hs,
-        ]
-    };
-    let g0 = to_src_grid(centre(0.0, 0.0));
-    let g1 = to_src_grid(centre(1.0, 0.0));
-    let g2 = to_src_grid(centre(0.0, 1.0));
-    let gx = [g1[0] - g0[0], g1[1] - g0[1]];
-    let gy = [g2[0] - g0[0], g2[1] - g0[1]];
+    let [g0, gx, gy] = lookup(geometry, src, t);
     let (w, hgt) = (geometry.width as usize, geometry.height as usize);
     let (sw, sh) = (src.geometry.width as usize, src.geometry.height as usize);
     let mut stats = MergeStats::default();
@@ -235,6 +255,7 @@ pub fn merge_planes(
                     x_lo,
                     gx,
                     (sw, sh),
+                    runs,
                 );
                 stats.adopted += a;
                 stats.averaged += b;
@@ -244,12 +265,40 @@ pub fn merge_planes(
     Ok(stats)
 }
 
-/// Merges `len` destination cells from index `start` on (row cells x_lo.., whose source
-/// coordinates are (u0 + x·gx[0], v0 + x·gx[1]), all inside the source); returns the cells
-/// (adopted, averaged).
+/// The inverse transform in source grid units: the source cell coordinates of destination cell
+/// (x, y) are `g0 + x·gx + y·gy` (affine), so each row is a walk of additions. Returns
+/// `[g0, gx, gy]`.
+fn lookup(geometry: &GridGeometry, src: &MapView<'_>, t: &MergeTransform) -> [[f64; 2]; 3] {
+    let (h, hs) = (geometry.cell_size_m as f64, src.geometry.cell_size_m as f64);
+    let centre = |x: f64, y: f64| {
+        [
+            geometry.origin_x_m as f64 + (x + 0.5) * h,
+            geometry.origin_y_m as f64 + (y + 0.5) * h,
+        ]
+    };
+    let to_src_grid = |q: [f64; 2]| {
+        let p = t.inverse(q);
+        [
+            (p[0] - src.geometry.origin_x_m as f64) / hs,
+            (p[1] - src.geometry.origin_y_m as f64) / hs,
+        ]
+    };
+    let g0 = to_src_grid(centre(0.0, 0.0));
+    let g1 = to_src_grid(centre(1.0, 0.0));
+    let g2 = to_src_grid(centre(0.0, 1.0));
+    [
+        g0,
+        [g1[0] - g0[0], g1[1] - g0[1]],
+        [g2[0] - g0[0], g2[1] - g0[1]],
+    ]
+}
+
 /// 1.0 in the 32.32 fixed point of [`merge_run`]'s walk.
 const FIXED_ONE: f64 = (1u64 << 32) as f64;
 
+/// Merges `len` destination cells from index `start` on (row cells x_lo.., whose source
+/// coordinates are (u0 + x·gx[0], v0 + x·gx[1]), all inside the source); returns the cells
+/// (adopted, averaged).
 #[allow(clippy::too_many_arguments)]
 #[inline]
 fn merge_run(
@@ -261,6 +310,7 @@ fn merge_run(
     x_lo: usize,
     gx: [f64; 2],
     (sw, sh): (usize, usize),
+    runs: super::merge_simd::Runs,
 ) -> (usize, usize) {
     let drow = &mut occupancy[start..start + len];
     let prow = &mut pheromone[start..start + len];
@@ -269,31 +319,15 @@ fn merge_run(
     // the loop. A run is at most a tile wide, so the step's rounding (≤ 2⁻³² cell per step)
     // moves a lookup only for a centre within about 2⁻²⁵ cell of a cell edge.
     let fixed = |c: f64| (c * FIXED_ONE).round() as i64;
-    let (mut u, mut v) = (
-        fixed(u0 + x_lo as f64 * gx[0]),
-        fixed(v0 + x_lo as f64 * gx[1]),
-    );
-    let (du, dv) = (fixed(gx[0]), fixed(gx[1]));
-    let (u_max, v_max) = (sw as i64 - 1, sh as i64 - 1);
-    let (mut adopted, mut averaged) = (0usize, 0usize);
-    for (d, p) in drow.iter_mut().zip(prow.iter_mut()) {
-        // `row_span` keeps u in [0, sw) and v in [0, sh); the clamp only guards rounding.
-        let (cu, cv) = ((u >> 32).clamp(0, u_max), (v >> 32).clamp(0, v_max));
-        let i = cv as usize * sw + cu as usize;
-        let (so, sp) = (src.occupancy[i], src.pheromone[i]);
-        let (od, op) = (*d, *p);
-        let known = so != 0.0;
-        let empty = od == 0.0;
-        let nd = if empty { so } else { 0.5 * (od + so) };
-        let np = if empty { sp } else { 0.5 * (op + sp) };
-        *d = if known { nd } else { od };
-        *p = if known { np } else { op };
-        adopted += (known & empty) as usize;
-        averaged += (known & !empty) as usize;
-        u += du;
-        v += dv;
-    }
-    (adopted, averaged)
+    let walk = super::merge_simd::Walk {
+        u: fixed(u0 + x_lo as f64 * gx[0]),
+        v: fixed(v0 + x_lo as f64 * gx[1]),
+        du: fixed(gx[0]),
+        dv: fixed(gx[1]),
+        sw,
+        sh,
+    };
+    runs.run(drow, prow, src.occupancy, src.pheromone, &walk)
 }
 
 /// The cells x in [x_lo, x_hi) of a destination row whose source coordinates
