@@ -81,7 +81,7 @@ pub fn measure(side: u32, reps: usize) -> Result<MergeRow, BenchError> {
             result = Err(fail(e));
         }
     });
-    result?;
+    std::mem::replace(&mut result, Ok(()))?;
     let geometry = *dst.geometry();
     let reference = median_ns(reps, || {
         let r = roles::mapper::merge::merge_planes_reference(
