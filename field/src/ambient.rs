@@ -7,8 +7,12 @@
 //! - vertically, `col_sum[x]` (f64) holds the sum of column `x` over the rows of the current
 //!   row's window; the next row adds the row entering and drops the row leaving (one f64 add of
 //!   an exact f32 difference per column, wide over x);
-//! - horizontally, a blocked prefix sum of `col_sum` along the row, whose differences are the
-//!   window sums;
+//! - horizontally, a prefix sum of `col_sum` along the row, whose differences are the window
+//!   sums. The fast pass (`band_grouped`) takes the column sums of four consecutive rows and
+//!   sums their prefixes at once, one row per SIMD lane (`Dispatch::prefix_rows4`: 4 × 4
+//!   transposes, one add of loop-carried chain per four columns), where the reference pass
+//!   (`band_reference`, `Dispatch::reference`) sums one row at a time in eight interleaved
+//!   blocks (`kernels::prefix_sum`), a chain of dependent scalar adds;
 //! - the output is fused: `P' = P − (1 − e)·(P − min(P, α·Pa))`, written once per cell, so each
 //!   cell of `prev` is read once for the output (plus the running sums' reads of the rows entering
 //!   and leaving the window, which are cache-hot for small radii) and each cell of `next` is
@@ -25,7 +29,10 @@
 //! any window of the band. The prefix sum along a row adds at most `W` (the width) such values;
 //! a window sum is a difference of two prefixes, so it is within `(2·W + n_v)·u·S_row` of the
 //! exact window sum, `S_row` the sum over the row's window rows of the whole row (≥ every partial
-//! sum). Dividing by the cell count and rounding to f32 adds ½ ulp(f32). For the grids of the
+//! sum; the bound holds for any order of the additions, so for both passes, which differ only
+//! in that order and so by at most twice it: `field/tests/ambient_fast.rs` checks the fast pass
+//! against the reference within it). Dividing by the cell count and rounding to f32 adds
+//! ½ ulp(f32). For the grids of the
 //! property tests (values ≤ 1e6, W ≤ 32) that is far below 1e-6 relative; for a 4096² field it is
 //! below 2⁻³⁹·S_row / count — negligible against the f32 output unless one window holds values
 //! 1e10 times larger than its neighbours' (then the small means are absolutely, not relatively,
