@@ -194,19 +194,27 @@ fn band_grouped(
     d: Dispatch,
 ) {
     let (w, y0) = (rows.width, rows.y0);
-    let mut sums = ColumnSums::start(w, rows.prev, radius, y0, s, d);
+    let sums = ColumnSums::start(w, rows.prev, radius, y0, s, d);
     let rx = sums.radius_x;
     for c in &mut s.cols {
         c.clear();
         c.resize(w, 0.0);
     }
+    // Each group row's sums are the previous row's moved by one row, out of place (the group's
+    // first row continues from the last row of the group before, or from the start-up sums).
+    s.cols[GROUP_ROWS - 1].copy_from_slice(&s.col_sum);
     let mut y = y0;
     while y < y1 {
         let g = (y1 - y).min(GROUP_ROWS);
         for k in 0..g {
-            let rows_in = sums.advance(y + k, y0, rows.prev, s, d);
+            let (before, from_k) = s.cols.split_at_mut(k);
+            let (dst, after) = from_k.split_first_mut().expect("k < GROUP_ROWS");
+            let src = match k {
+                0 => &after[GROUP_ROWS - 2],
+                _ => &before[k - 1],
+            };
+            let rows_in = sums.advance_into(y + k, y0, rows.prev, src, dst, d);
             sums.set_inv_count(s, k, rows_in);
-            s.cols[k].copy_from_slice(&s.col_sum);
         }
         // A short last group repeats its last row in the unused lanes (results unused).
         let [c0, c1, c2, c3] = &s.cols;
@@ -376,6 +384,37 @@ impl ColumnSums {
             (true, false) => d.add_row(&mut s.col_sum, row(y + r)),
             (false, true) => d.sub_row(&mut s.col_sum, row(y - r - 1)),
             (false, false) => {}
+        }
+        (y + r).min(self.height - 1) - y.saturating_sub(r) + 1
+    }
+
+    /// As `advance`, out of place: `dst` = the sums of row `y` from `src`, those of row
+    /// `y − 1` (the same operations, so the same bits).
+    fn advance_into(
+        &self,
+        y: usize,
+        y0: usize,
+        prev: &[f32],
+        src: &[f64],
+        dst: &mut [f64],
+        d: Dispatch,
+    ) -> usize {
+        let (w, r) = (self.width, self.radius_y);
+        let row = |i: usize| &prev[i * w..(i + 1) * w];
+        let enters = y + r < self.height;
+        let leaves = y > y0 && y > r;
+        match (enters, leaves) {
+            (true, true) => {
+                let ahead = if y + r + 1 < self.height {
+                    row(y + r + 1)
+                } else {
+                    &[]
+                };
+                d.swap_row_into(dst, src, row(y + r), row(y - r - 1), ahead)
+            }
+            (true, false) => d.add_row_into(dst, src, row(y + r)),
+            (false, true) => d.sub_row_into(dst, src, row(y - r - 1)),
+            (false, false) => dst.copy_from_slice(src),
         }
         (y + r).min(self.height - 1) - y.saturating_sub(r) + 1
     }

@@ -160,6 +160,15 @@ macro_rules! dispatch {
 dispatch! {
     fn add_row(col_sum: &mut [f64], row: &[f32]);
     fn sub_row(col_sum: &mut [f64], row: &[f32]);
+    fn add_row_into(dst: &mut [f64], src: &[f64], row: &[f32]);
+    fn sub_row_into(dst: &mut [f64], src: &[f64], row: &[f32]);
+    fn swap_row_into(
+        dst: &mut [f64],
+        src: &[f64],
+        row_in: &[f32],
+        row_out: &[f32],
+        ahead: &[f32]
+    );
     fn swap_row(col_sum: &mut [f64], row_in: &[f32], row_out: &[f32], ahead: &[f32]);
     fn prefix_sum(col: &[f64], prefix: &mut [f64]);
     fn mean_row(prefix: &[f64], inv_count: &[f64], span: usize, out: &mut [f32]);
