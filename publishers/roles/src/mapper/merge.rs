@@ -211,7 +211,11 @@ fn merge_with(
         });
     }
     t.validate(&src.geometry, geometry)?;
-    if let Some((channel, index, value)) = src.first_non_finite() {
+    // The fast test over both planes (AVX2 where the CPU has it); where it fails, the first
+    // non-finite cell is looked up for the error.
+    let finite = runs.all_finite(src.occupancy) && runs.all_finite(src.pheromone);
+    let bad = if finite { None } else { src.first_non_finite() };
+    if let Some((channel, index, value)) = bad {
         return Err(MapError::NonFiniteCell {
             channel,
             index,
