@@ -2,7 +2,9 @@
 //! with separate processes.
 //!
 //! - `tick_vs_memcpy`: one tick of the plain (exponential) and ambient models against a same-size
-//!   memcpy, in this process;
+//!   memcpy, in this process (the ambient model's fast pass beside its reference pass);
+//! - `merge_vs_memcpy` (issue 33): seed 004's map merge against a memcpy of its two planes, in
+//!   this process, beside the reference merge;
 //! - `hop_ns`: a small message between two processes, ping-pong / 2: ours (`field::link`,
 //!   a 128-byte `PoseMsg`) against raw iceoryx2 publish-subscribe of a `u64`; wait and busy-poll;
 //! - `frame_ns`: a 1 MiB (512²) and a 16 MiB (2048²) frame from publish to "a reader holds it",
