@@ -2,7 +2,9 @@
 //! with separate processes.
 //!
 //! - `tick_vs_memcpy`: one tick of the plain (exponential) and ambient models against a same-size
-//!   memcpy, in this process;
+//!   memcpy, in this process (the ambient model's fast pass beside its reference pass);
+//! - `merge_vs_memcpy` (issue 33): seed 004's map merge against a memcpy of its two planes, in
+//!   this process, beside the reference merge;
 //! - `hop_ns`: a small message between two processes, ping-pong / 2: ours (`field::link`,
 //!   a 128-byte `PoseMsg`) against raw iceoryx2 publish-subscribe of a `u64`; wait and busy-poll;
 //! - `frame_ns`: a 1 MiB (512²) and a 16 MiB (2048²) frame from publish to "a reader holds it",
@@ -31,6 +33,7 @@ pub mod frames;
 pub mod gateway;
 pub mod hop;
 pub mod machine;
+pub mod merge;
 #[cfg(feature = "zenoh")]
 pub mod mirror;
 pub mod peer;
@@ -48,6 +51,7 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 pub use machine::Machine;
+pub use merge::MergeRow;
 pub use peer::{FrameTransport, Launcher, PeerSpec, ReaderWait};
 pub use stats::Latency;
 pub use tick::TickRow;
@@ -102,6 +106,8 @@ pub enum Mode {
 struct Plan {
     tick_widths: &'static [u32],
     tick_reps: usize,
+    /// Map sides of the merge section (its repetitions: `tick_reps`).
+    merge_sides: &'static [u32],
     hop_warmup: usize,
     hop_count: usize,
     /// (frames recorded, frames skipped) at 1 MiB and 16 MiB.
@@ -130,6 +136,7 @@ impl Mode {
             Mode::Full => Plan {
                 tick_widths: &[512, 1024, 2048, 4096],
                 tick_reps: 31,
+                merge_sides: &[256, 512, 1024],
                 hop_warmup: 2_000,
                 hop_count: 50_000,
                 frames_1mib: (300, 5),
@@ -148,6 +155,7 @@ impl Mode {
             Mode::Quick => Plan {
                 tick_widths: &[512, 1024, 2048, 4096],
                 tick_reps: 7,
+                merge_sides: &[256, 512, 1024],
                 hop_warmup: 500,
                 hop_count: 5_000,
                 frames_1mib: (60, 3),
@@ -166,6 +174,7 @@ impl Mode {
             Mode::Smoke => Plan {
                 tick_widths: &[512],
                 tick_reps: 3,
+                merge_sides: &[256],
                 hop_warmup: 20,
                 hop_count: 200,
                 frames_1mib: (4, 1),
@@ -207,10 +216,12 @@ pub enum Section {
     /// `tick_timing`: the field's tick-start lateness beside busy loops, with and without
     /// real-time scheduling.
     Timing,
+    /// `merge_vs_memcpy`: seed 004's map merge against a same-size memcpy.
+    Merge,
 }
 
 impl Section {
-    pub const ALL: [Section; 8] = [
+    pub const ALL: [Section; 9] = [
         Section::Tick,
         Section::Hop,
         Section::Frames,
@@ -219,6 +230,7 @@ impl Section {
         Section::Mirror,
         Section::CAbi,
         Section::Timing,
+        Section::Merge,
     ];
 }
 
@@ -336,6 +348,8 @@ pub struct Report {
     pub sections: Vec<Section>,
     /// Keyed by the grid size, e.g. `"1024x1024"`.
     pub tick_vs_memcpy: BTreeMap<String, TickRow>,
+    /// Keyed by the map size, e.g. `"256x256"`.
+    pub merge_vs_memcpy: BTreeMap<String, MergeRow>,
     pub hop_ns: Option<HopReport>,
     /// Keyed `"1MiB"` and `"16MiB"`.
     pub frame_ns: BTreeMap<String, FrameReport>,
@@ -400,6 +414,11 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         cx.say(&format!("tick vs memcpy at {w}x{w}"));
         tick_vs_memcpy.insert(format!("{w}x{w}"), tick::measure(w, plan.tick_reps)?);
     }
+    let mut merge_vs_memcpy = BTreeMap::new();
+    for &n in plan.merge_sides.iter().filter(|_| cx.runs(Section::Merge)) {
+        cx.say(&format!("merge vs memcpy at {n}x{n}"));
+        merge_vs_memcpy.insert(format!("{n}x{n}"), merge::measure(n, plan.tick_reps)?);
+    }
     let hop_ns = match cx.runs(Section::Hop) {
         true => Some(measure_hops(&mut cx)?),
         false => None,
@@ -453,6 +472,7 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         zenoh_built: ZENOH_BUILT,
         sections,
         tick_vs_memcpy,
+        merge_vs_memcpy,
         hop_ns,
         frame_ns,
         deposit_to_visible_us: visible.as_ref().map(|v| v.on_tick.clone()),

@@ -44,6 +44,7 @@ pub(crate) fn target(name: &str, op: &'static str, limit: f64, measured: f64) ->
 pub fn targets(r: &Report) -> Vec<Target> {
     let mut t = Vec::new();
     tick_targets(r, &mut t);
+    merge_targets(r, &mut t);
     hop_targets(r, &mut t);
     frame_targets(r, &mut t);
     visible_targets(r, &mut t);
@@ -127,6 +128,18 @@ fn tick_targets(r: &Report, t: &mut Vec<Target>) {
                 by.ambient_ratio,
             ));
         }
+    }
+}
+
+/// A map merge costs at most a few memcpys of its planes (issue 33).
+fn merge_targets(r: &Report, t: &mut Vec<Target>) {
+    for (size, row) in &r.merge_vs_memcpy {
+        t.push(target(
+            &format!("merge / memcpy at {size}"),
+            "<=",
+            3.0,
+            row.merge_ratio,
+        ));
     }
 }
 

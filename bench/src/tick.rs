@@ -3,6 +3,7 @@
 use std::hint::black_box;
 use std::time::Instant;
 
+use field::models::{step_plane_with, Dispatch, PlanePlan, Scratch};
 use field::{ChannelSpec, Evaporation, FieldConfig, Stepper};
 use serde::Serialize;
 
@@ -24,6 +25,10 @@ pub struct TickRow {
     /// The ambient tick (radius 0.5 m) on 2 threads, and 1-thread time / 2-thread time.
     pub ambient_2_threads_us: f64,
     pub ambient_thread_speedup: f64,
+    /// The reference ambient pass (one row's prefix sums at a time, what the tick ran before the
+    /// four-row pass) at radius 0.5 m, one thread, and its ratio to memcpy.
+    pub ambient_reference_us: f64,
+    pub ambient_reference_ratio: f64,
     /// The kernel instantiation the tick ran (`"avx2"` or `"portable"`).
     pub kernels: &'static str,
 }
@@ -34,6 +39,9 @@ pub struct RadiusRow {
     pub radius_cells: u32,
     pub ambient_us: f64,
     pub ambient_ratio: f64,
+    /// The reference pass at this radius (`TickRow::ambient_reference_us`).
+    pub reference_us: f64,
+    pub reference_ratio: f64,
 }
 
 /// The radii of the by-radius ambient measurement (m, on 5 cm cells: 1, 10 and 40 cells).
@@ -97,12 +105,29 @@ pub fn measure(width: u32, reps: usize) -> Result<TickRow, BenchError> {
             black_box(&mut *next);
         }))
     };
+    let (w, cell_m) = (width as usize, FieldConfig::default().cell_size_m);
+    let mut scratch = Scratch::default();
+    let mut reference_at = |radius_m: f32, next: &mut Vec<f32>| {
+        // The plan a Stepper computes for this channel (any factor: the work is the same).
+        let plan = PlanePlan::Ambient {
+            factor: 0.9994,
+            alpha: 0.5,
+            radius_cells: (radius_m / cell_m).round() as u32,
+        };
+        let reference = Dispatch::detect().reference();
+        median_ns(reps, || {
+            step_plane_with(plan, 0.0, w, &prev, next, &mut scratch, 1, reference);
+            black_box(&mut *next);
+        })
+    };
     let ambient = ambient_at(0.5, 1, &mut next)?;
+    let ambient_reference = reference_at(0.5, &mut next);
     let ambient_2 = ambient_at(0.5, 2, &mut next)?;
     let mut by_radius = Vec::new();
     for radius_m in AMBIENT_RADII_M {
         let ns = ambient_at(radius_m, 1, &mut next)?;
-        by_radius.push((radius_m, ns));
+        let reference = reference_at(radius_m, &mut next);
+        by_radius.push((radius_m, ns, reference));
     }
     let us = |ns: u64| (ns as f64 / 100.0).round() / 10.0;
     let ratio = |ns: u64| ((ns as f64 / memcpy as f64) * 100.0).round() / 100.0;
@@ -116,14 +141,18 @@ pub fn measure(width: u32, reps: usize) -> Result<TickRow, BenchError> {
         ambient_ratio: ratio(ambient),
         ambient_by_radius: by_radius
             .into_iter()
-            .map(|(radius_m, ns)| RadiusRow {
-                radius_cells: (radius_m / FieldConfig::default().cell_size_m).round() as u32,
+            .map(|(radius_m, ns, reference)| RadiusRow {
+                radius_cells: (radius_m / cell_m).round() as u32,
                 ambient_us: us(ns),
                 ambient_ratio: ratio(ns),
+                reference_us: us(reference),
+                reference_ratio: ratio(reference),
             })
             .collect(),
         ambient_2_threads_us: us(ambient_2),
         ambient_thread_speedup: ((ambient as f64 / ambient_2 as f64) * 100.0).round() / 100.0,
+        ambient_reference_us: us(ambient_reference),
+        ambient_reference_ratio: ratio(ambient_reference),
         kernels: field::models::Dispatch::detect().name(),
     })
 }

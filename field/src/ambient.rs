@@ -7,8 +7,12 @@
 //! - vertically, `col_sum[x]` (f64) holds the sum of column `x` over the rows of the current
 //!   row's window; the next row adds the row entering and drops the row leaving (one f64 add of
 //!   an exact f32 difference per column, wide over x);
-//! - horizontally, a blocked prefix sum of `col_sum` along the row, whose differences are the
-//!   window sums;
+//! - horizontally, a prefix sum of `col_sum` along the row, whose differences are the window
+//!   sums. The fast pass (`band_grouped`) takes the column sums of four consecutive rows and
+//!   sums their prefixes at once, one row per SIMD lane (`Dispatch::prefix_rows4`: 4 × 4
+//!   transposes, one add of loop-carried chain per four columns), where the reference pass
+//!   (`band_reference`, `Dispatch::reference`) sums one row at a time in eight interleaved
+//!   blocks (`kernels::prefix_sum`), a chain of dependent scalar adds;
 //! - the output is fused: `P' = P − (1 − e)·(P − min(P, α·Pa))`, written once per cell, so each
 //!   cell of `prev` is read once for the output (plus the running sums' reads of the rows entering
 //!   and leaving the window, which are cache-hot for small radii) and each cell of `next` is
@@ -25,7 +29,10 @@
 //! any window of the band. The prefix sum along a row adds at most `W` (the width) such values;
 //! a window sum is a difference of two prefixes, so it is within `(2·W + n_v)·u·S_row` of the
 //! exact window sum, `S_row` the sum over the row's window rows of the whole row (≥ every partial
-//! sum). Dividing by the cell count and rounding to f32 adds ½ ulp(f32). For the grids of the
+//! sum; the bound holds for any order of the additions, so for both passes, which differ only
+//! in that order and so by at most twice it: `field/tests/ambient_fast.rs` checks the fast pass
+//! against the reference within it). Dividing by the cell count and rounding to f32 adds
+//! ½ ulp(f32). For the grids of the
 //! property tests (values ≤ 1e6, W ≤ 32) that is far below 1e-6 relative; for a 4096² field it is
 //! below 2⁻³⁹·S_row / count — negligible against the f32 output unless one window holds values
 //! 1e10 times larger than its neighbours' (then the small means are absolutely, not relatively,
@@ -51,14 +58,21 @@ pub fn band_rows(height: usize, r: usize) -> usize {
     BAND_ROWS_MIN.max(4 * r).min(height).max(1)
 }
 
+/// Rows the fast pass sums horizontally at once (one per SIMD lane, `Dispatch::prefix_rows4`).
+const GROUP_ROWS: usize = 4;
+
 /// Per-thread scratch of the band pass (O(width), never O(grid)).
 #[derive(Debug, Default, Clone)]
 pub struct BandScratch {
     col_sum: Vec<f64>,
-    prefix: Vec<f64>,
     inv_count_x: Vec<f64>,
-    inv_count: Vec<f64>,
     diffused: Vec<f32>,
+    /// Per row of a group (the reference pass uses the first only): the column sums, the
+    /// padded prefix sums, 1 / (cells of each window) and the window rows that one was made for.
+    cols: [Vec<f64>; GROUP_ROWS],
+    prefix: [Vec<f64>; GROUP_ROWS],
+    inv_count: [Vec<f64>; GROUP_ROWS],
+    inv_count_rows: [usize; GROUP_ROWS],
 }
 
 /// What a band pass writes for each cell.
@@ -81,7 +95,6 @@ pub(crate) fn band(
     s: &mut BandScratch,
     dispatch: Dispatch,
 ) {
-    let height = prev.len() / width;
     debug_assert_eq!(out.len(), (y1 - y0) * width);
     let (kappa, radius) = match output {
         Output::Step {
@@ -96,39 +109,159 @@ pub(crate) fn band(
         Output::Step { kappa, .. } => (kappa, None),
         Output::Mean { radius_cells } => (0.0, Some(radius_cells)),
     };
-    if kappa == 0.0 && radius.is_none() {
-        let src = &prev[y0 * width..y1 * width];
-        match output {
-            Output::Step {
-                plan: PlanePlan::Subtract { loss },
-                ..
-            } => {
-                for (o, &p) in out.iter_mut().zip(src) {
-                    *o = subtract_toward_zero(p, loss);
-                }
+    let rows = Rows {
+        output,
+        kappa,
+        width,
+        prev,
+        y0,
+    };
+    match radius {
+        None if kappa == 0.0 => no_window(output, &prev[y0 * width..y1 * width], out),
+        None => {
+            for y in y0..y1 {
+                rows.write(
+                    y,
+                    None,
+                    &mut out[(y - y0) * width..(y - y0 + 1) * width],
+                    s,
+                    0,
+                    dispatch,
+                );
             }
-            Output::Step {
-                plan: PlanePlan::Scale { factor },
-                ..
-            } => scale(src, out, factor),
-            // Ambient with α = 0: min(P, 0) = 0 for P ≥ 0, so P' = P·e.
-            Output::Step {
-                plan: PlanePlan::Ambient { factor, .. },
-                ..
-            } => ambient_no_mean(src, out, factor),
-            Output::Mean { .. } => unreachable!("the mean always has a radius"),
         }
-        return;
+        Some(r) if dispatch.is_reference() => band_reference(&rows, r, y1, out, s, dispatch),
+        Some(r) => band_grouped(&rows, r, y1, out, s, dispatch),
     }
-    let mut sums = radius.map(|r| ColumnSums::start(width, height, r, prev, y0, s, dispatch));
-    s.diffused.resize(width, 0.0);
-    for y in y0..y1 {
-        let row = &prev[y * width..(y + 1) * width];
-        let o = &mut out[(y - y0) * width..(y - y0 + 1) * width];
-        if let Some(sums) = sums.as_mut() {
-            sums.advance(y, y0, prev, s, dispatch);
+}
+
+/// The plans without a window mean or diffusion: each cell from its own previous value.
+fn no_window(output: Output, src: &[f32], out: &mut [f32]) {
+    match output {
+        Output::Step {
+            plan: PlanePlan::Subtract { loss },
+            ..
+        } => {
+            for (o, &p) in out.iter_mut().zip(src) {
+                *o = subtract_toward_zero(p, loss);
+            }
         }
-        let src: &[f32] = if kappa > 0.0 {
+        Output::Step {
+            plan: PlanePlan::Scale { factor },
+            ..
+        } => scale(src, out, factor),
+        // Ambient with α = 0: min(P, 0) = 0 for P ≥ 0, so P' = P·e.
+        Output::Step {
+            plan: PlanePlan::Ambient { factor, .. },
+            ..
+        } => ambient_no_mean(src, out, factor),
+        Output::Mean { .. } => unreachable!("the mean always has a radius"),
+    }
+}
+
+/// The reference pass: one row at a time, the row's prefix sums by `kernels::prefix_sum`.
+fn band_reference(
+    rows: &Rows<'_>,
+    radius: usize,
+    y1: usize,
+    out: &mut [f32],
+    s: &mut BandScratch,
+    d: Dispatch,
+) {
+    let (w, y0) = (rows.width, rows.y0);
+    let mut sums = ColumnSums::start(w, rows.prev, radius, y0, s, d);
+    let rx = sums.radius_x;
+    for y in y0..y1 {
+        let rows_in = sums.advance(y, y0, rows.prev, s, d);
+        sums.set_inv_count(s, 0, rows_in);
+        let prefix = &mut s.prefix[0];
+        d.prefix_sum(&s.col_sum, &mut prefix[rx..=rx + w]);
+        pad(prefix, rx, w);
+        let o = &mut out[(y - y0) * w..(y - y0 + 1) * w];
+        rows.write(y, Some(rx), o, s, 0, d);
+    }
+}
+
+/// The fast pass: the column sums of `GROUP_ROWS` consecutive rows, then their prefix sums at
+/// once (`Dispatch::prefix_rows4`, one row per lane), then the rows' outputs. Groups start at
+/// the band's first row, so they too are independent of the thread count.
+fn band_grouped(
+    rows: &Rows<'_>,
+    radius: usize,
+    y1: usize,
+    out: &mut [f32],
+    s: &mut BandScratch,
+    d: Dispatch,
+) {
+    let (w, y0) = (rows.width, rows.y0);
+    let sums = ColumnSums::start(w, rows.prev, radius, y0, s, d);
+    let rx = sums.radius_x;
+    for c in &mut s.cols {
+        c.clear();
+        c.resize(w, 0.0);
+    }
+    // Each group row's sums are the previous row's moved by one row, out of place (the group's
+    // first row continues from the last row of the group before, or from the start-up sums).
+    s.cols[GROUP_ROWS - 1].copy_from_slice(&s.col_sum);
+    let mut y = y0;
+    while y < y1 {
+        let g = (y1 - y).min(GROUP_ROWS);
+        for k in 0..g {
+            let (before, from_k) = s.cols.split_at_mut(k);
+            let (dst, after) = from_k.split_first_mut().expect("k < GROUP_ROWS");
+            let src = match k {
+                0 => &after[GROUP_ROWS - 2],
+                _ => &before[k - 1],
+            };
+            let rows_in = sums.advance_into(y + k, y0, rows.prev, src, dst, d);
+            sums.set_inv_count(s, k, rows_in);
+        }
+        // A short last group repeats its last row in the unused lanes (results unused).
+        let [c0, c1, c2, c3] = &s.cols;
+        let cols = [c0, c1, c2, c3].map(|c| c.as_slice());
+        let cols = std::array::from_fn(|k| cols[k.min(g - 1)]);
+        let [p0, p1, p2, p3] = &mut s.prefix;
+        d.prefix_rows4(cols, [p0, p1, p2, p3].map(|p| &mut p[rx..=rx + w]));
+        for k in 0..g {
+            pad(&mut s.prefix[k], rx, w);
+            let o = &mut out[(y + k - y0) * w..(y + k - y0 + 1) * w];
+            rows.write(y + k, Some(rx), o, s, k, d);
+        }
+        y += g;
+    }
+}
+
+/// Fills the right pad of a prefix row with the row's total (the left pad stays 0).
+fn pad(prefix: &mut [f64], rx: usize, w: usize) {
+    let total = prefix[rx + w];
+    prefix[rx + w + 1..].fill(total);
+}
+
+/// What every row of a band shares.
+struct Rows<'a> {
+    output: Output,
+    kappa: f32,
+    width: usize,
+    prev: &'a [f32],
+    y0: usize,
+}
+
+impl Rows<'_> {
+    /// Writes output row `y` into `o`, from the window sums of group row `k` of `s` (prefix
+    /// sums padded by `radius_x`, or no window).
+    fn write(
+        &self,
+        y: usize,
+        radius_x: Option<usize>,
+        o: &mut [f32],
+        s: &mut BandScratch,
+        k: usize,
+        d: Dispatch,
+    ) {
+        let (width, prev) = (self.width, self.prev);
+        let height = prev.len() / width;
+        let row = &prev[y * width..(y + 1) * width];
+        let src: &[f32] = if self.kappa > 0.0 {
             let up = if y > 0 {
                 &prev[(y - 1) * width..y * width]
             } else {
@@ -139,16 +272,16 @@ pub(crate) fn band(
             } else {
                 row
             };
-            diffuse_row(row, up, down, kappa, &mut s.diffused);
+            s.diffused.resize(width, 0.0);
+            diffuse_row(row, up, down, self.kappa, &mut s.diffused);
             &s.diffused
         } else {
             row
         };
-        match output {
-            Output::Mean { .. } => {
-                let rx = sums.as_ref().map_or(0, |c| c.radius_x);
-                dispatch.mean_row(&s.prefix, &s.inv_count, 2 * rx + 1, o);
-            }
+        let span = 2 * radius_x.unwrap_or(0) + 1;
+        let (prefix, inv) = (&s.prefix[k], &s.inv_count[k]);
+        match self.output {
+            Output::Mean { .. } => d.mean_row(prefix, inv, span, o),
             Output::Step { plan, .. } => match plan {
                 PlanePlan::Scale { factor } => scale(src, o, factor),
                 PlanePlan::Subtract { loss } => {
@@ -156,16 +289,8 @@ pub(crate) fn band(
                         *c = subtract_toward_zero(p, loss);
                     }
                 }
-                PlanePlan::Ambient { factor, alpha, .. } => match sums.as_ref() {
-                    Some(c) => dispatch.decay_row(
-                        &s.prefix,
-                        &s.inv_count,
-                        2 * c.radius_x + 1,
-                        src,
-                        o,
-                        factor,
-                        alpha,
-                    ),
+                PlanePlan::Ambient { factor, alpha, .. } => match radius_x {
+                    Some(_) => d.decay_row(prefix, inv, span, src, o, factor, alpha),
                     None => ambient_no_mean(src, o, factor),
                 },
             },
@@ -182,38 +307,42 @@ fn ambient_no_mean(src: &[f32], out: &mut [f32], factor: f32) {
     }
 }
 
-/// The vertical running sums of one band and the per-row prefix sums derived from them.
+/// The vertical running sums of one band (`BandScratch::col_sum`).
 struct ColumnSums {
     radius_y: usize,
     radius_x: usize,
     width: usize,
     height: usize,
-    inv_count_rows: usize,
 }
 
 impl ColumnSums {
     fn start(
         width: usize,
-        height: usize,
-        radius: usize,
         prev: &[f32],
+        radius: usize,
         y0: usize,
         s: &mut BandScratch,
         dispatch: Dispatch,
     ) -> Self {
+        let height = prev.len() / width;
         let (radius_x, radius_y) = (radius.min(width), radius.min(height));
         s.col_sum.clear();
         s.col_sum.resize(width, 0.0);
-        // The left pad stays 0 (= Σ of nothing); the rest is rewritten every row.
-        s.prefix.clear();
-        s.prefix.resize(width + 2 * radius_x + 1, 0.0);
+        // The left pads stay 0 (= Σ of nothing); the rest is rewritten every row.
+        for p in &mut s.prefix {
+            p.clear();
+            p.resize(width + 2 * radius_x + 1, 0.0);
+        }
         s.inv_count_x.clear();
         s.inv_count_x
             .extend((0..width).map(|x| {
                 1.0 / ((x + radius_x + 1).min(width) - x.saturating_sub(radius_x)) as f64
             }));
-        s.inv_count.clear();
-        s.inv_count.resize(width, 0.0);
+        for (c, rows) in s.inv_count.iter_mut().zip(&mut s.inv_count_rows) {
+            c.clear();
+            c.resize(width, 0.0);
+            *rows = 0;
+        }
         // The window of row y0 without its last row (row y0 + r enters in `advance`).
         for y in y0.saturating_sub(radius_y)..(y0 + radius_y).min(height) {
             dispatch.add_row(&mut s.col_sum, &prev[y * width..(y + 1) * width]);
@@ -223,14 +352,20 @@ impl ColumnSums {
             radius_x,
             width,
             height,
-            inv_count_rows: 0,
         }
     }
 
-    /// Moves the sums to row `y` (rows in order from the band's first row `y0`) and computes the
-    /// row's prefix sums into `s.prefix`.
-    fn advance(&mut self, y: usize, y0: usize, prev: &[f32], s: &mut BandScratch, d: Dispatch) {
-        let (w, r, rx) = (self.width, self.radius_y, self.radius_x);
+    /// Moves the sums to row `y` (rows in order from the band's first row `y0`); returns the
+    /// number of rows in row `y`'s window.
+    fn advance(
+        &mut self,
+        y: usize,
+        y0: usize,
+        prev: &[f32],
+        s: &mut BandScratch,
+        d: Dispatch,
+    ) -> usize {
+        let (w, r) = (self.width, self.radius_y);
         let row = |i: usize| &prev[i * w..(i + 1) * w];
         let enters = y + r < self.height;
         // Row y − r − 1 was summed only if it is a row of the band's start-up window or later.
@@ -250,17 +385,51 @@ impl ColumnSums {
             (false, true) => d.sub_row(&mut s.col_sum, row(y - r - 1)),
             (false, false) => {}
         }
-        let rows_in = (y + r).min(self.height - 1) - y.saturating_sub(r) + 1;
-        if rows_in != self.inv_count_rows {
-            let inv_rows = 1.0 / rows_in as f64;
-            for (c, &cx) in s.inv_count.iter_mut().zip(&s.inv_count_x) {
-                *c = cx * inv_rows;
+        (y + r).min(self.height - 1) - y.saturating_sub(r) + 1
+    }
+
+    /// As `advance`, out of place: `dst` = the sums of row `y` from `src`, those of row
+    /// `y − 1` (the same operations, so the same bits).
+    fn advance_into(
+        &self,
+        y: usize,
+        y0: usize,
+        prev: &[f32],
+        src: &[f64],
+        dst: &mut [f64],
+        d: Dispatch,
+    ) -> usize {
+        let (w, r) = (self.width, self.radius_y);
+        let row = |i: usize| &prev[i * w..(i + 1) * w];
+        let enters = y + r < self.height;
+        let leaves = y > y0 && y > r;
+        match (enters, leaves) {
+            (true, true) => {
+                let ahead = if y + r + 1 < self.height {
+                    row(y + r + 1)
+                } else {
+                    &[]
+                };
+                d.swap_row_into(dst, src, row(y + r), row(y - r - 1), ahead)
             }
-            self.inv_count_rows = rows_in;
+            (true, false) => d.add_row_into(dst, src, row(y + r)),
+            (false, true) => d.sub_row_into(dst, src, row(y - r - 1)),
+            (false, false) => dst.copy_from_slice(src),
         }
-        d.prefix_sum(&s.col_sum, &mut s.prefix[rx..=rx + w]);
-        let total = s.prefix[rx + w];
-        s.prefix[rx + w + 1..].fill(total);
+        (y + r).min(self.height - 1) - y.saturating_sub(r) + 1
+    }
+
+    /// Makes `s.inv_count[k]` 1 / (cells of each window of a row whose window has `rows_in`
+    /// rows).
+    fn set_inv_count(&self, s: &mut BandScratch, k: usize, rows_in: usize) {
+        if s.inv_count_rows[k] == rows_in {
+            return;
+        }
+        let inv_rows = 1.0 / rows_in as f64;
+        for (c, &cx) in s.inv_count[k].iter_mut().zip(&s.inv_count_x) {
+            *c = cx * inv_rows;
+        }
+        s.inv_count_rows[k] = rows_in;
     }
 }
 

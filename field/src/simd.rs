@@ -14,6 +14,7 @@
 #![allow(unsafe_code)]
 
 pub(crate) mod kernels;
+mod rows;
 
 use std::sync::OnceLock;
 
@@ -22,6 +23,9 @@ use std::sync::OnceLock;
 pub struct Dispatch {
     /// True only if the running CPU has AVX2 (the constructor checks it).
     avx2: bool,
+    /// The reference plane pass (one row at a time, `kernels::prefix_sum`) instead of the fast
+    /// one (four rows at a time, `rows`); see `crate::ambient`.
+    reference: bool,
 }
 
 impl Dispatch {
@@ -30,25 +34,62 @@ impl Dispatch {
         static AVX2: OnceLock<bool> = OnceLock::new();
         Self {
             avx2: *AVX2.get_or_init(avx2_available),
+            reference: false,
         }
     }
 
     /// The baseline instantiation, on any CPU.
     pub fn portable() -> Self {
-        Self { avx2: false }
+        Self {
+            avx2: false,
+            reference: false,
+        }
     }
 
     /// The AVX2 instantiation if this CPU has AVX2 (`None` otherwise).
     pub fn avx2() -> Option<Self> {
-        avx2_available().then_some(Self { avx2: true })
+        avx2_available().then_some(Self {
+            avx2: true,
+            reference: false,
+        })
     }
 
-    /// "avx2" or "portable".
-    pub fn name(&self) -> &'static str {
+    /// The same instantiation running the reference ambient pass (the one-row prefix sums the
+    /// fast pass is tested against; results within the bound of `crate::ambient`).
+    pub fn reference(self) -> Self {
+        Self {
+            reference: true,
+            ..self
+        }
+    }
+
+    /// True for [`Dispatch::reference`].
+    pub fn is_reference(&self) -> bool {
+        self.reference
+    }
+
+    /// `out[k][i] = Σ cols[k][..i]` for four rows at once (`rows`): the same bits in both
+    /// instantiations.
+    #[inline]
+    pub(crate) fn prefix_rows4(self, cols: [&[f64]; 4], out: [&mut [f64]; 4]) {
+        #[cfg(target_arch = "x86_64")]
         if self.avx2 {
-            "avx2"
-        } else {
-            "portable"
+            // SAFETY: `avx2` is true only when `is_x86_feature_detected!("avx2")` returned true
+            // on this CPU (`Dispatch::detect` / `Dispatch::avx2` set it), the one requirement
+            // of `prefix_rows4_avx2`.
+            unsafe { rows::prefix_rows4_avx2(cols, out) };
+            return;
+        }
+        rows::prefix_rows4_portable(cols, out)
+    }
+
+    /// "avx2" or "portable" (with " reference" for the reference pass).
+    pub fn name(&self) -> &'static str {
+        match (self.avx2, self.reference) {
+            (true, false) => "avx2",
+            (false, false) => "portable",
+            (true, true) => "avx2 reference",
+            (false, true) => "portable reference",
         }
     }
 }
@@ -119,6 +160,15 @@ macro_rules! dispatch {
 dispatch! {
     fn add_row(col_sum: &mut [f64], row: &[f32]);
     fn sub_row(col_sum: &mut [f64], row: &[f32]);
+    fn add_row_into(dst: &mut [f64], src: &[f64], row: &[f32]);
+    fn sub_row_into(dst: &mut [f64], src: &[f64], row: &[f32]);
+    fn swap_row_into(
+        dst: &mut [f64],
+        src: &[f64],
+        row_in: &[f32],
+        row_out: &[f32],
+        ahead: &[f32]
+    );
     fn swap_row(col_sum: &mut [f64], row_in: &[f32], row_out: &[f32], ahead: &[f32]);
     fn prefix_sum(col: &[f64], prefix: &mut [f64]);
     fn mean_row(prefix: &[f64], inv_count: &[f64], span: usize, out: &mut [f32]);

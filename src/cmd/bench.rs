@@ -68,6 +68,8 @@ enum SectionArg {
     CAbi,
     /// Tick-start lateness beside two busy loops, with and without real-time scheduling.
     Timing,
+    /// Seed 004's map merge vs memcpy.
+    Merge,
 }
 
 impl From<SectionArg> for Section {
@@ -81,6 +83,7 @@ impl From<SectionArg> for Section {
             SectionArg::Mirror => Section::Mirror,
             SectionArg::CAbi => Section::CAbi,
             SectionArg::Timing => Section::Timing,
+            SectionArg::Merge => Section::Merge,
         }
     }
 }
@@ -199,6 +202,9 @@ fn print_tables(r: &Report) {
     );
     if !r.tick_vs_memcpy.is_empty() {
         print_ticks(r);
+    }
+    if !r.merge_vs_memcpy.is_empty() {
+        print_merges(r);
     }
     print_hop(r);
     print_frames(r);
@@ -396,26 +402,57 @@ fn print_c_abi(c: &pheromone_bench::c_abi::CAbiReport) {
     );
 }
 
+fn print_merges(r: &Report) {
+    println!(
+        "\nmerge / memcpy           memcpy µs   merge µs  ratio   reference µs  ratio   average µs  ratio"
+    );
+    for (size, m) in &r.merge_vs_memcpy {
+        println!(
+            "{size:<22} {:>10.1} {:>10.1} {:>6.2} {:>14.1} {:>6.2} {:>12.1} {:>6.2}",
+            m.memcpy_us,
+            m.merge_us,
+            m.merge_ratio,
+            m.reference_us,
+            m.reference_ratio,
+            m.average_us,
+            m.average_ratio
+        );
+    }
+}
+
 fn print_ticks(r: &Report) {
-    println!("\ntick / memcpy            memcpy µs   plain µs  ratio   ambient µs  ratio");
+    println!(
+        "\ntick / memcpy            memcpy µs   plain µs  ratio   ambient µs  ratio   reference µs  ratio"
+    );
     for (size, t) in &r.tick_vs_memcpy {
         println!(
-            "{size:<22} {:>10.1} {:>10.1} {:>6.2} {:>12.1} {:>6.2}",
-            t.memcpy_us, t.exponential_us, t.exponential_ratio, t.ambient_us, t.ambient_ratio
+            "{size:<22} {:>10.1} {:>10.1} {:>6.2} {:>12.1} {:>6.2} {:>14.1} {:>6.2}",
+            t.memcpy_us,
+            t.exponential_us,
+            t.exponential_ratio,
+            t.ambient_us,
+            t.ambient_ratio,
+            t.ambient_reference_us,
+            t.ambient_reference_ratio
         );
     }
     println!(
-        "\nambient by radius ({} kernels)   radius cells: ratio …   2 threads µs  speedup",
+        "\nambient by radius ({} kernels)   radius cells: ratio (reference's) …   2 threads µs  speedup",
         { r.tick_vs_memcpy.values().next().map_or("-", |t| t.kernels) }
     );
     for (size, t) in &r.tick_vs_memcpy {
         let radii: Vec<String> = t
             .ambient_by_radius
             .iter()
-            .map(|b| format!("r{}: {:.2}", b.radius_cells, b.ambient_ratio))
+            .map(|b| {
+                format!(
+                    "r{}: {:.2} (ref {:.2})",
+                    b.radius_cells, b.ambient_ratio, b.reference_ratio
+                )
+            })
             .collect();
         println!(
-            "{size:<22} {:<28} {:>12.1} {:>8.2}",
+            "{size:<22} {:<52} {:>12.1} {:>8.2}",
             radii.join("  "),
             t.ambient_2_threads_us,
             t.ambient_thread_speedup

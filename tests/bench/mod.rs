@@ -60,7 +60,11 @@ fn bench_smoke_run_reports_every_figure_as_one_json_object() {
                 "tick_vs_memcpy.{size}.{k}: {row}"
             );
         }
-        for k in ["exponential_ratio", "ambient_ratio"] {
+        for k in [
+            "exponential_ratio",
+            "ambient_ratio",
+            "ambient_reference_ratio",
+        ] {
             assert!(
                 row[k].as_f64().is_some_and(|v| v > 0.0),
                 "tick_vs_memcpy.{size}.{k}: {row}"
@@ -316,6 +320,39 @@ fn bench_only_runs_the_sections_it_is_given() {
     assert_eq!(r["sections"], serde_json::json!(["tick"]), "{r}");
     assert!(!r["tick_vs_memcpy"].as_object().unwrap().is_empty(), "{r}");
     assert!(r["frame_ns"].as_object().unwrap().is_empty(), "{r}");
+    assert!(r["merge_vs_memcpy"].as_object().unwrap().is_empty(), "{r}");
+    // The merge section (issue 33): the merge and its reference against a memcpy, and a target.
+    let out = run(&["bench", "--smoke", "--json", "--only", "merge"]);
+    assert!(out.status.success(), "bench failed: {}", stderr(&out));
+    let m = json(&out);
+    let merges = m["merge_vs_memcpy"].as_object().expect("merge_vs_memcpy");
+    assert!(!merges.is_empty(), "{m}");
+    for (size, row) in merges {
+        for k in [
+            "memcpy_us",
+            "merge_us",
+            "merge_ratio",
+            "reference_us",
+            "reference_ratio",
+            "average_us",
+            "average_ratio",
+        ] {
+            assert!(
+                row[k].as_f64().is_some_and(|v| v > 0.0),
+                "{size}.{k}: {row}"
+            );
+        }
+    }
+    let names: Vec<&str> = m["targets"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|t| t["name"].as_str())
+        .collect();
+    assert!(
+        names.iter().any(|n| n.starts_with("merge / memcpy")),
+        "{names:?}"
+    );
     for k in ["hop_ns", "deposit_to_visible_us", "gateway_pir", "mirror"] {
         assert!(r[k].is_null(), "{k} measured with --only tick: {r}");
     }

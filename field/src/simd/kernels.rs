@@ -76,6 +76,62 @@ pub(crate) fn swap_row(col_sum: &mut [f64], row_in: &[f32], row_out: &[f32], ahe
     }
 }
 
+/// As `add_row`, out of place: `dst = src + row` (the fast pass keeps each group row's sums).
+#[inline(always)]
+pub(crate) fn add_row_into(dst: &mut [f64], src: &[f64], row: &[f32]) {
+    for ((d, &c), &v) in dst.iter_mut().zip(src).zip(row) {
+        *d = c + v as f64;
+    }
+}
+
+/// As `sub_row`, out of place.
+#[inline(always)]
+pub(crate) fn sub_row_into(dst: &mut [f64], src: &[f64], row: &[f32]) {
+    for ((d, &c), &v) in dst.iter_mut().zip(src).zip(row) {
+        *d = c - v as f64;
+    }
+}
+
+/// As `swap_row`, out of place (the same operations, so the same bits): `dst = src + (in −
+/// out)`, prefetching `ahead`.
+#[inline(always)]
+pub(crate) fn swap_row_into(
+    dst: &mut [f64],
+    src: &[f64],
+    row_in: &[f32],
+    row_out: &[f32],
+    ahead: &[f32],
+) {
+    const LINE: usize = 16; // f32 per 64-byte cache line
+    let n = dst
+        .len()
+        .min(src.len())
+        .min(row_in.len())
+        .min(row_out.len());
+    let full = n - n % LINE;
+    let chunks = dst[..full]
+        .chunks_exact_mut(LINE)
+        .zip(src[..full].chunks_exact(LINE))
+        .zip(row_in[..full].chunks_exact(LINE))
+        .zip(row_out[..full].chunks_exact(LINE));
+    for (k, (((d, c), ri), ro)) in chunks.enumerate() {
+        if let Some(a) = ahead.get(k * LINE) {
+            super::prefetch(a);
+        }
+        for (((d, &c), &i), &o) in d.iter_mut().zip(c).zip(ri).zip(ro) {
+            *d = c + (i as f64 - o as f64);
+        }
+    }
+    for (((d, &c), &i), &o) in dst[full..n]
+        .iter_mut()
+        .zip(&src[full..n])
+        .zip(&row_in[full..n])
+        .zip(&row_out[full..n])
+    {
+        *d = c + (i as f64 - o as f64);
+    }
+}
+
 /// `prefix[i] = Σ col[..i]` (`prefix` is one longer than `col`). The row is cut into eight
 /// blocks whose local sums run interleaved, so the adds overlap instead of waiting on each other;
 /// a second, vectorized pass adds to each block the total of the blocks before it.

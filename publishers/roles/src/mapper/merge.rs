@@ -163,13 +163,40 @@ impl LocalMap {
 }
 
 /// The merge pass over destination planes (occupancy, pheromone) of `geometry` (what
-/// [`LocalMap::merge`] runs), by `rule` with log-odds clamped to ±`logodds_max`.
+/// [`LocalMap::merge`] runs), by `rule` with log-odds clamped to ±`logodds_max`: the reference
+/// pass's result bit for bit (`merge_planes_reference`); by `AdoptUnknown`, each run of
+/// destination cells merged eight at a time where the CPU has AVX2 (`merge_simd`).
 pub fn merge_planes(
+    geometry: &GridGeometry,
+    planes: (&mut [f32], &mut [f32]),
+    src: &MapView<'_>,
+    t: &MergeTransform,
+    rule: (MergeRule, f32),
+) -> Result<MergeStats, MapError> {
+    let runs = super::merge_simd::Runs::detect();
+    merge_with(geometry, planes, src, t, (runs, rule))
+}
+
+/// The reference merge pass: every run of destination cells one cell at a time. Kept for the
+/// tests and the bench, which compare [`merge_planes`] with it.
+#[doc(hidden)]
+pub fn merge_planes_reference(
+    geometry: &GridGeometry,
+    planes: (&mut [f32], &mut [f32]),
+    src: &MapView<'_>,
+    t: &MergeTransform,
+    rule: (MergeRule, f32),
+) -> Result<MergeStats, MapError> {
+    let runs = super::merge_simd::Runs::Scalar;
+    merge_with(geometry, planes, src, t, (runs, rule))
+}
+
+fn merge_with(
     geometry: &GridGeometry,
     (occupancy, pheromone): (&mut [f32], &mut [f32]),
     src: &MapView<'_>,
     t: &MergeTransform,
-    (rule, logodds_max): (MergeRule, f32),
+    (runs, rule): (super::merge_simd::Runs, (MergeRule, f32)),
 ) -> Result<MergeStats, MapError> {
     let plane = src.geometry.cells();
     if src.occupancy.len() != plane || src.pheromone.len() != plane {
@@ -181,34 +208,18 @@ pub fn merge_planes(
         });
     }
     t.validate(&src.geometry, geometry)?;
-    if let Some((channel, index, value)) = src.first_non_finite() {
+    // The fast test over both planes (AVX2 where the CPU has it); where it fails, the first
+    // non-finite cell is looked up for the error.
+    let finite = runs.all_finite(src.occupancy) && runs.all_finite(src.pheromone);
+    let bad = if finite { None } else { src.first_non_finite() };
+    if let Some((channel, index, value)) = bad {
         return Err(MapError::NonFiniteCell {
             channel,
             index,
             value,
         });
     }
-    // The inverse transform in grid units: source cell coordinates of destination cell (x, y)
-    // are g0 + x·gx + y·gy (affine), so each row is a walk of additions.
-    let (h, hs) = (geometry.cell_size_m as f64, src.geometry.cell_size_m as f64);
-    let centre = |x: f64, y: f64| {
-        [
-            geometry.origin_x_m as f64 + (x + 0.5) * h,
-            geometry.origin_y_m as f64 + (y + 0.5) * h,
-        ]
-    };
-    let to_src_grid = |q: [f64; 2]| {
-        let p = t.inverse(q);
-        [
-            (p[0] - src.geometry.origin_x_m as f64) / hs,
-            (p[1] - src.geometry.origin_y_m as f64) / hs,
-        ]
-    };
-    let g0 = to_src_grid(centre(0.0, 0.0));
-    let g1 = to_src_grid(centre(1.0, 0.0));
-    let g2 = to_src_grid(centre(0.0, 1.0));
-    let gx = [g1[0] - g0[0], g1[1] - g0[1]];
-    let gy = [g2[0] - g0[0], g2[1] - g0[1]];
+    let [g0, gx, gy] = lookup(geometry, src, t);
     let (w, hgt) = (geometry.width as usize, geometry.height as usize);
     let (sw, sh) = (src.geometry.width as usize, src.geometry.height as usize);
     let mut stats = MergeStats::default();
@@ -237,14 +248,15 @@ pub fn merge_planes(
                     continue;
                 }
                 let (a, b) = merge_run(
-                    (&mut *occupancy, &mut *pheromone),
+                    occupancy,
+                    pheromone,
                     src,
                     (y * w + x_lo, x_hi - x_lo),
                     [g0[0] + y as f64 * gy[0], g0[1] + y as f64 * gy[1]],
                     x_lo,
                     gx,
                     (sw, sh),
-                    (rule, logodds_max),
+                    (runs, rule),
                 );
                 stats.adopted += a;
                 stats.averaged += b;
@@ -254,23 +266,52 @@ pub fn merge_planes(
     Ok(stats)
 }
 
-/// Merges `len` destination cells from index `start` on (row cells x_lo.., whose source
-/// coordinates are (u0 + x·gx[0], v0 + x·gx[1]), all inside the source); returns the cells
-/// (adopted, averaged).
+/// The inverse transform in source grid units: the source cell coordinates of destination cell
+/// (x, y) are `g0 + x·gx + y·gy` (affine), so each row is a walk of additions. Returns
+/// `[g0, gx, gy]`.
+fn lookup(geometry: &GridGeometry, src: &MapView<'_>, t: &MergeTransform) -> [[f64; 2]; 3] {
+    let (h, hs) = (geometry.cell_size_m as f64, src.geometry.cell_size_m as f64);
+    let centre = |x: f64, y: f64| {
+        [
+            geometry.origin_x_m as f64 + (x + 0.5) * h,
+            geometry.origin_y_m as f64 + (y + 0.5) * h,
+        ]
+    };
+    let to_src_grid = |q: [f64; 2]| {
+        let p = t.inverse(q);
+        [
+            (p[0] - src.geometry.origin_x_m as f64) / hs,
+            (p[1] - src.geometry.origin_y_m as f64) / hs,
+        ]
+    };
+    let g0 = to_src_grid(centre(0.0, 0.0));
+    let g1 = to_src_grid(centre(1.0, 0.0));
+    let g2 = to_src_grid(centre(0.0, 1.0));
+    [
+        g0,
+        [g1[0] - g0[0], g1[1] - g0[1]],
+        [g2[0] - g0[0], g2[1] - g0[1]],
+    ]
+}
+
 /// 1.0 in the 32.32 fixed point of [`merge_run`]'s walk.
 const FIXED_ONE: f64 = (1u64 << 32) as f64;
 
+/// Merges `len` destination cells from index `start` on (row cells x_lo.., whose source
+/// coordinates are (u0 + x·gx[0], v0 + x·gx[1]), all inside the source); returns the cells
+/// (adopted, averaged).
 #[allow(clippy::too_many_arguments)]
 #[inline]
 fn merge_run(
-    (occupancy, pheromone): (&mut [f32], &mut [f32]),
+    occupancy: &mut [f32],
+    pheromone: &mut [f32],
     src: &MapView<'_>,
     (start, len): (usize, usize),
     [u0, v0]: [f64; 2],
     x_lo: usize,
     gx: [f64; 2],
     (sw, sh): (usize, usize),
-    (rule, logodds_max): (MergeRule, f32),
+    (runs, (rule, logodds_max)): (super::merge_simd::Runs, (MergeRule, f32)),
 ) -> (usize, usize) {
     let drow = &mut occupancy[start..start + len];
     let prow = &mut pheromone[start..start + len];
@@ -279,43 +320,49 @@ fn merge_run(
     // the loop. A run is at most a tile wide, so the step's rounding (≤ 2⁻³² cell per step)
     // moves a lookup only for a centre within about 2⁻²⁵ cell of a cell edge.
     let fixed = |c: f64| (c * FIXED_ONE).round() as i64;
-    let (mut u, mut v) = (
-        fixed(u0 + x_lo as f64 * gx[0]),
-        fixed(v0 + x_lo as f64 * gx[1]),
-    );
-    let (du, dv) = (fixed(gx[0]), fixed(gx[1]));
-    let (u_max, v_max) = (sw as i64 - 1, sh as i64 - 1);
-    let (mut adopted, mut averaged) = (0usize, 0usize);
+    let walk = super::merge_simd::Walk {
+        u: fixed(u0 + x_lo as f64 * gx[0]),
+        v: fixed(v0 + x_lo as f64 * gx[1]),
+        du: fixed(gx[0]),
+        dv: fixed(gx[1]),
+        sw,
+        sh,
+    };
+    match rule {
+        MergeRule::AdoptUnknown => runs.run(drow, prow, src.occupancy, src.pheromone, &walk),
+        MergeRule::Average => average_run((drow, prow), src, &walk, logodds_max),
+    }
+}
+
+/// Seed 004's rule over one run, one cell at a time: every cell either map knows (a nonzero
+/// log-odds or pheromone on either side) becomes the average of both, occupancy as
+/// probabilities ([`average_logodds`]); returns (0 adopted, averaged).
+fn average_run(
+    (drow, prow): (&mut [f32], &mut [f32]),
+    src: &MapView<'_>,
+    walk: &super::merge_simd::Walk,
+    logodds_max: f32,
+) -> (usize, usize) {
+    let (u_max, v_max) = (walk.sw as i64 - 1, walk.sh as i64 - 1);
+    let (mut u, mut v) = (walk.u, walk.v);
+    let mut averaged = 0usize;
     for (d, p) in drow.iter_mut().zip(prow.iter_mut()) {
         // `row_span` keeps u in [0, sw) and v in [0, sh); the clamp only guards rounding.
         let (cu, cv) = ((u >> 32).clamp(0, u_max), (v >> 32).clamp(0, v_max));
-        let i = cv as usize * sw + cu as usize;
+        let i = cv as usize * walk.sw + cu as usize;
         let (so, sp) = (src.occupancy[i], src.pheromone[i]);
         let (od, op) = (*d, *p);
-        match rule {
-            MergeRule::AdoptUnknown => {
-                let known = so != 0.0;
-                let empty = od == 0.0;
-                let nd = if empty { so } else { 0.5 * (od + so) };
-                let np = if empty { sp } else { 0.5 * (op + sp) };
-                *d = if known { nd } else { od };
-                *p = if known { np } else { op };
-                adopted += (known & empty) as usize;
-                averaged += (known & !empty) as usize;
-            }
-            MergeRule::Average => {
-                if so != 0.0 || od != 0.0 || sp != 0.0 || op != 0.0 {
-                    *d = average_logodds(od, so, logodds_max);
-                    *p = 0.5 * (op + sp);
-                    averaged += 1;
-                }
-            }
+        if so != 0.0 || od != 0.0 || sp != 0.0 || op != 0.0 {
+            *d = average_logodds(od, so, logodds_max);
+            *p = 0.5 * (op + sp);
+            averaged += 1;
         }
-        u += du;
-        v += dv;
+        u = u.wrapping_add(walk.du);
+        v = v.wrapping_add(walk.dv);
     }
-    (adopted, averaged)
+    (0, averaged)
 }
+
 
 /// Seed 004's average of two occupancy log-odds as probabilities: σ⁻¹((σ(a) + σ(b))/2), both
 /// clamped to ±`max` first and the result clamped to ±`max` (so a finite input never gives

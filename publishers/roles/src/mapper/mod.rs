@@ -13,6 +13,7 @@
 pub mod config;
 pub mod map;
 pub mod merge;
+mod merge_simd;
 #[cfg(test)]
 mod tests;
 
