@@ -94,7 +94,13 @@ pub fn measure(side: u32, reps: usize) -> Result<MergeRow, BenchError> {
         let rule = (rule, MappingConfig::default().logodds_max);
         let view = src.view();
         let r = if reference {
-            roles::mapper::merge::merge_planes_reference(&geometry, planes, black_box(&view), &t, rule)
+            roles::mapper::merge::merge_planes_reference(
+                &geometry,
+                planes,
+                black_box(&view),
+                &t,
+                rule,
+            )
         } else {
             roles::mapper::merge_planes(&geometry, planes, black_box(&view), &t, rule)
         };

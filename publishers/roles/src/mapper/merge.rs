@@ -363,7 +363,6 @@ fn average_run(
     (0, averaged)
 }
 
-
 /// Seed 004's average of two occupancy log-odds as probabilities: σ⁻¹((σ(a) + σ(b))/2), both
 /// clamped to ±`max` first and the result clamped to ±`max` (so a finite input never gives
 /// NaN or ±∞). Symmetric in a and b; equal inputs (two unknown cells: 0) are returned as they
