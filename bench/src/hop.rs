@@ -150,8 +150,7 @@ impl End for Raw {
             .map(|s| *s.payload()))
     }
     fn wait(&self, timeout: Duration) -> Result<(), BenchError> {
-        self.listener
-            .timed_wait(|_| {}, timeout)
+        field::shm::listener_timed_wait(&self.listener, timeout)
             .map(|_| ())
             .map_err(|e| raw_err("wait", e))
     }

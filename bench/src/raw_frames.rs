@@ -141,8 +141,7 @@ pub fn read(source: &str, wait: ReaderWait, skip: usize, count: usize) -> Result
             if waited < spin {
                 std::hint::spin_loop();
             } else {
-                listener
-                    .timed_wait(|_| {}, FRAME_TIMEOUT - waited)
+                field::shm::listener_timed_wait(&listener, FRAME_TIMEOUT - waited)
                     .map_err(|e| raw_err("wait", e))?;
             }
         }

@@ -144,10 +144,10 @@ impl JoinWatch {
                 });
             }
             // A join notifies; a participant that left again does not, so the wait is bounded.
-            match self
-                .listener
-                .timed_wait(|_| {}, left.min(Duration::from_millis(500)))
-            {
+            match crate::shm::listener_timed_wait(
+                &self.listener,
+                left.min(Duration::from_millis(500)),
+            ) {
                 Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
                 Err(e) => {
                     let e = service_err(&attached_service(&self.world), "wait", e);

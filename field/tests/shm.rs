@@ -352,3 +352,34 @@ fn wait_policies_parse_from_their_names_and_refuse_anything_else() {
         assert!(e.to_string().contains(&format!("\"{bad}\"")), "{bad}: {e}");
     }
 }
+
+/// A wait of less than a microsecond ends at once: iceoryx2 0.10 turns such a timeout into a
+/// zero `SO_RCVTIMEO`, which means "wait for ever" (a field on deposit once hung there until
+/// its follower, waiting for a frame, gave up).
+#[test]
+fn a_listener_wait_shorter_than_a_microsecond_does_not_block() {
+    use iceoryx2::prelude::*;
+    field::shm::set_verbose(false);
+    let name = unique("subus");
+    let (done_tx, done) = std::sync::mpsc::channel();
+    let waiter = std::thread::spawn(move || {
+        let node = create_node(&name).unwrap();
+        let service = node
+            .service_builder(&ServiceName::new(&name).unwrap())
+            .event()
+            .open_or_create()
+            .unwrap();
+        let listener = service.listener_builder().create().unwrap();
+        for ns in [0, 1, 500, 999] {
+            let n = field::shm::listener_timed_wait(&listener, Duration::from_nanos(ns)).unwrap();
+            assert_eq!(n, 0, "{ns} ns");
+        }
+        done_tx.send(()).unwrap();
+    });
+    // With the bug the thread never ends: no event ever comes.
+    assert!(
+        done.recv_timeout(Duration::from_secs(20)).is_ok(),
+        "a sub-microsecond wait blocked"
+    );
+    waiter.join().unwrap();
+}

@@ -765,7 +765,7 @@ impl DepositWake {
             // In slices of at most 100 ms: readers that attached meanwhile get the current frame
             // without waiting for a tick (which can be far off at a low tick rate).
             let slice = poll_from.saturating_duration_since(now).min(IDLE_SLICE);
-            match self.listener.timed_wait(|_| {}, slice) {
+            match crate::shm::listener_timed_wait(&self.listener, slice) {
                 Ok(0) => server.serve_new_readers()?,
                 Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
                 Err(e) => {

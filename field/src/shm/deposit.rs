@@ -107,7 +107,7 @@ impl DepositPublisher {
             if left.is_zero() {
                 return false;
             }
-            match self.frame_ready.timed_wait(|_| {}, left) {
+            match super::listener_timed_wait(&self.frame_ready, left) {
                 Ok(n) => frames += n,
                 Err(_) => return false,
             }

@@ -119,6 +119,22 @@ pub(crate) fn stop_requested() -> bool {
     iceoryx2_bb_posix::signal::SignalHandler::termination_requested()
 }
 
+/// A listener's timed wait that never blocks for good. iceoryx2 0.10's listener hands the timeout
+/// to its socket's `SO_RCVTIMEO` as a `timeval`: one under a microsecond becomes {0, 0}, which
+/// means *no* timeout, and the wait then lasts until the next event (a field waiting for a
+/// deposit that its follower sends only after the next frame never woke). Below a microsecond
+/// this only takes the events already there.
+pub fn listener_timed_wait(
+    listener: &iceoryx2::port::listener::Listener<Svc>,
+    timeout: Duration,
+) -> Result<u64, iceoryx2::port::listener::ListenerWaitError> {
+    if timeout < Duration::from_micros(1) {
+        listener.try_wait(|_| {})
+    } else {
+        listener.timed_wait(|_| {}, timeout)
+    }
+}
+
 /// Waits on a listener; a signal that interrupts the wait (any caught one, not only Ctrl-C) is
 /// a spurious wake-up, since callers loop on their own deadline and see Ctrl-C through
 /// `node.wait`.
@@ -127,7 +143,7 @@ pub(crate) fn wait_interruptible(
     timeout: Duration,
     service: &str,
 ) -> Result<(), ServiceError> {
-    match listener.timed_wait(|_| {}, timeout) {
+    match listener_timed_wait(listener, timeout) {
         Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => Ok(()),
         Err(e) => Err(service_err(service, "wait", Iceoryx(e))),
     }
