@@ -467,6 +467,10 @@ class Field:
     # ---- frames ---------------------------------------------------------------------------
 
     def _wait_event(self, seconds: float) -> None:
+        # iceoryx2 0.10 turns a timeout under a microsecond into a zero SO_RCVTIMEO, which
+        # means "wait for ever": the caller loops on its own deadline, so return instead.
+        if seconds < 1e-6:
+            return
         # Interrupted by a signal: the caller loops on its own deadline.
         with contextlib.suppress(iox2.ListenerWaitError):
             self._listener.timed_wait(_duration(seconds))
