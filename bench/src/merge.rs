@@ -7,12 +7,12 @@
 //! per cell, one cell at a time).
 
 use std::hint::black_box;
-use std::time::Instant;
 
 use field::{ChannelSpec, Evaporation};
 use roles::mapper::{LocalMap, MappingConfig, MergeRule, MergeTransform};
 use serde::Serialize;
 
+use crate::tick::median_ns;
 use crate::BenchError;
 
 /// Median times of one merge and one memcpy of both planes at one size, and their ratios.
@@ -48,19 +48,6 @@ fn map(side: u32, salt: u32) -> Result<LocalMap, BenchError> {
         *p = h as f32 / 255.0;
     }
     Ok(m)
-}
-
-fn median_ns(reps: usize, mut f: impl FnMut()) -> u64 {
-    f();
-    let mut t: Vec<u64> = (0..reps.max(1))
-        .map(|_| {
-            let start = Instant::now();
-            f();
-            start.elapsed().as_nanos() as u64
-        })
-        .collect();
-    t.sort_unstable();
-    t[t.len() / 2].max(1)
 }
 
 /// Measures one size, `reps` times each.

@@ -47,7 +47,8 @@ pub struct RadiusRow {
 /// The radii of the by-radius ambient measurement (m, on 5 cm cells: 1, 10 and 40 cells).
 pub const AMBIENT_RADII_M: [f32; 3] = [0.05, 0.5, 2.0];
 
-fn median_ns(reps: usize, mut f: impl FnMut()) -> u64 {
+/// The median time of `reps` runs of `f` (ns, at least 1), after one warm-up run.
+pub(crate) fn median_ns(reps: usize, mut f: impl FnMut()) -> u64 {
     f();
     let mut t: Vec<u64> = (0..reps.max(1))
         .map(|_| {

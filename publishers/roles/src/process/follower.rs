@@ -100,19 +100,8 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
         |m| {
             let p = to_pose(m);
             if o.lockstep {
-                // The frame of this step (`frame_of_step`), and no other.
-                loop {
-                    reader.update()?;
-                    if reader
-                        .frame()
-                        .is_some_and(|f| frame_of_step(f.header, p.step, start.is_some()))
-                    {
-                        break;
-                    }
-                    if end.conductor_gone() || node.wait(Duration::ZERO).is_err() {
-                        return Ok(());
-                    }
-                    reader.wait_frame_with(o.frame_wait, Duration::from_millis(100))?;
+                if !wait_for_step_frame(node, &end, &mut reader, o, (p.step, start.is_some()))? {
+                    return Ok(());
                 }
             } else if reader.update()? {
                 // A field that died leaves its last frame with the reader: steer on it, say
@@ -149,17 +138,7 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
                 Ok(out) => (out.cmd, Some(out.status)),
                 Err(e) => {
                     rejected += 1;
-                    eprintln!(
-                        "follower r{robot}: step {}: {e}; stopping the robot",
-                        p.step
-                    );
-                    (
-                        CmdMsg {
-                            robot_id: robot,
-                            ..Default::default()
-                        },
-                        None,
-                    )
+                    (stop_after_refusal(robot, p.step, &e), None)
                 }
             };
             send_step(&cmds, &statuses, &last, p.step, (cmd, status))
@@ -173,6 +152,39 @@ fn follow<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>
     )?;
     summary.rejected = rejected;
     Ok(summary)
+}
+
+/// Waits (lockstep) until the reader holds the frame of `step` (`frame_of_step`), and no other;
+/// false when the run ends first.
+fn wait_for_step_frame(
+    node: &Node<Svc>,
+    end: &Participant,
+    reader: &mut FieldReader,
+    o: &RoleOptions,
+    (step, own_map): (u64, bool),
+) -> Result<bool, ProcessError> {
+    loop {
+        reader.update()?;
+        if reader
+            .frame()
+            .is_some_and(|f| frame_of_step(f.header, step, own_map))
+        {
+            return Ok(true);
+        }
+        if end.conductor_gone() || node.wait(Duration::ZERO).is_err() {
+            return Ok(false);
+        }
+        reader.wait_frame_with(o.frame_wait, Duration::from_millis(100))?;
+    }
+}
+
+/// The command that stops robot `robot` after its follower refused step `step`, said on stderr.
+fn stop_after_refusal(robot: u32, step: u64, e: &impl std::fmt::Display) -> CmdMsg {
+    eprintln!("follower r{robot}: step {step}: {e}; stopping the robot");
+    CmdMsg {
+        robot_id: robot,
+        ..Default::default()
+    }
 }
 
 /// Sends a step's command, and its status if the step produced one, both stamped now and
