@@ -16,6 +16,7 @@ pub mod ros2;
 pub mod rt;
 pub mod sim;
 pub mod sim_args;
+pub mod sim_filters;
 pub mod stop;
 pub mod sweep;
 pub mod tune;

@@ -62,6 +62,9 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     if let Some(t) = a.trials {
         return run_trials(&a, &scenario, t);
     }
+    if a.compare_filters {
+        return super::sim_filters::run(&a, &scenario);
+    }
     if a.remote && sim::processes::remote_robots(&scenario).is_empty() {
         return Err(bad(format!(
             "--remote: scenario '{}' has no robot with an antenna follower (try trail-following)",
@@ -197,7 +200,7 @@ fn start_record(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<Option<SimMc
     Ok(Some(SimMcap::start(file, scenario)?))
 }
 
-fn out_dir(a: &SimArgs, scenario: &Scenario) -> Option<PathBuf> {
+pub(super) fn out_dir(a: &SimArgs, scenario: &Scenario) -> Option<PathBuf> {
     if a.no_out {
         return None;
     }
@@ -392,7 +395,7 @@ impl Trials {
 // ---------------------------------------------------------------------------------------------
 // Separate processes
 
-fn run_processes(
+pub(super) fn run_processes(
     a: &SimArgs,
     scenario: &Scenario,
     progress: Option<&mut dyn FnMut(f64)>,

@@ -156,6 +156,16 @@ pub struct SimArgs {
     /// Particles of every particle filter (10..=100000).
     #[arg(long, value_name = "N", value_parser = super::roles::parse_particles)]
     pub particles: Option<usize>,
+    /// Seed 000's comparison of filters (Figs. 13–18): run the scenario once with each of ekf,
+    /// ukf and pf (same seed, scripted loss off; --particles applies to the PF) and write, for
+    /// one robot, `filters.csv`, the error in x, y, φ and combined against time, the deposits
+    /// against time, σ against deposit (log–log) and `filters.json` (RMS errors, σ, deposits,
+    /// and the correlation of ln σ and ln γ). --json prints the summary.
+    #[arg(long, conflicts_with_all = ["filter", "trials", "record", "slam", "remote", "view", "ros2"])]
+    pub compare_filters: bool,
+    /// The robot --compare-filters compares [default: the lowest id with a depositor].
+    #[arg(long, value_name = "ID", requires = "compare_filters")]
+    pub compare_robot: Option<u32>,
     /// Turn every localizer's scripted loss (`loss.after_s`) off.
     #[arg(long)]
     pub no_scripted_loss: bool,

@@ -12,6 +12,7 @@ use serde_json::Value;
 
 use crate::crash::{Run, WAIT};
 
+mod filters;
 mod interrupt;
 use crate::harness::*;
 

@@ -16,10 +16,14 @@
 //! Submodules: `style` the font, palette, colour maps and picture buffer; `heatmap` a snapshot's
 //! picture; `marks` the places it marks (from the scenario's metrics: `wrong_area`'s A and B); `series` the data of the charts, from the run; `plots` the charts; `graph_png` the
 //! picture of a node-graph run; `files` writes the CSV and PNG files; `sweep` the files of
-//! `pheromone sweep` (CSV, JSON, exploration against robots and against R_C).
+//! `pheromone sweep` (CSV, JSON, exploration against robots and against R_C); `filters` and
+//! `filters_plots` the comparison of localization filters (`sim --compare-filters`, seed 000
+//! Figs. 13–18).
 
 pub mod export;
 mod files;
+pub mod filters;
+mod filters_plots;
 mod graph_png;
 mod heatmap;
 mod maps;
@@ -38,6 +42,7 @@ use heatmap::render_snapshot;
 use roles::scenario::Scenario;
 use sim::record::{Recording, Snapshot};
 
+pub use filters::{write_filter_comparison, FilterRun, FilterSummary};
 pub use graph_png::write_graph_png;
 pub use marks::{marks, Mark, Shape};
 pub use plots::{PLOT_H_PX, PLOT_W_PX};

@@ -1,0 +1,171 @@
+//! `pheromone sim --compare-filters`: seed 000's comparison of localization filters (Figs.
+//! 13–18). The scenario runs once per filter (EKF, UKF, PF), on the same seed and without its
+//! scripted loss, in the mode `sim` would use; one robot's estimation errors, deposits and σ
+//! from each run become `filters.csv`, six charts and `filters.json`.
+
+use roles::localizer::FilterKind;
+use roles::scenario::{Overrides, Scenario};
+use serde::Serialize;
+use sim::single::{run_single_process, SingleProcessOptions};
+
+use report::{FilterRun, FilterSummary};
+
+use super::bad;
+use super::sim::{out_dir, run_processes, SimArgs};
+use super::stop::{self, Stopped};
+
+/// `filters.json` and the `--json` line.
+#[derive(Debug, Serialize)]
+struct Comparison {
+    scenario: String,
+    seed: u64,
+    robot: u32,
+    /// Particles of the PF run.
+    particles: Option<usize>,
+    /// The largest distance between the robot's true positions at the same step in two of the
+    /// runs (m): 0 when the filter changes nothing but the estimate.
+    truth_spread_m: f64,
+    filters: Vec<FilterSummary>,
+}
+
+/// The robot compared: `--compare-robot`, or the lowest id with a depositor.
+fn robot_of(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<u32> {
+    let ids: Vec<u32> = scenario.world.robots.iter().map(|r| r.id).collect();
+    if let Some(id) = a.compare_robot {
+        if !ids.contains(&id) {
+            return Err(bad(format!(
+                "--compare-robot {id}: scenario '{}' has robots {ids:?}",
+                scenario.name
+            )));
+        }
+        return Ok(id);
+    }
+    scenario
+        .robots
+        .iter()
+        .filter(|r| r.depositor.is_some() && ids.contains(&r.id))
+        .map(|r| r.id)
+        .min()
+        .or(ids.first().copied())
+        .ok_or_else(|| {
+            bad(format!(
+                "--compare-filters: scenario '{}' has no robot",
+                scenario.name
+            ))
+        })
+}
+
+/// Runs `scenario` once with `filter` and returns the robot's time series.
+fn run_with(
+    a: &SimArgs,
+    scenario: &Scenario,
+    filter: FilterKind,
+    robot: u32,
+) -> anyhow::Result<Vec<sim::record::RobotSample>> {
+    let mut s = scenario.clone();
+    s.apply(&Overrides {
+        filter: Some(filter),
+        particles: a.particles,
+        no_scripted_loss: true,
+        ..Overrides::default()
+    })
+    .map_err(|e| super::bad_in(a.scenario.as_str(), e))?;
+    let stop = || stop::requested().is_some();
+    let mut rec = if a.single_process {
+        let options = SingleProcessOptions {
+            slam: false,
+            progress: None,
+            record: None,
+            stop: Some(&stop),
+        };
+        run_single_process(&s, options)?.1
+    } else {
+        run_processes(a, &s, None, None)?.1
+    };
+    if stop() {
+        eprintln!("sim: --compare-filters stopped: nothing written");
+        return Err(Stopped::by_requested().into());
+    }
+    Ok(rec.robots.remove(&robot).unwrap_or_default())
+}
+
+fn truth_spread_m(series: &[Vec<sim::record::RobotSample>]) -> f64 {
+    let mut spread: f64 = 0.0;
+    for a in series {
+        for b in series {
+            for (p, q) in a.iter().zip(b) {
+                let d = (p.true_pose[0] - q.true_pose[0]).hypot(p.true_pose[1] - q.true_pose[1]);
+                spread = spread.max(d);
+            }
+        }
+    }
+    spread
+}
+
+pub fn run(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
+    let robot = robot_of(a, scenario)?;
+    eprintln!(
+        "sim '{}' (seed {}) --compare-filters: robot {robot}, once with each of ekf, ukf and pf, \
+         scripted loss off, {}",
+        scenario.name,
+        scenario.seed,
+        if a.single_process {
+            "one process"
+        } else {
+            "separate processes"
+        }
+    );
+    let kinds = [FilterKind::Ekf, FilterKind::Ukf, FilterKind::Pf];
+    let mut series = Vec::new();
+    for k in kinds {
+        series.push(run_with(a, scenario, k, robot)?);
+    }
+    let runs: Vec<FilterRun> = kinds
+        .iter()
+        .zip(&series)
+        .map(|(k, rows)| FilterRun::of(k.name(), rows))
+        .collect();
+    if runs.iter().any(|r| r.steps.is_empty()) {
+        return Err(bad(format!(
+            "--compare-filters: robot {robot} of '{}' has no localizer estimate to compare",
+            scenario.name
+        )));
+    }
+    let out = Comparison {
+        scenario: scenario.name.clone(),
+        seed: scenario.seed,
+        robot,
+        particles: a.particles,
+        truth_spread_m: truth_spread_m(&series),
+        filters: runs.iter().map(FilterSummary::of).collect(),
+    };
+    for f in &out.filters {
+        eprintln!(
+            "  {:>3}: {} steps, RMS error x {:.3} m, y {:.3} m, φ {:.4} rad, combined {:.3} m (max {:.3} m); \
+             mean σ {:.3} m; {} deposits summing {:.1}; r(ln σ, ln γ) {}",
+            f.filter,
+            f.steps,
+            f.rms_x_m,
+            f.rms_y_m,
+            f.rms_phi_rad,
+            f.rms_xy_m,
+            f.max_xy_m,
+            f.mean_sigma_m.unwrap_or(f64::NAN),
+            f.deposits,
+            f.deposited,
+            f.log_sigma_log_deposit_r.map_or("n/a".into(), |r| format!("{r:.3}")),
+        );
+    }
+    if let Some(dir) = out_dir(a, scenario) {
+        let mut files = report::write_filter_comparison(&dir, robot, &runs)?;
+        let path = dir.join("filters.json");
+        std::fs::write(&path, serde_json::to_string_pretty(&out)? + "\n")
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        files.push(path);
+        eprintln!("wrote {} file(s) to {}", files.len(), dir.display());
+    }
+    if a.json {
+        println!("{}", serde_json::to_string(&out)?);
+    }
+    Ok(())
+}
