@@ -273,7 +273,7 @@ mod tests {
         let s = FilterSummary::of(&run);
         assert_eq!((s.steps, s.deposits), (2, 1));
         assert!((s.rms_xy_m - (0.25f64 / 2.0).sqrt()).abs() < 1e-12);
-        assert_eq!(s.max_xy_m, 0.5);
+        assert!((s.max_xy_m - 0.5).abs() < 1e-12, "{}", s.max_xy_m);
         assert_eq!(
             s.log_sigma_log_deposit_r, None,
             "one pair has no correlation"
