@@ -11,7 +11,8 @@ use field::shm::create_node;
 use graph::agent::{GraphStrategy, RegionsScenario, Until, BUILTIN_REGIONS};
 use graph::compare::{compare, comparison_text, Comparison};
 use graph::processes::{run_graph_robot, run_graph_writer, WriterOptions};
-use graph::run::{simulate, tables_text, RunReport};
+use graph::run::{simulate, RunReport};
+use graph::tables::tables_text;
 use serde::Serialize;
 use sim::metrics::RunMode;
 
