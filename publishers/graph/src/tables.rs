@@ -13,6 +13,7 @@ pub fn tables_text(r: &RunReport) -> String {
     links_table(&mut s, r);
     robots_lines(&mut s, r);
     areas_table(&mut s, r);
+    localization_lines(&mut s, r);
     s
 }
 
@@ -134,4 +135,63 @@ fn areas_table(s: &mut String, r: &RunReport) {
             ids(&a.captured_by)
         );
     }
+}
+
+/// A localized run: the landmark comparisons per class of steps, η1 and η2 (eq. 13 from the
+/// landmark counts, from the comparisons, and measured as time per step), ρ_t and deposits.
+fn localization_lines(s: &mut String, r: &RunReport) {
+    use std::fmt::Write;
+    let Some(l) = &r.localization else {
+        return;
+    };
+    let a = &l.all;
+    let f = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.2}"));
+    let us = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{:.1} µs", v / 1e3));
+    let _ = writeln!(
+        s,
+        "\nLocalization (seed 001 Algorithm 1, deposits {}): {} landmarks, {} observations, {} used",
+        l.config.deposit.name(),
+        a.landmarks,
+        a.observations,
+        a.observations_used
+    );
+    let per_step = |c: u64, n: u64| if n > 0 { c as f64 / n as f64 } else { 0.0 };
+    for (name, w) in [
+        ("holding a region", &a.holding),
+        ("free (others hold)", &a.free),
+        ("nothing captured", &a.open),
+    ] {
+        let _ = writeln!(
+            s,
+            "  {name:<20} {:>6} steps: L_set {:>5.1} of {:>3} landmarks, {:>7.1} comparisons/step ({:.1} against the whole map)",
+            w.steps,
+            per_step(w.landmarks_considered, w.steps),
+            a.landmarks,
+            per_step(w.compared, w.steps),
+            per_step(w.compared_whole_map, w.steps)
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  η1 = {} (eq. 13) · {} (comparisons) · {} (time: {} whole map / {} region)",
+        f(l.eta1_eq13),
+        f(l.eta1_compared),
+        f(l.eta1_time),
+        us(l.holding_step_whole_map_ns),
+        us(l.holding_step_ns)
+    );
+    let _ = writeln!(
+        s,
+        "  η2 = {} (eq. 13) · {} (comparisons) · {} (time: {} whole map / {} free areas)",
+        f(l.eta2_eq13),
+        f(l.eta2_compared),
+        f(l.eta2_time),
+        us(l.free_step_whole_map_ns),
+        us(l.free_step_ns)
+    );
+    let _ = writeln!(
+        s,
+        "  ρ_t {:.3}..{:.3} · deposits {} ({:.3}..{:.3}) · position error mean {:.3} m, max {:.3} m",
+        a.rho_min, a.rho_max, a.deposits, a.deposit_min, a.deposit_max, a.position_error_mean_m, a.position_error_max_m
+    );
 }
