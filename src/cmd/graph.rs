@@ -293,8 +293,11 @@ fn run_each(
     let mut runs: Vec<RunReport> = Vec::new();
     let mut text = String::new();
     let stopped = || super::stop::requested().is_some();
-    let localization = a.localize.map(|w| Localization {
-        config: LocalizeConfig::new(w),
+    let localization = a.localize.map(|deposit| Localization {
+        config: LocalizeConfig {
+            deposit,
+            ..scenario.localize.unwrap_or_default()
+        },
         make_filter: &roles::localizer::graph_filter::make_graph_ekf,
     });
     for &n in counts {
