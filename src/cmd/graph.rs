@@ -10,8 +10,10 @@ use clap::Args;
 use field::shm::create_node;
 use graph::agent::{GraphStrategy, RegionsScenario, Until, BUILTIN_REGIONS};
 use graph::compare::{compare, comparison_text, Comparison};
+use graph::localize::{Localization, LocalizeConfig};
 use graph::processes::{run_graph_robot, run_graph_writer, WriterOptions};
-use graph::run::{simulate, tables_text, RunReport};
+use graph::run::{simulate_with, RunReport};
+use graph::tables::tables_text;
 use serde::Serialize;
 use sim::metrics::RunMode;
 
@@ -187,6 +189,11 @@ pub fn run_robot(a: GraphRobotArgs) -> anyhow::Result<()> {
 /// with both strategies (or --strategy), then the comparison of the time to the goal.
 pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
     refuse_grid_flags(a)?;
+    if a.localize.is_some() && !a.single_process {
+        return Err(bad(
+            "--localize needs --single-process (the graph-robot processes have no localizer)",
+        ));
+    }
     let scenario = load_regions(&a.scenario)?;
     let seed = a.seed.unwrap_or(scenario.seed);
     let counts = robot_counts(a, &scenario)?;
@@ -286,6 +293,13 @@ fn run_each(
     let mut runs: Vec<RunReport> = Vec::new();
     let mut text = String::new();
     let stopped = || super::stop::requested().is_some();
+    let localization = a.localize.map(|deposit| Localization {
+        config: LocalizeConfig {
+            deposit,
+            ..scenario.localize.unwrap_or_default()
+        },
+        make_filter: &roles::localizer::graph_filter::make_graph_ekf,
+    });
     for &n in counts {
         for &strategy in strategies {
             if stopped() {
@@ -293,7 +307,7 @@ fn run_each(
             }
             let run_started = Instant::now();
             let report = if a.single_process {
-                simulate(scenario, strategy, n, seed)?
+                simulate_with(scenario, strategy, n, seed, localization.as_ref())?
             } else {
                 match run_as_processes(a, strategy, n, seed) {
                     Ok(r) => r,

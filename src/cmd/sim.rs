@@ -40,6 +40,12 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         }
         return super::graph::run_sim(&a);
     }
+    if a.localize.is_some() {
+        return Err(bad(format!(
+            "--localize applies to node-graph scenarios only; '{}' is a grid scenario (its robots localize already)",
+            a.scenario
+        )));
+    }
     // From here SIGINT/SIGTERM end the run with what it has (exit status 130/143).
     super::stop::install()?;
     let mut scenario = load_scenario(&a.scenario)?;

@@ -169,6 +169,13 @@ pub struct SimArgs {
     /// Turn every localizer's scripted loss (`loss.after_s`) off.
     #[arg(long)]
     pub no_scripted_loss: bool,
+    /// Node-graph scenarios: every robot localizes on landmarks with the EKF (seed 001
+    /// Algorithm 1; a region holder matches only its region's landmarks, the others only the
+    /// free areas') and deposits on a link its constant −1 (`constant`) or −1 × ρ_t of its
+    /// covariance (`rho`); the run reports the landmark comparisons and η1, η2 (eq. 13,
+    /// Fig. 6). With --single-process. Off by default (no localizer).
+    #[arg(long, value_name = "constant|rho")]
+    pub localize: Option<graph::localize::DepositWeight>,
     /// Seconds the whole run may take before it is stopped as failed (separate processes).
     #[arg(long, value_parser = super::secs(), default_value_t = 900.0, value_name = "SECS")]
     pub timeout: f64,

@@ -216,6 +216,16 @@ fn bad_regions_input_exits_with_status_2_and_names_it() {
         "{}",
         stderr(&o)
     );
+    // Graph robots localize in one process only; grid robots have their own localizers.
+    let o = run(&["sim", "regions", "--localize", "rho", "--no-out"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--single-process"), "{}", stderr(&o));
+    let o = run(&["sim", "trail", "--localize", "rho", "--no-out"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--localize"), "{}", stderr(&o));
+    let o = run(&["sim", "regions", "--localize", "sometimes", "--no-out"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("sometimes"), "{}", stderr(&o));
     let o = run(&["graph-robot", "--robot", "5", "--robots", "3"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--robot 5"), "{}", stderr(&o));
@@ -233,6 +243,49 @@ fn bad_regions_input_exits_with_status_2_and_names_it() {
     let o = run(&["sim", &p, "--no-out"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains(&p), "{}", stderr(&o));
+    std::fs::remove_file(&path).unwrap();
+}
+
+/// `--localize rho` (seed 001 Algorithm 1 coupled to capture): the run reports the landmark
+/// comparisons and η1, η2; a bad `[localize]` setting is bad input naming its key.
+#[test]
+fn sim_regions_localize_reports_the_landmark_work() {
+    let o = run(&[
+        "sim",
+        "regions",
+        "--single-process",
+        "--localize",
+        "rho",
+        "--robots",
+        "2",
+        "--strategy",
+        "pheromone",
+        "--no-out",
+        "--json",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stderr(&o).contains("η1 = 16.67 (eq. 13)"), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let l = &runs(&v)[0]["localization"];
+    assert_eq!(l["config"]["deposit"], "rho");
+    assert_eq!(l["all"]["landmarks"], 50);
+    assert!(l["eta1_compared"].as_f64().unwrap() > 1.0, "{l}");
+    let held = &l["all"]["holding"];
+    assert!(held["compared"].as_u64().unwrap() < held["compared_whole_map"].as_u64().unwrap());
+    let path = std::env::temp_dir().join(format!("{}.toml", unique("bad-localize")));
+    let text = graph::agent::PAPER_CORRIDOR.to_string() + "\n[localize]\nrho_ref_m = -1.0\n";
+    std::fs::write(&path, text).unwrap();
+    let p = path.display().to_string();
+    let o = run(&[
+        "sim",
+        &p,
+        "--single-process",
+        "--localize",
+        "rho",
+        "--no-out",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("`rho_ref_m` = -1"), "{}", stderr(&o));
     std::fs::remove_file(&path).unwrap();
 }
 

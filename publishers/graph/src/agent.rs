@@ -446,6 +446,10 @@ pub struct RegionsScenario {
     pub robot_roles: Vec<RobotRole>,
     #[serde(default)]
     pub regions_sim: SimParams,
+    /// `[localize]`: the landmarks, sensors and noise of the graph world when its robots
+    /// localize (`pheromone sim --localize`; its `deposit` key is set by that flag).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub localize: Option<super::localize::LocalizeConfig>,
 }
 
 fn all_strategies() -> Vec<GraphStrategy> {
@@ -587,6 +591,9 @@ impl RegionsScenario {
                 0,
             );
             self.apply_role(&state.graph, &mut probe)?;
+        }
+        if let Some(l) = &self.localize {
+            l.validate()?;
         }
         if self.strategies.is_empty() || self.robots.is_empty() {
             return Err(GraphError::Node {

@@ -12,11 +12,13 @@
 pub mod agent;
 pub mod compare;
 pub mod conflict;
+pub mod localize;
 pub mod processes;
 pub mod region;
 pub mod run;
 pub mod shm;
 pub mod skeleton;
+pub mod tables;
 
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
@@ -144,6 +146,8 @@ pub enum GraphError {
     Amount(f32),
     #[error(transparent)]
     Region(#[from] RegionError),
+    #[error(transparent)]
+    Localize(#[from] localize::LocalizeError),
 }
 
 /// `[[graph.node]]` of a scenario.

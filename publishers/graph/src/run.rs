@@ -19,6 +19,7 @@ use super::agent::{
     Action, GraphAgent, GraphStrategy, RegionsScenario, RobotProfile, SimParams, Until,
 };
 use super::conflict::{ContendMsg, RgbRes};
+use super::localize::{Localization, LocalizationStats, RobotLocalizer, RunLocalization};
 use super::shm::GraphShmError;
 use super::{CaptureOutcome, GraphError, GraphState, GraphUpdate, MAX_LINKS};
 
@@ -93,6 +94,8 @@ pub struct GraphRobot {
     pub captured: u32,
     /// Nodes reached, in order (the dock first).
     pub path: Vec<usize>,
+    /// Seed 001 Algorithm 1 on landmarks, when the run localizes ([`GraphRobot::localize`]).
+    pub localizer: Option<Box<RobotLocalizer>>,
 }
 
 /// What a robot reports at the end of a run.
@@ -108,6 +111,9 @@ pub struct RobotReport {
     pub battery_pct: f32,
     /// Nodes reached, in order (the dock first).
     pub path: Vec<String>,
+    /// What its localizer did, when the run localizes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub localization: Option<LocalizationStats>,
 }
 
 impl GraphRobot {
@@ -146,7 +152,52 @@ impl GraphRobot {
             refused: 0,
             captured: 0,
             path: Vec::new(),
+            localizer: None,
         })
+    }
+
+    /// Gives this robot a landmark localizer (seed 001 Algorithm 1), starting at the dock.
+    pub fn localize(
+        &mut self,
+        loc: &Localization,
+        g: &super::Graph,
+        seed: u64,
+    ) -> Result<(), GraphError> {
+        let (xy, _) = self.truth_xy(g);
+        self.localizer = Some(Box::new(RobotLocalizer::new(loc, g, self.id(), seed, xy)?));
+        Ok(())
+    }
+
+    /// Where the robot truly is (on the straight line between two nodes while it moves), and
+    /// its heading while it moves.
+    fn truth_xy(&self, g: &super::Graph) -> ([f64; 2], Option<f64>) {
+        let at = |n: usize| {
+            g.nodes()
+                .get(n)
+                .map_or([0.0, 0.0], |n| [f64::from(n.x_m), f64::from(n.y_m)])
+        };
+        match self.phase {
+            Phase::Moving { from, to, left_m } => {
+                let (a, b) = (at(from), at(to));
+                let length_m = g
+                    .edge_dirs(from, to)
+                    .and_then(|(d, _)| g.link(from, d).ok())
+                    .map_or(0.0, |l| l.length_m);
+                let f = if length_m > 0.0 {
+                    f64::from((left_m / length_m).clamp(0.0, 1.0))
+                } else {
+                    0.0
+                };
+                let xy = [b[0] + (a[0] - b[0]) * f, b[1] + (a[1] - b[1]) * f];
+                (xy, Some((b[1] - a[1]).atan2(b[0] - a[0])))
+            }
+            Phase::Waiting { .. } => (at(self.dock), None),
+            Phase::AtNode { node }
+            | Phase::Claiming { node, .. }
+            | Phase::Serving { node, .. }
+            | Phase::Resolving { node, .. }
+            | Phase::Idle { node } => (at(node), None),
+        }
     }
 
     pub fn id(&self) -> u32 {
@@ -167,6 +218,7 @@ impl GraphRobot {
                 .iter()
                 .filter_map(|&n| g.nodes().get(n).map(|n| n.name.clone()))
                 .collect(),
+            localization: self.localizer.as_ref().map(|l| l.report()),
         }
     }
 
@@ -259,6 +311,16 @@ impl GraphRobot {
                 }
                 Action::Idle => Phase::Idle { node },
             };
+        }
+        if self.localizer.is_some() {
+            let (xy, heading) = self.truth_xy(&v.state.graph);
+            if let Some(loc) = self.localizer.as_mut() {
+                // The deposits were chosen with the belief of the step's start (its ρ_t);
+                // then the step's motion is localized.
+                loc.weigh_deposits(&mut out.updates);
+                loc.step(v.state, xy, heading, f64::from(p.dt_s))
+                    .map_err(GraphError::from)?;
+            }
         }
         Ok(out)
     }
@@ -373,6 +435,9 @@ pub struct RunReport {
     /// Filled in by whoever collects the robots' own reports.
     #[serde(default)]
     pub robot_reports: Vec<RobotReport>,
+    /// The robots' localization together, η1 and η2 (runs whose robots localize).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub localization: Option<RunLocalization>,
 }
 
 /// The graph's one writer in a lockstep run.
@@ -601,6 +666,7 @@ impl GraphWorld {
             updates_rejected: self.rejected,
             captures_refused: self.refused,
             robot_reports: Vec::new(),
+            localization: None,
         }
     }
 }
@@ -613,10 +679,27 @@ pub fn simulate(
     robots: usize,
     seed: u64,
 ) -> Result<RunReport, GraphShmError> {
+    simulate_with(scenario, strategy, robots, seed, None)
+}
+
+/// [`simulate`], with every robot localizing on landmarks when `localization` is given
+/// (seed 001 Algorithm 1 coupled to area capture, [`super::localize`]).
+pub fn simulate_with(
+    scenario: &RegionsScenario,
+    strategy: GraphStrategy,
+    robots: usize,
+    seed: u64,
+    localization: Option<&Localization>,
+) -> Result<RunReport, GraphShmError> {
     let mut world = GraphWorld::new(scenario, strategy, robots, seed)?;
     let mut fleet: Vec<GraphRobot> = (0..robots)
         .map(|i| GraphRobot::new(scenario, &world.state, i, strategy, seed))
         .collect::<Result<_, _>>()?;
+    if let Some(loc) = localization {
+        for r in &mut fleet {
+            r.localize(loc, &world.state.graph, seed)?;
+        }
+    }
     // Contention messages announced in a step, read by the claimants in the next.
     let mut announced: Vec<ContendMsg> = Vec::new();
     while !world.finished() {
@@ -639,139 +722,15 @@ pub fn simulate(
     }
     let mut report = world.report();
     report.robot_reports = fleet.iter().map(|r| r.report(&world.state.graph)).collect();
+    if let Some(loc) = localization {
+        let stats: Vec<&LocalizationStats> = report
+            .robot_reports
+            .iter()
+            .filter_map(|r| r.localization.as_ref())
+            .collect();
+        report.localization = Some(RunLocalization::new(loc.config, &stats));
+    }
     Ok(report)
-}
-
-/// The paper's tables as text: captures in time order (Table 2), final link values (Table 3)
-/// and the area capture matrix (Table 4).
-pub fn tables_text(r: &RunReport) -> String {
-    let mut s = String::new();
-    headline(&mut s, r);
-    captures_table(&mut s, r);
-    links_table(&mut s, r);
-    robots_lines(&mut s, r);
-    areas_table(&mut s, r);
-    s
-}
-
-// Writing into a String cannot fail: each `let _ = writeln!` below drops an `Ok`.
-
-/// The run in one line: scenario, strategy, robots, seed, the goal and when it was reached.
-fn headline(s: &mut String, r: &RunReport) {
-    use std::fmt::Write;
-    let finish = r
-        .finish_s
-        .map_or("not finished".to_string(), |f| format!("{f:.1} s"));
-    let _ = writeln!(
-        s,
-        "{} · {} · {} robot(s) · seed {} · {} when {}: {finish} · conflicts {}",
-        r.scenario,
-        r.strategy.name(),
-        r.robots,
-        r.seed,
-        match r.until {
-            Until::Served => "every region served",
-            Until::Captured => "every region captured",
-            Until::Time => "the end of max_time_s",
-        },
-        if r.finish_s.is_some() {
-            "reached"
-        } else {
-            "not reached"
-        },
-        r.conflicts
-    );
-}
-
-/// Table 2: captures in time order.
-fn captures_table(s: &mut String, r: &RunReport) {
-    use std::fmt::Write;
-    let _ = writeln!(s, "\nCaptures (cf. Table 2):");
-    let _ = writeln!(
-        s,
-        "  {:<8} {:>6} {:>11} {:>11}",
-        "region", "robot", "captured s", "released s"
-    );
-    for c in &r.captures {
-        let rel = c
-            .released_s
-            .map_or("held".to_string(), |t| format!("{t:.1}"));
-        let _ = writeln!(
-            s,
-            "  {:<8} {:>6} {:>11.1} {:>11}",
-            c.region,
-            format!("R{}", c.robot),
-            c.captured_s,
-            rel
-        );
-    }
-}
-
-/// Table 3: the final link values of each node.
-fn links_table(s: &mut String, r: &RunReport) {
-    use std::fmt::Write;
-    let _ = writeln!(s, "\nFinal link values (cf. Table 3):");
-    let _ = writeln!(
-        s,
-        "  {:<8} {:>7} {:>7} {:>7} {:>7}",
-        "node", "up", "down", "left", "right"
-    );
-    for l in &r.links {
-        let _ = writeln!(
-            s,
-            "  {:<8} {:>7} {:>7} {:>7} {:>7}",
-            l.node, l.up, l.down, l.left, l.right
-        );
-    }
-}
-
-/// Each robot's distance, captures, conflicts and path (when the run has robot reports).
-fn robots_lines(s: &mut String, r: &RunReport) {
-    use std::fmt::Write;
-    if r.robot_reports.is_empty() {
-        return;
-    }
-    let _ = writeln!(s, "\nRobots:");
-    for rr in &r.robot_reports {
-        let _ = writeln!(
-            s,
-            "  R{:<3} {:>6.1} m, {} capture(s), {} conflict(s), path {}",
-            rr.robot,
-            rr.distance_m,
-            rr.capture_count,
-            rr.conflicts,
-            rr.path.join(" → ")
-        );
-    }
-}
-
-/// Table 4: the area capture matrix.
-fn areas_table(s: &mut String, r: &RunReport) {
-    use std::fmt::Write;
-    let _ = writeln!(s, "\nArea capture matrix (cf. Table 4):");
-    let _ = writeln!(
-        s,
-        "  {:<8} {:<16} {:>5}  captured during the run",
-        "area", "held at end", "max-r"
-    );
-    let ids = |v: &[u32]| {
-        if v.is_empty() {
-            "N".to_string()
-        } else {
-            let robots: Vec<String> = v.iter().map(|i| format!("R{i}")).collect();
-            format!("Y ({})", robots.join(", "))
-        }
-    };
-    for a in &r.areas {
-        let _ = writeln!(
-            s,
-            "  {:<8} {:<16} {:>5}  {}",
-            a.region,
-            ids(&a.held_by),
-            a.max_r,
-            ids(&a.captured_by)
-        );
-    }
 }
 
 #[cfg(test)]

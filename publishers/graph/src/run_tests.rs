@@ -3,6 +3,7 @@
 #[cfg(test)]
 mod tests {
     use super::super::*;
+    use crate::tables::tables_text;
 
     fn who(r: &RunReport, name: &str) -> u32 {
         r.captures.iter().find(|c| c.region == name).unwrap().robot
@@ -95,6 +96,7 @@ mod tests {
 #[cfg(test)]
 mod backup_tests {
     use super::super::*;
+    use crate::tables::tables_text;
 
     /// Sec. 6.2: R2, told nothing, follows R1's positive pheromone to E node by node; with
     /// anti-pheromone instead it finds nothing to follow and stays at the dock.
@@ -119,6 +121,7 @@ mod backup_tests {
 #[cfg(test)]
 mod skeleton_tests {
     use super::super::*;
+    use crate::tables::tables_text;
 
     /// Fig. 7 / Table 4: on the skeletonized map, 8 robots fill the 7 regions (C with two) and
     /// capture does it with fewer conflicts and sooner than the shortest-path baseline.

@@ -259,6 +259,9 @@ impl CheckedFilter for Ekf {
                     obs.signature = 0;
                 }
             }
+            // Line 15: every landmark of L_set is compared with the observation.
+            self.counters.landmarks_compared +=
+                self.filter.as_ref().map_or(self.map.len(), Vec::len) as u64;
             match self.associate(&obs, &q) {
                 Association::Matched { z_hat, h, s } => {
                     self.correct(&obs, &z_hat, &h, &s, &q);

@@ -26,6 +26,7 @@
 //! - Line 24 is replaced by the Joseph form (I − KH)Σ(I − KH)ᵀ + KQKᵀ, then symmetrized.
 
 mod ekf;
+pub mod graph_filter;
 mod likelihood;
 mod models;
 mod pf;
@@ -336,6 +337,9 @@ pub struct EkfCounters {
     pub observations_dropped: u64,
     /// Landmarks added to the state (EKF-SLAM).
     pub landmarks_added: u64,
+    /// Landmark comparisons of the EKF's association: for every observation, each landmark of
+    /// the filter in effect (seed 001 Algorithm 1 line 15: the whole map, or L_set).
+    pub landmarks_compared: u64,
     pub rejected_non_finite_odometry: u64,
     pub rejected_absurd_odometry: u64,
     pub rejected_bad_dt: u64,
