@@ -15,9 +15,11 @@ use crate::world::WorldConfig;
 mod error;
 mod map;
 mod mapping;
+mod starts;
 mod validate;
 
 pub use error::{DepositError, ScenarioError};
+pub use starts::StartArea;
 
 /// The robot id the world's scripted deposits carry: after every robot's in a tick's
 /// canonical order (`field::shm::FieldServer::tick`).
@@ -36,6 +38,10 @@ pub const BUILTIN: &[(&str, &str)] = &[
     (
         "ias-ss",
         include_str!("../../../../examples/scenarios/ias-ss.toml"),
+    ),
+    (
+        "ias-ss-open",
+        include_str!("../../../../examples/scenarios/ias-ss-open.toml"),
     ),
     (
         "evaporation",
@@ -102,6 +108,9 @@ pub struct Scenario {
     /// Seed 004's local maps and their merging (`scenario/mapping.rs`); off by default.
     #[serde(default)]
     pub mapping: crate::mapper::MappingConfig,
+    /// Robots start at random poses in this rectangle, drawn from the seed (`starts.rs`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start_area: Option<StartArea>,
 }
 
 /// `mark_walls`: deposits every `spacing_m` along every wall segment.
@@ -457,6 +466,7 @@ impl Scenario {
         let table: toml::Table = toml::from_str(text).unwrap_or_default();
         check_numbers(&table, "")
             .and_then(|()| s.load_world_map(base_dir))
+            .and_then(|()| s.place_random_starts())
             .and_then(|()| s.validate())
             .map_err(|e| ScenarioError::Invalid {
                 origin: origin.to_string(),
@@ -472,6 +482,7 @@ impl Scenario {
         }
         if let Some(seed) = o.seed {
             self.seed = seed;
+            self.place_random_starts()?;
         }
         if let Some(d) = o.duration_s {
             if !(d.is_finite() && d > 0.0) {
