@@ -213,6 +213,7 @@ fn ours(p: &PaperValue, r: &SweepResult) -> Option<String> {
                 .iter()
                 .filter(|c| {
                     c.kind == kind
+                        && c.a.merge == p.integration
                         && (welch || c.a.strategy == p.strategy)
                         && p.robots.is_none_or(|n| n == c.a.robots)
                 })
