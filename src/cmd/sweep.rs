@@ -5,25 +5,39 @@ use std::path::PathBuf;
 
 use clap::Args;
 use roles::follower::StrategyKind;
-use sim::sweep::{parse_rc_m, parse_robots, parse_strategies, run_sweep, SweepGrid, SweepResult};
+use sim::sweep::{
+    parse_rc_m, parse_robots, parse_steer, parse_strategies, run_sweep, Figure, SweepGrid,
+    SweepResult,
+};
 
 use super::roles::load_scenario;
 use super::{bad, bad_from};
 
 /// Run seed 004's grid of experiments: exploration with and without map merging.
 ///
-/// Every combination of --robots × --rc-m × merge {on, off} × --strategies runs --trials times
-/// (seeds 1..=T), each run the single-process simulation of the scenario (deterministic for a
-/// seed) with mapping on. Runs go to --jobs worker threads from one queue, the largest first.
-/// Per run it records `exploration_known` (sectors known, visited or merged: team, and mean per
-/// robot) and `exploration` (sectors visited); per point the mean ± sd of each over the
-/// trials; at equal points it compares merge on vs off and inverse vs uniform on the known mean
-/// per robot (Welch's t and its df; the paired t, the seeds match).
+/// Every combination of --robots × --rc-m × merge {on, off} × --strategies × --steer runs
+/// --trials times (seeds 1..=T), each run the single-process simulation of the scenario
+/// (deterministic for a seed) with mapping on. Runs go to --jobs worker threads from one queue,
+/// the largest first. Per run it records `exploration_known` (sectors mapped by the robot's
+/// sensor or merged into its map), `exploration_merged` (visited or received through a merge:
+/// the paper's count) and `exploration` (visited), team and mean per robot; per point the mean
+/// ± sd of each over the trials; at equal points it compares merge on vs off and inverse vs
+/// uniform on --figure's mean per robot (Welch's t and its df; the paired t, the seeds match).
+///
+/// Steering (--steer) is a dimension like the others: `shared` steers every robot on the
+/// shared field (every robot's deposits, at any range), `own-map` on its own merged map (seed
+/// 004's Algorithm 2); each is its own point (CSV column steer_on, a chart line of its own).
 ///
 /// Writes into --out: sweep.csv (one row per run), sweep.json (points and comparisons),
-/// sweep_robots.png (exploration vs robots, with and without merging) and, when --rc-m lists
-/// two radii or more, sweep_rc.png (exploration vs R_C; one radius makes no line, so no
-/// chart), mean ± sd error bars. A progress bar shows on a terminal only.
+/// sweep_paper.md (each of the paper's values, docs/paper/seed004.csv, beside ours),
+/// sweep_robots.png (exploration vs robots, with and without merging, the paper's values as
+/// black crosses) and, when --rc-m lists two radii or more, sweep_rc.png (exploration vs R_C,
+/// the paper's peak as a dotted line; one radius makes no line, so no chart), mean ± sd error
+/// bars. A progress bar shows on a terminal only.
+///
+/// Seed 004's Table 9: `pheromone sweep ias-ss-open --robots 5 --rc-m 4,8,16,24,32,40 --merge
+/// --steer own-map,shared --figure merged` (30 m × 20 m, no inner walls, random starts in the
+/// top-left 5 m × 5 m, 1000 iterations, 10 seeds).
 ///
 /// Time (measured on a 2-core machine, release build): one 1000 s run takes 0.4 s (1 robot) to
 /// 3.4 s (8 robots), so the default sweep (robots 1,2,4,6,8 × merge on/off × 10 trials = 100
@@ -64,6 +78,15 @@ pub struct SweepArgs {
     /// Also the uniform strategy (the same as --strategies inverse,uniform).
     #[arg(long, conflicts_with = "strategies")]
     pub uniform: bool,
+    /// What the robots steer on, comma-separated: own-map (each robot's own merged map, seed
+    /// 004's Algorithm 2), shared (the shared field: every robot's deposits at any range)
+    /// [default: the scenario's [mapping] steer_on: shared in ias-ss, own-map in ias-ss-open].
+    #[arg(long, value_name = "LIST", allow_hyphen_values = true)]
+    pub steer: Option<String>,
+    /// The figure compared and charted: known (mapped or merged into the map), merged (visited
+    /// or received through a merge: the paper's count) or visited. The CSV has all three.
+    #[arg(long, value_name = "FIGURE", default_value = "known")]
+    pub figure: Figure,
     /// Trials per point (seeds 1..=T).
     #[arg(long, value_parser = super::int::<u32>(1, 100_000), value_name = "T", default_value_t = 10)]
     pub trials: u32,
@@ -108,8 +131,13 @@ fn grid(a: &SweepArgs) -> anyhow::Result<SweepGrid> {
             _ => vec![true, false],
         },
         strategies,
+        steer: match &a.steer {
+            Some(t) => parse_steer(t).map_err(bad_from)?,
+            None => Vec::new(),
+        },
         trials: a.trials,
         duration_s: a.duration_s,
+        figure: a.figure,
     })
 }
 
@@ -139,7 +167,9 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("pheromone-out").join(format!("sweep-{}", base.name)));
-    let files = report::write_sweep(&dir, &result)?;
+    let paper = sim::paper::seed004()?;
+    eprint!("{}", report::paper_table(&result, &paper));
+    let files = report::write_sweep(&dir, &result, &paper)?;
     eprintln!("wrote {} file(s) to {}", files.len(), dir.display());
     if let [rc_m] = report::rc_values(&result)[..] {
         eprintln!("no sweep_rc.png: the sweep has one R_C ({rc_m} m); give --rc-m two or more");
@@ -160,12 +190,14 @@ fn print_summary(r: &SweepResult) {
     );
     for p in &r.points {
         eprintln!(
-            "  {}: known {:.3} ± {:.3} (team {:.3} ± {:.3}), visited {:.3} ± {:.3}",
+            "  {}: known {:.3} ± {:.3} (team {:.3} ± {:.3}), merged {:.3} ± {:.3}, visited {:.3} ± {:.3}",
             p.key,
             p.known_mean.mean,
             p.known_mean.sd,
             p.known_team.mean,
             p.known_team.sd,
+            p.merged_mean.mean,
+            p.merged_mean.sd,
             p.visited_mean.mean,
             p.visited_mean.sd
         );
@@ -177,9 +209,10 @@ fn print_summary(r: &SweepResult) {
             })
         };
         eprintln!(
-            "  {} at {}: {:.3} vs {:.3}, Welch t = {}, paired t = {}",
+            "  {} at {} ({}): {:.3} vs {:.3}, Welch t = {}, paired t = {}",
             c.kind,
             c.a,
+            r.figure.name(),
             c.mean_a,
             c.mean_b,
             t(c.welch),

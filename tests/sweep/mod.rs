@@ -44,13 +44,15 @@ fn a_tiny_sweep_writes_a_row_per_run_the_points_and_the_robots_chart() {
     assert!(lines
         .next()
         .unwrap()
-        .starts_with("robots,rc_m,merge,strategy,seed,"));
+        .starts_with("robots,rc_m,merge,strategy,steer_on,seed,"));
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 8, "{csv}");
-    let seeds: Vec<&str> = rows.iter().map(|r| r[4]).collect();
+    let seeds: Vec<&str> = rows.iter().map(|r| r[5]).collect();
     assert_eq!(seeds, ["1", "2", "1", "2", "1", "2", "1", "2"]);
     for r in &rows {
-        let known: f64 = r[5].parse().unwrap();
+        // ias-ss steers on the shared field unless --steer says otherwise.
+        assert_eq!(r[4], "shared", "{r:?}");
+        let known: f64 = r[6].parse().unwrap();
         assert!((0.0..=1.0).contains(&known), "{r:?}");
     }
     let json: serde_json::Value =
@@ -69,6 +71,9 @@ fn a_tiny_sweep_writes_a_row_per_run_the_points_and_the_robots_chart() {
     // --json prints the same object.
     assert_eq!(crate::harness::json(&o)["points"], json["points"]);
     assert!(is_png(&dir.join("sweep_robots.png")));
+    // The paper's values beside ours, each citing its table.
+    let md = std::fs::read_to_string(dir.join("sweep_paper.md")).unwrap();
+    assert!(md.contains("| 6 | mean 80 %"), "{md}");
     // One R_C (the scenario's): no R_C chart, and the summary says why.
     assert!(!dir.join("sweep_rc.png").exists());
     assert!(
@@ -88,6 +93,7 @@ fn bad_lists_exit_with_status_2_naming_the_option_and_the_value() {
         (&["--rc-m", "-1"][..], "--rc-m", "-1"),
         (&["--rc-m", "abc"][..], "--rc-m", "abc"),
         (&["--strategies", "route"][..], "--strategies", "route"),
+        (&["--steer", "own-map,theirs"][..], "--steer", "theirs"),
         (&["--trials", "0"][..], "--trials", "0"),
     ] {
         let dir = std::env::temp_dir().join(unique("sweep-bad"));

@@ -46,7 +46,7 @@ pub use filters::{write_filter_comparison, FilterRun, FilterSummary};
 pub use graph_png::write_graph_png;
 pub use marks::{marks, Mark, Shape};
 pub use plots::{PLOT_H_PX, PLOT_W_PX};
-pub use sweep::{rc_values, sweep_csv, write_sweep, SWEEP_CSV_HEADER};
+pub use sweep::{paper_table, rc_values, sweep_csv, write_sweep, SWEEP_CSV_HEADER};
 
 /// Writing the outputs of a run failed.
 #[derive(Debug, thiserror::Error)]

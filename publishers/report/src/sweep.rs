@@ -3,9 +3,12 @@
 //! run's (plotters, `PLOT_W_PX` × `PLOT_H_PX`): `sweep_robots.png`, exploration against the
 //! number of robots (whole-number ticks) with and without merging, and `sweep_rc.png`,
 //! exploration against R_C, written only when the sweep has two radii or more (one radius is
-//! no line). Both plot `exploration_known` mean per robot, mean ± sd over the trials (error
-//! bars); merge on is a solid line with filled dots, merge off a dashed line with hollow dots,
-//! and each legend entry starts with "merge" or "no merge".
+//! no line). Both plot the sweep's figure (`--figure`: known, merged or visited) mean per
+//! robot, mean ± sd over the trials (error bars); merge on is a solid line with filled dots,
+//! merge off a dashed line with hollow dots, each legend entry starts with "merge" or "no
+//! merge" and names the steering; the paper's own values (`sim::paper`) are black crosses
+//! (robots chart) and its peak R_C a dotted vertical line (R_C chart). `sweep_paper.md` puts
+//! each of the paper's values beside what the sweep measured.
 
 use std::fmt::Write as _;
 use std::fs;
@@ -22,11 +25,12 @@ use super::files::{write_file, write_png};
 use super::plots::{blank, series_labels, text, titled};
 use super::style::{colour, msg, series_rgb, Picture, Rgb};
 use super::ReportError;
+use sim::paper::{PaperKind, PaperValue};
 use sim::sweep::{Point, PointKey, SweepResult};
 
 /// Header of `sweep.csv`.
-pub const SWEEP_CSV_HEADER: &str = "robots,rc_m,merge,strategy,seed,known_mean,known_team,\
-visited_mean,visited_team,merges,alignment_error_m,wall_s";
+pub const SWEEP_CSV_HEADER: &str = "robots,rc_m,merge,strategy,steer_on,seed,known_mean,\
+known_team,merged_mean,merged_team,visited_mean,visited_team,merges,alignment_error_m,wall_s";
 
 /// `sweep.csv`: one row per run, in grid order.
 pub fn sweep_csv(r: &SweepResult) -> String {
@@ -36,14 +40,17 @@ pub fn sweep_csv(r: &SweepResult) -> String {
         // Writing into a String cannot fail.
         let _ = writeln!(
             text,
-            "{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             x.point.robots,
             x.point.rc_m,
             x.point.merge,
             x.point.strategy.name(),
+            x.point.steer_on.name(),
             x.seed,
             x.known_mean,
             x.known_team,
+            x.merged_mean,
+            x.merged_team,
             x.visited_mean,
             x.visited_team,
             x.merges,
@@ -56,10 +63,14 @@ pub fn sweep_csv(r: &SweepResult) -> String {
     text
 }
 
-/// Writes `sweep.csv`, `sweep.json`, `sweep_robots.png` and, when the sweep has two radii or
-/// more ([`rc_values`]), `sweep_rc.png` into `dir` (created if needed) and returns the paths
-/// written.
-pub fn write_sweep(dir: &Path, r: &SweepResult) -> Result<Vec<PathBuf>, ReportError> {
+/// Writes `sweep.csv`, `sweep.json`, `sweep_paper.md` (the paper's values beside ours),
+/// `sweep_robots.png` and, when the sweep has two radii or more ([`rc_values`]),
+/// `sweep_rc.png` into `dir` (created if needed) and returns the paths written.
+pub fn write_sweep(
+    dir: &Path,
+    r: &SweepResult,
+    paper: &[PaperValue],
+) -> Result<Vec<PathBuf>, ReportError> {
     fs::create_dir_all(dir).map_err(|source| ReportError::Io {
         path: dir.to_path_buf(),
         source,
@@ -75,9 +86,17 @@ pub fn write_sweep(dir: &Path, r: &SweepResult) -> Result<Vec<PathBuf>, ReportEr
     })?;
     write_file(&path, json.as_bytes())?;
     written.push(path);
+    let path = dir.join("sweep_paper.md");
+    write_file(&path, paper_table(r, paper).as_bytes())?;
+    written.push(path);
     let subtitle = format!(
-        "'{}', {} s, {} trial(s) per point (seeds 1..={}); known: visited or merged, mean per robot over the {} sectors; mean ± sd",
-        r.scenario, r.duration_s, r.trials, r.trials, r.sectors
+        "'{}', {} s, {} trial(s) per point (seeds 1..={}); {}, mean per robot over the {} sectors; mean ± sd; black: the paper",
+        r.scenario,
+        r.duration_s,
+        r.trials,
+        r.trials,
+        figure_words(r.figure),
+        r.sectors
     );
     let mut charts = vec![("sweep_robots.png", Axis::Robots)];
     if rc_values(r).len() > 1 {
@@ -85,7 +104,7 @@ pub fn write_sweep(dir: &Path, r: &SweepResult) -> Result<Vec<PathBuf>, ReportEr
     }
     for (name, axis) in charts {
         let path = dir.join(name);
-        let pic = chart(&r.points, axis, &subtitle).map_err(|detail| ReportError::Draw {
+        let pic = chart(r, paper, axis, &subtitle).map_err(|detail| ReportError::Draw {
             path: path.clone(),
             detail,
         })?;
@@ -93,6 +112,53 @@ pub fn write_sweep(dir: &Path, r: &SweepResult) -> Result<Vec<PathBuf>, ReportEr
         written.push(path);
     }
     Ok(written)
+}
+
+/// The figure's words on a chart.
+fn figure_words(f: sim::sweep::Figure) -> &'static str {
+    match f {
+        sim::sweep::Figure::Known => "known: mapped or merged",
+        sim::sweep::Figure::Merged => "merged: visited or received by a merge (the paper's)",
+        sim::sweep::Figure::Visited => "visited",
+    }
+}
+
+/// `sweep_paper.md`: a Markdown table, one row per paper value: its table, the value and
+/// ours beside it (what the sweep has no point for says so).
+pub fn paper_table(r: &SweepResult, paper: &[PaperValue]) -> String {
+    let mut text = format!(
+        "# Seed 004 beside sweep '{}' ({} s, {} trial(s), figure: {})\n\n| table | paper | ours |\n| --- | --- | --- |\n",
+        r.scenario,
+        r.duration_s,
+        r.trials,
+        r.figure.name()
+    );
+    for (p, ours) in sim::paper::beside(paper, r) {
+        let what = match p.kind {
+            PaperKind::MeanPct => format!("mean {} %", p.value),
+            PaperKind::MaxPct => format!("at most {} %", p.value),
+            PaperKind::WelchT => format!("Welch t = {}", p.value),
+            PaperKind::PairedTAbove => format!("every paired t > {}", p.value),
+            PaperKind::PeakRcM => format!("peak at R_C = {} m, slow decay beyond", p.value),
+        };
+        let setting = format!(
+            "{}, {}{}",
+            p.strategy.name(),
+            if p.integration {
+                "integration"
+            } else {
+                "no integration"
+            },
+            p.robots.map_or(String::new(), |n| format!(", {n} robots"))
+        );
+        let _ = writeln!(
+            text,
+            "| {} | {what} ({setting}) | {} |",
+            p.table,
+            ours.unwrap_or_else(|| "not in this sweep".into())
+        );
+    }
+    text
 }
 
 /// The distinct R_C values of the sweep's points, ascending.
@@ -120,9 +186,10 @@ impl Axis {
     /// The settings a line keeps fixed, in words, merge or not first.
     fn label(self, k: &PointKey) -> String {
         let merge = if k.merge { "merge" } else { "no merge" };
+        let (s, steer) = (k.strategy.name(), k.steer_on.name());
         match self {
-            Axis::Robots => format!("{merge}: {}, R_C = {} m", k.strategy.name(), k.rc_m),
-            Axis::Rc => format!("{merge}: {}, {} robot(s)", k.strategy.name(), k.robots),
+            Axis::Robots => format!("{merge}: {s}, {steer}, R_C = {} m", k.rc_m),
+            Axis::Rc => format!("{merge}: {s}, {steer}, {} robot(s)", k.robots),
         }
     }
 
@@ -223,9 +290,16 @@ fn lines(points: &[Point], axis: Axis) -> Vec<Line<'_>> {
 /// A sweep chart: exploration (%) against the axis' setting.
 type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<Ticked, RangedCoordf64>>;
 
-/// The chart of one axis: each line's mean ± sd against the axis' setting.
-fn chart(points: &[Point], axis: Axis, subtitle: &str) -> Result<Picture, String> {
-    let lines = lines(points, axis);
+/// The chart of one axis: each line's mean ± sd against the axis' setting, the paper's values
+/// in black.
+fn chart(
+    r: &SweepResult,
+    paper: &[PaperValue],
+    axis: Axis,
+    subtitle: &str,
+) -> Result<Picture, String> {
+    let figure = r.figure;
+    let lines = lines(&r.points, axis);
     let (lo, hi) = x_span(&lines, axis);
     let pad = ((hi - lo) * 0.06).max(0.5);
     let (title, x_desc) = titles(axis);
@@ -248,15 +322,16 @@ fn chart(points: &[Point], axis: Axis, subtitle: &str) -> Result<Picture, String
             .label_style(text(14))
             .axis_desc_style(text(15))
             .x_desc(x_desc)
-            .y_desc("sectors known, mean per robot (%)")
+            .y_desc(format!("sectors {}, mean per robot (%)", figure.name()))
             .draw()
             .map_err(msg)?;
         // One colour per line whatever its merge setting; merge off dashed.
         let mut colours: Vec<PointKey> = Vec::new();
         for l in &lines {
             let rgb: Rgb = series_rgb(colour_index(&mut colours, axis, &l.key));
-            draw_line(&mut chart, l, axis, rgb, (lo, hi), pad)?;
+            draw_line(&mut chart, l, axis, rgb, (lo, hi), pad, figure)?;
         }
+        draw_paper(&mut chart, r, paper, axis)?;
         series_labels(&mut chart, SeriesLabelPosition::LowerRight)?;
         root.present().map_err(msg)?;
     }
@@ -335,12 +410,13 @@ fn draw_line<'a, 'b: 'a>(
     rgb: Rgb,
     (lo, hi): (f64, f64),
     pad: f64,
+    figure: sim::sweep::Figure,
 ) -> Result<(), String> {
     let style = colour(rgb).stroke_width(2);
     let mut xy: Vec<(f64, f64)> = l
         .points
         .iter()
-        .map(|p| (axis.x(&p.key), 100.0 * p.known_mean.mean))
+        .map(|p| (axis.x(&p.key), 100.0 * p.figure(figure).mean))
         .collect();
     let across = axis == Axis::Rc && !l.key.merge && xy.len() == 1 && hi > lo;
     if across {
@@ -363,12 +439,12 @@ fn draw_line<'a, 'b: 'a>(
     let merge = l.key.merge;
     anno.label(line_label(l, axis, across))
         .legend(move |(x, y)| legend_sample!(merge, rgb, (x, y)));
-    draw_error_bars(chart, l, axis, style, 0.12 * pad)?;
+    draw_error_bars(chart, l, axis, style, 0.12 * pad, figure)?;
     // The dots: filled with merging, rings (white inside) without.
     let xy: Vec<(f64, f64)> = l
         .points
         .iter()
-        .map(|p| (axis.x(&p.key), 100.0 * p.known_mean.mean))
+        .map(|p| (axis.x(&p.key), 100.0 * p.figure(figure).mean))
         .collect();
     let fill = if merge { colour(rgb) } else { WHITE };
     chart
@@ -389,8 +465,9 @@ fn draw_line<'a, 'b: 'a>(
 fn line_label(l: &Line<'_>, axis: Axis, across: bool) -> String {
     if across {
         format!(
-            "no merge: {}, {} robot(s) (any R_C)",
+            "no merge: {}, {}, {} robot(s) (any R_C)",
             l.key.strategy.name(),
+            l.key.steer_on.name(),
             l.key.robots
         )
     } else {
@@ -405,10 +482,12 @@ fn draw_error_bars<'a, 'b: 'a>(
     axis: Axis,
     style: ShapeStyle,
     cap: f64,
+    figure: sim::sweep::Figure,
 ) -> Result<(), String> {
     for p in &l.points {
         let x = axis.x(&p.key);
-        let (m, s) = (100.0 * p.known_mean.mean, 100.0 * p.known_mean.sd);
+        let m = p.figure(figure);
+        let (m, s) = (100.0 * m.mean, 100.0 * m.sd);
         let (y0, y1) = ((m - s).max(0.0), (m + s).min(105.0));
         chart
             .draw_series([
@@ -421,11 +500,64 @@ fn draw_error_bars<'a, 'b: 'a>(
     Ok(())
 }
 
+/// The paper's values on a chart, in black: on the robots axis a cross at each percentage of a
+/// strategy the sweep ran (Tables 2 and 6); on the R_C axis a dotted vertical line at its peak
+/// (Table 9). Each has a legend entry citing its table.
+fn draw_paper<'a, 'b: 'a>(
+    chart: &mut Chart<'a, 'b>,
+    r: &SweepResult,
+    paper: &[PaperValue],
+    axis: Axis,
+) -> Result<(), String> {
+    let black = colour([0, 0, 0]).stroke_width(2);
+    let ran = |p: &PaperValue| r.points.iter().any(|x| x.key.strategy == p.strategy);
+    for p in paper.iter().filter(|p| ran(p)) {
+        match (axis, p.kind, p.robots) {
+            (Axis::Robots, PaperKind::MeanPct | PaperKind::MaxPct, Some(n)) => {
+                let at = (n as f64, p.value);
+                let words = if p.kind == PaperKind::MeanPct {
+                    "mean"
+                } else {
+                    "at most"
+                };
+                chart
+                    .draw_series(std::iter::once(Cross::new(at, 6, black)))
+                    .map_err(msg)?
+                    .label(format!(
+                        "paper, Table {}: {}, {n} robots, {words} {} %",
+                        p.table,
+                        p.strategy.name(),
+                        p.value
+                    ))
+                    .legend(move |(x, y)| Cross::new((x + 12, y), 6, black));
+            }
+            (Axis::Rc, PaperKind::PeakRcM, _) => {
+                chart
+                    .draw_series(std::iter::once(DashedPathElement::new(
+                        vec![(p.value, 0.0), (p.value, 105.0)],
+                        2,
+                        4,
+                        black,
+                    )))
+                    .map_err(msg)?
+                    .label(format!(
+                        "paper, Table {}: peak at R_C = {} m",
+                        p.table, p.value
+                    ))
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], black));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use roles::follower::StrategyKind;
-    use sim::sweep::{comparisons, points, RunResult};
+    use roles::mapper::SteerOn;
+    use sim::sweep::{comparisons, points, Figure, RunResult};
 
     fn run(robots: usize, merge: bool, seed: u64, known: f64) -> RunResult {
         RunResult {
@@ -434,10 +566,13 @@ mod tests {
                 rc_m: 8.0,
                 merge,
                 strategy: StrategyKind::Inverse,
+                steer_on: SteerOn::OwnMap,
             },
             seed,
             known_mean: known,
             known_team: known,
+            merged_mean: known,
+            merged_team: known,
             visited_mean: 0.5,
             visited_team: 0.6,
             merges: 3,
@@ -465,8 +600,9 @@ mod tests {
             trials: 2,
             sectors: 24,
             jobs: 2,
+            figure: Figure::Known,
             wall_s: 1.0,
-            comparisons: comparisons(&runs, &pts),
+            comparisons: comparisons(&runs, &pts, Figure::Known),
             points: pts,
             runs,
         };
@@ -482,10 +618,11 @@ mod tests {
         );
         assert_eq!(c.paired, None, "equal differences: undefined");
         let dir = std::env::temp_dir().join(format!("sweep-report-{}", std::process::id()));
-        let files = write_sweep(&dir, &r).unwrap();
+        let paper = sim::paper::seed004().unwrap();
+        let files = write_sweep(&dir, &r, &paper).unwrap();
         // One R_C (8 m): no R_C chart.
         assert_eq!(rc_values(&r), [8.0]);
-        assert_eq!(files.len(), 3, "{files:?}");
+        assert_eq!(files.len(), 4, "{files:?}");
         assert!(!dir.join("sweep_rc.png").exists());
         let csv = fs::read_to_string(dir.join("sweep.csv")).unwrap();
         assert_eq!(csv.lines().count(), 1 + 8);
@@ -493,7 +630,25 @@ mod tests {
             .lines()
             .nth(1)
             .unwrap()
-            .starts_with("1,8,true,inverse,1,0.5,"));
+            .starts_with("1,8,true,inverse,own-map,1,0.5,"));
+        // The paper beside ours: every value of the paper's file, its table first.
+        let md = fs::read_to_string(dir.join("sweep_paper.md")).unwrap();
+        assert_eq!(
+            md.lines()
+                .filter(|l| l.starts_with("| ")
+                    && !l.starts_with("| table")
+                    && !l.starts_with("| ---"))
+                .count(),
+            paper.len()
+        );
+        assert!(
+            md.contains("| 6 | mean 80 % (inverse, integration, 5 robots) | not in this sweep |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| 8 | every paired t > 1.83 (inverse, integration) | own-map: "),
+            "{md}"
+        );
         let json: serde_json::Value =
             serde_json::from_str(&fs::read_to_string(dir.join("sweep.json")).unwrap()).unwrap();
         assert_eq!(json["points"].as_array().unwrap().len(), 4);
@@ -513,14 +668,20 @@ mod tests {
         }
         let pts = points(&runs);
         let r2 = SweepResult {
-            comparisons: comparisons(&runs, &pts),
+            comparisons: comparisons(&runs, &pts, Figure::Known),
             points: pts,
             runs,
             ..r
         };
         assert_eq!(rc_values(&r2), [4.0, 8.0]);
-        let files = write_sweep(&dir, &r2).unwrap();
-        assert_eq!(files.len(), 4, "{files:?}");
+        let files = write_sweep(&dir, &r2, &paper).unwrap();
+        assert_eq!(files.len(), 5, "{files:?}");
+        let md = fs::read_to_string(dir.join("sweep_paper.md")).unwrap();
+        // Table 9 is about 5 robots: this sweep has none.
+        assert!(
+            md.contains("| 9 | peak at R_C = 24 m, slow decay beyond (inverse, integration, 5 robots) | not in this sweep |"),
+            "{md}"
+        );
         assert!(dir.join("sweep_rc.png").is_file());
         fs::remove_dir_all(&dir).unwrap();
     }
@@ -536,12 +697,18 @@ mod tests {
         assert_eq!(Axis::Rc.tick(12.5), "12.5");
         assert_eq!(Axis::Rc.tick(8.0), "8");
         let key = run(2, true, 1, 0.5).point;
-        assert_eq!(Axis::Robots.label(&key), "merge: inverse, R_C = 8 m");
+        assert_eq!(
+            Axis::Robots.label(&key),
+            "merge: inverse, own-map, R_C = 8 m"
+        );
         let off = PointKey {
             merge: false,
             ..key
         };
-        assert_eq!(Axis::Robots.label(&off), "no merge: inverse, R_C = 8 m");
+        assert_eq!(
+            Axis::Robots.label(&off),
+            "no merge: inverse, own-map, R_C = 8 m"
+        );
     }
 
     /// The legend tells the two apart in pixels too: merge's sample is a solid line through a

@@ -3,11 +3,12 @@
 //! what a run records ([`record`]; as a ROS 2 MCAP file, [`ros_record`] and the observer's
 //! [`ros_feed`]) and the metrics computed from it ([`metrics`], seed 000's
 //! `wrong_area` in [`wrong_area`]), and seed 004's grid of experiments ([`sweep`], its statistics in
-//! [`sweep_stats`]).
+//! [`sweep_stats`], the paper's own figures beside it in [`paper`]).
 
 pub mod exploration;
 pub mod metrics;
 pub mod observer;
+pub mod paper;
 pub mod processes;
 pub mod record;
 pub mod ros_feed;

@@ -1,10 +1,11 @@
 //! Seed 004's grid of experiments (`pheromone sweep`): robots × R_C × merge {on, off} ×
-//! strategy × trials, each run the single-process runner ([`run_single_process`]) on the
+//! strategy × steering (shared field, own map) × trials, each run the single-process runner ([`run_single_process`]) on the
 //! scenario with its overrides and the seeds 1..=T, in parallel on a work queue
 //! (`std::thread::scope`, one worker per job). Per run: `exploration_known` (team, mean per
-//! robot) and `exploration` (visited); per point (every value but the seed): mean ± sd of each
-//! ([`sweep_stats`](super::sweep_stats)); comparisons at equal points: merge on vs off and
-//! inverse vs uniform, Welch's t and the paired t (the seeds match).
+//! robot), `exploration_merged` (the paper's count) and `exploration` (visited); per point
+//! (every value but the seed): mean ± sd of each ([`sweep_stats`](super::sweep_stats));
+//! comparisons at equal points on the sweep's [`Figure`]: merge on vs off and inverse vs
+//! uniform, Welch's t and the paired t (the seeds match).
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -13,11 +14,12 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::exploration::exploration_known;
+use super::exploration::{exploration_known, exploration_merged};
 use super::metrics::exploration;
 use super::single::{run_single_process, SingleProcessOptions};
 use super::sweep_stats::{paired, welch, MeanSd, TTest};
 use roles::follower::StrategyKind;
+use roles::mapper::SteerOn;
 use roles::process::role_loop::ProcessError;
 use roles::scenario::{Overrides, Scenario, ScenarioError};
 
@@ -140,6 +142,58 @@ pub fn parse_strategies(text: &str) -> Result<Vec<StrategyKind>, SweepError> {
     Ok(out)
 }
 
+/// `--steer own-map,shared`: what the sector strategies steer on, each at most once.
+pub fn parse_steer(text: &str) -> Result<Vec<SteerOn>, SweepError> {
+    let mut out = Vec::new();
+    for p in items("--steer", text)? {
+        match p.parse::<SteerOn>() {
+            Ok(k) => {
+                if out.contains(&k) {
+                    return Err(list_error("--steer", p, "given twice"));
+                }
+                out.push(k)
+            }
+            Err(_) => return Err(list_error("--steer", p, "expected own-map or shared")),
+        }
+    }
+    Ok(out)
+}
+
+/// The exploration figure a sweep compares and charts (every run records all three).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Figure {
+    /// `exploration_known`: sectors mapped by the robot's sensor or merged into its final map.
+    #[default]
+    Known,
+    /// `exploration_merged`: sectors visited or received through a merge (the paper's count).
+    Merged,
+    /// `exploration`: sectors the robot visited.
+    Visited,
+}
+
+impl Figure {
+    pub fn name(self) -> &'static str {
+        match self {
+            Figure::Known => "known",
+            Figure::Merged => "merged",
+            Figure::Visited => "visited",
+        }
+    }
+}
+
+impl std::str::FromStr for Figure {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "known" => Ok(Figure::Known),
+            "merged" => Ok(Figure::Merged),
+            "visited" => Ok(Figure::Visited),
+            _ => Err(format!("'{s}': expected known, merged or visited")),
+        }
+    }
+}
+
 /// What a sweep runs: every combination of the lists, `trials` seeds each (1..=trials).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SweepGrid {
@@ -148,8 +202,12 @@ pub struct SweepGrid {
     pub rc_m: Vec<f64>,
     pub merge: Vec<bool>,
     pub strategies: Vec<StrategyKind>,
+    /// Empty: the scenario's `[mapping] steer_on` only.
+    pub steer: Vec<SteerOn>,
     pub trials: u32,
     pub duration_s: f64,
+    /// The figure the comparisons test and the charts draw.
+    pub figure: Figure,
 }
 
 /// One point of the grid: every setting but the seed.
@@ -160,9 +218,15 @@ pub struct PointKey {
     pub merge: bool,
     #[serde(serialize_with = "strategy_name")]
     pub strategy: StrategyKind,
+    #[serde(serialize_with = "steer_name")]
+    pub steer_on: SteerOn,
 }
 
 fn strategy_name<S: serde::Serializer>(k: &StrategyKind, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(k.name())
+}
+
+fn steer_name<S: serde::Serializer>(k: &SteerOn, s: S) -> Result<S::Ok, S::Error> {
     s.serialize_str(k.name())
 }
 
@@ -170,11 +234,12 @@ impl std::fmt::Display for PointKey {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{} robot(s), R_C = {} m, {}, {}",
+            "{} robot(s), R_C = {} m, {}, {}, steering on {}",
             self.robots,
             self.rc_m,
             if self.merge { "merge" } else { "no merge" },
-            self.strategy.name()
+            self.strategy.name(),
+            self.steer_on.name()
         )
     }
 }
@@ -188,6 +253,10 @@ pub struct RunResult {
     /// `exploration_known`: mean over the robots, and known by at least one.
     pub known_mean: f64,
     pub known_team: f64,
+    /// `exploration_merged` (visited or received through a merge, the paper's count): mean
+    /// over the robots, and counted by at least one.
+    pub merged_mean: f64,
+    pub merged_team: f64,
     /// `exploration` (visited): mean over the robots, and visited by at least one.
     pub visited_mean: f64,
     pub visited_team: f64,
@@ -205,12 +274,36 @@ pub struct Point {
     pub seeds: Vec<u64>,
     pub known_mean: MeanSd,
     pub known_team: MeanSd,
+    pub merged_mean: MeanSd,
+    pub merged_team: MeanSd,
     pub visited_mean: MeanSd,
     pub visited_team: MeanSd,
     pub merges: MeanSd,
 }
 
-/// Two points that differ in one setting, on `exploration_known` mean per robot.
+impl Point {
+    /// The mean per robot of `figure`, mean ± sd over the trials.
+    pub fn figure(&self, figure: Figure) -> MeanSd {
+        match figure {
+            Figure::Known => self.known_mean,
+            Figure::Merged => self.merged_mean,
+            Figure::Visited => self.visited_mean,
+        }
+    }
+}
+
+impl RunResult {
+    /// The mean per robot of `figure`.
+    pub fn figure(&self, figure: Figure) -> f64 {
+        match figure {
+            Figure::Known => self.known_mean,
+            Figure::Merged => self.merged_mean,
+            Figure::Visited => self.visited_mean,
+        }
+    }
+}
+
+/// Two points that differ in one setting, on the sweep's figure, mean per robot.
 #[derive(Debug, Clone, Serialize)]
 pub struct Comparison {
     /// `merge` (a: on, b: off) or `strategy` (a: inverse, b: uniform).
@@ -233,10 +326,12 @@ pub struct SweepResult {
     pub trials: u32,
     pub sectors: u32,
     pub jobs: usize,
+    /// The figure the comparisons and charts use.
+    pub figure: Figure,
     pub wall_s: f64,
     pub points: Vec<Point>,
     pub comparisons: Vec<Comparison>,
-    /// One per run, in grid order (robots, R_C, merge, strategy, seed).
+    /// One per run, in grid order (robots, R_C, merge, strategy, steering, seed).
     #[serde(skip)]
     pub runs: Vec<RunResult>,
 }
@@ -268,6 +363,11 @@ pub fn plan(
     } else {
         grid.rc_m.clone()
     };
+    let steer = if grid.steer.is_empty() {
+        vec![base.mapping.steer_on]
+    } else {
+        grid.steer.clone()
+    };
     let mut out = Vec::new();
     for &robots in &grid.robots {
         for (ir, &rc) in rc_m.iter().enumerate() {
@@ -276,35 +376,51 @@ pub fn plan(
                 if !merge && ir > 0 {
                     continue;
                 }
-                for &strategy in &grid.strategies {
+                for (&strategy, &steer_on) in grid
+                    .strategies
+                    .iter()
+                    .flat_map(|k| steer.iter().map(move |s| (k, s)))
+                {
                     let key = PointKey {
                         robots,
                         rc_m: rc,
                         merge,
                         strategy,
+                        steer_on,
                     };
                     for seed in 1..=grid.trials as u64 {
-                        let mut s = base.clone();
-                        s.apply(&Overrides {
-                            seed: Some(seed),
-                            robots: Some(robots),
-                            duration_s: Some(grid.duration_s),
-                            strategy: Some(strategy),
-                            merge: Some(merge),
-                            rc_m: Some(rc),
-                            ..Overrides::default()
-                        })
-                        .map_err(|source| SweepError::Scenario {
-                            point: key.to_string(),
-                            source: Box::new(source),
-                        })?;
-                        out.push((key, seed, s));
+                        out.push((key, seed, point_scenario(base, grid, key, seed)?));
                     }
                 }
             }
         }
     }
     Ok(out)
+}
+
+/// The scenario of one run: `base` with the point's settings and the seed.
+fn point_scenario(
+    base: &Scenario,
+    grid: &SweepGrid,
+    key: PointKey,
+    seed: u64,
+) -> Result<Scenario, SweepError> {
+    let mut s = base.clone();
+    s.apply(&Overrides {
+        seed: Some(seed),
+        robots: Some(key.robots),
+        duration_s: Some(grid.duration_s),
+        strategy: Some(key.strategy),
+        merge: Some(key.merge),
+        rc_m: Some(key.rc_m),
+        steer_on: Some(key.steer_on),
+        ..Overrides::default()
+    })
+    .map_err(|source| SweepError::Scenario {
+        point: key.to_string(),
+        source: Box::new(source),
+    })?;
+    Ok(s)
 }
 
 /// One run and its figures.
@@ -325,6 +441,8 @@ fn run_one(key: PointKey, seed: u64, s: &Scenario) -> Result<RunResult, SweepErr
     let visited = exploration(m, &rec);
     let mapping = rec.mapping.as_ref();
     let known = mapping.and_then(|r| exploration_known(s, m, r));
+    // Without a mapping record nobody merged: the paper's count is what each robot visited.
+    let merged = mapping.map(|r| exploration_merged(m, &rec, &r.merges, s.world.dt_s));
     let errors: Vec<f64> = mapping
         .map(|r| r.merges.iter().map(|e| e.alignment_error_m).collect())
         .unwrap_or_default();
@@ -333,6 +451,8 @@ fn run_one(key: PointKey, seed: u64, s: &Scenario) -> Result<RunResult, SweepErr
         seed,
         known_mean: known.as_ref().map_or(visited.mean, |k| k.mean),
         known_team: known.as_ref().map_or(visited.team, |k| k.team),
+        merged_mean: merged.as_ref().map_or(visited.mean, |k| k.mean),
+        merged_team: merged.as_ref().map_or(visited.team, |k| k.team),
         visited_mean: visited.mean,
         visited_team: visited.team,
         merges: errors.len(),
@@ -412,8 +532,9 @@ pub fn run_sweep(
         trials: grid.trials,
         sectors,
         jobs,
+        figure: grid.figure,
         wall_s: started.elapsed().as_secs_f64(),
-        comparisons: comparisons(&runs, &points),
+        comparisons: comparisons(&runs, &points, grid.figure),
         points,
         runs,
     })
@@ -444,6 +565,8 @@ pub fn points(runs: &[RunResult]) -> Vec<Point> {
                 seeds: rs.iter().map(|r| r.seed).collect(),
                 known_mean: of(&|r| r.known_mean)?,
                 known_team: of(&|r| r.known_team)?,
+                merged_mean: of(&|r| r.merged_mean)?,
+                merged_team: of(&|r| r.merged_team)?,
                 visited_mean: of(&|r| r.visited_mean)?,
                 visited_team: of(&|r| r.visited_team)?,
                 merges: of(&|r| r.merges as f64)?,
@@ -452,13 +575,14 @@ pub fn points(runs: &[RunResult]) -> Vec<Point> {
         .collect()
 }
 
-/// Merge on against off (at every R_C, against the one no-merge point), and inverse against
-/// uniform, wherever both points ran.
-pub fn comparisons(runs: &[RunResult], points: &[Point]) -> Vec<Comparison> {
+/// Merge on against off (at every R_C, against the one no-merge point of the same robots,
+/// strategy and steering), and inverse against uniform, wherever both points ran; on
+/// `figure`'s mean per robot.
+pub fn comparisons(runs: &[RunResult], points: &[Point], figure: Figure) -> Vec<Comparison> {
     let values: BTreeMap<usize, Vec<(u64, f64)>> = by_point(runs)
         .into_iter()
         .enumerate()
-        .map(|(i, (_, rs))| (i, rs.iter().map(|r| (r.seed, r.known_mean)).collect()))
+        .map(|(i, (_, rs))| (i, rs.iter().map(|r| (r.seed, r.figure(figure))).collect()))
         .collect();
     let keys: Vec<PointKey> = by_point(runs).into_iter().map(|(k, _)| k).collect();
     let find = |k: &PointKey| keys.iter().position(|x| x == k);
@@ -468,8 +592,12 @@ pub fn comparisons(runs: &[RunResult], points: &[Point]) -> Vec<Comparison> {
         let partner = a
             .merge
             .then(|| {
-                keys.iter()
-                    .find(|k| !k.merge && k.robots == a.robots && k.strategy == a.strategy)
+                keys.iter().find(|k| {
+                    !k.merge
+                        && k.robots == a.robots
+                        && k.strategy == a.strategy
+                        && k.steer_on == a.steer_on
+                })
             })
             .flatten()
             .map(|k| ("merge", *k));
@@ -490,7 +618,7 @@ pub fn comparisons(runs: &[RunResult], points: &[Point]) -> Vec<Comparison> {
                 points
                     .iter()
                     .find(|p| p.key == *k)
-                    .map_or(f64::NAN, |p| p.known_mean.mean)
+                    .map_or(f64::NAN, |p| p.figure(figure).mean)
             };
             out.push(Comparison {
                 kind,
@@ -507,124 +635,5 @@ pub fn comparisons(runs: &[RunResult], points: &[Point]) -> Vec<Comparison> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn lists_parse_and_bad_items_are_refused_naming_the_option_and_value() {
-        assert_eq!(parse_robots("1, 2,4").unwrap(), vec![1, 2, 4]);
-        assert_eq!(parse_rc_m("4,8.5,40").unwrap(), vec![4.0, 8.5, 40.0]);
-        assert_eq!(
-            parse_strategies("inverse,uniform").unwrap(),
-            vec![StrategyKind::Inverse, StrategyKind::Uniform]
-        );
-        for (e, option, value) in [
-            (parse_robots("0").unwrap_err(), "--robots", "\"0\""),
-            (parse_robots("1,x").unwrap_err(), "--robots", "\"x\""),
-            (parse_robots("2,2").unwrap_err(), "--robots", "\"2\""),
-            (parse_robots("1,,2").unwrap_err(), "--robots", "\"1,,2\""),
-            (parse_rc_m("-1").unwrap_err(), "--rc-m", "\"-1\""),
-            (parse_rc_m("abc").unwrap_err(), "--rc-m", "\"abc\""),
-            (parse_rc_m("8,NaN").unwrap_err(), "--rc-m", "\"NaN\""),
-            (parse_rc_m("inf").unwrap_err(), "--rc-m", "\"inf\""),
-            (
-                parse_strategies("route").unwrap_err(),
-                "--strategies",
-                "\"route\"",
-            ),
-        ] {
-            let text = e.to_string();
-            assert!(text.contains(option) && text.contains(value), "{text}");
-        }
-    }
-
-    fn grid() -> SweepGrid {
-        SweepGrid {
-            robots: vec![1, 2],
-            rc_m: vec![],
-            merge: vec![true, false],
-            strategies: vec![StrategyKind::Inverse],
-            trials: 2,
-            duration_s: 15.0,
-        }
-    }
-
-    #[test]
-    fn the_plan_is_the_cross_product_and_refuses_too_many_robots() {
-        let base = Scenario::load("ias-ss").unwrap();
-        let runs = plan(&base, &grid()).unwrap();
-        assert_eq!(runs.len(), 2 * 2 * 2);
-        let (key, seed, s) = &runs[1];
-        assert_eq!((key.robots, key.merge, *seed), (1, true, 2));
-        assert_eq!((s.world.robots.len(), s.seed, s.duration_s), (1, 2, 15.0));
-        assert_eq!(key.rc_m, base.mapping.rc_m, "the scenario's R_C by default");
-        let e = plan(
-            &base,
-            &SweepGrid {
-                robots: vec![99],
-                ..grid()
-            },
-        )
-        .unwrap_err()
-        .to_string();
-        assert!(e.contains("--robots") && e.contains("99"), "{e}");
-        // Two radii: merge on at both, merge off once (at the first).
-        let runs = plan(
-            &base,
-            &SweepGrid {
-                robots: vec![2],
-                rc_m: vec![4.0, 24.0],
-                ..grid()
-            },
-        )
-        .unwrap();
-        let keys: Vec<(f64, bool)> = runs.iter().map(|r| (r.0.rc_m, r.0.merge)).collect();
-        assert_eq!(
-            keys,
-            [
-                (4.0, true),
-                (4.0, true),
-                (4.0, false),
-                (4.0, false),
-                (24.0, true),
-                (24.0, true)
-            ]
-        );
-    }
-
-    #[test]
-    fn a_sweep_on_two_threads_gives_every_run_once_and_its_comparisons() {
-        let base = Scenario::load("ias-ss").unwrap();
-        let calls = AtomicUsize::new(0);
-        let r = run_sweep(&base, &grid(), 2, &|_, total| {
-            assert_eq!(total, 8);
-            calls.fetch_add(1, Ordering::Relaxed);
-        })
-        .unwrap();
-        assert_eq!(calls.into_inner(), 8);
-        assert_eq!(r.runs.len(), 8);
-        assert_eq!(r.points.len(), 4);
-        // Grid order, whatever order the threads ran them in.
-        let order: Vec<(usize, bool, u64)> = r
-            .runs
-            .iter()
-            .map(|x| (x.point.robots, x.point.merge, x.seed))
-            .collect();
-        assert_eq!(order[..3], [(1, true, 1), (1, true, 2), (1, false, 1)]);
-        // One run equals the same run alone (the threads share nothing).
-        let (key, seed, s) = &plan(&base, &grid()).unwrap()[5];
-        let alone = run_one(*key, *seed, s).unwrap();
-        assert_eq!(r.runs[5].known_mean, alone.known_mean);
-        assert_eq!(r.runs[5].visited_mean, alone.visited_mean);
-        // Merge on vs off for each robot count; no uniform point, so no strategy comparison.
-        assert_eq!(r.comparisons.len(), 2);
-        assert!(r
-            .comparisons
-            .iter()
-            .all(|c| c.kind == "merge" && c.a.merge && !c.b.merge));
-        for x in &r.runs {
-            assert!((0.0..=1.0).contains(&x.known_mean) && x.known_mean.is_finite());
-            assert!(x.known_mean + 1e-12 >= 0.0);
-        }
-    }
-}
+#[path = "sweep_tests.rs"]
+mod tests;

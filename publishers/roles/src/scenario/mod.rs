@@ -15,9 +15,11 @@ use crate::world::WorldConfig;
 mod error;
 mod map;
 mod mapping;
+mod starts;
 mod validate;
 
 pub use error::{DepositError, ScenarioError};
+pub use starts::StartArea;
 
 /// The robot id the world's scripted deposits carry: after every robot's in a tick's
 /// canonical order (`field::shm::FieldServer::tick`).
@@ -36,6 +38,10 @@ pub const BUILTIN: &[(&str, &str)] = &[
     (
         "ias-ss",
         include_str!("../../../../examples/scenarios/ias-ss.toml"),
+    ),
+    (
+        "ias-ss-open",
+        include_str!("../../../../examples/scenarios/ias-ss-open.toml"),
     ),
     (
         "evaporation",
@@ -102,6 +108,9 @@ pub struct Scenario {
     /// Seed 004's local maps and their merging (`scenario/mapping.rs`); off by default.
     #[serde(default)]
     pub mapping: crate::mapper::MappingConfig,
+    /// Robots start at random poses in this rectangle, drawn from the seed (`starts.rs`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start_area: Option<StartArea>,
 }
 
 /// `mark_walls`: deposits every `spacing_m` along every wall segment.
@@ -457,6 +466,7 @@ impl Scenario {
         let table: toml::Table = toml::from_str(text).unwrap_or_default();
         check_numbers(&table, "")
             .and_then(|()| s.load_world_map(base_dir))
+            .and_then(|()| s.place_random_starts())
             .and_then(|()| s.validate())
             .map_err(|e| ScenarioError::Invalid {
                 origin: origin.to_string(),
@@ -472,6 +482,7 @@ impl Scenario {
         }
         if let Some(seed) = o.seed {
             self.seed = seed;
+            self.place_random_starts()?;
         }
         if let Some(d) = o.duration_s {
             if !(d.is_finite() && d > 0.0) {
@@ -683,136 +694,4 @@ fn check_value(value: &toml::Value, path: &str) -> Result<(), ScenarioError> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn every_builtin_scenario_loads() {
-        for (name, _) in BUILTIN {
-            let s = Scenario::load(name).unwrap_or_else(|e| panic!("{e}"));
-            assert_eq!(&s.name, name);
-        }
-    }
-
-    #[test]
-    fn unknown_keys_and_bad_values_are_refused_with_the_origin() {
-        let e = Scenario::parse("name = 'x'\nduration_s = 1\nspeed = 3\n", "x.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("x.toml") && e.contains("speed"), "{e}");
-        let e = Scenario::parse("name = 'x'\nduration_s = -1\n", "y.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("y.toml") && e.contains("duration_s = -1"), "{e}");
-        let e = Scenario::load("no-such-scenario").unwrap_err().to_string();
-        assert!(e.contains("no-such-scenario") && e.contains("trail"), "{e}");
-    }
-
-    #[test]
-    fn duplicates_robots_off_the_field_nan_deposits_and_endless_runs_are_refused() {
-        let refused = |edit: &dyn Fn(&mut Scenario)| {
-            let mut s = Scenario::load("trail").unwrap();
-            edit(&mut s);
-            s.validate().unwrap_err().to_string()
-        };
-        let e = refused(&|s| s.robots.push(s.robots[0].clone()));
-        assert!(e.contains("more than one [[robots]] entry"), "{e}");
-        let e = refused(&|s| s.world.robots[0].start.x_m = -1e4);
-        assert!(
-            e.contains("lies outside the field") && e.contains("-10000"),
-            "{e}"
-        );
-        let e = refused(&|s| s.deposits[0].amount = f32::NAN);
-        assert!(
-            e.contains("deposit 1: the field would refuse it") && e.contains("non_finite"),
-            "{e}"
-        );
-        let e = refused(&|s| s.deposits[0].channel = 7);
-        assert!(e.contains("deposit 1: the field would refuse it"), "{e}");
-        let e = refused(&|s| s.duration_s = 1e300);
-        assert!(
-            e.contains("duration_s") && e.contains("at most 1e9 s"),
-            "{e}"
-        );
-        let e = refused(&|s| {
-            s.robots[0]
-                .depositor
-                .as_mut()
-                .expect("trail's robot deposits")
-                .channel = 5
-        });
-        assert!(
-            e.contains("depositor channel = 5") && e.contains("the field has 2 channel(s)"),
-            "{e}"
-        );
-    }
-
-    #[test]
-    fn nan_infinite_and_absurd_numbers_anywhere_in_a_file_are_refused_naming_the_key() {
-        // Every float key of a file, at any depth, in tables and arrays of tables.
-        let cases = [
-            (
-                "duration_s = ",
-                "nan",
-                "duration_s = NaN: must be a finite number",
-            ),
-            (
-                "duration_s = ",
-                "inf",
-                "duration_s = inf: must be a finite number",
-            ),
-            (
-                "duration_s = ",
-                "-1e300",
-                "duration_s = -1e300: must be at most 1e9 in size",
-            ),
-        ];
-        for (key, value, says) in cases {
-            let text = format!("name = 'x'\n{key}{value}\n");
-            let e = Scenario::parse(&text, "n.toml").unwrap_err().to_string();
-            assert!(e.contains("n.toml") && e.contains(says), "{value}: {e}");
-        }
-        let nested = "name = 'x'\nduration_s = 5.0\n[[robots]]\nid = 0\n[[robots]]\nid = 1\n\
-                      [robots.depositor]\ntau = nan\n";
-        let e = check_numbers(&toml::from_str(nested).unwrap(), "")
-            .unwrap_err()
-            .to_string();
-        assert_eq!(e, "robots[1].depositor.tau = NaN: must be a finite number");
-    }
-
-    #[test]
-    fn a_refused_scenario_keeps_what_was_refused_as_its_source() {
-        use std::error::Error;
-        let e = Scenario::parse("name = 'x'\nduration_s = -1\n", "y.toml").unwrap_err();
-        let inner = e
-            .source()
-            .and_then(|s| s.downcast_ref::<Box<ScenarioError>>());
-        assert!(
-            matches!(inner.map(|b| &**b), Some(ScenarioError::Value { key, .. }) if key == "duration_s"),
-            "{e:?}"
-        );
-        let mut s = Scenario::load("trail").unwrap();
-        s.deposits[0].kernel = "blob".into();
-        let e = s.validate().unwrap_err();
-        assert!(
-            matches!(
-                &e,
-                ScenarioError::Deposit {
-                    index: 1,
-                    source: DepositError::Kernel(_)
-                }
-            ),
-            "{e:?}"
-        );
-        let kernel = e.source().and_then(|d| d.source()).map(|k| k.to_string());
-        assert!(kernel.is_some_and(|k| k.contains("'blob'")), "{e}");
-    }
-
-    #[test]
-    fn a_line_deposit_expands_every_spacing() {
-        let s = Scenario::load("trail").unwrap();
-        let msgs = s.deposits[0].messages().unwrap();
-        assert_eq!(msgs.len(), 106);
-        assert!((msgs[105].x_m - 11.0).abs() < 1e-3);
-    }
-}
+mod tests;
