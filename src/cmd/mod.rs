@@ -17,6 +17,7 @@ pub mod rt;
 pub mod sim;
 pub mod sim_args;
 pub mod sim_filters;
+pub mod sim_run;
 pub mod stop;
 pub mod sweep;
 pub mod tune;

@@ -4,7 +4,6 @@
 //! `--out DIR` pictures of the field, the scenario's charts, a CSV per robot and
 //! `metrics.json`.
 
-use std::path::PathBuf;
 use std::time::Instant;
 
 use roles::follower::StrategyKind;
@@ -12,13 +11,14 @@ use roles::scenario::{Overrides, Scenario};
 use ros2::record::{McapRecorder, RecordError};
 use serde::Serialize;
 use sim::metrics::{mean_sd, scenario_metrics, welch_t, RunMetrics, RunMode};
-use sim::processes::{run_as_processes, ProcessRunError, ProcessRunInfo, ProcessRunOptions};
+use sim::processes::ProcessRunInfo;
 use sim::record::Recording;
 use sim::ros_record::{McapTotals, SimMcap};
 use sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 
 use super::roles::load_scenario;
 pub use super::sim_args::SimArgs;
+use super::sim_run::{out_dir, run_processes};
 use super::stop::{self, Stopped};
 use super::{bad, bad_from, bad_in};
 
@@ -206,17 +206,6 @@ fn start_record(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<Option<SimMc
     Ok(Some(SimMcap::start(file, scenario)?))
 }
 
-pub(super) fn out_dir(a: &SimArgs, scenario: &Scenario) -> Option<PathBuf> {
-    if a.no_out {
-        return None;
-    }
-    Some(
-        a.out
-            .clone()
-            .unwrap_or_else(|| PathBuf::from("pheromone-out").join(&scenario.name)),
-    )
-}
-
 fn print_summary(m: &RunMetrics) {
     let how = if m.interrupted {
         "stopped by a signal, written as far as it ran"
@@ -396,75 +385,4 @@ impl Trials {
             welch_df,
         }
     }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Separate processes
-
-pub(super) fn run_processes(
-    a: &SimArgs,
-    scenario: &Scenario,
-    progress: Option<&mut dyn FnMut(f64)>,
-    record: Option<SimMcap>,
-) -> anyhow::Result<(RunSummary, Recording, ProcessRunInfo)> {
-    let stall = super::seconds("stall-timeout", a.stall_timeout)?;
-    if let Some(v) = &a.view {
-        eprintln!("sim: view: http://{v}/ (stops with the run)");
-    }
-    if a.ros2.is_some() && !cfg!(feature = "zenoh") {
-        return Err(super::bad(
-            "--ros2: this build has no Zenoh: rebuild with `cargo build --release --features zenoh`",
-        ));
-    }
-    if a.zenoh.any() && a.ros2.is_none() {
-        return Err(super::bad(
-            "--zenoh-config, --tls-*, --user, --password-file and --users-file are for the --ros2 \
-             child: give --ros2 too",
-        ));
-    }
-    if let Some(e) = &a.ros2 {
-        eprintln!("sim: ros2: connecting to {e} (stops with the run)");
-    }
-    let attach = a
-        .attach_timeout
-        .map(|v| super::seconds("attach-timeout", v))
-        .transpose()?;
-    run_as_processes(
-        scenario,
-        ProcessRunOptions {
-            exe: std::env::current_exe()?,
-            slam: a.slam,
-            realtime: a.realtime,
-            timeout: super::seconds("timeout", a.timeout)?,
-            attach_timeout: attach,
-            stall_timeout: stall,
-            progress,
-            view: a.view.clone(),
-            ros2: a.ros2.clone(),
-            ros2_args: a.zenoh.to_args(),
-            rt_args: rt_args(a.rt_priority, a.rt_best_effort),
-            remote: a.remote,
-            follower_wait: a.follower_wait,
-            record,
-        },
-    )
-    .map_err(|e| match e {
-        ProcessRunError::Interrupted => {
-            eprintln!("sim: stopped before the run recorded a frame: nothing written");
-            Stopped::by_requested().into()
-        }
-        e => e.into(),
-    })
-}
-
-/// `--rt-priority N [--rt-best-effort]` for each child (none without a priority).
-fn rt_args(priority: Option<i32>, best_effort: bool) -> Vec<String> {
-    let Some(p) = priority else {
-        return Vec::new();
-    };
-    let mut v = vec!["--rt-priority".to_string(), p.to_string()];
-    if best_effort {
-        v.push("--rt-best-effort".to_string());
-    }
-    v
 }

@@ -11,7 +11,8 @@ use sim::single::{run_single_process, SingleProcessOptions};
 use report::{FilterRun, FilterSummary};
 
 use super::bad;
-use super::sim::{out_dir, run_processes, SimArgs};
+use super::sim_args::SimArgs;
+use super::sim_run::{out_dir, run_processes};
 use super::stop::{self, Stopped};
 
 /// `filters.json` and the `--json` line.

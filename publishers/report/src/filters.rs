@@ -5,16 +5,9 @@
 //! uncertainty against its deposits (Fig. 18, log–log). Nothing here is made up: every value
 //! is a difference of two recorded poses, or a recorded σ or deposit.
 
-use std::fmt::Write as _;
-use std::fs;
-use std::path::{Path, PathBuf};
-
 use serde::Serialize;
 use sim::record::RobotSample;
-
-use super::files::{write_file, write_png};
-use super::filters_plots::{error_chart, scatter_chart, ErrorKind};
-use super::ReportError;
+use std::fmt::Write as _;
 
 /// One step of one filter's run: the estimate's error and what the robot deposited.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -193,47 +186,6 @@ pub fn filters_csv(runs: &[FilterRun]) -> String {
         }
     }
     text
-}
-
-/// Writes `filters.csv` and the charts of seed 000 Figs. 13–18 for robot `robot` into `dir`:
-/// `filter_error_phi.png` (Fig. 13), `filter_error_x.png` (14), `filter_error_y.png` (15),
-/// `filter_error_xy.png` (16), `filter_deposits.png` (17) and `filter_sigma_deposit.png` (18).
-pub fn write_filter_comparison(
-    dir: &Path,
-    robot: u32,
-    runs: &[FilterRun],
-) -> Result<Vec<PathBuf>, ReportError> {
-    fs::create_dir_all(dir).map_err(|source| ReportError::Io {
-        path: dir.to_path_buf(),
-        source,
-    })?;
-    let path = dir.join("filters.csv");
-    write_file(&path, filters_csv(runs).as_bytes())?;
-    let mut written = vec![path];
-    let charts = [
-        ("filter_error_phi.png", ErrorKind::Phi),
-        ("filter_error_x.png", ErrorKind::X),
-        ("filter_error_y.png", ErrorKind::Y),
-        ("filter_error_xy.png", ErrorKind::Combined),
-        ("filter_deposits.png", ErrorKind::Deposit),
-    ];
-    for (name, kind) in charts {
-        let path = dir.join(name);
-        let pic = error_chart(robot, runs, kind).map_err(|detail| ReportError::Draw {
-            path: path.clone(),
-            detail,
-        })?;
-        write_png(&path, &pic)?;
-        written.push(path);
-    }
-    let path = dir.join("filter_sigma_deposit.png");
-    let pic = scatter_chart(robot, runs).map_err(|detail| ReportError::Draw {
-        path: path.clone(),
-        detail,
-    })?;
-    write_png(&path, &pic)?;
-    written.push(path);
-    Ok(written)
 }
 
 #[cfg(test)]

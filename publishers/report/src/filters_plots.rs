@@ -2,11 +2,16 @@
 //! filter in the palette's order: errors and deposits against time, and σ against the
 //! deposit on log–log axes. Their data are [`super::filters::FilterRun`]s.
 
+use std::fs;
+use std::path::{Path, PathBuf};
+
 use plotters::prelude::*;
 
-use super::filters::{FilterRun, FilterStep};
+use super::files::{write_file, write_png};
+use super::filters::{filters_csv, FilterRun, FilterStep};
 use super::plots::{blank, series_labels, text, titled};
 use super::style::{colour, msg, series_rgb, Picture, Rgb};
+use super::ReportError;
 
 /// What an [`error_chart`] draws against time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -235,4 +240,45 @@ pub(super) fn scatter_chart(robot: u32, runs: &[FilterRun]) -> Result<Picture, S
         root.present().map_err(msg)?;
     }
     Ok(pic)
+}
+
+/// Writes `filters.csv` and the charts of seed 000 Figs. 13–18 for robot `robot` into `dir`:
+/// `filter_error_phi.png` (Fig. 13), `filter_error_x.png` (14), `filter_error_y.png` (15),
+/// `filter_error_xy.png` (16), `filter_deposits.png` (17) and `filter_sigma_deposit.png` (18).
+pub fn write_filter_comparison(
+    dir: &Path,
+    robot: u32,
+    runs: &[FilterRun],
+) -> Result<Vec<PathBuf>, ReportError> {
+    fs::create_dir_all(dir).map_err(|source| ReportError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let path = dir.join("filters.csv");
+    write_file(&path, filters_csv(runs).as_bytes())?;
+    let mut written = vec![path];
+    let charts = [
+        ("filter_error_phi.png", ErrorKind::Phi),
+        ("filter_error_x.png", ErrorKind::X),
+        ("filter_error_y.png", ErrorKind::Y),
+        ("filter_error_xy.png", ErrorKind::Combined),
+        ("filter_deposits.png", ErrorKind::Deposit),
+    ];
+    for (name, kind) in charts {
+        let path = dir.join(name);
+        let pic = error_chart(robot, runs, kind).map_err(|detail| ReportError::Draw {
+            path: path.clone(),
+            detail,
+        })?;
+        write_png(&path, &pic)?;
+        written.push(path);
+    }
+    let path = dir.join("filter_sigma_deposit.png");
+    let pic = scatter_chart(robot, runs).map_err(|detail| ReportError::Draw {
+        path: path.clone(),
+        detail,
+    })?;
+    write_png(&path, &pic)?;
+    written.push(path);
+    Ok(written)
 }

@@ -42,7 +42,8 @@ use heatmap::render_snapshot;
 use roles::scenario::Scenario;
 use sim::record::{Recording, Snapshot};
 
-pub use filters::{write_filter_comparison, FilterRun, FilterSummary};
+pub use filters::{FilterRun, FilterSummary};
+pub use filters_plots::write_filter_comparison;
 pub use graph_png::write_graph_png;
 pub use marks::{marks, Mark, Shape};
 pub use plots::{PLOT_H_PX, PLOT_W_PX};
