@@ -89,6 +89,7 @@ const DOMAINS: &[(&str, &str, Domain)] = &[
     ("sim", "--trials", int(2.0, 100_000.0)),
     ("sim", "--rc-m", pos(1e6)),
     ("sim", "--particles", int(10.0, 100_000.0)),
+    ("sim", "--compare-robot", ANY_U32),
     ("sim", "--timeout", SECS),
     ("sim", "--attach-timeout", SECS),
     ("sim", "--stall-timeout", SECS),
@@ -406,6 +407,7 @@ const NEEDS: &[(&str, &str, &[&str], Option<&str>)] = &[
     ),
     ("tune threshold", "--delta", &[], Some("--level")),
     ("sim", "--rc-m", &["--merge"], None),
+    ("sim", "--compare-robot", &["--compare-filters"], None),
 ];
 
 /// The values every flag gets, besides one just above its largest.
