@@ -113,7 +113,7 @@ pub(super) fn error_chart(
             let mut chart = builder
                 .build_cartesian_2d(0.0..t_max, (lo..hi).log_scale())
                 .map_err(msg)?;
-            mesh(&mut chart, y_desc)?;
+            mesh(&mut chart, "time (s)", y_desc)?;
             for (i, (r, pts)) in runs.iter().zip(&series).enumerate() {
                 let rgb = series_rgb(i);
                 chart
@@ -137,7 +137,7 @@ pub(super) fn error_chart(
             let mut chart = builder
                 .build_cartesian_2d(0.0..t_max, lo..hi)
                 .map_err(msg)?;
-            mesh(&mut chart, y_desc)?;
+            mesh(&mut chart, "time (s)", y_desc)?;
             for (i, (r, pts)) in runs.iter().zip(&series).enumerate() {
                 let rgb = series_rgb(i);
                 let rms =
@@ -160,6 +160,7 @@ pub(super) fn error_chart(
 
 fn mesh<X, Y>(
     chart: &mut ChartContext<'_, BitMapBackend<'_>, Cartesian2d<X, Y>>,
+    x_desc: &str,
     y_desc: &str,
 ) -> Result<(), String>
 where
@@ -174,7 +175,7 @@ where
         .bold_line_style(RGBColor(225, 225, 225))
         .label_style(text(14))
         .axis_desc_style(text(15))
-        .x_desc("time (s)")
+        .x_desc(x_desc)
         .y_desc(y_desc)
         .draw()
         .map_err(msg)
@@ -218,16 +219,11 @@ pub(super) fn scatter_chart(robot: u32, runs: &[FilterRun]) -> Result<Picture, S
             .y_label_area_size(80)
             .build_cartesian_2d((x_lo..x_hi).log_scale(), (y_lo..y_hi).log_scale())
             .map_err(msg)?;
-        chart
-            .configure_mesh()
-            .light_line_style(WHITE)
-            .bold_line_style(RGBColor(225, 225, 225))
-            .label_style(text(14))
-            .axis_desc_style(text(15))
-            .x_desc("σ of the estimate (m, log scale)")
-            .y_desc("deposit γ (log scale)")
-            .draw()
-            .map_err(msg)?;
+        mesh(
+            &mut chart,
+            "σ of the estimate (m, log scale)",
+            "deposit γ (log scale)",
+        )?;
         for (i, (r, pts)) in runs.iter().zip(&series).enumerate() {
             let rgb = series_rgb(i);
             chart
