@@ -30,6 +30,15 @@ pub(super) fn run_processes(
     record: Option<SimMcap>,
 ) -> anyhow::Result<(RunSummary, Recording, ProcessRunInfo)> {
     let stall = super::seconds("stall-timeout", a.stall_timeout)?;
+    if let Some(m) = scenario.mapping() {
+        if m.merge && m.merge_idle_iterations > 0 {
+            return Err(super::bad(format!(
+                "scenario '{}': mapping.merge_idle_iterations = {} needs --single-process (a \
+                 follower process does not learn of its mapper's merges)",
+                scenario.name, m.merge_idle_iterations
+            )));
+        }
+    }
     if let Some(v) = &a.view {
         eprintln!("sim: view: http://{v}/ (stops with the run)");
     }

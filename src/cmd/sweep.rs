@@ -5,9 +5,10 @@ use std::path::PathBuf;
 
 use clap::Args;
 use roles::follower::StrategyKind;
+use roles::scenario::Scenario;
 use sim::sweep::{
-    parse_rc_m, parse_robots, parse_steer, parse_strategies, run_sweep, Figure, SweepGrid,
-    SweepResult,
+    integrations, parse_merge_idle, parse_merge_rules, parse_rc_m, parse_robots, parse_steer,
+    parse_strategies, run_sweep, Figure, SweepGrid, SweepResult,
 };
 
 use super::roles::load_scenario;
@@ -83,6 +84,16 @@ pub struct SweepArgs {
     /// [default: the scenario's [mapping] steer_on: shared in ias-ss, own-map in ias-ss-open].
     #[arg(long, value_name = "LIST", allow_hyphen_values = true)]
     pub steer: Option<String>,
+    /// Seed 004's ablation: how merges combine two maps, comma-separated: average (seed
+    /// 004's mean), max (the larger occupancy and pheromone), adopt-unknown [default: the
+    /// scenario's [mapping] merge_rule, average]. Each is a point (and chart line) of its own.
+    #[arg(long = "merge-rule", value_name = "LIST", allow_hyphen_values = true)]
+    pub merge_rule: Option<String>,
+    /// Seed 004's ablation, the cost of an integration: iterations a robot stands still after
+    /// each merge, comma-separated (e.g. 0,10,50) [default: the scenario's [mapping]
+    /// merge_idle_iterations, 0]. Combined with every --merge-rule.
+    #[arg(long = "merge-idle", value_name = "LIST", allow_hyphen_values = true)]
+    pub merge_idle: Option<String>,
     /// The figure compared and charted: known (mapped or merged into the map), merged (visited
     /// or received through a merge: the paper's count) or visited. The CSV has all three.
     #[arg(long, value_name = "FIGURE", default_value = "known")]
@@ -104,7 +115,7 @@ pub struct SweepArgs {
     pub json: bool,
 }
 
-fn grid(a: &SweepArgs) -> anyhow::Result<SweepGrid> {
+fn grid(a: &SweepArgs, base: &Scenario) -> anyhow::Result<SweepGrid> {
     if !(a.duration_s.is_finite() && a.duration_s > 0.0) {
         return Err(bad(format!(
             "--duration-s {}: must be a number of seconds > 0",
@@ -135,6 +146,17 @@ fn grid(a: &SweepArgs) -> anyhow::Result<SweepGrid> {
             Some(t) => parse_steer(t).map_err(bad_from)?,
             None => Vec::new(),
         },
+        integration: integrations(
+            base,
+            &match &a.merge_rule {
+                Some(t) => parse_merge_rules(t).map_err(bad_from)?,
+                None => Vec::new(),
+            },
+            &match &a.merge_idle {
+                Some(t) => parse_merge_idle(t).map_err(bad_from)?,
+                None => Vec::new(),
+            },
+        ),
         trials: a.trials,
         duration_s: a.duration_s,
         figure: a.figure,
@@ -142,13 +164,13 @@ fn grid(a: &SweepArgs) -> anyhow::Result<SweepGrid> {
 }
 
 pub fn run(a: SweepArgs) -> anyhow::Result<()> {
-    let grid = grid(&a)?;
+    let base = load_scenario(&a.scenario)?;
+    let grid = grid(&a, &base)?;
     let jobs = match a.jobs {
         Some(0) => return Err(bad("--jobs 0: needs at least 1 worker")),
         Some(n) => n,
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
-    let base = load_scenario(&a.scenario)?;
     let runs = sim::sweep::plan(&base, &grid).map_err(bad_from)?.len();
     eprintln!(
         "sweep '{}': {runs} run(s) of {} s on {jobs} thread(s)",

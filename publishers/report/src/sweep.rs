@@ -29,8 +29,8 @@ use sim::paper::{PaperKind, PaperValue};
 use sim::sweep::{Point, PointKey, SweepResult};
 
 /// Header of `sweep.csv`.
-pub const SWEEP_CSV_HEADER: &str = "robots,rc_m,merge,strategy,steer_on,seed,known_mean,\
-known_team,merged_mean,merged_team,visited_mean,visited_team,merges,alignment_error_m,wall_s";
+pub const SWEEP_CSV_HEADER: &str = "robots,rc_m,merge,strategy,steer_on,merge_rule,\
+merge_idle_iterations,seed,known_mean,known_team,merged_mean,merged_team,visited_mean,visited_team,merges,alignment_error_m,wall_s";
 
 /// `sweep.csv`: one row per run, in grid order.
 pub fn sweep_csv(r: &SweepResult) -> String {
@@ -40,12 +40,14 @@ pub fn sweep_csv(r: &SweepResult) -> String {
         // Writing into a String cannot fail.
         let _ = writeln!(
             text,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             x.point.robots,
             x.point.rc_m,
             x.point.merge,
             x.point.strategy.name(),
             x.point.steer_on.name(),
+            x.point.integration.merge_rule.name(),
+            x.point.integration.merge_idle_iterations,
             x.seed,
             x.known_mean,
             x.known_team,
@@ -185,7 +187,11 @@ impl Axis {
 
     /// The settings a line keeps fixed, in words, merge or not first.
     fn label(self, k: &PointKey) -> String {
-        let merge = if k.merge { "merge" } else { "no merge" };
+        let merge = match (k.merge, k.integration.words()) {
+            (false, _) => "no merge".to_string(),
+            (true, w) if w.is_empty() => "merge".to_string(),
+            (true, w) => format!("merge {w}"),
+        };
         let (s, steer) = (k.strategy.name(), k.steer_on.name());
         match self {
             Axis::Robots => format!("{merge}: {s}, {steer}, R_C = {} m", k.rc_m),
@@ -567,6 +573,7 @@ mod tests {
                 merge,
                 strategy: StrategyKind::Inverse,
                 steer_on: SteerOn::OwnMap,
+                integration: Default::default(),
             },
             seed,
             known_mean: known,
@@ -630,7 +637,7 @@ mod tests {
             .lines()
             .nth(1)
             .unwrap()
-            .starts_with("1,8,true,inverse,own-map,1,0.5,"));
+            .starts_with("1,8,true,inverse,own-map,average,0,1,0.5,"));
         // The paper beside ours: every value of the paper's file, its table first.
         let md = fs::read_to_string(dir.join("sweep_paper.md")).unwrap();
         assert_eq!(

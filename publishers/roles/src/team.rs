@@ -169,6 +169,20 @@ impl MappingTeam {
     }
 
     /// The mapper of robot `id`.
+    /// The robots that merged a peer's map at `step` (each once, however many maps it merged).
+    pub fn merged_at(&self, step: u64) -> Vec<u32> {
+        let mut ids: Vec<u32> = self
+            .merges
+            .iter()
+            .rev()
+            .take_while(|e| e.step == step)
+            .map(|e| e.dst)
+            .collect();
+        ids.sort_unstable();
+        ids.dedup();
+        ids
+    }
+
     pub fn mapper(&self, id: u32) -> Option<&Mapper> {
         self.mappers.iter().find(|m| m.id == id)
     }

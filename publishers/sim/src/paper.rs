@@ -5,7 +5,7 @@
 
 use roles::follower::StrategyKind;
 
-use super::sweep::{Figure, SweepResult};
+use super::sweep::{Figure, PointKey, SweepResult};
 
 /// The paper's values, as shipped.
 pub const SEED004_CSV: &str = include_str!("../../../docs/paper/seed004.csv");
@@ -196,7 +196,7 @@ fn ours(p: &PaperValue, r: &SweepResult) -> Option<String> {
                 let m = x.figure(f);
                 format!(
                     "{}: {} ± {} % ({} robot(s), R_C = {} m)",
-                    x.key.steer_on.name(),
+                    setting(&x.key),
                     pct(m.mean),
                     pct(m.sd),
                     x.key.robots,
@@ -224,7 +224,7 @@ fn ours(p: &PaperValue, r: &SweepResult) -> Option<String> {
                     });
                     format!(
                         "{}: {t} ({} robot(s), R_C = {} m)",
-                        c.a.steer_on.name(),
+                        setting(&c.a),
                         c.a.robots,
                         c.a.rc_m
                     )
@@ -236,11 +236,20 @@ fn ours(p: &PaperValue, r: &SweepResult) -> Option<String> {
     (!parts.is_empty()).then(|| parts.join("; "))
 }
 
-/// Per steering mode (and robot count), where the sweep's merge line over R_C peaks.
+/// A point's steering and, where they are not seed 004's own, its merge rule and cost.
+fn setting(k: &PointKey) -> String {
+    match k.integration.words() {
+        w if w.is_empty() || !k.merge => k.steer_on.name().to_string(),
+        w => format!("{}, merge {w}", k.steer_on.name()),
+    }
+}
+
+/// Per steering mode, merge setting and robot count, where the sweep's merge line over R_C
+/// peaks.
 fn peaks(p: &PaperValue, r: &SweepResult) -> Vec<String> {
-    let mut lines: Vec<(roles::mapper::SteerOn, usize)> = Vec::new();
+    let mut lines: Vec<PointKey> = Vec::new();
     for x in &r.points {
-        let k = (x.key.steer_on, x.key.robots);
+        let k = PointKey { rc_m: 0.0, ..x.key };
         if x.key.merge
             && x.key.strategy == p.strategy
             && p.robots.is_none_or(|n| n == x.key.robots)
@@ -251,16 +260,11 @@ fn peaks(p: &PaperValue, r: &SweepResult) -> Vec<String> {
     }
     lines
         .into_iter()
-        .filter_map(|(steer, robots)| {
+        .filter_map(|line| {
             let mut pts: Vec<(f64, f64)> = r
                 .points
                 .iter()
-                .filter(|x| {
-                    x.key.merge
-                        && x.key.strategy == p.strategy
-                        && x.key.steer_on == steer
-                        && x.key.robots == robots
-                })
+                .filter(|x| PointKey { rc_m: 0.0, ..x.key } == line)
                 .map(|x| (x.key.rc_m, x.figure(r.figure).mean))
                 .collect();
             if pts.len() < 2 {
@@ -277,9 +281,9 @@ fn peaks(p: &PaperValue, r: &SweepResult) -> Vec<String> {
                 .collect();
             Some(format!(
                 "{}: peak at {} m ({} robot(s); {} %)",
-                steer.name(),
+                setting(&line),
                 best.0,
-                robots,
+                line.robots,
                 curve.join(", ")
             ))
         })
@@ -312,7 +316,7 @@ mod tests {
 
     /// A sweep of 5 robots over three radii, merged figure 0.7, 0.8, 0.75 (two seeds each).
     fn rc_sweep() -> SweepResult {
-        use super::super::sweep::{comparisons, points, PointKey, RunResult};
+        use super::super::sweep::{comparisons, points, RunResult};
         let mut runs = Vec::new();
         for (rc_m, m) in [(16.0, 0.7), (24.0, 0.8), (40.0, 0.75)] {
             for (seed, d) in [(1, -0.05), (2, 0.05)] {
@@ -323,6 +327,7 @@ mod tests {
                         merge: true,
                         strategy: StrategyKind::Inverse,
                         steer_on: roles::mapper::SteerOn::OwnMap,
+                        integration: Default::default(),
                     },
                     seed,
                     known_mean: 1.0,

@@ -275,6 +275,9 @@ struct SingleRun<'a> {
     /// Own-map steering: each robot's map frame origin and its map as a frame (both planes,
     /// [`MAP_CHANNELS`]), refreshed after the mapping team's step; `None` on the shared field.
     own_maps: Vec<Option<(Pose2, Vec<f32>)>>,
+    /// Seed 004's integration cost (`[mapping] merge_idle_iterations`): each robot stands still
+    /// until this step (exclusive) after a merge.
+    idle_until: Vec<u64>,
     record: Option<&'a mut SimMcap>,
 }
 
@@ -326,6 +329,7 @@ impl<'a> SingleRun<'a> {
             robots,
             rec,
             frames: FrameSchedule::new(scenario),
+            idle_until: vec![0; commands.len()],
             commands,
             own_maps,
             record: None,
@@ -353,6 +357,7 @@ impl<'a> SingleRun<'a> {
                 .collect();
             team.step(self.world.step_count(), &poses, &sensed);
         }
+        self.start_idling(k);
         self.refresh_own_maps();
         self.field.tick();
         let ft = self.field.stepper.sim_time_s;
@@ -361,7 +366,9 @@ impl<'a> SingleRun<'a> {
         let dt = self.scenario.world.dt_s;
         let robots = self.robots.iter_mut().zip(&outputs).zip(&self.own_maps);
         let mut rows = Vec::new();
-        for (((r, out), own), cmd) in robots.zip(self.commands.iter_mut()) {
+        let idle = self.idle_until.iter();
+        for ((((r, out), own), cmd), &idle_until) in robots.zip(self.commands.iter_mut()).zip(idle)
+        {
             let pose = r.pose.expect("set above");
             if self.record.is_some() {
                 rows.push(PoseRow {
@@ -372,6 +379,10 @@ impl<'a> SingleRun<'a> {
                 });
             }
             let (state, level) = match own {
+                _ if k < idle_until => {
+                    *cmd = (0.0, 0.0);
+                    (None, None)
+                }
                 Some((start, cells)) => {
                     let g = *self
                         .mapping
@@ -401,6 +412,23 @@ impl<'a> SingleRun<'a> {
             out.poses(rows);
             out.deposits(t, self.field.stepper.applied());
             out.frames(&self.rec);
+        }
+    }
+
+    /// The integration cost: a robot that merged at step `k` stands still for
+    /// `merge_idle_iterations` iterations from this step on.
+    fn start_idling(&mut self, k: u64) {
+        let (Some(team), Some(m)) = (self.mapping.as_ref(), self.scenario.mapping()) else {
+            return;
+        };
+        let idle_steps = m.idle_steps_per_merge(self.scenario.world.dt_s);
+        if idle_steps == 0 {
+            return;
+        }
+        for id in team.merged_at(self.world.step_count()) {
+            if let Some(i) = self.robots.iter().position(|r| r.id == id) {
+                self.idle_until[i] = k + idle_steps;
+            }
         }
     }
 

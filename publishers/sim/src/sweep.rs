@@ -19,7 +19,7 @@ use super::metrics::exploration;
 use super::single::{run_single_process, SingleProcessOptions};
 use super::sweep_stats::{paired, welch, MeanSd, TTest};
 use roles::follower::StrategyKind;
-use roles::mapper::SteerOn;
+use roles::mapper::{MergeRule, SteerOn};
 use roles::process::role_loop::ProcessError;
 use roles::scenario::{Overrides, Scenario, ScenarioError};
 
@@ -159,6 +159,76 @@ pub fn parse_steer(text: &str) -> Result<Vec<SteerOn>, SweepError> {
     Ok(out)
 }
 
+/// `--merge-rule average,max`: how merges combine two maps, each at most once.
+pub fn parse_merge_rules(text: &str) -> Result<Vec<MergeRule>, SweepError> {
+    let mut out = Vec::new();
+    for p in items("--merge-rule", text)? {
+        match p.parse::<MergeRule>() {
+            Ok(k) if !out.contains(&k) => out.push(k),
+            Ok(_) => return Err(list_error("--merge-rule", p, "given twice")),
+            Err(_) => {
+                return Err(list_error(
+                    "--merge-rule",
+                    p,
+                    "expected average, adopt-unknown or max",
+                ))
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The most idle iterations per merge a sweep takes (the paper runs 1000 iterations).
+pub const MAX_IDLE_ITERATIONS: u32 = 100_000;
+
+/// `--merge-idle 0,5,20`: iterations a robot stands still after a merge, each at most once.
+pub fn parse_merge_idle(text: &str) -> Result<Vec<u32>, SweepError> {
+    let mut out = Vec::new();
+    for p in items("--merge-idle", text)? {
+        match p.parse::<u32>() {
+            Ok(k) if k <= MAX_IDLE_ITERATIONS && !out.contains(&k) => out.push(k),
+            Ok(k) if k <= MAX_IDLE_ITERATIONS => {
+                return Err(list_error("--merge-idle", p, "given twice"))
+            }
+            _ => {
+                return Err(list_error(
+                    "--merge-idle",
+                    p,
+                    "not a number of iterations from 0 to 100000",
+                ))
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Every combination of the merge rules and idle iterations given (an empty list: the
+/// scenario's); empty when neither is given.
+pub fn integrations(base: &Scenario, rules: &[MergeRule], idle: &[u32]) -> Vec<Integration> {
+    if rules.is_empty() && idle.is_empty() {
+        return Vec::new();
+    }
+    let rules = if rules.is_empty() {
+        vec![base.mapping.merge_rule]
+    } else {
+        rules.to_vec()
+    };
+    let idle = if idle.is_empty() {
+        vec![base.mapping.merge_idle_iterations]
+    } else {
+        idle.to_vec()
+    };
+    rules
+        .iter()
+        .flat_map(|&merge_rule| {
+            idle.iter().map(move |&merge_idle_iterations| Integration {
+                merge_rule,
+                merge_idle_iterations,
+            })
+        })
+        .collect()
+}
+
 /// The exploration figure a sweep compares and charts (every run records all three).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -204,10 +274,40 @@ pub struct SweepGrid {
     pub strategies: Vec<StrategyKind>,
     /// Empty: the scenario's `[mapping] steer_on` only.
     pub steer: Vec<SteerOn>,
+    /// How merges combine and what they cost (seed 004's ablations); empty: the scenario's
+    /// `[mapping] merge_rule` and `merge_idle_iterations` only.
+    pub integration: Vec<Integration>,
     pub trials: u32,
     pub duration_s: f64,
     /// The figure the comparisons test and the charts draw.
     pub figure: Figure,
+}
+
+/// How a point's merges combine two maps and what one costs: `[mapping] merge_rule` and
+/// `merge_idle_iterations` (seed 004's ablations: merge by max; k idle iterations per merge).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct Integration {
+    #[serde(serialize_with = "rule_name")]
+    pub merge_rule: MergeRule,
+    pub merge_idle_iterations: u32,
+}
+
+fn rule_name<S: serde::Serializer>(k: &MergeRule, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(k.name())
+}
+
+impl Integration {
+    /// `max, 10 idle`; empty for seed 004's own (average, free).
+    pub fn words(self) -> String {
+        let mut w = Vec::new();
+        if self.merge_rule != MergeRule::Average {
+            w.push(format!("by {}", self.merge_rule.name()));
+        }
+        if self.merge_idle_iterations > 0 {
+            w.push(format!("{} idle", self.merge_idle_iterations));
+        }
+        w.join(", ")
+    }
 }
 
 /// One point of the grid: every setting but the seed.
@@ -220,6 +320,9 @@ pub struct PointKey {
     pub strategy: StrategyKind,
     #[serde(serialize_with = "steer_name")]
     pub steer_on: SteerOn,
+    /// Without merging, the scenario's (it changes nothing).
+    #[serde(flatten)]
+    pub integration: Integration,
 }
 
 fn strategy_name<S: serde::Serializer>(k: &StrategyKind, s: S) -> Result<S::Ok, S::Error> {
@@ -240,7 +343,11 @@ impl std::fmt::Display for PointKey {
             if self.merge { "merge" } else { "no merge" },
             self.strategy.name(),
             self.steer_on.name()
-        )
+        )?;
+        match self.integration.words() {
+            w if w.is_empty() => Ok(()),
+            w => write!(f, ", merge {w}"),
+        }
     }
 }
 
@@ -368,28 +475,44 @@ pub fn plan(
     } else {
         grid.steer.clone()
     };
+    let integration = if grid.integration.is_empty() {
+        vec![Integration {
+            merge_rule: base.mapping.merge_rule,
+            merge_idle_iterations: base.mapping.merge_idle_iterations,
+        }]
+    } else {
+        grid.integration.clone()
+    };
     let mut out = Vec::new();
     for &robots in &grid.robots {
         for (ir, &rc) in rc_m.iter().enumerate() {
             for &merge in &grid.merge {
-                // Without merging R_C changes nothing a robot knows: once, at the first R_C.
+                // Without merging R_C and the merge settings change nothing a robot knows:
+                // once, at the first of each.
                 if !merge && ir > 0 {
                     continue;
                 }
-                for (&strategy, &steer_on) in grid
-                    .strategies
-                    .iter()
-                    .flat_map(|k| steer.iter().map(move |s| (k, s)))
-                {
-                    let key = PointKey {
-                        robots,
-                        rc_m: rc,
-                        merge,
-                        strategy,
-                        steer_on,
-                    };
-                    for seed in 1..=grid.trials as u64 {
-                        out.push((key, seed, point_scenario(base, grid, key, seed)?));
+                let variants = if merge {
+                    &integration[..]
+                } else {
+                    &integration[..1]
+                };
+                for &strategy in &grid.strategies {
+                    for (&steer_on, &integration) in steer
+                        .iter()
+                        .flat_map(|s| variants.iter().map(move |v| (s, v)))
+                    {
+                        let key = PointKey {
+                            robots,
+                            rc_m: rc,
+                            merge,
+                            strategy,
+                            steer_on,
+                            integration,
+                        };
+                        for seed in 1..=grid.trials as u64 {
+                            out.push((key, seed, point_scenario(base, grid, key, seed)?));
+                        }
                     }
                 }
             }
@@ -420,6 +543,8 @@ fn point_scenario(
         point: key.to_string(),
         source: Box::new(source),
     })?;
+    s.mapping.merge_rule = key.integration.merge_rule;
+    s.mapping.merge_idle_iterations = key.integration.merge_idle_iterations;
     Ok(s)
 }
 

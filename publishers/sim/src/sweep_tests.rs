@@ -35,6 +35,7 @@ fn grid() -> SweepGrid {
         merge: vec![true, false],
         strategies: vec![StrategyKind::Inverse],
         steer: vec![],
+        integration: vec![],
         trials: 2,
         duration_s: 15.0,
         figure: Figure::Known,

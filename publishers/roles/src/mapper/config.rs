@@ -55,6 +55,10 @@ pub struct MappingConfig {
     pub steer_on: SteerOn,
     /// How a merge combines two maps.
     pub merge_rule: MergeRule,
+    /// The cost of an integration (seed 004's ablation): a robot that merged a peer's map
+    /// stands still for this many iterations, from the step of the merge (0: merging is free).
+    /// Single-process runs only (`pheromone sweep`, `sim --single-process`).
+    pub merge_idle_iterations: u32,
 }
 
 /// `[mapping] steer_on` / `pheromone sim --steer`: the map a sector strategy reads.
@@ -101,6 +105,32 @@ pub enum MergeRule {
     /// A cell unknown in one map (log-odds 0) takes the other's occupancy and pheromone; a cell
     /// known in both averages both, occupancy in log-odds.
     AdoptUnknown,
+    /// Seed 004's ablation, the maximum instead of the mean: a cell unknown in one map (log-odds
+    /// 0) takes the other's occupancy, a cell known in both the larger log-odds (an obstacle
+    /// wins); pheromone the larger level.
+    Max,
+}
+
+impl MergeRule {
+    pub fn name(self) -> &'static str {
+        match self {
+            MergeRule::Average => "average",
+            MergeRule::AdoptUnknown => "adopt-unknown",
+            MergeRule::Max => "max",
+        }
+    }
+}
+
+impl std::str::FromStr for MergeRule {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "average" => Ok(MergeRule::Average),
+            "adopt-unknown" => Ok(MergeRule::AdoptUnknown),
+            "max" => Ok(MergeRule::Max),
+            _ => Err(format!("'{s}': expected average, adopt-unknown or max")),
+        }
+    }
 }
 
 impl Default for MappingConfig {
@@ -128,6 +158,7 @@ impl Default for MappingConfig {
             logodds_max: 4.0,
             steer_on: SteerOn::Shared,
             merge_rule: MergeRule::Average,
+            merge_idle_iterations: 0,
         }
     }
 }
@@ -204,6 +235,11 @@ impl MappingConfig {
     /// Cells of a side of the local map.
     pub fn side_cells(&self) -> u32 {
         (self.extent_m / self.cell_size_m).round() as u32
+    }
+
+    /// World steps a robot stands still after a merge (`merge_idle_iterations` iterations).
+    pub fn idle_steps_per_merge(&self, dt_s: f64) -> u64 {
+        self.merge_idle_iterations as u64 * self.steps_per_iteration(dt_s)
     }
 
     /// World steps in one iteration (at least 1).

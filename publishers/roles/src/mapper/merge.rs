@@ -139,10 +139,12 @@ impl MergeTransform {
 /// What one merge did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct MergeStats {
-    /// Destination cells that were unknown and took the source's values (`adopt-unknown`).
+    /// Destination cells that were unknown and took the source's values (`adopt-unknown`,
+    /// `max`).
     pub adopted: usize,
     /// Destination cells averaged: known in both maps (`adopt-unknown`), known or marked in
-    /// either (`average`; a cell unknown and unmarked in both stays as it is).
+    /// either (`average`; a cell unknown and unmarked in both stays as it is); with `max`, the
+    /// cells combined by the maximum (a known or marked source cell not adopted).
     pub averaged: usize,
 }
 
@@ -331,6 +333,7 @@ fn merge_run(
     match rule {
         MergeRule::AdoptUnknown => runs.run(drow, prow, src.occupancy, src.pheromone, &walk),
         MergeRule::Average => average_run((drow, prow), src, &walk, logodds_max),
+        MergeRule::Max => max_run((drow, prow), src, &walk),
     }
 }
 
@@ -375,6 +378,39 @@ pub fn average_logodds(a: f32, b: f32, max: f32) -> f32 {
     let p = |l: f32| 1.0 / (1.0 + (-l.clamp(-max, max)).exp());
     let q = 0.5 * (p(a) + p(b));
     (q / (1.0 - q)).ln().clamp(-max, max)
+}
+
+/// The `max` ablation over one run, one cell at a time: a cell unknown in one map takes the
+/// other's occupancy, a cell known in both the larger log-odds; pheromone the larger level.
+/// Returns (adopted: unknown here, known in the source; combined: known in both, or marked).
+fn max_run(
+    (drow, prow): (&mut [f32], &mut [f32]),
+    src: &MapView<'_>,
+    walk: &super::merge_simd::Walk,
+) -> (usize, usize) {
+    let (u_max, v_max) = (walk.sw as i64 - 1, walk.sh as i64 - 1);
+    let (mut u, mut v) = (walk.u, walk.v);
+    let (mut adopted, mut combined) = (0usize, 0usize);
+    for (d, p) in drow.iter_mut().zip(prow.iter_mut()) {
+        let (cu, cv) = ((u >> 32).clamp(0, u_max), (v >> 32).clamp(0, v_max));
+        let i = cv as usize * walk.sw + cu as usize;
+        let (so, sp) = (src.occupancy[i], src.pheromone[i]);
+        if *d == 0.0 && so != 0.0 {
+            *d = so;
+            *p = p.max(sp);
+            adopted += 1;
+        } else if so != 0.0 || sp != 0.0 {
+            // Here a known source cell meets a known destination cell (else the branch above).
+            if so != 0.0 {
+                *d = d.max(so);
+            }
+            *p = p.max(sp);
+            combined += 1;
+        }
+        u = u.wrapping_add(walk.du);
+        v = v.wrapping_add(walk.dv);
+    }
+    (adopted, combined)
 }
 
 /// The cells x in [x_lo, x_hi) of a destination row whose source coordinates

@@ -44,6 +44,10 @@ pub const BUILTIN: &[(&str, &str)] = &[
         include_str!("../../../../examples/scenarios/ias-ss-open.toml"),
     ),
     (
+        "ias-ss-rooms",
+        include_str!("../../../../examples/scenarios/ias-ss-rooms.toml"),
+    ),
+    (
         "evaporation",
         include_str!("../../../../examples/scenarios/evaporation.toml"),
     ),
