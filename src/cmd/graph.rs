@@ -10,8 +10,8 @@ use clap::Args;
 use field::shm::create_node;
 use graph::agent::{GraphStrategy, RegionsScenario, Until, BUILTIN_REGIONS};
 use graph::compare::{compare, comparison_text, Comparison};
-use graph::localize::{Localization, LocalizeConfig};
-use graph::processes::{run_graph_robot, run_graph_writer, WriterOptions};
+use graph::localize::{DepositWeight, Localization, LocalizeConfig};
+use graph::processes::{run_graph_robot, run_graph_writer, RobotOptions, WriterOptions};
 use graph::run::{simulate_with, RunReport};
 use graph::tables::tables_text;
 use serde::Serialize;
@@ -49,6 +49,16 @@ pub fn load_regions(name: &str) -> anyhow::Result<RegionsScenario> {
     };
     sc.validate().map_err(|e| bad_in(name, e))?;
     Ok(sc)
+}
+
+/// The localization of a run's robots (`--localize`): the scenario's `[localize]` table with
+/// `deposit`, and the landmark EKF of `roles` (the graph crate does not depend on it). The
+/// same in one process, in every `graph-robot` process and for the run's report.
+fn localization(scenario: &RegionsScenario, deposit: DepositWeight) -> Localization<'static> {
+    Localization {
+        config: scenario.localize_config(deposit),
+        make_filter: &roles::localizer::graph_filter::make_graph_ekf,
+    }
 }
 
 fn parse_strategy(s: &str) -> anyhow::Result<GraphStrategy> {
@@ -149,6 +159,13 @@ pub struct GraphRobotArgs {
     /// Seconds to wait for the other robots and for each step.
     #[arg(long, value_parser = super::secs(), default_value_t = 30.0, value_name = "SECS")]
     pub timeout: f64,
+    /// Localize on landmarks with the EKF (seed 001 Algorithm 1, the scenario's `[localize]`
+    /// table): this robot owns its filter and its simulated sensors, seeded per robot as in
+    /// `sim --single-process`; as a region holder it matches only its region's landmarks, else
+    /// only the free areas'. Its link deposits are its constant −1 (`constant`) or −1 × ρ_t of
+    /// its covariance (`rho`); its summary reports the landmark comparisons and step times.
+    #[arg(long, value_name = "constant|rho")]
+    pub localize: Option<graph::localize::DepositWeight>,
     /// Print this robot's summary as one JSON object on stdout.
     #[arg(long)]
     pub json: bool,
@@ -165,16 +182,16 @@ pub fn run_robot(a: GraphRobotArgs) -> anyhow::Result<()> {
     let scenario = load_regions(&a.scenario)?;
     let strategy = parse_strategy(&a.strategy)?;
     let node = create_node(&format!("graph-{}-r{}", a.name, a.robot))?;
-    let report = run_graph_robot(
-        &node,
-        &scenario,
-        &a.name,
-        a.robot as usize - 1,
-        a.robots,
+    let o = RobotOptions {
+        name: a.name.clone(),
+        index: a.robot as usize - 1,
+        robots: a.robots,
         strategy,
-        a.seed.unwrap_or(scenario.seed),
-        secs("--timeout", a.timeout)?,
-    )?;
+        seed: a.seed.unwrap_or(scenario.seed),
+        timeout: secs("--timeout", a.timeout)?,
+        localization: a.localize.map(|deposit| localization(&scenario, deposit)),
+    };
+    let report = run_graph_robot(&node, &scenario, &o)?;
     eprintln!(
         "graph-robot R{}: {:.1} m driven, {} capture(s), {} conflict(s)",
         report.robot, report.distance_m, report.capture_count, report.conflicts
@@ -189,11 +206,6 @@ pub fn run_robot(a: GraphRobotArgs) -> anyhow::Result<()> {
 /// with both strategies (or --strategy), then the comparison of the time to the goal.
 pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
     refuse_grid_flags(a)?;
-    if a.localize.is_some() && !a.single_process {
-        return Err(bad(
-            "--localize needs --single-process (the graph-robot processes have no localizer)",
-        ));
-    }
     let scenario = load_regions(&a.scenario)?;
     let seed = a.seed.unwrap_or(scenario.seed);
     let counts = robot_counts(a, &scenario)?;
@@ -293,13 +305,7 @@ fn run_each(
     let mut runs: Vec<RunReport> = Vec::new();
     let mut text = String::new();
     let stopped = || super::stop::requested().is_some();
-    let localization = a.localize.map(|deposit| Localization {
-        config: LocalizeConfig {
-            deposit,
-            ..scenario.localize.unwrap_or_default()
-        },
-        make_filter: &roles::localizer::graph_filter::make_graph_ekf,
-    });
+    let localization = a.localize.map(|deposit| localization(scenario, deposit));
     for &n in counts {
         for &strategy in strategies {
             if stopped() {
@@ -309,7 +315,8 @@ fn run_each(
             let report = if a.single_process {
                 simulate_with(scenario, strategy, n, seed, localization.as_ref())?
             } else {
-                match run_as_processes(a, strategy, n, seed) {
+                let config = localization.map(|l| l.config);
+                match run_as_processes(a, strategy, n, seed, config) {
                     Ok(r) => r,
                     // The children got the terminal's Ctrl-C too: whatever ended the run first.
                     Err(_) if stopped() => return Ok((runs, text, true)),
@@ -385,6 +392,7 @@ fn run_as_processes(
     strategy: GraphStrategy,
     robots: usize,
     seed: u64,
+    localize: Option<LocalizeConfig>,
 ) -> anyhow::Result<RunReport> {
     Ok(sim::processes::run_graph_as_processes(
         &std::env::current_exe()?,
@@ -393,5 +401,6 @@ fn run_as_processes(
         robots,
         seed,
         super::seconds("timeout", a.timeout)?,
+        localize,
     )?)
 }

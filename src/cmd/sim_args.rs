@@ -173,7 +173,8 @@ pub struct SimArgs {
     /// Algorithm 1; a region holder matches only its region's landmarks, the others only the
     /// free areas') and deposits on a link its constant −1 (`constant`) or −1 × ρ_t of its
     /// covariance (`rho`); the run reports the landmark comparisons and η1, η2 (eq. 13,
-    /// Fig. 6). With --single-process. Off by default (no localizer).
+    /// Fig. 6). As processes each `graph-robot` owns its localizer; the metrics (all but the
+    /// step times) equal --single-process's. Off by default (no localizer).
     #[arg(long, value_name = "constant|rho")]
     pub localize: Option<graph::localize::DepositWeight>,
     /// Seconds the whole run may take before it is stopped as failed (separate processes).

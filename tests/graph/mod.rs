@@ -216,10 +216,7 @@ fn bad_regions_input_exits_with_status_2_and_names_it() {
         "{}",
         stderr(&o)
     );
-    // Graph robots localize in one process only; grid robots have their own localizers.
-    let o = run(&["sim", "regions", "--localize", "rho", "--no-out"]);
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(stderr(&o).contains("--single-process"), "{}", stderr(&o));
+    // Grid robots have their own localizers.
     let o = run(&["sim", "trail", "--localize", "rho", "--no-out"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--localize"), "{}", stderr(&o));
@@ -276,17 +273,107 @@ fn sim_regions_localize_reports_the_landmark_work() {
     let text = graph::agent::PAPER_CORRIDOR.to_string() + "\n[localize]\nrho_ref_m = -1.0\n";
     std::fs::write(&path, text).unwrap();
     let p = path.display().to_string();
-    let o = run(&[
-        "sim",
-        &p,
-        "--single-process",
-        "--localize",
-        "rho",
-        "--no-out",
-    ]);
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(stderr(&o).contains("`rho_ref_m` = -1"), "{}", stderr(&o));
+    for mode in [&["--single-process"][..], &[]] {
+        let mut args = vec!["sim", &p, "--localize", "rho", "--no-out"];
+        args.extend_from_slice(mode);
+        let o = run(&args);
+        assert_eq!(o.status.code(), Some(2), "{mode:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains("`rho_ref_m` = -1"), "{}", stderr(&o));
+    }
     std::fs::remove_file(&path).unwrap();
+}
+
+/// Drops the wall-clock measurements of a localized run (the step times and the η measured
+/// from them: `*_ns`, `eta1_time`, `eta2_time`), which differ from run to run.
+fn without_step_times(v: &mut serde_json::Value) {
+    match v {
+        serde_json::Value::Object(m) => {
+            m.retain(|k, _| !(k.ends_with("_ns") || k == "eta1_time" || k == "eta2_time"));
+            m.values_mut().for_each(without_step_times);
+        }
+        serde_json::Value::Array(a) => a.iter_mut().for_each(without_step_times),
+        _ => {}
+    }
+}
+
+/// The iceoryx2 nodes, alive or dead, whose names contain `tag`.
+fn nodes_named(tag: &str) -> Vec<String> {
+    use iceoryx2::node::NodeView;
+    use iceoryx2::prelude::*;
+    let mut names = Vec::new();
+    Node::<field::shm::Svc>::list(iceoryx2::config::Config::global_config(), |state| {
+        let name = |d: &Option<iceoryx2::node::NodeDetails>| {
+            d.as_ref().map(|d| d.name().as_str().to_string())
+        };
+        let name = match &state {
+            NodeState::Alive(v) => name(v.details()),
+            NodeState::Dead(v) => name(v.details()),
+            NodeState::Inaccessible(_) | NodeState::Undefined(_) => None,
+        };
+        names.extend(name.filter(|n| n.contains(tag)));
+        CallbackProgression::Continue
+    })
+    .expect("list the iceoryx2 nodes");
+    names
+}
+
+/// `--localize` as processes (each `graph-robot` owns its localizer) gives the runs of
+/// `--single-process` key by key: captures, link values, paths, deposits, ρ_t, landmark counts,
+/// comparisons and η1, η2 by count (all but the step times), for both deposit weights; and the
+/// run leaves no service and no node behind.
+#[test]
+fn sim_regions_localize_as_processes_matches_one_process() {
+    let sparse = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("examples/scenarios/regions-sparse.toml")
+        .display()
+        .to_string();
+    let cases: [(&str, &str, &[&str]); 3] = [
+        (&sparse, "rho", &[]),
+        (&sparse, "constant", &[]),
+        (
+            "regions",
+            "rho",
+            &["--robots", "3", "--strategy", "pheromone"],
+        ),
+    ];
+    for (scenario, weight, extra) in cases {
+        let mut args = vec!["sim", scenario, "--localize", weight, "--json", "--no-out"];
+        args.extend_from_slice(extra);
+        let p = Proc::spawn(&args);
+        let tag = format!("sim{}g", p.pid());
+        let o = p.wait_exit(Duration::from_secs(300));
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        let procs = json(&o);
+        assert_eq!(procs["mode"], "processes");
+        args.push("--single-process");
+        let o = run(&args);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        let single = json(&o);
+        let (mut a, mut b) = (runs(&procs), runs(&single));
+        assert!(!a.is_empty());
+        for r in &a {
+            let l = &r["localization"];
+            assert_eq!(l["config"]["deposit"], weight, "{l}");
+            assert!(l["all"]["deposits"].as_u64().unwrap() > 0, "{l}");
+            assert!(l["eta1_compared"].as_f64().is_some(), "{l}");
+            for rr in r["robot_reports"].as_array().unwrap() {
+                assert!(
+                    rr["localization"]["holding"]["steps"].as_u64().is_some(),
+                    "{rr}"
+                );
+            }
+        }
+        a.iter_mut().for_each(without_step_times);
+        b.iter_mut().for_each(without_step_times);
+        let mut diffs = Vec::new();
+        let (a, b) = (serde_json::Value::Array(a), serde_json::Value::Array(b));
+        crate::processes::differences(&a, &b, "runs", &mut diffs);
+        assert!(diffs.is_empty(), "{args:?}: {diffs:#?}");
+        let left = super::services_named(&tag);
+        assert!(left.is_empty(), "services left behind: {left:?}");
+        let left = nodes_named(&tag);
+        assert!(left.is_empty(), "nodes left behind: {left:?}");
+    }
 }
 
 /// Sec. 6.2 as processes: R2, told nothing, follows R1's positive pheromone to E.

@@ -552,6 +552,19 @@ impl RegionsScenario {
         Ok(GraphState { graph, regions })
     }
 
+    /// The settings of a run whose robots localize with deposits weighted by `deposit`: the
+    /// scenario's `[localize]` table (or the defaults) with its `deposit` key set by the flag.
+    /// Every process of a run builds it alike from the same scenario.
+    pub fn localize_config(
+        &self,
+        deposit: super::localize::DepositWeight,
+    ) -> super::localize::LocalizeConfig {
+        super::localize::LocalizeConfig {
+            deposit,
+            ..self.localize.unwrap_or_default()
+        }
+    }
+
     pub fn dock_node(&self, g: &Graph) -> Result<usize, GraphError> {
         self.dock.resolve(g)
     }

@@ -7,6 +7,13 @@
 //! updates and, for a claim, its contention message to every robot, then a step-done message.
 //! When all robots are done the writer applies the updates in robot order and opens the next
 //! step. Claimants exchange their messages over the contention service and decide alike.
+//!
+//! A run whose robots localize ([`RobotOptions::localization`], `graph-robot --localize`):
+//! each robot process owns its localizer, an on-robot filter fed by the robot's own true motion
+//! on the graph and seeded per robot exactly as in one process, so its steps are the same. Its
+//! ρ_t-weighted link deposits go out in the ordinary update messages (the amount is already
+//! there); its landmark counts and step times travel once, in its end-of-run report, from which
+//! whoever collects the reports builds the run's η1, η2 ([`super::run::RunReport::add_localization`]).
 
 use std::time::Duration;
 
@@ -16,6 +23,7 @@ use field::shm::{now_ns, Svc};
 use iceoryx2::node::Node;
 
 use super::agent::{GraphStrategy, RegionsScenario};
+use super::localize::Localization;
 use super::run::{GraphRobot, GraphWorld, RobotReport, RunReport, StepView};
 use super::shm::{
     graph_services, kind, Contention, GraphReader, GraphShmError, GraphSnapshot, GraphUpdateMsg,
@@ -162,20 +170,36 @@ pub fn run_graph_writer(
     Ok(world.report())
 }
 
-/// One robot process: index `index` (id = index + 1) of `robots`.
-#[allow(clippy::too_many_arguments)]
+/// Options of one robot process.
+#[derive(Clone)]
+pub struct RobotOptions<'a> {
+    /// Name of the graph to attach to.
+    pub name: String,
+    /// 0-based index of the robot (id = index + 1).
+    pub index: usize,
+    pub robots: usize,
+    pub strategy: GraphStrategy,
+    pub seed: u64,
+    /// How long to wait for the other robots and for each step.
+    pub timeout: Duration,
+    /// The robot localizes on landmarks (seed 001 Algorithm 1): it owns its filter and its
+    /// sensors, seeded per robot as in one process, and weighs its link deposits by ρ_t
+    /// before they go out in its update messages.
+    pub localization: Option<Localization<'a>>,
+}
+
+/// One robot process: index `o.index` (id = index + 1) of `o.robots`.
 pub fn run_graph_robot(
     node: &Node<Svc>,
     scenario: &RegionsScenario,
-    name: &str,
-    index: usize,
-    robots: usize,
-    strategy: GraphStrategy,
-    seed: u64,
-    timeout: Duration,
+    o: &RobotOptions,
 ) -> Result<RobotReport, GraphRunError> {
+    let (name, robots, timeout) = (o.name.as_str(), o.robots, o.timeout);
     let base = scenario.state()?;
-    let mut robot = GraphRobot::new(scenario, &base, index, strategy, seed)?;
+    let mut robot = GraphRobot::new(scenario, &base, o.index, o.strategy, o.seed)?;
+    if let Some(loc) = &o.localization {
+        robot.localize(loc, &base.graph, o.seed)?;
+    }
     let mut reader = GraphReader::attach(node, name)?;
     let updater = GraphUpdater::attach(node, name, robot.id())?;
     let mut contention = Contention::attach(node, name)?;

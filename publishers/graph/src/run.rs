@@ -19,7 +19,9 @@ use super::agent::{
     Action, GraphAgent, GraphStrategy, RegionsScenario, RobotProfile, SimParams, Until,
 };
 use super::conflict::{ContendMsg, RgbRes};
-use super::localize::{Localization, LocalizationStats, RobotLocalizer, RunLocalization};
+use super::localize::{
+    Localization, LocalizationStats, LocalizeConfig, RobotLocalizer, RunLocalization,
+};
 use super::shm::GraphShmError;
 use super::{CaptureOutcome, GraphError, GraphState, GraphUpdate, MAX_LINKS};
 
@@ -440,6 +442,20 @@ pub struct RunReport {
     pub localization: Option<RunLocalization>,
 }
 
+impl RunReport {
+    /// The robots' localization together, η1 and η2, from their reports (in robot order):
+    /// the same in one process and as processes, where the reports come from the robots.
+    pub fn add_localization(&mut self, config: LocalizeConfig) {
+        let mut reports: Vec<&RobotReport> = self.robot_reports.iter().collect();
+        reports.sort_by_key(|r| r.robot);
+        let stats: Vec<&LocalizationStats> = reports
+            .iter()
+            .filter_map(|r| r.localization.as_ref())
+            .collect();
+        self.localization = Some(RunLocalization::new(config, &stats));
+    }
+}
+
 /// The graph's one writer in a lockstep run.
 #[derive(Debug, Clone)]
 pub struct GraphWorld {
@@ -723,12 +739,7 @@ pub fn simulate_with(
     let mut report = world.report();
     report.robot_reports = fleet.iter().map(|r| r.report(&world.state.graph)).collect();
     if let Some(loc) = localization {
-        let stats: Vec<&LocalizationStats> = report
-            .robot_reports
-            .iter()
-            .filter_map(|r| r.localization.as_ref())
-            .collect();
-        report.localization = Some(RunLocalization::new(loc.config, &stats));
+        report.add_localization(loc.config);
     }
     Ok(report)
 }

@@ -432,7 +432,10 @@ fn run_summary(
 }
 
 /// A node-graph run (seed 001) as processes: the graph writer and one `graph-robot` per robot,
-/// under one supervisor. `scenario` is what `pheromone graph --scenario` takes.
+/// under one supervisor. `scenario` is what `pheromone graph --scenario` takes. With
+/// `localize` (the run's settings, built from that scenario's `[localize]` table), every robot
+/// process localizes (`graph-robot --localize`) and the run's η1, η2 come from the robots'
+/// reports, as in one process.
 pub fn run_graph_as_processes(
     exe: &Path,
     scenario: &str,
@@ -440,6 +443,7 @@ pub fn run_graph_as_processes(
     robots: usize,
     seed: u64,
     timeout: Duration,
+    localize: Option<graph::localize::LocalizeConfig>,
 ) -> Result<graph::run::RunReport, ProcessRunError> {
     use std::sync::atomic::{AtomicU32, Ordering};
     static RUN: AtomicU32 = AtomicU32::new(0);
@@ -475,6 +479,9 @@ pub fn run_graph_as_processes(
         for id in 1..=robots {
             let mut args = common("graph-robot");
             args.extend(["--robot".to_string(), id.to_string()]);
+            if let Some(l) = &localize {
+                args.extend(["--localize".to_string(), l.deposit.name().to_string()]);
+            }
             ids.push(sup.spawn(ChildSpec::new("graph-robot", Some(id as u32), args))?);
         }
         let deadline = Instant::now() + timeout;
@@ -502,6 +509,9 @@ pub fn run_graph_as_processes(
                 });
             }
             report.robot_reports.push(sup.summary(id)?);
+        }
+        if let Some(config) = localize {
+            report.add_localization(config);
         }
         Ok(report)
     })();
