@@ -215,3 +215,117 @@ fn a_sweep_on_two_threads_gives_every_run_once_and_its_comparisons() {
         assert!(x.known_mean + 1e-12 >= 0.0);
     }
 }
+
+#[test]
+fn the_ablations_parse_and_are_points_of_their_own_without_merging_once() {
+    assert_eq!(
+        parse_merge_rules("average, max").unwrap(),
+        vec![MergeRule::Average, MergeRule::Max]
+    );
+    assert_eq!(parse_merge_idle("0,5,20").unwrap(), vec![0, 5, 20]);
+    for e in [
+        parse_merge_rules("mean").unwrap_err(),
+        parse_merge_rules("max,max").unwrap_err(),
+    ] {
+        assert!(e.to_string().contains("--merge-rule"), "{e}");
+    }
+    for (text, value) in [("-1", "\"-1\""), ("5,5", "\"5\""), ("100001", "\"100001\"")] {
+        let e = parse_merge_idle(text).unwrap_err().to_string();
+        assert!(e.contains("--merge-idle") && e.contains(value), "{e}");
+    }
+    let base = Scenario::load("ias-ss-open").unwrap();
+    assert!(integrations(&base, &[], &[]).is_empty());
+    let only_idle = integrations(&base, &[], &[0, 20]);
+    assert_eq!(only_idle.len(), 2);
+    assert!(only_idle.iter().all(|v| v.merge_rule == MergeRule::Average));
+    let variants = integrations(&base, &[MergeRule::Average, MergeRule::Max], &[0, 20]);
+    assert_eq!(variants.len(), 4);
+    let g = SweepGrid {
+        robots: vec![2],
+        trials: 1,
+        integration: vec![variants[0], variants[3]],
+        ..grid()
+    };
+    let runs = plan(&base, &g).unwrap();
+    let keys: Vec<(bool, MergeRule, u32)> = runs
+        .iter()
+        .map(|r| {
+            let v = r.0.integration;
+            (r.0.merge, v.merge_rule, v.merge_idle_iterations)
+        })
+        .collect();
+    assert_eq!(
+        keys,
+        [
+            (true, MergeRule::Average, 0),
+            (true, MergeRule::Max, 20),
+            (false, MergeRule::Average, 0)
+        ]
+    );
+    for (key, _, s) in &runs {
+        assert_eq!(s.mapping.merge_rule, key.integration.merge_rule);
+        assert_eq!(
+            s.mapping.merge_idle_iterations,
+            key.integration.merge_idle_iterations
+        );
+    }
+    assert!(runs[1].0.to_string().ends_with("merge by max, 20 idle"));
+}
+
+/// Samples of robot `id` with no command (standing still).
+fn still(rec: &crate::record::Recording, id: u32) -> usize {
+    rec.robots[&id]
+        .iter()
+        .filter(|s| s.v_m_per_s == 0.0 && s.omega_rad_per_s == 0.0)
+        .count()
+}
+
+#[test]
+fn a_robot_stands_still_for_the_idle_iterations_after_each_merge() {
+    let mut s = Scenario::load("ias-ss-open").unwrap();
+    s.apply(&Overrides {
+        robots: Some(3),
+        duration_s: Some(170.0),
+        ..Overrides::default()
+    })
+    .unwrap();
+    let run = |idle: u32| {
+        let mut s = s.clone();
+        s.mapping.merge_idle_iterations = idle;
+        run_single_process(&s, SingleProcessOptions::default())
+            .unwrap()
+            .1
+    };
+    let (free, costly) = (run(0), run(20));
+    let merges = &costly.mapping.as_ref().unwrap().merges;
+    assert!(!merges.is_empty(), "the robots start together: they merge");
+    let first = merges[0].clone();
+    let dt = s.world.dt_s;
+    // From the merge's step on, 20 iterations (200 steps) without a command.
+    let samples = &costly.robots[&first.dst];
+    let from = samples
+        .iter()
+        .position(|x| x.t_s + 1e-9 >= first.step as f64 * dt)
+        .unwrap();
+    let idle = &samples[from..from + 200];
+    assert!(
+        idle.iter()
+            .all(|x| x.v_m_per_s == 0.0 && x.omega_rad_per_s == 0.0),
+        "robot {} after its merge at step {}",
+        first.dst,
+        first.step
+    );
+    // Before it, the same as the run where merging is free; overall, more standing still.
+    let before = |rec: &crate::record::Recording| rec.robots[&first.dst][..from].to_vec();
+    assert_eq!(
+        before(&free)
+            .iter()
+            .map(|x| x.true_pose)
+            .collect::<Vec<_>>(),
+        before(&costly)
+            .iter()
+            .map(|x| x.true_pose)
+            .collect::<Vec<_>>()
+    );
+    assert!(still(&costly, first.dst) >= still(&free, first.dst) + 200);
+}

@@ -551,3 +551,38 @@ fn an_averaging_merge_with_a_bad_transform_is_refused_counted_and_changes_nothin
     assert_eq!(m.map.occupancy, before.occupancy);
     assert_eq!(m.map.pheromone, before.pheromone);
 }
+
+#[test]
+fn merging_by_max_is_symmetric_keeps_what_either_knows_and_lets_obstacles_win() {
+    let by_max = |salt: u32| {
+        let c = MappingConfig {
+            merge_rule: MergeRule::Max,
+            ..config(6.0)
+        };
+        let mut m = LocalMap::new(&c, &channel(), 0.1).unwrap();
+        let p = patterned(6.0, salt);
+        m.occupancy.copy_from_slice(&p.occupancy);
+        m.pheromone.copy_from_slice(&p.pheromone);
+        m
+    };
+    let (a, b) = (by_max(1), by_max(0x5000_0000));
+    let (mut ab, mut ba) = (a.clone(), b.clone());
+    let sa = ab.merge(&b.view(), &MergeTransform::default()).unwrap();
+    let sb = ba.merge(&a.view(), &MergeTransform::default()).unwrap();
+    assert!(sa.adopted > 100 && sa.averaged > 100, "{sa:?}");
+    assert_eq!(ab.occupancy, ba.occupancy);
+    assert_eq!(ab.pheromone, ba.pheromone);
+    for i in 0..a.occupancy.len() {
+        let (x, y) = (a.occupancy[i], b.occupancy[i]);
+        let want = match (x == 0.0, y == 0.0) {
+            (true, _) => y,
+            (_, true) => x,
+            _ => x.max(y),
+        };
+        assert_eq!(ab.occupancy[i], want, "cell {i}: {x} {y}");
+        assert_eq!(ab.pheromone[i], a.pheromone[i].max(b.pheromone[i]));
+        assert!(ab.occupancy[i].is_finite());
+    }
+    assert_eq!("max".parse::<MergeRule>(), Ok(MergeRule::Max));
+    assert!("mean".parse::<MergeRule>().is_err());
+}
