@@ -11,7 +11,7 @@
 //! two exponentials and one logarithm per cell, as the reference, but no σ, no 1 − q and every
 //! sum one of positive terms (no cancellation anywhere). The exponentials and the logarithm are
 //! Cephes' single-precision polynomials (range reduction by ln 2, degree 5 for exp, degree 8
-//! for ln), no FMA. Equal inputs (`a == b`, before the clamp, as the reference tests them) are
+//! for ln), with FMA. Equal inputs (`a == b`, before the clamp, as the reference tests them) are
 //! returned clamped, as the reference returns them: those lanes are bit-identical.
 //!
 //! # The bound
@@ -82,7 +82,7 @@ pub(crate) mod avx2 {
 
     /// [`super::average_logodds`] of eight lanes, within [`super::average_logodds_bound`] of
     /// it (bit-identical where `a == b`); `max` in (0, `AVX2_LOGODDS_MAX`] in every lane.
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     #[inline]
     pub(crate) fn average_logodds_avx2(a: __m256, b: __m256, max: __m256) -> __m256 {
         let neg_max = _mm256_sub_ps(_mm256_setzero_ps(), max);
@@ -93,14 +93,14 @@ pub(crate) mod avx2 {
         let sum = _mm256_add_ps(ea, eb);
         let two = _mm256_set1_ps(2.0);
         let num = _mm256_add_ps(two, sum);
-        let den = _mm256_add_ps(sum, _mm256_mul_ps(two, _mm256_mul_ps(ea, eb)));
+        let den = _mm256_fmadd_ps(two, _mm256_mul_ps(ea, eb), sum);
         let l = clamp(ln_avx2(_mm256_div_ps(num, den)));
         _mm256_blendv_ps(l, ca, _mm256_cmp_ps::<_CMP_EQ_OQ>(a, b))
     }
 
     /// eˣ of eight lanes (Cephes' `expf`: x = n ln 2 + r, |r| ≤ ½ ln 2, a degree-5 polynomial
     /// in r, times 2ⁿ), for |x| ≤ 80.
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     #[inline]
     pub(crate) fn exp_avx2(x: __m256) -> __m256 {
         let set = |v: f32| _mm256_set1_ps(v);
@@ -108,8 +108,8 @@ pub(crate) mod avx2 {
             _mm256_mul_ps(x, set(std::f32::consts::LOG2_E)),
         );
         // ln 2 in two parts: 0.693359375 has 9 significant bits, so n·C1 is exact.
-        let r = _mm256_sub_ps(x, _mm256_mul_ps(n, set(0.693_359_375)));
-        let r = _mm256_sub_ps(r, _mm256_mul_ps(n, set(-2.121_944_40e-4)));
+        let r = _mm256_fnmadd_ps(n, set(0.693_359_375), x);
+        let r = _mm256_fnmadd_ps(n, set(-2.121_944_40e-4), r);
         let mut y = set(1.987_569_150_0e-4);
         for c in [
             1.398_199_950_7e-3,
@@ -118,10 +118,10 @@ pub(crate) mod avx2 {
             1.666_666_545_9e-1,
             5.000_000_120_1e-1,
         ] {
-            y = _mm256_add_ps(_mm256_mul_ps(y, r), set(c));
+            y = _mm256_fmadd_ps(y, r, set(c));
         }
-        let y = _mm256_mul_ps(y, _mm256_mul_ps(r, r));
-        let y = _mm256_add_ps(_mm256_add_ps(y, r), set(1.0));
+        let y = _mm256_fmadd_ps(y, _mm256_mul_ps(r, r), r);
+        let y = _mm256_add_ps(y, set(1.0));
         let pow2n = _mm256_slli_epi32::<23>(_mm256_add_epi32(
             _mm256_cvtps_epi32(n),
             _mm256_set1_epi32(127),
@@ -131,7 +131,7 @@ pub(crate) mod avx2 {
 
     /// ln x of eight lanes (Cephes' `logf`: x = m·2ᵉ, m in [√½, √2), a degree-8 polynomial in
     /// m − 1), for normal positive x.
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     #[inline]
     pub(crate) fn ln_avx2(x: __m256) -> __m256 {
         let set = |v: f32| _mm256_set1_ps(v);
@@ -159,11 +159,11 @@ pub(crate) mod avx2 {
             -2.499_999_399_3e-1,
             3.333_333_117_4e-1,
         ] {
-            y = _mm256_add_ps(_mm256_mul_ps(y, t), set(c));
+            y = _mm256_fmadd_ps(y, t, set(c));
         }
         let y = _mm256_mul_ps(_mm256_mul_ps(y, t), z);
-        let y = _mm256_add_ps(y, _mm256_mul_ps(e, set(-2.121_944_40e-4)));
-        let y = _mm256_sub_ps(y, _mm256_mul_ps(z, set(0.5)));
-        _mm256_add_ps(_mm256_add_ps(t, y), _mm256_mul_ps(e, set(0.693_359_375)))
+        let y = _mm256_fmadd_ps(e, set(-2.121_944_40e-4), y);
+        let y = _mm256_fnmadd_ps(z, set(0.5), y);
+        _mm256_fmadd_ps(e, set(0.693_359_375), _mm256_add_ps(t, y))
     }
 }

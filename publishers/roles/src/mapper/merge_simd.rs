@@ -97,7 +97,7 @@ impl Runs {
 impl Runs {
     /// Seed 004's `average` rule over the source cells the walk visits, into `d` (occupancy)
     /// and `p` (pheromone), log-odds clamped to ±`logodds_max`; returns the cells (0 adopted,
-    /// averaged). Eight cells at a time where the CPU has AVX2 and 0 < `logodds_max` ≤
+    /// averaged). Eight cells at a time where the CPU has AVX2 and FMA and 0 < `logodds_max` ≤
     /// `AVX2_LOGODDS_MAX` (occupancy within `average_logodds_bound` of the one-cell pass's,
     /// pheromone and counts bit for bit), else one cell at a time.
     pub(crate) fn average(
@@ -109,16 +109,26 @@ impl Runs {
     ) -> (usize, usize) {
         #[cfg(target_arch = "x86_64")]
         if self == Runs::Avx2
+            && has_fma()
             && logodds_max > 0.0
             && logodds_max <= AVX2_LOGODDS_MAX
             && avx2_fits(d.len().min(p.len()), so, sp, walk)
         {
-            // SAFETY: `Runs::Avx2` is only constructed by `detect` when the CPU has AVX2;
-            // `avx2_fits` and the test of `logodds_max` checked what `average_avx2` states.
+            // SAFETY: `Runs::Avx2` is only constructed by `detect` when the CPU has AVX2, and
+            // `has_fma` checked FMA; `avx2_fits` and the test of `logodds_max` checked what
+            // `average_avx2` states.
             return unsafe { average_avx2(d, p, (so, sp), walk, logodds_max) };
         }
         average_scalar(d, p, (so, sp), walk, logodds_max)
     }
+}
+
+/// True if the CPU has FMA (checked once per process): the `average` rule's eight-lane pass
+/// evaluates its polynomials with it.
+#[cfg(target_arch = "x86_64")]
+fn has_fma() -> bool {
+    static FMA: OnceLock<bool> = OnceLock::new();
+    *FMA.get_or_init(|| std::arch::is_x86_feature_detected!("fma"))
 }
 
 impl Runs {
@@ -341,10 +351,10 @@ fn average_scalar(
 /// result does not depend on where it falls in a run (the merge stays symmetric).
 ///
 /// # Safety
-/// The CPU must have AVX2, `avx2_fits(d.len().min(p.len()), so, sp, walk)` must hold and
-/// 0 < `logodds_max` ≤ `AVX2_LOGODDS_MAX`.
+/// The CPU must have AVX2 and FMA, `avx2_fits(d.len().min(p.len()), so, sp, walk)` must hold
+/// and 0 < `logodds_max` ≤ `AVX2_LOGODDS_MAX`.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 unsafe fn average_avx2(
     d: &mut [f32],
     p: &mut [f32],
@@ -371,7 +381,8 @@ unsafe fn average_avx2(
         // `avx2_fits`), so the gathers read inside `so` and `sp`. Lane k of the masked loads
         // and stores touches `d[x + k]`, `p[x + k]` only where k < n − x (x < n ≤ d.len(),
         // p.len()); masked-out lanes are neither read nor written and cannot fault. `d` and
-        // `p` are distinct `&mut` slices; no alignment is needed. The caller guarantees AVX2.
+        // `p` are distinct `&mut` slices; no alignment is needed. The caller guarantees AVX2
+        // and FMA.
         unsafe {
             let s_o = _mm256_i32gather_ps::<4>(so.as_ptr(), i);
             let s_p = _mm256_i32gather_ps::<4>(sp.as_ptr(), i);
@@ -391,7 +402,7 @@ unsafe fn average_avx2(
 /// source's; returns the new lanes and which of them were averaged (a nonzero value on either
 /// side; the others are returned as they were).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 #[inline]
 fn average8(
     (od, op): (std::arch::x86_64::__m256, std::arch::x86_64::__m256),
@@ -453,12 +464,12 @@ mod tests {
     /// largest M served, ln x within 2u(1 + |ln x|) over [e^−M, e^M].
     #[test]
     fn vector_exp_and_ln_are_within_the_errors_the_bound_assumes() {
-        if !std::arch::is_x86_feature_detected!("avx2") {
+        if !(std::arch::is_x86_feature_detected!("avx2") && super::has_fma()) {
             return;
         }
         let u = 1.0 / 16_777_216.0;
         let m = AVX2_LOGODDS_MAX;
-        // SAFETY (both closures): the CPU has AVX2 (tested above).
+        // SAFETY (both closures): the CPU has AVX2 and FMA (tested above).
         let exp = |x| unsafe { exp_avx2(x) };
         let ln = |x| unsafe { ln_avx2(x) };
         let e = worst((-m, m), 613, exp, f64::exp, |y, t| (y - t).abs() / t);
