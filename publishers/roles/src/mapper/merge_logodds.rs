@@ -108,16 +108,10 @@ pub(crate) mod avx2 {
             _mm256_mul_ps(x, set(std::f32::consts::LOG2_E)),
         );
         // ln 2 in two parts: 0.693359375 has 9 significant bits, so n·C1 is exact.
-        let r = _mm256_fnmadd_ps(n, set(0.693_359_375), x);
-        let r = _mm256_fnmadd_ps(n, set(-2.121_944_40e-4), r);
-        let mut y = set(1.987_569_150_0e-4);
-        for c in [
-            1.398_199_950_7e-3,
-            8.333_451_907_3e-3,
-            4.166_579_589_4e-2,
-            1.666_666_545_9e-1,
-            5.000_000_120_1e-1,
-        ] {
+        let r = _mm256_fnmadd_ps(n, set(6.933594e-1), x);
+        let r = _mm256_fnmadd_ps(n, set(-2.1219444e-4), r);
+        let mut y = set(1.9875691e-4);
+        for c in [1.3981999e-3, 8.333452e-3, 4.1665796e-2, 1.6666666e-1, 5e-1] {
             y = _mm256_fmadd_ps(y, r, set(c));
         }
         let y = _mm256_fmadd_ps(y, _mm256_mul_ps(r, r), r);
@@ -148,22 +142,22 @@ pub(crate) mod avx2 {
         let e = _mm256_sub_ps(e, _mm256_and_ps(low, set(1.0)));
         let t = _mm256_sub_ps(_mm256_add_ps(m, _mm256_and_ps(low, m)), set(1.0));
         let z = _mm256_mul_ps(t, t);
-        let mut y = set(7.037_683_629_2e-2);
+        let mut y = set(7.0376836e-2);
         for c in [
-            -1.151_461_031_0e-1,
-            1.167_699_874_0e-1,
-            -1.242_014_084_6e-1,
-            1.424_932_278_7e-1,
-            -1.666_805_766_5e-1,
-            2.000_071_476_5e-1,
-            -2.499_999_399_3e-1,
-            3.333_333_117_4e-1,
+            -1.151461e-1,
+            1.16769984e-1,
+            -1.2420141e-1,
+            1.4249323e-1,
+            -1.6668057e-1,
+            2.0000714e-1,
+            -2.4999994e-1,
+            3.333333e-1,
         ] {
             y = _mm256_fmadd_ps(y, t, set(c));
         }
         let y = _mm256_mul_ps(_mm256_mul_ps(y, t), z);
-        let y = _mm256_fmadd_ps(e, set(-2.121_944_40e-4), y);
+        let y = _mm256_fmadd_ps(e, set(-2.1219444e-4), y);
         let y = _mm256_fnmadd_ps(z, set(0.5), y);
-        _mm256_fmadd_ps(e, set(0.693_359_375), _mm256_add_ps(t, y))
+        _mm256_fmadd_ps(e, set(6.933594e-1), _mm256_add_ps(t, y))
     }
 }

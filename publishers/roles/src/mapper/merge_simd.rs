@@ -378,19 +378,31 @@ unsafe fn average_avx2(
         );
         // SAFETY: every lane of `i` lies in [0, sw·sh) (clamped in `Lanes::next`, lanes past
         // the run's end included; sw·sh ≤ i32::MAX and both source planes hold sw·sh cells by
-        // `avx2_fits`), so the gathers read inside `so` and `sp`. Lane k of the masked loads
-        // and stores touches `d[x + k]`, `p[x + k]` only where k < n − x (x < n ≤ d.len(),
-        // p.len()); masked-out lanes are neither read nor written and cannot fault. `d` and
-        // `p` are distinct `&mut` slices; no alignment is needed. The caller guarantees AVX2
-        // and FMA.
+        // `avx2_fits`), so the gathers read inside `so` and `sp`. A full chunk's loads and
+        // stores touch d[x..x + 8], p[x..x + 8] (x + 8 ≤ n ≤ d.len(), p.len()); lane k of the
+        // masked ones `d[x + k]`, `p[x + k]` only where k < n − x (x < n); masked-out lanes are
+        // neither read nor written and cannot fault. `d` and `p` are distinct `&mut` slices;
+        // no alignment is needed. The caller guarantees AVX2 and FMA.
         unsafe {
             let s_o = _mm256_i32gather_ps::<4>(so.as_ptr(), i);
             let s_p = _mm256_i32gather_ps::<4>(sp.as_ptr(), i);
-            let od = _mm256_maskload_ps(dp.add(x), mask);
-            let op = _mm256_maskload_ps(pp.add(x), mask);
+            // Full chunks by plain loads and stores (a masked store is slow on some CPUs).
+            let full = rest == 8;
+            let (od, op) = match full {
+                true => (_mm256_loadu_ps(dp.add(x)), _mm256_loadu_ps(pp.add(x))),
+                false => (
+                    _mm256_maskload_ps(dp.add(x), mask),
+                    _mm256_maskload_ps(pp.add(x), mask),
+                ),
+            };
             let (nd, np, known) = average8((od, op), (s_o, s_p), max);
-            _mm256_maskstore_ps(dp.add(x), mask, nd);
-            _mm256_maskstore_ps(pp.add(x), mask, np);
+            if full {
+                _mm256_storeu_ps(dp.add(x), nd);
+                _mm256_storeu_ps(pp.add(x), np);
+            } else {
+                _mm256_maskstore_ps(dp.add(x), mask, nd);
+                _mm256_maskstore_ps(pp.add(x), mask, np);
+            }
             let known = _mm256_and_ps(known, _mm256_castsi256_ps(mask));
             averaged += _mm256_movemask_ps(known).count_ones() as usize;
         }
@@ -469,8 +481,9 @@ mod tests {
         }
         let u = 1.0 / 16_777_216.0;
         let m = AVX2_LOGODDS_MAX;
-        // SAFETY (both closures): the CPU has AVX2 and FMA (tested above).
+        // SAFETY: the CPU has AVX2 and FMA (tested above).
         let exp = |x| unsafe { exp_avx2(x) };
+        // SAFETY: as above.
         let ln = |x| unsafe { ln_avx2(x) };
         let e = worst((-m, m), 613, exp, f64::exp, |y, t| (y - t).abs() / t);
         let l = worst(((-m).exp(), m.exp()), 613, ln, f64::ln, |y, t| {
