@@ -404,18 +404,21 @@ fn print_c_abi(c: &pheromone_bench::c_abi::CAbiReport) {
 
 fn print_merges(r: &Report) {
     println!(
-        "\nmerge / memcpy           memcpy µs   merge µs  ratio   reference µs  ratio   average µs  ratio"
+        "\nmerge / memcpy           memcpy µs   merge µs  ratio   reference µs  ratio   average µs  \
+         ratio   average reference µs  ratio"
     );
     for (size, m) in &r.merge_vs_memcpy {
         println!(
-            "{size:<22} {:>10.1} {:>10.1} {:>6.2} {:>14.1} {:>6.2} {:>12.1} {:>6.2}",
+            "{size:<22} {:>10.1} {:>10.1} {:>6.2} {:>14.1} {:>6.2} {:>12.1} {:>6.2} {:>22.1} {:>6.2}",
             m.memcpy_us,
             m.merge_us,
             m.merge_ratio,
             m.reference_us,
             m.reference_ratio,
             m.average_us,
-            m.average_ratio
+            m.average_ratio,
+            m.average_reference_us,
+            m.average_reference_ratio
         );
     }
 }

@@ -336,6 +336,8 @@ fn bench_only_runs_the_sections_it_is_given() {
             "reference_ratio",
             "average_us",
             "average_ratio",
+            "average_reference_us",
+            "average_reference_ratio",
         ] {
             assert!(
                 row[k].as_f64().is_some_and(|v| v > 0.0),

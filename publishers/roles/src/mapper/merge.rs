@@ -18,6 +18,7 @@ use field::GridGeometry;
 
 use super::config::MergeRule;
 use super::map::{reach_m, LocalMap, MapView, Pose2};
+pub use super::merge_logodds::{average_logodds, average_logodds_bound};
 use super::MapError;
 use messages::PeerObs;
 
@@ -166,8 +167,10 @@ impl LocalMap {
 
 /// The merge pass over destination planes (occupancy, pheromone) of `geometry` (what
 /// [`LocalMap::merge`] runs), by `rule` with log-odds clamped to ±`logodds_max`: the reference
-/// pass's result bit for bit (`merge_planes_reference`); by `AdoptUnknown`, each run of
-/// destination cells merged eight at a time where the CPU has AVX2 (`merge_simd`).
+/// pass's result (`merge_planes_reference`) bit for bit by `AdoptUnknown`, and by `Average`
+/// bit for bit in the pheromone plane and the counts and within [`average_logodds_bound`] in
+/// the occupancy plane; each run of destination cells merged eight at a time where the CPU has
+/// AVX2 (`merge_simd`; `Average` for a `logodds_max` up to 8, the default 4).
 pub fn merge_planes(
     geometry: &GridGeometry,
     planes: (&mut [f32], &mut [f32]),
@@ -332,53 +335,16 @@ fn merge_run(
     };
     match rule {
         MergeRule::AdoptUnknown => runs.run(drow, prow, src.occupancy, src.pheromone, &walk),
-        MergeRule::Average => average_run((drow, prow), src, &walk, logodds_max),
+        MergeRule::Average => runs.average(
+            (drow, prow),
+            (src.occupancy, src.pheromone),
+            &walk,
+            logodds_max,
+        ),
         MergeRule::Max => max_run((drow, prow), src, &walk),
     }
 }
 
-/// Seed 004's rule over one run, one cell at a time: every cell either map knows (a nonzero
-/// log-odds or pheromone on either side) becomes the average of both, occupancy as
-/// probabilities ([`average_logodds`]); returns (0 adopted, averaged).
-fn average_run(
-    (drow, prow): (&mut [f32], &mut [f32]),
-    src: &MapView<'_>,
-    walk: &super::merge_simd::Walk,
-    logodds_max: f32,
-) -> (usize, usize) {
-    let (u_max, v_max) = (walk.sw as i64 - 1, walk.sh as i64 - 1);
-    let (mut u, mut v) = (walk.u, walk.v);
-    let mut averaged = 0usize;
-    for (d, p) in drow.iter_mut().zip(prow.iter_mut()) {
-        // `row_span` keeps u in [0, sw) and v in [0, sh); the clamp only guards rounding.
-        let (cu, cv) = ((u >> 32).clamp(0, u_max), (v >> 32).clamp(0, v_max));
-        let i = cv as usize * walk.sw + cu as usize;
-        let (so, sp) = (src.occupancy[i], src.pheromone[i]);
-        let (od, op) = (*d, *p);
-        if so != 0.0 || od != 0.0 || sp != 0.0 || op != 0.0 {
-            *d = average_logodds(od, so, logodds_max);
-            *p = 0.5 * (op + sp);
-            averaged += 1;
-        }
-        u = u.wrapping_add(walk.du);
-        v = v.wrapping_add(walk.dv);
-    }
-    (0, averaged)
-}
-
-/// Seed 004's average of two occupancy log-odds as probabilities: σ⁻¹((σ(a) + σ(b))/2), both
-/// clamped to ±`max` first and the result clamped to ±`max` (so a finite input never gives
-/// NaN or ±∞). Symmetric in a and b; equal inputs (two unknown cells: 0) are returned as they
-/// are.
-#[inline]
-pub fn average_logodds(a: f32, b: f32, max: f32) -> f32 {
-    if a == b {
-        return a.clamp(-max, max);
-    }
-    let p = |l: f32| 1.0 / (1.0 + (-l.clamp(-max, max)).exp());
-    let q = 0.5 * (p(a) + p(b));
-    (q / (1.0 - q)).ln().clamp(-max, max)
-}
 
 /// The `max` ablation over one run, one cell at a time: a cell unknown in one map takes the
 /// other's occupancy, a cell known in both the larger log-odds; pheromone the larger level.

@@ -7,12 +7,15 @@
 //! - `config.rs` `[mapping]` ([`MappingConfig`]);
 //! - `map.rs` [`LocalMap`]: scan integration, the robot's own deposits, frames;
 //! - `merge.rs` the transform of eqs. 7–10 ([`MergeTransform`]) and the merge pass;
+//!   `merge_simd.rs` its runs eight cells at a time (AVX2); `merge_logodds.rs` the `average`
+//!   rule's mean of two log-odds, one cell and eight lanes at a time, and its error bound;
 //! - `run.rs` the process loop (`pheromone mapper`): the map as a frame in shared memory, and
 //!   the exchanges merged zero-copy from the peers' frames.
 
 pub mod config;
 pub mod map;
 pub mod merge;
+mod merge_logodds;
 mod merge_simd;
 #[cfg(test)]
 mod tests;
