@@ -44,15 +44,17 @@ fn a_tiny_sweep_writes_a_row_per_run_the_points_and_the_robots_chart() {
     assert!(lines
         .next()
         .unwrap()
-        .starts_with("robots,rc_m,merge,strategy,steer_on,seed,"));
+        .starts_with("robots,rc_m,merge,strategy,steer_on,merge_rule,merge_idle_iterations,seed,"));
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 8, "{csv}");
-    let seeds: Vec<&str> = rows.iter().map(|r| r[5]).collect();
+    let seeds: Vec<&str> = rows.iter().map(|r| r[7]).collect();
     assert_eq!(seeds, ["1", "2", "1", "2", "1", "2", "1", "2"]);
     for r in &rows {
         // ias-ss steers on the shared field unless --steer says otherwise.
         assert_eq!(r[4], "shared", "{r:?}");
-        let known: f64 = r[6].parse().unwrap();
+        // The scenario's merge rule and cost unless --merge-rule / --merge-idle say otherwise.
+        assert_eq!((r[5], r[6]), ("average", "0"), "{r:?}");
+        let known: f64 = r[8].parse().unwrap();
         assert!((0.0..=1.0).contains(&known), "{r:?}");
     }
     let json: serde_json::Value =
@@ -95,6 +97,13 @@ fn bad_lists_exit_with_status_2_naming_the_option_and_the_value() {
         (&["--strategies", "route"][..], "--strategies", "route"),
         (&["--steer", "own-map,theirs"][..], "--steer", "theirs"),
         (&["--trials", "0"][..], "--trials", "0"),
+        (
+            &["--merge-rule", "average,mean"][..],
+            "--merge-rule",
+            "mean",
+        ),
+        (&["--merge-idle", "-1"][..], "--merge-idle", "-1"),
+        (&["--merge-idle", "5,5"][..], "--merge-idle", "5"),
     ] {
         let dir = std::env::temp_dir().join(unique("sweep-bad"));
         let mut all = vec!["sweep", "ias-ss", "--duration-s", "5", "--out"];
@@ -152,5 +161,35 @@ fn sim_trials_reports_each_strategy_over_the_same_seeds_as_single_runs_measure_t
         let mean = (per_trial[0].as_f64().unwrap() + per_trial[1].as_f64().unwrap()) / 2.0;
         assert!((e["mean"].as_f64().unwrap() - mean).abs() < 1e-12, "{e}");
     }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn the_cost_of_a_merge_runs_in_one_process_and_is_refused_as_processes() {
+    let dir = std::env::temp_dir().join(unique("merge-idle"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenarios/ias-ss-open.toml");
+    let text = std::fs::read_to_string(base).unwrap();
+    let file = dir.join("idle.toml");
+    let text = text.replace("[mapping]\n", "[mapping]\nmerge_idle_iterations = 5\n");
+    std::fs::write(&file, text).unwrap();
+    let f = file.to_str().unwrap();
+    let o = run(&["sim", f, "--duration", "5", "--robots", "2"]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(
+        e.contains("mapping.merge_idle_iterations = 5") && e.contains("--single-process"),
+        "{e}"
+    );
+    let o = run(&[
+        "sim",
+        f,
+        "--duration",
+        "5",
+        "--robots",
+        "2",
+        "--single-process",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -345,7 +345,6 @@ fn merge_run(
     }
 }
 
-
 /// The `max` ablation over one run, one cell at a time: a cell unknown in one map takes the
 /// other's occupancy, a cell known in both the larger log-odds; pheromone the larger level.
 /// Returns (adopted: unknown here, known in the source; combined: known in both, or marked).
