@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 use roles::follower::StrategyKind;
+use roles::mapper::MergeRule;
 use roles::scenario::Scenario;
 use sim::sweep::{
     integrations, parse_merge_idle, parse_merge_rules, parse_rc_m, parse_robots, parse_steer,
@@ -115,7 +116,9 @@ pub struct SweepArgs {
     pub json: bool,
 }
 
-fn grid(a: &SweepArgs, base: &Scenario) -> anyhow::Result<SweepGrid> {
+/// The grid of `a`, every list checked before the scenario is loaded; `--merge-rule` and
+/// `--merge-idle` are combined with the scenario's settings by [`with_integration`].
+fn grid(a: &SweepArgs) -> anyhow::Result<(SweepGrid, Vec<MergeRule>, Vec<u32>)> {
     if !(a.duration_s.is_finite() && a.duration_s > 0.0) {
         return Err(bad(format!(
             "--duration-s {}: must be a number of seconds > 0",
@@ -130,7 +133,15 @@ fn grid(a: &SweepArgs, base: &Scenario) -> anyhow::Result<SweepGrid> {
     } else {
         parse_strategies(&a.strategies).map_err(bad_from)?
     };
-    Ok(SweepGrid {
+    let rules = match &a.merge_rule {
+        Some(t) => parse_merge_rules(t).map_err(bad_from)?,
+        None => Vec::new(),
+    };
+    let idle = match &a.merge_idle {
+        Some(t) => parse_merge_idle(t).map_err(bad_from)?,
+        None => Vec::new(),
+    };
+    let grid = SweepGrid {
         robots: parse_robots(&a.robots).map_err(bad_from)?,
         rc_m: match &a.rc_m {
             Some(t) => parse_rc_m(t).map_err(bad_from)?,
@@ -146,26 +157,30 @@ fn grid(a: &SweepArgs, base: &Scenario) -> anyhow::Result<SweepGrid> {
             Some(t) => parse_steer(t).map_err(bad_from)?,
             None => Vec::new(),
         },
-        integration: integrations(
-            base,
-            &match &a.merge_rule {
-                Some(t) => parse_merge_rules(t).map_err(bad_from)?,
-                None => Vec::new(),
-            },
-            &match &a.merge_idle {
-                Some(t) => parse_merge_idle(t).map_err(bad_from)?,
-                None => Vec::new(),
-            },
-        ),
+        integration: Vec::new(),
         trials: a.trials,
         duration_s: a.duration_s,
         figure: a.figure,
-    })
+    };
+    Ok((grid, rules, idle))
+}
+
+/// `grid` with the merge variants of `rules` × `idle` (the scenario's where a list is empty).
+fn with_integration(
+    grid: SweepGrid,
+    base: &Scenario,
+    (rules, idle): (&[MergeRule], &[u32]),
+) -> SweepGrid {
+    SweepGrid {
+        integration: integrations(base, rules, idle),
+        ..grid
+    }
 }
 
 pub fn run(a: SweepArgs) -> anyhow::Result<()> {
+    let (grid, rules, idle) = grid(&a)?;
     let base = load_scenario(&a.scenario)?;
-    let grid = grid(&a, &base)?;
+    let grid = with_integration(grid, &base, (&rules, &idle));
     let jobs = match a.jobs {
         Some(0) => return Err(bad("--jobs 0: needs at least 1 worker")),
         Some(n) => n,

@@ -92,10 +92,9 @@ pub fn write_sweep(
     write_file(&path, paper_table(r, paper).as_bytes())?;
     written.push(path);
     let subtitle = format!(
-        "'{}', {} s, {} trial(s) per point (seeds 1..={}); {}, mean per robot over the {} sectors; mean ± sd; black: the paper",
+        "'{}', {} s, seeds 1–{} per point; {}, mean per robot of {} sectors ± sd; black: the paper",
         r.scenario,
         r.duration_s,
-        r.trials,
         r.trials,
         figure_words(r.figure),
         r.sectors
@@ -120,7 +119,7 @@ pub fn write_sweep(
 fn figure_words(f: sim::sweep::Figure) -> &'static str {
     match f {
         sim::sweep::Figure::Known => "known: mapped or merged",
-        sim::sweep::Figure::Merged => "merged: visited or received by a merge (the paper's)",
+        sim::sweep::Figure::Merged => "merged: visited or received by a merge",
         sim::sweep::Figure::Visited => "visited",
     }
 }
@@ -550,7 +549,13 @@ fn draw_paper<'a, 'b: 'a>(
                         "paper, Table {}: peak at R_C = {} m",
                         p.table, p.value
                     ))
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], black));
+                    // Dotted like the line: three dashes.
+                    .legend(move |(x, y)| {
+                        EmptyElement::at((x, y))
+                            + PathElement::new(vec![(0, 0), (4, 0)], black)
+                            + PathElement::new(vec![(10, 0), (14, 0)], black)
+                            + PathElement::new(vec![(20, 0), (24, 0)], black)
+                    });
             }
             _ => {}
         }

@@ -299,7 +299,7 @@ fn a_robot_stands_still_for_the_idle_iterations_after_each_merge() {
     let (free, costly) = (run(0), run(20));
     let merges = &costly.mapping.as_ref().unwrap().merges;
     assert!(!merges.is_empty(), "the robots start together: they merge");
-    let first = merges[0].clone();
+    let first = merges[0];
     let dt = s.world.dt_s;
     // From the merge's step on, 20 iterations (200 steps) without a command.
     let samples = &costly.robots[&first.dst];

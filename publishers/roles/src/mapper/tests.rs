@@ -568,7 +568,7 @@ fn merging_by_max_is_symmetric_keeps_what_either_knows_and_lets_obstacles_win() 
     let (a, b) = (by_max(1), by_max(0x5000_0000));
     let (mut ab, mut ba) = (a.clone(), b.clone());
     let sa = ab.merge(&b.view(), &MergeTransform::default()).unwrap();
-    let sb = ba.merge(&a.view(), &MergeTransform::default()).unwrap();
+    ba.merge(&a.view(), &MergeTransform::default()).unwrap();
     assert!(sa.adopted > 100 && sa.averaged > 100, "{sa:?}");
     assert_eq!(ab.occupancy, ba.occupancy);
     assert_eq!(ab.pheromone, ba.pheromone);
