@@ -350,13 +350,29 @@ impl Stepper {
     /// κ = D·dt/h². `dt_s` must lie in (0, tick period]: a shorter step keeps the diffusion
     /// stable (κ only shrinks), a longer one is clamped to the period.
     pub fn step_dt(&mut self, prev: &[f32], next: &mut [f32], dt_s: f32) -> TickReport {
+        self.step_dt_then(prev, next, dt_s, |_| {})
+    }
+
+    /// As `step_dt`, calling `late` between the evaporation pass and the deposits: what it
+    /// offers (deposits that arrived while the pass ran) lands in this frame, in the canonical
+    /// order with the others. A field publishing on deposit uses it, so a deposit that comes
+    /// during a tick waits for the rest of that tick only, not for one more.
+    pub fn step_dt_then(
+        &mut self,
+        prev: &[f32],
+        next: &mut [f32],
+        dt_s: f32,
+        late: impl FnOnce(&mut Self),
+    ) -> TickReport {
         let period = self.config.dt_s();
         let dt = if dt_s.is_finite() && dt_s > 0.0 {
             dt_s.min(period)
         } else {
             period
         };
-        self.step_by(prev, next, dt, dt as f64)
+        self.evaporate(prev, next, dt);
+        late(self);
+        self.apply_pending(prev, next, dt, dt as f64)
     }
 
     /// The deposits the last step applied, in the order it applied them: what a mirror replays
@@ -401,6 +417,12 @@ impl Stepper {
     }
 
     fn step_by(&mut self, prev: &[f32], next: &mut [f32], dt: f32, dt_time_s: f64) -> TickReport {
+        self.evaporate(prev, next, dt);
+        self.apply_pending(prev, next, dt, dt_time_s)
+    }
+
+    /// The plane pass of every channel (evaporation, diffusion) over `dt` seconds.
+    fn evaporate(&mut self, prev: &[f32], next: &mut [f32], dt: f32) {
         let n = self.geometry.cells();
         assert_eq!(
             prev.len(),
@@ -423,6 +445,17 @@ impl Stepper {
                 self.threads,
             );
         }
+    }
+
+    /// Applies the pending deposits onto `next` in their canonical order and closes the step.
+    fn apply_pending(
+        &mut self,
+        prev: &[f32],
+        next: &mut [f32],
+        dt: f32,
+        dt_time_s: f64,
+    ) -> TickReport {
+        let n = self.geometry.cells();
         let mut report = TickReport::default();
         // Deposits onto one cell do not commute (saturation, rounding): apply them in one
         // canonical order, whatever order the publishers' messages arrived in.

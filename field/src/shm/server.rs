@@ -262,7 +262,7 @@ impl FieldServer {
             });
         }
         self.stepper.resume_from(header);
-        self.publish_with(|stepper, _prev, next| {
+        self.publish_with(|stepper, _deposits, _prev, next| {
             next.copy_from_slice(cells);
             let _ = stepper;
             TickReport::default()
@@ -280,7 +280,7 @@ impl FieldServer {
     ) -> Result<u32, TickError> {
         let mut refused = 0;
         self.stepper.sequence = header.sequence.wrapping_sub(1);
-        self.publish_with(|stepper, prev, next| {
+        self.publish_with(|stepper, _deposits, prev, next| {
             let (report, r) = stepper.replay(
                 prev,
                 next,
@@ -298,7 +298,7 @@ impl FieldServer {
     /// Loans the next frame, lets `compute` fill it from the previous one, publishes it.
     fn publish_with(
         &mut self,
-        compute: impl FnOnce(&mut Stepper, &[f32], &mut [f32]) -> TickReport,
+        compute: impl FnOnce(&mut Stepper, &DepositSubscriber, &[f32], &mut [f32]) -> TickReport,
     ) -> Result<(TickReport, u64), TickError> {
         let started = now_ns();
         let len = self.stepper.config().frame_len();
@@ -325,7 +325,12 @@ impl FieldServer {
         // initialized bytes, and every bit pattern is a valid `f32`. `compute` (a `Stepper` step
         // or a copy of a whole keyframe) overwrites every element before the sample is sent.
         let mut next = unsafe { uninit.assume_init() };
-        let report = compute(&mut self.stepper, previous.payload(), next.payload_mut());
+        let report = compute(
+            &mut self.stepper,
+            &self.deposits,
+            previous.payload(),
+            next.payload_mut(),
+        );
         drop(previous);
         let done = now_ns();
         let compute_ns = done.saturating_sub(started);
@@ -431,21 +436,16 @@ impl FieldServer {
         // Confirm requests before the queue: a flush request's receipt then covers every
         // deposit its process published before it.
         let mut rejected = self.confirm.take(&mut self.stepper)?;
-        loop {
-            match self.deposits.receive() {
-                Ok(Some(sample)) => {
-                    if self.stepper.offer(sample.payload()).is_err() {
-                        rejected += 1;
-                    }
-                }
-                Ok(None) => break,
-                Err(e) => return Err(service_err(&self.names.deposit, "receive", e).into()),
-            }
-        }
-        let (report, compute_ns) = self.publish_with(|stepper, prev, next| match dt_s {
-            None => stepper.step(prev, next),
-            Some(dt) => stepper.step_dt(prev, next, dt),
-        })?;
+        rejected += drain(&self.deposits, &mut self.stepper)
+            .map_err(|e| service_err(&self.names.deposit, "receive", e))?;
+        // Publishing on deposit, what arrives during the evaporation pass joins this frame.
+        let mut late = Ok(0);
+        let (report, compute_ns) =
+            self.publish_with(|stepper, deposits, prev, next| match dt_s {
+                None => stepper.step(prev, next),
+                Some(dt) => stepper.step_dt_then(prev, next, dt, |s| late = drain(deposits, s)),
+            })?;
+        rejected += late.map_err(|e| service_err(&self.names.deposit, "receive", e))?;
         Ok(TickOutcome {
             report,
             sequence: self.stepper.sequence,
@@ -453,4 +453,18 @@ impl FieldServer {
             rejected,
         })
     }
+}
+
+/// Offers every deposit waiting in the queue to `stepper`; returns how many it refused.
+fn drain(
+    deposits: &DepositSubscriber,
+    stepper: &mut Stepper,
+) -> Result<u64, iceoryx2::port::ReceiveError> {
+    let mut rejected = 0;
+    while let Some(sample) = deposits.receive()? {
+        if stepper.offer(sample.payload()).is_err() {
+            rejected += 1;
+        }
+    }
+    Ok(rejected)
 }
