@@ -327,6 +327,14 @@ pub struct VisibleReport {
     pub width: u32,
     /// The field's tick compute time, µs.
     pub tick_compute_us: Latency,
+    /// Where the time goes: deposit sent → the field starts the tick that applies it, µs.
+    pub to_field_us: Latency,
+    /// Where the time goes: the frame published → the follower holds it, µs.
+    pub to_reader_us: Latency,
+    /// Of `to_field_us`: the depositor's send call (the sample and the wake-up event), µs.
+    pub send_us: Latency,
+    /// The three stages' means over the slowest 1 % of the samples (those at or above p99).
+    pub slowest_1pct_us: visible::Stages,
     /// The target for p99: one tick period + 1.2 × the tick compute (p99) + 50 µs; publishing
     /// on deposit, the tick compute (p99) + 100 µs.
     pub target_p99_us: f64,

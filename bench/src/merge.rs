@@ -13,7 +13,7 @@ use field::{ChannelSpec, Evaporation};
 use roles::mapper::{LocalMap, MappingConfig, MergeRule, MergeTransform};
 use serde::Serialize;
 
-use crate::tick::median_ns;
+use crate::tick::{median_ns, median_ns_from};
 use crate::BenchError;
 
 /// Median times of one merge and one memcpy of both planes at one size, and their ratios.
@@ -63,7 +63,7 @@ pub fn measure(side: u32, reps: usize) -> Result<MergeRow, BenchError> {
         ..MergeTransform::default()
     };
     let src = map(side, 1)?;
-    let mut dst = map(side, 2)?;
+    let dst = map(side, 2)?;
     let cells = 2 * side as usize * side as usize;
     let from = vec![0.5f32; cells];
     let mut to = vec![0.0f32; cells];
@@ -73,15 +73,27 @@ pub fn measure(side: u32, reps: usize) -> Result<MergeRow, BenchError> {
     });
     let fail = |e| BenchError::Peer(format!("merge bench: {e}"));
     let mut result = Ok(());
-    let merge = median_ns(reps, || {
-        if let Err(e) = dst.merge(black_box(&src.view()), &t) {
+    // Every merge starts from the same destination. Each merge pulls the destination towards
+    // the source, and the reference's `a == b` shortcut skips the transcendental functions of
+    // cells that reached it: merging into the last result would time ever cheaper merges.
+    let pristine = (dst.occupancy.clone(), dst.pheromone.clone());
+    let dst = std::cell::RefCell::new(dst);
+    let restore = || {
+        let mut d = dst.borrow_mut();
+        d.occupancy.copy_from_slice(&pristine.0);
+        d.pheromone.copy_from_slice(&pristine.1);
+    };
+    let merge = median_ns_from(reps, restore, || {
+        if let Err(e) = dst.borrow_mut().merge(black_box(&src.view()), &t) {
             result = Err(fail(e));
         }
     });
     std::mem::replace(&mut result, Ok(()))?;
-    let geometry = *dst.geometry();
-    let mut timed = |rule: MergeRule, reference: bool| {
-        let planes = (&mut dst.occupancy[..], &mut dst.pheromone[..]);
+    let geometry = *dst.borrow().geometry();
+    let timed = |rule: MergeRule, reference: bool| {
+        let mut d = dst.borrow_mut();
+        let d = &mut *d;
+        let planes = (&mut d.occupancy[..], &mut d.pheromone[..]);
         let rule = (rule, MappingConfig::default().logodds_max);
         let view = src.view();
         let r = if reference {
@@ -95,16 +107,16 @@ pub fn measure(side: u32, reps: usize) -> Result<MergeRow, BenchError> {
         } else {
             roles::mapper::merge_planes(&geometry, planes, black_box(&view), &t, rule)
         };
-        if let Err(e) = r {
-            result = Err(fail(e));
+        r.map(|_| ()).map_err(fail)
+    };
+    let mut timed_ok = |rule: MergeRule, reference: bool| {
+        if let Err(e) = timed(rule, reference) {
+            result = Err(e);
         }
     };
-    let reference = median_ns(reps, || timed(MergeRule::AdoptUnknown, true));
-    // Each merge pulls the destination towards the source; the reference's `a == b` shortcut
-    // would skip the σ and σ⁻¹ of cells that reached it, so it is timed before the AVX2 pass
-    // (whose cost does not depend on the values).
-    let average_reference = median_ns(reps, || timed(MergeRule::Average, true));
-    let average = median_ns(reps, || timed(MergeRule::Average, false));
+    let reference = median_ns_from(reps, restore, || timed_ok(MergeRule::AdoptUnknown, true));
+    let average_reference = median_ns_from(reps, restore, || timed_ok(MergeRule::Average, true));
+    let average = median_ns_from(reps, restore, || timed_ok(MergeRule::Average, false));
     result?;
     let us = |ns: u64| (ns as f64 / 100.0).round() / 10.0;
     let ratio = |ns: u64| ((ns as f64 / memcpy as f64) * 100.0).round() / 100.0;

@@ -308,12 +308,17 @@ fn visible_report(
 ) -> Result<VisibleReport, BenchError> {
     let no_samples = || BenchError::Peer("deposit to visible: no samples".into());
     let compute = Latency::from_ns_as_us(&v.compute_ns).ok_or_else(no_samples)?;
+    let latency = Latency::from_ns_as_us(&v.samples_ns).ok_or_else(no_samples)?;
     Ok(VisibleReport {
-        latency: Latency::from_ns_as_us(&v.samples_ns).ok_or_else(no_samples)?,
         tick_hz: opts.tick_hz,
         width: opts.visible_width,
         target_p99_us: target_p99_us(compute.p99),
         tick_compute_us: compute,
+        to_field_us: Latency::from_ns_as_us(&v.to_field_ns).ok_or_else(no_samples)?,
+        to_reader_us: Latency::from_ns_as_us(&v.to_reader_ns).ok_or_else(no_samples)?,
+        send_us: Latency::from_ns_as_us(&v.send_ns).ok_or_else(no_samples)?,
+        slowest_1pct_us: v.slowest_stages(latency.p99),
+        latency,
         field_cpu: v.cpu,
     })
 }

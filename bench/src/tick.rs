@@ -47,11 +47,14 @@ pub struct RadiusRow {
 /// The radii of the by-radius ambient measurement (m, on 5 cm cells: 1, 10 and 40 cells).
 pub const AMBIENT_RADII_M: [f32; 3] = [0.05, 0.5, 2.0];
 
-/// The median time of `reps` runs of `f` (ns, at least 1), after one warm-up run.
-pub(crate) fn median_ns(reps: usize, mut f: impl FnMut()) -> u64 {
+/// The median time of `reps` runs of `f` (ns, at least 1), after one warm-up run, with `setup`
+/// run before each call and not timed (to start every call from the same state).
+pub(crate) fn median_ns_from(reps: usize, mut setup: impl FnMut(), mut f: impl FnMut()) -> u64 {
+    setup();
     f();
     let mut t: Vec<u64> = (0..reps.max(1))
         .map(|_| {
+            setup();
             let start = Instant::now();
             f();
             start.elapsed().as_nanos() as u64
@@ -59,6 +62,11 @@ pub(crate) fn median_ns(reps: usize, mut f: impl FnMut()) -> u64 {
         .collect();
     t.sort_unstable();
     t[t.len() / 2].max(1)
+}
+
+/// As `median_ns_from`, with nothing to set up.
+pub(crate) fn median_ns(reps: usize, f: impl FnMut()) -> u64 {
+    median_ns_from(reps, || {}, f)
 }
 
 fn stepper(width: u32, evaporation: Evaporation) -> Result<Stepper, BenchError> {

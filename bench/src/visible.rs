@@ -60,7 +60,53 @@ pub struct VisibleResult {
     pub samples_ns: Vec<u64>,
     /// The field's tick compute time of the frames that carried the deposits, ns.
     pub compute_ns: Vec<u64>,
+    /// Deposit sent → the field starts the tick that applies it (the frame's publish stamp −
+    /// its compute time − the send stamp), ns: the field's wake-up and its wait for the tick.
+    pub to_field_ns: Vec<u64>,
+    /// The frame's publish stamp → the follower holds it, ns: the follower's wake-up.
+    pub to_reader_ns: Vec<u64>,
+    /// The depositor's `send` (the sample and the field's wake-up event), ns: part of
+    /// `to_field_ns`.
+    pub send_ns: Vec<u64>,
     pub cpu: Vec<CpuAtRate>,
+}
+
+/// Mean time of each stage of a deposit's way to the follower, µs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct Stages {
+    /// Deposit sent → the field starts the tick that applies it.
+    pub to_field: f64,
+    /// The tick's compute.
+    pub compute: f64,
+    /// The frame published → the follower holds it.
+    pub to_reader: f64,
+    /// Samples averaged.
+    pub samples: usize,
+}
+
+impl VisibleResult {
+    /// The stages' means over the samples whose whole latency is at least `p99_us`.
+    pub fn slowest_stages(&self, p99_us: f64) -> Stages {
+        let mut sum = Stages::default();
+        for (i, &total) in self.samples_ns.iter().enumerate() {
+            if (total as f64) * 1e-3 < p99_us {
+                continue;
+            }
+            let stage = |v: &[u64]| v.get(i).copied().unwrap_or(0) as f64 * 1e-3;
+            sum.to_field += stage(&self.to_field_ns);
+            sum.compute += stage(&self.compute_ns);
+            sum.to_reader += stage(&self.to_reader_ns);
+            sum.samples += 1;
+        }
+        let n = sum.samples.max(1) as f64;
+        let round = |v: f64| (v / n * 10.0).round() / 10.0;
+        Stages {
+            to_field: round(sum.to_field),
+            compute: round(sum.compute),
+            to_reader: round(sum.to_reader),
+            samples: sum.samples,
+        }
+    }
 }
 
 /// The bench's field: `width`² cells, one exponential channel, 2 readers.
@@ -103,13 +149,44 @@ pub fn measure(
     let field_pid = field.pid();
     let mut reader = FieldReader::attach_within(&node, &name, Duration::from_secs(10))?;
     let mut depositor = DepositPublisher::attach_within(&node, &name, 1, Duration::from_secs(10))?;
-    let period = Duration::from_secs_f32(1.0 / run.tick_hz);
-    let timeout = period * 10 + Duration::from_secs(2);
+    let mut result = deposits_to_visible(&node, &name, &mut reader, &mut depositor, run)?;
+    for rate in [10.0, 100.0, 1000.0] {
+        result.cpu.push(cpu_at_rate(
+            &node,
+            &mut reader,
+            &mut depositor,
+            field_pid,
+            rate,
+            run.cpu_window,
+            centre(run),
+        )?);
+    }
+    drop(depositor);
+    drop(field);
+    Ok(result)
+}
+
+/// The centre of the bench's field (m), where every deposit goes.
+fn centre(run: VisibleRun) -> (f32, f32) {
     let c = config(run.width, run.tick_hz);
-    let (x_m, y_m) = (
+    (
         c.width as f32 * c.cell_size_m / 2.0,
         c.height as f32 * c.cell_size_m / 2.0,
-    );
+    )
+}
+
+/// `run.warmup + run.count` deposits, each sent at a phase of the tick, timed until the follower
+/// holds a frame containing it (the last `count` recorded, with their stages).
+fn deposits_to_visible(
+    node: &iceoryx2::prelude::Node<field::shm::Svc>,
+    name: &str,
+    reader: &mut FieldReader,
+    depositor: &mut DepositPublisher,
+    run: VisibleRun,
+) -> Result<VisibleResult, BenchError> {
+    let period = Duration::from_secs_f32(1.0 / run.tick_hz);
+    let timeout = period * 10 + Duration::from_secs(2);
+    let (x_m, y_m) = centre(run);
     let mut result = VisibleResult::default();
     // The follower at the field's priority too: a busy-polling reader preempted by the rest of
     // the machine sees the frame late however fast the field published it.
@@ -134,30 +211,23 @@ pub fn measure(
             .unwrap_or(0);
         let sent = now_ns();
         depositor.send(small_deposit(x_m, y_m))?;
-        let frame = wait_for(&mut reader, run.reader_wait, timeout, |f| {
+        let send_ns = now_ns().saturating_sub(sent);
+        let frame = wait_for(reader, run.reader_wait, timeout, |f| {
             f.header.deposits_applied > before
         })?
         .ok_or_else(|| BenchError::Peer(format!("the deposit did not show within {timeout:?}")))?;
         let seen = now_ns();
         if i >= run.warmup {
+            let h = &frame.header;
             result.samples_ns.push(seen.saturating_sub(sent));
-            result.compute_ns.push(frame.header.tick_compute_ns);
+            result.compute_ns.push(h.tick_compute_ns);
+            let started = h.stamp_ns.saturating_sub(h.tick_compute_ns);
+            result.to_field_ns.push(started.saturating_sub(sent));
+            result.send_ns.push(send_ns);
+            result.to_reader_ns.push(seen.saturating_sub(h.stamp_ns));
         }
     }
     drop(follower_rt);
-    for rate in [10.0, 100.0, 1000.0] {
-        result.cpu.push(cpu_at_rate(
-            &node,
-            &mut reader,
-            &mut depositor,
-            field_pid,
-            rate,
-            run.cpu_window,
-            (x_m, y_m),
-        )?);
-    }
-    drop(depositor);
-    drop(field);
     Ok(result)
 }
 

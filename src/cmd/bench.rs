@@ -3,7 +3,7 @@
 
 use anyhow::Context;
 use clap::Args;
-use pheromone_bench::{Latency, Mode, Options, Report, Section};
+use pheromone_bench::{Latency, Mode, Options, Report, Section, VisibleReport};
 
 use super::{bad, bad_from};
 
@@ -165,7 +165,7 @@ targets over {runs} runs                      min     median        max   met"
     );
     for t in spread {
         println!(
-            "  {} {} {}\n      {:>10} {:>10} {:>10}   {}/{}",
+            "  {} {} {}\n      {:>10.3} {:>10.3} {:>10.3}   {}/{}",
             t.name, t.op, t.limit, t.min, t.median, t.max, t.met, t.runs
         );
     }
@@ -303,6 +303,11 @@ fn print_visible(r: &Report) {
                 lat(&rt.latency, 1.0, "µs")
             );
         }
+        print_visible_stages(
+            [("ticking", v), ("on deposit", o)]
+                .into_iter()
+                .chain(rt.map(|rt| ("FIFO + spin", rt))),
+        );
         println!(
             "field CPU (share of a core)   deposits/s  ticking  on deposit  frames/s  FIFO+spin"
         );
@@ -315,6 +320,31 @@ fn print_visible(r: &Report) {
                 t.deposits_per_s, t.cpu_share, d.cpu_share, d.frames_per_s, spin
             );
         }
+    }
+}
+
+/// Where a deposit's time goes, stage by stage: p50 / p99 of each, and their means over the
+/// slowest 1 % of the deposits.
+fn print_visible_stages<'r>(runs: impl Iterator<Item = (&'static str, &'r VisibleReport)>) {
+    println!(
+        "  stages µs (p50 / p99; mean of the slowest 1 %)   to the field's tick      compute      to the follower   (send p50 / p99)"
+    );
+    for (what, v) in runs {
+        let s = &v.slowest_1pct_us;
+        println!(
+            "  {what:<12} {:>8.0} / {:<6.0} ({:>6.0}) {:>6.0} / {:<5.0} ({:>5.0}) {:>6.0} / {:<6.0} ({:>6.0}) ({:.0} / {:.0})",
+            v.to_field_us.p50,
+            v.to_field_us.p99,
+            s.to_field,
+            v.tick_compute_us.p50,
+            v.tick_compute_us.p99,
+            s.compute,
+            v.to_reader_us.p50,
+            v.to_reader_us.p99,
+            s.to_reader,
+            v.send_us.p50,
+            v.send_us.p99
+        );
     }
 }
 
