@@ -78,6 +78,10 @@ pub struct LocalizeConfig {
     pub initial_sigma_rad: f64,
     /// ρ_t = 1 while √det Σxy ≤ ρ_ref² (a 1-σ ellipse no larger than a circle of this radius).
     pub rho_ref_m: f64,
+    /// An unlit stretch: no landmark inside this rectangle, `[min_x, min_y, max_x, max_y]` (m).
+    /// A robot crossing it runs on odometry alone, so its belief spreads and its ρ_t falls.
+    /// All zeros (the default): none.
+    pub unlit_rect_m: [f64; 4],
 }
 
 impl Default for LocalizeConfig {
@@ -100,7 +104,14 @@ impl LocalizeConfig {
             initial_sigma_m: 0.05,
             initial_sigma_rad: 0.02,
             rho_ref_m: 0.05,
+            unlit_rect_m: [0.0; 4],
         }
+    }
+
+    /// Whether (x, y) lies in the unlit rectangle (`unlit_rect_m`; an empty one holds nothing).
+    pub fn unlit(&self, x_m: f64, y_m: f64) -> bool {
+        let [x0, y0, x1, y1] = self.unlit_rect_m;
+        x0 < x1 && y0 < y1 && (x0..=x1).contains(&x_m) && (y0..=y1).contains(&y_m)
     }
 
     /// Every setting finite and in range; the error names the key and the value.
@@ -129,6 +140,21 @@ impl LocalizeConfig {
         for (key, value) in non_negative {
             if !(value.is_finite() && value >= 0.0) {
                 return Err(LocalizeError::Config { key, value });
+            }
+        }
+        // Finite, and each max no less than its min.
+        const UNLIT: [&str; 4] = [
+            "unlit_rect_m[0]",
+            "unlit_rect_m[1]",
+            "unlit_rect_m[2]",
+            "unlit_rect_m[3]",
+        ];
+        for (i, v) in self.unlit_rect_m.into_iter().enumerate() {
+            if !v.is_finite() || (i >= 2 && v < self.unlit_rect_m[i - 2]) {
+                return Err(LocalizeError::Config {
+                    key: UNLIT[i],
+                    value: v,
+                });
             }
         }
         if self.signatures == 0 {
@@ -244,9 +270,13 @@ pub fn graph_landmarks(g: &Graph, c: &LocalizeConfig) -> Vec<GraphLandmark> {
                 let s = (k as f64 + 0.5) * step;
                 for side in [1.0, -1.0] {
                     let off = side * c.landmark_offset_m;
+                    let (x_m, y_m) = (ax + ux * s - uy * off, ay + uy * s + ux * off);
+                    if c.unlit(x_m, y_m) {
+                        continue;
+                    }
                     out.push(GraphLandmark {
-                        x_m: ax + ux * s - uy * off,
-                        y_m: ay + uy * s + ux * off,
+                        x_m,
+                        y_m,
                         signature: (out.len() as u32 % c.signatures) + 1,
                     });
                 }

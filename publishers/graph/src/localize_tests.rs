@@ -58,6 +58,20 @@ fn a_bad_covariance_or_setting_is_refused_by_name() {
                 ..LocalizeConfig::default()
             },
         ),
+        (
+            "unlit_rect_m[2]",
+            LocalizeConfig {
+                unlit_rect_m: [5.0, 0.0, 4.0, 1.0],
+                ..LocalizeConfig::default()
+            },
+        ),
+        (
+            "unlit_rect_m[1]",
+            LocalizeConfig {
+                unlit_rect_m: [0.0, f64::INFINITY, 4.0, 1.0],
+                ..LocalizeConfig::default()
+            },
+        ),
     ] {
         let e = c.validate().unwrap_err().to_string();
         assert!(e.contains(&format!("`{key}`")), "{e}");
@@ -92,4 +106,22 @@ fn landmarks_line_both_sides_of_every_link_and_the_sensors_are_seeded() {
         .count();
     assert_eq!(a.len(), in_range);
     assert_ne!(a, Sensing::new(c, 4, 1).observe(truth, &map));
+}
+
+#[test]
+fn an_unlit_rectangle_has_no_landmarks_and_the_rest_of_the_map_keeps_them() {
+    let sc = crate::agent::RegionsScenario::paper_corridor();
+    let g = sc.graph().unwrap();
+    let all = graph_landmarks(&g, &LocalizeConfig::default());
+    let c = LocalizeConfig {
+        unlit_rect_m: [10.0, 0.0, 16.0, 5.0],
+        ..LocalizeConfig::default()
+    };
+    c.validate().unwrap();
+    let lit = graph_landmarks(&g, &c);
+    let inside = |l: &GraphLandmark| (10.0..=16.0).contains(&l.x_m) && (0.0..=5.0).contains(&l.y_m);
+    assert!(all.iter().any(inside), "the corridor has landmarks there");
+    assert!(!lit.iter().any(inside), "none is left inside");
+    assert_eq!(lit.len(), all.iter().filter(|l| !inside(l)).count());
+    assert!(lit.len() >= 30, "{} landmarks outside", lit.len());
 }
