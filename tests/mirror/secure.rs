@@ -450,6 +450,10 @@ fn an_access_control_rule_keeps_a_viewer_mirror_from_depositing() {
     deposit(MIRROR, &name, "2.0", "3.0");
     deposit(ORIGIN, &name, "4.5", "1.5");
     assert_identical(&hosts.common(20, |f| super::value_at(f, 4.5, 1.5) > 0.1));
+    // The mirror sends an unanswered batch again after `RESEND_AFTER`: follow the origin (50 Hz)
+    // for three of those before asking whether it did (20 frames, 0.4 s, were not always one).
+    let frames_per_resend = (bridge::RESEND_AFTER.as_secs_f64() * 50.0).ceil() as usize;
+    assert_identical(&hosts.common(3 * frames_per_resend, |_| true));
     let o = hosts.origin.frame().unwrap();
     assert_eq!(
         super::value_at(&o, 2.0, 3.0),

@@ -184,13 +184,24 @@ impl Window {
         if self.below == 0 {
             self.below = 1;
         }
-        self.above.insert(batch);
+        if batch >= self.below {
+            self.above.insert(batch);
+        }
         while self.above.remove(&self.below) {
             self.below += 1;
         }
         self.answers.push_back((batch, forwarded, refused));
         if self.answers.len() > ANSWERS_KEPT {
             self.answers.pop_front();
+        }
+    }
+
+    /// Every batch below `below` was handed over.
+    fn floor(&mut self, below: u64) {
+        self.below = self.below.max(below);
+        self.above.retain(|&b| b >= self.below);
+        while self.above.remove(&self.below) {
+            self.below += 1;
         }
     }
 
@@ -201,6 +212,15 @@ impl Window {
             .find(|a| a.0 == batch)
             .map_or((0, 0), |a| (a.1, a.2))
     }
+}
+
+/// One thing [`Seen`] knows of a mirror's batches.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Known {
+    /// (mirror, below): every batch below was handed over.
+    Below(u64, u64),
+    /// (mirror, batch, forwarded, refused): handed over, with its answer.
+    Handed(u64, u64, u32, u32),
 }
 
 /// The bridge's side: the batches it has handed to the field, per mirror.
@@ -221,8 +241,39 @@ impl Seen {
         w.contains(batch).then(|| w.answer(batch))
     }
 
+    /// Records that every batch of `mirror_id` below `below` was handed over (their answers
+    /// unknown: a resend of one is answered with none forwarded).
+    pub fn floor(&mut self, mirror_id: u64, below: u64) {
+        self.heard(mirror_id).floor(below);
+    }
+
+    /// What this holds, for a compacted journal (`journal`).
+    pub(crate) fn known(&self) -> Vec<Known> {
+        let mut out = Vec::new();
+        for (&m, (w, _)) in &self.mirrors {
+            if w.below > 1 {
+                out.push(Known::Below(m, w.below));
+            }
+            let answered: BTreeSet<u64> = w.answers.iter().map(|a| a.0).collect();
+            out.extend(w.answers.iter().map(|&(b, f, r)| Known::Handed(m, b, f, r)));
+            out.extend(
+                w.above
+                    .iter()
+                    .filter(|b| !answered.contains(b))
+                    .map(|&b| Known::Handed(m, b, 0, 0)),
+            );
+        }
+        out
+    }
+
     /// Records that `batch` of `mirror_id` was handed over.
     pub fn record(&mut self, mirror_id: u64, batch: u64, forwarded: u32, refused: u32) {
+        self.heard(mirror_id).insert(batch, forwarded, refused);
+    }
+
+    /// `mirror_id`'s window, heard now (made, forgetting the least recently heard mirror when
+    /// `MIRRORS_KEPT` are kept).
+    fn heard(&mut self, mirror_id: u64) -> &mut Window {
         self.clock += 1;
         if !self.mirrors.contains_key(&mirror_id) && self.mirrors.len() >= MIRRORS_KEPT {
             let stalest = self
@@ -238,7 +289,7 @@ impl Seen {
             .entry(mirror_id)
             .or_insert_with(|| (Window::default(), 0));
         entry.1 = self.clock;
-        entry.0.insert(batch, forwarded, refused);
+        &mut entry.0
     }
 }
 

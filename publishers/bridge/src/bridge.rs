@@ -11,6 +11,7 @@ use zenoh::Wait;
 
 use super::batches::Seen;
 use super::codec::{self, frame_checksum};
+use super::journal::{self, Journal};
 use super::{zerr, BridgeError, Keys, REQUEST_TIMEOUT};
 
 /// `--frames`: downsampled compressed frames for consumers without a mirror.
@@ -77,8 +78,9 @@ pub struct Bridge {
     deposit_sub:
         zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
     ack_pub: zenoh::pubsub::Publisher<'static>,
-    /// The mirrors' batches handed to the field.
+    /// The mirrors' batches handed to the field, and their record on disk (`journal`).
     seen: Seen,
+    journal: Journal,
     reader: FieldReader,
     inputs: InputsSubscriber,
     depositor: DepositPublisher,
@@ -116,6 +118,8 @@ impl Bridge {
         let inputs = InputsSubscriber::attach(node, &o.field)?;
         let depositor = DepositPublisher::attach(node, &o.field, u32::MAX)?;
         let keys = Keys::of(&o.field);
+        let mut seen = Seen::default();
+        let journal = open_journal(node, &o.field, &mut seen)?;
         let mut config = super::session_config_with(&o.security, "peer", &o.listen, &[])?;
         if o.admin_space {
             config = super::with_admin_space(config)?;
@@ -167,7 +171,8 @@ impl Bridge {
             config_q,
             deposit_sub,
             ack_pub,
-            seen: Seen::default(),
+            seen,
+            journal,
             reader,
             inputs,
             depositor,
@@ -399,6 +404,11 @@ impl Bridge {
                 earlier
             }
             None => {
+                if mirror_id != 0 {
+                    self.journal
+                        .handing(mirror_id, batch)
+                        .map_err(|e| self.journal_err(e))?;
+                }
                 let (mut forwarded, mut refused) = (0u32, 0u32);
                 for d in deposits {
                     // Each keeps the robot id its mirror-host publisher stamped.
@@ -410,6 +420,11 @@ impl Bridge {
                                  mirror {mirror_id:016x} waits for its resend",
                                 self.o.field
                             );
+                            if mirror_id != 0 {
+                                self.journal
+                                    .not_handed(mirror_id, batch)
+                                    .map_err(|e| self.journal_err(e))?;
+                            }
                             return Ok(());
                         }
                         Err(e) => {
@@ -422,6 +437,9 @@ impl Bridge {
                 self.stats.deposits_refused += u64::from(refused);
                 if mirror_id != 0 {
                     self.seen.record(mirror_id, batch, forwarded, refused);
+                    self.journal
+                        .handed(mirror_id, batch, (forwarded, refused), &self.seen)
+                        .map_err(|e| self.journal_err(e))?;
                 }
                 (forwarded, refused)
             }
@@ -454,9 +472,46 @@ impl Bridge {
         self.reader.field_alive()
     }
 
+    /// Stops: closes the session; dropping the journal removes its file (a successor needs it
+    /// only after a crash).
     pub fn close(self) {
         // A session that fails to close ends with the process.
         let _ = self.session.close().wait();
+    }
+
+    fn journal_err(&self, e: std::io::Error) -> BridgeError {
+        journal_err(self.journal.path(), e)
+    }
+}
+
+/// Opens the journal of `field`'s bridges in `node`'s iceoryx2 domain and loads what a crashed
+/// predecessor left into `seen`, saying what it recovered.
+fn open_journal(node: &Node<Svc>, field: &str, seen: &mut Seen) -> Result<Journal, BridgeError> {
+    let prefix = node.config().global.prefix.to_string();
+    let path = journal::path_for(&prefix, field);
+    let (j, r) = Journal::open(&path, seen).map_err(|e| journal_err(&path, e))?;
+    if r.handed > 0 || !r.interrupted.is_empty() {
+        eprintln!(
+            "bridge '{field}': a bridge before this one stopped without closing; {} batch(es) it \
+             handed to the field are answered again from {} without handing them over twice",
+            r.handed,
+            path.display()
+        );
+    }
+    for (m, b) in &r.interrupted {
+        eprintln!(
+            "bridge '{field}': batch {b} of mirror {m:016x} was being handed to the field when \
+             that bridge stopped; it is not handed over again, and some of its deposits may be \
+             missing"
+        );
+    }
+    Ok(j)
+}
+
+fn journal_err(path: &std::path::Path, e: std::io::Error) -> BridgeError {
+    BridgeError::Journal {
+        path: path.display().to_string(),
+        detail: e.to_string(),
     }
 }
 

@@ -7,12 +7,15 @@
 mod batches;
 mod bridge;
 pub mod codec;
+mod journal;
 mod mirror;
 mod security;
 
 use std::time::Duration;
 
+pub use batches::RESEND_AFTER;
 pub use bridge::{Bridge, BridgeOptions, BridgeStats, FramesOptions};
+pub use journal::path_for as journal_path;
 pub use mirror::{Mirror, MirrorOptions, MirrorStats};
 pub use security::{refusal, try_connect, Security};
 /// The Zenoh crate this build uses (tests and benches speak to bridges with it).
@@ -25,6 +28,8 @@ pub enum BridgeError {
     Shm(#[from] field::shm::ShmError),
     #[error("zenoh: {action}: {detail}")]
     Zenoh { action: String, detail: String },
+    #[error("the bridge's record of handed-over batches {path}: {detail}")]
+    Journal { path: String, detail: String },
     #[error("the configuration the origin sent is invalid: {0}")]
     Config(String),
     #[error("{0}")]
