@@ -118,8 +118,14 @@ fn a_tick_held_up_on_purpose_is_a_missed_deadline_in_list_and_the_summary() {
         .unwrap_or_else(|| panic!("no row for {name}: {}", stdout(&text)));
     let columns: Vec<&str> = row.split_whitespace().collect();
     // field grid ch cell_m tick_hz sequence readers depositors missed gap_ms state
-    assert!(columns[8].parse::<u64>().unwrap() >= 1, "{row}");
-    assert!(columns[9].parse::<f64>().unwrap() >= 250.0, "{row}");
+    let missed: u64 = columns[8]
+        .parse()
+        .unwrap_or_else(|e| panic!("missed: {e}\n{}", stdout(&text)));
+    let gap_ms: f64 = columns[9]
+        .parse()
+        .unwrap_or_else(|e| panic!("gap_ms: {e}\n{}", stdout(&text)));
+    assert!(missed >= 1, "{row}");
+    assert!(gap_ms >= 250.0, "{row}");
     field.interrupt();
     let out = field.wait_exit(Duration::from_secs(60));
     assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
@@ -277,8 +283,13 @@ fn sim_gives_its_control_loops_the_rt_priority_and_the_same_metrics() {
     let mut seen: std::collections::BTreeMap<u32, (String, u32, u32)> = Default::default();
     while child.try_wait().unwrap().is_none() {
         for (pid, role, policy, prio) in children_scheduling(sim_pid) {
-            // The latest sighting that shows a policy: the first may precede its setting.
-            let e = seen.entry(pid).or_insert((role, policy, prio));
+            // The latest sighting that shows a policy: the first may precede its setting. And
+            // the latest role that shows one: a child seen between fork and exec still has
+            // `sim`'s command line (an exited child, a zombie, has none).
+            let e = seen.entry(pid).or_insert((role.clone(), policy, prio));
+            if !role.is_empty() {
+                e.0 = role;
+            }
             if policy != 0 {
                 (e.1, e.2) = (policy, prio);
             }
