@@ -353,12 +353,8 @@ fn max_run(
     src: &MapView<'_>,
     walk: &super::merge_simd::Walk,
 ) -> (usize, usize) {
-    let (u_max, v_max) = (walk.sw as i64 - 1, walk.sh as i64 - 1);
-    let (mut u, mut v) = (walk.u, walk.v);
     let (mut adopted, mut combined) = (0usize, 0usize);
-    for (d, p) in drow.iter_mut().zip(prow.iter_mut()) {
-        let (cu, cv) = ((u >> 32).clamp(0, u_max), (v >> 32).clamp(0, v_max));
-        let i = cv as usize * walk.sw + cu as usize;
+    for ((d, p), i) in drow.iter_mut().zip(prow.iter_mut()).zip(walk.indices()) {
         let (so, sp) = (src.occupancy[i], src.pheromone[i]);
         if *d == 0.0 && so != 0.0 {
             *d = so;
@@ -372,8 +368,6 @@ fn max_run(
             *p = p.max(sp);
             combined += 1;
         }
-        u = u.wrapping_add(walk.du);
-        v = v.wrapping_add(walk.dv);
     }
     (adopted, combined)
 }

@@ -42,6 +42,21 @@ impl Walk {
             ..*self
         }
     }
+
+    /// The source index of each of the run's cells in turn, endless (zip it with the run):
+    /// the fixed-point walk every one-cell pass takes.
+    pub(crate) fn indices(&self) -> impl Iterator<Item = usize> {
+        let (u_max, v_max) = (self.sw as i64 - 1, self.sh as i64 - 1);
+        let (du, dv, sw) = (self.du, self.dv, self.sw);
+        std::iter::successors(Some((self.u, self.v)), move |&(u, v)| {
+            Some((u.wrapping_add(du), v.wrapping_add(dv)))
+        })
+        .map(move |(u, v)| {
+            // `row_span` keeps u in [0, sw) and v in [0, sh); the clamp only guards rounding.
+            let (cu, cv) = ((u >> 32).clamp(0, u_max), (v >> 32).clamp(0, v_max));
+            cv as usize * sw + cu as usize
+        })
+    }
 }
 
 /// How runs are merged.
@@ -164,13 +179,8 @@ unsafe fn all_finite_avx2(plane: &[f32]) -> bool {
 
 /// The reference: one cell at a time.
 fn scalar(d: &mut [f32], p: &mut [f32], so: &[f32], sp: &[f32], walk: &Walk) -> (usize, usize) {
-    let (u_max, v_max) = (walk.sw as i64 - 1, walk.sh as i64 - 1);
-    let (mut u, mut v) = (walk.u, walk.v);
     let (mut adopted, mut averaged) = (0usize, 0usize);
-    for (d, p) in d.iter_mut().zip(p.iter_mut()) {
-        // `row_span` keeps u in [0, sw) and v in [0, sh); the clamp only guards rounding.
-        let (cu, cv) = ((u >> 32).clamp(0, u_max), (v >> 32).clamp(0, v_max));
-        let i = cv as usize * walk.sw + cu as usize;
+    for ((d, p), i) in d.iter_mut().zip(p.iter_mut()).zip(walk.indices()) {
         let (so, sp) = (so[i], sp[i]);
         let (od, op) = (*d, *p);
         let known = so != 0.0;
@@ -181,8 +191,6 @@ fn scalar(d: &mut [f32], p: &mut [f32], so: &[f32], sp: &[f32], walk: &Walk) -> 
         *p = if known { np } else { op };
         adopted += (known & empty) as usize;
         averaged += (known & !empty) as usize;
-        u = u.wrapping_add(walk.du);
-        v = v.wrapping_add(walk.dv);
     }
     (adopted, averaged)
 }
@@ -324,13 +332,8 @@ fn average_scalar(
     walk: &Walk,
     logodds_max: f32,
 ) -> (usize, usize) {
-    let (u_max, v_max) = (walk.sw as i64 - 1, walk.sh as i64 - 1);
-    let (mut u, mut v) = (walk.u, walk.v);
     let mut averaged = 0usize;
-    for (d, p) in d.iter_mut().zip(p.iter_mut()) {
-        // `row_span` keeps u in [0, sw) and v in [0, sh); the clamp only guards rounding.
-        let (cu, cv) = ((u >> 32).clamp(0, u_max), (v >> 32).clamp(0, v_max));
-        let i = cv as usize * walk.sw + cu as usize;
+    for ((d, p), i) in d.iter_mut().zip(p.iter_mut()).zip(walk.indices()) {
         let (so, sp) = (so[i], sp[i]);
         let (od, op) = (*d, *p);
         if so != 0.0 || od != 0.0 || sp != 0.0 || op != 0.0 {
@@ -338,8 +341,6 @@ fn average_scalar(
             *p = 0.5 * (op + sp);
             averaged += 1;
         }
-        u = u.wrapping_add(walk.du);
-        v = v.wrapping_add(walk.dv);
     }
     (0, averaged)
 }
