@@ -408,6 +408,32 @@ fn a_sigkilled_sim_takes_every_child_with_it() {
     });
     // A killed sim cannot remove its scenario directory (a known leftover, private to its user).
     std::fs::remove_dir_all(&dir).unwrap();
+    // A service the sim was creating when it died is left half-made (its static config only,
+    // which iceoryx2 removes in no cleanup): the next pheromone process removes it once it is
+    // older than twice iceoryx2's creation timeout.
+    let tag = format!("sim{sim_pid}x");
+    eventually(WAIT, "no service file of the killed run", || {
+        let o = crate::harness::run(&["list"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        service_files_naming(&tag).is_empty().then_some(())
+    });
+}
+
+/// The static config files in iceoryx2's service directory that name `tag`: the finished
+/// services, and the half-made ones no listing shows.
+fn service_files_naming(tag: &str) -> Vec<String> {
+    let dir = iceoryx2::config::Config::global_config()
+        .global
+        .service_dir()
+        .to_string();
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    entries
+        .flatten()
+        .filter(|e| std::fs::read_to_string(e.path()).is_ok_and(|t| t.contains(tag)))
+        .map(|e| e.path().display().to_string())
+        .collect()
 }
 
 #[test]

@@ -41,6 +41,7 @@ mod config;
 mod confirm;
 mod deposit;
 mod error;
+mod half_created;
 mod inputs;
 mod mirror_state;
 mod reader;
@@ -69,6 +70,7 @@ pub use error::{
     AttachError, Cause, Iceoryx, NameError, ReceiveError, SendError, ServiceError, ShmError,
     StandbyError, StartError, TickError,
 };
+pub use half_created::remove_half_created_services;
 pub use inputs::{
     f32s_from_bytes, wire_bytes, wire_from_bytes, wire_slice_bytes, wire_vec_from_bytes,
     InputsPublisher, InputsSubscriber,
@@ -279,6 +281,7 @@ fn create_node_with(name: &str, domain: Config) -> Result<Node<Svc>, AttachError
     }
     let node = node?;
     cleanup_dead_nodes(&node);
+    remove_half_created_services(node.config());
     Ok(node)
 }
 
