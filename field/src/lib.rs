@@ -31,7 +31,7 @@ pub use deposit::{DepositLimits, RejectReason, Rejection};
 pub use engine::{FieldConfig, OwnedField, Stepper, TickReport};
 pub use error::ConfigError;
 pub use geometry::GridGeometry;
-pub use kernel::{Deposit, Kernel, KernelParams};
+pub use kernel::{Deposit, EllipseRule, Kernel, KernelParams, PoseEstimate, PoseRejection};
 pub use messages::{DepositMsg, FrameHeader, KernelKind};
 pub use models::{ChannelSpec, Evaporation};
 pub use sample::{FrameView, SamplePose};

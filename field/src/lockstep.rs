@@ -10,7 +10,7 @@
 //! by each join, no fixed deadline per process), every port of the run exists, and every message
 //! sent from then on is delivered.
 //!
-//! One step `k`, as the world runs it (`roles::run_world`):
+//! One step `k`, as the world runs it (`pheromone_world::run_world`):
 //! 1. the world publishes step `k`'s sensors and truth and sends the scripted deposits due;
 //! 2. each localizer turns its sensors into a pose; each depositor turns the pose into a deposit
 //!    (or none), sends it to the field and then acknowledges step `k` ([`StepAck`]);

@@ -1,35 +1,14 @@
-//! Seed 000's uncertainty-aware deposit from a pose estimate: the rule of
-//! `roles::depositor` (`validate_pose` and `Depositor::deposit_for` in
-//! `publishers/src/roles/depositor/mod.rs`, mode `uncertainty-aware`), restated here because
-//! this crate does not depend on `publishers`. The field then computes γ = τ / det Σxy capped at
-//! γmax and cuts the kernel at z_rng (`field::deposit`), as for the Rust depositor's deposit.
-//!
-//! The pose is refused (with the entry and its value named) when a number is not finite, the
-//! covariance is not symmetric (|Σij − Σji| > 1e-6·max|Σ|) or not positive semi-definite
-//! (λmin < −1e-9·max|Σ|), or a value does not fit the `f32` message.
+//! Seed 000's uncertainty-aware deposit from a pose estimate, from C: the C parameters checked
+//! ([`check_params`]), then the field's one pose → deposit rule (`field::kernel::pose`:
+//! validation, tolerances, the ellipse), the same the Rust depositor (`roles::depositor`, mode
+//! `uncertainty-aware`) and the ROS 2 pose path use. A refusal is `BadArgument` with the rule's
+//! message, naming the entry and its value.
 
-use field::{Deposit, Kernel, KernelParams};
+use field::kernel::pose::{EllipseRule, PoseEstimate, PoseRejection};
 use field::{DepositMsg, KernelKind};
 
 use crate::error::{bail, Failure};
 use crate::types::{PheromoneEllipseParams, PheromonePoseEstimate, PheromoneStatus};
-
-/// `roles::depositor::SYMMETRY_REL_TOL`.
-const SYMMETRY_REL_TOL: f64 = 1e-6;
-/// `roles::depositor::PSD_REL_TOL`.
-const PSD_REL_TOL: f64 = 1e-9;
-
-const COV_NAMES: [&str; 9] = [
-    "cov_xx",
-    "cov_xy",
-    "cov_xtheta",
-    "cov_yx",
-    "cov_yy",
-    "cov_ytheta",
-    "cov_thetax",
-    "cov_thetay",
-    "cov_thetatheta",
-];
 
 const BAD: PheromoneStatus = PheromoneStatus::BadArgument;
 
@@ -61,57 +40,19 @@ pub fn check_params(p: &PheromoneEllipseParams) -> Result<KernelKind, Failure> {
     }
 }
 
-/// Checks a pose: finite, covariance symmetric and positive semi-definite.
-pub fn validate_pose(pose: &PheromonePoseEstimate) -> Result<(), Failure> {
-    for (name, v) in [
-        ("x_m", pose.x_m),
-        ("y_m", pose.y_m),
-        ("theta_rad", pose.theta_rad),
-    ] {
-        if !v.is_finite() {
-            bail!(BAD, "pose rejected (non_finite): {name} = {v}");
-        }
+/// The pose as the field's rule reads it.
+fn estimate(pose: &PheromonePoseEstimate) -> PoseEstimate {
+    PoseEstimate {
+        x_m: pose.x_m,
+        y_m: pose.y_m,
+        theta_rad: pose.theta_rad,
+        cov: pose.cov,
     }
-    if let Some(i) = pose.cov.iter().position(|v| !v.is_finite()) {
-        bail!(
-            BAD,
-            "pose rejected (non_finite): {} = {}",
-            COV_NAMES[i],
-            pose.cov[i]
-        );
-    }
-    let c = &pose.cov;
-    let scale = c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    for (row, col) in [(0, 1), (0, 2), (1, 2)] {
-        let (upper, lower) = (c[row * 3 + col], c[col * 3 + row]);
-        if (upper - lower).abs() > SYMMETRY_REL_TOL * scale {
-            bail!(
-                BAD,
-                "pose rejected (not_symmetric): cov[{row}][{col}] = {upper} but cov[{col}][{row}] = {lower}"
-            );
-        }
-    }
-    let m = nalgebra::Matrix3::from_row_slice(c);
-    let sym = (m + m.transpose()) * 0.5;
-    let min_eigenvalue = sym.symmetric_eigenvalues().min();
-    if min_eigenvalue < -PSD_REL_TOL * scale {
-        bail!(
-            BAD,
-            "pose rejected (not_psd): covariance has eigenvalue {min_eigenvalue} < 0"
-        );
-    }
-    Ok(())
 }
 
-fn to_f32(name: &str, value: f64) -> Result<f32, Failure> {
-    let v = value as f32;
-    if !v.is_finite() {
-        bail!(
-            BAD,
-            "pose rejected (out_of_range): {name} = {value} does not fit the f32 deposit message"
-        );
-    }
-    Ok(v)
+/// The refusal as this library reports it: `BadArgument` with the rule's message.
+fn refused(e: PoseRejection) -> Failure {
+    crate::error::fail(BAD, format_args!("{e}"))
 }
 
 /// The deposit the Rust depositor makes for `pose` in mode `uncertainty-aware` (stamp and robot
@@ -120,31 +61,16 @@ pub fn deposit_for(
     pose: &PheromonePoseEstimate,
     p: &PheromoneEllipseParams,
 ) -> Result<DepositMsg, Failure> {
-    let kernel = check_params(p)?;
-    validate_pose(pose)?;
-    let x = to_f32("x_m", pose.x_m)?;
-    let y = to_f32("y_m", pose.y_m)?;
-    let sign = if p.anti_pheromone != 0 { -1.0 } else { 1.0 };
-    let (xx, xy, yy) = (pose.cov[0], pose.cov[1], pose.cov[4]);
-    let floor = (p.min_sigma_m as f64).powi(2);
-    let xx32 = to_f32("cov_xx", xx.max(floor))?;
-    let yy32 = to_f32("cov_yy", yy.max(floor))?;
-    // Keep Σxy PSD after rounding to f32: |xy| ≤ √(xx·yy).
-    let bound = (xx32 as f64 * yy32 as f64).max(0.0).sqrt();
-    let xy32 = xy.clamp(-bound, bound) as f32;
-    let params = KernelParams {
-        cov_m2: [xx32, xy32, yy32],
+    let rule = EllipseRule {
+        channel: p.channel,
+        kernel: check_params(p)?,
+        tau: p.tau,
         range_m: p.range_m,
         gamma_max: p.gamma_max,
-        ..KernelParams::default()
+        min_sigma_m: p.min_sigma_m,
+        anti_pheromone: p.anti_pheromone != 0,
     };
-    let deposit = Deposit {
-        channel: p.channel,
-        x_m: x,
-        y_m: y,
-        kernel: Kernel::from_params(kernel, sign * p.tau, &params),
-    };
-    Ok(deposit.into())
+    Ok(rule.deposit(&estimate(pose)).map_err(refused)?.into())
 }
 
 #[cfg(test)]

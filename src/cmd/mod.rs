@@ -394,8 +394,9 @@ mod tests {
             .is_some_and(|c| c.downcast_ref::<std::io::Error>().is_some()));
         // Transparent: the scenario's message (which names what was refused) once, and the
         // refused part behind it in the chain.
-        let s = ::roles::scenario::Scenario::parse("name = 'x'\nduration_s = -1\n", "y.toml")
-            .unwrap_err();
+        let s =
+            ::pheromone_world::scenario::Scenario::parse("name = 'x'\nduration_s = -1\n", "y.toml")
+                .unwrap_err();
         let text = s.to_string();
         let e = bad_from(s);
         assert!(e.downcast_ref::<BadInput>().is_some());

@@ -3,13 +3,11 @@
 
 use clap::{Args, ValueEnum};
 use field::shm::{create_node, WaitPolicy};
+use pheromone_world::scenario::Scenario;
+use pheromone_world::{run_world, WorldOptions};
 use roles::depositor::{DepositMode, DepositorConfig};
 use roles::follower::{Follower, FollowerConfig, StrategyKind};
-use roles::scenario::Scenario;
-use roles::{
-    run_depositor, run_follower, run_localizer, run_mapper, run_world, OwnMap, RoleOptions,
-    WorldOptions,
-};
+use roles::{run_depositor, run_follower, run_localizer, run_mapper, OwnMap, RoleOptions};
 
 use super::{bad, bad_from, seconds};
 
@@ -18,7 +16,7 @@ use super::{bad, bad_from, seconds};
 pub struct Common {
     /// Scenario: a built-in name (blind-leader, trail-following, ias-ss, evaporation, trail,
     /// wrong-area) or a TOML file.
-    #[arg(long, default_value = roles::scenario::DEFAULT_SCENARIO)]
+    #[arg(long, default_value = pheromone_world::scenario::DEFAULT_SCENARIO)]
     pub scenario: String,
     /// Name of the simulated world (its clock is sim/<WORLD>/clock).
     #[arg(long, default_value = "sim")]
@@ -188,7 +186,8 @@ pub fn run_localizer_cmd(a: LocalizerArgs) -> anyhow::Result<()> {
         }
     }
     let node = create_node(&format!("localizer-r{}-{}", a.robot, std::process::id()))?;
-    let summary = run_localizer(&node, &scenario, &a.common.role_options(a.robot), a.slam)?;
+    let setup = scenario.localizer_setup(a.robot, a.slam)?;
+    let summary = run_localizer(&node, &setup, &a.common.role_options(a.robot))?;
     eprintln!(
         "localizer r{}: {} steps, {} rejected",
         a.robot, summary.steps, summary.rejected
@@ -219,7 +218,8 @@ pub fn run_mapper_cmd(a: MapperArgs) -> anyhow::Result<()> {
     check_names(&a.common, &format!("mapper r{}", a.robot))?;
     let scenario = load_scenario(&a.common.scenario)?;
     let node = create_node(&format!("mapper-r{}-{}", a.robot, std::process::id()))?;
-    let summary = run_mapper(&node, &scenario, &a.common.role_options(a.robot))?;
+    let setup = scenario.mapper_setup(a.robot)?;
+    let summary = run_mapper(&node, setup, &a.common.role_options(a.robot))?;
     eprintln!(
         "mapper r{}: {} steps, {} merges, {} maps refused, {} exchanges refused (lost)",
         a.robot,

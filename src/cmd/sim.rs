@@ -6,8 +6,8 @@
 
 use std::time::Instant;
 
+use pheromone_world::scenario::{Overrides, Scenario};
 use roles::follower::StrategyKind;
-use roles::scenario::{Overrides, Scenario};
 use ros2::record::{McapRecorder, RecordError};
 use serde::Serialize;
 use sim::metrics::{mean_sd, scenario_metrics, welch_t, RunMetrics, RunMode};

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use roles::scenario::DEFAULT_SCENARIO;
+use pheromone_world::scenario::DEFAULT_SCENARIO;
 
 /// Run a scenario and report what happened.
 ///

@@ -3,8 +3,8 @@
 //! scripted loss, in the mode `sim` would use; one robot's estimation errors, deposits and σ
 //! from each run become `filters.csv`, six charts and `filters.json`.
 
+use pheromone_world::scenario::{Overrides, Scenario};
 use roles::localizer::FilterKind;
-use roles::scenario::{Overrides, Scenario};
 use serde::Serialize;
 use sim::single::{run_single_process, SingleProcessOptions};
 

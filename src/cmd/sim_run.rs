@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use roles::scenario::Scenario;
+use pheromone_world::scenario::Scenario;
 use sim::processes::{run_as_processes, ProcessRunError, ProcessRunInfo, ProcessRunOptions};
 use sim::record::Recording;
 use sim::ros_record::SimMcap;

@@ -4,9 +4,9 @@
 use std::path::PathBuf;
 
 use clap::Args;
+use pheromone_world::scenario::Scenario;
 use roles::follower::StrategyKind;
 use roles::mapper::MergeRule;
-use roles::scenario::Scenario;
 use sim::sweep::{
     integrations, parse_merge_idle, parse_merge_rules, parse_rc_m, parse_robots, parse_steer,
     parse_strategies, run_sweep, Figure, SweepGrid, SweepResult,

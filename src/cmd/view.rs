@@ -67,7 +67,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
 /// world is bad input, exit status 2).
 fn scenario_walls(scenario: &str) -> anyhow::Result<Vec<[f64; 4]>> {
     let s = super::roles::load_scenario(scenario)?;
-    let world = roles::world::World::new(s.world.clone(), s.seed).map_err(super::bad_from)?;
+    let world = pheromone_world::World::new(s.world.clone(), s.seed).map_err(super::bad_from)?;
     Ok(world
         .wall_segments()
         .iter()

@@ -12,7 +12,7 @@ use std::time::Duration;
 use field::shm::{create_node, FieldReader};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
-use roles::scenario::Scenario;
+use pheromone_world::scenario::Scenario;
 use serde_json::Value;
 
 use super::free_port;

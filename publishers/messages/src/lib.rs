@@ -6,6 +6,10 @@
 //! `pheromone/W/r<ID>/status` ([`FollowerStatusMsg`]), `sim/W/r<ID>/sensors` ([`SensorMsg`]),
 //! `sim/W/r<ID>/truth` ([`TruthMsg`]), `sim/W/r<ID>/laser` ([`LaserMsg`]); each has a `…-ready` event that wakes its receivers.
 
+pub mod geometry;
+
+pub use geometry::{sinc, sinc_derivative, Landmark, NoiseConfig, Segment, WorldPose};
+
 /// Most landmark observations one sensor message carries; the world reports the nearest ones.
 pub const MAX_OBSERVATIONS: usize = 32;
 
@@ -29,6 +33,17 @@ pub struct PoseMsg {
 field::wire_type!(PoseMsg, "PoseMsg", size = 120, align = 8);
 
 impl PoseMsg {
+    /// The estimate (mean and covariance) without robot, step and stamp: what the one
+    /// pose → deposit rule of `field::kernel::pose` reads.
+    pub fn estimate(&self) -> field::PoseEstimate {
+        field::PoseEstimate {
+            x_m: self.x_m,
+            y_m: self.y_m,
+            theta_rad: self.theta_rad,
+            cov: self.cov,
+        }
+    }
+
     /// The position block Σxy as `[xx, xy, yy]`.
     pub fn cov_xy(&self) -> [f64; 3] {
         [self.cov[0], self.cov[1], self.cov[4]]

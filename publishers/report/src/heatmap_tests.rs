@@ -3,7 +3,7 @@ use super::super::style::{lighter, Rgb, OUTLINE_RGB, ROBOT_RGB, VIRIDIS};
 use super::super::tests::scene;
 use super::*;
 use messages::FollowerState;
-use roles::scenario::Scenario;
+use pheromone_world::scenario::Scenario;
 
 #[test]
 fn trajectories_stop_at_the_snapshot_time() {

@@ -39,7 +39,7 @@ use std::path::{Path, PathBuf};
 
 use files::{robot_csv, write_file, write_png};
 use heatmap::render_snapshot;
-use roles::scenario::Scenario;
+use pheromone_world::scenario::Scenario;
 use sim::record::{Recording, Snapshot};
 
 pub use filters::{FilterRun, FilterSummary};

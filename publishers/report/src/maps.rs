@@ -9,8 +9,8 @@
 use plotters::prelude::*;
 
 use super::style::{colour, msg, robot_rgb, Picture, Rgb, FONT};
+use pheromone_world::team::RobotMap;
 use roles::mapper::pose_in_frame;
-use roles::team::RobotMap;
 use sim::record::Recording;
 
 const UNKNOWN: f32 = 160.0;
@@ -442,7 +442,7 @@ mod tests {
 
     #[test]
     fn write_plots_writes_the_framed_maps() {
-        use roles::team::MappingRecord;
+        use pheromone_world::team::MappingRecord;
         let m = map();
         let rec = Recording {
             mapping: Some(MappingRecord {
@@ -453,7 +453,7 @@ mod tests {
             ..Recording::default()
         };
         let dir = std::env::temp_dir().join(format!("maps-framed-{}", std::process::id()));
-        let scenario = roles::scenario::Scenario::load("evaporation").unwrap();
+        let scenario = pheromone_world::scenario::Scenario::load("evaporation").unwrap();
         let written = crate::write_plots(&dir, &scenario, &rec).unwrap();
         assert!(written.contains(&dir.join("map_r3.png")), "{written:?}");
         let decoder = png::Decoder::new(std::io::BufReader::new(

@@ -5,7 +5,7 @@
 //! on the run, so only in the pictures from that time on).
 
 use super::style::{robot_rgb, Rgb};
-use roles::scenario::Scenario;
+use pheromone_world::scenario::Scenario;
 use sim::record::Recording;
 use sim::wrong_area::wrong_area;
 

@@ -13,7 +13,7 @@ use std::collections::BTreeMap;
 
 use field::Evaporation;
 
-use roles::scenario::{BlindLeaderMetric, ExplorationMetric, Scenario};
+use pheromone_world::scenario::{BlindLeaderMetric, ExplorationMetric, Scenario};
 use sim::metrics::{blind_leader, distance_to_polyline_m, mean_path_error_m, BlindLeader};
 use sim::record::Recording;
 

@@ -1,7 +1,7 @@
 //! Seed 004's local maps and their merging, run in one process (`pheromone sim ias-ss --merge
 //! --single-process`): what a user relies on in the metrics.
 
-use roles::scenario::{Overrides, Scenario};
+use pheromone_world::scenario::{Overrides, Scenario};
 use sim::metrics::scenario_metrics;
 use sim::single::{run_single_process, SingleProcessOptions};
 

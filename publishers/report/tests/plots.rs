@@ -7,9 +7,9 @@ use std::fs::{self, File};
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
+use pheromone_world::scenario::{Overrides, Scenario};
 use report::series::{exploration_over_time, leader_deposits, path_distances, probe_curves};
 use report::{write_outputs, write_plots, PLOT_H_PX, PLOT_W_PX};
-use roles::scenario::{Overrides, Scenario};
 use sim::metrics::{distance_to_polyline_m, scenario_metrics, RunMetrics, RunMode};
 use sim::record::Recording;
 use sim::single::{run_single_process, SingleProcessOptions};

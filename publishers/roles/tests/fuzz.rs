@@ -12,14 +12,14 @@ use field::{
 };
 use messages::{LandmarkObs, PoseMsg, SensorMsg, MAX_OBSERVATIONS};
 use nalgebra::Matrix3;
+use pheromone_world::scenario::Scenario;
+use pheromone_world::{Landmark, OccupancyMap, RobotConfig, World, WorldConfig, WorldPose};
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
 use proptest::test_runner::{Config, TestRunner};
 use roles::depositor::{msg_is_finite, DepositMode, Depositor, DepositorConfig};
 use roles::follower::{Follower, FollowerConfig, StrategyKind};
 use roles::localizer::{CheckedFilter, Ekf, EkfConfig, EkfSlam, EkfSlamConfig};
-use roles::scenario::Scenario;
-use roles::world::{Landmark, OccupancyMap, RobotConfig, World, WorldConfig, WorldPose};
 use testkit::toml_fuzz;
 
 fn cases(default: u32) -> u32 {
@@ -376,7 +376,7 @@ fn the_world_survives_any_command() {
             })
             .collect(),
         landmarks: landmarks(),
-        walls: vec![roles::world::WallConfig::Rect {
+        walls: vec![pheromone_world::WallConfig::Rect {
             min_x_m: 0.0,
             min_y_m: 4.9,
             max_x_m: 12.0,
@@ -425,7 +425,7 @@ fn the_world_survives_any_command() {
 /// origin (file) and, for syntax errors, the line.
 #[test]
 fn mutated_scenarios_are_refused_with_file_and_reason() {
-    let text = roles::scenario::BUILTIN[0].1;
+    let text = pheromone_world::scenario::BUILTIN[0].1;
     let lines: Vec<String> = text.lines().map(str::to_string).collect();
     let stats = std::cell::RefCell::new([0u64; 2]);
     run(cases(256), &toml_fuzz::mutations(lines.len()), |muts| {

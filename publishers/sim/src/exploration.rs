@@ -12,10 +12,10 @@
 use serde::Serialize;
 
 use crate::record::Recording;
+use pheromone_world::scenario::{ExplorationMetric, Scenario};
+use pheromone_world::team::{MappingRecord, MergeEvent, RobotMap};
+use pheromone_world::World;
 use roles::mapper::{pose_in_frame, MappingConfig};
-use roles::scenario::{ExplorationMetric, Scenario};
-use roles::team::{MappingRecord, MergeEvent, RobotMap};
-use roles::world::World;
 
 /// `exploration_known`, shaped like `exploration`.
 #[derive(Debug, Clone, Serialize)]

@@ -23,7 +23,7 @@ use crate::record::{ProbeReading, Recording};
 use crate::ros_record::McapTotals;
 use crate::single::{FieldSummary, RobotResult, RunSummary};
 use crate::wrong_area::WrongArea;
-use roles::scenario::{BlindLeaderMetric, ExplorationMetric, PathMetric, Scenario};
+use pheromone_world::scenario::{BlindLeaderMetric, ExplorationMetric, PathMetric, Scenario};
 
 /// Every metric the scenario asks for; those it does not ask for are left out of the JSON.
 #[derive(Debug, Clone, Default, Serialize)]

@@ -33,9 +33,9 @@ use crate::single::{sigma_max_m, FrameSchedule};
 use messages::{
     CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, RendezvousMsg, ScanMsg, TruthMsg,
 };
+use pheromone_world::scenario::Scenario;
+use pheromone_world::team::MappingTeam;
 use roles::depositor::Depositor;
-use roles::scenario::Scenario;
-use roles::team::MappingTeam;
 use roles::RobotServices;
 use ros2::record::RecordError;
 

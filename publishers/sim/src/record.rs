@@ -84,7 +84,7 @@ pub struct Recording {
     /// Wall segments of the world, ([x0, y0], [x1, y1]) in metres, to draw on the pictures.
     pub walls: Vec<([f64; 2], [f64; 2])>,
     /// Seed 004's final local maps and merges, when the scenario maps.
-    pub mapping: Option<roles::team::MappingRecord>,
+    pub mapping: Option<pheromone_world::team::MappingRecord>,
 }
 
 impl Recording {

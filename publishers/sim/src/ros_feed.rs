@@ -21,7 +21,7 @@ use std::collections::{BTreeMap, VecDeque};
 use field::deposit::prepare;
 use field::{DepositMsg, FieldConfig, GridGeometry};
 use messages::PoseMsg;
-use roles::scenario::Scenario;
+use pheromone_world::scenario::Scenario;
 use ros2::record::RecordError;
 
 use crate::record::Recording;

@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use field::{DepositMsg, GridGeometry};
 use messages::PoseMsg;
-use roles::scenario::Scenario;
+use pheromone_world::scenario::Scenario;
 use ros2::frames::{frame_cdr, FieldTopics};
 use ros2::grid::{FrameRef, Stamp};
 use ros2::record::{McapRecorder, RecordError};

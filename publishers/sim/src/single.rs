@@ -22,12 +22,12 @@ use serde::Serialize;
 use crate::record::{deposit_peak, ProbeReading, Recording, RobotSample, Snapshot};
 use crate::ros_record::{PoseRow, SimMcap};
 use messages::{FollowerState, LaserMsg, PoseMsg};
+use pheromone_world::scenario::{ProbeSpec, Scenario};
+use pheromone_world::team::MappingTeam;
+use pheromone_world::{StepOutput, World};
 use roles::depositor::Depositor;
 use roles::follower::{Follower, PoseSource};
 use roles::mapper::{pose_msg_in_frame, Pose2, MAP_CHANNELS};
-use roles::scenario::{ProbeSpec, Scenario};
-use roles::team::MappingTeam;
-use roles::world::{StepOutput, World};
 use roles::{Filter, ProcessError};
 
 /// What a run ends with, whichever way it ran.
@@ -167,7 +167,7 @@ impl Robot {
         };
         Ok(Self {
             id,
-            filter: Filter::for_robot(scenario, id, slam)?,
+            filter: Filter::new(&scenario.localizer_setup(id, slam)?)?,
             depositor,
             follower,
             pose: None,
@@ -285,7 +285,7 @@ impl<'a> SingleRun<'a> {
     /// Builds the world, the mapping team, the field, the scripted deposits and the robots.
     fn new(scenario: &'a Scenario, slam: bool) -> Result<Self, ProcessError> {
         let mut world =
-            World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::World)?;
+            World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::from)?;
         if let Some(m) = scenario.mapping() {
             world.enable_mapping(m, scenario.seed);
         }

@@ -18,10 +18,10 @@ use super::exploration::{exploration_known, exploration_merged};
 use super::metrics::exploration;
 use super::single::{run_single_process, SingleProcessOptions};
 use super::sweep_stats::{paired, welch, MeanSd, TTest};
+use pheromone_world::scenario::{Overrides, Scenario, ScenarioError};
 use roles::follower::StrategyKind;
 use roles::mapper::{MergeRule, SteerOn};
 use roles::process::role_loop::ProcessError;
-use roles::scenario::{Overrides, Scenario, ScenarioError};
 
 /// A sweep cannot be planned or one of its runs failed.
 #[derive(Debug, thiserror::Error)]

@@ -7,7 +7,7 @@ use serde::Serialize;
 
 use crate::record::{Recording, RobotSample};
 use messages::FollowerState;
-use roles::scenario::{Scenario, WrongAreaMetric};
+use pheromone_world::scenario::{Scenario, WrongAreaMetric};
 
 /// The outcome of a run, for the leader and each follower. Positions are [x, y] in metres.
 #[derive(Debug, Clone, Serialize)]

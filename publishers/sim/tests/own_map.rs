@@ -3,9 +3,9 @@
 //! go; on the shared field it changes only what they know. Runs in one process; that the
 //! processes run equals it is tests/processes.
 
+use pheromone_world::scenario::{ExplorationMetric, Overrides, Scenario};
+use pheromone_world::team::MergeEvent;
 use roles::mapper::{pose_in_frame, SteerOn};
-use roles::scenario::{ExplorationMetric, Overrides, Scenario};
-use roles::team::MergeEvent;
 use sim::exploration::exploration_merged;
 use sim::metrics::{scenario_metrics, ScenarioMetrics};
 use sim::record::{Recording, RobotSample};

@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 
-use roles::scenario::{Overrides, Scenario};
+use pheromone_world::scenario::{Overrides, Scenario};
 use ros2::record::McapRecorder;
 use sim::ros_record::SimMcap;
 use sim::single::{run_single_process, SingleProcessOptions};

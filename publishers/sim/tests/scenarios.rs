@@ -2,8 +2,8 @@
 //! with assertions on the metrics a user relies on. Durations are shortened where the claim
 //! holds earlier, to keep the suite quick.
 
+use pheromone_world::scenario::{Overrides, Scenario, BUILTIN};
 use roles::follower::StrategyKind;
-use roles::scenario::{Overrides, Scenario, BUILTIN};
 use sim::metrics::{scenario_metrics, ScenarioMetrics};
 use sim::record::Recording;
 use sim::single::{run_single_process, RunSummary, SingleProcessOptions};

@@ -3,7 +3,7 @@
 //! followers end there, with uncertainty-aware deposits they give the trail up within a few
 //! metres of the loss, explore, and none ends in A.
 
-use roles::scenario::{Overrides, Scenario};
+use pheromone_world::scenario::{Overrides, Scenario};
 use serde_json::Value;
 use sim::metrics::scenario_metrics;
 use sim::single::{run_single_process, SingleProcessOptions};

@@ -1,5 +1,5 @@
 //! One channel of a frame as a ROS map_server map: an 8-bit binary PGM (P5) and its YAML, for
-//! RViz (`nav2_map_server`, `map_server`) or for [`OccupancyMap`](roles::world::OccupancyMap).
+//! RViz (`nav2_map_server`, `map_server`) or for [`OccupancyMap`](pheromone_world::OccupancyMap).
 //!
 //! A value v becomes the pixel `round(255 · (v − min) / (max − min))` (clamped to 0–255) and the
 //! YAML says `negate: 1`, so map_server reads the occupancy probability p = pixel / 255 — the
@@ -121,7 +121,7 @@ pub fn write_ros_map(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use roles::world::OccupancyMap;
+    use pheromone_world::OccupancyMap;
 
     #[test]
     fn a_channel_round_trips_through_the_map_server_loader() {

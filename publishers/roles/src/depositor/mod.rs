@@ -22,7 +22,7 @@
 //! that do not fit the `f32` deposit message) are rejected with a [`PoseRejection`] and counted
 //! by reason; no `DepositMsg` carrying a non-finite value is ever produced.
 
-use field::{Deposit, DepositMsg, Kernel, KernelKind};
+use field::{Deposit, DepositMsg, EllipseRule, Kernel, KernelKind};
 use serde::{Deserialize, Serialize};
 
 use messages::PoseMsg;
@@ -198,126 +198,15 @@ impl DepositorConfig {
     }
 }
 
-/// Why a pose was refused. The discriminant indexes [`DepositorCounters::rejected`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum PoseRejectReason {
-    /// A position, heading or covariance entry is NaN or infinite.
-    NonFinite = 0,
-    /// The 3×3 covariance is not symmetric.
-    NotSymmetric = 1,
-    /// The 3×3 covariance is not positive semi-definite.
-    NotPsd = 2,
-    /// A value is finite in `f64` but does not fit the `f32` deposit message.
-    OutOfRange = 3,
-}
+pub use field::kernel::pose::{
+    fit_f32, PoseRejectReason, PoseRejection, POSE_REJECT_REASONS, PSD_REL_TOL, SYMMETRY_REL_TOL,
+};
 
-/// Number of pose rejection reasons.
-pub const POSE_REJECT_REASONS: usize = 4;
-
-impl PoseRejectReason {
-    pub const ALL: [PoseRejectReason; POSE_REJECT_REASONS] = [
-        PoseRejectReason::NonFinite,
-        PoseRejectReason::NotSymmetric,
-        PoseRejectReason::NotPsd,
-        PoseRejectReason::OutOfRange,
-    ];
-
-    /// Stable snake_case name, for logs and JSON.
-    pub fn name(self) -> &'static str {
-        match self {
-            PoseRejectReason::NonFinite => "non_finite",
-            PoseRejectReason::NotSymmetric => "not_symmetric",
-            PoseRejectReason::NotPsd => "not_psd",
-            PoseRejectReason::OutOfRange => "out_of_range",
-        }
-    }
-}
-
-/// A refused pose, naming the offending entry and value.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum PoseRejection {
-    #[error("pose rejected (non_finite): {name} = {value}")]
-    NonFinite { name: &'static str, value: f64 },
-    #[error("pose rejected (not_symmetric): cov[{row}][{col}] = {upper} but cov[{col}][{row}] = {lower}")]
-    NotSymmetric {
-        row: usize,
-        col: usize,
-        upper: f64,
-        lower: f64,
-    },
-    #[error("pose rejected (not_psd): covariance has eigenvalue {min_eigenvalue} < 0")]
-    NotPsd { min_eigenvalue: f64 },
-    #[error("pose rejected (out_of_range): {name} = {value} does not fit the f32 deposit message")]
-    OutOfRange { name: &'static str, value: f64 },
-}
-
-impl PoseRejection {
-    pub fn reason(&self) -> PoseRejectReason {
-        match self {
-            PoseRejection::NonFinite { .. } => PoseRejectReason::NonFinite,
-            PoseRejection::NotSymmetric { .. } => PoseRejectReason::NotSymmetric,
-            PoseRejection::NotPsd { .. } => PoseRejectReason::NotPsd,
-            PoseRejection::OutOfRange { .. } => PoseRejectReason::OutOfRange,
-        }
-    }
-}
-
-/// Relative tolerance of the symmetry check: |Σij − Σji| ≤ tol·max|Σ|.
-pub const SYMMETRY_REL_TOL: f64 = 1e-6;
-/// Relative tolerance of the PSD check: λmin ≥ −tol·max|Σ|.
-pub const PSD_REL_TOL: f64 = 1e-9;
-
-const COV_NAMES: [&str; 9] = [
-    "cov_xx",
-    "cov_xy",
-    "cov_xtheta",
-    "cov_yx",
-    "cov_yy",
-    "cov_ytheta",
-    "cov_thetax",
-    "cov_thetay",
-    "cov_thetatheta",
-];
-
-/// Checks a pose: finite mean and covariance, covariance symmetric and positive semi-definite
-/// (MODELS.md M1: anything else is bad input, rejected with a reason, never deposited).
+/// Checks a pose by the field's one rule (`field::kernel::pose::validate_pose`): finite mean
+/// and covariance, covariance symmetric and positive semi-definite (MODELS.md M1: anything else
+/// is bad input, rejected with a reason, never deposited).
 pub fn validate_pose(pose: &PoseMsg) -> Result<(), PoseRejection> {
-    for (name, value) in [
-        ("x_m", pose.x_m),
-        ("y_m", pose.y_m),
-        ("theta_rad", pose.theta_rad),
-    ] {
-        if !value.is_finite() {
-            return Err(PoseRejection::NonFinite { name, value });
-        }
-    }
-    if let Some(i) = pose.cov.iter().position(|v| !v.is_finite()) {
-        return Err(PoseRejection::NonFinite {
-            name: COV_NAMES[i],
-            value: pose.cov[i],
-        });
-    }
-    let c = &pose.cov;
-    let scale = c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    for (row, col) in [(0, 1), (0, 2), (1, 2)] {
-        let (upper, lower) = (c[row * 3 + col], c[col * 3 + row]);
-        if (upper - lower).abs() > SYMMETRY_REL_TOL * scale {
-            return Err(PoseRejection::NotSymmetric {
-                row,
-                col,
-                upper,
-                lower,
-            });
-        }
-    }
-    let m = nalgebra::Matrix3::from_row_slice(c);
-    let sym = (m + m.transpose()) * 0.5;
-    let min_eigenvalue = sym.symmetric_eigenvalues().min();
-    if min_eigenvalue < -PSD_REL_TOL * scale {
-        return Err(PoseRejection::NotPsd { min_eigenvalue });
-    }
-    Ok(())
+    field::kernel::pose::validate_pose(&pose.estimate())
 }
 
 /// ρt = ρmax·exp(−trace(Σxy)/σ0²) — the project's choice for the strength of seed 001 eq. 3 /
@@ -434,52 +323,49 @@ impl Depositor {
     /// The deposit this pose would make, ignoring the interval rule (pure: no counters, no
     /// state). Every field of the result is finite.
     pub fn deposit_for(&self, pose: &PoseMsg) -> Result<DepositMsg, PoseRejection> {
-        validate_pose(pose)?;
         let c = &self.config;
-        let x = to_f32("x_m", pose.x_m)?;
-        let y = to_f32("y_m", pose.y_m)?;
-        let sign = if c.anti_pheromone { -1.0 } else { 1.0 };
-        let [xx, xy, yy] = pose.cov_xy();
-        let ellipse =
-            |cov_m2: [f32; 3]| c.kernel.with(sign * c.tau, cov_m2, c.range_m, c.gamma_max);
-        let kernel = match c.mode {
-            DepositMode::UncertaintyAware => {
-                let floor = (c.min_sigma_m as f64).powi(2);
-                let xx32 = to_f32("cov_xx", xx.max(floor))?;
-                let yy32 = to_f32("cov_yy", yy.max(floor))?;
-                // Keep Σxy PSD after rounding to f32: |xy| ≤ √(xx·yy).
-                let bound = (xx32 as f64 * yy32 as f64).max(0.0).sqrt();
-                let xy32 = xy.clamp(-bound, bound) as f32;
-                ellipse([xx32, xy32, yy32])
+        let deposit = match c.mode {
+            DepositMode::UncertaintyAware => self.ellipse_rule().deposit(&pose.estimate())?,
+            DepositMode::Constant | DepositMode::Saturating => {
+                validate_pose(pose)?;
+                let sign = if c.anti_pheromone { -1.0 } else { 1.0 };
+                let kernel = if c.mode == DepositMode::Constant {
+                    let s2 = c.constant_sigma_m * c.constant_sigma_m;
+                    c.kernel
+                        .with(sign * c.tau, [s2, 0.0, s2], c.range_m, c.gamma_max)
+                } else {
+                    let [xx, _, yy] = pose.cov_xy();
+                    Kernel::Saturating {
+                        rho: sign * saturating_rho(c.rho_max, c.rho_sigma0_m, xx, yy),
+                        sigma_m: c.lambda_m,
+                        range_m: c.range_m,
+                    }
+                };
+                Deposit {
+                    channel: c.channel,
+                    x_m: fit_f32("x_m", pose.x_m)?,
+                    y_m: fit_f32("y_m", pose.y_m)?,
+                    kernel,
+                }
             }
-            DepositMode::Constant => {
-                let s2 = c.constant_sigma_m * c.constant_sigma_m;
-                ellipse([s2, 0.0, s2])
-            }
-            DepositMode::Saturating => Kernel::Saturating {
-                rho: sign * saturating_rho(c.rho_max, c.rho_sigma0_m, xx, yy),
-                sigma_m: c.lambda_m,
-                range_m: c.range_m,
-            },
-        };
-        let deposit = Deposit {
-            channel: c.channel,
-            x_m: x,
-            y_m: y,
-            kernel,
         };
         let msg = deposit.to_msg(pose.robot_id, pose.stamp_ns);
         debug_assert!(msg_is_finite(&msg));
         Ok(msg)
     }
-}
 
-fn to_f32(name: &'static str, value: f64) -> Result<f32, PoseRejection> {
-    let v = value as f32;
-    if v.is_finite() {
-        Ok(v)
-    } else {
-        Err(PoseRejection::OutOfRange { name, value })
+    /// Seed 000's uncertainty-aware rule with this depositor's settings.
+    pub fn ellipse_rule(&self) -> EllipseRule {
+        let c = &self.config;
+        EllipseRule {
+            channel: c.channel,
+            kernel: c.kernel.kind(),
+            tau: c.tau,
+            range_m: c.range_m,
+            gamma_max: c.gamma_max,
+            min_sigma_m: c.min_sigma_m,
+            anti_pheromone: c.anti_pheromone,
+        }
     }
 }
 

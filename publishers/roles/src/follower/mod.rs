@@ -87,7 +87,7 @@ pub trait FollowerStrategy: Send {
 }
 
 /// Angle wrapped into (−π, π]: the world's, one function for the whole crate.
-pub use crate::world::wrap_angle;
+pub use messages::wrap_angle;
 
 /// A follower setting that is out of range.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -13,7 +13,7 @@ use super::models::{
 use super::{
     invalid, CheckedFilter, EkfConfig, EkfCounters, InputLimits, LocalizerError, UpdateStats,
 };
-use crate::world::{wrap_angle, Landmark, WorldPose};
+use messages::{wrap_angle, Landmark, WorldPose};
 use messages::{LandmarkObs, PoseMsg};
 
 /// Landmark-based EKF localization (seed 001 Algorithm 1).
@@ -297,8 +297,8 @@ mod tests {
         arena, corridor, initial_cov, some_obs, CAPTURED, OMEGA_RADPS, V_MPS,
     };
     use crate::localizer::LossConfig;
-    use crate::world::World;
     use messages::SensorMsg;
+    use pheromone_world::World;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use rand_distr::StandardNormal;

@@ -9,7 +9,7 @@ use messages::LandmarkObs;
 use nalgebra::Matrix3;
 
 use super::{CheckedFilter, Ekf, EkfConfig, InputLimits};
-use crate::world::{Landmark, NoiseConfig, WorldPose};
+use messages::{Landmark, NoiseConfig, WorldPose};
 
 /// A graph robot's EKF: association restricted to the L_set it is given each step.
 #[derive(Debug, Clone)]

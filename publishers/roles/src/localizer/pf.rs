@@ -28,7 +28,7 @@ use super::{
     check_message, invalid, CheckedFilter, EkfConfig, EkfCounters, InputLimits, LocalizerError,
     UpdateStats,
 };
-use crate::world::{wrap_angle, Landmark, Segment, WorldPose};
+use messages::{wrap_angle, Landmark, Segment, WorldPose};
 use messages::{LandmarkObs, LaserMsg, PoseMsg, SensorMsg, MAX_LASER_BEAMS};
 
 /// Fewest particles a filter may have.

@@ -15,7 +15,7 @@ use super::{
     invalid, validate_common, CheckedFilter, EkfCounters, EkfSlamConfig, InputLimits,
     LocalizerError, SlamAssociation, UpdateStats,
 };
-use crate::world::{wrap_angle, WorldPose};
+use messages::{wrap_angle, WorldPose};
 use messages::{LandmarkObs, PoseMsg};
 
 /// A landmark estimated by [`EkfSlam`].
@@ -407,7 +407,7 @@ fn symmetrize(cov: &mut Mat<f64>) {
 mod tests {
     use super::*;
     use crate::localizer::test_support::{arena, some_obs, OMEGA_RADPS, V_MPS};
-    use crate::world::World;
+    use pheromone_world::World;
 
     fn run_slam(
         seed: u64,

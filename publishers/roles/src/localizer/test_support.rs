@@ -3,8 +3,8 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::world::{Landmark, RobotConfig, WallConfig, WorldConfig, WorldPose};
 use messages::LandmarkObs;
+use pheromone_world::{Landmark, RobotConfig, WallConfig, WorldConfig, WorldPose};
 
 pub(super) const V_MPS: f64 = 0.6;
 pub(super) const OMEGA_RADPS: f64 = 0.2;

@@ -8,7 +8,7 @@ use rand_distr::StandardNormal;
 
 use super::test_support::{arena, initial_cov, OMEGA_RADPS, V_MPS};
 use super::{CheckedFilter, EkfConfig, ParticleFilter, PfConfig, Ukf, UkfConfig};
-use crate::world::{
+use pheromone_world::{
     wall_segments, wrap_angle, LaserConfig, NoiseConfig, RobotConfig, WallConfig, World,
     WorldConfig, WorldPose,
 };

@@ -22,7 +22,7 @@ use super::models::{
 use super::{
     invalid, CheckedFilter, EkfConfig, EkfCounters, InputLimits, LocalizerError, UpdateStats,
 };
-use crate::world::{wrap_angle, Landmark, WorldPose};
+use messages::{wrap_angle, Landmark, WorldPose};
 use messages::{LandmarkObs, PoseMsg};
 
 /// The UKF's scaling parameters (seed 000 eq. 6: α, κ; β for w_c⁰).

@@ -419,3 +419,26 @@ fn row_span(u0: f64, v0: f64, gx: [f64; 2], sw: f64, sh: f64, w: usize) -> Optio
     }
     (x_lo < x_hi).then_some((x_lo, x_hi))
 }
+
+/// One merge: robot `dst` merged the map of `src` at world step `step`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MergeEvent {
+    pub step: u64,
+    pub dst: u32,
+    pub src: u32,
+    /// Alignment error (m): the largest displacement, between the transform measured and the
+    /// true one, of the source map's origin and of the source robot's position.
+    pub alignment_error_m: f64,
+}
+
+/// The true transform from `src`'s map frame into `dst`'s (their true start poses).
+pub fn true_transform(src_start: Pose2, dst_start: Pose2) -> MergeTransform {
+    MergeTransform::between_frames(src_start, dst_start)
+}
+
+/// Alignment error of a merge (see [`MergeEvent::alignment_error_m`]).
+pub fn alignment_error_m(measured: &MergeTransform, truth: &MergeTransform) -> f64 {
+    measured
+        .displacement_m(truth, [0.0, 0.0])
+        .max(measured.displacement_m(truth, measured.src_robot_m))
+}

@@ -25,7 +25,9 @@ use std::collections::BTreeMap;
 pub use config::{MappingConfig, MappingConfigError, MergeRule, SteerOn};
 pub use map::MapView;
 pub use map::{pose_in_frame, pose_msg_in_frame, LocalMap, Pose2, MAP_CHANNELS};
-pub use merge::{merge_planes, MergeStats, MergeTransform};
+pub use merge::{
+    alignment_error_m, merge_planes, true_transform, MergeEvent, MergeStats, MergeTransform,
+};
 
 use crate::depositor::Depositor;
 use messages::{PeerObs, PoseMsg, ScanMsg};

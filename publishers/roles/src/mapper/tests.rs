@@ -202,7 +202,7 @@ fn wall_near(m: &LocalMap, x: i64, y: i64) -> bool {
 #[allow(clippy::too_many_lines)]
 #[test]
 fn a_known_rotation_and_translation_is_recovered_within_one_cell_under_the_worlds_noise() {
-    use crate::world::{NoiseConfig, RobotConfig, World, WorldConfig, WorldPose};
+    use pheromone_world::{NoiseConfig, RobotConfig, World, WorldConfig, WorldPose};
     // Robot j (id 0, the destination) and robot i (id 1) stand still at their start poses, the
     // origins of their frames, so their estimates are exact ([0, 0, 0]): only the rendezvous
     // measurement is noisy, drawn by the world at the mapping's configured noise.
@@ -231,7 +231,18 @@ fn a_known_rotation_and_translation_is_recovered_within_one_cell_under_the_world
         7,
     )
     .unwrap();
-    world.enable_mapping(&mapping, 7);
+    world.enable_mapping(
+        pheromone_world::ScanSensorConfig {
+            rays: mapping.rays,
+            range_max_m: mapping.range_max_m,
+            range_sigma_m: mapping.range_sigma_m,
+            rc_m: mapping.rc_m,
+            relpose_range_sigma_m: mapping.relpose_range_sigma_m,
+            relpose_bearing_sigma_rad: mapping.relpose_bearing_sigma_rad,
+            relpose_heading_sigma_rad: mapping.relpose_heading_sigma_rad,
+        },
+        7,
+    );
     let truth = MergeTransform::between_frames(sb, sa);
     let d = (sb[0] - sa[0]).hypot(sb[1] - sa[1]);
     let (b, a) = (walls_map(sb), walls_map(sa));
@@ -259,8 +270,8 @@ fn a_known_rotation_and_translation_is_recovered_within_one_cell_under_the_world
         // |δd| + d·|δα| + r·|δθ| (eqs. 7–10 are a rotation about robot i and a translation).
         let (dd, da, dt) = (
             (measured.d_ij_m - truth.d_ij_m).abs(),
-            crate::world::wrap_angle(measured.alpha_ji_rad - truth.alpha_ji_rad).abs(),
-            crate::world::wrap_angle(measured.theta_ij_rad - truth.theta_ij_rad).abs(),
+            pheromone_world::wrap_angle(measured.alpha_ji_rad - truth.alpha_ji_rad).abs(),
+            pheromone_world::wrap_angle(measured.theta_ij_rad - truth.theta_ij_rad).abs(),
         );
         assert!(dd + da + dt > 0.0, "the measurement is noisy");
         let e0 = measured.displacement_m(&truth, [0.0, 0.0]);

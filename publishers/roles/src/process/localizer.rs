@@ -7,28 +7,50 @@ use iceoryx2::node::Node;
 use nalgebra::Matrix3;
 
 use crate::localizer::{
-    CheckedFilter, Ekf, EkfSlam, EkfSlamConfig, FilterKind, LocalizerError, ParticleFilter, Ukf,
+    CheckedFilter, Ekf, EkfConfig, EkfSlam, EkfSlamConfig, FilterKind, LocalizerError,
+    ParticleFilter, PfConfig, Ukf, UkfConfig,
 };
-use crate::scenario::Scenario;
 use crate::{
     receiver, role_loop, sender, sim_stamp_ns, summary_of, ProcessError, RobotServices,
     RoleOptions, RoleSummary,
 };
-use messages::{LaserMsg, PoseMsg, SensorMsg};
+use messages::{Landmark, LaserMsg, PoseMsg, Segment, SensorMsg, WorldPose};
 
 /// Mixed into a particle filter's seed.
 const PF_SEED: u64 = 0x7061_7274_6963_6c65;
+
+/// Everything a robot's localizer needs, and nothing of the simulator: which filter, its
+/// settings, the robot's start pose and σ, the known map (landmarks, and walls for the particle
+/// filter's laser model) and a seed. A scenario builds it (`pheromone_world`'s
+/// `Scenario::localizer_setup`); a real robot fills it from its own configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LocalizerSetup {
+    pub robot: u32,
+    pub filter: FilterKind,
+    /// EKF-SLAM: the landmarks are not given, they join the state as they are seen.
+    pub slam: bool,
+    pub ekf: EkfConfig,
+    pub ukf: UkfConfig,
+    pub pf: PfConfig,
+    pub start: WorldPose,
+    /// σ of the start position (m), in x and in y.
+    pub initial_sigma_m: f64,
+    pub landmarks: Vec<Landmark>,
+    /// The walls as segments (the particle filter's likelihood field).
+    pub walls: Vec<Segment>,
+    /// The run's seed (a particle filter's RNG mixes in the robot id).
+    pub seed: u64,
+}
 
 /// The localizer process: sensors → EKF → pose with covariance. The pose is stamped with the
 /// step's simulated time: the robot's clock, which the depositor's interval rule reads.
 pub fn run_localizer(
     node: &Node<Svc>,
-    scenario: &Scenario,
+    setup: &LocalizerSetup,
     o: &RoleOptions,
-    slam: bool,
 ) -> Result<RoleSummary, ProcessError> {
     let robot = o.robot;
-    let mut filter = Filter::for_robot(scenario, robot, slam)?;
+    let mut filter = Filter::new(setup)?;
     let s = RobotServices::new(&o.world, robot);
     let sensors = receiver::<SensorMsg>(node, &s.sensors)?;
     let lasers = match filter.needs_laser() {
@@ -95,56 +117,40 @@ pub enum Filter {
 }
 
 impl Filter {
-    /// The filter of robot `robot` as the scenario configures it (its `filter`, start pose,
-    /// initial σ, noise, loss); EKF-SLAM if `slam`. A particle filter's RNG is seeded from the
-    /// scenario's seed and the robot id.
-    pub fn for_robot(scenario: &Scenario, robot: u32, slam: bool) -> Result<Self, ProcessError> {
-        let roles = scenario
-            .roles(robot)
-            .ok_or(ProcessError::NoRoles { robot })?;
-        let start = scenario
-            .world
-            .robots
-            .iter()
-            .find(|r| r.id == robot)
-            .ok_or(ProcessError::NotInWorld { robot })?
-            .start;
-        let var = roles.initial_sigma_m.powi(2);
+    /// The filter of `s`: its `filter` kind (EKF-SLAM if `s.slam`), start pose, initial σ, noise,
+    /// loss. A particle filter's RNG is seeded from the run's seed and the robot id.
+    pub fn new(s: &LocalizerSetup) -> Result<Self, ProcessError> {
+        let var = s.initial_sigma_m.powi(2);
         let cov0 = Matrix3::from_diagonal(&nalgebra::Vector3::new(var, var, (0.05f64).powi(2)));
-        Ok(if slam {
+        let (start, cfg, e) = (s.start, s.ekf, ProcessError::Localizer);
+        Ok(if s.slam {
             // EKF-SLAM: landmarks are not given, they join the state as they are seen.
-            if let Some(region) = roles.localizer.landmark_region_m {
+            if let Some(region) = cfg.landmark_region_m {
                 return Err(ProcessError::SlamRegion {
-                    robot,
+                    robot: s.robot,
                     key: crate::localizer::LANDMARK_REGION_KEY,
                     region,
                 });
             }
             let config = EkfSlamConfig {
-                noise: roles.localizer.noise,
-                limits: roles.localizer.limits,
+                noise: cfg.noise,
+                limits: cfg.limits,
                 ..EkfSlamConfig::default()
             };
-            Filter::Slam(Box::new(
-                EkfSlam::new(config, start, cov0).map_err(ProcessError::Localizer)?,
-            ))
+            Filter::Slam(Box::new(EkfSlam::new(config, start, cov0).map_err(e)?))
         } else {
-            let landmarks = scenario.world.landmarks.clone();
-            let cfg = roles.localizer;
-            let e = ProcessError::Localizer;
-            match roles.filter {
+            let landmarks = s.landmarks.clone();
+            match s.filter {
                 FilterKind::Ekf => {
                     Filter::Ekf(Box::new(Ekf::new(cfg, landmarks, start, cov0).map_err(e)?))
                 }
                 FilterKind::Ukf => Filter::Ukf(Box::new(
-                    Ukf::new(cfg, roles.ukf, landmarks, start, cov0).map_err(e)?,
+                    Ukf::new(cfg, s.ukf, landmarks, start, cov0).map_err(e)?,
                 )),
                 FilterKind::Pf => {
-                    let walls = crate::world::wall_segments(&scenario.world.walls)
-                        .map_err(ProcessError::World)?;
-                    let seed = scenario.seed ^ (u64::from(robot) << 32) ^ PF_SEED;
+                    let seed = s.seed ^ (u64::from(s.robot) << 32) ^ PF_SEED;
                     Filter::Pf(Box::new(
-                        ParticleFilter::new(cfg, roles.pf, landmarks, &walls, start, cov0, seed)
+                        ParticleFilter::new(cfg, s.pf, landmarks, &s.walls, start, cov0, seed)
                             .map_err(e)?,
                     ))
                 }
@@ -175,22 +181,5 @@ impl Filter {
             Filter::Pf(f) => f.to_msg(robot, step),
             Filter::Slam(f) => f.to_msg(robot, step),
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use crate::localizer::test_support::CAPTURED;
-
-    #[test]
-    fn ekf_slam_refuses_landmark_region_m() {
-        let mut scenario = crate::scenario::Scenario::load("trail").unwrap();
-        let id = scenario.robots[0].id;
-        scenario.robots[0].localizer.landmark_region_m = Some(CAPTURED);
-        assert!(crate::Filter::for_robot(&scenario, id, false).is_ok());
-        let e = crate::Filter::for_robot(&scenario, id, true)
-            .err()
-            .expect("EKF-SLAM accepted a landmark region");
-        assert!(e.to_string().contains("landmark_region_m"), "{e}");
     }
 }

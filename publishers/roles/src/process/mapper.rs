@@ -27,9 +27,10 @@ use field::shm::{AttachError, FieldReader, FrameWriter, Svc};
 use field::{ChannelSpec, Evaporation, FieldConfig};
 use iceoryx2::node::Node;
 
-use crate::mapper::{pose_in_frame, Mapper, MapperCounters, Pose2, MAP_CHANNELS};
-use crate::scenario::Scenario;
-use crate::team::{alignment_error_m, mapper_for, true_transform, MergeEvent};
+use crate::mapper::{
+    alignment_error_m, pose_in_frame, true_transform, Mapper, MapperCounters, MergeEvent, Pose2,
+    MAP_CHANNELS,
+};
 use crate::{
     receiver, role_loop, summary_of, ProcessError, RobotServices, RoleOptions, RoleSummary,
 };
@@ -88,18 +89,28 @@ struct Peer {
     field: String,
 }
 
+/// What a mapper process needs: its robot's [`Mapper`], the world step, and its peers (robot
+/// id and start pose: the frame of the peer's map). A scenario builds it (`pheromone_world`'s
+/// `Scenario::mapper_setup`).
+pub struct MapperSetup {
+    pub mapper: Mapper,
+    pub dt_s: f64,
+    pub peers: Vec<(u32, Pose2)>,
+}
+
 /// The mapper process of robot `o.robot`.
 pub fn run_mapper(
     node: &Node<Svc>,
-    scenario: &Scenario,
+    setup: MapperSetup,
     o: &RoleOptions,
 ) -> Result<MapperSummary, ProcessError> {
     let robot = o.robot;
-    let mut mapper = mapper_for(scenario, robot)
-        .map_err(ProcessError::Mapping)?
-        .ok_or(ProcessError::NotMapping { robot })?;
-    let dt_s = scenario.world.dt_s;
-    let team = scenario.world.robots.len();
+    let MapperSetup {
+        mut mapper,
+        dt_s,
+        peers: peer_starts,
+    } = setup;
+    let team = peer_starts.len() + 1;
     let map_field = field::wire::map_field(&o.world, robot);
     let mut writer =
         FrameWriter::start(node, &map_field, map_field_config(&mapper, dt_s, team + 4))?;
@@ -108,16 +119,16 @@ pub fn run_mapper(
     let rendezvous = receiver::<RendezvousMsg>(node, &s.rendezvous)?;
     let poses = receiver::<PoseMsg>(node, &s.pose)?;
     let mut peers = BTreeMap::new();
-    for r in scenario.world.robots.iter().filter(|r| r.id != robot) {
-        let ps = RobotServices::new(&o.world, r.id);
+    for (id, start) in peer_starts.into_iter().filter(|(id, _)| *id != robot) {
+        let ps = RobotServices::new(&o.world, id);
         peers.insert(
-            r.id,
+            id,
             Peer {
-                start: [r.start.x_m, r.start.y_m, r.start.theta_rad],
+                start,
                 poses: receiver::<PoseMsg>(node, &ps.pose)?,
                 pose: None,
                 reader: None,
-                field: field::wire::map_field(&o.world, r.id),
+                field: field::wire::map_field(&o.world, id),
             },
         );
     }

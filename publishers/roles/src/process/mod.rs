@@ -1,4 +1,4 @@
-//! The process loop of each role: set up from a scenario, then a short loop that waits on its
+//! The process loop of each role: set up from its configuration, then a short loop that waits on its
 //! inputs (iceoryx2 events) and publishes its outputs, in lockstep with the world.
 
 pub mod depositor;
@@ -7,4 +7,3 @@ pub mod follower_antenna;
 pub mod localizer;
 pub mod mapper;
 pub mod role_loop;
-pub mod world;

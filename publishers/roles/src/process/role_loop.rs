@@ -15,8 +15,6 @@ use iceoryx2::node::Node;
 use crate::depositor::DepositorConfigError;
 use crate::follower::FollowerConfigError;
 use crate::localizer::LocalizerError;
-use crate::scenario::ScenarioError;
-use crate::world::WorldError;
 
 /// Why a role's loop stopped with an error. The set-up errors (`scenario: …`) keep the error of
 /// the scenario part that was refused as their source.
@@ -24,13 +22,13 @@ use crate::world::WorldError;
 pub enum ProcessError {
     #[error(transparent)]
     Shm(#[from] ShmError),
+    /// The configuration a role was built from (a scenario, the world it describes) refused a
+    /// part: that part's error is the source.
     #[error("scenario: {0}")]
-    Scenario(#[from] ScenarioError),
+    Setup(#[source] Box<dyn std::error::Error + Send + Sync + 'static>),
     /// The field of a single-process run cannot be built.
     #[error("scenario: {0}")]
     Field(#[source] ConfigError),
-    #[error("scenario: {0}")]
-    World(#[source] WorldError),
     #[error("scenario: {}{source}", robot_prefix(.robot))]
     Depositor {
         /// The robot, where the error names it.
@@ -85,14 +83,16 @@ fn robot_prefix(robot: &Option<u32>) -> String {
     robot.map(|r| format!("robot {r}: ")).unwrap_or_default()
 }
 
-pub(crate) fn sender<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
+/// A sender of `T` on robot link `service` (with its `…-ready` wake-up event).
+pub fn sender<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,
     service: &str,
 ) -> Result<Sender<T>, AttachError> {
     Sender::create(node, service, &wake(service), ROBOT_LINK)
 }
 
-pub(crate) fn receiver<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
+/// A receiver of `T` on robot link `service` (woken by its `…-ready` event).
+pub fn receiver<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static>(
     node: &Node<Svc>,
     service: &str,
 ) -> Result<Receiver<T>, AttachError> {

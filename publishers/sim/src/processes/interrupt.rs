@@ -79,7 +79,7 @@ pub(super) fn world_from_recording(rec: &Recording, sim_time_s: f64) -> WorldSum
             .robots
             .iter()
             .filter_map(|(&id, rows)| {
-                Some(roles::RobotSummary {
+                Some(pheromone_world::RobotSummary {
                     id,
                     true_pose: rows.last()?.true_pose,
                     distance_travelled_m: rec.distance_travelled_m(id),

@@ -16,12 +16,11 @@ use crate::record::Recording;
 use crate::ros_feed::McapFeed;
 use crate::ros_record::{McapTotals, SimMcap};
 use crate::single::{role_name, FieldSummary, RobotResult, RunSummary};
+use pheromone_world::scenario::{Scenario, ScenarioError};
+use pheromone_world::World;
+use pheromone_world::{lockstep_participants, mapper_robots, WorldOptions, WorldSummary};
 use roles::process::follower_antenna::AntennaRobotSummary;
-use roles::scenario::{Scenario, ScenarioError};
-use roles::world::World;
-use roles::{
-    lockstep_participants, mapper_robots, MapperSummary, RoleSummary, WorldOptions, WorldSummary,
-};
+use roles::{MapperSummary, RoleSummary};
 use supervisor::{ChildId, ChildSpec, Supervisor, SupervisorError};
 
 mod children;

@@ -1,6 +1,7 @@
 //! A deposit as its sender thinks of it: where, on which channel, and a kernel with its own named
 //! parameters. [`Deposit`] becomes the wire's flat [`DepositMsg`] with `into()`; the field reads
-//! a message back with [`Deposit::from_msg`].
+//! a message back with [`Deposit::from_msg`]. A pose estimate becomes a deposit by the one rule of
+//! [`pose`] (validation, tolerances, seed 000's uncertainty-aware ellipse).
 //!
 //! ```
 //! use field::{Deposit, DepositMsg, Kernel, KernelKind};
@@ -17,6 +18,10 @@
 //! assert_eq!(msg.kernel, KernelKind::Ellipse as u32);
 //! assert_eq!(Deposit::from_msg(&msg), Some(deposit));
 //! ```
+
+pub mod pose;
+
+pub use pose::{EllipseRule, PoseEstimate, PoseRejectReason, PoseRejection};
 
 use crate::messages::{DepositMsg, KernelKind};
 

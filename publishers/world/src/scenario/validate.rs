@@ -9,7 +9,7 @@ impl Scenario {
         self.validate_clock()?;
         self.validate_robot_roles()?;
         self.validate_scripted_deposits()?;
-        crate::world::World::new(self.world.clone(), self.seed).map_err(ScenarioError::World)?;
+        crate::World::new(self.world.clone(), self.seed).map_err(ScenarioError::World)?;
         self.validate_starts_in_field()?;
         self.validate_active_robots()?;
         let channels = self.field.channels.len() as u32;
@@ -75,7 +75,7 @@ impl Scenario {
     /// The robot's filter: its settings valid; the loss script only with the EKF; a particle
     /// filter only with the world's laser.
     fn validate_filter(&self, r: &super::RobotRoles) -> Result<(), ScenarioError> {
-        use crate::localizer::{FilterKind, LocalizerError};
+        use roles::localizer::{FilterKind, LocalizerError};
         let robot = r.id;
         let err = |source| ScenarioError::Localizer { robot, source };
         r.ukf.validate().map_err(err)?;

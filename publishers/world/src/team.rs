@@ -11,14 +11,11 @@
 
 use std::collections::BTreeMap;
 
-use serde::Serialize;
-
-use crate::depositor::Depositor;
-use crate::mapper::{
-    MapError, MapView, Mapper, MapperCounters, MappingConfig, MergeTransform, Pose2,
-};
 use crate::scenario::Scenario;
 use messages::{PoseMsg, RendezvousMsg, ScanMsg};
+use roles::depositor::Depositor;
+pub use roles::mapper::{alignment_error_m, true_transform, MergeEvent};
+use roles::mapper::{MapError, MapView, Mapper, MapperCounters, MappingConfig, Pose2};
 
 /// A robot's final map, in its own frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,17 +25,6 @@ pub struct RobotMap {
     pub geometry: field::GridGeometry,
     pub occupancy: Vec<f32>,
     pub pheromone: Vec<f32>,
-}
-
-/// One merge: robot `dst` merged the map of `src` at world step `step`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
-pub struct MergeEvent {
-    pub step: u64,
-    pub dst: u32,
-    pub src: u32,
-    /// Alignment error (m): the largest displacement, between the transform measured and the
-    /// true one, of the source map's origin and of the source robot's position.
-    pub alignment_error_m: f64,
 }
 
 /// What the mappers of a run leave for the metrics and pictures.
@@ -71,18 +57,6 @@ pub fn mapper_for(scenario: &Scenario, id: u32) -> Result<Option<Mapper>, MapErr
         depositor,
     )
     .map(Some)
-}
-
-/// The true transform from `src`'s map frame into `dst`'s (their true start poses).
-pub fn true_transform(src_start: Pose2, dst_start: Pose2) -> MergeTransform {
-    MergeTransform::between_frames(src_start, dst_start)
-}
-
-/// Alignment error of a merge (see [`MergeEvent::alignment_error_m`]).
-pub fn alignment_error_m(measured: &MergeTransform, truth: &MergeTransform) -> f64 {
-    measured
-        .displacement_m(truth, [0.0, 0.0])
-        .max(measured.displacement_m(truth, measured.src_robot_m))
 }
 
 /// Every robot's mapper in one process.
@@ -129,7 +103,7 @@ impl MappingTeam {
     fn exchange(&mut self, step: u64) {
         let n = self.mappers.len();
         // What each robot offers: its map and estimate at the end of the last step.
-        let mut offers: Vec<Option<(crate::mapper::LocalMap, Pose2)>> = vec![None; n];
+        let mut offers: Vec<Option<(roles::mapper::LocalMap, Pose2)>> = vec![None; n];
         let mut merges = Vec::new();
         for j in 0..n {
             let Some(rv) = self.previous[j] else { continue };
@@ -213,7 +187,7 @@ impl MappingTeam {
 mod tests {
     use super::*;
     use crate::scenario::Overrides;
-    use crate::world::wrap_angle;
+    use crate::wrap_angle;
     use messages::PeerObs;
 
     /// Three robots of `ias-ss` with merging, exchanges from iteration 2 (step 20; 10 steps an
@@ -232,7 +206,7 @@ mod tests {
     }
 
     /// Robot `r` standing at its start pose, with det Σxy = `var_m2`².
-    fn pose(r: &crate::world::RobotConfig, step: u64, var_m2: f64) -> PoseMsg {
+    fn pose(r: &crate::RobotConfig, step: u64, var_m2: f64) -> PoseMsg {
         let mut p = PoseMsg {
             step,
             robot_id: r.id,

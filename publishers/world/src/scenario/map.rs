@@ -10,7 +10,7 @@
 use std::path::Path;
 
 use super::{Scenario, ScenarioError};
-use crate::world::OccupancyMap;
+use crate::OccupancyMap;
 
 fn load(key: &'static str, path: &Path) -> Result<OccupancyMap, ScenarioError> {
     OccupancyMap::load(path).map_err(|source| ScenarioError::Map { key, source })
@@ -89,7 +89,7 @@ mod tests {
         );
         // The one wall is the top-left cell (the image's first row is the top of the map).
         match &s.world.walls[0] {
-            crate::world::WallConfig::Rect {
+            crate::WallConfig::Rect {
                 min_x_m, min_y_m, ..
             } => assert_eq!((*min_x_m, *min_y_m), (-2.0, 3.0)),
             w => panic!("{w:?}"),

@@ -1,6 +1,14 @@
-//! The simulator's library type: true poses of differential-drive robots among walls and
-//! landmarks, noisy odometry and noisy range/bearing observations.
+//! The simulated world of a run, apart from the robot stack: what a real robot's sensors and
+//! motors would be (`pheromone-roles` does not depend on this crate, `tests/crate_graph.rs`).
 //!
+//! - [`World`]: true poses of differential-drive robots among walls and landmarks, noisy odometry
+//!   and noisy range/bearing observations, seed 000's laser, seed 004's scans and rendezvous.
+//! - [`scenario`]: the scenario file (TOML, unknown keys are errors), built-ins, overrides, and
+//!   the configuration of each robot's roles built from it (`Scenario::localizer_setup`, …).
+//! - [`run_world`]: the world's process loop, which also conducts the lockstep.
+//! - [`team`]: seed 004's `MappingTeam`, the mappers of a single-process run.
+//!
+//! The simulator:
 //! - Kinematics: seed 000 eqs. 27–33 ([`diff_drive`]); a velocity command `(v, ω)` over `dt` is
 //!   the wheel travel of [`wheel_travel`].
 //! - Odometry: the executed `(v, ω)` plus Gaussian noise of the velocity motion model used by
@@ -15,6 +23,15 @@
 //!
 //! Everything is deterministic for a seed (`ChaCha8Rng`).
 
+mod conductor;
+pub mod scenario;
+pub mod team;
+
+pub use conductor::{
+    lockstep_participants, mapper_robots, run_world, RobotSummary, WorldOptions, WorldSummary,
+};
+pub use scenario::WORLD_DEPOSITOR_ID;
+
 mod laser;
 mod map;
 mod scan;
@@ -25,8 +42,9 @@ mod walls;
 
 pub use laser::LaserConfig;
 pub use map::{MapError, OccupancyMap};
-pub use sensors::NoiseConfig;
-pub use walls::{wall_segments, Segment, WallConfig};
+pub use messages::geometry::{sinc, sinc_derivative, Landmark, NoiseConfig, Segment, WorldPose};
+pub use scan::ScanSensorConfig;
+pub use walls::{wall_segments, WallConfig};
 
 use std::f64::consts::TAU;
 
@@ -38,48 +56,7 @@ use thiserror::Error;
 use messages::{SensorMsg, TruthMsg};
 use walls::{inside_rect, SegmentIndex};
 
-/// A planar pose: metres and radians, θ counter-clockwise from +x.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct WorldPose {
-    pub x_m: f64,
-    pub y_m: f64,
-    pub theta_rad: f64,
-}
-
-impl WorldPose {
-    pub fn new(x_m: f64, y_m: f64, theta_rad: f64) -> Self {
-        Self {
-            x_m,
-            y_m,
-            theta_rad,
-        }
-    }
-
-    fn is_finite(&self) -> bool {
-        self.x_m.is_finite() && self.y_m.is_finite() && self.theta_rad.is_finite()
-    }
-}
-
 pub use messages::wrap_angle;
-
-/// sin(x)/x, exact near 0.
-pub(crate) fn sinc(x: f64) -> f64 {
-    if x.abs() < 1e-4 {
-        1.0 - x * x / 6.0
-    } else {
-        x.sin() / x
-    }
-}
-
-/// d/dx of sin(x)/x, exact near 0.
-pub(crate) fn sinc_derivative(x: f64) -> f64 {
-    if x.abs() < 1e-4 {
-        -x / 3.0 + x * x * x / 30.0
-    } else {
-        (x * x.cos() - x.sin()) / (x * x)
-    }
-}
 
 /// Differential-drive motion by wheel travel (seed 000 eqs. 27–33).
 ///
@@ -150,16 +127,6 @@ pub struct RobotConfig {
     /// Noise for this robot; the world's `noise` when absent.
     #[serde(default)]
     pub noise: Option<NoiseConfig>,
-}
-
-/// A point landmark with a signature (0 = no signature / ambiguous).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Landmark {
-    pub x_m: f64,
-    pub y_m: f64,
-    #[serde(default)]
-    pub signature: u32,
 }
 
 /// The simulated world.
@@ -498,7 +465,7 @@ fn validate_config(c: &WorldConfig) -> Result<(), WorldError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::test_support::one_robot;
+    use crate::test_support::one_robot;
     use approx::assert_relative_eq;
     use std::f64::consts::{FRAC_PI_2, FRAC_PI_6};
 

@@ -13,23 +13,55 @@ use rand_distr::StandardNormal;
 
 use super::walls::SegmentIndex;
 use super::{wrap_angle, World};
-use crate::mapper::MappingConfig;
 use messages::{PeerObs, RendezvousMsg, ScanMsg, MAX_PEERS};
+use roles::mapper::MappingConfig;
 
 /// Mixed into the world's seed for the mapping RNG.
 const MAPPING_SEED: u64 = 0x6d61_7070_696e_6721;
 
+/// The range scanner and the rendezvous measurement the world simulates for seed 004 (from a
+/// scenario's `[mapping]`, `From<&MappingConfig>`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScanSensorConfig {
+    /// Rays of one scan, spread evenly over [−90°, 90°].
+    pub rays: u32,
+    /// R_D: the range sensor's maximum range.
+    pub range_max_m: f64,
+    /// Standard deviation of the Gaussian range noise.
+    pub range_sigma_m: f64,
+    /// R_C: robots this close (true distance) measure each other.
+    pub rc_m: f64,
+    /// Noise of the relative-pose measurement at a rendezvous.
+    pub relpose_range_sigma_m: f64,
+    pub relpose_bearing_sigma_rad: f64,
+    pub relpose_heading_sigma_rad: f64,
+}
+
+impl From<&MappingConfig> for ScanSensorConfig {
+    fn from(c: &MappingConfig) -> Self {
+        Self {
+            rays: c.rays,
+            range_max_m: c.range_max_m,
+            range_sigma_m: c.range_sigma_m,
+            rc_m: c.rc_m,
+            relpose_range_sigma_m: c.relpose_range_sigma_m,
+            relpose_bearing_sigma_rad: c.relpose_bearing_sigma_rad,
+            relpose_heading_sigma_rad: c.relpose_heading_sigma_rad,
+        }
+    }
+}
+
 /// The world's mapping sensors.
 #[derive(Debug, Clone)]
 pub(super) struct MappingSensors {
-    config: MappingConfig,
+    config: ScanSensorConfig,
     rng: ChaCha8Rng,
 }
 
 impl MappingSensors {
-    pub(super) fn new(config: &MappingConfig, seed: u64) -> Self {
+    pub(super) fn new(config: ScanSensorConfig, seed: u64) -> Self {
         Self {
-            config: config.clone(),
+            config,
             rng: ChaCha8Rng::seed_from_u64(seed ^ MAPPING_SEED),
         }
     }
@@ -63,8 +95,8 @@ impl SegmentIndex {
 
 impl World {
     /// Turns the mapping sensors on ([`World::mapping_outputs`]).
-    pub fn enable_mapping(&mut self, config: &MappingConfig, seed: u64) {
-        self.mapping = Some(MappingSensors::new(config, seed));
+    pub fn enable_mapping(&mut self, config: impl Into<ScanSensorConfig>, seed: u64) {
+        self.mapping = Some(MappingSensors::new(config.into(), seed));
     }
 
     /// After a [`World::step`]: each robot's range scan and rendezvous measurement, in the order
@@ -73,7 +105,7 @@ impl World {
         let Some(mut m) = self.mapping.take() else {
             return Vec::new();
         };
-        let c = m.config.clone();
+        let c = m.config;
         let n = self.poses.len();
         let mut out = Vec::with_capacity(n);
         for i in 0..n {
@@ -139,8 +171,8 @@ impl World {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::test_support::one_robot;
-    use crate::world::{WallConfig, WorldPose};
+    use crate::test_support::one_robot;
+    use crate::{WallConfig, WorldPose};
 
     fn boxed(sigma_m: f64) -> (World, MappingConfig) {
         let mut cfg = one_robot(WorldPose::new(0.0, 0.0, 0.0));
@@ -148,7 +180,7 @@ mod tests {
             points_m: vec![[-3.0, -2.0], [3.0, -2.0], [3.0, 2.0], [-3.0, 2.0]],
             closed: true,
         }];
-        cfg.robots.push(crate::world::RobotConfig {
+        cfg.robots.push(crate::RobotConfig {
             id: 9,
             start: WorldPose::new(1.0, 1.0, 1.0),
             noise: None,

@@ -167,8 +167,8 @@ impl World {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::test_support::one_robot;
-    use crate::world::{WallConfig, WorldConfig};
+    use crate::test_support::one_robot;
+    use crate::{WallConfig, WorldConfig};
 
     /// A robot in a 6 m × 3 m box ([−1, 5] × [−1, 2]) with the laser `laser`.
     fn boxed(pose: WorldPose, laser: LaserConfig) -> World {

@@ -4,10 +4,10 @@
 
 use field::ConfigError;
 
-use crate::depositor::DepositorConfigError;
-use crate::follower::FollowerConfigError;
-use crate::localizer::LocalizerError;
-use crate::world::{MapError, WorldError};
+use crate::{MapError, WorldError};
+use roles::depositor::DepositorConfigError;
+use roles::follower::FollowerConfigError;
+use roles::localizer::LocalizerError;
 
 /// Why a scenario could not be loaded, validated or changed.
 #[derive(Debug, thiserror::Error)]
@@ -36,7 +36,7 @@ pub enum ScenarioError {
     Unknown(String),
     /// `[mapping]` is refused.
     #[error("{0}")]
-    Mapping(#[source] crate::mapper::MappingConfigError),
+    Mapping(#[source] roles::mapper::MappingConfigError),
     /// `[field]` is refused.
     #[error("field: {0}")]
     Field(#[source] ConfigError),

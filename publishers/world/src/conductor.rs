@@ -10,9 +10,9 @@ use field::DepositMsg;
 use iceoryx2::node::Node;
 
 use crate::scenario::{Scenario, WORLD_DEPOSITOR_ID};
-use crate::world::{StepOutput, World, WorldPose};
-use crate::{receiver, sender, ProcessError, RobotServices};
+use crate::{StepOutput, World, WorldPose};
 use messages::{CmdMsg, LaserMsg, RendezvousMsg, ScanMsg, SensorMsg, TruthMsg};
+use roles::{receiver, sender, ProcessError, RobotServices};
 
 /// Options of the world process.
 #[derive(Debug, Clone)]
@@ -303,7 +303,7 @@ impl<'a> WorldRun<'a> {
     ) -> Result<Self, ProcessError> {
         let started = Instant::now();
         let mut world =
-            World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::World)?;
+            World::new(scenario.world.clone(), scenario.seed).map_err(ProcessError::from)?;
         if let Some(m) = scenario.mapping() {
             world.enable_mapping(m, scenario.seed);
         }

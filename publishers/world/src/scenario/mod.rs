@@ -7,14 +7,15 @@ use std::path::Path;
 use field::{DepositMsg, FieldConfig, KernelKind};
 use serde::{Deserialize, Serialize};
 
-use crate::depositor::{DepositMode, DepositorConfig};
-use crate::follower::{FollowerConfig, StrategyKind};
-use crate::localizer::{EkfConfig, FilterKind, PfConfig, UkfConfig};
-use crate::world::WorldConfig;
+use crate::WorldConfig;
+use roles::depositor::{DepositMode, DepositorConfig};
+use roles::follower::{FollowerConfig, StrategyKind};
+use roles::localizer::{EkfConfig, FilterKind, PfConfig, UkfConfig};
 
 mod error;
 mod map;
 mod mapping;
+mod setup;
 mod starts;
 mod validate;
 
@@ -111,7 +112,7 @@ pub struct Scenario {
     pub metrics: MetricsConfig,
     /// Seed 004's local maps and their merging (`scenario/mapping.rs`); off by default.
     #[serde(default)]
-    pub mapping: crate::mapper::MappingConfig,
+    pub mapping: roles::mapper::MappingConfig,
     /// Robots start at random poses in this rectangle, drawn from the seed (`starts.rs`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub start_area: Option<StartArea>,
@@ -304,7 +305,7 @@ pub struct Overrides {
     /// `--no-scripted-loss`: every localizer's loss script (`localizer.loss.after_s`) is off.
     pub no_scripted_loss: bool,
     /// `--steer own-map|shared`: what the sector followers steer on (`[mapping] steer_on`).
-    pub steer_on: Option<crate::mapper::SteerOn>,
+    pub steer_on: Option<roles::mapper::SteerOn>,
 }
 
 /// What runs for one robot: a localizer always, a depositor and a follower if configured.
@@ -546,7 +547,7 @@ impl Scenario {
             }
         }
         if o.filter == Some(FilterKind::Pf) && self.world.laser.is_none() {
-            self.world.laser = Some(crate::world::LaserConfig::default());
+            self.world.laser = Some(crate::LaserConfig::default());
         }
     }
 
@@ -566,7 +567,7 @@ impl Scenario {
     /// Every scripted deposit (walls first, at t = 0), sorted by time.
     pub fn scripted(
         &self,
-        walls: &[crate::world::Segment],
+        walls: &[crate::Segment],
     ) -> Result<Vec<(f64, DepositMsg)>, ScenarioError> {
         let mut out = Vec::new();
         if let Some(m) = &self.mark_walls {
@@ -618,8 +619,8 @@ impl Scenario {
         let depositors = self.robots.iter().filter(|r| r.depositor.is_some()).count();
         c.max_readers = c.max_readers.max(followers + 3);
         c.max_depositors = c.max_depositors.max(depositors + 2);
-        let world = crate::world::World::new(self.world.clone(), self.seed)
-            .map_err(ScenarioError::World)?;
+        let world =
+            crate::World::new(self.world.clone(), self.seed).map_err(ScenarioError::World)?;
         let dt = self.world.dt_s;
         let mut per_step = std::collections::BTreeMap::<u64, usize>::new();
         for (t, _) in self.scripted(world.wall_segments())? {

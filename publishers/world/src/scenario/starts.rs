@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::{Scenario, ScenarioError};
-use crate::world::WorldPose;
+use crate::WorldPose;
 
 /// Mixed into the seed so the starts' draws differ from every other stream of the run.
 const START_SEED: u64 = 0x5354_4152_5441_5245;

@@ -129,3 +129,15 @@ fn a_line_deposit_expands_every_spacing() {
     assert_eq!(msgs.len(), 106);
     assert!((msgs[105].x_m - 11.0).abs() < 1e-3);
 }
+
+#[test]
+fn a_bad_landmark_region_fails_validation_naming_the_robot_and_the_key() {
+    // A scenario with a bad region fails validation naming the robot and the key.
+    let mut scenario = Scenario::load("trail").unwrap();
+    scenario.robots[0].localizer.landmark_region_m = Some([1.0, 1.0, 0.0, 2.0]);
+    let e = scenario.validate().unwrap_err().to_string();
+    assert!(
+        e.contains("localizer") && e.contains("`landmark_region_m`"),
+        "{e}"
+    );
+}

@@ -1,6 +1,6 @@
 //! Test fixtures shared by the world's unit tests.
 
-use crate::world::{NoiseConfig, RobotConfig, WorldConfig, WorldPose};
+use crate::{NoiseConfig, RobotConfig, WorldConfig, WorldPose};
 
 pub(super) fn one_robot(start: WorldPose) -> WorldConfig {
     WorldConfig {

@@ -7,83 +7,9 @@
 
 use rand::Rng;
 use rand_distr::StandardNormal;
-use serde::{Deserialize, Serialize};
 
-use super::{wrap_angle, World, WorldPose};
+use super::{wrap_angle, NoiseConfig, World, WorldPose};
 use messages::{LandmarkObs, MAX_OBSERVATIONS};
-
-/// Sensor and odometry noise. The α's are those of the velocity motion model (seed 001
-/// Algorithm 1 line 5): σ_v² = α1·v² + α2·ω², σ_ω² = α3·v² + α4·ω².
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct NoiseConfig {
-    /// Standard deviation of the measured range.
-    pub range_sigma_m: f64,
-    /// Standard deviation of the measured bearing.
-    pub bearing_sigma_rad: f64,
-    /// (m/s)² of v-noise per (m/s)² of v.
-    pub alpha1: f64,
-    /// (m/s)² of v-noise per (rad/s)² of ω.
-    pub alpha2: f64,
-    /// (rad/s)² of ω-noise per (m/s)² of v.
-    pub alpha3: f64,
-    /// (rad/s)² of ω-noise per (rad/s)² of ω.
-    pub alpha4: f64,
-}
-
-impl Default for NoiseConfig {
-    fn default() -> Self {
-        Self {
-            range_sigma_m: 0.05,
-            bearing_sigma_rad: 0.02,
-            alpha1: 0.01,
-            alpha2: 0.001,
-            alpha3: 0.001,
-            alpha4: 0.01,
-        }
-    }
-}
-
-impl NoiseConfig {
-    /// No noise at all (for tests and ground-truth runs).
-    pub fn zero() -> Self {
-        Self {
-            range_sigma_m: 0.0,
-            bearing_sigma_rad: 0.0,
-            alpha1: 0.0,
-            alpha2: 0.0,
-            alpha3: 0.0,
-            alpha4: 0.0,
-        }
-    }
-
-    /// Variances (σ_v², σ_ω²) of the control noise for a command (seed 001 Algorithm 1 line 5).
-    pub fn control_variances(&self, v_m_per_s: f64, omega_rad_per_s: f64) -> (f64, f64) {
-        let (v2, w2) = (v_m_per_s * v_m_per_s, omega_rad_per_s * omega_rad_per_s);
-        (
-            self.alpha1 * v2 + self.alpha2 * w2,
-            self.alpha3 * v2 + self.alpha4 * w2,
-        )
-    }
-
-    /// The first field that is negative or not finite.
-    pub(crate) fn validate(&self) -> Result<(), (&'static str, f64)> {
-        let fields = [
-            ("range_sigma_m", self.range_sigma_m),
-            ("bearing_sigma_rad", self.bearing_sigma_rad),
-            ("alpha1", self.alpha1),
-            ("alpha2", self.alpha2),
-            ("alpha3", self.alpha3),
-            ("alpha4", self.alpha4),
-        ];
-        for (name, value) in fields {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err((name, value));
-            }
-        }
-        Ok(())
-    }
-}
 
 impl World {
     pub(super) fn normal(&mut self) -> f64 {
@@ -137,8 +63,8 @@ impl World {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::test_support::one_robot;
-    use crate::world::{Landmark, WallConfig};
+    use crate::test_support::one_robot;
+    use crate::{Landmark, WallConfig};
     use approx::assert_relative_eq;
     use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -283,6 +209,7 @@ mod tests {
     #[test]
     fn config_rejects_unknown_fields() {
         use serde::de::value::{Error as DeError, MapDeserializer};
+        use serde::Deserialize;
         let ok: Result<NoiseConfig, DeError> = NoiseConfig::deserialize(MapDeserializer::new(
             vec![("range_sigma_m", 0.1)].into_iter(),
         ));

@@ -473,8 +473,8 @@ fn parse_pgm(bytes: &[u8]) -> Result<(usize, usize, u16, Vec<u16>), MapError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::test_support::one_robot;
-    use crate::world::{World, WorldPose};
+    use crate::test_support::one_robot;
+    use crate::{World, WorldPose};
     use std::f64::consts::FRAC_PI_2;
 
     const MAP_YAML: &str = "image: map.pgm\nresolution: 0.5\norigin: [-1.0, -2.0, 0.0]\n\

@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::WorldError;
+use super::{Segment, WorldError};
 
 /// A wall: an axis-aligned rectangle or a polyline of segments.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -24,13 +24,6 @@ pub enum WallConfig {
         #[serde(default)]
         closed: bool,
     },
-}
-
-/// A wall segment from `a_m` to `b_m`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Segment {
-    pub a_m: [f64; 2],
-    pub b_m: [f64; 2],
 }
 
 /// The segments of `walls` (a rectangle as its four edges); a degenerate or non-finite wall is
@@ -321,8 +314,8 @@ impl SegmentIndex {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::test_support::one_robot;
-    use crate::world::{World, WorldPose};
+    use crate::test_support::one_robot;
+    use crate::{World, WorldPose};
     use approx::assert_relative_eq;
     use std::f64::consts::PI;
 

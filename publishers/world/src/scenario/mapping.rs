@@ -8,9 +8,9 @@
 //! in its own frame ([`Scenario::own_map_start`]).
 
 use super::{Overrides, Scenario, ScenarioError};
-use crate::follower::{FollowerConfig, StrategyKind};
-use crate::mapper::{MappingConfig, Pose2, SteerOn, MAP_CHANNELS};
 use messages::MAX_PEERS;
+use roles::follower::{FollowerConfig, StrategyKind};
+use roles::mapper::{MappingConfig, Pose2, SteerOn, MAP_CHANNELS};
 
 impl Scenario {
     /// `--merge` / `--no-merge` and `--rc-m`.
@@ -45,7 +45,7 @@ impl Scenario {
         self.mapping.validate().map_err(ScenarioError::Mapping)?;
         let robots = self.world.robots.len();
         if robots > MAX_PEERS + 1 {
-            return Err(ScenarioError::Mapping(crate::mapper::MappingConfigError {
+            return Err(ScenarioError::Mapping(roles::mapper::MappingConfigError {
                 key: "enabled",
                 value: robots as f64,
                 expected: "at most MAX_PEERS + 1 = 17 robots in a mapping world",

@@ -1,0 +1,288 @@
+//! Seed 000's pose → deposit rule, written once for every sender (the Rust depositor
+//! `roles::depositor`, the C ABI's `pheromone_deposit_pose`, the ROS 2 pose path): which pose
+//! estimates are accepted ([`validate_pose`], with the tolerances [`SYMMETRY_REL_TOL`] and
+//! [`PSD_REL_TOL`]), and the uncertainty-aware ellipse a pose deposits ([`EllipseRule`]). The
+//! field then computes γ = τ / det Σxy capped at γmax and cuts the kernel at z_rng
+//! (`field::deposit`).
+//!
+//! A pose is refused, naming the entry and its value, when a number is not finite, the
+//! covariance is not symmetric (|Σij − Σji| > 1e-6·max|Σ|) or not positive semi-definite
+//! (λmin < −1e-9·max|Σ|), or a value does not fit the `f32` deposit message. Nothing non-finite
+//! ever leaves this module.
+
+use super::{Deposit, Kernel, KernelParams};
+use crate::messages::KernelKind;
+
+/// A pose estimate: the mean (m, rad) and its 3×3 covariance, row-major over x, y, θ.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PoseEstimate {
+    pub x_m: f64,
+    pub y_m: f64,
+    pub theta_rad: f64,
+    pub cov: [f64; 9],
+}
+
+/// Why a pose was refused. The discriminant indexes a depositor's counters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum PoseRejectReason {
+    /// A position, heading or covariance entry is NaN or infinite.
+    NonFinite = 0,
+    /// The 3×3 covariance is not symmetric.
+    NotSymmetric = 1,
+    /// The 3×3 covariance is not positive semi-definite.
+    NotPsd = 2,
+    /// A value is finite in `f64` but does not fit the `f32` deposit message.
+    OutOfRange = 3,
+}
+
+/// Number of pose rejection reasons.
+pub const POSE_REJECT_REASONS: usize = 4;
+
+impl PoseRejectReason {
+    /// Every reason, in discriminant order.
+    pub const ALL: [PoseRejectReason; POSE_REJECT_REASONS] = [
+        PoseRejectReason::NonFinite,
+        PoseRejectReason::NotSymmetric,
+        PoseRejectReason::NotPsd,
+        PoseRejectReason::OutOfRange,
+    ];
+
+    /// Stable snake_case name, for logs and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            PoseRejectReason::NonFinite => "non_finite",
+            PoseRejectReason::NotSymmetric => "not_symmetric",
+            PoseRejectReason::NotPsd => "not_psd",
+            PoseRejectReason::OutOfRange => "out_of_range",
+        }
+    }
+}
+
+/// A refused pose, naming the offending entry and value.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PoseRejection {
+    /// A number is NaN or infinite.
+    #[error("pose rejected (non_finite): {name} = {value}")]
+    NonFinite { name: &'static str, value: f64 },
+    /// Σ is not symmetric.
+    #[error("pose rejected (not_symmetric): cov[{row}][{col}] = {upper} but cov[{col}][{row}] = {lower}")]
+    NotSymmetric {
+        row: usize,
+        col: usize,
+        upper: f64,
+        lower: f64,
+    },
+    /// Σ has a negative eigenvalue.
+    #[error("pose rejected (not_psd): covariance has eigenvalue {min_eigenvalue} < 0")]
+    NotPsd { min_eigenvalue: f64 },
+    /// A finite `f64` that does not fit the `f32` message.
+    #[error("pose rejected (out_of_range): {name} = {value} does not fit the f32 deposit message")]
+    OutOfRange { name: &'static str, value: f64 },
+}
+
+impl PoseRejection {
+    /// The reason, for counting.
+    pub fn reason(&self) -> PoseRejectReason {
+        match self {
+            PoseRejection::NonFinite { .. } => PoseRejectReason::NonFinite,
+            PoseRejection::NotSymmetric { .. } => PoseRejectReason::NotSymmetric,
+            PoseRejection::NotPsd { .. } => PoseRejectReason::NotPsd,
+            PoseRejection::OutOfRange { .. } => PoseRejectReason::OutOfRange,
+        }
+    }
+}
+
+/// Relative tolerance of the symmetry check: |Σij − Σji| ≤ tol·max|Σ|.
+pub const SYMMETRY_REL_TOL: f64 = 1e-6;
+/// Relative tolerance of the PSD check: λmin ≥ −tol·max|Σ|.
+pub const PSD_REL_TOL: f64 = 1e-9;
+
+const COV_NAMES: [&str; 9] = [
+    "cov_xx",
+    "cov_xy",
+    "cov_xtheta",
+    "cov_yx",
+    "cov_yy",
+    "cov_ytheta",
+    "cov_thetax",
+    "cov_thetay",
+    "cov_thetatheta",
+];
+
+/// Checks a pose: finite mean and covariance, covariance symmetric and positive semi-definite
+/// (MODELS.md M1: anything else is bad input, rejected with a reason, never deposited).
+pub fn validate_pose(pose: &PoseEstimate) -> Result<(), PoseRejection> {
+    for (name, value) in [
+        ("x_m", pose.x_m),
+        ("y_m", pose.y_m),
+        ("theta_rad", pose.theta_rad),
+    ] {
+        if !value.is_finite() {
+            return Err(PoseRejection::NonFinite { name, value });
+        }
+    }
+    if let Some(i) = pose.cov.iter().position(|v| !v.is_finite()) {
+        return Err(PoseRejection::NonFinite {
+            name: COV_NAMES[i],
+            value: pose.cov[i],
+        });
+    }
+    let c = &pose.cov;
+    let scale = c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (row, col) in [(0, 1), (0, 2), (1, 2)] {
+        let (upper, lower) = (c[row * 3 + col], c[col * 3 + row]);
+        if (upper - lower).abs() > SYMMETRY_REL_TOL * scale {
+            return Err(PoseRejection::NotSymmetric {
+                row,
+                col,
+                upper,
+                lower,
+            });
+        }
+    }
+    let m = nalgebra::Matrix3::from_row_slice(c);
+    let sym = (m + m.transpose()) * 0.5;
+    let min_eigenvalue = sym.symmetric_eigenvalues().min();
+    if min_eigenvalue < -PSD_REL_TOL * scale {
+        return Err(PoseRejection::NotPsd { min_eigenvalue });
+    }
+    Ok(())
+}
+
+/// `value` as the `f32` of a deposit message, or [`PoseRejection::OutOfRange`] naming it.
+pub fn fit_f32(name: &'static str, value: f64) -> Result<f32, PoseRejection> {
+    let v = value as f32;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(PoseRejection::OutOfRange { name, value })
+    }
+}
+
+/// The position block Σxy of `cov` as `[xx, xy, yy]` in `f32`, each variance floored at
+/// `min_sigma_m²`, and |xy| ≤ √(xx·yy) so that it stays positive semi-definite after rounding.
+pub fn ellipse_cov_m2(cov: &[f64; 9], min_sigma_m: f32) -> Result<[f32; 3], PoseRejection> {
+    let (xx, xy, yy) = (cov[0], cov[1], cov[4]);
+    let floor = (min_sigma_m as f64).powi(2);
+    let xx32 = fit_f32("cov_xx", xx.max(floor))?;
+    let yy32 = fit_f32("cov_yy", yy.max(floor))?;
+    let bound = (xx32 as f64 * yy32 as f64).max(0.0).sqrt();
+    Ok([xx32, xy.clamp(-bound, bound) as f32, yy32])
+}
+
+/// Seed 000's uncertainty-aware deposit (MODELS.md M1): amount τ (negative with
+/// `anti_pheromone`), the pose's error ellipse Σxy (floored at `min_sigma_m`), γ = τ/det Σxy
+/// capped at `gamma_max` by the field, cut at `range_m`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EllipseRule {
+    pub channel: u32,
+    /// [`KernelKind::Ellipse`] (the project's default) or [`KernelKind::Paper`] (eq. 14 as
+    /// printed).
+    pub kernel: KernelKind,
+    pub tau: f32,
+    pub range_m: f32,
+    pub gamma_max: f32,
+    /// σ floor of each position variance (m; 0 = off).
+    pub min_sigma_m: f32,
+    pub anti_pheromone: bool,
+}
+
+impl EllipseRule {
+    /// The deposit `pose` makes, or why it is refused.
+    pub fn deposit(&self, pose: &PoseEstimate) -> Result<Deposit, PoseRejection> {
+        validate_pose(pose)?;
+        let x_m = fit_f32("x_m", pose.x_m)?;
+        let y_m = fit_f32("y_m", pose.y_m)?;
+        let cov_m2 = ellipse_cov_m2(&pose.cov, self.min_sigma_m)?;
+        let sign = if self.anti_pheromone { -1.0 } else { 1.0 };
+        let params = KernelParams {
+            cov_m2,
+            range_m: self.range_m,
+            gamma_max: self.gamma_max,
+            ..KernelParams::default()
+        };
+        Ok(Deposit {
+            channel: self.channel,
+            x_m,
+            y_m,
+            kernel: Kernel::from_params(self.kernel, sign * self.tau, &params),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pose(x_m: f64, cov: [f64; 9]) -> PoseEstimate {
+        PoseEstimate {
+            x_m,
+            y_m: -2.0,
+            theta_rad: 0.3,
+            cov,
+        }
+    }
+
+    const RULE: EllipseRule = EllipseRule {
+        channel: 0,
+        kernel: KernelKind::Ellipse,
+        tau: 0.2,
+        range_m: 1.0,
+        gamma_max: 100.0,
+        min_sigma_m: 0.0,
+        anti_pheromone: false,
+    };
+
+    #[test]
+    fn the_xy_block_becomes_the_ellipse_and_theta_is_ignored() {
+        let cov = [0.04, 0.01, 0.02, 0.01, 0.09, 0.03, 0.02, 0.03, 0.3];
+        let d = RULE.deposit(&pose(1.5, cov)).unwrap();
+        assert_eq!((d.x_m, d.y_m), (1.5, -2.0));
+        let expected = Kernel::Ellipse {
+            tau: 0.2,
+            cov_m2: [0.04, 0.01, 0.09],
+            range_m: 1.0,
+            gamma_max: 100.0,
+        };
+        assert_eq!(d.kernel, expected);
+    }
+
+    #[test]
+    fn the_floor_keeps_the_ellipse_psd_and_anti_pheromone_is_negative() {
+        let rule = EllipseRule {
+            min_sigma_m: 0.1,
+            anti_pheromone: true,
+            kernel: KernelKind::Paper,
+            ..RULE
+        };
+        let cov = [1e-6, 0.4, 0.0, 0.4, 0.5, 0.0, 0.0, 0.0, 0.1];
+        // Not PSD before the floor: refused as such, never floored into shape.
+        assert_eq!(
+            rule.deposit(&pose(0.0, cov)).unwrap_err().reason(),
+            PoseRejectReason::NotPsd
+        );
+        let cov = [1e-6, 1e-4, 0.0, 1e-4, 0.5, 0.0, 0.0, 0.0, 0.1];
+        let Kernel::Paper { tau, cov_m2, .. } = rule.deposit(&pose(0.0, cov)).unwrap().kernel
+        else {
+            panic!("not the paper kernel");
+        };
+        assert_eq!(tau, -0.2);
+        assert_eq!(cov_m2[0], (0.1f32 as f64).powi(2) as f32);
+        assert!(cov_m2[1] * cov_m2[1] <= cov_m2[0] * cov_m2[2]);
+    }
+
+    #[test]
+    fn bad_poses_are_refused_naming_the_entry_and_value() {
+        let mut cov = [0.04, 0.0, 0.0, 0.0, 0.04, 0.0, 0.0, 0.0, 0.1];
+        cov[4] = f64::NAN;
+        let e = RULE.deposit(&pose(0.0, cov)).unwrap_err().to_string();
+        assert!(e.contains("(non_finite): cov_yy = NaN"), "{e}");
+        let asym = [0.04, 0.02, 0.0, 0.0, 0.04, 0.0, 0.0, 0.0, 0.1];
+        let e = RULE.deposit(&pose(0.0, asym)).unwrap_err();
+        assert_eq!(e.reason(), PoseRejectReason::NotSymmetric);
+        let ok = [0.04, 0.0, 0.0, 0.0, 0.04, 0.0, 0.0, 0.0, 0.1];
+        let e = RULE.deposit(&pose(1e300, ok)).unwrap_err().to_string();
+        assert!(e.contains("(out_of_range): x_m = "), "{e}");
+    }
+}
