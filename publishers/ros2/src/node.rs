@@ -21,13 +21,13 @@ use zenoh::sample::Sample;
 use zenoh::Wait;
 
 use crate::deps::depositor::{Depositor, DepositorConfig, DepositorConfigError};
-use crate::deps::{session_config_with, with_admin_space};
 use crate::frames::{frame_messages, wall_now_ns, FieldTopics};
 use crate::graph::{
     self, split_topic_key, topic_key, Attachment, EntityKind, NameError, NodeIdentity, Qos,
 };
 use crate::pose::{check_pose, PoseWithCovarianceStamped};
 use crate::robots::{robot_topics, WorldRobots};
+use crate::session::{SessionConfigError, SessionSettings};
 use crate::types::{TypeInfo, POSE_COV_STAMPED};
 
 #[derive(Debug, Error)]
@@ -38,6 +38,8 @@ pub enum Ros2Error {
     Name(#[from] NameError),
     #[error(transparent)]
     Depositor(#[from] DepositorConfigError),
+    #[error(transparent)]
+    Session(#[from] SessionConfigError),
     #[error("zenoh: {action}: {detail}")]
     Zenoh { action: String, detail: String },
     #[error("field {0}: no frame within the timeout")]
@@ -68,13 +70,10 @@ pub struct Ros2Options {
     pub node_name: String,
     pub frame_id: String,
     pub rate_hz: f64,
-    pub listen: Vec<String>,
-    pub connect: Vec<String>,
+    /// The Zenoh session: rmw_zenoh's settings, a file's, and the flags over them.
+    pub session: SessionSettings,
     pub deposit_from: Vec<DepositFrom>,
     pub depositor: DepositorConfig,
-    pub admin_space: bool,
-    /// TLS, credentials and access control of the session.
-    pub security: crate::deps::Security,
     /// The simulated world whose robots to publish, if any.
     pub world: Option<WorldOptions>,
 }
@@ -213,14 +212,10 @@ impl Ros2Node {
         } else {
             Some(DepositPublisher::attach(node, &o.field, u32::MAX)?)
         };
-        let mut config = session_config_with(&o.security, "peer", &o.listen, &o.connect)
-            .map_err(|e| zerr("session config", e))?;
-        if o.admin_space {
-            config = with_admin_space(config).map_err(|e| zerr("session config", e))?;
-        }
+        let config = o.session.config()?;
         let session = zenoh::open(config)
             .wait()
-            .map_err(|e| zerr("open session", e))?;
+            .map_err(|e| zerr(format!("open session ({})", o.session.origin()), e))?;
         let identity = NodeIdentity {
             domain_id: o.domain_id,
             zid: session.info().zid().wait().to_string(),
