@@ -90,6 +90,12 @@ pub struct Ros2Args {
     /// frame_id of the published messages; poses in another frame are refused.
     #[arg(long, default_value = "map")]
     pub frame_id: String,
+    /// The ROS 2 distribution of the graph: humble writes `TypeHashNotSupported` in keys and
+    /// tokens where jazzy, kilted and rolling write the type's RIHS01 hash (poses are accepted
+    /// with that distribution's form only); all follow the current rmw_zenoh release's QoS and
+    /// attachment conventions (docs/ros2.md, "ROS 2 distributions").
+    #[arg(long, value_name = "DISTRO", value_parser = ["humble", "jazzy", "kilted", "rolling"], default_value = "jazzy")]
+    pub ros_distro: String,
     /// Zenoh endpoint to connect to, e.g. a router: tcp/ROS_HOST:7447 (repeatable); replaces
     /// the configuration's connect endpoints [default: the file's, else rmw_zenoh's
     /// tcp/localhost:7447].
@@ -199,6 +205,8 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
         namespace: a.namespace.clone(),
         node_name: a.node_name.clone(),
         frame_id: a.frame_id.clone(),
+        distro: ros2::graph::RosDistro::from_name(&a.ros_distro)
+            .ok_or_else(|| bad(format!("--ros-distro {}: unknown", a.ros_distro)))?,
         rate_hz: a.rate_hz,
         session,
         deposit_from,

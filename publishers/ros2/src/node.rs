@@ -24,6 +24,7 @@ use crate::deps::depositor::{Depositor, DepositorConfig, DepositorConfigError};
 use crate::frames::{frame_messages, wall_now_ns, FieldTopics};
 use crate::graph::{
     self, split_topic_key, topic_key, Attachment, EntityKind, NameError, NodeIdentity, Qos,
+    RosDistro,
 };
 use crate::pose::{check_pose, PoseWithCovarianceStamped};
 use crate::robots::{robot_topics, WorldRobots};
@@ -69,6 +70,8 @@ pub struct Ros2Options {
     pub namespace: String,
     pub node_name: String,
     pub frame_id: String,
+    /// Whose rmw_zenoh conventions the keys and tokens follow.
+    pub distro: RosDistro,
     pub rate_hz: f64,
     /// The Zenoh session: rmw_zenoh's settings, a file's, and the flags over them.
     pub session: SessionSettings,
@@ -110,6 +113,9 @@ pub struct Ros2Stats {
     pub refused_frame: u64,
     /// Refused poses by reason (`non_finite`, `not_psd`, `not_positive_definite`, …).
     pub refused_pose: BTreeMap<String, u64>,
+    /// Samples on `--deposit-from` topics by attachment layout (`positional`, `keyed`, `none`,
+    /// `other`); an attachment is not required.
+    pub attachments: BTreeMap<String, u64>,
     /// `--world`: robots found, truths and estimates received from their links, poses and
     /// paths published, and poses the paths dropped at `--path-max-poses` (oldest first).
     pub robots_found: u64,
@@ -206,7 +212,8 @@ impl Ros2Node {
             Some(f) => f.header.channels as usize,
             None => return Err(Ros2Error::NoFrame(o.field.clone())),
         };
-        let topics = FieldTopics::new(&namespace, channels)?;
+        let mut topics = FieldTopics::new(&namespace, channels)?;
+        topics.types = topics.types.iter().map(|t| o.distro.type_info(t)).collect();
         let deposits = if o.deposit_from.is_empty() {
             None
         } else {
@@ -233,7 +240,7 @@ impl Ros2Node {
                 t,
             )?);
         }
-        let pose_type = TypeInfo::of(POSE_COV_STAMPED);
+        let pose_type = o.distro.type_info(&TypeInfo::of(POSE_COV_STAMPED));
         let mut subscriptions = Vec::new();
         for (i, d) in o.deposit_from.iter().enumerate() {
             let id = (1 + publishers.len() + i) as u32;
@@ -311,7 +318,7 @@ impl Ros2Node {
                         &self.identity,
                         self.next_entity,
                         &topic,
-                        &t,
+                        &self.o.distro.type_info(&t),
                     )?);
                     self.next_entity += 1;
                 }
@@ -544,6 +551,11 @@ fn handle_pose(
     deposits: Option<&mut DepositPublisher>,
     stats: &mut Ros2Stats,
 ) {
+    let layout = match sample.attachment() {
+        None => "none",
+        Some(a) => Attachment::decode_any(&a.to_bytes()).map_or("other", |(_, l)| l.name()),
+    };
+    *stats.attachments.entry(layout.to_string()).or_default() += 1;
     let key = sample.key_expr().as_str();
     let typed = split_topic_key(key).is_some_and(|(_, ty, h)| ty == t.dds_name && h == t.hash);
     if !typed {
