@@ -97,6 +97,9 @@ pub struct WorldOptions {
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct Ros2Stats {
     pub frames_published: u64,
+    /// Frames due while no subscriber matched any of the field's topics (Zenoh's matching
+    /// status): nothing was serialized for them.
+    pub frames_without_subscribers: u64,
     pub messages_published: u64,
     pub bytes_published: u64,
     pub last_sequence: u64,
@@ -142,6 +145,15 @@ struct RosPublisher {
 }
 
 impl RosPublisher {
+    /// Whether a subscriber somewhere matches the publisher (Zenoh's matching status; if it
+    /// cannot be read, as if one did).
+    fn matched(&self) -> bool {
+        match self.publisher.matching_status().wait() {
+            Ok(s) => s.matching(),
+            Err(_) => true,
+        }
+    }
+
     fn put(&mut self, cdr: Vec<u8>) -> Result<(), Ros2Error> {
         self.sequence += 1;
         let att = Attachment {
@@ -395,6 +407,12 @@ impl Ros2Node {
     }
 
     fn publish_frame(&mut self) -> Result<(), Ros2Error> {
+        if !self.publishers.iter().any(RosPublisher::matched) {
+            // Nobody listens: the frame is not serialized (the schedule goes on).
+            self.schedule_next();
+            self.stats.frames_without_subscribers += 1;
+            return Ok(());
+        }
         let Some(fm) = frame_messages(&self.reader, &self.o.frame_id) else {
             return Ok(());
         };
