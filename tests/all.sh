@@ -18,13 +18,23 @@ python3 .ci/module_cycles.py
 # The `test` extra: pytest and the pinned ruff and mypy; the `zenoh` extra (eclipse-zenoh
 # 1.10.2, as the Rust zenoh crate in Cargo.lock; zstandard, xxhash) is for
 # python/tests/test_zenoh_frames.py: a bridge's --frames decoded in Python; the `ros2` extra
-# (rosbags, mcap) is for python/tests/test_ros2.py: our ROS 2 messages, hashes and MCAP files
-# read by ROS 2's own Python tools.
+# (rosbags, mcap, mcap-ros2-support) is for python/tests/test_ros2*.py and test_sim_record.py:
+# our ROS 2 messages, hashes and MCAP files read by ROS 2's own Python tools.
 echo "== python: venv .venv, pip install ./python[test,zenoh,ros2]"
 if [ ! -x .venv/bin/python ]; then
     python3 -m venv .venv
 fi
 .venv/bin/python -m pip install -q --upgrade './python[test,zenoh,ros2]'
+
+# python/tests/test_ros2_router.py also starts a router on the oldest Zenoh 1.x that rmw_zenoh
+# releases shipped (rmw_zenoh 0.2.0/0.1.0 era): eclipse-zenoh 1.1.0 in a venv of its own, as
+# one process cannot load two eclipse-zenoh versions.
+echo "== python: venv .venv-zenoh-old, pip install eclipse-zenoh==1.1.0"
+if [ ! -x .venv-zenoh-old/bin/python ]; then
+    python3 -m venv .venv-zenoh-old
+fi
+.venv-zenoh-old/bin/python -m pip install -q 'eclipse-zenoh==1.1.0'
+export PHEROMONE_OLD_ZENOH_PYTHON="${PHEROMONE_OLD_ZENOH_PYTHON:-$PWD/.venv-zenoh-old/bin/python}"
 
 # Lints of the package and its tests (configured in python/pyproject.toml; mypy cold ~7 s).
 echo "== python: ruff check, mypy"

@@ -346,3 +346,34 @@ def test_record_writes_a_ros2_mcap_that_rosbags_reads(start_field, store, tmp_pa
     assert stamps == sorted(stamps) and abs(stamps[-1] - time.time_ns()) < 60e9
     for c in range(2):
         np.testing.assert_array_equal(last_grid.data[c].data[::-1].reshape(30, 40), cells[c])
+
+
+def test_nothing_is_serialized_while_nobody_subscribes(start_field, ros2_node, tmp_path):
+    """Zenoh's matching status: frames due while no subscriber matches any topic are counted and
+    not serialized; a subscriber that comes gets the next frame."""
+    cfg = tmp_path / "two.toml"
+    cfg.write_text(TWO_CHANNELS)
+    f = start_field("idle", "--config", str(cfg))
+    node = ros2_node(f.name)
+    with _session(node.endpoint) as s:
+        _tokens(s, 4)
+        # 10 field frames (0.2 s at 50 Hz: about 4 of the node's 20 Hz periods), nobody listening.
+        with pheromone.Field.attach(f.name, timeout_s=10) as field:
+            with field.frame() as fr:
+                first = fr.header.sequence
+            for _ in deadline_loop(10, "10 field frames"):
+                field.wait_frame(0.2)
+                with field.frame() as fr:
+                    if fr.header.sequence >= first + 10:
+                        break
+        got = []
+        sub = s.declare_subscriber("0/pheromone/grid_map/**", got.append)
+        for _ in deadline_loop(15, "a GridMap once a subscriber came"):
+            if got:
+                break
+            time.sleep(0.02)
+        sub.undeclare()
+    summary = node.stop()["ros2"]
+    assert summary["frames_without_subscribers"] >= 1, summary
+    assert summary["frames_published"] >= 1, summary
+    assert summary["messages_published"] == 3 * summary["frames_published"], summary

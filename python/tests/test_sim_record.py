@@ -1,10 +1,14 @@
 """`pheromone sim --record FILE.mcap` read back with ROS 2's Python tools: `mcap` reads the file,
 `rosbags` (Stores.ROS2_JAZZY, grid_map_msgs registered, pheromone_msgs/msg/Deposit from the
 file's own schema) deserializes every message; counts, stamps and values are checked against
-the run's own outputs (metrics.json, robot_<id>.csv, field_final.npy) (docs/ros2.md).
+the run's own outputs (metrics.json, robot_<id>.csv, field_final.npy) (docs/ros2.md). The same
+file also opens as rosbag2 files do: `mcap-ros2-support`'s decoder (Foxglove's, which builds its
+types from the schemas' `.msg` text alone) decodes every message, and rosbags' rosbag2 reader
+reads it as a bag from the `rosbag2` metadata record the file carries (QoS, type hashes,
+counts).
 
-Needs `pip install './python[ros2]'` (rosbags, mcap); without them the tests are skipped,
-unless PHEROMONE_REQUIRE_ZENOH=1 (tests/all.sh), where they fail instead."""
+Needs `pip install './python[ros2]'` (rosbags, mcap, mcap-ros2-support); without them the tests
+are skipped, unless PHEROMONE_REQUIRE_ZENOH=1 (tests/all.sh), where they fail instead."""
 
 import csv
 import json
@@ -25,7 +29,10 @@ try:
     from mcap.reader import make_reader
     from mcap.records import Channel, Message
     from mcap.stream_reader import StreamReader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.rosbag2 import Reader as BagReader
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    from ruamel.yaml import YAML
 except ImportError as e:
     if os.environ.get("PHEROMONE_REQUIRE_ZENOH") == "1":
         raise
@@ -68,6 +75,64 @@ def read_mcap(path):
     return by_topic, types
 
 
+def check_ros_tools(mcap, tmp_path):
+    """The file as ROS tools see it; returns {topic: message count}."""
+    # mcap-ros2-support: every message decoded from the schema text alone.
+    decoded = {}
+    with open(mcap, "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        for schema, channel, message, msg in reader.iter_decoded_messages(log_time_order=False):
+            assert "/msg/" not in schema.data.decode(), schema.name
+            assert message.log_time == _stamp(msg.header), channel.topic
+            decoded[channel.topic] = decoded.get(channel.topic, 0) + 1
+    # The mcap library: summary statistics, channel metadata and the rosbag2 record.
+    with open(mcap, "rb") as fh:
+        reader = make_reader(fh)
+        summary = reader.get_summary()
+        [record] = [m for m in reader.iter_metadata() if m.name == "rosbag2"]
+    store = _store()
+    stats = summary.statistics
+    assert stats.message_count == sum(decoded.values())
+    for cid, ch in summary.channels.items():
+        assert stats.channel_message_counts[cid] == decoded[ch.topic]
+        schema = summary.schemas[ch.schema_id].name
+        if schema in store.types:
+            assert ch.metadata["topic_type_hash"] == store.hash_rihs01(schema)
+        [qos] = YAML(typ="safe").load(ch.metadata["offered_qos_profiles"])
+        maps = schema in (GRID, OCC)
+        assert qos["durability"] == ("transient_local" if maps else "volatile"), ch.topic
+        assert (qos["reliability"], qos["history"], qos["depth"]) == ("reliable", "keep_last", 1)
+    meta = YAML(typ="safe").load(record.metadata["serialized_metadata"])
+    assert meta["version"] == 9 and meta["storage_identifier"] == "mcap"
+    assert meta["message_count"] == stats.message_count
+    # rosbags' rosbag2 reader: the file in a bag directory whose metadata.yaml is the record's.
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / mcap.name).symlink_to(mcap)
+    with open(bag / "metadata.yaml", "w") as fh:
+        YAML(typ="safe").dump({"rosbag2_bagfile_information": meta}, fh)
+    counts = {}
+    with BagReader(bag) as r:
+        assert r.message_count == stats.message_count
+        for conn in r.connections:
+            assert conn.msgcount == decoded[conn.topic]
+            [qos] = conn.ext.offered_qos_profiles
+            maps = conn.msgtype in (GRID, OCC)
+            assert qos.durability.name == ("TRANSIENT_LOCAL" if maps else "VOLATILE")
+            if conn.msgtype in store.types:
+                assert conn.digest == store.hash_rihs01(conn.msgtype)
+        with open(mcap, "rb") as fh:
+            for schema in make_reader(fh).get_summary().schemas.values():
+                if schema.name not in store.types:
+                    store.register(get_types_from_msg(schema.data.decode(), schema.name))
+        for conn, t, raw in r.messages():
+            msg = store.deserialize_cdr(raw, conn.msgtype)
+            assert t == _stamp(msg.header)
+            counts[conn.topic] = counts.get(conn.topic, 0) + 1
+    assert counts == decoded
+    return decoded
+
+
 def run_sim(tmp_path, name, *args):
     """`pheromone sim blind-leader` for DURATION_S with --record and --out: metrics, out, file."""
     out = tmp_path / name
@@ -94,6 +159,7 @@ def test_a_process_run_records_every_message_rosbags_reads(tmp_path):
     rec = metrics["record"]
     assert rec["messages"] == sum(len(v) for v in by_topic.values())
     assert rec["deposit_mismatches"] == 0
+    assert check_ros_tools(mcap, tmp_path) == {t: len(v) for t, v in by_topic.items()}
 
     # The field: one GridMap and OccupancyGrid per frame the run pictured (its snapshot PNGs).
     shots = out.glob("field_trail_t*s.png")

@@ -64,9 +64,12 @@ impl RosDepositArgs {
 ///
 /// Declares rmw_zenoh's liveliness tokens for the node, its publishers and subscriptions (so
 /// `ros2 node list` / `ros2 topic list` show them) and attaches the sequence number, source
-/// timestamp and GID to every message. A ROS 2 machine sees it through a Zenoh router
-/// (`--connect tcp/ROUTER:7447`, RMW_IMPLEMENTATION=rmw_zenoh_cpp). Needs a build with
-/// `--features zenoh`. Ctrl-C stops it.
+/// timestamp and GID to every message. Its Zenoh session opens as an rmw_zenoh node's does:
+/// the file of --zenoh-config or of ZENOH_SESSION_CONFIG_URI, else rmw_zenoh's default session
+/// settings (a peer connecting to the router `rmw_zenohd` at tcp/localhost:7447, listening on
+/// an ephemeral localhost port, gossip scouting on); --connect, --listen and the TLS and
+/// credential flags override only what they name. Needs a build with `--features zenoh`.
+/// Ctrl-C stops it.
 #[derive(Args, Debug)]
 pub struct Ros2Args {
     /// The field to publish (it must run on this host, in this iceoryx2 domain).
@@ -87,12 +90,22 @@ pub struct Ros2Args {
     /// frame_id of the published messages; poses in another frame are refused.
     #[arg(long, default_value = "map")]
     pub frame_id: String,
-    /// Zenoh endpoint to connect to, e.g. a router: tcp/127.0.0.1:7447 (repeatable).
+    /// The ROS 2 distribution of the graph: humble writes `TypeHashNotSupported` in keys and
+    /// tokens where jazzy, kilted and rolling write the type's RIHS01 hash (poses are accepted
+    /// with that distribution's form only); all follow the current rmw_zenoh release's QoS and
+    /// attachment conventions (docs/ros2.md, "ROS 2 distributions").
+    #[arg(long, value_name = "DISTRO", value_parser = ["humble", "jazzy", "kilted", "rolling"], default_value = "jazzy")]
+    pub ros_distro: String,
+    /// Zenoh endpoint to connect to, e.g. a router: tcp/ROS_HOST:7447 (repeatable); replaces
+    /// the configuration's connect endpoints [default: the file's, else rmw_zenoh's
+    /// tcp/localhost:7447].
     #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint())]
     pub connect: Vec<String>,
-    /// Zenoh endpoint to listen on, e.g. tcp/127.0.0.1:7448 (repeatable). None by default:
-    /// the node only connects (to a router, --connect). An address other hosts reach should be
-    /// a tls/ one with --tls-cert/--tls-key and --users-file (docs/mirrors.md, "Security").
+    /// Zenoh endpoint to listen on, e.g. tcp/127.0.0.1:7448 (repeatable); replaces the
+    /// configuration's listen endpoints [default: the file's, else rmw_zenoh's
+    /// tcp/localhost:0, where the router's other peers on this host connect]. An address other
+    /// hosts reach should be a tls/ one with --tls-cert/--tls-key and --users-file
+    /// (docs/mirrors.md, "Security").
     #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint())]
     pub listen: Vec<String>,
     /// Subscribe TOPIC (PoseWithCovarianceStamped) and deposit its poses as robot ROBOT_ID
@@ -165,9 +178,16 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
             a.rate_hz
         )));
     }
-    if a.listen.is_empty() && a.connect.is_empty() {
-        return Err(bad("give --listen and/or --connect (a Zenoh endpoint)"));
+    let session = ros2::session::SessionSettings {
+        security: a.zenoh.security(),
+        env_file: None,
+        listen: a.listen.clone(),
+        connect: a.connect.clone(),
+        admin_space: a.print_address,
     }
+    .with_env();
+    // A configuration that cannot be built (a file that does not parse) is refused now.
+    session.config().map_err(bad_from)?;
     let timeout = seconds("timeout", a.timeout)?;
     let duration = a.duration.map(|d| seconds("duration", d)).transpose()?;
     let deposit_from = a
@@ -185,17 +205,18 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
         namespace: a.namespace.clone(),
         node_name: a.node_name.clone(),
         frame_id: a.frame_id.clone(),
+        distro: ros2::graph::RosDistro::from_name(&a.ros_distro)
+            .ok_or_else(|| bad(format!("--ros-distro {}: unknown", a.ros_distro)))?,
         rate_hz: a.rate_hz,
-        listen: a.listen.clone(),
-        connect: a.connect.clone(),
+        session,
         deposit_from,
         depositor,
-        admin_space: a.print_address,
-        security: a.zenoh.security(),
         world,
     };
     let mut ros = Ros2Node::start(&node, options, timeout).map_err(|e| match e {
-        ros2::node::Ros2Error::Name(_) | ros2::node::Ros2Error::Depositor(_) => bad_from(e),
+        ros2::node::Ros2Error::Name(_)
+        | ros2::node::Ros2Error::Depositor(_)
+        | ros2::node::Ros2Error::Session(_) => bad_from(e),
         e => e.into(),
     })?;
     announce(&a, &ros)?;

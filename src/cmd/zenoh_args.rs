@@ -10,8 +10,10 @@ use clap::Args;
 pub struct ZenohArgs {
     /// Zenoh's own JSON5 configuration file (as rmw_zenoh uses): TLS (transport.link.tls),
     /// credentials (transport.auth.usrpwd), access control (access_control) and any other
-    /// Zenoh setting. The mode, scouting, listen/connect endpoints and connection retry are
-    /// set by this command's flags, over the file's.
+    /// Zenoh setting. For `ros2` (and `sim --ros2`'s child) the file is the whole session
+    /// configuration, as rmw_zenoh's ZENOH_SESSION_CONFIG_URI (which it wins over): mode and
+    /// scouting included, only the flags given override what they name. For `bridge` and
+    /// `field --mirror` the mode, scouting, endpoints and connection retry are the command's.
     #[arg(long, value_name = "FILE", value_parser = super::check::in_file())]
     pub zenoh_config: Option<PathBuf>,
     /// PEM certificate of the CA that signed the other side's certificate (tls/ endpoints).

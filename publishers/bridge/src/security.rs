@@ -49,14 +49,21 @@ impl Security {
         *self != Self::default()
     }
 
-    /// The base Zenoh configuration: the file (if any), then the TLS and credential options.
+    /// The base Zenoh configuration: the file (if any, else Zenoh's defaults), then the TLS and
+    /// credential options ([`Self::over`]).
     pub fn base_config(&self) -> Result<zenoh::Config, BridgeError> {
-        let mut c = match &self.config_file {
+        let c = match &self.config_file {
             Some(f) => zenoh::Config::from_file(f).map_err(|e| {
                 BridgeError::Security(format!("--zenoh-config {}: {e}", f.display()))
             })?,
             None => zenoh::Config::default(),
         };
+        self.over(c)
+    }
+
+    /// `c` with the TLS and credential options written over it (`config_file` is not read:
+    /// the caller chose the base, e.g. the ROS 2 node's rmw_zenoh defaults).
+    pub fn over(&self, mut c: zenoh::Config) -> Result<zenoh::Config, BridgeError> {
         if let Some(ca) = &self.tls_root_ca {
             set(
                 &mut c,

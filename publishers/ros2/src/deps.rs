@@ -4,6 +4,7 @@
 pub use messages::{PoseMsg, TruthMsg};
 pub use roles::depositor;
 
-/// The bridge's Zenoh session settings (peer mode, no multicast scouting, listen/connect).
+/// The bridge's TLS and credential settings, its admin-space switch and the listening ports it
+/// reads there.
 #[cfg(feature = "zenoh")]
-pub use bridge::{listen_locators, session_config_with, with_admin_space, Security};
+pub use bridge::{listen_locators, with_admin_space, Security};

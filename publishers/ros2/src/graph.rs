@@ -11,9 +11,15 @@
 //!   and enclave `/` are `%`).
 //! - GID (16 bytes): XXH3-128 of the entity's token, low 64 bits then high 64 bits, each little
 //!   endian.
-//! - Attachment (Zenoh serialization format, rmw_zenoh_cpp ≥ 0.2 / Jazzy): the sequence number
+//! - Attachment (zenoh-ext serialization, `attachment_helpers.cpp`): the sequence number
 //!   (i64 LE, from 1), the source timestamp (i64 LE, ns since the epoch), the GID as a
-//!   length-prefixed byte array (`0x10` and 16 bytes): 33 bytes.
+//!   length-prefixed byte array (`0x10` and 16 bytes): 33 bytes ("positional", ros2/rmw_zenoh
+//!   #601: Rolling 0.6.0, Jazzy 0.2.4, Humble 0.1.2 and later). The releases before on Zenoh 1.x
+//!   (Jazzy 0.2.0–0.2.3, Humble 0.1.0–0.1.1) put each value after its name as a zenoh-ext
+//!   string (`"sequence_number"`, `"source_timestamp"`, `"source_gid"`): 77 bytes ("keyed").
+//!   Both are read ([`Attachment::decode_any`]); the positional one is written.
+//! - Distributions ([`RosDistro`]): Humble has no type hashes, so its rmw_zenoh writes
+//!   `TypeHashNotSupported` where the RIHS01 hash goes, in keys and tokens.
 
 use thiserror::Error;
 
@@ -21,6 +27,54 @@ use crate::types::TypeInfo;
 
 /// The admin space of `rmw_zenoh_cpp`'s liveliness tokens.
 pub const ADMIN_SPACE: &str = "@ros2_lv";
+
+/// What rmw_zenoh on Humble writes where a type hash goes.
+pub const TYPE_HASH_NOT_SUPPORTED: &str = "TypeHashNotSupported";
+
+/// A ROS 2 distribution, as far as rmw_zenoh's wire format differs between them (its current
+/// release on each: docs/ros2.md, "ROS 2 distributions").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RosDistro {
+    Humble,
+    #[default]
+    Jazzy,
+    Kilted,
+    Rolling,
+}
+
+impl RosDistro {
+    pub const ALL: [RosDistro; 4] = [
+        RosDistro::Humble,
+        RosDistro::Jazzy,
+        RosDistro::Kilted,
+        RosDistro::Rolling,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            RosDistro::Humble => "humble",
+            RosDistro::Jazzy => "jazzy",
+            RosDistro::Kilted => "kilted",
+            RosDistro::Rolling => "rolling",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|d| d.name() == name)
+    }
+
+    /// Type `t` as this distribution names it in keys and tokens: Humble has no type hashes
+    /// (REP 2011 came with Iron), its rmw_zenoh writes [`TYPE_HASH_NOT_SUPPORTED`].
+    pub fn type_info(self, t: &TypeInfo) -> TypeInfo {
+        match self {
+            RosDistro::Humble => TypeInfo {
+                hash: TYPE_HASH_NOT_SUPPORTED.into(),
+                ..t.clone()
+            },
+            _ => t.clone(),
+        }
+    }
+}
 
 /// A ROS name (namespace, topic) in the form a token holds: '/' → '%'.
 pub fn mangle(name: &str) -> String {
@@ -111,12 +165,17 @@ pub struct Qos {
 }
 
 impl Qos {
-    /// The token's QoS component: `reliability:durability:history,depth:deadline:lifespan:
-    /// liveliness`, each left empty when it is rmw_zenoh's default (reliable, transient local,
-    /// keep last, depth 42, the rest infinite/automatic).
+    /// The token's QoS component (`qos_to_keyexpr` of liveliness_utils.cpp):
+    /// `reliability:durability:history,depth:deadline:lifespan:liveliness`, each policy's rmw
+    /// enum value (reliable 1, best effort 2; transient local 1, volatile 2) left out when it is
+    /// rmw_zenoh's default (qos.cpp: reliable, **volatile**, keep last, depth 42, the rest
+    /// infinite/automatic). The default durability was transient local until ros2/rmw_zenoh#521
+    /// (March 2025, backported to Jazzy and Humble): receivers rebuild a token from its parts with
+    /// their defaults and hash it into the GID, so a token written with the old default gets a
+    /// GID other than the one in its samples' attachments.
     pub fn keyexpr(&self) -> String {
         let rel = if self.reliable { "" } else { "2" };
-        let dur = if self.transient_local { "" } else { "2" };
+        let dur = if self.transient_local { "1" } else { "" };
         let depth = if self.depth == 42 {
             String::new()
         } else {
@@ -193,6 +252,22 @@ pub fn gid(token: &str) -> [u8; 16] {
     g
 }
 
+/// The two attachment layouts (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AttachmentLayout {
+    Positional,
+    Keyed,
+}
+
+impl AttachmentLayout {
+    pub fn name(self) -> &'static str {
+        match self {
+            AttachmentLayout::Positional => "positional",
+            AttachmentLayout::Keyed => "keyed",
+        }
+    }
+}
+
 /// A sample's attachment (see the module documentation).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Attachment {
@@ -214,7 +289,39 @@ impl Attachment {
         b
     }
 
-    /// Reads an attachment; `None` if it does not have this shape.
+    /// Reads an attachment in either layout.
+    pub fn decode_any(b: &[u8]) -> Option<(Self, AttachmentLayout)> {
+        if let Some(a) = Self::decode(b) {
+            return Some((a, AttachmentLayout::Positional));
+        }
+        // Keyed: each value after its name (a zenoh-ext string: one length byte, the bytes).
+        fn field<'a>(r: &mut &'a [u8], key: &str, len: usize) -> Option<&'a [u8]> {
+            let rest = r
+                .strip_prefix(&[key.len() as u8][..])?
+                .strip_prefix(key.as_bytes())?;
+            if rest.len() < len {
+                return None;
+            }
+            let (v, rest) = rest.split_at(len);
+            *r = rest;
+            Some(v)
+        }
+        let mut r = b;
+        let seq = field(&mut r, "sequence_number", 8)?.try_into().ok()?;
+        let stamp = field(&mut r, "source_timestamp", 8)?.try_into().ok()?;
+        let gid = field(&mut r, "source_gid", 17)?;
+        if gid[0] != 16 || !r.is_empty() {
+            return None;
+        }
+        let a = Self {
+            sequence_number: i64::from_le_bytes(seq),
+            source_timestamp_ns: i64::from_le_bytes(stamp),
+            source_gid: gid[1..].try_into().ok()?,
+        };
+        Some((a, AttachmentLayout::Keyed))
+    }
+
+    /// Reads a positional attachment; `None` if it does not have this shape.
     pub fn decode(b: &[u8]) -> Option<Self> {
         if b.len() != ATTACHMENT_LEN || b[16] != 16 {
             return None;
@@ -300,10 +407,24 @@ mod tests {
             tok,
             format!(
                 "@ros2_lv/3/abc/0/1/MP/%/%/pheromone/%pheromone%grid_map/\
-                 grid_map_msgs::msg::dds_::GridMap_/{}/:2:,1:,:,:,,",
+                 grid_map_msgs::msg::dds_::GridMap_/{}/::,1:,:,:,,",
                 t.hash
             )
         );
+        let tl = Qos {
+            transient_local: true,
+            depth: 42,
+            ..qos
+        };
+        assert_eq!(tl.keyexpr(), ":1:,:,:,:,,");
+        let humble = RosDistro::Humble.type_info(&t);
+        assert_eq!(
+            topic_key(0, "/m", &humble),
+            "0/m/grid_map_msgs::msg::dds_::GridMap_/TypeHashNotSupported"
+        );
+        assert_eq!(RosDistro::Rolling.type_info(&t), t);
+        assert_eq!(RosDistro::from_name("kilted"), Some(RosDistro::Kilted));
+        assert_eq!(RosDistro::from_name("iron"), None);
         assert_ne!(gid(&tok), gid(&id.token(EntityKind::Node, 0, None)));
     }
 
@@ -318,5 +439,29 @@ mod tests {
         assert_eq!(b[16], 16);
         assert_eq!(Attachment::decode(&b), Some(a));
         assert_eq!(Attachment::decode(&b[..32]), None);
+        assert_eq!(
+            Attachment::decode_any(&b),
+            Some((a, AttachmentLayout::Positional))
+        );
+        // Keyed, as zenoh-ext serializes ("sequence_number", i64, "source_timestamp", i64,
+        // "source_gid", 16 bytes).
+        let mut k = Vec::new();
+        for (key, v) in [
+            ("sequence_number", &b[..8]),
+            ("source_timestamp", &b[8..16]),
+            ("source_gid", &b[16..]),
+        ] {
+            k.push(key.len() as u8);
+            k.extend_from_slice(key.as_bytes());
+            k.extend_from_slice(v);
+        }
+        assert_eq!(k.len(), 77);
+        assert_eq!(
+            Attachment::decode_any(&k),
+            Some((a, AttachmentLayout::Keyed))
+        );
+        assert_eq!(Attachment::decode_any(&k[..76]), None);
+        k[1] = b'S';
+        assert_eq!(Attachment::decode_any(&k), None);
     }
 }

@@ -12,6 +12,7 @@
 //! - [`graph`]: rmw_zenoh's key expressions, liveliness tokens, GIDs and attachments.
 //! - [`frames`]: the topics of a field and the messages of its current frame.
 //! - [`record`]: ROS 2 MCAP files.
+//! - `session` (feature `zenoh`): the Zenoh session configured as rmw_zenoh configures a node's.
 //! - `node` (feature `zenoh`): the node itself — publishers, `--deposit-from` subscriptions.
 
 pub mod cdr;
@@ -25,4 +26,6 @@ pub mod pose;
 pub mod record;
 pub mod robot;
 pub mod robots;
+#[cfg(feature = "zenoh")]
+pub mod session;
 pub mod types;

@@ -21,13 +21,14 @@ use zenoh::sample::Sample;
 use zenoh::Wait;
 
 use crate::deps::depositor::{Depositor, DepositorConfig, DepositorConfigError};
-use crate::deps::{session_config_with, with_admin_space};
 use crate::frames::{frame_messages, wall_now_ns, FieldTopics};
 use crate::graph::{
     self, split_topic_key, topic_key, Attachment, EntityKind, NameError, NodeIdentity, Qos,
+    RosDistro,
 };
 use crate::pose::{check_pose, PoseWithCovarianceStamped};
 use crate::robots::{robot_topics, WorldRobots};
+use crate::session::{SessionConfigError, SessionSettings};
 use crate::types::{TypeInfo, POSE_COV_STAMPED};
 
 #[derive(Debug, Error)]
@@ -38,6 +39,8 @@ pub enum Ros2Error {
     Name(#[from] NameError),
     #[error(transparent)]
     Depositor(#[from] DepositorConfigError),
+    #[error(transparent)]
+    Session(#[from] SessionConfigError),
     #[error("zenoh: {action}: {detail}")]
     Zenoh { action: String, detail: String },
     #[error("field {0}: no frame within the timeout")]
@@ -67,14 +70,13 @@ pub struct Ros2Options {
     pub namespace: String,
     pub node_name: String,
     pub frame_id: String,
+    /// Whose rmw_zenoh conventions the keys and tokens follow.
+    pub distro: RosDistro,
     pub rate_hz: f64,
-    pub listen: Vec<String>,
-    pub connect: Vec<String>,
+    /// The Zenoh session: rmw_zenoh's settings, a file's, and the flags over them.
+    pub session: SessionSettings,
     pub deposit_from: Vec<DepositFrom>,
     pub depositor: DepositorConfig,
-    pub admin_space: bool,
-    /// TLS, credentials and access control of the session.
-    pub security: crate::deps::Security,
     /// The simulated world whose robots to publish, if any.
     pub world: Option<WorldOptions>,
 }
@@ -95,6 +97,9 @@ pub struct WorldOptions {
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct Ros2Stats {
     pub frames_published: u64,
+    /// Frames due while no subscriber matched any of the field's topics (Zenoh's matching
+    /// status): nothing was serialized for them.
+    pub frames_without_subscribers: u64,
     pub messages_published: u64,
     pub bytes_published: u64,
     pub last_sequence: u64,
@@ -111,6 +116,9 @@ pub struct Ros2Stats {
     pub refused_frame: u64,
     /// Refused poses by reason (`non_finite`, `not_psd`, `not_positive_definite`, …).
     pub refused_pose: BTreeMap<String, u64>,
+    /// Samples on `--deposit-from` topics by attachment layout (`positional`, `keyed`, `none`,
+    /// `other`); an attachment is not required.
+    pub attachments: BTreeMap<String, u64>,
     /// `--world`: robots found, truths and estimates received from their links, poses and
     /// paths published, and poses the paths dropped at `--path-max-poses` (oldest first).
     pub robots_found: u64,
@@ -137,6 +145,15 @@ struct RosPublisher {
 }
 
 impl RosPublisher {
+    /// Whether a subscriber somewhere matches the publisher (Zenoh's matching status; if it
+    /// cannot be read, as if one did).
+    fn matched(&self) -> bool {
+        match self.publisher.matching_status().wait() {
+            Ok(s) => s.matching(),
+            Err(_) => true,
+        }
+    }
+
     fn put(&mut self, cdr: Vec<u8>) -> Result<(), Ros2Error> {
         self.sequence += 1;
         let att = Attachment {
@@ -207,20 +224,17 @@ impl Ros2Node {
             Some(f) => f.header.channels as usize,
             None => return Err(Ros2Error::NoFrame(o.field.clone())),
         };
-        let topics = FieldTopics::new(&namespace, channels)?;
+        let mut topics = FieldTopics::new(&namespace, channels)?;
+        topics.types = topics.types.iter().map(|t| o.distro.type_info(t)).collect();
         let deposits = if o.deposit_from.is_empty() {
             None
         } else {
             Some(DepositPublisher::attach(node, &o.field, u32::MAX)?)
         };
-        let mut config = session_config_with(&o.security, "peer", &o.listen, &o.connect)
-            .map_err(|e| zerr("session config", e))?;
-        if o.admin_space {
-            config = with_admin_space(config).map_err(|e| zerr("session config", e))?;
-        }
+        let config = o.session.config()?;
         let session = zenoh::open(config)
             .wait()
-            .map_err(|e| zerr("open session", e))?;
+            .map_err(|e| zerr(format!("open session ({})", o.session.origin()), e))?;
         let identity = NodeIdentity {
             domain_id: o.domain_id,
             zid: session.info().zid().wait().to_string(),
@@ -238,7 +252,7 @@ impl Ros2Node {
                 t,
             )?);
         }
-        let pose_type = TypeInfo::of(POSE_COV_STAMPED);
+        let pose_type = o.distro.type_info(&TypeInfo::of(POSE_COV_STAMPED));
         let mut subscriptions = Vec::new();
         for (i, d) in o.deposit_from.iter().enumerate() {
             let id = (1 + publishers.len() + i) as u32;
@@ -316,7 +330,7 @@ impl Ros2Node {
                         &self.identity,
                         self.next_entity,
                         &topic,
-                        &t,
+                        &self.o.distro.type_info(&t),
                     )?);
                     self.next_entity += 1;
                 }
@@ -393,6 +407,12 @@ impl Ros2Node {
     }
 
     fn publish_frame(&mut self) -> Result<(), Ros2Error> {
+        if !self.publishers.iter().any(RosPublisher::matched) {
+            // Nobody listens: the frame is not serialized (the schedule goes on).
+            self.schedule_next();
+            self.stats.frames_without_subscribers += 1;
+            return Ok(());
+        }
         let Some(fm) = frame_messages(&self.reader, &self.o.frame_id) else {
             return Ok(());
         };
@@ -549,6 +569,11 @@ fn handle_pose(
     deposits: Option<&mut DepositPublisher>,
     stats: &mut Ros2Stats,
 ) {
+    let layout = match sample.attachment() {
+        None => "none",
+        Some(a) => Attachment::decode_any(&a.to_bytes()).map_or("other", |(_, l)| l.name()),
+    };
+    *stats.attachments.entry(layout.to_string()).or_default() += 1;
     let key = sample.key_expr().as_str();
     let typed = split_topic_key(key).is_some_and(|(_, ty, h)| ty == t.dds_name && h == t.hash);
     if !typed {

@@ -1,8 +1,14 @@
 //! ROS 2 MCAP files (profile `ros2`, schema encoding `ros2msg`, message encoding `cdr`): the
 //! messages `pheromone ros2` publishes, written with the `mcap` crate for `ros2 bag play` and
-//! Foxglove. Each [`McapRecorder::end_frame`] closes the current chunk and flushes the file, so
-//! a process that dies leaves a file a streaming reader reads up to its last frame;
-//! [`McapRecorder::finish`] writes the summary and footer.
+//! Foxglove, in the form rosbag2's MCAP storage plugin writes
+//! (`rosbag2_storage_mcap/src/mcap_storage.cpp`, `create_topic` and `update_metadata`): schemas
+//! in the `.msg` grammar ([`crate::types::ros2msg_schema`]), each channel's metadata holding its
+//! `offered_qos_profiles` (YAML, as `rosbag2_storage/src/rosbag2_storage/qos.cpp` writes them for
+//! bag version 9) and its `topic_type_hash` (RIHS01), and at the end a `rosbag2` metadata record
+//! whose `serialized_metadata` is the bag's metadata (YAML, version 9: topics, types, QoS, hashes,
+//! message counts, start and duration). Each [`McapRecorder::end_frame`] closes the current
+//! chunk and flushes the file, so a process that dies leaves a file a streaming reader reads up
+//! to its last frame; [`McapRecorder::finish`] writes the metadata, summary and footer.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -11,7 +17,56 @@ use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
-use crate::types::{ros2msg_schema, TypeInfo};
+use crate::graph::Qos;
+use crate::types::{ros2msg_schema, TypeInfo, GRID_MAP, OCCUPANCY_GRID};
+
+/// The ROS 2 distribution whose type hashes and bag format the files follow.
+pub const ROS_DISTRO: &str = "jazzy";
+
+/// The QoS a recorded topic is declared to have been offered with: maps (GridMap,
+/// OccupancyGrid) as a map server offers them, reliable and transient local, keep last 1, so
+/// `ros2 bag play` republishes them latched; every other topic reliable and volatile, keep
+/// last 1 (the node's publishers).
+pub fn recorded_qos(t: &TypeInfo) -> Qos {
+    Qos {
+        reliable: true,
+        transient_local: t.name == GRID_MAP || t.name == OCCUPANCY_GRID,
+        depth: 1,
+    }
+}
+
+/// One offered QoS profile as a YAML sequence of one map, as rosbag2 writes
+/// `offered_qos_profiles` (`serialize_rclcpp_qos_vector`, bag version 9: policies by name,
+/// infinite durations as `RMW_DURATION_INFINITE`); lines after the first are indented by
+/// `indent`.
+pub fn qos_yaml(q: Qos, indent: &str) -> String {
+    let infinite = ["    sec: 9223372036", "    nsec: 854775807"];
+    let reliability = if q.reliable {
+        "reliable"
+    } else {
+        "best_effort"
+    };
+    let durability = if q.transient_local {
+        "transient_local"
+    } else {
+        "volatile"
+    };
+    let mut lines = vec![
+        "- history: keep_last".to_string(),
+        format!("  depth: {}", q.depth),
+        format!("  reliability: {reliability}"),
+        format!("  durability: {durability}"),
+    ];
+    for key in ["deadline", "lifespan", "liveliness_lease_duration"] {
+        if key == "liveliness_lease_duration" {
+            lines.push("  liveliness: automatic".into());
+        }
+        lines.push(format!("  {key}:"));
+        lines.extend(infinite.iter().map(|l| l.to_string()));
+    }
+    lines.push("  avoid_ros_namespace_conventions: false".into());
+    lines.join(&format!("\n{indent}"))
+}
 
 #[derive(Debug, Error)]
 #[error("MCAP file {path}: {action}: {detail}")]
@@ -21,12 +76,24 @@ pub struct RecordError {
     pub detail: String,
 }
 
+/// A recorded topic.
+struct Topic {
+    name: String,
+    channel: u16,
+    type_name: &'static str,
+    hash: String,
+    qos: Qos,
+    messages: u64,
+}
+
 /// An MCAP file being written.
 pub struct McapRecorder {
     path: PathBuf,
     writer: mcap::Writer<BufWriter<File>>,
-    channels: Vec<(String, u16)>,
+    topics: Vec<Topic>,
     sequence: u32,
+    /// The smallest and largest log time written (ns).
+    span: Option<(u64, u64)>,
     pub messages: u64,
     pub bytes: u64,
 }
@@ -48,8 +115,9 @@ impl McapRecorder {
         Ok(Self {
             path: path.to_path_buf(),
             writer,
-            channels: Vec::new(),
+            topics: Vec::new(),
             sequence: 0,
+            span: None,
             messages: 0,
             bytes: 0,
         })
@@ -68,25 +136,38 @@ impl McapRecorder {
         }
     }
 
-    /// Adds a topic of type `t` (absolute ROS name); returns its index for [`Self::write`].
+    /// Adds a topic of type `t` (absolute ROS name), offered with [`recorded_qos`]; returns its
+    /// index for [`Self::write`].
     pub fn add_topic(&mut self, topic: &str, t: &TypeInfo) -> Result<usize, RecordError> {
         let schema = self
             .writer
             .add_schema(t.name, "ros2msg", ros2msg_schema(t.name).as_bytes())
             .map_err(|e| self.err("add schema", e))?;
+        let qos = recorded_qos(t);
+        let metadata = BTreeMap::from([
+            ("offered_qos_profiles".to_string(), qos_yaml(qos, "")),
+            ("topic_type_hash".to_string(), t.hash.clone()),
+        ]);
         let channel = self
             .writer
-            .add_channel(schema, topic, "cdr", &BTreeMap::new())
+            .add_channel(schema, topic, "cdr", &metadata)
             .map_err(|e| self.err("add channel", e))?;
-        self.channels.push((topic.to_string(), channel));
-        Ok(self.channels.len() - 1)
+        self.topics.push(Topic {
+            name: topic.to_string(),
+            channel,
+            type_name: t.name,
+            hash: t.hash.clone(),
+            qos,
+            messages: 0,
+        });
+        Ok(self.topics.len() - 1)
     }
 
     /// Writes one CDR message on topic `index`, logged at `log_time_ns` (ns since the epoch).
     pub fn write(&mut self, index: usize, log_time_ns: u64, cdr: &[u8]) -> Result<(), RecordError> {
         self.sequence = self.sequence.wrapping_add(1);
         let header = mcap::records::MessageHeader {
-            channel_id: self.channels[index].1,
+            channel_id: self.topics[index].channel,
             sequence: self.sequence,
             log_time: log_time_ns,
             publish_time: log_time_ns,
@@ -96,6 +177,11 @@ impl McapRecorder {
             .map_err(|e| self.err("write message", e))?;
         self.messages += 1;
         self.bytes += cdr.len() as u64;
+        self.topics[index].messages += 1;
+        self.span = Some(match self.span {
+            Some((lo, hi)) => (lo.min(log_time_ns), hi.max(log_time_ns)),
+            None => (log_time_ns, log_time_ns),
+        });
         Ok(())
     }
 
@@ -104,8 +190,74 @@ impl McapRecorder {
         self.writer.flush().map_err(|e| self.err("flush", e))
     }
 
-    /// Writes the summary and footer.
+    /// The bag's metadata as rosbag2 serializes it (`YAML::convert<BagMetadata>::encode`,
+    /// version 9), for the `rosbag2` metadata record.
+    pub fn bag_metadata_yaml(&self) -> String {
+        let file = self
+            .path
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let file = serde_json::to_string(&file).expect("a string");
+        let (start, duration) = self.span.map_or((0, 0), |(lo, hi)| (lo, hi - lo));
+        let n = self.messages;
+        let mut y: Vec<String> = [
+            "version: 9",
+            "storage_identifier: mcap",
+            "duration:",
+            &format!("  nanoseconds: {duration}"),
+            "starting_time:",
+            &format!("  nanoseconds_since_epoch: {start}"),
+            &format!("message_count: {n}"),
+            "topics_with_message_count:",
+        ]
+        .map(str::to_string)
+        .into();
+        for t in &self.topics {
+            y.extend([
+                "  - topic_metadata:".to_string(),
+                format!(
+                    "      name: {}",
+                    serde_json::to_string(&t.name).expect("a string")
+                ),
+                format!("      type: {}", t.type_name),
+                "      serialization_format: cdr".into(),
+                "      offered_qos_profiles:".into(),
+                format!("        {}", qos_yaml(t.qos, "        ")),
+                format!("      type_description_hash: {}", t.hash),
+                format!("    message_count: {}", t.messages),
+            ]);
+        }
+        y.extend([
+            "compression_format: \"\"".to_string(),
+            "compression_mode: \"\"".into(),
+            "relative_file_paths:".into(),
+            format!("  - {file}"),
+            "files:".into(),
+            format!("  - path: {file}"),
+            "    starting_time:".into(),
+            format!("      nanoseconds_since_epoch: {start}"),
+            "    duration:".into(),
+            format!("      nanoseconds: {duration}"),
+            format!("    message_count: {n}"),
+            "custom_data: ~".into(),
+            format!("ros_distro: {ROS_DISTRO}"),
+        ]);
+        y.join("\n") + "\n"
+    }
+
+    /// Writes the `rosbag2` metadata record, the summary and the footer.
     pub fn finish(mut self) -> Result<(), RecordError> {
+        let metadata = mcap::records::Metadata {
+            name: "rosbag2".into(),
+            metadata: BTreeMap::from([(
+                "serialized_metadata".to_string(),
+                self.bag_metadata_yaml(),
+            )]),
+        };
+        self.writer
+            .write_metadata(&metadata)
+            .map_err(|e| self.err("write the rosbag2 metadata", e))?;
         self.writer
             .finish()
             .map(|_| ())
@@ -143,6 +295,26 @@ mod tests {
         assert_eq!(
             (msgs[0].log_time, &msgs[1].data[..]),
             (5, &[0, 1, 0, 0, 8][..])
+        );
+        let meta = &msgs[0].channel.metadata;
+        assert_eq!(meta["topic_type_hash"], t.hash);
+        assert!(meta["offered_qos_profiles"].contains("\n  durability: transient_local\n"));
+        let bag: Vec<_> = mcap::read::LinearReader::new(&bytes)
+            .unwrap()
+            .filter_map(|r| match r.unwrap() {
+                mcap::records::Record::Metadata(m) => Some(m),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(bag.len(), 1);
+        assert_eq!(bag[0].name, "rosbag2");
+        let yaml = &bag[0].metadata["serialized_metadata"];
+        assert!(yaml.contains("\nmessage_count: 2\n"), "{yaml}");
+        assert!(yaml.contains("\n    message_count: 2\n"), "{yaml}");
+        assert!(yaml.contains("\n  nanoseconds: 1\n"), "{yaml}");
+        assert!(
+            yaml.contains("\n        - history: keep_last\n          depth: 1\n"),
+            "{yaml}"
         );
     }
 }

@@ -10,7 +10,7 @@
 //! plus 48 for a fixed array, 96 for a bounded and 144 for an unbounded sequence; a nested
 //! type is id 1.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 
 use sha2::{Digest, Sha256};
@@ -57,6 +57,16 @@ impl Elem {
             Elem::Str => "string",
             Elem::Msg(n) => n,
         }
+    }
+}
+
+/// `pkg/msg/Name` → `pkg/Name`: how a `.msg` file names a message type (ROS 2's interface
+/// grammar has no `msg/` in a field's type) and how rosbag2 names a dependency in its `MSG:`
+/// lines.
+pub fn msg_reference(name: &str) -> String {
+    match name.split('/').collect::<Vec<_>>()[..] {
+        [pkg, "msg", base] => format!("{pkg}/{base}"),
+        _ => name.to_string(),
     }
 }
 
@@ -290,20 +300,42 @@ fn msg_text(fs: &[Field]) -> String {
             Shape::Array(n) => format!("[{n}]"),
             Shape::Seq => "[]".into(),
         };
-        let _ = writeln!(s, "{}{suffix} {}", fl.elem.msg_name(), fl.name);
+        let ty = match fl.elem {
+            Msg(n) => msg_reference(n),
+            e => e.msg_name().to_string(),
+        };
+        let _ = writeln!(s, "{ty}{suffix} {}", fl.name);
     }
     s
 }
 
-/// The `ros2msg` schema of an MCAP channel (what `ros2 bag record` writes): the type's
-/// definition, then each referenced type's after a line of 80 `=` and `MSG: pkg/msg/Name`.
+/// The `ros2msg` schema of an MCAP channel, as rosbag2 writes it
+/// (`rosbag2_cpp/src/rosbag2_cpp/message_definitions/local_message_definition_source.cpp`,
+/// `get_full_text` and `delimiter`): the type's `.msg` text, then depth first each type it
+/// references that is not written yet, in the order of their names (a `std::set`), each after
+/// an empty line, a line of 80 `=` and `MSG: pkg/Name`. Field types are `pkg/Name`, as in the
+/// `.msg` grammar (`std_msgs/Header header`), never `pkg/msg/Name`.
 pub fn ros2msg_schema(name: &'static str) -> String {
-    let all = closure(name);
-    let mut s = msg_text(all[name]);
-    for (n, fs) in all.iter().filter(|(n, _)| **n != name) {
-        let _ = write!(s, "{}\nMSG: {n}\n{}", "=".repeat(80), msg_text(fs));
+    fn append(name: &'static str, seen: &mut BTreeSet<&'static str>, out: &mut String) {
+        let fs = fields(name).unwrap_or_else(|| panic!("unknown message type {name}"));
+        out.push_str(&msg_text(fs));
+        let deps: BTreeMap<String, &'static str> = fs
+            .iter()
+            .filter_map(|fl| match fl.elem {
+                Msg(n) => Some((msg_reference(n), n)),
+                _ => None,
+            })
+            .collect();
+        for (reference, dep) in deps {
+            if seen.insert(dep) {
+                let _ = write!(out, "\n{}\nMSG: {reference}\n", "=".repeat(80));
+                append(dep, seen, out);
+            }
+        }
     }
-    s
+    let mut out = String::new();
+    append(name, &mut BTreeSet::new(), &mut out);
+    out
 }
 
 /// Everything a topic needs about its type.
@@ -373,8 +405,36 @@ mod tests {
     #[test]
     fn schema_lists_each_referenced_type_once() {
         let s = ros2msg_schema(GRID_MAP);
-        assert!(s.starts_with("std_msgs/msg/Header header\n"));
-        assert_eq!(s.matches("MSG: geometry_msgs/msg/Pose\n").count(), 1);
+        assert!(s.starts_with("std_msgs/Header header\n"));
+        assert!(!s.contains("/msg/"), "{s}");
+        assert_eq!(s.matches("MSG: geometry_msgs/Pose\n").count(), 1);
         assert_eq!(s.matches("MSG: ").count(), 9, "{s}");
+    }
+
+    /// rosbag2's layout: depth first, dependencies by name, a blank line before each block.
+    #[test]
+    fn schema_is_written_as_rosbag2_writes_it() {
+        let bar = "=".repeat(80);
+        assert_eq!(
+            ros2msg_schema(HEADER),
+            format!(
+                "builtin_interfaces/Time stamp\nstring frame_id\n\n{bar}\n\
+                 MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+            )
+        );
+        let s = ros2msg_schema(POSE_COV_STAMPED);
+        let blocks: Vec<&str> = s.lines().filter_map(|l| l.strip_prefix("MSG: ")).collect();
+        assert_eq!(
+            blocks,
+            [
+                "geometry_msgs/PoseWithCovariance",
+                "geometry_msgs/Pose",
+                "geometry_msgs/Point",
+                "geometry_msgs/Quaternion",
+                "std_msgs/Header",
+                "builtin_interfaces/Time"
+            ]
+        );
+        assert!(s.starts_with("std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n"));
     }
 }
