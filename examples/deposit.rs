@@ -13,6 +13,9 @@ const PERIOD: Duration = Duration::from_millis(200);
 
 fn main() -> anyhow::Result<()> {
     field::shm::set_verbose(false);
+    // A program of its own: Ctrl-C ends the loop below (`node.wait` fails) instead of killing
+    // the process before it cleans up.
+    field::shm::handle_termination_requests();
     let node = create_node(&format!("example-deposit-{}", std::process::id()))?;
     let mut publisher = DepositPublisher::attach_within(&node, FIELD, 1, Duration::from_secs(30))?;
     let mut step = 0u32;

@@ -14,6 +14,9 @@ const POINT_M: (f32, f32) = (12.8, 12.8);
 
 fn main() -> anyhow::Result<()> {
     field::shm::set_verbose(false);
+    // A program of its own: Ctrl-C ends the loop below (`node.wait` fails) instead of killing
+    // the process before it cleans up.
+    field::shm::handle_termination_requests();
     let node = create_node(&format!("example-read-{}", std::process::id()))?;
     let mut reader = FieldReader::attach_within(&node, FIELD, Duration::from_secs(30))?;
     let mut last_print = 0u64;

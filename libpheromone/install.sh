@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Builds libpheromone and installs it for C, C++, CMake and pkg-config:
 #   bash libpheromone/install.sh [--prefix DIR] [--profile release|dev]
-# DIR (default /usr/local) receives lib/libpheromone.{so,a}, include/pheromone.{h,hpp},
-# lib/pkgconfig/pheromone.pc and lib/cmake/pheromone/ (find_package(pheromone)).
+# DIR (default /usr/local) receives lib/libpheromone.so.MAJOR.MINOR.PATCH (SONAME
+# libpheromone.so.MAJOR) with the links libpheromone.so.MAJOR and libpheromone.so, lib/libpheromone.a,
+# include/pheromone.{h,hpp}, lib/pkgconfig/pheromone.pc and lib/cmake/pheromone/
+# (find_package(pheromone)).
 set -euo pipefail
 prefix=/usr/local
 profile=release
@@ -25,15 +27,20 @@ target="${CARGO_TARGET_DIR:-target}/$out"
 version=$(sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -n 1)
 major=${version%%.*}
 minor=${version#*.}; minor=${minor%%.*}
+soname="libpheromone.so.$major"
+real="libpheromone.so.$version"
 mkdir -p "$prefix"
 prefix="$(cd "$prefix" && pwd)"
 install -d "$prefix/lib/pkgconfig" "$prefix/lib/cmake/pheromone" "$prefix/include"
-install -m 755 "$target/libpheromone.so" "$prefix/lib/libpheromone.so"
+install -m 755 "$target/libpheromone.so" "$prefix/lib/$real"
+ln -sfn "$real" "$prefix/lib/$soname"
+ln -sfn "$soname" "$prefix/lib/libpheromone.so"
 install -m 644 "$target/libpheromone.a" "$prefix/lib/libpheromone.a"
 install -m 644 "$here/include/pheromone.h" "$here/include/pheromone.hpp" "$prefix/include/"
 sed -e "s|@PREFIX@|$prefix|" -e "s|@VERSION@|$version|" "$here/cmake/pheromone.pc.in" \
     > "$prefix/lib/pkgconfig/pheromone.pc"
-install -m 644 "$here/cmake/pheromoneConfig.cmake" "$prefix/lib/cmake/pheromone/"
+sed -e "s|@REAL@|$real|" -e "s|@SONAME@|$soname|" "$here/cmake/pheromoneConfig.cmake.in" \
+    > "$prefix/lib/cmake/pheromone/pheromoneConfig.cmake"
 sed -e "s|@VERSION@|$version|" -e "s|@MAJOR@|$major|" -e "s|@MINOR@|$minor|" \
     "$here/cmake/pheromoneConfigVersion.cmake.in" \
     > "$prefix/lib/cmake/pheromone/pheromoneConfigVersion.cmake"

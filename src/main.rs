@@ -78,6 +78,9 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // This program owns its process: its nodes stop on SIGINT/SIGTERM through iceoryx2's handler
+    // (the library's default is to install none, for programs that embed it).
+    field::shm::handle_termination_requests();
     let cli = Cli::parse();
     field::shm::set_verbose(cli.verbose);
     // The inherited domain is checked as the flag is, before anything starts.

@@ -6,9 +6,10 @@
 //!   `pheromone_frame_borrow` have returned (it then has the plane pointers). The two readers
 //!   alternate in `rounds` runs each, so drift on the machine touches both alike.
 //! - Sampling cost: value + gradient at the same points of the same frame in this process,
-//!   through `FrameView` on the Rust reader's frame and through `pheromone_sample_value` /
-//!   `pheromone_sample_gradient` on the C handle's borrowed frame; the median over repetitions
-//!   of the time per point, alternating the two.
+//!   through `FrameView` on the Rust reader's frame, through `pheromone_sample_value` /
+//!   `pheromone_sample_gradient` on the C handle's borrowed frame (two calls per point), and
+//!   through one `pheromone_sample_many` call for all the points (issue 47's batch); the median
+//!   over repetitions of the time per point, the three alternated.
 //!
 //! The C functions are called through their `extern "C"` symbols (libpheromone linked as an
 //! rlib): the same code a C program runs, without a C compiler at bench time.
@@ -24,9 +25,9 @@ use field::{Deposit, Kernel};
 use pheromone::{
     pheromone_field_attach, pheromone_field_detach, pheromone_frame_borrow,
     pheromone_frame_release, pheromone_last_error, pheromone_sample_gradient,
-    pheromone_sample_value, pheromone_wait_frame, PheromoneAttachOptions, PheromoneField,
-    PheromoneFrameView, PheromoneStatus, PheromoneWaitPolicy, PHEROMONE_MAX_CHANNELS,
-    PHEROMONE_WAIT_BUSY_POLL, PHEROMONE_WAIT_EVENT, PHEROMONE_WAIT_SPIN,
+    pheromone_sample_many, pheromone_sample_value, pheromone_wait_frame, PheromoneAttachOptions,
+    PheromoneField, PheromoneFrameView, PheromoneStatus, PheromoneWaitPolicy,
+    PHEROMONE_MAX_CHANNELS, PHEROMONE_WAIT_BUSY_POLL, PHEROMONE_WAIT_EVENT, PHEROMONE_WAIT_SPIN,
 };
 use serde::Serialize;
 
@@ -64,8 +65,12 @@ pub struct CAbiReport {
     /// ns per point for value + gradient (median over the repetitions).
     pub sample_rust_ns: f64,
     pub sample_c_ns: f64,
-    /// C / Rust (goal ≤ 1.1).
+    /// C / Rust, one point per pair of calls (issue 29's goal ≤ 1.1).
     pub sample_ratio: f64,
+    /// ns per point for value + gradient through one `pheromone_sample_many` call for all the
+    /// points, and its ratio to Rust's (issue 47's goal ≤ 1.1).
+    pub sample_batch_c_ns: f64,
+    pub sample_batch_ratio: f64,
     pub points: usize,
     pub method: &'static str,
 }
@@ -109,7 +114,8 @@ pub fn measure(
     }
     let frame_rust_ns = crate::latency(&rust, "C ABI frames, Rust reader")?;
     let frame_c_ns = crate::latency(&c, "C ABI frames, C reader")?;
-    let (sample_rust_ns, sample_c_ns) = sampling_cost(&tag(), run.width, run.points, run.reps)?;
+    let (sample_rust_ns, sample_c_ns, sample_batch_c_ns) =
+        sampling_cost(&tag(), run.width, run.points, run.reps)?;
     Ok(CAbiReport {
         width: run.width,
         frame_bytes: run.width as u64 * run.width as u64 * 4,
@@ -118,12 +124,15 @@ pub fn measure(
         frame_rust_ns,
         frame_c_ns,
         sample_ratio: ratio(sample_c_ns, sample_rust_ns),
+        sample_batch_ratio: ratio(sample_batch_c_ns, sample_rust_ns),
         sample_rust_ns,
         sample_c_ns,
+        sample_batch_c_ns,
         points: run.points,
         method: "frames: publish stamp to the reader holding the frame (C: after wait + borrow), \
                  1 reader process waiting on the event, Rust and C alternated; sampling: value + \
-                 gradient per point on the same frame in this process, median of repetitions",
+                 gradient per point on the same frame in this process (C per point, and C batch: \
+                 one pheromone_sample_many call), median of repetitions",
     })
 }
 
@@ -251,13 +260,14 @@ pub fn read(source: &str, wait: ReaderWait, skip: usize, count: usize) -> Result
     })
 }
 
-/// ns per point of value + gradient: (Rust `FrameView`, the C ABI), on one frame.
+/// ns per point of value + gradient: (Rust `FrameView`, the C ABI per point, the C ABI's batch),
+/// on one frame.
 fn sampling_cost(
     tag: &str,
     width: u32,
     points: usize,
     reps: usize,
-) -> Result<(f64, f64), BenchError> {
+) -> Result<(f64, f64, f64), BenchError> {
     let name = format!("bench-cabi-{tag}");
     let node = create_node(&name)?;
     let config = FieldConfig {
@@ -320,20 +330,42 @@ fn sampling_cost(
             )
         })
         .collect();
-    let (mut rust_ns, mut c_ns) = (Vec::new(), Vec::new());
+    let timed = time_sampling(&frame.view, &h, &pts, reps);
+    check(
+        // SAFETY: `h.0` is still live (`h` drops after this) and only this thread calls on it;
+        // the sampling above, the only use of the borrowed frame, is over.
+        unsafe { pheromone_frame_release(h.0) },
+        "pheromone_frame_release",
+    )?;
+    timed
+}
+
+/// The sampling of `sampling_cost` timed, `reps` times each alternated: ns per point for
+/// (Rust `FrameView`, the C ABI per point, one `pheromone_sample_many` call), medians. `h` holds
+/// a borrowed frame equal to `view`'s.
+fn time_sampling(
+    view: &field::FrameView<'_>,
+    h: &CHandle,
+    pts: &[(f32, f32)],
+    reps: usize,
+) -> Result<(f64, f64, f64), BenchError> {
+    let points = pts.len();
+    let xy: Vec<f32> = pts.iter().flat_map(|&(x, y)| [x, y]).collect();
+    let (mut values, mut gradients) = (vec![0.0f32; points], vec![0.0f32; 2 * points]);
+    let (mut rust_ns, mut c_ns, mut batch_ns) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..reps.max(1) {
         let t0 = Instant::now();
         let mut acc = 0.0f32;
-        for &(x, y) in &pts {
-            let v = frame.view.value(0, black_box(x), black_box(y));
-            let (gx, gy) = frame.view.gradient(0, black_box(x), black_box(y));
+        for &(x, y) in pts {
+            let v = view.value(0, black_box(x), black_box(y));
+            let (gx, gy) = view.gradient(0, black_box(x), black_box(y));
             acc += v + gx + gy;
         }
         black_box(acc);
         rust_ns.push(t0.elapsed().as_nanos() as f64 / points as f64);
         let t0 = Instant::now();
         let mut acc = 0.0f32;
-        for &(x, y) in &pts {
+        for &(x, y) in pts {
             let (mut v, mut gx, mut gy) = (0.0, 0.0, 0.0);
             // SAFETY: a live handle with a borrowed frame; the out pointers are locals.
             unsafe {
@@ -344,14 +376,28 @@ fn sampling_cost(
         }
         black_box(acc);
         c_ns.push(t0.elapsed().as_nanos() as f64 / points as f64);
+        let t0 = Instant::now();
+        // SAFETY: a live handle with a borrowed frame; `xy` holds 2·points floats, `values`
+        // points and `gradients` 2·points, none overlapping.
+        let s = unsafe {
+            pheromone_sample_many(
+                h.0,
+                0,
+                black_box(xy.as_ptr()),
+                points,
+                values.as_mut_ptr(),
+                gradients.as_mut_ptr(),
+            )
+        };
+        black_box((&values, &gradients));
+        batch_ns.push(t0.elapsed().as_nanos() as f64 / points as f64);
+        check(s, "pheromone_sample_many")?;
     }
-    check(
-        // SAFETY: `h.0` is still live (`h` drops after this) and only this thread calls on it;
-        // the sampling above, the only use of the borrowed frame, is over.
-        unsafe { pheromone_frame_release(h.0) },
-        "pheromone_frame_release",
-    )?;
-    Ok((median(&mut rust_ns), median(&mut c_ns)))
+    Ok((
+        median(&mut rust_ns),
+        median(&mut c_ns),
+        median(&mut batch_ns),
+    ))
 }
 
 fn median(v: &mut [f64]) -> f64 {

@@ -351,6 +351,12 @@ fn c_abi_targets(r: &Report, t: &mut Vec<Target>) {
             1.1,
             c.sample_ratio,
         ));
+        t.push(target(
+            "C batch sampling (pheromone_sample_many) / Rust FrameView's",
+            "<=",
+            1.1,
+            c.sample_batch_ratio,
+        ));
     }
 }
 

@@ -204,12 +204,15 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
     }
 
     /// Blocks until a sender notifies (or `timeout`), consuming the notifications.
+    /// `ReceiveError::Interrupted` when a signal the program handles cut the wait short (not in
+    /// a process that handles termination requests through iceoryx2).
     pub fn wait(&self, timeout: Duration) -> Result<(), ReceiveError> {
-        Ok(crate::shm::wait_interruptible(
-            &self.listener,
-            timeout,
-            &self.service,
-        )?)
+        match crate::shm::wait_interruptible(&self.listener, timeout, &self.service)? {
+            crate::shm::Woken::Anyway => Ok(()),
+            crate::shm::Woken::Interrupted => Err(ReceiveError::Interrupted {
+                service: self.service.clone(),
+            }),
+        }
     }
 
     /// Senders currently attached to the service (0 once the other side has gone).

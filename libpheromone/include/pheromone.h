@@ -26,6 +26,16 @@
 #define PHEROMONE_LAYOUT_VERSION 1
 
 /**
+ * The version of this library and of the `pheromone.h` it ships with (the crate's version;
+ * `libpheromone.so.MAJOR` is its SONAME).
+ */
+#define PHEROMONE_VERSION_MAJOR 0
+
+#define PHEROMONE_VERSION_MINOR 1
+
+#define PHEROMONE_VERSION_PATCH 0
+
+/**
  * Most channels a field has (`FieldConfig`): the length of `PheromoneFrameView::planes`.
  */
 #define PHEROMONE_MAX_CHANNELS 64
@@ -34,6 +44,21 @@
  * Bytes of the per-thread last-error message, its terminating NUL included.
  */
 #define PHEROMONE_ERROR_CAPACITY 512
+
+/**
+ * `pheromone_set_log_level`: iceoryx2's log levels, most verbose first.
+ */
+#define PHEROMONE_LOG_TRACE 0
+
+#define PHEROMONE_LOG_DEBUG 1
+
+#define PHEROMONE_LOG_INFO 2
+
+#define PHEROMONE_LOG_WARN 3
+
+#define PHEROMONE_LOG_ERROR 4
+
+#define PHEROMONE_LOG_FATAL 5
 
 /**
  * `PheromoneReceipt::status`: the deposit is in frame `sequence`.
@@ -140,6 +165,21 @@ typedef enum {
    * outside its grid); the receipt's `reason` and the last error say why. Nothing was applied.
    */
   PHEROMONE_STATUS_REJECTED = 10,
+  /**
+   * A signal the program handles cut a blocking call short: `pheromone_wait_frame` sleeping on
+   * the frame event, `pheromone_deposit_confirmed` waiting for its receipt (the deposit may
+   * still be applied, once), `pheromone_field_attach` between retries. The program's handler
+   * ran; the library installs, replaces and consumes no signal handler. Call again to go on
+   * waiting.
+   */
+  PHEROMONE_STATUS_INTERRUPTED = 11,
+  /**
+   * `pheromone_field_attach`: the field's services exist (another process attached to them
+   * holds them) but no live process publishes its frames: its field process died (and no
+   * standby took over) within `attach_timeout_ns`. Restart the field; a handle attached before
+   * it died keeps its last frame and receives the frames of a field restarted under the name.
+   */
+  PHEROMONE_STATUS_FIELD_DEAD = 12,
 } PheromoneStatus;
 
 /**
@@ -169,8 +209,10 @@ typedef struct {
    */
   uint64_t attach_timeout_ns;
   /**
-   * The iceoryx2 domain (`pheromone --iox-domain`); NULL: the `PHEROMONE_IOX_DOMAIN`
-   * environment variable, or the default domain.
+   * The iceoryx2 domain (`pheromone --iox-domain`). NULL: the `PHEROMONE_IOX_DOMAIN`
+   * environment variable if it is set and not empty, else iceoryx2's default domain. `""`:
+   * iceoryx2's default domain, whatever the environment says. Otherwise 1–64 characters of
+   * `A–Z a–z 0–9 _ -`.
    */
   const char *iox_domain;
 } PheromoneAttachOptions;
@@ -355,6 +397,11 @@ typedef struct {
   double cov[9];
 } PheromonePoseEstimate;
 
+/**
+ * Every status, in the order of their values.
+ */
+#define PheromoneStatus_ALL { PheromoneStatus_Ok, PheromoneStatus_Timeout, PheromoneStatus_NoField, PheromoneStatus_BadArgument, PheromoneStatus_Layout, PheromoneStatus_NoFrame, PheromoneStatus_Borrowed, PheromoneStatus_NotDelivered, PheromoneStatus_ShmError, PheromoneStatus_Internal, PheromoneStatus_Rejected, PheromoneStatus_Interrupted, PheromoneStatus_FieldDead, }
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -385,7 +432,10 @@ PheromoneStatus pheromone_ellipse_params_init(PheromoneEllipseParams *params);
  * Attaches to the running field `name` and stores a new handle in `*out` (NULL on failure).
  * Fails with `PHEROMONE_STATUS_NO_FIELD` if no such field runs (after retrying for
  * `options->attach_timeout_ns`), `PHEROMONE_STATUS_LAYOUT` if the field or this program's
- * `pheromone.h` speaks another layout version. `options` NULL: the defaults. Allocates.
+ * `pheromone.h` speaks another layout version, `PHEROMONE_STATUS_INTERRUPTED` if a signal the
+ * program handles cut a wait between retries short. `options` NULL: the defaults. Installs no
+ * signal handler and leaves iceoryx2's log level as it is (`pheromone_set_log_level`).
+ * Allocates.
  *
  * Thread safety: any thread; handles are independent.
  *
@@ -408,8 +458,13 @@ PheromoneStatus pheromone_field_detach(PheromoneField *field);
 
 /**
  * Waits up to `timeout_ns` for a frame newer than the one held, as `policy` says:
- * `PHEROMONE_STATUS_OK` when one came, `PHEROMONE_STATUS_TIMEOUT` when none did. Refused with
- * `PHEROMONE_STATUS_BORROWED` while a frame is borrowed. Does not allocate.
+ * `PHEROMONE_STATUS_OK` when one came, `PHEROMONE_STATUS_TIMEOUT` when none did,
+ * `PHEROMONE_STATUS_INTERRUPTED` when a signal the program handles cut the sleep on the frame
+ * event short (the program's handler ran; the spin of `PHEROMONE_WAIT_SPIN` and
+ * `PHEROMONE_WAIT_BUSY_POLL` make no system call a signal could cut and go on until the frame or
+ * the timeout). Refused with `PHEROMONE_STATUS_BORROWED` while a frame is borrowed. Takes the
+ * frame-ready notifications pending on `pheromone_field_fd` first: after a `poll` on it, call
+ * this with a zero timeout. Does not allocate.
  *
  * Thread safety: not concurrently with any other call on this handle.
  *
@@ -466,6 +521,24 @@ PheromoneStatus pheromone_sample_value(const PheromoneField *field, uint32_t cha
 PheromoneStatus pheromone_sample_gradient(const PheromoneField *field, uint32_t channel, float x_m, float y_m, float *gx, float *gy);
 
 /**
+ * Samples `channel` of the borrowed frame at `n` points in one call: `xy` holds `2·n` floats,
+ * `x0, y0, x1, y1, …` (an array of `struct { float x, y; }`); writes `values[i]` (Rust's
+ * `FrameView::value`) when `values` is not NULL and `gradients[2i]`, `gradients[2i + 1]`
+ * (`FrameView::gradient`: ∂P/∂x, ∂P/∂y per metre) when `gradients` is not NULL — the numbers
+ * of `pheromone_sample_value` / `_gradient` point by point, with the checks made once per call.
+ * Every coordinate must be finite (`PHEROMONE_STATUS_BAD_ARGUMENT` names the first that is not,
+ * and nothing is written); `values` and `gradients` both NULL is `BAD_ARGUMENT`; `n = 0` does
+ * nothing (`xy` may then be NULL). Does not allocate.
+ *
+ * Thread safety: as `pheromone_sample_value`.
+ *
+ * # Safety
+ * `field` is a live handle; `xy` is valid for `2·n` floats; `values` is NULL or valid for `n`
+ * floats, `gradients` NULL or valid for `2·n` floats, neither overlapping `xy`.
+ */
+PheromoneStatus pheromone_sample_many(const PheromoneField *field, uint32_t channel, const float *xy, size_t n, float *values, float *gradients);
+
+/**
  * (`*left`, `*right`) = the readings of two antennas half `wheel_base_m` to each side of `pose`
  * in the borrowed frame (Rust's `FrameView::antennas`, seed 002). Does not allocate.
  *
@@ -511,6 +584,8 @@ PheromoneStatus pheromone_deposit(PheromoneField *field, const PheromoneDeposit 
  *   say why; nothing was applied;
  * - `PHEROMONE_STATUS_TIMEOUT`: no receipt in time; the deposit may still be applied, at most
  *   once (do not resend it blindly);
+ * - `PHEROMONE_STATUS_INTERRUPTED`: a signal the program handles cut the wait for the receipt
+ *   short; as with `TIMEOUT`, the deposit may still be applied, at most once;
  * - `PHEROMONE_STATUS_BAD_ARGUMENT` (before sending) and `_NOT_DELIVERED` as
  *   `pheromone_deposit`.
  *
@@ -538,6 +613,42 @@ PheromoneStatus pheromone_deposit_confirmed(PheromoneField *field, const Pheromo
  * `field` is a live handle; `pose` and `params` are valid for reads (`params` NULL: defaults).
  */
 PheromoneStatus pheromone_deposit_pose(PheromoneField *field, const PheromonePoseEstimate *pose, const PheromoneEllipseParams *params);
+
+/**
+ * The file descriptor of the handle's frame-ready event, in `*out_fd`, for `poll`/`epoll`/`select`
+ * in the program's own event loop: it becomes readable when the field publishes a frame. On
+ * readable, call `pheromone_wait_frame(field, policy, 0)`, which takes the pending
+ * notifications and the frame (`OK`; `TIMEOUT` after a wake-up for a frame already taken).
+ * The descriptor belongs to the handle: valid until `pheromone_field_detach`; do not read,
+ * close or change its flags. Does not allocate.
+ *
+ * Thread safety: any thread may poll the descriptor; the calls on the handle stay one thread
+ * at a time.
+ *
+ * # Safety
+ * `field` is a live handle; `out_fd` is valid for a write.
+ */
+PheromoneStatus pheromone_field_fd(const PheromoneField *field, int *out_fd);
+
+/**
+ * A static description of `status` (a `PheromoneStatus` value), e.g. "no field of that name
+ * is running" for `PHEROMONE_STATUS_NO_FIELD`; "unknown status" for a value that is none.
+ * Never NULL. (`pheromone_last_error()` says more about the last failure.)
+ *
+ * Thread safety: any thread, any time.
+ */
+const char *pheromone_status_str(int32_t status);
+
+/**
+ * Sets iceoryx2's log level, which is process-wide (every iceoryx2 user in the process shares
+ * it): `PHEROMONE_LOG_TRACE` (0) to `PHEROMONE_LOG_FATAL` (5, only fatal messages). The
+ * library never changes it by itself; iceoryx2's default is `PHEROMONE_LOG_INFO` (or its
+ * `IOX2_LOG_LEVEL` environment variable, if something in the process reads it).
+ * `PHEROMONE_STATUS_BAD_ARGUMENT` for another value.
+ *
+ * Thread safety: any thread, any time.
+ */
+PheromoneStatus pheromone_set_log_level(uint32_t level);
 
 /**
  * The message of the last failed call on this thread (NUL-terminated UTF-8, at most

@@ -90,6 +90,7 @@ impl Status for AttachError {
             AttachError::NoField { .. } => PheromoneStatus::NoField,
             AttachError::Layout { .. } => PheromoneStatus::Layout,
             AttachError::Name(e) => e.status(),
+            AttachError::Interrupted { .. } => PheromoneStatus::Interrupted,
             AttachError::Node { .. } | AttachError::BadFrame { .. } | AttachError::Service(_) => {
                 PheromoneStatus::ShmError
             }
@@ -106,6 +107,8 @@ impl Status for SendError {
             // `pheromone_deposit_confirmed` got no receipt in time: it may still be applied,
             // once.
             SendError::Unconfirmed { .. } => PheromoneStatus::Timeout,
+            // Interrupted while it waited for the receipt: it may still be applied, once.
+            SendError::Interrupted { .. } => PheromoneStatus::Interrupted,
             SendError::Service(_) => PheromoneStatus::ShmError,
         }
     }
@@ -115,6 +118,7 @@ impl Status for ReceiveError {
     fn status(&self) -> PheromoneStatus {
         match self {
             ReceiveError::BadFrame { .. } | ReceiveError::Service(_) => PheromoneStatus::ShmError,
+            ReceiveError::Interrupted { .. } => PheromoneStatus::Interrupted,
         }
     }
 }

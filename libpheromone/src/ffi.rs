@@ -10,7 +10,7 @@
 use std::ffi::{c_char, CStr};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-use crate::error::{fail, last_message_ptr, Failure};
+use crate::error::{bail, fail, last_message_ptr, Failure};
 use crate::handle::{Options, PheromoneField};
 use crate::types::*;
 
@@ -107,7 +107,10 @@ pub unsafe extern "C" fn pheromone_ellipse_params_init(
 /// Attaches to the running field `name` and stores a new handle in `*out` (NULL on failure).
 /// Fails with `PHEROMONE_STATUS_NO_FIELD` if no such field runs (after retrying for
 /// `options->attach_timeout_ns`), `PHEROMONE_STATUS_LAYOUT` if the field or this program's
-/// `pheromone.h` speaks another layout version. `options` NULL: the defaults. Allocates.
+/// `pheromone.h` speaks another layout version, `PHEROMONE_STATUS_INTERRUPTED` if a signal the
+/// program handles cut a wait between retries short. `options` NULL: the defaults. Installs no
+/// signal handler and leaves iceoryx2's log level as it is (`pheromone_set_log_level`).
+/// Allocates.
 ///
 /// Thread safety: any thread; handles are independent.
 ///
@@ -166,8 +169,13 @@ pub unsafe extern "C" fn pheromone_field_detach(field: *mut PheromoneField) -> P
 }
 
 /// Waits up to `timeout_ns` for a frame newer than the one held, as `policy` says:
-/// `PHEROMONE_STATUS_OK` when one came, `PHEROMONE_STATUS_TIMEOUT` when none did. Refused with
-/// `PHEROMONE_STATUS_BORROWED` while a frame is borrowed. Does not allocate.
+/// `PHEROMONE_STATUS_OK` when one came, `PHEROMONE_STATUS_TIMEOUT` when none did,
+/// `PHEROMONE_STATUS_INTERRUPTED` when a signal the program handles cut the sleep on the frame
+/// event short (the program's handler ran; the spin of `PHEROMONE_WAIT_SPIN` and
+/// `PHEROMONE_WAIT_BUSY_POLL` make no system call a signal could cut and go on until the frame or
+/// the timeout). Refused with `PHEROMONE_STATUS_BORROWED` while a frame is borrowed. Takes the
+/// frame-ready notifications pending on `pheromone_field_fd` first: after a `poll` on it, call
+/// this with a zero timeout. Does not allocate.
 ///
 /// Thread safety: not concurrently with any other call on this handle.
 ///
@@ -284,6 +292,56 @@ pub unsafe extern "C" fn pheromone_sample_gradient(
     })
 }
 
+/// Samples `channel` of the borrowed frame at `n` points in one call: `xy` holds `2·n` floats,
+/// `x0, y0, x1, y1, …` (an array of `struct { float x, y; }`); writes `values[i]` (Rust's
+/// `FrameView::value`) when `values` is not NULL and `gradients[2i]`, `gradients[2i + 1]`
+/// (`FrameView::gradient`: ∂P/∂x, ∂P/∂y per metre) when `gradients` is not NULL — the numbers
+/// of `pheromone_sample_value` / `_gradient` point by point, with the checks made once per call.
+/// Every coordinate must be finite (`PHEROMONE_STATUS_BAD_ARGUMENT` names the first that is not,
+/// and nothing is written); `values` and `gradients` both NULL is `BAD_ARGUMENT`; `n = 0` does
+/// nothing (`xy` may then be NULL). Does not allocate.
+///
+/// Thread safety: as `pheromone_sample_value`.
+///
+/// # Safety
+/// `field` is a live handle; `xy` is valid for `2·n` floats; `values` is NULL or valid for `n`
+/// floats, `gradients` NULL or valid for `2·n` floats, neither overlapping `xy`.
+#[no_mangle]
+pub unsafe extern "C" fn pheromone_sample_many(
+    field: *const PheromoneField,
+    channel: u32,
+    xy: *const f32,
+    n: usize,
+    values: *mut f32,
+    gradients: *mut f32,
+) -> PheromoneStatus {
+    guard(|| {
+        // SAFETY: forwarded from this function's contract.
+        let f = unsafe { arg(field, "field") }?;
+        if n > (isize::MAX as usize) / 8 {
+            return Err(fail(BAD, format_args!("n = {n}: too many points")));
+        }
+        let points: &[[f32; 2]] = if n == 0 {
+            &[]
+        } else if xy.is_null() {
+            return Err(null("xy"));
+        } else {
+            // SAFETY: non-null, valid for 2·n floats per the contract; [f32; 2] has the size of
+            // two floats and the alignment of one.
+            unsafe { std::slice::from_raw_parts(xy.cast::<[f32; 2]>(), n) }
+        };
+        let values = (!values.is_null()).then(|| {
+            // SAFETY: non-null, valid for n floats and not overlapping `xy` per the contract.
+            unsafe { std::slice::from_raw_parts_mut(values, n) }
+        });
+        let gradients = (!gradients.is_null()).then(|| {
+            // SAFETY: non-null, valid for 2·n floats and not overlapping `xy` or `values`.
+            unsafe { std::slice::from_raw_parts_mut(gradients.cast::<[f32; 2]>(), n) }
+        });
+        f.sample_many(channel, points, values, gradients)
+    })
+}
+
 /// (`*left`, `*right`) = the readings of two antennas half `wheel_base_m` to each side of `pose`
 /// in the borrowed frame (Rust's `FrameView::antennas`, seed 002). Does not allocate.
 ///
@@ -383,6 +441,8 @@ pub unsafe extern "C" fn pheromone_deposit(
 ///   say why; nothing was applied;
 /// - `PHEROMONE_STATUS_TIMEOUT`: no receipt in time; the deposit may still be applied, at most
 ///   once (do not resend it blindly);
+/// - `PHEROMONE_STATUS_INTERRUPTED`: a signal the program handles cut the wait for the receipt
+///   short; as with `TIMEOUT`, the deposit may still be applied, at most once;
 /// - `PHEROMONE_STATUS_BAD_ARGUMENT` (before sending) and `_NOT_DELIVERED` as
 ///   `pheromone_deposit`.
 ///
@@ -446,6 +506,78 @@ pub unsafe extern "C" fn pheromone_deposit_pose(
             *unsafe { arg(params, "params") }?
         };
         f.deposit_pose(pose, &params)
+    })
+}
+
+/// The file descriptor of the handle's frame-ready event, in `*out_fd`, for `poll`/`epoll`/`select`
+/// in the program's own event loop: it becomes readable when the field publishes a frame. On
+/// readable, call `pheromone_wait_frame(field, policy, 0)`, which takes the pending
+/// notifications and the frame (`OK`; `TIMEOUT` after a wake-up for a frame already taken).
+/// The descriptor belongs to the handle: valid until `pheromone_field_detach`; do not read,
+/// close or change its flags. Does not allocate.
+///
+/// Thread safety: any thread may poll the descriptor; the calls on the handle stay one thread
+/// at a time.
+///
+/// # Safety
+/// `field` is a live handle; `out_fd` is valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn pheromone_field_fd(
+    field: *const PheromoneField,
+    out_fd: *mut core::ffi::c_int,
+) -> PheromoneStatus {
+    guard(|| {
+        use iceoryx2_bb_posix::file_descriptor::FileDescriptorBased;
+        // SAFETY: forwarded from this function's contract.
+        let f = unsafe { arg(field, "field") }?;
+        // SAFETY: forwarded from this function's contract.
+        let out = unsafe { arg_mut(out_fd, "out_fd") }?;
+        // SAFETY: the value is handed to the caller, who is told (above) that the listener owns
+        // it for the handle's life and must not close it; it is not stored here.
+        *out = unsafe { f.frame_ready_listener().file_descriptor().native_handle() };
+        Ok(())
+    })
+}
+
+/// A static description of `status` (a `PheromoneStatus` value), e.g. "no field of that name
+/// is running" for `PHEROMONE_STATUS_NO_FIELD`; "unknown status" for a value that is none.
+/// Never NULL. (`pheromone_last_error()` says more about the last failure.)
+///
+/// Thread safety: any thread, any time.
+#[no_mangle]
+pub extern "C" fn pheromone_status_str(status: i32) -> *const c_char {
+    PheromoneStatus::ALL
+        .iter()
+        .find(|s| **s as i32 == status)
+        .map_or(c"unknown status", |s| s.description())
+        .as_ptr()
+}
+
+/// Sets iceoryx2's log level, which is process-wide (every iceoryx2 user in the process shares
+/// it): `PHEROMONE_LOG_TRACE` (0) to `PHEROMONE_LOG_FATAL` (5, only fatal messages). The
+/// library never changes it by itself; iceoryx2's default is `PHEROMONE_LOG_INFO` (or its
+/// `IOX2_LOG_LEVEL` environment variable, if something in the process reads it).
+/// `PHEROMONE_STATUS_BAD_ARGUMENT` for another value.
+///
+/// Thread safety: any thread, any time.
+#[no_mangle]
+pub extern "C" fn pheromone_set_log_level(level: u32) -> PheromoneStatus {
+    use iceoryx2::prelude::{set_log_level, LogLevel};
+    guard(|| {
+        let l = match level {
+            PHEROMONE_LOG_TRACE => LogLevel::Trace,
+            PHEROMONE_LOG_DEBUG => LogLevel::Debug,
+            PHEROMONE_LOG_INFO => LogLevel::Info,
+            PHEROMONE_LOG_WARN => LogLevel::Warn,
+            PHEROMONE_LOG_ERROR => LogLevel::Error,
+            PHEROMONE_LOG_FATAL => LogLevel::Fatal,
+            l => bail!(
+                BAD,
+                "log level = {l}: expected PHEROMONE_LOG_TRACE (0) … PHEROMONE_LOG_FATAL (5)"
+            ),
+        };
+        set_log_level(l);
+        Ok(())
     })
 }
 

@@ -56,8 +56,12 @@ impl PheromoneField {
             );
         }
         field::shm::check_name(name).map_err(|e| from_shm("field name", &e))?;
-        field::shm::set_verbose(false);
-        let node = create_node(o.iox_domain)?;
+        let domain = effective_domain(o.iox_domain);
+        let node = create_node(domain.as_deref())?;
+        let place = match &domain {
+            Some(d) => format!("field '{name}' in iceoryx2 domain '{d}'"),
+            None => format!("field '{name}' in iceoryx2's default domain"),
+        };
         let timeout = Duration::from_nanos(o.c.attach_timeout_ns);
         let started = std::time::Instant::now();
         let reader = if timeout.is_zero() {
@@ -65,7 +69,8 @@ impl PheromoneField {
         } else {
             FieldReader::attach_within(&node, name, timeout)
         }
-        .map_err(|e| from_shm("attach", &e))?;
+        .map_err(|e| from_shm(&format!("attach to {place}"), &e))?;
+        wait_alive(&node, &reader, &place, started + timeout)?;
         if let Some(f) = reader.frame() {
             check_frame_layout(name, f.header)?;
         }
@@ -82,7 +87,7 @@ impl PheromoneField {
             )),
         }
         .transpose()
-        .map_err(|e| from_shm("attach the deposit publisher", &e))?;
+        .map_err(|e| from_shm(&format!("attach the deposit publisher of {place}"), &e))?;
         Ok(Box::new(Self {
             name: name.to_string(),
             borrowed: None,
@@ -115,6 +120,12 @@ impl PheromoneField {
                 self.name
             );
         }
+        // The notifications pending go first (a frame that comes after this is taken below or
+        // wakes the caller's `poll` on `pheromone_field_fd` again), so a caller that waits in
+        // its own event loop and calls this with a zero timeout is not woken for ever.
+        self.reader
+            .take_notifications()
+            .map_err(|e| from_shm("wait for a frame", &e))?;
         let fresh = self
             .reader
             .wait_frame_with(policy, Duration::from_nanos(timeout_ns))
@@ -169,6 +180,12 @@ impl PheromoneField {
         Ok(())
     }
 
+    /// The frame-ready listener of the handle's reader (its file descriptor is
+    /// `pheromone_field_fd`'s).
+    pub fn frame_ready_listener(&self) -> &iceoryx2::port::listener::Listener<Svc> {
+        self.reader.frame_ready_listener()
+    }
+
     /// Ends the borrow (the view's pointers must not be used any more).
     pub fn release(&mut self) {
         self.borrowed = None;
@@ -205,6 +222,43 @@ impl PheromoneField {
         finite(&[("x_m", x_m), ("y_m", y_m)])?;
         let (f, c) = self.sampled(channel)?;
         Ok(f.gradient(c, x_m, y_m))
+    }
+
+    /// Values and/or gradients of `channel` at every point (`FrameView::value`, `gradient`).
+    pub fn sample_many(
+        &self,
+        channel: u32,
+        points: &[[f32; 2]],
+        values: Option<&mut [f32]>,
+        gradients: Option<&mut [[f32; 2]]>,
+    ) -> Result<(), Failure> {
+        let (f, c) = self.sampled(channel)?;
+        if let Some(i) = points
+            .iter()
+            .position(|p| !(p[0].is_finite() && p[1].is_finite()))
+        {
+            bail!(
+                BAD,
+                "point {i} = ({}, {}) (xy[{}], xy[{}]): must be finite",
+                points[i][0],
+                points[i][1],
+                2 * i,
+                2 * i + 1
+            );
+        }
+        let done = match (values, gradients) {
+            (Some(v), Some(g)) => field::shm::values_and_gradients_into(&f, c, points, v, g),
+            (Some(v), None) => field::shm::values_into(&f, c, points, v),
+            (None, Some(g)) => {
+                for (p, g) in points.iter().zip(g.iter_mut()) {
+                    let (gx, gy) = f.gradient(c, p[0], p[1]);
+                    *g = [gx, gy];
+                }
+                Ok(())
+            }
+            (None, None) => bail!(BAD, "values and gradients are both NULL: nothing to write"),
+        };
+        done.map_err(|e| fail(BAD, format_args!("field '{}': {e}", self.name)))
     }
 
     pub fn antennas(
@@ -331,16 +385,56 @@ impl PheromoneField {
     }
 }
 
-/// The iceoryx2 node of a handle: in the domain given (or the environment's), without signal
+/// The iceoryx2 domain of `options.iox_domain`: NULL, the environment's
+/// (`PHEROMONE_IOX_DOMAIN` if set and not empty); `""`, the default domain (`None`) whatever the
+/// environment says; otherwise the name given.
+fn effective_domain(option: Option<&str>) -> Option<String> {
+    match option {
+        Some(d) => Some(d.to_string()),
+        None => std::env::var(field::shm::IOX_DOMAIN_ENV).ok(),
+    }
+    .filter(|d| !d.is_empty())
+}
+
+/// Waits until a live process publishes the frames the reader opened, at most until
+/// `deadline`: a field whose process died (its services held by another process) is
+/// `FieldDead`, not a handle whose every wait times out.
+fn wait_alive(
+    node: &Node<Svc>,
+    reader: &FieldReader,
+    place: &str,
+    deadline: std::time::Instant,
+) -> Result<(), Failure> {
+    use iceoryx2::node::NodeWaitFailure;
+    loop {
+        if reader.field_alive() {
+            return Ok(());
+        }
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        if left.is_zero() {
+            bail!(
+                PheromoneStatus::FieldDead,
+                "attach to {place}: its services exist (another process holds them) but no live \
+                 process publishes its frames: the field process died; restart it"
+            );
+        }
+        match node.wait(left.min(Duration::from_millis(20))) {
+            Ok(()) => {}
+            Err(NodeWaitFailure::Interrupt | NodeWaitFailure::TerminationRequest) => bail!(
+                PheromoneStatus::Interrupted,
+                "attach to {place}: the wait for its field process was interrupted by a signal"
+            ),
+        }
+    }
+}
+
+/// The iceoryx2 node of a handle: in `domain` (`None`: the default domain), without signal
 /// handlers (the host program owns SIGINT and SIGTERM), after removing what dead nodes left.
 fn create_node(domain: Option<&str>) -> Result<Node<Svc>, Failure> {
     use std::sync::atomic::{AtomicU32, Ordering};
     static SERIAL: AtomicU32 = AtomicU32::new(0);
-    let config = match domain {
-        Some(d) => field::shm::domain_config_of(Some(d)),
-        None => field::shm::domain_config(),
-    }
-    .map_err(|e| from_shm("iceoryx2 domain", &e))?;
+    let config =
+        field::shm::domain_config_of(domain).map_err(|e| from_shm("options.iox_domain", &e))?;
     let name = format!(
         "c-{}-{}",
         std::process::id(),
@@ -414,7 +508,27 @@ fn sample_pose(p: PheromonePose) -> Result<SamplePose, Failure> {
     Ok(SamplePose::new(p.x_m, p.y_m, p.theta_rad))
 }
 
-/// The wire message of a C deposit, every number checked finite and the kernel known.
+/// The covariance of an ellipse or paper deposit must be positive semi-definite: the field's own
+/// check (`quadratic_shape` in `field/src/deposit.rs`, which refuses it as `not_psd`), made here
+/// so that `pheromone_deposit`, which gets no receipt, refuses it to the caller instead of the
+/// field dropping it.
+fn check_psd(xx: f32, xy: f32, yy: f32) -> Result<(), Failure> {
+    let scale = xx.abs().max(yy.abs()).max(f32::MIN_POSITIVE);
+    if xx < 0.0
+        || yy < 0.0
+        || (xx as f64 * yy as f64 - xy as f64 * xy as f64) < -1e-6 * (scale as f64).powi(2)
+    {
+        bail!(
+            BAD,
+            "deposit covariance [[{xx}, {xy}], [{xy}, {yy}]] (cov_xx, cov_xy, cov_yy): not \
+             positive semi-definite (needs cov_xx ≥ 0, cov_yy ≥ 0, cov_xx·cov_yy ≥ cov_xy²)"
+        );
+    }
+    Ok(())
+}
+
+/// The wire message of a C deposit, every number checked finite, the kernel known and an
+/// ellipse's or paper kernel's covariance positive semi-definite.
 pub fn deposit_msg(d: &PheromoneDeposit) -> Result<DepositMsg, Failure> {
     let Some(kernel) = KernelKind::from_code(d.kernel) else {
         bail!(
@@ -437,6 +551,9 @@ pub fn deposit_msg(d: &PheromoneDeposit) -> Result<DepositMsg, Failure> {
         ("deposit plateau_m", d.plateau_m),
         ("deposit slope_m", d.slope_m),
     ])?;
+    if matches!(kernel, KernelKind::Ellipse | KernelKind::Paper) {
+        check_psd(d.cov_xx, d.cov_xy, d.cov_yy)?;
+    }
     let params = field::KernelParams {
         cov_m2: [d.cov_xx, d.cov_xy, d.cov_yy],
         range_m: d.range_m,

@@ -12,6 +12,30 @@ const _: () = assert!(
     "PHEROMONE_LAYOUT_VERSION must follow field::wire::LAYOUT_VERSION"
 );
 
+/// The version of this library and of the `pheromone.h` it ships with (the crate's version;
+/// `libpheromone.so.MAJOR` is its SONAME).
+pub const PHEROMONE_VERSION_MAJOR: u32 = 0;
+pub const PHEROMONE_VERSION_MINOR: u32 = 1;
+pub const PHEROMONE_VERSION_PATCH: u32 = 0;
+
+/// A decimal number at compile time (the crate's version parts).
+const fn decimal(s: &str) -> u32 {
+    let b = s.as_bytes();
+    let mut i = 0;
+    let mut v = 0;
+    while i < b.len() {
+        v = v * 10 + (b[i] - b'0') as u32;
+        i += 1;
+    }
+    v
+}
+const _: () = assert!(
+    PHEROMONE_VERSION_MAJOR == decimal(env!("CARGO_PKG_VERSION_MAJOR"))
+        && PHEROMONE_VERSION_MINOR == decimal(env!("CARGO_PKG_VERSION_MINOR"))
+        && PHEROMONE_VERSION_PATCH == decimal(env!("CARGO_PKG_VERSION_PATCH")),
+    "PHEROMONE_VERSION_* must follow the crate's version"
+);
+
 /// Most channels a field has (`FieldConfig`): the length of `PheromoneFrameView::planes`.
 pub const PHEROMONE_MAX_CHANNELS: usize = 64;
 
@@ -50,7 +74,64 @@ pub enum PheromoneStatus {
     /// `pheromone_deposit_confirmed`: the field refused the deposit (by its own checks, e.g.
     /// outside its grid); the receipt's `reason` and the last error say why. Nothing was applied.
     Rejected = 10,
+    /// A signal the program handles cut a blocking call short: `pheromone_wait_frame` sleeping on
+    /// the frame event, `pheromone_deposit_confirmed` waiting for its receipt (the deposit may
+    /// still be applied, once), `pheromone_field_attach` between retries. The program's handler
+    /// ran; the library installs, replaces and consumes no signal handler. Call again to go on
+    /// waiting.
+    Interrupted = 11,
+    /// `pheromone_field_attach`: the field's services exist (another process attached to them
+    /// holds them) but no live process publishes its frames: its field process died (and no
+    /// standby took over) within `attach_timeout_ns`. Restart the field; a handle attached before
+    /// it died keeps its last frame and receives the frames of a field restarted under the name.
+    FieldDead = 12,
 }
+
+impl PheromoneStatus {
+    /// Every status, in the order of their values.
+    pub const ALL: [Self; 13] = [
+        Self::Ok,
+        Self::Timeout,
+        Self::NoField,
+        Self::BadArgument,
+        Self::Layout,
+        Self::NoFrame,
+        Self::Borrowed,
+        Self::NotDelivered,
+        Self::ShmError,
+        Self::Internal,
+        Self::Rejected,
+        Self::Interrupted,
+        Self::FieldDead,
+    ];
+
+    /// What `pheromone_status_str` says of it.
+    pub fn description(self) -> &'static core::ffi::CStr {
+        match self {
+            Self::Ok => c"ok",
+            Self::Timeout => c"timeout: nothing came within the timeout",
+            Self::NoField => c"no field of that name is running",
+            Self::BadArgument => c"invalid argument",
+            Self::Layout => c"another layout version",
+            Self::NoFrame => c"no frame held or borrowed",
+            Self::Borrowed => c"a frame is borrowed",
+            Self::NotDelivered => c"deposit not delivered",
+            Self::ShmError => c"shared memory (iceoryx2) failed",
+            Self::Internal => c"internal error (a bug in libpheromone)",
+            Self::Rejected => c"the field refused the deposit",
+            Self::Interrupted => c"interrupted by a signal",
+            Self::FieldDead => c"the field's process is gone",
+        }
+    }
+}
+
+/// `pheromone_set_log_level`: iceoryx2's log levels, most verbose first.
+pub const PHEROMONE_LOG_TRACE: u32 = 0;
+pub const PHEROMONE_LOG_DEBUG: u32 = 1;
+pub const PHEROMONE_LOG_INFO: u32 = 2;
+pub const PHEROMONE_LOG_WARN: u32 = 3;
+pub const PHEROMONE_LOG_ERROR: u32 = 4;
+pub const PHEROMONE_LOG_FATAL: u32 = 5;
 
 /// `PheromoneReceipt::status`: the deposit is in frame `sequence`.
 pub const PHEROMONE_RECEIPT_APPLIED: u32 = 0;
@@ -104,8 +185,10 @@ pub struct PheromoneAttachOptions {
     pub deposits: u32,
     /// Keep retrying while the field does not exist yet, this long (ns); 0: try once.
     pub attach_timeout_ns: u64,
-    /// The iceoryx2 domain (`pheromone --iox-domain`); NULL: the `PHEROMONE_IOX_DOMAIN`
-    /// environment variable, or the default domain.
+    /// The iceoryx2 domain (`pheromone --iox-domain`). NULL: the `PHEROMONE_IOX_DOMAIN`
+    /// environment variable if it is set and not empty, else iceoryx2's default domain. `""`:
+    /// iceoryx2's default domain, whatever the environment says. Otherwise 1–64 characters of
+    /// `A–Z a–z 0–9 _ -`.
     pub iox_domain: *const core::ffi::c_char,
 }
 

@@ -181,6 +181,84 @@ fn compare_sampling(h: *mut PheromoneField, view: &field::FrameView<'_>) {
     }
 }
 
+/// `pheromone_sample_many` on the borrowed frame of `h`: values only, gradients only, both, on
+/// both channels, equal bit for bit to `FrameView`'s point by point (points inside, on the
+/// border and outside the grid); a non-finite point and two NULL outputs refused by name.
+fn compare_sample_many(h: *mut PheromoneField, view: &field::FrameView<'_>) {
+    let xy: Vec<f32> = (0..200)
+        .flat_map(|i| [-1.5 + 0.041 * i as f32, -0.3 + 0.019 * i as f32])
+        .collect();
+    let n = xy.len() / 2;
+    for ch in 0..2u32 {
+        let c = ch as usize;
+        let (mut v1, mut v2, mut g1, mut g2) = (
+            vec![0.0f32; n],
+            vec![0.0f32; n],
+            vec![0.0f32; 2 * n],
+            vec![0.0f32; 2 * n],
+        );
+        // SAFETY: a live handle with a borrowed frame; xy holds 2n floats, the outputs n / 2n.
+        unsafe {
+            let null = std::ptr::null_mut();
+            let s = pheromone_sample_many(h, ch, xy.as_ptr(), n, v1.as_mut_ptr(), null);
+            assert_eq!(s, PheromoneStatus::Ok, "{}", last_error());
+            let s = pheromone_sample_many(h, ch, xy.as_ptr(), n, null, g1.as_mut_ptr());
+            assert_eq!(s, PheromoneStatus::Ok, "{}", last_error());
+            let s = pheromone_sample_many(h, ch, xy.as_ptr(), n, v2.as_mut_ptr(), g2.as_mut_ptr());
+            assert_eq!(s, PheromoneStatus::Ok, "{}", last_error());
+        }
+        for i in 0..n {
+            let (x, y) = (xy[2 * i], xy[2 * i + 1]);
+            let v = view.value(c, x, y);
+            let (gx, gy) = view.gradient(c, x, y);
+            assert_eq!(v1[i].to_bits(), v.to_bits(), "point {i}");
+            assert_eq!(v2[i].to_bits(), v.to_bits(), "point {i}");
+            assert_eq!((g1[2 * i], g1[2 * i + 1]), (gx, gy), "point {i}");
+            assert_eq!((g2[2 * i], g2[2 * i + 1]), (gx, gy), "point {i}");
+        }
+    }
+    let mut bad = xy.clone();
+    bad[7] = f32::NAN;
+    let mut out = vec![0.0f32; n];
+    // SAFETY: as above.
+    let s = unsafe {
+        pheromone_sample_many(
+            h,
+            0,
+            bad.as_ptr(),
+            n,
+            out.as_mut_ptr(),
+            std::ptr::null_mut(),
+        )
+    };
+    assert_eq!(s, PheromoneStatus::BadArgument);
+    assert!(
+        last_error().contains("point 3") && last_error().contains("xy[7]"),
+        "{}",
+        last_error()
+    );
+    assert!(out.iter().all(|v| *v == 0.0), "nothing written");
+    // SAFETY: as above.
+    let s = unsafe {
+        pheromone_sample_many(
+            h,
+            0,
+            xy.as_ptr(),
+            n,
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+        )
+    };
+    assert_eq!(s, PheromoneStatus::BadArgument);
+    assert!(last_error().contains("both NULL"), "{}", last_error());
+    // SAFETY: as above.
+    let s = unsafe {
+        pheromone_sample_many(h, 2, xy.as_ptr(), n, out.as_mut_ptr(), std::ptr::null_mut())
+    };
+    assert_eq!(s, PheromoneStatus::BadArgument);
+    assert!(last_error().contains("channel = 2"), "{}", last_error());
+}
+
 /// 53 rounds of wait, borrow, sample, release and two deposits, the last 50 counted: the
 /// reading calls allocate nothing, the deposits only iceoryx2's one block per sample.
 fn hot_path_allocations(h: *mut PheromoneField, server: &mut FieldServer) {
@@ -206,6 +284,8 @@ fn hot_path_allocations(h: *mut PheromoneField, server: &mut FieldServer) {
     let hot_round = || {
         let (mut v, mut gx, mut gy) = (0.0, 0.0, 0.0);
         let mut sectors = [0.0f32; 7];
+        let xy = [1.0f32, 1.0, 2.0, 0.5, -3.0, 9.0, 0.2, 0.3];
+        let (mut many, mut grads) = ([0.0f32; 4], [0.0f32; 8]);
         let mut view = empty_view();
         let p = PheromonePose::default();
         // SAFETY: a live handle; every pointer is valid for the call.
@@ -225,6 +305,10 @@ fn hot_path_allocations(h: *mut PheromoneField, server: &mut FieldServer) {
             );
             assert_eq!(
                 pheromone_sample_sectors(h, 0, p, 1.0, 3, sectors.as_mut_ptr(), 7),
+                PheromoneStatus::Ok
+            );
+            assert_eq!(
+                pheromone_sample_many(h, 0, xy.as_ptr(), 4, many.as_mut_ptr(), grads.as_mut_ptr()),
                 PheromoneStatus::Ok
             );
             assert_eq!(pheromone_frame_release(h), PheromoneStatus::Ok);
@@ -308,6 +392,7 @@ fn sampling_gives_frame_views_numbers_and_the_hot_calls_do_not_allocate() {
         assert_eq!(plane, frame.view.plane(c), "channel {c}");
     }
     compare_sampling(h, &frame.view);
+    compare_sample_many(h, &frame.view);
     // SAFETY: a live handle.
     assert_eq!(unsafe { pheromone_frame_release(h) }, PheromoneStatus::Ok);
 
@@ -380,4 +465,47 @@ fn a_missing_field_bad_arguments_and_a_field_of_another_layout_are_refused_by_na
     let s = unsafe { pheromone_field_attach(c_name.as_ptr(), &old_header, std::ptr::null_mut()) };
     assert_eq!(s, PheromoneStatus::BadArgument);
     assert_eq!(last_error(), "out is NULL");
+}
+
+#[test]
+fn statuses_have_descriptions_and_the_log_level_is_the_callers() {
+    use iceoryx2_log::{get_log_level, LogLevel};
+    // Every status a description of its own; another value "unknown status"; never NULL.
+    let mut seen = std::collections::HashSet::new();
+    for s in PheromoneStatus::ALL {
+        // SAFETY: a static NUL-terminated string.
+        let d = unsafe { CStr::from_ptr(pheromone_status_str(s as i32)) }
+            .to_str()
+            .unwrap();
+        assert!(!d.is_empty() && d != "unknown status", "{s:?}: {d}");
+        assert!(seen.insert(d), "{s:?}: {d} twice");
+    }
+    assert_eq!(
+        PheromoneStatus::ALL.len(),
+        PheromoneStatus::FieldDead as usize + 1
+    );
+    for v in [-1, 13, i32::MAX] {
+        // SAFETY: as above.
+        let d = unsafe { CStr::from_ptr(pheromone_status_str(v)) };
+        assert_eq!(d.to_str().unwrap(), "unknown status");
+    }
+    // SAFETY: as above.
+    let d = unsafe { CStr::from_ptr(pheromone_status_str(PheromoneStatus::Interrupted as i32)) };
+    assert_eq!(d.to_str().unwrap(), "interrupted by a signal");
+
+    assert_eq!(pheromone_set_log_level(6), PheromoneStatus::BadArgument);
+    assert!(last_error().contains("log level = 6"), "{}", last_error());
+    assert_eq!(
+        pheromone_set_log_level(PHEROMONE_LOG_WARN),
+        PheromoneStatus::Ok
+    );
+    assert_eq!(get_log_level(), LogLevel::Warn as u8);
+    // Attaching (here to a field that does not exist) leaves the process's log level alone.
+    let _ = attach(&unique("capi-loglevel"));
+    assert_eq!(get_log_level(), LogLevel::Warn as u8);
+    assert_eq!(
+        pheromone_set_log_level(PHEROMONE_LOG_FATAL),
+        PheromoneStatus::Ok
+    );
+    assert_eq!(get_log_level(), LogLevel::Fatal as u8);
 }

@@ -12,13 +12,16 @@
 #   - confirmed deposits: applied in the frame the receipt names, refused with the field's reason
 #     (nothing applied), no receipt with a zero timeout;
 #   - the C example's attach/read/release/detach loop and the C++ test are clean under valgrind;
-#   - the C++ test (shared and static) reads probe's value zero-copy and deposits.
+#   - the C++ test (shared and static) reads probe's value zero-copy and deposits; one live
+#     borrow per Field, a Frame outliving its Field; the -fno-exceptions build;
+#   - a C and a C++ program keep their own SIGTERM handler through blocking waits (INTERRUPTED);
+#   - SONAME and version macros; the poll loop example; FIELD_DEAD; domain-naming errors.
 # Needs cc, c++, cmake, pkg-config, valgrind and python3. Env: PHEROMONE_BIN (the `pheromone`
 # binary; default target/debug/pheromone, built if missing).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 
-for tool in cc c++ cmake pkg-config valgrind python3; do
+for tool in cc c++ cmake pkg-config valgrind python3 readelf; do
     command -v "$tool" >/dev/null || { echo "c_abi.sh: '$tool' is missing (.ci/run installs it)" >&2; exit 1; }
 done
 BIN="${PHEROMONE_BIN:-${CARGO_TARGET_DIR:-target}/debug/pheromone}"
@@ -40,10 +43,58 @@ cleanup() {
 trap cleanup EXIT
 trap 'exit 130' INT TERM
 
-start_field() { # NAME: a still field (no evaporation), 64 x 48 cells of 0.1 m from (-1, -2)
+start_field() { # NAME [TICK_HZ]: a still field (no evaporation), 64 x 48 cells of 0.1 m from (-1, -2)
     "$BIN" field --name "$1" --width 64 --height 48 --cell-size 0.1 --origin-x -1 --origin-y -2 \
-        --model none --tick-hz 100 --max-readers 8 2>"$work/$1.log" &
+        --model none --tick-hz "${2:-100}" --max-readers 8 2>"$work/$1.log" &
     fields+=("$!")
+}
+
+# SIGNAL_PROGRAM LABEL WAITS CMD…: runs a program of tests/c/signal_test.c's protocol and sends it
+# SIGTERMs from outside until it reports each of its WAITS waits and its confirmed deposit
+# interrupted (a SIGTERM that lands between two waits runs its handler without interrupting one:
+# the next is sent 0.5 s later). Then its handler must have seen every SIGTERM sent.
+signal_program() {
+    local label="$1" waits="$2"
+    shift 2
+    local out="$work/$label.out" err="$work/$label.err" fifo="$work/$label.in" pid fd sent=0 i
+    mkfifo "$fifo"
+    "$@" "$waits" <"$fifo" >"$out" 2>"$err" &
+    pid=$!
+    exec {fd}>"$fifo"
+    seen_line() { grep -qx "$1" "$out"; }
+    alive_or_fail() {
+        kill -0 "$pid" 2>/dev/null && return 0
+        echo "$label exited early:" >&2
+        cat "$out" "$err" >&2
+        exit 1
+    }
+    local deadline=$((SECONDS + 30))
+    until seen_line ready; do
+        alive_or_fail
+        [ "$SECONDS" -lt "$deadline" ] || { echo "$label: not ready within 30 s" >&2; exit 1; }
+        sleep 0.05
+    done
+    local lines=()
+    for i in $(seq 1 "$waits"); do lines+=("interrupted $i"); done
+    lines+=("interrupted deposit")
+    for line in "${lines[@]}"; do
+        deadline=$((SECONDS + 30))
+        until seen_line "$line"; do
+            alive_or_fail
+            [ "$SECONDS" -lt "$deadline" ] || { echo "$label: no '$line' within 30 s" >&2; cat "$out" "$err" >&2; exit 1; }
+            kill -TERM "$pid"
+            sent=$((sent + 1))
+            for _ in $(seq 10); do
+                seen_line "$line" && break
+                sleep 0.05
+            done
+        done
+    done
+    echo end >&"$fd"
+    exec {fd}>&-
+    wait "$pid" || { echo "$label failed:" >&2; cat "$out" "$err" >&2; exit 1; }
+    seen_line "seen $sent" || { echo "$label: sent $sent SIGTERMs, the program $(tail -n 1 "$out")" >&2; exit 1; }
+    echo "$label: $waits waits and a confirmed deposit interrupted; its own handler saw $sent of $sent SIGTERMs"
 }
 
 probe() { # FIELD X Y: probe's value as JSON's "value"
@@ -62,6 +113,16 @@ bash libpheromone/install.sh --prefix "$prefix" --profile dev >"$work/install.lo
 export PKG_CONFIG_PATH="$prefix/lib/pkgconfig"
 rpath="-Wl,-rpath,$prefix/lib"
 
+echo "-- SONAME libpheromone.so.MAJOR; PHEROMONE_VERSION_* = the package's version"
+version=$(pkg-config --modversion pheromone)
+readelf -d "$prefix/lib/libpheromone.so" | grep -q "SONAME.*\[libpheromone\.so\.${version%%.*}\]" \
+    || { readelf -d "$prefix/lib/libpheromone.so" >&2; echo "SONAME is not libpheromone.so.${version%%.*}" >&2; exit 1; }
+printf '#include <pheromone.h>\n#include <stdio.h>\nint main(void) { printf("%%d.%%d.%%d\\n", PHEROMONE_VERSION_MAJOR, PHEROMONE_VERSION_MINOR, PHEROMONE_VERSION_PATCH); return 0; }\n' >"$work/version.c"
+# shellcheck disable=SC2046
+cc -std=c99 -Wall -Wpedantic -Werror "$work/version.c" -o "$work/version" $(pkg-config --cflags pheromone)
+[ "$("$work/version")" = "$version" ] || { echo "PHEROMONE_VERSION_* $("$work/version"), package $version" >&2; exit 1; }
+echo "SONAME libpheromone.so.${version%%.*}, version $version"
+
 echo "-- build the C test and example with cc and pkg-config"
 # shellcheck disable=SC2046
 cc -std=c99 -Wall -Wextra -Werror -O1 -g libpheromone/tests/c/abi_test.c -o "$work/abi_test" \
@@ -69,6 +130,11 @@ cc -std=c99 -Wall -Wextra -Werror -O1 -g libpheromone/tests/c/abi_test.c -o "$wo
 # shellcheck disable=SC2046
 cc -std=c99 -Wall -Wextra -Werror -O1 -g examples/c/read_deposit.c -o "$work/read_deposit" \
     $(pkg-config --cflags --libs pheromone) "$rpath"
+# shellcheck disable=SC2046
+cc -std=c99 -Wall -Wextra -Wpedantic -Werror -O1 -g examples/c/poll_loop.c -o "$work/poll_loop" \
+    $(pkg-config --cflags --libs pheromone) "$rpath"
+readelf -d "$work/abi_test" | grep -q "NEEDED.*\[libpheromone\.so\.${version%%.*}\]" \
+    || { echo "abi_test does not record libpheromone.so.${version%%.*}" >&2; exit 1; }
 
 tag="capi-$$-$RANDOM"
 a="$tag-a"
@@ -125,6 +191,52 @@ echo "-- confirmed deposits from C: applied in the receipt's frame, refused with
 "$work/abi_test" confirm "$a" 2.5 -1.0
 "$BIN" probe --field "$a" --x 2.5 --y -1.0 --above 0 --timeout 10 >/dev/null
 
+echo "-- the program's own SIGTERM handler runs during blocking waits, which return INTERRUPTED"
+# cc -std=c99 -Wpedantic: the header and the test program as a strict C99 host builds them.
+# shellcheck disable=SC2046
+cc -std=c99 -Wall -Wextra -Wpedantic -Werror -O1 -g libpheromone/tests/c/signal_test.c \
+    -o "$work/signal_test" $(pkg-config --cflags --libs pheromone) "$rpath"
+still="$tag-s"
+start_field "$still" 0.01 # one tick per 100 s: only a signal ends a wait early
+signal_program "C" 4 "$work/signal_test" "$still"
+
+echo "-- attach to a field whose process died while another process holds its services"
+dead="$tag-d"
+start_field "$dead"
+dead_pid="${fields[-1]}"
+mkfifo "$work/hold.in"
+"$work/abi_test" hold "$dead" <"$work/hold.in" >"$work/hold.out" 2>&1 &
+holder=$!
+exec {hold_fd}>"$work/hold.in"
+deadline=$((SECONDS + 30))
+until grep -qx holding "$work/hold.out"; do
+    kill -0 "$holder" 2>/dev/null || { cat "$work/hold.out" >&2; exit 1; }
+    [ "$SECONDS" -lt "$deadline" ] || { echo "the holder did not attach within 30 s" >&2; exit 1; }
+    sleep 0.05
+done
+kill -KILL "$dead_pid"
+wait "$dead_pid" 2>/dev/null || true
+"$work/abi_test" dead "$dead"
+exec {hold_fd}>&-
+wait "$holder" || { cat "$work/hold.out" >&2; exit 1; }
+
+echo "-- the C example's poll loop: frames of a 100 Hz field and a 50 ms timer in one poll"
+"$work/poll_loop" "$a" 30 5 >"$work/poll.out" || { cat "$work/poll.out" >&2; exit 1; }
+python3 - "$work/poll.out" <<'PY'
+import re, sys
+lines = open(sys.argv[1]).read().split("\n")
+seqs = [int(l.split()[1]) for l in lines if l.startswith("frame ")]
+m = re.search(r"^done frames (\d+) timer (\d+) wakeups (\d+) spurious (\d+)$", "\n".join(lines), re.M)
+assert m, "no done line"
+frames, timer, wakeups, spurious = map(int, m.groups())
+assert frames == 30 and len(seqs) == 30 and timer >= 5, m.group(0)
+assert all(b > a for a, b in zip(seqs, seqs[1:])), f"sequences not increasing: {seqs}"
+# Each wake-up is a frame, the timer, or a notification of a frame already taken: the
+# notifications are taken with the frames, so the descriptor does not stay readable.
+assert spurious <= frames, m.group(0)
+print(m.group(0))
+PY
+
 echo "-- valgrind: the C example's attach/read/release/detach loop"
 valgrind --error-exitcode=99 --leak-check=full --errors-for-leak-kinds=definite,indirect \
     --show-leak-kinds=definite,indirect "$work/read_deposit" "$a" 20 >"$work/vg-c.out" 2>"$work/vg-c.log" \
@@ -140,9 +252,12 @@ v=$(probe "$a" 1.0 0.5)
 v=$(probe "$a" 1.0 0.5)
 "$work/cpp/wrapper_test_static" "$a" 1.0 0.5 "$v" "$tag-missing"
 v=$(probe "$a" 1.0 0.5)
+"$work/cpp/nothrow_test" "$a" 1.0 0.5 "$v" "$tag-missing"
+v=$(probe "$a" 1.0 0.5)
 valgrind --error-exitcode=99 --leak-check=full --errors-for-leak-kinds=definite,indirect \
     --show-leak-kinds=definite,indirect "$work/cpp/wrapper_test" "$a" 1.0 0.5 "$v" "$tag-missing" \
     >"$work/vg-cpp.out" 2>"$work/vg-cpp.log" || { cat "$work/vg-cpp.log" >&2; exit 1; }
 grep -E "ERROR SUMMARY|definitely lost|indirectly lost" "$work/vg-cpp.log" | sed 's/^==[0-9]*== /C++: /'
 "$work/cpp/follower" "$a" 0.3 0.5 20 | tail -n 1
+signal_program "C++" 4 "$work/cpp/signal_test_cpp" "$still"
 echo "c_abi: ok"

@@ -25,11 +25,12 @@ from .field import (
     Frame,
     FramesHeld,
     Header,
+    Interrupted,
     LayoutMismatch,
     PheromoneError,
     Receipt,
 )
-from .sample import gradient, sample
+from .sample import gradient, gradient_many, sample, sample_many
 
 __all__ = [
     "KERNELS",
@@ -45,10 +46,13 @@ __all__ = [
     "FrameHeader",
     "FramesHeld",
     "Header",
+    "Interrupted",
     "LayoutMismatch",
     "PheromoneError",
     "Receipt",
     "gradient",
+    "gradient_many",
     "sample",
+    "sample_many",
     "wire_type_name",
 ]

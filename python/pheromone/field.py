@@ -30,7 +30,9 @@ import numpy as np
 
 from . import _wire
 from .sample import gradient as _gradient
+from .sample import gradient_many as _gradient_many
 from .sample import sample as _sample
+from .sample import sample_many as _sample_many
 
 
 class PheromoneError(Exception):
@@ -55,6 +57,15 @@ class LayoutMismatch(PheromoneError):
 
 class FramesHeld(PheromoneError):
     """Receiving a frame would exceed the frames a reader may hold at once."""
+
+
+class Interrupted(PheromoneError, InterruptedError):
+    """A signal the program handles cut a blocking wait short (`wait_frame`, `attach` while it
+    waits for the first frame, `deposit` and `flush` waiting for the field's answer). The
+    program's handler has run (Python runs it before this is raised; a handler that raises, as
+    the default SIGINT one raises `KeyboardInterrupt`, wins instead); this package installs and
+    consumes no signal handler. Call again to go on waiting. From `deposit`: the deposit may still
+    be applied, once, or not at all (as after `DepositUnconfirmed`)."""
 
 
 class DepositNotDelivered(PheromoneError):
@@ -192,6 +203,15 @@ class Frame:
     def gradient(self, x_m: float, y_m: float, channel: int = 0) -> tuple[float, float]:
         """∇P per metre at `(x_m, y_m)` (see `pheromone.gradient`)."""
         return _gradient(self, x_m, y_m, channel)
+
+    def sample_many(self, points: Any, channel: int = 0) -> np.ndarray:
+        """Values at the `(N, 2)` points, one call (see `pheromone.sample_many`)."""
+        return _sample_many(self, points, channel)
+
+    def gradient_many(self, points: Any, channel: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Values `(N,)` and gradients `(N, 2)` at the `(N, 2)` points, one call (see
+        `pheromone.gradient_many`)."""
+        return _gradient_many(self, points, channel)
 
     def __repr__(self) -> str:
         h = self.header
@@ -471,9 +491,19 @@ class Field:
         # means "wait for ever": the caller loops on its own deadline, so return instead.
         if seconds < 1e-6:
             return
-        # Interrupted by a signal: the caller loops on its own deadline.
-        with contextlib.suppress(iox2.ListenerWaitError):
+        try:
             self._listener.timed_wait(_duration(seconds))
+        except iox2.ListenerWaitError as e:
+            # EINTR: a signal with a handler (the program's) came. Python has run that handler
+            # by now; the program's loop decides whether to wait again.
+            if _open_error(e) == "InterruptSignal":
+                raise Interrupted(
+                    f"field '{self.name}': the wait on '{self._ready_service}' was interrupted "
+                    "by a signal"
+                ) from None
+            raise PheromoneError(
+                f"service '{self._ready_service}': waiting failed: {_open_error(e) or e!r}"
+            ) from e
 
     def _receive(self) -> Any:
         if not self._subscriber.has_samples():
@@ -534,6 +564,8 @@ class Field:
 
     def wait_frame(self, timeout_s: float, spin_s: float = 0.0) -> bool:
         """Waits up to `timeout_s` for a frame newer than the one held; returns whether one came.
+        Raises `Interrupted` when a signal the program handles cuts the sleep on the frame event
+        short (the polling of `spin_s` makes no call a signal could cut).
 
         The wait policy of Rust's `WaitPolicy`: with `spin_s` > 0 it first polls for up to
         `spin_s` seconds (a frame due shortly is seen without the 150–200 µs a wake-up from sleep
@@ -579,6 +611,15 @@ class Field:
     def gradient(self, x_m: float, y_m: float, channel: int = 0) -> tuple[float, float]:
         """∇P at `(x_m, y_m)` on the newest frame (see `pheromone.gradient`)."""
         return _gradient(self.frame(), x_m, y_m, channel)
+
+    def sample_many(self, points: Any, channel: int = 0) -> np.ndarray:
+        """Values at the `(N, 2)` points on the newest frame (see `pheromone.sample_many`)."""
+        return _sample_many(self.frame(), points, channel)
+
+    def gradient_many(self, points: Any, channel: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Values and gradients at the `(N, 2)` points on the newest frame (see
+        `pheromone.gradient_many`)."""
+        return _gradient_many(self.frame(), points, channel)
 
     # ---- deposits -------------------------------------------------------------------------
 

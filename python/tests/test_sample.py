@@ -51,3 +51,27 @@ def test_origin_and_channels():
     assert pheromone.sample((h, cells), -1.0 + 2.5 * 0.25, 2.0 + 1.5 * 0.25, 0) == 0.0
     with pytest.raises(IndexError):
         pheromone.sample((h, cells), 0.0, 0.0, 2)
+
+
+def test_many_points_in_one_call_equal_the_point_by_point_numbers():
+    # A random field, random points inside, on the border, outside and NaN: bit for bit.
+    rng = np.random.default_rng(47)
+    h = header(24, 16, 0.3, channels=2, ox=-1.2, oy=0.7)
+    cells = rng.standard_normal((2, 16, 24)).astype(np.float32)
+    pts = np.column_stack([rng.uniform(-2.5, 7.5, 400), rng.uniform(-0.5, 6.5, 400)])
+    pts = np.vstack([pts, [[-1.2, 0.7], [-1.2 + 24 * 0.3, 0.7 + 16 * 0.3], [np.nan, 1.0],
+                           [1.0, np.inf]]])
+    for channel in (0, 1):
+        values = pheromone.sample_many((h, cells), pts, channel)
+        v2, grads = pheromone.gradient_many((h, cells), pts, channel)
+        assert values.dtype == np.float32 and values.shape == (len(pts),)
+        assert grads.dtype == np.float32 and grads.shape == (len(pts), 2)
+        for i, (x, y) in enumerate(pts):
+            v = pheromone.sample((h, cells), x, y, channel)
+            gx, gy = pheromone.gradient((h, cells), x, y, channel)
+            assert values[i] == v and v2[i] == v, (i, x, y, values[i], v)
+            assert grads[i, 0] == gx and grads[i, 1] == gy, (i, x, y, grads[i], gx, gy)
+    with pytest.raises(ValueError, match=r"shape \(N, 2\)"):
+        pheromone.sample_many((h, cells), np.zeros(3))
+    with pytest.raises(IndexError):
+        pheromone.sample_many((h, cells), pts, 2)

@@ -162,12 +162,15 @@ fn bench_smoke_run_reports_every_figure_as_one_json_object() {
         "sample_rust_ns",
         "sample_c_ns",
         "sample_ratio",
+        "sample_batch_c_ns",
+        "sample_batch_ratio",
     ] {
         assert!(c[k].as_f64().is_some_and(|v| v > 0.0), "c_abi.{k}: {c}");
     }
     for name in [
         "C reader frame latency p50 / Rust reader's",
         "C sampling (value + gradient) / Rust FrameView's",
+        "C batch sampling (pheromone_sample_many) / Rust FrameView's",
     ] {
         assert!(names.contains(&name), "no target '{name}' in {names:?}");
     }

@@ -22,7 +22,7 @@ use iceoryx2::prelude::*;
 use super::{
     open_deposit_ready, open_frame_ready_service, retry_attach, service_err, service_name,
     wait_interruptible, AttachError, FieldServices, SendError, ServiceError, StartError, Svc,
-    TickError,
+    TickError, Woken,
 };
 use crate::engine::{FieldConfig, Stepper};
 use crate::messages::{
@@ -262,6 +262,7 @@ impl DepositClient {
     ) -> Result<Self, AttachError> {
         retry_attach(
             node,
+            field,
             timeout,
             || Self::attach(node, field, robot_id),
             AttachError::field_not_up_yet,
@@ -348,7 +349,11 @@ fn wait_receipt(
         }
         // A stale mirror answers ("forwarded") without publishing a frame: look again at least
         // every RECEIPT_POLL.
-        wait_interruptible(frame_ready, left.min(RECEIPT_POLL), service)?;
+        if wait_interruptible(frame_ready, left.min(RECEIPT_POLL), service)? == Woken::Interrupted {
+            return Err(SendError::Interrupted {
+                service: service.to_string(),
+            });
+        }
     }
 }
 

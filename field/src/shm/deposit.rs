@@ -124,6 +124,7 @@ impl DepositPublisher {
     ) -> Result<Self, AttachError> {
         retry_attach(
             node,
+            field,
             timeout,
             || Self::attach(node, field, robot_id),
             AttachError::field_not_up_yet,

@@ -93,6 +93,11 @@ pub enum AttachError {
     /// lockstep join failed (the `attach_within`s retry on it).
     #[error(transparent)]
     Service(#[from] ServiceError),
+    /// A signal the program handles itself cut short a wait between attach attempts (its
+    /// handler ran; nothing was consumed). Not in a process that called
+    /// [`handle_termination_requests`](super::handle_termination_requests).
+    #[error("attaching to field '{field}' was interrupted by a signal")]
+    Interrupted { field: String },
 }
 
 /// Why a field could not start: a [`FieldServer`](super::FieldServer) (its services, its first
@@ -166,6 +171,15 @@ pub enum SendError {
          applied (once), or not at all"
     )]
     Unconfirmed { service: String, timeout_s: f64 },
+    /// A signal the program handles itself cut short the wait for a confirmed deposit's receipt
+    /// (its handler ran): as with `Unconfirmed`, the deposit may still be applied, once, or not
+    /// at all. Not in a process that called
+    /// [`handle_termination_requests`](super::handle_termination_requests).
+    #[error(
+        "the wait for the receipt on '{service}' was interrupted by a signal: the deposit may \
+         still be applied (once), or not at all"
+    )]
+    Interrupted { service: String },
     /// iceoryx2 could not send a link's message or a confirmed deposit, or receive its receipt.
     #[error(transparent)]
     Service(#[from] ServiceError),
@@ -180,6 +194,11 @@ pub enum ReceiveError {
     /// A frame's cells are not as many as its header says.
     #[error("the frame received has {got} cells but its header says {expected}")]
     BadFrame { got: usize, expected: usize },
+    /// A signal the program handles itself cut the wait short (its handler ran; nothing was
+    /// consumed): the program looks at its own flags and waits again if it wants. Not in a
+    /// process that called [`handle_termination_requests`](super::handle_termination_requests).
+    #[error("the wait on '{service}' was interrupted by a signal")]
+    Interrupted { service: String },
     /// Receiving or waiting failed, or a received configuration cannot be read.
     #[error(transparent)]
     Service(#[from] ServiceError),

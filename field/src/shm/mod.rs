@@ -46,6 +46,7 @@ mod inputs;
 mod mirror_state;
 mod reader;
 mod server;
+mod signals;
 mod standby;
 mod survey;
 mod timing;
@@ -76,8 +77,12 @@ pub use inputs::{
     InputsPublisher, InputsSubscriber,
 };
 pub use mirror_state::{mirror_info, MirrorInfo, MirrorStateWriter};
-pub use reader::{FieldReader, Frame, ParseWaitPolicyError, WaitPolicy};
+pub use reader::{
+    values_and_gradients_into, values_into, FieldReader, Frame, ParseWaitPolicyError,
+    SampleManyError, WaitPolicy,
+};
 pub use server::{FieldServer, TickOutcome};
+pub use signals::{handle_termination_requests, handles_termination_requests, stop_requested};
 pub use standby::{Standby, StandbyEvent, Takeover};
 pub use survey::{field_names, survey, FieldInfo};
 pub use timing::{field_timing, TimingInfo, TimingWriter};
@@ -90,17 +95,16 @@ pub use crate::wire::READER_BORROWED_FRAMES;
 /// Deposit publishers' and readers' event id for "frame ready".
 const FRAME_READY: EventId = EventId::new(0);
 
-/// Waits on the node for `d`; `false` once SIGINT or SIGTERM asked the process to stop. Any other
-/// signal that cuts the sleep short (SIGCONT after a SIGSTOP or Ctrl-Z, SIGCHLD…) is not a
-/// request to stop, although `node.wait` reports it as an interrupt.
+/// Waits on the node for `d`; `false` once SIGINT or SIGTERM asked the process to stop (only in a
+/// process that called [`handle_termination_requests`]). Any other signal that cuts the sleep
+/// short (SIGCONT after a SIGSTOP or Ctrl-Z, SIGCHLD, a signal the program handles itself…) is
+/// not a request to stop, although `node.wait` reports it as an interrupt.
 pub fn wait_or_stop(node: &Node<Svc>, d: Duration) -> bool {
     use iceoryx2::node::NodeWaitFailure;
     match node.wait(d) {
         Ok(()) => true,
         Err(NodeWaitFailure::TerminationRequest) => false,
-        Err(NodeWaitFailure::Interrupt) => {
-            !iceoryx2_bb_posix::signal::SignalHandler::termination_requested()
-        }
+        Err(NodeWaitFailure::Interrupt) => !stop_requested(),
     }
 }
 
@@ -114,11 +118,6 @@ fn open_deposit_ready(
         .notifier_builder()
         .create()
         .ok()
-}
-
-/// Whether SIGINT or SIGTERM asked this process to stop.
-pub(crate) fn stop_requested() -> bool {
-    iceoryx2_bb_posix::signal::SignalHandler::termination_requested()
 }
 
 /// A listener's timed wait that never blocks for good. iceoryx2 0.10's listener hands the timeout
@@ -137,16 +136,34 @@ pub fn listener_timed_wait(
     }
 }
 
-/// Waits on a listener; a signal that interrupts the wait (any caught one, not only Ctrl-C) is
-/// a spurious wake-up, since callers loop on their own deadline and see Ctrl-C through
-/// `node.wait`.
+/// How a listener's wait ended ([`wait_interruptible`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Woken {
+    /// An event, the timeout, or (in a process that handles termination requests itself) a
+    /// signal: the caller looks at what it waits for and loops on its own deadline.
+    Anyway,
+    /// A signal cut the wait short (`EINTR`): the program's own handler ran. Returned only where
+    /// the program owns its signals (`signals.rs`), so its loop can look at its flags.
+    Interrupted,
+}
+
+/// Waits on a listener. A signal that interrupts the wait is a spurious wake-up in a process
+/// that handles termination requests through iceoryx2 (callers loop on their own deadline and
+/// see Ctrl-C through `stop_requested`); elsewhere it is [`Woken::Interrupted`].
 pub(crate) fn wait_interruptible(
     listener: &iceoryx2::port::listener::Listener<Svc>,
     timeout: Duration,
     service: &str,
-) -> Result<(), ServiceError> {
+) -> Result<Woken, ServiceError> {
     match listener_timed_wait(listener, timeout) {
-        Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => Ok(()),
+        Ok(_) => Ok(Woken::Anyway),
+        Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {
+            Ok(if handles_termination_requests() {
+                Woken::Anyway
+            } else {
+                Woken::Interrupted
+            })
+        }
         Err(e) => Err(service_err(service, "wait", Iceoryx(e))),
     }
 }
@@ -227,8 +244,9 @@ pub fn domain_config_of(domain: Option<&str>) -> Result<Config, NameError> {
     Ok(config)
 }
 
-/// Creates an iceoryx2 node that stops on SIGINT/SIGTERM (`node.wait` then returns an error) and
-/// first removes what dead nodes left behind.
+/// Creates an iceoryx2 node and first removes what dead nodes left behind. The node installs no
+/// signal handler, unless the program called [`handle_termination_requests`]: then it stops on
+/// SIGINT/SIGTERM (`node.wait` returns an error).
 pub fn create_node(name: &str) -> Result<Node<Svc>, AttachError> {
     create_node_with(name, domain_config()?)
 }
@@ -244,10 +262,11 @@ fn create_node_with(name: &str, domain: Config) -> Result<Node<Svc>, AttachError
         name: name.to_string(),
         source: Box::new(Iceoryx(e)),
     })?;
-    // SIGINT and SIGTERM wait (blocked, pending) until the node exists and iceoryx2's handler
-    // is installed: a process stopped while its node is half-created leaves an entry that no
-    // cleanup can remove. A signal that came meanwhile is handled at the unblock, and the
-    // node's next `wait` reports it.
+    // SIGINT and SIGTERM wait (blocked, pending, in this thread) until the node exists (and,
+    // where the program asked for it, iceoryx2's handler is installed): a process stopped while
+    // its node is half-created leaves an entry that no cleanup can remove. A signal that came
+    // meanwhile is handled at the unblock — by the program's own handler, or by iceoryx2's, and
+    // the node's next `wait` reports it.
     use nix::sys::signal::{pthread_sigmask, SigSet, SigmaskHow, Signal};
     let mut termination = SigSet::empty();
     termination.add(Signal::SIGINT);
@@ -262,15 +281,17 @@ fn create_node_with(name: &str, domain: Config) -> Result<Node<Svc>, AttachError
     let node = NodeBuilder::new()
         .name(&node_name)
         .config(&domain)
-        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+        .signal_handling_mode(signals::node_signal_mode())
         .create::<Svc>()
         .map_err(|e| AttachError::Node {
             name: name.to_string(),
             source: e,
         });
-    // Installs iceoryx2's signal handler (installed on first use). A wait that fails took a
-    // termination request an earlier node of this process had not yet seen: raised again below.
-    let seen_before = node.as_ref().is_ok_and(|n| n.wait(Duration::ZERO).is_err());
+    // Where the program asked for iceoryx2's handling: installs its signal handler (installed on
+    // first use). A wait that fails took a termination request an earlier node of this process
+    // had not yet seen: raised again below. Elsewhere nothing is installed or consumed.
+    let seen_before = handles_termination_requests()
+        && node.as_ref().is_ok_and(|n| n.wait(Duration::ZERO).is_err());
     if blocked {
         // Restoring the mask the thread had cannot fail with a valid `how`.
         let _ = pthread_sigmask(SigmaskHow::SIG_SETMASK, Some(&previous), None);
@@ -697,22 +718,36 @@ fn check_shm_space(config: &FieldConfig) -> Result<(), StartError> {
 }
 
 /// Calls `attach` until it succeeds, for at most `timeout`, while its error is one `retry`
-/// accepts (no field yet, a service half-made); waits with `node.wait` between tries (returns
-/// early on a termination request).
-fn retry_attach<T, E>(
+/// accepts (no field yet, a service half-made); waits with `node.wait` between tries. Returns
+/// early with the last error on a termination request (a process that handles them through
+/// iceoryx2), and with `AttachError::Interrupted` when a signal the program handles itself cuts
+/// a wait short.
+fn retry_attach<T, E: From<AttachError>>(
     node: &Node<Svc>,
+    field: &str,
     timeout: Duration,
     mut attach: impl FnMut() -> Result<T, E>,
     retry: impl Fn(&E) -> bool,
 ) -> Result<T, E> {
+    use iceoryx2::node::NodeWaitFailure;
     let deadline = std::time::Instant::now() + timeout;
     loop {
         match attach() {
             Ok(t) => return Ok(t),
             Err(e) if retry(&e) => {
                 let left = deadline.saturating_duration_since(std::time::Instant::now());
-                if left.is_zero() || node.wait(left.min(Duration::from_millis(20))).is_err() {
+                if left.is_zero() {
                     return Err(e);
+                }
+                match node.wait(left.min(Duration::from_millis(20))) {
+                    Ok(()) => {}
+                    Err(NodeWaitFailure::Interrupt) if !handles_termination_requests() => {
+                        return Err(AttachError::Interrupted {
+                            field: field.to_string(),
+                        }
+                        .into())
+                    }
+                    Err(_) => return Err(e),
                 }
             }
             Err(e) => return Err(e),

@@ -8,6 +8,7 @@ use iceoryx2::prelude::*;
 use super::{
     open_frame_ready_service, open_frame_service, retry_attach, service_err, wait_interruptible,
     AttachError, FieldServices, FrameFactory, FrameSample, FrameSubscriber, ReceiveError, Svc,
+    Woken,
 };
 use crate::messages::FrameHeader;
 use crate::sample::FrameView;
@@ -105,6 +106,104 @@ pub struct Frame<'a> {
     pub view: FrameView<'a>,
 }
 
+impl Frame<'_> {
+    /// [`values_into`]: `FrameView::value` of `channel` at every point.
+    pub fn values_into(
+        &self,
+        channel: usize,
+        points: &[[f32; 2]],
+        values: &mut [f32],
+    ) -> Result<(), SampleManyError> {
+        values_into(&self.view, channel, points, values)
+    }
+
+    /// [`values_and_gradients_into`]: `FrameView::value` and `gradient` at every point.
+    pub fn values_and_gradients_into(
+        &self,
+        channel: usize,
+        points: &[[f32; 2]],
+        values: &mut [f32],
+        gradients: &mut [[f32; 2]],
+    ) -> Result<(), SampleManyError> {
+        values_and_gradients_into(&self.view, channel, points, values, gradients)
+    }
+}
+
+/// Why a batch of samples was refused (nothing was written).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SampleManyError {
+    #[error("channel = {channel}: the frame has {channels} channel(s)")]
+    Channel { channel: usize, channels: usize },
+    #[error("{what} has room for {got} point(s), {points} point(s) given")]
+    Length {
+        what: &'static str,
+        got: usize,
+        points: usize,
+    },
+}
+
+fn check_batch(
+    view: &FrameView<'_>,
+    channel: usize,
+    points: usize,
+    outputs: &[(&'static str, usize)],
+) -> Result<(), SampleManyError> {
+    if channel >= view.channels {
+        return Err(SampleManyError::Channel {
+            channel,
+            channels: view.channels,
+        });
+    }
+    for &(what, got) in outputs {
+        if got < points {
+            return Err(SampleManyError::Length { what, got, points });
+        }
+    }
+    Ok(())
+}
+
+/// `view.value(channel, x, y)` for every point `[x, y]` into `values[i]`: a batch in one call,
+/// the same numbers as point by point.
+pub fn values_into(
+    view: &FrameView<'_>,
+    channel: usize,
+    points: &[[f32; 2]],
+    values: &mut [f32],
+) -> Result<(), SampleManyError> {
+    check_batch(view, channel, points.len(), &[("values", values.len())])?;
+    for (p, v) in points.iter().zip(values.iter_mut()) {
+        *v = view.value(channel, p[0], p[1]);
+    }
+    Ok(())
+}
+
+/// `view.value` and `view.gradient` for every point into `values[i]` and `gradients[i]`
+/// (`[gx, gy]`): a batch in one call, the same numbers as point by point.
+pub fn values_and_gradients_into(
+    view: &FrameView<'_>,
+    channel: usize,
+    points: &[[f32; 2]],
+    values: &mut [f32],
+    gradients: &mut [[f32; 2]],
+) -> Result<(), SampleManyError> {
+    check_batch(
+        view,
+        channel,
+        points.len(),
+        &[("values", values.len()), ("gradients", gradients.len())],
+    )?;
+    for ((p, v), g) in points
+        .iter()
+        .zip(values.iter_mut())
+        .zip(gradients.iter_mut())
+    {
+        *v = view.value(channel, p[0], p[1]);
+        let (gx, gy) = view.gradient(channel, p[0], p[1]);
+        *g = [gx, gy];
+    }
+    Ok(())
+}
+
 /// A process's read access to a field: lends the newest frame without copying it.
 ///
 /// When the field dies the reader keeps its last frame (`frame()` still lends it) and
@@ -179,6 +278,9 @@ impl FieldReader {
         reader.update().map_err(|e| match e {
             ReceiveError::BadFrame { got, expected } => AttachError::BadFrame { got, expected },
             ReceiveError::Service(e) => AttachError::Service(e),
+            ReceiveError::Interrupted { .. } => AttachError::Interrupted {
+                field: field.to_string(),
+            },
         })?;
         Ok(reader)
     }
@@ -192,6 +294,7 @@ impl FieldReader {
     ) -> Result<Self, AttachError> {
         retry_attach(
             node,
+            field,
             timeout,
             || Self::attach(node, field),
             AttachError::field_not_up_yet,
@@ -239,17 +342,52 @@ impl FieldReader {
     }
 
     /// Waits up to `timeout` for a frame newer than the one held; returns whether one came.
+    /// `ReceiveError::Interrupted` when a signal the program handles cut the wait short (not in
+    /// a process that called
+    /// [`handle_termination_requests`](super::handle_termination_requests)).
     pub fn wait_frame(&mut self, timeout: Duration) -> Result<bool, ReceiveError> {
         if self.update()? {
             return Ok(true);
         }
-        wait_interruptible(&self.listener, timeout, &self.names.frame_ready)?;
-        self.update()
+        let woken = wait_interruptible(&self.listener, timeout, &self.names.frame_ready)?;
+        if self.update()? {
+            return Ok(true);
+        }
+        match woken {
+            Woken::Anyway => Ok(false),
+            Woken::Interrupted => Err(ReceiveError::Interrupted {
+                service: self.names.frame_ready.clone(),
+            }),
+        }
+    }
+
+    /// Takes the frame-ready notifications that have arrived, without waiting: after it the
+    /// descriptor of [`frame_ready_listener`](Self::frame_ready_listener) is readable again
+    /// only for a notification that comes later. Returns how many were taken.
+    pub fn take_notifications(&self) -> Result<u64, ReceiveError> {
+        self.listener.try_wait(|_| {}).map_err(|e| {
+            service_err(
+                &self.names.frame_ready,
+                "take notifications",
+                super::Iceoryx(e),
+            )
+            .into()
+        })
+    }
+
+    /// This reader's frame-ready listener, e.g. for its file descriptor (iceoryx2's
+    /// `FileDescriptorBased`): readable (`poll`, `epoll`) while a notification of a frame
+    /// published since the last [`take_notifications`](Self::take_notifications) is pending.
+    pub fn frame_ready_listener(&self) -> &iceoryx2::port::listener::Listener<Svc> {
+        &self.listener
     }
 
     /// Waits up to `timeout` for a frame newer than the one held, the way `policy` says;
-    /// returns whether one came. A wake-up for a frame already taken waits again; a
-    /// termination request (Ctrl-C) ends the wait with `false`.
+    /// returns whether one came. A wake-up for a frame already taken waits again. A signal
+    /// the program handles cuts the sleep on the event short with `ReceiveError::Interrupted`
+    /// (the polling part of `Spin` and `BusyPoll` makes no system call a signal could cut: it
+    /// goes on until the frame or the timeout); in a process that handles termination requests
+    /// through iceoryx2, Ctrl-C ends the wait with `false` instead.
     pub fn wait_frame_with(
         &mut self,
         policy: WaitPolicy,
@@ -278,7 +416,7 @@ impl FieldReader {
             if self.wait_frame(left)? {
                 return Ok(true);
             }
-            if iceoryx2_bb_posix::signal::SignalHandler::termination_requested() {
+            if super::stop_requested() {
                 // Ctrl-C: the caller sees no frame and checks its own termination flag.
                 return Ok(false);
             }

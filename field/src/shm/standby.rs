@@ -170,6 +170,7 @@ impl Standby {
     ) -> Result<Self, StandbyError> {
         retry_attach(
             node,
+            field,
             timeout,
             || Self::attach(node, field, config.clone()),
             |e| match e {
@@ -280,6 +281,8 @@ impl Standby {
             } else {
                 timeout.min(until_limit)
             };
+            // Interrupted or not, it looks at the frames and the primary's silence below (a
+            // signal the program handles is not consumed here).
             wait_interruptible(&self.listener, timeout, &self.names.frame_ready)?;
             fresh = self.receive_frames()?;
         }

@@ -7,6 +7,10 @@
  *   abi_test confirm FIELD X Y                 confirmed deposits: applied in frame N (and
  *                                              seen there), refused with the field's reason,
  *                                              no receipt within a zero timeout
+ *   abi_test hold FIELD                        attaches, prints "holding", detaches at the end
+ *                                              of stdin
+ *   abi_test dead FIELD                        the field's process died while another process
+ *                                              holds its services: PHEROMONE_STATUS_FIELD_DEAD
  *
  * Exits 0 when every check holds, 1 (with the reason on stderr) otherwise. */
 #include <inttypes.h>
@@ -60,6 +64,22 @@ static int run_errors(const char *missing, const char *live) {
     CHECK(s == PHEROMONE_STATUS_NO_FIELD, "missing field: status %d", (int)s);
     CHECK(f == NULL, "a failed attach leaves *out NULL");
     CHECK(says(missing), "the message names the field: %s", pheromone_last_error());
+    CHECK(says("default domain"), "the message names the domain: %s", pheromone_last_error());
+    {
+        PheromoneAttachOptions od;
+        MUST(pheromone_attach_options_init(&od));
+        od.iox_domain = "capi-other-domain";
+        s = pheromone_field_attach(live, &od, &f);
+        CHECK(s == PHEROMONE_STATUS_NO_FIELD && says("domain 'capi-other-domain'"),
+              "a live field in another domain: %d %s", (int)s, pheromone_last_error());
+    }
+    CHECK(strcmp(pheromone_status_str(PHEROMONE_STATUS_NO_FIELD),
+                 "no field of that name is running") == 0,
+          "status_str(NO_FIELD): %s", pheromone_status_str(PHEROMONE_STATUS_NO_FIELD));
+    CHECK(strcmp(pheromone_status_str(-3), "unknown status") == 0, "status_str(-3)");
+    s = pheromone_set_log_level(99);
+    CHECK(s == PHEROMONE_STATUS_BAD_ARGUMENT && says("log level = 99"), "log level 99: %d %s",
+          (int)s, pheromone_last_error());
 
     s = pheromone_field_attach(NULL, NULL, &f);
     CHECK(s == PHEROMONE_STATUS_BAD_ARGUMENT && says("name is NULL"), "NULL name: %d %s", (int)s,
@@ -120,6 +140,21 @@ static int run_errors(const char *missing, const char *live) {
     s = pheromone_deposit(h, &d);
     CHECK(s == PHEROMONE_STATUS_BAD_ARGUMENT && says("kernel = 9"), "bad kernel: %d %s", (int)s,
           pheromone_last_error());
+    /* Not positive semi-definite: |cov_xy| > sqrt(cov_xx * cov_yy). Refused before sending,
+     * unconfirmed as well as confirmed. */
+    d.kernel = PHEROMONE_KERNEL_ELLIPSE;
+    d.cov_xx = 0.01f;
+    d.cov_xy = 0.05f;
+    d.cov_yy = 0.01f;
+    d.range_m = 1.0f;
+    d.gamma_max = 100.0f;
+    s = pheromone_deposit(h, &d);
+    CHECK(s == PHEROMONE_STATUS_BAD_ARGUMENT && says("not positive semi-definite"),
+          "non-PSD deposit: %d %s", (int)s, pheromone_last_error());
+    s = pheromone_deposit_confirmed(h, &d, SECOND_NS, NULL);
+    CHECK(s == PHEROMONE_STATUS_BAD_ARGUMENT && says("cov_xy"), "non-PSD confirmed: %d %s",
+          (int)s, pheromone_last_error());
+
     PheromonePoseEstimate p = {0};
     p.cov[0] = 0.01;
     p.cov[1] = 0.5; /* not symmetric: cov[1][0] stays 0 */
@@ -317,13 +352,47 @@ static int run_confirm(const char *name, float x, float y) {
     return failures ? 1 : 0;
 }
 
+static int run_hold(const char *name) {
+    PheromoneAttachOptions o;
+    PheromoneField *f = NULL;
+    char line[64];
+    MUST(pheromone_attach_options_init(&o));
+    o.attach_timeout_ns = 10 * SECOND_NS;
+    o.deposits = 0;
+    MUST(pheromone_field_attach(name, &o, &f));
+    printf("holding\n");
+    fflush(stdout);
+    while (fgets(line, sizeof line, stdin) != NULL) {
+    }
+    MUST(pheromone_field_detach(f));
+    return 0;
+}
+
+static int run_dead(const char *name) {
+    PheromoneAttachOptions o;
+    PheromoneField *f = (PheromoneField *)0x1;
+    MUST(pheromone_attach_options_init(&o));
+    o.attach_timeout_ns = SECOND_NS / 2;
+    PheromoneStatus s = pheromone_field_attach(name, &o, &f);
+    CHECK(s == PHEROMONE_STATUS_FIELD_DEAD, "attach to a dead field: %d %s", (int)s,
+          pheromone_last_error());
+    CHECK(f == NULL, "a failed attach leaves *out NULL");
+    CHECK(says(name) && says("died"), "the message names the field: %s", pheromone_last_error());
+    if (failures == 0) printf("dead: %s\n", pheromone_last_error());
+    return failures ? 1 : 0;
+}
+
 int main(int argc, char **argv) {
+    /* iceoryx2's log level is the program's to set (the library never changes it): quiet. */
+    MUST(pheromone_set_log_level(PHEROMONE_LOG_FATAL));
     if (argc >= 4 && strcmp(argv[1], "errors") == 0) return run_errors(argv[2], argv[3]);
     if (argc >= 3 && strcmp(argv[1], "sample") == 0) return run_sample(argv[2], argc - 3, argv + 3);
     if (argc == 5 && strcmp(argv[1], "frames") == 0)
         return run_frames(argv[2], strtof(argv[3], NULL), strtof(argv[4], NULL));
     if (argc == 5 && strcmp(argv[1], "confirm") == 0)
         return run_confirm(argv[2], strtof(argv[3], NULL), strtof(argv[4], NULL));
-    fprintf(stderr, "usage: abi_test errors MISSING LIVE | sample FIELD X,Y... | frames FIELD X Y | confirm FIELD X Y\n");
+    if (argc == 3 && strcmp(argv[1], "hold") == 0) return run_hold(argv[2]);
+    if (argc == 3 && strcmp(argv[1], "dead") == 0) return run_dead(argv[2]);
+    fprintf(stderr, "usage: abi_test errors MISSING LIVE | sample FIELD X,Y... | frames FIELD X Y | confirm FIELD X Y | hold FIELD | dead FIELD\n");
     return 2;
 }

@@ -7,8 +7,15 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <type_traits>
 
 #include "pheromone.hpp"
+
+// A Frame and a Field are move-only: a copy is refused at compile time.
+static_assert(!std::is_copy_constructible<pheromone::Frame>::value, "Frame is move-only");
+static_assert(!std::is_copy_assignable<pheromone::Frame>::value, "Frame is move-only");
+static_assert(std::is_nothrow_move_constructible<pheromone::Frame>::value, "Frame moves");
+static_assert(!std::is_copy_constructible<pheromone::Field>::value, "Field is move-only");
 
 namespace {
 int failures = 0;
@@ -54,7 +61,46 @@ int main(int argc, char** argv) {
       } catch (const pheromone::Error& e) {
         check(e.status() == PHEROMONE_STATUS_BORROWED, e.what());
       }
+      // One live borrow per Field: a second borrow, or `frame = field.borrow()` over a live
+      // Frame, is refused while the first lives.
+      try {
+        pheromone::Frame second = field.borrow();
+        check(false, "a second borrow while a Frame lives did not throw");
+      } catch (const pheromone::Error& e) {
+        check(e.status() == PHEROMONE_STATUS_BORROWED, e.what());
+      }
+      try {
+        frame = field.borrow();
+        check(false, "frame = field.borrow() over a live Frame did not throw");
+      } catch (const pheromone::Error& e) {
+        check(e.status() == PHEROMONE_STATUS_BORROWED, e.what());
+      }
+      pheromone::Frame other;
+      check(field.try_borrow(other) == PHEROMONE_STATUS_BORROWED && !other,
+            "try_borrow while a Frame lives");
+      check(frame.value(0, x, y) == expected, "the first Frame still reads its frame");
+      pheromone::Frame moved = std::move(frame);
+      check(!frame && moved && moved.value(0, x, y) == expected, "a moved Frame");
     }  // the frame is released here
+    {
+      pheromone::Frame again = field.borrow();
+      check(bool(again), "a borrow after the release");
+    }
+    // A Frame that outlives its Field keeps the handle (detached with the Frame: valgrind
+    // sees no leak) and still reads its frame.
+    {
+      pheromone::Frame survivor;
+      {
+        PheromoneAttachOptions o2 = pheromone::default_options();
+        o2.attach_timeout_ns = 5'000'000'000ull;
+        o2.deposits = 0;
+        pheromone::Field second(argv[1], o2);
+        survivor = second.borrow();
+      }
+      float v = 0.0f;
+      check(survivor.try_value(0, x, y, v) == PHEROMONE_STATUS_OK && v == expected,
+            "a Frame that outlived its Field");
+    }
     PheromonePoseEstimate pose{double(x) + 0.5, double(y), 0.0,
                                {0.02, 0.0, 0.0, 0.0, 0.02, 0.0, 0.0, 0.0, 0.1}};
     field.deposit_pose(pose);

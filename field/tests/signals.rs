@@ -1,0 +1,205 @@
+//! A Rust program that embeds the field keeps its own SIGTERM handling (issue 47): its handler
+//! runs during a blocking wait on a live field, the wait returns "interrupted", every SIGTERM
+//! sent from outside reaches the handler, and no signal's disposition changes.
+//!
+//! Its own test binary without libtest's harness (`harness = false`): the waits run on the main
+//! thread, the only one that does not block SIGTERM, so a SIGTERM sent to the process (by the
+//! `kill` command) lands in them. The field runs on a thread of this process that publishes its
+//! first frame and never ticks, so only a signal can end a wait early.
+#![allow(unsafe_code)]
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{mpsc, Arc};
+use std::time::{Duration, Instant};
+
+use field::shm::{
+    create_node, DepositClient, FieldReader, FieldServer, ReceiveError, SendError, WaitPolicy,
+};
+use field::{ChannelSpec, Deposit, DepositMsg, Evaporation, FieldConfig, Kernel};
+use nix::sys::signal::{pthread_sigmask, SigSet, SigmaskHow, Signal};
+
+static SEEN: AtomicUsize = AtomicUsize::new(0);
+
+extern "C" fn on_term(_: libc::c_int) {
+    SEEN.fetch_add(1, Ordering::SeqCst);
+}
+
+/// The handler and flags of every signal that has a disposition.
+fn dispositions() -> Vec<(i32, usize, i32)> {
+    (1..65)
+        .filter_map(|s| {
+            // SAFETY: a zeroed sigaction is a valid output buffer; a NULL new action only reads.
+            let mut old: libc::sigaction = unsafe { std::mem::zeroed() };
+            // SAFETY: valid pointers for the call; `s` may be invalid, which sigaction reports.
+            let ok = unsafe { libc::sigaction(s, std::ptr::null(), &mut old) } == 0;
+            ok.then_some((s, old.sa_sigaction, old.sa_flags))
+        })
+        .collect()
+}
+
+fn install_handler() {
+    // SAFETY: zeroed is a valid sigaction; the handler only touches an atomic
+    // (async-signal-safe); no SA_RESTART.
+    unsafe {
+        let mut sa: libc::sigaction = std::mem::zeroed();
+        sa.sa_sigaction = on_term as extern "C" fn(libc::c_int) as usize;
+        libc::sigemptyset(&mut sa.sa_mask);
+        sa.sa_flags = 0;
+        assert_eq!(
+            libc::sigaction(libc::SIGTERM, &sa, std::ptr::null_mut()),
+            0,
+            "sigaction(SIGTERM)"
+        );
+    }
+}
+
+/// Runs `f` on a new thread that blocks SIGTERM (it inherits the mask set around its spawn).
+fn spawn_blocking_sigterm<T: Send + 'static>(
+    f: impl FnOnce() -> T + Send + 'static,
+) -> std::thread::JoinHandle<T> {
+    let mut term = SigSet::empty();
+    term.add(Signal::SIGTERM);
+    pthread_sigmask(SigmaskHow::SIG_BLOCK, Some(&term), None).expect("block SIGTERM");
+    let h = std::thread::spawn(f);
+    pthread_sigmask(SigmaskHow::SIG_UNBLOCK, Some(&term), None).expect("unblock SIGTERM");
+    h
+}
+
+/// Sends SIGTERM to this process with the `kill` command until `done` reaches `target`: one,
+/// then another every 0.5 s while the step it waits for has not come (a SIGTERM that lands
+/// between two waits runs the handler without interrupting a wait). Returns how many it sent.
+fn sender(done: Arc<AtomicUsize>, target: usize) -> usize {
+    let pid = std::process::id().to_string();
+    let mut sent = 0;
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while done.load(Ordering::SeqCst) < target {
+        assert!(
+            Instant::now() < deadline,
+            "the waits were not all interrupted within 60 s"
+        );
+        let step = done.load(Ordering::SeqCst);
+        let status = std::process::Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .expect("run kill");
+        assert!(status.success(), "kill -TERM {pid}: {status}");
+        sent += 1;
+        let resend = Instant::now() + Duration::from_millis(500);
+        while done.load(Ordering::SeqCst) == step && Instant::now() < resend {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+    sent
+}
+
+fn config() -> FieldConfig {
+    FieldConfig {
+        width: 32,
+        height: 32,
+        cell_size_m: 0.1,
+        channels: vec![ChannelSpec::new("trail", Evaporation::None)],
+        ..FieldConfig::default()
+    }
+}
+
+fn main() {
+    const WAITS: usize = 4;
+    field::shm::set_verbose(false);
+    install_handler();
+    let before = dispositions();
+    let name = testkit::unique("sig");
+
+    // The field: its first frame, then no tick until told to stop.
+    let (started_tx, started_rx) = mpsc::channel();
+    let (stop_tx, stop_rx) = mpsc::channel::<()>();
+    let field_name = name.clone();
+    let server = spawn_blocking_sigterm(move || {
+        let node = create_node(&format!("{field_name}-field")).expect("field node");
+        let server = FieldServer::start(&node, &field_name, config(), None).expect("field");
+        started_tx.send(()).expect("tell main");
+        // Hands the first frame to readers that attach (the field's history); no tick. Stops
+        // after the reader and the client are gone.
+        while let Err(mpsc::RecvTimeoutError::Timeout) =
+            stop_rx.recv_timeout(Duration::from_millis(5))
+        {
+            server.serve_new_readers().expect("serve readers");
+        }
+        drop(server);
+    });
+    started_rx
+        .recv_timeout(Duration::from_secs(30))
+        .expect("the field started");
+
+    let node = create_node(&format!("{name}-main")).expect("node");
+    let mut reader =
+        FieldReader::attach_within(&node, &name, Duration::from_secs(10)).expect("attach");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while reader.frame().is_none() {
+        assert!(Instant::now() < deadline, "no first frame within 10 s");
+        reader.update().expect("update");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let mut client = DepositClient::attach(&node, &name, 3).expect("deposit client");
+
+    let done = Arc::new(AtomicUsize::new(0));
+    let sending = {
+        let done = Arc::clone(&done);
+        spawn_blocking_sigterm(move || sender(done, WAITS + 1))
+    };
+    for i in 1..=WAITS {
+        let at_start = SEEN.load(Ordering::SeqCst);
+        let r = if i % 2 == 1 {
+            reader.wait_frame_with(WaitPolicy::Event, Duration::from_secs(60))
+        } else {
+            reader.wait_frame(Duration::from_secs(60))
+        };
+        assert!(
+            matches!(r, Err(ReceiveError::Interrupted { .. })),
+            "wait {i}: {r:?}, expected ReceiveError::Interrupted"
+        );
+        assert!(
+            SEEN.load(Ordering::SeqCst) > at_start,
+            "wait {i} was interrupted but the program's handler did not run"
+        );
+        done.store(i, Ordering::SeqCst);
+    }
+    let at_start = SEEN.load(Ordering::SeqCst);
+    let msg = DepositMsg::from(Deposit {
+        channel: 0,
+        x_m: 1.0,
+        y_m: 1.0,
+        kernel: Kernel::Ellipse {
+            tau: 0.01,
+            cov_m2: [0.04, 0.0, 0.04],
+            range_m: 0.5,
+            gamma_max: 100.0,
+        },
+    });
+    let r = client.deposit(msg, Duration::from_secs(60));
+    assert!(
+        matches!(r, Err(SendError::Interrupted { .. })),
+        "confirmed deposit: {r:?}, expected SendError::Interrupted"
+    );
+    assert!(
+        SEEN.load(Ordering::SeqCst) > at_start,
+        "deposit: the handler did not run"
+    );
+    done.store(WAITS + 1, Ordering::SeqCst);
+
+    let sent = sending.join().expect("sender");
+    assert_eq!(
+        SEEN.load(Ordering::SeqCst),
+        sent,
+        "SIGTERMs the program's handler saw, of those sent"
+    );
+    assert_eq!(dispositions(), before, "a signal's disposition changed");
+    drop(client);
+    drop(reader);
+    drop(node);
+    stop_tx.send(()).expect("stop the field");
+    server.join().expect("field thread");
+    println!(
+        "signals: {WAITS} waits and a confirmed deposit interrupted; the handler saw {sent} of \
+         {sent} SIGTERMs"
+    );
+}
