@@ -224,6 +224,19 @@ impl Lengths {
     }
 }
 
+/// Whether a deposit's Σxy `[[xx, xy], [xy, yy]]` is positive semi-definite, within the `f32`
+/// message's rounding: xx ≥ 0, yy ≥ 0 and xx·yy − xy² ≥ −1e-6·max(|xx|, |yy|)². The field refuses
+/// an ellipse or paper deposit that fails it (`not_psd`); senders that get no receipt (the C
+/// ABI's `pheromone_deposit`) check it first with this same function.
+pub fn cov_xy_is_psd(xx: f32, xy: f32, yy: f32) -> bool {
+    let scale = xx.abs().max(yy.abs()).max(f32::MIN_POSITIVE);
+    // Written as "not refused" so that a NaN (which the finiteness checks refuse first, by name)
+    // is not reported as a PSD failure.
+    !(xx < 0.0
+        || yy < 0.0
+        || (xx as f64 * yy as f64 - xy as f64 * xy as f64) < -1e-6 * (scale as f64).powi(2))
+}
+
 /// The M1 kernels (ellipse and paper, seed 000): the covariance's quadratic form and γ, and the
 /// cut-off range. `h`: the cell size (m).
 fn quadratic_shape(
@@ -244,11 +257,7 @@ fn quadratic_shape(
         ));
     }
     let (xx, xy, yy) = (msg.cov_xx, msg.cov_xy, msg.cov_yy);
-    let scale = xx.abs().max(yy.abs()).max(f32::MIN_POSITIVE);
-    if xx < 0.0
-        || yy < 0.0
-        || (xx as f64 * yy as f64 - xy as f64 * xy as f64) < -1e-6 * (scale as f64).powi(2)
-    {
+    if !cov_xy_is_psd(xx, xy, yy) {
         return Err(reject(
             RejectReason::NotPsd,
             format!("covariance [[{xx}, {xy}], [{xy}, {yy}]] is not positive semi-definite"),

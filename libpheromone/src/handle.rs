@@ -509,15 +509,11 @@ fn sample_pose(p: PheromonePose) -> Result<SamplePose, Failure> {
 }
 
 /// The covariance of an ellipse or paper deposit must be positive semi-definite: the field's own
-/// check (`quadratic_shape` in `field/src/deposit.rs`, which refuses it as `not_psd`), made here
+/// check (`field::deposit::cov_xy_is_psd`, by which the field refuses it as `not_psd`), made here
 /// so that `pheromone_deposit`, which gets no receipt, refuses it to the caller instead of the
 /// field dropping it.
 fn check_psd(xx: f32, xy: f32, yy: f32) -> Result<(), Failure> {
-    let scale = xx.abs().max(yy.abs()).max(f32::MIN_POSITIVE);
-    if xx < 0.0
-        || yy < 0.0
-        || (xx as f64 * yy as f64 - xy as f64 * xy as f64) < -1e-6 * (scale as f64).powi(2)
-    {
+    if !field::deposit::cov_xy_is_psd(xx, xy, yy) {
         bail!(
             BAD,
             "deposit covariance [[{xx}, {xy}], [{xy}, {yy}]] (cov_xx, cov_xy, cov_yy): not \
