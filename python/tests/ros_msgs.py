@@ -1,7 +1,26 @@
-"""grid_map_msgs for rosbags (not in its ROS 2 stores): the .msg texts of the jazzy branch of
-ANYbotics/grid_map, comments left out; shared by test_ros2.py and test_sim_record.py."""
+"""What the ROS 2 tests (test_ros2*.py, test_sim_record.py) share: grid_map_msgs for rosbags (not
+in its ROS 2 stores; the .msg texts of the jazzy branch of ANYbotics/grid_map, comments left
+out), the type names, the field they start, rmw_zenoh's DDS spelling and a free port."""
+
+import socket
 
 GRID = "grid_map_msgs/msg/GridMap"
+OCC = "nav_msgs/msg/OccupancyGrid"
+POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+
+#: A one-channel 40 × 30 field without evaporation, as the ROS 2 tests start it.
+ONE_CHANNEL_FIELD = """
+width = 40
+height = 30
+cell_size_m = 0.1
+origin_x_m = -1.0
+origin_y_m = 0.5
+tick_hz = 50.0
+
+[[channel]]
+name = "trail"
+evaporation = { model = "none" }
+"""
 
 GRID_MAP_MSG = """std_msgs/Header header
 GridMapInfo info
@@ -25,3 +44,16 @@ def register_grid_map(store, get_types_from_msg):
     types.update(get_types_from_msg(GRID_MAP_INFO_MSG, "grid_map_msgs/msg/GridMapInfo"))
     store.register(types)
     return store
+
+
+def dds(name):
+    """A ROS 2 type name as rmw_zenoh's key expressions spell it (`pkg::msg::dds_::Type_`)."""
+    pkg, sub, base = name.split("/")
+    return f"{pkg}::{sub}::dds_::{base}_"
+
+
+def free_port():
+    """A TCP port on 127.0.0.1 that nothing listens on now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

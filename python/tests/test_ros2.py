@@ -12,14 +12,13 @@ import json
 import math
 import os
 import signal
-import socket
 import struct
 import subprocess
 import time
 
 import numpy as np
 import pytest
-from ros_msgs import GRID, register_grid_map
+from ros_msgs import GRID, OCC, POSE, dds, free_port, register_grid_map
 
 import pheromone
 from conftest import BIN, STARTED_PIDS, deadline_loop, probe, run_cli
@@ -53,18 +52,10 @@ name = "other"
 evaporation = { model = "none" }
 """
 
-OCC = "nav_msgs/msg/OccupancyGrid"
-POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
-
 
 @pytest.fixture(scope="module")
 def store():
     return register_grid_map(get_typestore(Stores.ROS2_JAZZY), get_types_from_msg)
-
-
-def dds(name):
-    pkg, sub, base = name.split("/")
-    return f"{pkg}::{sub}::dds_::{base}_"
 
 
 @pytest.fixture(scope="module")
@@ -79,15 +70,9 @@ def zenoh_bin():
     return BIN
 
 
-def _free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 class Ros2Node:
     def __init__(self, tmp_path, field, *args):
-        self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.err = open(tmp_path / "ros2.stderr", "wb")
         self.proc = subprocess.Popen(
             [str(BIN), "ros2", "--field", field, "--listen", self.endpoint, "--json",

@@ -17,13 +17,13 @@ import json
 import math
 import os
 import signal
-import socket
 import struct
 import subprocess
 import time
 
 import pytest
-from ros_msgs import GRID, register_grid_map
+from ros_msgs import GRID, OCC, POSE, dds, free_port, register_grid_map
+from ros_msgs import ONE_CHANNEL_FIELD as FIELD
 
 from conftest import BIN, STARTED_PIDS, deadline_loop, run_cli
 
@@ -40,36 +40,10 @@ except ImportError as e:
     pytest.skip(f"pip install './python[zenoh,ros2]' for these tests ({e})",
                 allow_module_level=True)
 
-OCC = "nav_msgs/msg/OccupancyGrid"
-POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
-FIELD = """
-width = 40
-height = 30
-cell_size_m = 0.1
-origin_x_m = -1.0
-origin_y_m = 0.5
-tick_hz = 50.0
-
-[[channel]]
-name = "trail"
-evaporation = { model = "none" }
-"""
-
 
 @pytest.fixture(scope="module")
 def store():
     return register_grid_map(get_typestore(Stores.ROS2_JAZZY), get_types_from_msg)
-
-
-def dds(name):
-    pkg, sub, base = name.split("/")
-    return f"{pkg}::{sub}::dds_::{base}_"
-
-
-def _free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def type_hash(distro, store, name):
@@ -130,7 +104,7 @@ def test_a_distros_keys_tokens_gids_and_attachments(distro, start_field, store, 
     cfg = tmp_path / "field.toml"
     cfg.write_text(FIELD)
     f = start_field(distro[:3], "--config", str(cfg))
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     err = open(tmp_path / "ros2.stderr", "wb")
     node = subprocess.Popen(
         [str(BIN), "ros2", "--field", f.name, "--listen", endpoint,

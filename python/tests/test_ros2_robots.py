@@ -10,13 +10,13 @@ import csv
 import json
 import math
 import os
-import socket
 import struct
 import subprocess
 import threading
 
 import numpy as np
 import pytest
+from ros_msgs import POSE, dds, free_port
 
 from conftest import BIN, STARTED_PIDS
 
@@ -31,20 +31,8 @@ except ImportError as e:
     pytest.skip(f"pip install './python[zenoh]' rosbags for these tests ({e})",
                 allow_module_level=True)
 
-POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 PATH = "nav_msgs/msg/Path"
 SIM_S = "4"
-
-
-def dds(name):
-    pkg, sub, base = name.split("/")
-    return f"{pkg}::{sub}::dds_::{base}_"
-
-
-def _free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _listening_session(endpoint):
@@ -72,7 +60,7 @@ def _rows(path):
 def test_sim_ros2_publishes_poses_and_paths_that_match_the_run(tmp_path):
     store = get_typestore(Stores.ROS2_JAZZY)
     hashes = {t: store.hash_rihs01(t) for t in (POSE, PATH)}
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     got = {}
     lock = threading.Lock()
 

@@ -19,7 +19,6 @@ import math
 import os
 import select
 import signal
-import socket
 import struct
 import subprocess
 import sys
@@ -27,7 +26,8 @@ import time
 from pathlib import Path
 
 import pytest
-from ros_msgs import GRID, register_grid_map
+from ros_msgs import GRID, OCC, POSE, dds, free_port, register_grid_map
+from ros_msgs import ONE_CHANNEL_FIELD as FIELD
 
 from conftest import BIN, REPO, STARTED_PIDS, deadline_loop, run_cli
 
@@ -52,32 +52,6 @@ ROUTERS = {
     "1.1.0": (OLD_PYTHON, HERE / "rmw_zenohd" / "router_2024.json5"),
 }
 
-OCC = "nav_msgs/msg/OccupancyGrid"
-POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
-FIELD = """
-width = 40
-height = 30
-cell_size_m = 0.1
-origin_x_m = -1.0
-origin_y_m = 0.5
-tick_hz = 50.0
-
-[[channel]]
-name = "trail"
-evaporation = { model = "none" }
-"""
-
-
-def dds(name):
-    pkg, sub, base = name.split("/")
-    return f"{pkg}::{sub}::dds_::{base}_"
-
-
-def _free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 @pytest.fixture(scope="module")
 def store():
@@ -95,7 +69,7 @@ class Router:
             if REQUIRED:
                 pytest.fail(msg)
             pytest.skip(msg)
-        self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.err = open(tmp_path / f"router-{version}.stderr", "wb")
         self.proc = subprocess.Popen([str(python), str(ROUTER_PY), str(config), self.endpoint],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
