@@ -29,6 +29,7 @@ from .field import (
     LayoutMismatch,
     PheromoneError,
     Receipt,
+    set_log_level,
 )
 from .sample import gradient, gradient_many, sample, sample_many
 
@@ -54,5 +55,6 @@ __all__ = [
     "gradient_many",
     "sample",
     "sample_many",
+    "set_log_level",
     "wire_type_name",
 ]

@@ -238,6 +238,17 @@ _KERNEL_PARAMS = {
 _INTEGER_FIELDS = ("stamp_ns", "robot_id", "channel", "kernel")
 
 
+_LOG_LEVELS = ("trace", "debug", "info", "warn", "error", "fatal")
+
+
+def set_log_level(level: str) -> None:
+    """Sets iceoryx2's process-wide log level (`"trace"` … `"fatal"`). The package never changes
+    it by itself: a program that does not want iceoryx2's warnings on stderr calls this once."""
+    if not isinstance(level, str) or level.lower() not in _LOG_LEVELS:
+        raise ValueError(f"log level {level!r}: expected one of {', '.join(_LOG_LEVELS)}")
+    iox2.set_log_level(getattr(iox2.LogLevel, level.capitalize()))
+
+
 def _finite(name: str, value: Any) -> float:
     """`value` as a float that is finite, also as the wire's `float32`; else `ValueError` naming
     `name` and the value."""
@@ -403,7 +414,6 @@ class Field:
         self._ready_service = _wire.frame_ready_service(name)
         self._deposit_service = _wire.deposit_service(name)
         self._confirm_service = _wire.deposit_confirm_service(name)
-        iox2.set_log_level(iox2.LogLevel.Fatal)
         # Python keeps Ctrl-C (KeyboardInterrupt): iceoryx2 installs no signal handler.
         # iceoryx2's configuration (a config/iceoryx2.toml if there is one), with the prefix
         # `<D>_iox2_` of domain D as `shm::domain_config_of` sets it.

@@ -384,3 +384,21 @@ def test_wait_frame_spins_or_sleeps_as_asked_and_honours_its_timeout(start_field
             assert not field.wait_frame(0.3, spin_s=spin_s), spin_s
             took = time.monotonic() - t
             assert 0.3 <= took < 5.0, (spin_s, took)
+
+
+def test_attach_leaves_iceoryx2s_log_level_alone_and_set_log_level_is_the_callers(
+    start_field, monkeypatch
+):
+    import iceoryx2 as iox2
+
+    calls = []
+    real = iox2.set_log_level
+    monkeypatch.setattr(iox2, "set_log_level", lambda level: (calls.append(level), real(level)))
+    f = start_field("loglevel", *GRID)
+    with attach(f):
+        pass
+    assert calls == [], "attach changed iceoryx2's process-wide log level"
+    pheromone.set_log_level("error")
+    assert calls == [iox2.LogLevel.Error]
+    with pytest.raises(ValueError, match="'loud'"):
+        pheromone.set_log_level("loud")
