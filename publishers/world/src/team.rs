@@ -13,7 +13,6 @@ use std::collections::BTreeMap;
 
 use crate::scenario::Scenario;
 use messages::{PoseMsg, RendezvousMsg, ScanMsg};
-use roles::depositor::Depositor;
 pub use roles::mapper::{alignment_error_m, true_transform, MergeEvent};
 use roles::mapper::{MapError, MapView, Mapper, MapperCounters, MappingConfig, Pose2};
 
@@ -35,30 +34,6 @@ pub struct MappingRecord {
     pub counters: BTreeMap<u32, MapperCounters>,
 }
 
-/// Robot `id`'s mapper as the scenario sets it up: its start pose is the world's, its depositor
-/// copy the scenario's.
-pub fn mapper_for(scenario: &Scenario, id: u32) -> Result<Option<Mapper>, MapError> {
-    let Some(config) = scenario.mapping() else {
-        return Ok(None);
-    };
-    let Some(r) = scenario.world.robots.iter().find(|r| r.id == id) else {
-        return Ok(None);
-    };
-    let depositor = scenario
-        .roles(id)
-        .and_then(|x| x.depositor.clone())
-        .and_then(|c| Depositor::new(c).ok());
-    Mapper::new(
-        id,
-        config,
-        [r.start.x_m, r.start.y_m, r.start.theta_rad],
-        &scenario.mapping_channel(id),
-        scenario.world.dt_s,
-        depositor,
-    )
-    .map(Some)
-}
-
 /// Every robot's mapper in one process.
 pub struct MappingTeam {
     config: MappingConfig,
@@ -76,7 +51,7 @@ impl MappingTeam {
         };
         let mut mappers = Vec::new();
         for r in &scenario.world.robots {
-            mappers.extend(mapper_for(scenario, r.id)?);
+            mappers.extend(scenario.mapper(r.id)?);
         }
         Ok(Some(Self {
             config: config.clone(),
@@ -271,7 +246,7 @@ mod tests {
         let mut team = MappingTeam::new(&s).unwrap().expect("maps");
         let ids: Vec<u32> = s.world.robots.iter().map(|r| r.id).collect();
         // Robot 0's mapper alone, fed the same inputs: what it maps with no merge.
-        let mut solo = mapper_for(&s, ids[0]).unwrap().unwrap();
+        let mut solo = s.mapper(ids[0]).unwrap().unwrap();
         let feed = |team: &mut MappingTeam,
                     solo: &mut Mapper,
                     steps: std::ops::RangeInclusive<u64>,
@@ -311,7 +286,7 @@ mod tests {
         // Its map holds only what it mapped itself; the others' maps took each other's.
         assert_eq!(team.mappers[0].map.occupancy, solo.map.occupancy);
         assert_eq!(team.mappers[0].map.pheromone, solo.map.pheromone);
-        let mut solo_1 = mapper_for(&s, ids[1]).unwrap().unwrap();
+        let mut solo_1 = s.mapper(ids[1]).unwrap().unwrap();
         for k in 1..=29 {
             solo_1.on_step(k, &pose(&s.world.robots[1], k, found), &scan(ids[1], k));
         }

@@ -2,8 +2,9 @@
 //! place of the scenario (which it does not know), so that the robot stack runs the same on a
 //! real robot, fed its own configuration.
 
+use roles::depositor::Depositor;
 use roles::localizer::FilterKind;
-use roles::mapper::Pose2;
+use roles::mapper::{MapError, Mapper, Pose2};
 use roles::{LocalizerSetup, MapperSetup, ProcessError};
 
 use super::{Scenario, ScenarioError};
@@ -41,10 +42,36 @@ impl Scenario {
         })
     }
 
-    /// Robot `robot`'s mapper process: its mapper (`team::mapper_for`), the world's step and
+    /// Robot `id`'s mapper as the scenario sets it up (`None` when the scenario does not map or
+    /// the robot is not in the world): its start pose is the world's, its depositor copy the
+    /// scenario's.
+    pub fn mapper(&self, id: u32) -> Result<Option<Mapper>, MapError> {
+        let Some(config) = self.mapping() else {
+            return Ok(None);
+        };
+        let Some(r) = self.world.robots.iter().find(|r| r.id == id) else {
+            return Ok(None);
+        };
+        let depositor = self
+            .roles(id)
+            .and_then(|x| x.depositor.clone())
+            .and_then(|c| Depositor::new(c).ok());
+        Mapper::new(
+            id,
+            config,
+            [r.start.x_m, r.start.y_m, r.start.theta_rad],
+            &self.mapping_channel(id),
+            self.world.dt_s,
+            depositor,
+        )
+        .map(Some)
+    }
+
+    /// Robot `robot`'s mapper process: its mapper ([`Scenario::mapper`]), the world's step and
     /// every other robot's start pose (the frames of their maps).
     pub fn mapper_setup(&self, robot: u32) -> Result<MapperSetup, ProcessError> {
-        let mapper = crate::team::mapper_for(self, robot)
+        let mapper = self
+            .mapper(robot)
             .map_err(ProcessError::Mapping)?
             .ok_or(ProcessError::NotMapping { robot })?;
         let peers = self
