@@ -95,6 +95,8 @@ int main(int argc, char** argv) {
         o2.attach_timeout_ns = 5'000'000'000ull;
         o2.deposits = 0;
         pheromone::Field second(argv[1], o2);
+        // Attached is not yet received: a borrow needs the first frame this Field took.
+        check(second.wait_frame(std::chrono::seconds(5)), "a frame for the second Field");
         survivor = second.borrow();
       }
       float v = 0.0f;
