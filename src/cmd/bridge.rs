@@ -1,7 +1,7 @@
 //! `pheromone bridge` and `pheromone field --mirror`: field mirrors over Zenoh (feature `zenoh`).
 
 #[cfg(feature = "zenoh")]
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use clap::Args;
 
@@ -69,57 +69,33 @@ pub struct BridgeArgs {
     pub zenoh: super::zenoh_args::ZenohArgs,
 }
 
+/// The bridge's options from its flags (their parsers have checked the values).
 #[cfg(feature = "zenoh")]
-fn positive(flag: &str, v: f64) -> anyhow::Result<Duration> {
-    if v.is_finite() && v > 0.0 {
-        Ok(Duration::from_secs_f64(v))
-    } else {
-        Err(super::bad(format!(
-            "--{flag} {v}: must be a positive number of seconds"
-        )))
+fn bridge_options(a: &BridgeArgs) -> bridge::BridgeOptions {
+    bridge::BridgeOptions {
+        field: a.field.clone(),
+        listen: a.listen.clone(),
+        checksum_every: a.checksum_every,
+        keyframe_every: Duration::from_secs_f64(a.keyframe_every_s),
+        frames: a.frames.then_some(bridge::FramesOptions {
+            rate_hz: a.rate_hz,
+            downsample: a.downsample,
+        }),
+        admin_space: a.print_address,
+        security: a.zenoh.security(),
     }
 }
 
 #[cfg(feature = "zenoh")]
 pub fn run(a: BridgeArgs) -> anyhow::Result<()> {
-    use bridge::{Bridge, BridgeOptions, FramesOptions};
     field::shm::check_name(&a.field).map_err(bad_from)?;
-    if a.checksum_every == 0 {
-        return Err(bad("--checksum-every 0: must be at least 1"));
-    }
-    if a.frames && !(a.rate_hz.is_finite() && a.rate_hz > 0.0 && a.rate_hz <= 1000.0) {
-        return Err(bad(format!(
-            "--rate-hz {}: must be within (0, 1000]",
-            a.rate_hz
-        )));
-    }
-    if a.downsample == 0 {
-        return Err(bad("--downsample 0: must be at least 1"));
-    }
-    let keyframe_every = positive("keyframe-every-s", a.keyframe_every_s)?;
-    let timeout = positive("timeout", a.timeout)?;
-    let duration = a.duration.map(|d| positive("duration", d)).transpose()?;
     let node = field::shm::create_node(&format!("bridge-{}", std::process::id()))?;
-    let mut bridge = Bridge::start(
-        &node,
-        BridgeOptions {
-            field: a.field.clone(),
-            listen: a.listen.clone(),
-            checksum_every: a.checksum_every,
-            keyframe_every,
-            frames: a.frames.then_some(FramesOptions {
-                rate_hz: a.rate_hz,
-                downsample: a.downsample,
-            }),
-            admin_space: a.print_address,
-            security: a.zenoh.security(),
-        },
-        timeout,
-    )
-    .map_err(|e| match e {
-        bridge::BridgeError::Security(_) => bad_from(e),
-        e => e.into(),
-    })?;
+    let timeout = Duration::from_secs_f64(a.timeout);
+    let bridge =
+        bridge::Bridge::start(&node, bridge_options(&a), timeout).map_err(|e| match e {
+            bridge::BridgeError::Security(_) => bad_from(e),
+            e => e.into(),
+        })?;
     if a.print_address {
         let locators = bridge.listen_locators()?;
         eprintln!("bridge '{}': listening on {locators:?}", a.field);
@@ -132,33 +108,7 @@ pub fn run(a: BridgeArgs) -> anyhow::Result<()> {
     } else {
         eprintln!("bridge '{}': listening on {:?}", a.field, a.listen);
     }
-    let started = Instant::now();
-    let mut last_log = Instant::now();
-    let mut last_cleanup = Instant::now();
-    while node.wait(Duration::ZERO).is_ok() && duration.is_none_or(|d| started.elapsed() < d) {
-        bridge.step(Duration::from_millis(20))?;
-        if last_cleanup.elapsed() >= Duration::from_secs(1) {
-            last_cleanup = Instant::now();
-            field::shm::cleanup_dead_nodes(&node);
-        }
-        if last_log.elapsed() >= Duration::from_secs(5) {
-            last_log = Instant::now();
-            let s = &bridge.stats;
-            eprintln!(
-                "bridge '{}': frame {}, {} inputs ({} deposits), {} keyframes, {} checksums, {} deposits forwarded{}",
-                a.field,
-                s.last_sequence,
-                s.inputs_sent,
-                s.deposits_in_inputs,
-                s.keyframes_sent,
-                s.checksums_sent,
-                s.deposits_forwarded,
-                if bridge.field_alive() { "" } else { "; the field is not running" }
-            );
-        }
-    }
-    let stats = bridge.stats;
-    bridge.close();
+    let stats = bridge.run(&node, a.duration.map(Duration::from_secs_f64))?;
     if a.json {
         println!(
             "{}",
@@ -177,104 +127,42 @@ pub fn run(_a: BridgeArgs) -> anyhow::Result<()> {
 
 #[cfg(feature = "zenoh")]
 pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
-    use bridge::{Mirror, MirrorOptions};
+    use bridge::{BridgeError, Mirror, MirrorOptions};
     field::shm::check_name(&a.name).map_err(bad_from)?;
-    let Some(endpoint) = endpoint.strip_prefix("zenoh:") else {
-        return Err(bad(format!(
-            "--mirror {endpoint}: expected zenoh:ENDPOINT, e.g. zenoh:tcp/10.0.0.1:7447"
-        )));
+    // The flag's parser checked the `zenoh:` prefix and the endpoint.
+    let endpoint = endpoint.strip_prefix("zenoh:").unwrap_or(endpoint);
+    // `field --duration` takes 0 (a field that only starts); a mirror needs a positive one.
+    let duration = match a.duration {
+        Some(d) if d <= 0.0 => {
+            return Err(bad(format!(
+                "--duration {d}: must be a positive number of seconds"
+            )))
+        }
+        d => d.map(Duration::from_secs_f64),
     };
-    let stale_after = positive("stale-after-s", a.stale_after_s.unwrap_or(1.0))?;
-    let duration = a.duration.map(|d| positive("duration", d)).transpose()?;
     let node = field::shm::create_node(&format!("mirror-{}", a.name))?;
-    let security = a.zenoh.security();
-    let mut mirror = Mirror::start(MirrorOptions {
+    let mirror = Mirror::start(MirrorOptions {
         field: a.name.clone(),
         connect: vec![endpoint.to_string()],
-        stale_after,
-        security: security.clone(),
+        stale_after: Duration::from_secs_f64(a.stale_after_s.unwrap_or(1.0)),
+        security: a.zenoh.security(),
     })
     .map_err(|e| match e {
-        bridge::BridgeError::Security(_) => bad_from(e),
+        BridgeError::Security(_) => bad_from(e),
         e => e.into(),
     })?;
     eprintln!("mirror '{}': connecting to {endpoint}", a.name);
-    let refused = watch_refusal(security, endpoint.to_string());
-    let started = Instant::now();
-    let mut last_log = Instant::now();
-    let mut last_cleanup = Instant::now();
-    while node.wait(Duration::ZERO).is_ok() && duration.is_none_or(|d| started.elapsed() < d) {
-        if let Ok(why) = refused.try_recv() {
-            mirror.close();
-            anyhow::bail!(
-                "mirror '{}': {endpoint} refused the connection: {why}",
-                a.name
-            );
-        }
-        if let Err(e) = mirror.step(&node, Duration::from_millis(20)) {
-            match e {
-                bridge::BridgeError::Config(_) => return Err(bad_from(e)),
-                e => return Err(e.into()),
-            }
-        }
-        if last_cleanup.elapsed() >= Duration::from_secs(1) {
-            last_cleanup = Instant::now();
-            field::shm::cleanup_dead_nodes(&node);
-        }
-        if last_log.elapsed() >= Duration::from_secs(5) {
-            last_log = Instant::now();
-            let s = &mirror.stats;
-            eprintln!(
-                "mirror '{}': {} at frame {}, {} frames applied, {} keyframes, checksums {} matched / {} mismatched, {} gaps, {} rejected",
-                a.name,
-                if mirror.is_stale() { "stale" } else { "live" },
-                s.last_sequence,
-                s.frames_applied,
-                s.keyframes_applied,
-                s.checksums_matched,
-                s.checksum_mismatches,
-                s.gaps,
-                s.rejected_inputs + s.rejected_keyframes + s.rejected_other
-            );
-        }
-    }
-    let stats = mirror.stats;
-    let stale = mirror.is_stale();
-    mirror.close();
+    let run = mirror.run(&node, duration).map_err(|e| match e {
+        BridgeError::Config(_) => bad_from(e),
+        e => e.into(),
+    })?;
     if a.json {
         println!(
             "{}",
-            serde_json::json!({ "field": a.name, "stale": stale, "mirror": stats })
+            serde_json::json!({ "field": a.name, "stale": run.stale, "mirror": run.stats })
         );
     }
     Ok(())
-}
-
-/// Until a connection to the bridge opens: one attempt at a time, a second apart, in a thread
-/// of its own (an attempt may take as long as a TCP connect and a TLS handshake), whose refusal for good (a
-/// certificate, CA or password the bridge does not accept) is sent on the channel: the
-/// mirror's own session would retry it forever, logging nothing.
-#[cfg(feature = "zenoh")]
-fn watch_refusal(
-    security: bridge::Security,
-    endpoint: String,
-) -> std::sync::mpsc::Receiver<String> {
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || loop {
-        match bridge::try_connect(&security, &endpoint) {
-            Ok(()) => return,
-            Err(e) => {
-                if let Some(why) = bridge::refusal(&e) {
-                    let _ = tx.send(why);
-                    return;
-                }
-            }
-        }
-        // The period between two connection attempts (a cadence, not a wait for a condition:
-        // the attempt itself is what waits for the bridge).
-        std::thread::sleep(Duration::from_secs(1));
-    });
-    rx
 }
 
 #[cfg(not(feature = "zenoh"))]

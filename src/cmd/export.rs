@@ -1,16 +1,17 @@
 //! `pheromone export`: the next frame of a running field as a NumPy `.npy` file (every
 //! channel) or as a ROS map_server map (one channel, PGM + YAML). The writers are
-//! `report::export`.
+//! `report::export`, the wait for the frame `report::export::live`.
 
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use clap::Args;
-use field::shm::{create_node, mirror_info, FieldReader, Frame};
+use field::shm::{create_node, FieldReader, Frame};
+use report::export::live::next_frame;
 use report::export::npy::write_npy;
 use report::export::ros_map::{write_ros_map, PlaneRef};
 
-use super::{bad, seconds};
+use super::bad;
 
 /// Save the next frame of a running field: `--out frame.npy` writes every channel as a
 /// `(channels, height, width)` little-endian float32 NumPy array (`numpy.load`); `--out
@@ -54,22 +55,10 @@ enum Format {
 
 pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     let format = format_of(&a.out)?;
-    let timeout = seconds("timeout-s", a.timeout_s)?;
+    let timeout = Duration::from_secs_f64(a.timeout_s);
     let node = create_node(&format!("export-{}", std::process::id()))?;
     let mut reader = FieldReader::attach_within(&node, &a.field, timeout)?;
-    // A stale mirror publishes nothing until its origin is back: its current frame is all
-    // there is, exported at once and said to be stale.
-    let mirror = mirror_info(&node, &a.field)?;
-    let stale_mirror = mirror.filter(|m| m.stale);
-    let fresh = match stale_mirror {
-        Some(_) => {
-            if reader.frame().is_none() {
-                reader.wait_frame(timeout)?;
-            }
-            false
-        }
-        None => wait_fresh(&node, &mut reader, &a.field, timeout)?,
-    };
+    let next = next_frame(&node, &mut reader, &a.field, timeout)?;
     let Some(frame) = reader.frame() else {
         anyhow::bail!(
             "field '{}' published no frame within {} s",
@@ -77,14 +66,14 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
             a.timeout_s
         );
     };
-    if let Some(m) = stale_mirror {
+    if let Some(m) = next.stale_mirror() {
         eprintln!(
             "field '{}' is stale ({}): exporting its current frame {}",
             a.field,
             m.describe(),
             frame.header.sequence
         );
-    } else if !fresh {
+    } else if !next.fresh {
         eprintln!(
             "field '{}' published no new frame within {} s: exporting its current frame {}",
             a.field, a.timeout_s, frame.header.sequence
@@ -94,8 +83,8 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     let (c, height, width) = (h.channels as usize, h.height as usize, h.width as usize);
     let mut report = serde_json::json!({
         "field": a.field, "out": a.out, "sequence": h.sequence, "sim_time_s": h.sim_time_s,
-        "fresh": fresh, "shape": [c, height, width], "cell_size_m": h.cell_size_m,
-        "origin_m": [h.origin_x_m, h.origin_y_m], "mirror": mirror,
+        "fresh": next.fresh, "shape": [c, height, width], "cell_size_m": h.cell_size_m,
+        "origin_m": [h.origin_x_m, h.origin_y_m], "mirror": next.mirror,
     });
     match format {
         Format::Npy => {
@@ -125,32 +114,6 @@ fn format_of(out: &Path) -> anyhow::Result<Format> {
             out.display()
         ))),
     }
-}
-
-/// Waits up to `timeout` for a frame newer than the one `reader` holds; whether one came.
-fn wait_fresh(
-    node: &iceoryx2::node::Node<field::shm::Svc>,
-    reader: &mut FieldReader,
-    field: &str,
-    timeout: Duration,
-) -> anyhow::Result<bool> {
-    let held = reader.frame().map(|f| f.header.sequence);
-    let deadline = Instant::now() + timeout;
-    let mut fresh = false;
-    while !fresh {
-        let left = deadline.saturating_duration_since(Instant::now());
-        if left.is_zero() {
-            break;
-        }
-        reader.wait_frame(left.min(Duration::from_millis(200)))?;
-        fresh = reader
-            .frame()
-            .is_some_and(|f| Some(f.header.sequence) != held);
-        if node.wait(Duration::ZERO).is_err() {
-            anyhow::bail!("interrupted while waiting for a frame of field '{field}'");
-        }
-    }
-    Ok(fresh)
 }
 
 /// Writes `--channel` of `frame` as a ROS map_server map and adds what was written to `report`.

@@ -9,7 +9,7 @@ use field::run::{run_field, FieldRunOptions};
 use field::shm::{create_node, frame_pool};
 use field::{Evaporation, FieldConfig};
 
-use super::{bad, bad_from, bad_in, read_toml, seconds, seconds_or_zero, MAX_SECONDS};
+use super::{bad, bad_from, bad_in, read_toml};
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq, Debug)]
 pub enum ModelArg {
@@ -197,14 +197,24 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
          origin_y => origin_y_m, tick_hz => tick_hz, max_readers => max_readers,
          max_depositors => max_depositors, deposit_buffer => deposit_buffer);
     let ch = &mut c.channels[0];
-    let current = ch.evaporation;
-    let model = a.model.unwrap_or(match current {
-        Evaporation::None => ModelArg::None,
-        Evaporation::Exponential { .. } => ModelArg::Exponential,
-        Evaporation::Ambient { .. } => ModelArg::Ambient,
-        Evaporation::Saturating { .. } => ModelArg::Saturating,
-        Evaporation::Quantum { .. } => ModelArg::Quantum,
-    });
+    ch.evaporation = evaporation_from_args(a, ch.evaporation)?;
+    if let Some(d) = a.diffusion {
+        ch.diffusion_m2_per_s = d;
+    }
+    if a.signed {
+        ch.signed = true;
+    }
+    c.validate().map_err(|e| match &a.config {
+        Some(p) => bad_in(p.display().to_string(), e),
+        None => bad_from(e),
+    })?;
+    Ok(c)
+}
+
+/// The model of `--model` (by default `current`'s) with the parameters its flags give, the
+/// others from `current` or the defaults; a flag of another model is refused.
+fn evaporation_from_args(a: &FieldArgs, current: Evaporation) -> anyhow::Result<Evaporation> {
+    let model = a.model.unwrap_or(model_of(current));
     let (k0, alpha0, radius0) = match current {
         Evaporation::Ambient {
             decay_per_s,
@@ -214,28 +224,18 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
         Evaporation::Exponential { decay_per_s } => (decay_per_s, 0.5, 0.5),
         _ => (0.0057, 0.5, 0.5),
     };
-    let unused = |flag: &str, v: Option<f32>| -> anyhow::Result<()> {
-        match v {
-            Some(v) => Err(bad(format!(
-                "--{flag} {v} does not apply to the {model:?} model"
-            ))),
-            None => Ok(()),
-        }
-    };
-    ch.evaporation = match model {
+    let unused = |flags: &[(&str, Option<f32>)]| unused_flags(model, flags);
+    let evaporation = match model {
         ModelArg::None => {
-            for (f, v) in [
+            unused(&[
                 ("decay-per-s", a.decay_per_s),
                 ("alpha", a.alpha),
                 ("ambient-radius", a.ambient_radius),
-            ] {
-                unused(f, v)?;
-            }
+            ])?;
             Evaporation::None
         }
         ModelArg::Exponential => {
-            unused("alpha", a.alpha)?;
-            unused("ambient-radius", a.ambient_radius)?;
+            unused(&[("alpha", a.alpha), ("ambient-radius", a.ambient_radius)])?;
             Evaporation::Exponential {
                 decay_per_s: a.decay_per_s.unwrap_or(k0),
             }
@@ -263,33 +263,36 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
         }
     };
     if model != ModelArg::Saturating {
-        unused("rho-per-tick", a.rho_per_tick)?;
+        unused(&[("rho-per-tick", a.rho_per_tick)])?;
     }
     if model != ModelArg::Quantum {
-        unused("quantum", a.quantum)?;
-        unused("tau-s", a.tau_s)?;
+        unused(&[("quantum", a.quantum), ("tau-s", a.tau_s)])?;
     }
-    if let Some(d) = a.diffusion {
-        ch.diffusion_m2_per_s = d;
+    Ok(evaporation)
+}
+
+/// The first of `flags` given, refused as not applying to `model`.
+fn unused_flags(model: ModelArg, flags: &[(&str, Option<f32>)]) -> anyhow::Result<()> {
+    match flags.iter().find_map(|(f, v)| v.map(|v| (f, v))) {
+        Some((flag, v)) => Err(bad(format!(
+            "--{flag} {v} does not apply to the {model:?} model"
+        ))),
+        None => Ok(()),
     }
-    if a.signed {
-        ch.signed = true;
+}
+
+/// The model of an evaporation.
+fn model_of(e: Evaporation) -> ModelArg {
+    match e {
+        Evaporation::None => ModelArg::None,
+        Evaporation::Exponential { .. } => ModelArg::Exponential,
+        Evaporation::Ambient { .. } => ModelArg::Ambient,
+        Evaporation::Saturating { .. } => ModelArg::Saturating,
+        Evaporation::Quantum { .. } => ModelArg::Quantum,
     }
-    c.validate().map_err(|e| match &a.config {
-        Some(p) => bad_in(p.display().to_string(), e),
-        None => bad_from(e),
-    })?;
-    Ok(c)
 }
 
 pub fn run(a: FieldArgs) -> anyhow::Result<()> {
-    if a.threads == 0 || a.threads > field::engine::MAX_THREADS {
-        return Err(bad(format!(
-            "--threads {}: the tick needs between 1 and {} threads",
-            a.threads,
-            field::engine::MAX_THREADS
-        )));
-    }
     // `--mirror` runs `bridge::run_mirror` instead (dispatched by main, as this module's
     // arguments are the mirror's too).
     if a.zenoh.any() {
@@ -304,21 +307,34 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         print!("{}", toml::to_string_pretty(&config)?);
         return Ok(());
     }
-    let every = seconds("checkpoint-every", a.checkpoint_every.unwrap_or(10.0))?;
-    let duration = a
-        .duration
-        .map(|d| seconds_or_zero("duration", d))
-        .transpose()?;
-    let publish_on_deposit = match a.publish_on_deposit_ms {
-        Some(ms) if !(ms.is_finite() && (0.0..=MAX_SECONDS * 1e3).contains(&ms)) => {
-            return Err(bad(format!(
-                "--publish-on-deposit-ms {}: must be a number of milliseconds from 0 to {:e}",
-                super::num(ms),
-                MAX_SECONDS * 1e3
-            )))
-        }
-        ms => ms.map(|ms| Duration::from_secs_f64(ms / 1e3)),
+    let options = run_options(&a, config)?;
+    let (frames, bytes) = frame_pool(&options.config);
+    eprintln!(
+        "field '{}': {}×{} cells × {} channel(s), {} m cells, {} Hz; shared memory {:.1} MiB ({} frames)",
+        a.name,
+        options.config.width,
+        options.config.height,
+        options.config.channels.len(),
+        options.config.cell_size_m,
+        options.config.tick_hz,
+        bytes as f64 / (1 << 20) as f64,
+        frames
+    );
+    a.rt.apply(&format!("field '{}'", a.name))?;
+    // SIGINT/SIGTERM stop the field as before (summary written) and set its exit status.
+    super::stop::install()?;
+    let node = create_node(&format!("field-{}", a.name))?;
+    let summary = match run_field(&node, &options) {
+        Ok(s) => s,
+        Err(e) if e.is_bad_input() => return Err(bad_from(e)),
+        Err(e) => return Err(e.into()),
     };
+    finish(&a, summary)
+}
+
+/// The field's run options from its flags (their parsers have checked the numbers) and the
+/// checkpoint to restore, read and checked against `config`.
+fn run_options(a: &FieldArgs, config: FieldConfig) -> anyhow::Result<FieldRunOptions> {
     let restore = match &a.restore {
         Some(path) => {
             let cp = checkpoint::read(path).map_err(bad_from)?;
@@ -327,53 +343,25 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let (frames, bytes) = frame_pool(&config);
-    eprintln!(
-        "field '{}': {}×{} cells × {} channel(s), {} m cells, {} Hz; shared memory {:.1} MiB ({} frames)",
-        a.name,
-        config.width,
-        config.height,
-        config.channels.len(),
-        config.cell_size_m,
-        config.tick_hz,
-        bytes as f64 / (1 << 20) as f64,
-        frames
-    );
-    let deadline_slack = match a.deadline_slack_us {
-        Some(us) if !(us.is_finite() && (0.0..=MAX_SECONDS * 1e6).contains(&us)) => {
-            return Err(bad(format!(
-                "--deadline-slack-us {}: must be a number of microseconds from 0 to {:e}",
-                super::num(us),
-                MAX_SECONDS * 1e6
-            )))
-        }
-        us => us.map(|us| Duration::from_secs_f64(us / 1e6)),
-    };
-    a.rt.apply(&format!("field '{}'", a.name))?;
-    // SIGINT/SIGTERM stop the field as before (summary written) and set its exit status.
-    super::stop::install()?;
-    let node = create_node(&format!("field-{}", a.name))?;
-    let options = FieldRunOptions {
+    Ok(FieldRunOptions {
         name: a.name.clone(),
         config,
         clock: a.clock.clone(),
         ticks: a.ticks,
-        duration,
+        duration: a.duration.map(Duration::from_secs_f64),
         checkpoint: a.checkpoint.clone(),
-        checkpoint_every: every,
+        checkpoint_every: Duration::from_secs_f64(a.checkpoint_every.unwrap_or(10.0)),
         restore,
         standby: a.standby,
-        publish_on_deposit,
+        publish_on_deposit: a
+            .publish_on_deposit_ms
+            .map(|ms| Duration::from_secs_f64(ms / 1e3)),
         threads: a.threads,
-        deadline_slack,
+        deadline_slack: a
+            .deadline_slack_us
+            .map(|us| Duration::from_secs_f64(us / 1e6)),
         spin: Duration::from_secs_f64(a.spin_us / 1e6),
-    };
-    let summary = match run_field(&node, &options) {
-        Ok(s) => s,
-        Err(e) if e.is_bad_input() => return Err(bad_from(e)),
-        Err(e) => return Err(e.into()),
-    };
-    finish(&a, summary)
+    })
 }
 
 /// Prints the `--json` summary; a field stopped by SIGINT or SIGTERM then exits 130 / 143.

@@ -1,9 +1,12 @@
 //! `pheromone gateway`: seed 002's pheromone server for thin radio clients (DLE/CRC frames over
 //! UDP or a serial line), in front of a running field.
 
+use std::time::Duration;
+
 use clap::Args;
 use field::shm::create_node;
-use gateway::{serial, udp, Gateway, GatewayConfig, Source};
+use gateway::line::Line;
+use gateway::{serial, Gateway, GatewayConfig, Source};
 
 use super::bad;
 
@@ -115,8 +118,8 @@ fn parse_allow(items: &[String]) -> anyhow::Result<Vec<u8>> {
     Ok(ids)
 }
 
-pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
-    a.rt.apply("gateway")?;
+/// The gateway's configuration from `--allow`, `--rate-hz` and the deposit's shape.
+fn gateway_config(a: &GatewayArgs) -> anyhow::Result<GatewayConfig> {
     let (bound, ids) = parse_bound(&a.allow)?;
     if !bound.is_empty() && a.serial.is_some() {
         return Err(bad(
@@ -132,21 +135,18 @@ pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
     allow.extend(bound.iter().map(|(id, _)| *id));
     allow.sort_unstable();
     allow.dedup();
-    let config = GatewayConfig {
+    Ok(GatewayConfig {
         allow,
         bound,
         rate_per_s: a.rate_hz,
         plateau_m: a.plateau_m,
         slope_m: a.slope_m,
-    };
-    if !(a.attach_timeout.is_finite() && a.attach_timeout >= 0.0) {
-        return Err(bad(format!(
-            "--attach-timeout {}: expected seconds ≥ 0",
-            a.attach_timeout
-        )));
-    }
-    // The line or socket first: a bad path, rate or address fails before the field is waited for.
-    let mut line = match &a.serial {
+    })
+}
+
+/// The serial line of `--serial` or the socket of `--udp`.
+fn open_line(a: &GatewayArgs) -> anyhow::Result<Line> {
+    Ok(match &a.serial {
         Some(path) => {
             if serial::baud_rate(a.baud).is_none() {
                 return Err(bad(format!(
@@ -154,54 +154,35 @@ pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
                     a.baud
                 )));
             }
-            Some((path.clone(), serial::open(path, a.baud)?))
+            Line::serial(path, a.baud)?
         }
-        None => None,
-    };
-    let socket = match &line {
-        Some(_) => None,
-        None => Some(udp::bind(a.udp.as_deref().unwrap_or(DEFAULT_UDP))?),
-    };
-    let attach_timeout = super::seconds_or_zero("attach-timeout", a.attach_timeout)?;
+        None => Line::udp(a.udp.as_deref().unwrap_or(DEFAULT_UDP))?,
+    })
+}
+
+pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
+    a.rt.apply("gateway")?;
+    let config = gateway_config(&a)?;
+    // The line or socket first: a bad path, rate or address fails before the field is waited for.
+    let mut line = open_line(&a)?;
     let node = create_node(&format!("gateway-{}", std::process::id()))?;
+    let attach_timeout = Duration::from_secs_f64(a.attach_timeout);
     let mut gateway = match Gateway::attach(&node, &a.field, config, attach_timeout) {
         Ok(g) => g,
         Err(e @ gateway::GatewayError::Config { .. }) => return Err(bad(e.to_string())),
         Err(e) => return Err(e.into()),
     };
-    let log = |c: &gateway::GatewayCounters| {
-        eprintln!(
-            "gateway: frames {} pir {} deposits {} (repeated {}, undelivered {}) pings {} \
-             errors sent {:?} dropped {} rejected {:?}",
-            c.frames,
-            c.pirs,
-            c.deposits,
-            c.deposits_repeated,
-            c.deposits_undelivered,
-            c.pings,
-            &c.errors_sent[1..],
-            c.dropped,
-            c.rejected
-        )
-    };
-    match (&mut line, &socket) {
-        (Some((path, file)), _) => {
-            eprintln!(
-                "gateway: serving field '{}' on serial {path} at {} baud",
-                a.field, a.baud
-            );
-            serial::serve(&node, &mut gateway, file, path, log)?;
+    eprintln!(
+        "gateway: serving field '{}' on {}",
+        a.field,
+        line.describe()?
+    );
+    if a.print_address {
+        if let Some(url) = line.udp_url()? {
+            println!("{url}");
         }
-        (None, Some(socket)) => {
-            let local = socket.local_addr()?;
-            eprintln!("gateway: serving field '{}' on udp://{local}", a.field);
-            if a.print_address {
-                println!("udp://{local}");
-            }
-            udp::serve(&node, &mut gateway, socket, log)?;
-        }
-        (None, None) => unreachable!("a socket when there is no line"),
     }
+    line.serve(&node, &mut gateway)?;
     if a.json {
         println!("{}", serde_json::to_string(gateway.counters())?);
     }

@@ -1,13 +1,14 @@
 //! `pheromone probe`: a minimal reader for scripts, tests and first steps (the same as the
-//! `read` example).
+//! `read` example). The waits are `report::probe`.
 
 use std::time::Duration;
 
 use clap::Args;
 use field::shm::{create_node, mirror_info, FieldReader, Frame, Svc};
 use iceoryx2::prelude::Node;
+use report::probe::{follow, last_value, probe_line, wait_for, Level, ProbeError, ProbePoint};
 
-use super::{bad, seconds_or_zero};
+use super::bad_from;
 
 /// Read a running field: wait for a frame, print its header and the value at a point.
 ///
@@ -51,66 +52,62 @@ pub struct ProbeArgs {
 }
 
 pub fn run_probe(a: ProbeArgs) -> anyhow::Result<()> {
-    if a.follow && !(a.rate_hz.is_finite() && a.rate_hz > 0.0 && a.rate_hz <= 10_000.0) {
-        return Err(bad(format!(
-            "--rate-hz {}: must be a number of lines per second in (0, 10000]",
-            a.rate_hz
-        )));
-    }
-    let timeout = seconds_or_zero("timeout", a.timeout)?;
+    let timeout = Duration::from_secs_f64(a.timeout);
     let node = create_node(&format!("probe-{}", std::process::id()))?;
     let mut reader = FieldReader::attach_within(&node, &a.field, timeout)?;
+    let p = ProbePoint {
+        x: a.x,
+        y: a.y,
+        channel: a.channel,
+    };
     if a.follow {
-        return follow(&a, &node, reader, timeout);
+        let period = Duration::from_secs_f64(1.0 / a.rate_hz);
+        return follow(&node, &a.field, reader, p, period, timeout).map_err(probe_error);
     }
-    let (x, y, ch) = (a.x, a.y, a.channel);
-    let pred = |v: f32| match (a.above, a.below) {
-        (Some(l), _) => v > l,
-        (_, Some(l)) => v < l,
-        _ => true,
+    let level = match (a.above, a.below) {
+        (Some(l), _) => Level::Above(l),
+        (_, Some(l)) => Level::Below(l),
+        _ => Level::Any,
     };
-    // Wait in slices so Ctrl-C (or SIGTERM) is seen between them.
-    let deadline = std::time::Instant::now() + timeout;
-    let met = loop {
-        let left = deadline.saturating_duration_since(std::time::Instant::now());
-        let slice = left.min(Duration::from_millis(200));
-        if reader
-            .wait_until(slice, |f| {
-                ch < f.view.channels && pred(f.view.value(ch, x, y))
-            })?
-            .is_some()
-        {
-            break true;
-        }
-        if left.is_zero() {
-            break false;
-        }
-        if node.wait(Duration::ZERO).is_err() {
-            anyhow::bail!(
-                "interrupted before the value at ({x}, {y}) channel {ch} reached the condition"
-            );
-        }
-    };
+    let met = wait_for(&node, &mut reader, p, level, timeout).map_err(probe_error)?;
     let frame = if met { reader.frame() } else { None };
     let Some(frame) = frame else {
-        let last = reader.frame().map(|f| {
-            f.view
-                .value(ch.min(f.view.channels.saturating_sub(1)), x, y)
-        });
         anyhow::bail!(
-            "the value at ({x}, {y}) channel {ch} did not reach the condition within {} s (last value {last:?})",
-            a.timeout
+            "the value at ({}, {}) channel {} did not reach the condition within {} s (last value {:?})",
+            p.x,
+            p.y,
+            p.channel,
+            a.timeout,
+            last_value(&reader, p)
         );
     };
-    if ch >= frame.view.channels {
-        return Err(bad(format!(
-            "--channel {ch}: the field has {} channel(s)",
-            frame.view.channels
-        )));
+    if p.channel >= frame.view.channels {
+        return Err(probe_error(ProbeError::NoChannel {
+            channel: p.channel,
+            channels: frame.view.channels,
+        }));
     }
+    print_probe(&a, &node, &frame, p)
+}
+
+/// A channel the field does not have is the user's input (exit status 2).
+fn probe_error(e: ProbeError) -> anyhow::Error {
+    match e {
+        ProbeError::NoChannel { .. } => bad_from(e),
+        e => e.into(),
+    }
+}
+
+/// The probe's output: the frame's header and the value, as a line or one JSON object.
+fn print_probe(
+    a: &ProbeArgs,
+    node: &Node<Svc>,
+    frame: &Frame<'_>,
+    p: ProbePoint,
+) -> anyhow::Result<()> {
     let h = frame.header;
-    let value = frame.view.value(ch, x, y);
-    let mirror = mirror_info(&node, &a.field)?;
+    let value = frame.view.value(p.channel, p.x, p.y);
+    let mirror = mirror_info(node, &a.field)?;
     if let Some(m) = mirror.filter(|m| m.stale) {
         eprintln!(
             "field '{}' is stale ({}): frame {} may be behind its origin",
@@ -126,60 +123,11 @@ pub fn run_probe(a: ProbeArgs) -> anyhow::Result<()> {
                 "field": a.field, "sequence": h.sequence, "sim_time_s": h.sim_time_s,
                 "width": h.width, "height": h.height, "channels": h.channels, "cell_size_m": h.cell_size_m,
                 "deposits_applied": h.deposits_applied, "deposits_rejected": h.deposits_rejected_total(),
-                "x": x, "y": y, "channel": ch, "value": value, "mirror": mirror,
+                "x": p.x, "y": p.y, "channel": p.channel, "value": value, "mirror": mirror,
             })
         );
     } else {
-        println!("{}", probe_line(&frame, x, y, ch));
+        println!("{}", probe_line(frame, p));
     }
     Ok(())
-}
-
-/// One line of `probe`: the frame's header and the value at (x, y) of channel `ch`.
-fn probe_line(frame: &Frame<'_>, x: f32, y: f32, ch: usize) -> String {
-    let h = frame.header;
-    format!(
-        "frame {} at t = {:.2} s ({}×{}×{}, {} m): value at ({x}, {y}) channel {ch} = {}; \
-         deposits {} applied, {} rejected",
-        h.sequence,
-        h.sim_time_s,
-        h.width,
-        h.height,
-        h.channels,
-        h.cell_size_m,
-        frame.view.value(ch, x, y),
-        h.deposits_applied,
-        h.deposits_rejected_total()
-    )
-}
-
-/// `probe --follow`: a line from the newest frame every 1/rate s, waiting on the node (which
-/// returns on Ctrl-C or SIGTERM: exit status 0), as iceoryx2's examples loop.
-fn follow(
-    a: &ProbeArgs,
-    node: &Node<Svc>,
-    mut reader: FieldReader,
-    timeout: Duration,
-) -> anyhow::Result<()> {
-    let period = Duration::from_secs_f64(1.0 / a.rate_hz);
-    let (x, y, ch) = (a.x, a.y, a.channel);
-    if reader.frame().is_none() {
-        reader.wait_frame(timeout)?;
-    }
-    loop {
-        reader.update()?;
-        match reader.frame() {
-            Some(frame) if ch >= frame.view.channels => {
-                return Err(bad(format!(
-                    "--channel {ch}: the field has {} channel(s)",
-                    frame.view.channels
-                )));
-            }
-            Some(frame) => println!("{}", probe_line(&frame, x, y, ch)),
-            None => eprintln!("field '{}': no frame yet", a.field),
-        }
-        if node.wait(period).is_err() {
-            return Ok(());
-        }
-    }
 }

@@ -411,17 +411,31 @@ fn udp_address(flag: &str, url: &str) -> anyhow::Result<String> {
     }
 }
 
-/// The antenna robot of `--gateway`: its client with the backup, and its run.
+/// The client ID of `--client-id`, else robot + 1.
+fn client_id(a: &FollowerArgs) -> anyhow::Result<u8> {
+    match a.client_id {
+        Some(0) => Err(bad(
+            "--client-id 0: use 1–255 (0 is not protected by the CRC)",
+        )),
+        Some(id) => Ok(id),
+        None => u8::try_from(a.robot + 1).map_err(|_| {
+            bad(format!(
+                "robot {}: no default client ID (1–255); give --client-id",
+                a.robot
+            ))
+        }),
+    }
+}
+
+/// The antenna robot of `--gateway` (`roles::process::follower_remote`).
 fn run_remote_follower(
     a: &FollowerArgs,
     scenario: &Scenario,
     config: &FollowerConfig,
     gateway: &str,
 ) -> anyhow::Result<()> {
-    use gateway::client::{ClientConfig, DepositRetry, GatewayClient, Transport};
-    use roles::follower::antenna_source::{AntennaRobot, GatewaySource};
-    use roles::follower::AntennaFollower;
-    use roles::process::follower_antenna::{run_antenna_robot, AntennaRunOptions, RemoteDeposits};
+    use roles::process::follower_antenna::RemoteDeposits;
+    use roles::process::follower_remote::{run_remote_follower, RemoteFollowerOptions};
     if config.strategy != StrategyKind::Antenna {
         return Err(bad(format!(
             "--gateway: only the antenna strategy reads through a gateway (robot {} has '{}')",
@@ -434,81 +448,47 @@ fn run_remote_follower(
             config.channel
         ))
     })?;
-    let client_id = match a.client_id {
-        Some(0) => {
-            return Err(bad(
-                "--client-id 0: use 1–255 (0 is not protected by the CRC)",
-            ))
-        }
-        Some(id) => id,
-        None => u8::try_from(a.robot + 1).map_err(|_| {
-            bad(format!(
-                "robot {}: no default client ID (1–255); give --client-id",
-                a.robot
-            ))
-        })?,
-    };
-    if a.gateway_timeout_ms == 0 {
-        return Err(bad("--gateway-timeout-ms 0: expected a timeout ≥ 1 ms"));
-    }
-    let deposits = match a.deposit_amount {
-        Some(v) if !(v.is_finite() && v > 0.0) => {
-            return Err(bad(format!(
-                "--deposit-amount {v}: expected a finite amount > 0"
-            )))
-        }
-        Some(amount) => Some(RemoteDeposits {
+    let client_id = client_id(a)?;
+    let remote = RemoteFollowerOptions {
+        gateway: udp_address("--gateway", gateway)?,
+        backup: a
+            .backup
+            .as_deref()
+            .map(|b| udp_address("--backup", b))
+            .transpose()?,
+        client_id,
+        timeout: std::time::Duration::from_millis(a.gateway_timeout_ms),
+        retries: a.gateway_retries,
+        deposits: a.deposit_amount.map(|amount| RemoteDeposits {
             amount,
-            every_steps: a.deposit_every.max(1),
+            every_steps: a.deposit_every,
         }),
-        None => None,
+        frame_timeout: std::time::Duration::from_secs_f64(a.frame_timeout),
+        dt_s: scenario.world.dt_s,
     };
-    let frame_timeout = seconds("frame-timeout", a.frame_timeout)?;
-    let primary = Transport::udp(&udp_address("--gateway", gateway)?).map_err(bad_from)?;
-    let mut client = GatewayClient::new(
-        primary,
-        ClientConfig {
-            client_id,
-            timeout: std::time::Duration::from_millis(a.gateway_timeout_ms),
-            retries: a.gateway_retries,
-            // A restarted robot does not reuse its last run's seqs (the gateway remembers 16).
-            first_seq: (std::process::id() % 256) as u8,
-            deposit_retry: DepositRetry::SameGateway,
-            ..ClientConfig::default()
-        },
-    );
-    if let Some(b) = &a.backup {
-        client =
-            client.with_backup(Transport::udp(&udp_address("--backup", b)?).map_err(bad_from)?);
-    }
-    let strategy =
-        AntennaFollower::new(config.channel as usize, config.antenna.clone()).map_err(bad_from)?;
-    let robot = AntennaRobot::new(a.robot, strategy, GatewaySource::new(client));
     let node = create_node(&format!("follower-r{}-{}", a.robot, std::process::id()))?;
-    let summary = run_antenna_robot(
-        &node,
-        &a.common.role_options(a.robot),
-        robot,
-        AntennaRunOptions {
-            steer_by: config.steer_by,
-            dt_s: scenario.world.dt_s,
-            frame_timeout,
-            deposits,
-        },
-    )?;
+    let summary = run_remote_follower(&node, &a.common.role_options(a.robot), config, &remote)
+        .map_err(|e| {
+            if e.is_bad_input() {
+                bad_from(e)
+            } else {
+                e.into()
+            }
+        })?;
+    let s = &summary.source;
     eprintln!(
         "follower r{} (gateway {}): {} steps, {} rejected, {} PIRs ({} stale), {} switch(es), \
          {} rate-limited backoff(s), deposits {} applied / {} failed",
         a.robot,
-        summary.source.active,
+        s.active,
         summary.role.steps,
         summary.role.rejected,
-        summary.source.reads,
-        summary.source.stale_replies,
-        summary.source.switches,
-        summary.source.rate_limited_backoffs,
-        summary.source.deposits_applied,
-        summary.source.deposits_failed
+        s.reads,
+        s.stale_replies,
+        s.switches,
+        s.rate_limited_backoffs,
+        s.deposits_applied,
+        s.deposits_failed
     );
     print_json(a.common.json, &summary)
 }

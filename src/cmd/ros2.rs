@@ -2,12 +2,12 @@
 //! The library is `ros2` (publishers/ros2); docs/ros2.md.
 
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use clap::Args;
 use roles::depositor::DepositorConfig;
 
-use super::{bad, bad_from, seconds};
+use super::{bad, bad_from};
 
 /// Depositor settings of `--deposit-from` (seed 000's uncertainty-aware deposit).
 #[derive(Args, Debug, Clone)]
@@ -170,14 +170,26 @@ fn parse_deposit_from(s: &str) -> anyhow::Result<ros2::node::DepositFrom> {
 
 #[cfg(feature = "zenoh")]
 pub fn run(a: Ros2Args) -> anyhow::Result<()> {
-    use ros2::node::{Ros2Node, Ros2Options};
+    use ros2::node::{Ros2Error, Ros2Node};
     field::shm::check_name(&a.field).map_err(bad_from)?;
-    if !(a.rate_hz.is_finite() && a.rate_hz > 0.0 && a.rate_hz <= 1000.0) {
-        return Err(bad(format!(
-            "--rate-hz {}: must be within (0, 1000]",
-            a.rate_hz
-        )));
+    let options = ros2_options(&a)?;
+    let node = field::shm::create_node(&format!("ros2-{}", std::process::id()))?;
+    let timeout = Duration::from_secs_f64(a.timeout);
+    let ros = Ros2Node::start(&node, options, timeout).map_err(|e| match e {
+        Ros2Error::Name(_) | Ros2Error::Depositor(_) | Ros2Error::Session(_) => bad_from(e),
+        e => e.into(),
+    })?;
+    announce(&a, &ros)?;
+    let summary = ros.run(&node, a.duration.map(Duration::from_secs_f64))?;
+    if a.json {
+        println!("{summary}");
     }
+    Ok(())
+}
+
+/// The node's options from its flags (their parsers have checked the numbers).
+#[cfg(feature = "zenoh")]
+fn ros2_options(a: &Ros2Args) -> anyhow::Result<ros2::node::Ros2Options> {
     let session = ros2::session::SessionSettings {
         security: a.zenoh.security(),
         env_file: None,
@@ -188,8 +200,6 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
     .with_env();
     // A configuration that cannot be built (a file that does not parse) is refused now.
     session.config().map_err(bad_from)?;
-    let timeout = seconds("timeout", a.timeout)?;
-    let duration = a.duration.map(|d| seconds("duration", d)).transpose()?;
     let deposit_from = a
         .deposit_from
         .iter()
@@ -197,9 +207,19 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
         .collect::<anyhow::Result<Vec<_>>>()?;
     let depositor = a.deposit.config();
     depositor.validate().map_err(bad_from)?;
-    let world = world_options(&a)?;
-    let node = field::shm::create_node(&format!("ros2-{}", std::process::id()))?;
-    let options = Ros2Options {
+    let world = match &a.world {
+        Some(world) => {
+            field::shm::check_name(world).map_err(bad_from)?;
+            Some(ros2::node::WorldOptions {
+                world: world.clone(),
+                robots: a.robots.clone(),
+                path_rate_hz: a.path_rate_hz,
+                path_max_poses: a.path_max_poses,
+            })
+        }
+        None => None,
+    };
+    Ok(ros2::node::Ros2Options {
         field: a.field.clone(),
         domain_id: a.domain_id,
         namespace: a.namespace.clone(),
@@ -212,75 +232,7 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
         deposit_from,
         depositor,
         world,
-    };
-    let mut ros = Ros2Node::start(&node, options, timeout).map_err(|e| match e {
-        ros2::node::Ros2Error::Name(_)
-        | ros2::node::Ros2Error::Depositor(_)
-        | ros2::node::Ros2Error::Session(_) => bad_from(e),
-        e => e.into(),
-    })?;
-    announce(&a, &ros)?;
-    let started = Instant::now();
-    let mut last_log = Instant::now();
-    while node.wait(Duration::ZERO).is_ok() && duration.is_none_or(|d| started.elapsed() < d) {
-        ros.step(Duration::from_millis(20))?;
-        ros.step_robots(&node)?;
-        if last_log.elapsed() >= Duration::from_secs(5) {
-            last_log = Instant::now();
-            let s = &ros.stats;
-            eprintln!(
-                "ros2 '{}': {} frames published ({} bytes), {} poses, {} deposits, {} refused, \
-                 {} robots ({} poses, {} paths published)",
-                a.field,
-                s.frames_published,
-                s.bytes_published,
-                s.poses_received,
-                s.deposits_sent,
-                s.refused_total(),
-                s.robots_found,
-                s.robot_poses_published,
-                s.robot_paths_published,
-            );
-        }
-    }
-    let elapsed_s = started.elapsed().as_secs_f64();
-    let summary = serde_json::json!({
-        "field": a.field,
-        "ros2": ros.stats,
-        "refused_total": ros.stats.refused_total(),
-        "elapsed_s": elapsed_s,
-        "bytes_per_s": ros.stats.bytes_published as f64 / elapsed_s.max(1e-9),
-        "latency_p50_us": ros.latency_percentile_us(0.5),
-        "latency_p99_us": ros.latency_percentile_us(0.99),
-    });
-    ros.close();
-    if a.json {
-        println!("{summary}");
-    }
-    Ok(())
-}
-
-#[cfg(feature = "zenoh")]
-fn world_options(a: &Ros2Args) -> anyhow::Result<Option<ros2::node::WorldOptions>> {
-    let Some(world) = &a.world else {
-        return Ok(None);
-    };
-    field::shm::check_name(world).map_err(bad_from)?;
-    if !(a.path_rate_hz.is_finite() && a.path_rate_hz > 0.0 && a.path_rate_hz <= 1000.0) {
-        return Err(bad(format!(
-            "--path-rate-hz {}: must be within (0, 1000]",
-            a.path_rate_hz
-        )));
-    }
-    if a.path_max_poses == 0 {
-        return Err(bad("--path-max-poses must be at least 1"));
-    }
-    Ok(Some(ros2::node::WorldOptions {
-        world: world.clone(),
-        robots: a.robots.clone(),
-        path_rate_hz: a.path_rate_hz,
-        path_max_poses: a.path_max_poses,
-    }))
+    })
 }
 
 #[cfg(feature = "zenoh")]
@@ -348,70 +300,26 @@ pub struct RecordArgs {
 }
 
 pub fn run_record(a: RecordArgs) -> anyhow::Result<()> {
-    use ros2::frames::{frame_messages, wall_now_ns, FieldTopics};
-    use ros2::record::McapRecorder;
+    use ros2::run::{record_field, RecordOptions};
     field::shm::check_name(&a.field).map_err(bad_from)?;
-    if !(a.rate_hz.is_finite() && a.rate_hz > 0.0) {
-        return Err(bad(format!("--rate-hz {}: must be positive", a.rate_hz)));
-    }
-    let ns = ros2::graph::namespace(&a.namespace).map_err(bad_from)?;
-    let timeout = seconds("timeout", a.timeout)?;
-    let duration = a.duration.map(|d| seconds("duration", d)).transpose()?;
-    let period = Duration::from_secs_f64(1.0 / a.rate_hz);
-    let node = field::shm::create_node(&format!("record-{}", std::process::id()))?;
-    let mut reader = field::shm::FieldReader::attach_within(&node, &a.field, timeout)?;
-    let Some(channels) = reader
-        .wait_until(timeout, |_| true)?
-        .map(|f| f.header.channels as usize)
-    else {
-        anyhow::bail!("field {}: no frame within {:?}", a.field, timeout);
+    let options = RecordOptions {
+        field: a.field.clone(),
+        mcap: a.mcap.clone(),
+        rate_hz: a.rate_hz,
+        namespace: a.namespace.clone(),
+        frame_id: a.frame_id.clone(),
+        timeout: Duration::from_secs_f64(a.timeout),
+        duration: a.duration.map(Duration::from_secs_f64),
+        frames: a.frames,
     };
-    let topics = FieldTopics::new(&ns, channels).map_err(bad_from)?;
-    let mut rec = McapRecorder::create(&a.mcap).map_err(bad_from)?;
-    for (name, t) in topics.names.iter().zip(&topics.types) {
-        rec.add_topic(name, t)?;
-    }
-    let started = Instant::now();
-    let mut last: Option<Instant> = None;
-    let mut frames = 0u64;
-    // The frame held on attaching is recorded first.
-    let mut fresh = true;
-    while node.wait(Duration::ZERO).is_ok()
-        && duration.is_none_or(|d| started.elapsed() < d)
-        && a.frames.is_none_or(|n| frames < n)
-    {
-        if (fresh || reader.wait_frame(Duration::from_millis(20))?)
-            && last.is_none_or(|t| t.elapsed() >= period)
-        {
-            if let Some(fm) = frame_messages(&reader, &a.frame_id) {
-                if fm.messages.len() == topics.names.len() {
-                    let log_ns = fm.stamp.as_ns().max(0) as u64;
-                    for (i, m) in fm.messages.iter().enumerate() {
-                        rec.write(i, log_ns, m)?;
-                    }
-                    rec.end_frame()?;
-                    frames += 1;
-                    last = Some(Instant::now());
-                }
-            }
-        }
-        fresh = false;
-    }
-    let (messages, bytes) = (rec.messages, rec.bytes);
-    rec.finish()?;
-    eprintln!(
-        "record '{}': {frames} frames, {messages} messages in {}",
-        a.field,
-        a.mcap.display()
-    );
+    let node = field::shm::create_node(&format!("record-{}", std::process::id()))?;
+    let summary = match record_field(&node, &options) {
+        Ok(s) => s,
+        Err(e) if e.is_bad_input() => return Err(bad_from(e)),
+        Err(e) => return Err(e.into()),
+    };
     if a.json {
-        println!(
-            "{}",
-            serde_json::json!({
-                "field": a.field, "mcap": a.mcap, "frames": frames, "messages": messages,
-                "bytes": bytes, "topics": topics.names, "finished_ns": wall_now_ns(),
-            })
-        );
+        println!("{}", summary.json(&options));
     }
     Ok(())
 }

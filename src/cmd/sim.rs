@@ -9,12 +9,12 @@ use std::time::Instant;
 use pheromone_world::scenario::{Overrides, Scenario};
 use roles::follower::StrategyKind;
 use ros2::record::{McapRecorder, RecordError};
-use serde::Serialize;
-use sim::metrics::{mean_sd, scenario_metrics, welch_t, RunMetrics, RunMode};
+use sim::metrics::{RunMetrics, RunMode};
 use sim::processes::ProcessRunInfo;
 use sim::record::Recording;
 use sim::ros_record::{McapTotals, SimMcap};
 use sim::single::{run_single_process, RunSummary, SingleProcessOptions};
+use sim::trials::TrialsError;
 
 use super::roles::load_scenario;
 pub use super::sim_args::SimArgs;
@@ -48,13 +48,25 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     }
     // From here SIGINT/SIGTERM end the run with what it has (exit status 130/143).
     super::stop::install()?;
+    let scenario = scenario_of(&a)?;
+    if let Some(t) = a.trials {
+        return run_trials(&a, &scenario, t);
+    }
+    if a.compare_filters {
+        return super::sim_filters::run(&a, &scenario);
+    }
+    run_scenario(&a, &scenario)
+}
+
+/// The scenario of `a` with its flags' overrides.
+fn scenario_of(a: &SimArgs) -> anyhow::Result<Scenario> {
     let mut scenario = load_scenario(&a.scenario)?;
     scenario
         .apply(&Overrides {
             seed: a.seed,
             robots: a.robots,
             duration_s: a.duration,
-            strategy: follower_strategy(&a)?,
+            strategy: follower_strategy(a)?,
             constant: a.constant,
             map: a.map.clone(),
             merge: a.merge_flag(),
@@ -65,13 +77,12 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             steer_on: a.steer,
         })
         .map_err(|e| bad_in(a.scenario.as_str(), e))?;
-    if let Some(t) = a.trials {
-        return run_trials(&a, &scenario, t);
-    }
-    if a.compare_filters {
-        return super::sim_filters::run(&a, &scenario);
-    }
-    if a.remote && sim::processes::remote_robots(&scenario).is_empty() {
+    Ok(scenario)
+}
+
+/// One run of the scenario, its summary, metrics and files.
+fn run_scenario(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
+    if a.remote && sim::processes::remote_robots(scenario).is_empty() {
         return Err(bad(format!(
             "--remote: scenario '{}' has no robot with an antenna follower (try trail-following)",
             scenario.name
@@ -91,15 +102,15 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
             "separate processes"
         }
     );
-    let record = start_record(&a, &scenario)?;
+    let record = start_record(a, scenario)?;
     let started = Instant::now();
-    let (summary, rec, processes, record) = run_once(&a, &scenario, record)?;
+    let (summary, rec, processes, record) = run_once(a, scenario, record)?;
     let interrupted = match &processes {
         Some(info) => info.interrupted,
         None => stop::requested().is_some(),
     };
     let wall_s = started.elapsed().as_secs_f64();
-    let mut metrics = RunMetrics::new(&scenario, &summary, &rec, run_mode(&a), wall_s);
+    let mut metrics = RunMetrics::new(scenario, &summary, &rec, run_mode(a), wall_s);
     metrics.interrupted = interrupted;
     if let Some(info) = processes {
         metrics.startup_s = Some(info.startup_s);
@@ -108,10 +119,24 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     // A file that could not be written fails the run, after its other outputs.
     let record = record.map(|totals| add_record(&mut metrics, totals));
     print_summary(&metrics);
-    if let Some(dir) = out_dir(&a, &scenario) {
-        let mut files =
-            report::write_outputs(&dir, &rec, &metrics, &report::marks(&scenario, &rec))?;
-        files.extend(report::write_plots(&dir, &scenario, &rec)?);
+    write_outputs(a, scenario, &rec, &metrics)?;
+    record?;
+    if interrupted {
+        return Err(Stopped::by_requested().into());
+    }
+    Ok(())
+}
+
+/// `--out DIR`'s files and the `--json` metrics.
+fn write_outputs(
+    a: &SimArgs,
+    scenario: &Scenario,
+    rec: &Recording,
+    metrics: &RunMetrics,
+) -> anyhow::Result<()> {
+    if let Some(dir) = out_dir(a, scenario) {
+        let mut files = report::write_outputs(&dir, rec, metrics, &report::marks(scenario, rec))?;
+        files.extend(report::write_plots(&dir, scenario, rec)?);
         eprintln!(
             "wrote {} file(s) to {} (the picture: {})",
             files.len(),
@@ -120,11 +145,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         );
     }
     if a.json {
-        println!("{}", serde_json::to_string(&metrics)?);
-    }
-    record?;
-    if interrupted {
-        return Err(Stopped::by_requested().into());
+        println!("{}", serde_json::to_string(metrics)?);
     }
     Ok(())
 }
@@ -263,65 +284,33 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
         )));
     }
     let ours = follower_strategy(a)?.unwrap_or(StrategyKind::Inverse);
-    let other = match ours {
-        StrategyKind::Uniform => StrategyKind::Inverse,
-        _ => StrategyKind::Uniform,
-    };
-    let base_seed = scenario.seed;
     let bar = progress_bar(2 * trials as u64);
-    let mut results = [(ours, Vec::new()), (other, Vec::new())];
-    for (kind, values) in &mut results {
-        let kind = *kind;
-        for t in 0..trials {
-            let mut s = scenario.clone();
-            s.apply(&Overrides {
-                seed: Some(base_seed + t as u64),
-                strategy: Some(kind),
-                ..Overrides::default()
-            })
-            .map_err(bad_from)?;
-            let rec = if a.single_process {
-                run_single_process(
-                    &s,
-                    SingleProcessOptions {
-                        slam: a.slam,
-                        progress: None,
-                        record: None,
-                        stop: Some(&|| stop::requested().is_some()),
-                    },
-                )?
-                .1
-            } else {
-                run_processes(a, &s, None, None)?.1
+    let stopped = || stop::requested().is_some();
+    let run = |s: &Scenario| -> anyhow::Result<Recording> {
+        let rec = if a.single_process {
+            let options = SingleProcessOptions {
+                slam: a.slam,
+                progress: None,
+                record: None,
+                stop: Some(&stopped),
             };
-            if stop::requested().is_some() {
-                eprintln!("sim: trials stopped: nothing written");
-                return Err(Stopped::by_requested().into());
-            }
-            // The scenario was checked above to have an exploration metric.
-            let m = scenario_metrics(&s, &rec);
-            values.push(m.exploration.map_or(f64::NAN, |e| e.mean));
-            bar.inc(1);
+            run_single_process(s, options)?.1
+        } else {
+            run_processes(a, s, None, None)?.1
+        };
+        if stop::requested().is_some() {
+            eprintln!("sim: trials stopped: nothing written");
+            return Err(Stopped::by_requested().into());
         }
-    }
+        Ok(rec)
+    };
+    let out = match sim::trials::run_trials(scenario, trials, ours, run, || bar.inc(1)) {
+        Ok(out) => out,
+        Err(TrialsError::Run(e)) => return Err(e),
+        Err(TrialsError::Scenario(e)) => return Err(bad_from(e)),
+    };
     bar.finish_and_clear();
-    let out = Trials::of(scenario, &results);
-    let (x, y) = (&out.exploration[0], &out.exploration[1]);
-    eprintln!(
-        "{} trials of '{}' with {} robot(s), {:.0} s each: exploration {} {:.3} ± {:.3}, {} {:.3} ± {:.3}; Welch t = {:.2} (df {:.1})",
-        trials,
-        scenario.name,
-        out.robots,
-        out.sim_time_s,
-        x.strategy,
-        x.mean,
-        x.sd,
-        y.strategy,
-        y.mean,
-        y.sd,
-        out.welch_t,
-        out.welch_df,
-    );
+    eprintln!("{}", out.summary_line());
     if let Some(dir) = out_dir(a, scenario) {
         std::fs::create_dir_all(&dir)?;
         let path = dir.join("trials.json");
@@ -332,57 +321,4 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
         println!("{}", serde_json::to_string(&out)?);
     }
     Ok(())
-}
-
-/// `--trials`: the exploration of each strategy over the same seeds, and Welch's t between them
-/// (`trials.json`).
-#[derive(Debug, Serialize)]
-struct Trials {
-    scenario: String,
-    trials: usize,
-    /// The first and last seed.
-    seeds: [u64; 2],
-    robots: usize,
-    sim_time_s: f64,
-    /// Ours first, then the other strategy.
-    exploration: [StrategyTrials; 2],
-    welch_t: f64,
-    welch_df: f64,
-}
-
-/// One strategy's `exploration.mean` over the trials.
-#[derive(Debug, Serialize)]
-struct StrategyTrials {
-    strategy: &'static str,
-    mean: f64,
-    sd: f64,
-    per_trial: Vec<f64>,
-}
-
-impl Trials {
-    fn of(scenario: &Scenario, results: &[(StrategyKind, Vec<f64>); 2]) -> Self {
-        let stats = |(kind, values): &(StrategyKind, Vec<f64>)| {
-            let (mean, sd) = mean_sd(values);
-            StrategyTrials {
-                strategy: kind.name(),
-                mean,
-                sd,
-                per_trial: values.clone(),
-            }
-        };
-        let exploration = [stats(&results[0]), stats(&results[1])];
-        let n = results[0].1.len();
-        let (x, y) = (&exploration[0], &exploration[1]);
-        let (welch_t, welch_df) = welch_t(x.mean, x.sd, y.mean, y.sd, n as f64);
-        Self {
-            scenario: scenario.name.clone(),
-            trials: n,
-            seeds: [scenario.seed, scenario.seed + n as u64 - 1],
-            robots: scenario.world.robots.len(),
-            sim_time_s: scenario.duration_s,
-            exploration,
-            welch_t,
-            welch_df,
-        }
-    }
 }

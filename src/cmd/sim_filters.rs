@@ -4,30 +4,15 @@
 //! from each run become `filters.csv`, six charts and `filters.json`.
 
 use pheromone_world::scenario::{Overrides, Scenario};
-use roles::localizer::FilterKind;
-use serde::Serialize;
-use sim::single::{run_single_process, SingleProcessOptions};
-
+use report::filters::{truth_spread_m, Comparison};
 use report::{FilterRun, FilterSummary};
+use roles::localizer::FilterKind;
+use sim::single::{run_single_process, SingleProcessOptions};
 
 use super::bad;
 use super::sim_args::SimArgs;
 use super::sim_run::{out_dir, run_processes};
 use super::stop::{self, Stopped};
-
-/// `filters.json` and the `--json` line.
-#[derive(Debug, Serialize)]
-struct Comparison {
-    scenario: String,
-    seed: u64,
-    robot: u32,
-    /// Particles of the PF run.
-    particles: Option<usize>,
-    /// The largest distance between the robot's true positions at the same step in two of the
-    /// runs (m): 0 when the filter changes nothing but the estimate.
-    truth_spread_m: f64,
-    filters: Vec<FilterSummary>,
-}
 
 /// The robot compared: `--compare-robot`, or the lowest id with a depositor.
 fn robot_of(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<u32> {
@@ -90,19 +75,6 @@ fn run_with(
     Ok(rec.robots.remove(&robot).unwrap_or_default())
 }
 
-fn truth_spread_m(series: &[Vec<sim::record::RobotSample>]) -> f64 {
-    let mut spread: f64 = 0.0;
-    for a in series {
-        for b in series {
-            for (p, q) in a.iter().zip(b) {
-                let d = (p.true_pose[0] - q.true_pose[0]).hypot(p.true_pose[1] - q.true_pose[1]);
-                spread = spread.max(d);
-            }
-        }
-    }
-    spread
-}
-
 pub fn run(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
     let robot = robot_of(a, scenario)?;
     eprintln!(
@@ -141,21 +113,7 @@ pub fn run(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
         filters: runs.iter().map(FilterSummary::of).collect(),
     };
     for f in &out.filters {
-        eprintln!(
-            "  {:>3}: {} steps, RMS error x {:.3} m, y {:.3} m, φ {:.4} rad, combined {:.3} m (max {:.3} m); \
-             mean σ {:.3} m; {} deposits summing {:.1}; r(ln σ, ln γ) {}",
-            f.filter,
-            f.steps,
-            f.rms_x_m,
-            f.rms_y_m,
-            f.rms_phi_rad,
-            f.rms_xy_m,
-            f.max_xy_m,
-            f.mean_sigma_m.unwrap_or(f64::NAN),
-            f.deposits,
-            f.deposited,
-            f.log_sigma_log_deposit_r.map_or("n/a".into(), |r| format!("{r:.3}")),
-        );
+        eprintln!("{}", f.line());
     }
     if let Some(dir) = out_dir(a, scenario) {
         let mut files = report::write_filter_comparison(&dir, robot, &runs)?;

@@ -30,32 +30,7 @@ pub(super) fn run_processes(
     record: Option<SimMcap>,
 ) -> anyhow::Result<(RunSummary, Recording, ProcessRunInfo)> {
     let stall = super::seconds("stall-timeout", a.stall_timeout)?;
-    if let Some(m) = scenario.mapping() {
-        if m.merge && m.merge_idle_iterations > 0 {
-            return Err(super::bad(format!(
-                "scenario '{}': mapping.merge_idle_iterations = {} needs --single-process (a \
-                 follower process does not learn of its mapper's merges)",
-                scenario.name, m.merge_idle_iterations
-            )));
-        }
-    }
-    if let Some(v) = &a.view {
-        eprintln!("sim: view: http://{v}/ (stops with the run)");
-    }
-    if a.ros2.is_some() && !cfg!(feature = "zenoh") {
-        return Err(super::bad(
-            "--ros2: this build has no Zenoh: rebuild with `cargo build --release --features zenoh`",
-        ));
-    }
-    if a.zenoh.any() && a.ros2.is_none() {
-        return Err(super::bad(
-            "--zenoh-config, --tls-*, --user, --password-file and --users-file are for the --ros2 \
-             child: give --ros2 too",
-        ));
-    }
-    if let Some(e) = &a.ros2 {
-        eprintln!("sim: ros2: connecting to {e} (stops with the run)");
-    }
+    check_process_flags(a, scenario)?;
     let attach = a
         .attach_timeout
         .map(|v| super::seconds("attach-timeout", v))
@@ -86,6 +61,38 @@ pub(super) fn run_processes(
         }
         e => e.into(),
     })
+}
+
+/// What a run as processes refuses of the flags and the scenario; what it says it starts
+/// beside the run (the view, the ROS 2 node).
+fn check_process_flags(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
+    if let Some(m) = scenario.mapping() {
+        if m.merge && m.merge_idle_iterations > 0 {
+            return Err(super::bad(format!(
+                "scenario '{}': mapping.merge_idle_iterations = {} needs --single-process (a \
+                 follower process does not learn of its mapper's merges)",
+                scenario.name, m.merge_idle_iterations
+            )));
+        }
+    }
+    if let Some(v) = &a.view {
+        eprintln!("sim: view: http://{v}/ (stops with the run)");
+    }
+    if a.ros2.is_some() && !cfg!(feature = "zenoh") {
+        return Err(super::bad(
+            "--ros2: this build has no Zenoh: rebuild with `cargo build --release --features zenoh`",
+        ));
+    }
+    if a.zenoh.any() && a.ros2.is_none() {
+        return Err(super::bad(
+            "--zenoh-config, --tls-*, --user, --password-file and --users-file are for the --ros2 \
+             child: give --ros2 too",
+        ));
+    }
+    if let Some(e) = &a.ros2 {
+        eprintln!("sim: ros2: connecting to {e} (stops with the run)");
+    }
+    Ok(())
 }
 
 /// `--rt-priority N [--rt-best-effort]` for each child (none without a priority).

@@ -17,6 +17,7 @@ use crate::shm::{
 use crate::FieldConfig;
 
 mod housekeeping;
+pub use housekeeping::{Housekeeping, CLEANUP_EVERY};
 mod pace;
 mod spin;
 mod stats;
@@ -203,7 +204,7 @@ pub fn run_field(
         if let Some(c) = &mut checkpointer {
             c.maybe_write(&server);
         }
-        stats.every_second(&o.name, server.stepper());
+        stats.every_second(node, &o.name, server.stepper());
         if o.ticks.is_some_and(|n| stats.ticks >= n)
             || o.duration.is_some_and(|d| started.elapsed() >= d)
         {

@@ -3,12 +3,15 @@
 
 use std::time::{Duration, Instant};
 
-use super::housekeeping::Housekeeper;
+use super::housekeeping::Housekeeping;
 use crate::deposit::RejectReason;
 use crate::messages::FieldTiming;
 use crate::shm::{cleanup_dead_nodes, Svc, TickOutcome, TimingWriter};
 use crate::Stepper;
 use iceoryx2::node::Node;
+
+/// The period of the field's log line.
+const LOG_EVERY: Duration = Duration::from_secs(1);
 
 /// What the loop counts: the run's totals and the current second's [`Window`].
 pub(crate) struct TickStats {
@@ -28,8 +31,9 @@ pub(crate) struct TickStats {
     window: Window,
     /// The totals for `pheromone list` (`pheromone/F/timing`), updated after every frame.
     board: Option<TimingWriter>,
-    /// Cleans up after dead clients off the tick thread (started by `keep_timing_board`).
-    housekeeper: Option<Housekeeper>,
+    /// The log line's period, and the cleanup after dead clients off the tick thread (started
+    /// by `keep_timing_board`).
+    housekeeping: Housekeeping,
 }
 
 impl TickStats {
@@ -49,7 +53,7 @@ impl TickStats {
             last_frame_at: Instant::now(),
             window: Window::new(Instant::now()),
             board: None,
-            housekeeper: None,
+            housekeeping: Housekeeping::new(LOG_EVERY),
         }
     }
 
@@ -57,10 +61,8 @@ impl TickStats {
     /// that cannot create it (e.g. a dead primary's is still there) runs without it, and says so.
     pub(crate) fn keep_timing_board(&mut self, node: &Node<Svc>, field: &str) {
         cleanup_dead_nodes(node);
-        self.housekeeper = Some(Housekeeper::start(
-            node.config().clone(),
-            Duration::from_secs(1),
-        ));
+        self.housekeeping = Housekeeping::new(LOG_EVERY).with_cleanup_thread(node);
+        self.window = Window::new(Instant::now());
         self.board = TimingWriter::create(node, field)
             .map_err(|e| eprintln!("field '{field}': `pheromone list` will show no timing: {e}"))
             .ok();
@@ -106,12 +108,9 @@ impl TickStats {
 
     /// Once a second: logs the window's line (with what the housekeeping thread freed of
     /// clients killed meanwhile: their ports and frames) and starts the next window.
-    pub(crate) fn every_second(&mut self, field: &str, stepper: &Stepper) {
-        if self.window.started.elapsed() >= Duration::from_secs(1) {
-            let cleaned = self
-                .housekeeper
-                .as_ref()
-                .map_or(0, Housekeeper::take_cleaned);
+    pub(crate) fn every_second(&mut self, node: &Node<Svc>, field: &str, stepper: &Stepper) {
+        if self.housekeeping.due(node) {
+            let cleaned = self.housekeeping.take_cleaned();
             self.dead_nodes_cleaned += cleaned;
             self.window.log(field, stepper, cleaned);
             self.window = Window::new(Instant::now());
@@ -203,11 +202,7 @@ impl TickStats {
     /// Dead nodes removed over the run, including what the housekeeping thread removed since
     /// the last log line.
     pub(crate) fn dead_nodes_cleaned_total(&self) -> u64 {
-        self.dead_nodes_cleaned
-            + self
-                .housekeeper
-                .as_ref()
-                .map_or(0, Housekeeper::take_cleaned)
+        self.dead_nodes_cleaned + self.housekeeping.take_cleaned()
     }
 
     /// The lateness percentiles (`None` when no tick had a wall-time deadline).

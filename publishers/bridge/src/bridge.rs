@@ -467,6 +467,11 @@ impl Bridge {
         super::listen_locators(&self.session)
     }
 
+    /// The options it was started with.
+    pub fn options(&self) -> &BridgeOptions {
+        &self.o
+    }
+
     /// Whether the field's process is alive.
     pub fn field_alive(&self) -> bool {
         self.reader.field_alive()

@@ -1,7 +1,8 @@
 //! Field mirrors over Zenoh (feature `zenoh`; docs/mirror-wire.md): `Bridge` publishes a
 //! field's inputs, configuration, checksums and keyframes from its host; `Mirror` runs the same
 //! `Stepper` on another host (or iceoryx2 domain) and publishes bit-identical frames there.
-//! `codec` holds the bytes both exchange.
+//! `codec` holds the bytes both exchange; `run` their loops (`pheromone bridge`, `pheromone
+//! field --mirror`).
 
 #[allow(clippy::module_inception)]
 mod batches;
@@ -9,6 +10,7 @@ mod bridge;
 pub mod codec;
 mod journal;
 mod mirror;
+pub mod run;
 mod security;
 
 use std::time::Duration;
@@ -38,6 +40,14 @@ pub enum BridgeError {
     /// configuration file that does not parse).
     #[error("{0}")]
     Security(String),
+    /// The bridge refused a mirror's connection for good (a certificate, CA or password it
+    /// does not accept).
+    #[error("mirror '{field}': {endpoint} refused the connection: {why}")]
+    Refused {
+        field: String,
+        endpoint: String,
+        why: String,
+    },
 }
 
 field::from_shm_errors!(BridgeError);

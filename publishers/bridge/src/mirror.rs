@@ -208,6 +208,11 @@ impl Mirror {
         })
     }
 
+    /// The options it was started with.
+    pub fn options(&self) -> &MirrorOptions {
+        &self.o
+    }
+
     pub fn is_stale(&self) -> bool {
         self.stale
     }

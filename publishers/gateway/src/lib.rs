@@ -6,7 +6,8 @@
 //! frame of a field it reads ([`FieldReader`]) and forwards deposits to the field
 //! ([`DepositPublisher`]). [`udp`] serves it on a UDP socket (one frame per datagram),
 //! [`serial`] on a serial line (a byte stream, half duplex); [`client`] is the thin client's side
-//! of both, with a backup gateway.
+//! of both, with a backup gateway; [`line`] is either place to serve on, as `pheromone gateway`
+//! opens it.
 //!
 //! - **PIR:** the two antenna readings at the M3 antenna points, half a wheel base (as the client
 //!   sends it) to each side of the pose ([`field::FrameView::antennas`]), with the sequence of
@@ -21,6 +22,7 @@
 //!   and dropped, since its client ID cannot be trusted.
 
 pub mod client;
+pub mod line;
 pub mod serial;
 pub mod udp;
 
@@ -34,6 +36,9 @@ use gateway_codec::{
 };
 use iceoryx2::node::Node;
 use serde::Serialize;
+
+/// How often a serving gateway calls its log with the counters.
+pub const LOG_EVERY: Duration = Duration::from_secs(1);
 
 /// Deposit seqs remembered per client (M3: the last 16).
 pub const SEQ_MEMORY: usize = 16;
@@ -155,6 +160,25 @@ pub struct GatewayCounters {
     pub dropped: u64,
     /// Rejections by the codec's reason name (bad_crc, too_long, …).
     pub rejected: std::collections::BTreeMap<&'static str, u64>,
+}
+
+impl GatewayCounters {
+    /// The status line `pheromone gateway` writes once a second and at the end.
+    pub fn status_line(&self) -> String {
+        format!(
+            "gateway: frames {} pir {} deposits {} (repeated {}, undelivered {}) pings {} \
+             errors sent {:?} dropped {} rejected {:?}",
+            self.frames,
+            self.pirs,
+            self.deposits,
+            self.deposits_repeated,
+            self.deposits_undelivered,
+            self.pings,
+            &self.errors_sent[1..],
+            self.dropped,
+            self.rejected
+        )
+    }
 }
 
 /// What one client has used of its rate and which deposit seqs it has applied.

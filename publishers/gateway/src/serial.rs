@@ -11,15 +11,16 @@ use std::fs::File;
 use std::io::{ErrorKind, Read, Write};
 use std::os::fd::AsFd;
 use std::os::unix::fs::OpenOptionsExt;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
+use field::run::Housekeeping;
 use field::shm::{now_ns, Svc};
 use gateway_codec::{Decoder, MAX_ENCODED_BYTES};
 use iceoryx2::node::Node;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::termios::{self, BaudRate, ControlFlags, SetArg, SpecialCharacterIndices};
 
-use super::{Gateway, GatewayCounters, GatewayError};
+use super::{Gateway, GatewayCounters, GatewayError, LOG_EVERY};
 
 /// How long one poll(2) waits before the loop looks at Ctrl-C and the log clock.
 const RECEIVE_SLICE: Duration = Duration::from_millis(100);
@@ -159,11 +160,10 @@ pub fn serve(
     let mut input = [0u8; 512];
     let mut out = [0u8; MAX_ENCODED_BYTES];
     let mut outcomes = Vec::new();
-    let mut next_log = Instant::now() + Duration::from_secs(1);
-    while node.wait(Duration::ZERO).is_ok() {
-        if Instant::now() >= next_log {
+    let mut chores = Housekeeping::new(LOG_EVERY);
+    while chores.running(node) {
+        if chores.due(node) {
             log(gateway.counters());
-            next_log += Duration::from_secs(1);
         }
         if !wait_readable(&*port, RECEIVE_SLICE).map_err(|e| serial_error(path, "poll", e))? {
             continue;

@@ -1,13 +1,14 @@
 //! The gateway on a UDP socket: one DLE/CRC frame per datagram, each answered to its sender.
 
 use std::net::{SocketAddr, UdpSocket};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
+use field::run::Housekeeping;
 use field::shm::{now_ns, Svc};
 use gateway_codec::{decode, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
 use iceoryx2::node::Node;
 
-use super::{Gateway, GatewayCounters, GatewayError};
+use super::{Gateway, GatewayCounters, GatewayError, LOG_EVERY};
 
 /// How long one receive waits before the loop looks at Ctrl-C and the log clock.
 const RECEIVE_SLICE: Duration = Duration::from_millis(100);
@@ -45,11 +46,10 @@ pub fn serve(
     // One byte more than the longest valid frame tells an over-long datagram apart.
     let mut datagram = [0u8; MAX_WIRE_BYTES + 1];
     let mut out = [0u8; MAX_ENCODED_BYTES];
-    let mut next_log = Instant::now() + Duration::from_secs(1);
-    while node.wait(Duration::ZERO).is_ok() {
-        if Instant::now() >= next_log {
+    let mut chores = Housekeeping::new(LOG_EVERY);
+    while chores.running(node) {
+        if chores.due(node) {
             log(gateway.counters());
-            next_log += Duration::from_secs(1);
         }
         let (n, from): (usize, SocketAddr) = match socket.recv_from(&mut datagram) {
             Ok(got) => got,

@@ -159,6 +159,56 @@ impl FilterSummary {
     }
 }
 
+impl FilterSummary {
+    /// The summary's line on stderr (`sim --compare-filters`).
+    pub fn line(&self) -> String {
+        format!(
+            "  {:>3}: {} steps, RMS error x {:.3} m, y {:.3} m, φ {:.4} rad, combined {:.3} m (max {:.3} m); \
+             mean σ {:.3} m; {} deposits summing {:.1}; r(ln σ, ln γ) {}",
+            self.filter,
+            self.steps,
+            self.rms_x_m,
+            self.rms_y_m,
+            self.rms_phi_rad,
+            self.rms_xy_m,
+            self.max_xy_m,
+            self.mean_sigma_m.unwrap_or(f64::NAN),
+            self.deposits,
+            self.deposited,
+            self.log_sigma_log_deposit_r
+                .map_or("n/a".into(), |r| format!("{r:.3}")),
+        )
+    }
+}
+
+/// `filters.json` and the `--json` line of `sim --compare-filters`.
+#[derive(Debug, Serialize)]
+pub struct Comparison {
+    pub scenario: String,
+    pub seed: u64,
+    pub robot: u32,
+    /// Particles of the PF run.
+    pub particles: Option<usize>,
+    /// The largest distance between the robot's true positions at the same step in two of the
+    /// runs (m): 0 when the filter changes nothing but the estimate.
+    pub truth_spread_m: f64,
+    pub filters: Vec<FilterSummary>,
+}
+
+/// The largest distance between the true positions at the same step of two of `series` (m).
+pub fn truth_spread_m(series: &[Vec<RobotSample>]) -> f64 {
+    let mut spread: f64 = 0.0;
+    for a in series {
+        for b in series {
+            for (p, q) in a.iter().zip(b) {
+                let d = (p.true_pose[0] - q.true_pose[0]).hypot(p.true_pose[1] - q.true_pose[1]);
+                spread = spread.max(d);
+            }
+        }
+    }
+    spread
+}
+
 /// Header of `filters.csv`.
 pub const FILTERS_CSV_HEADER: &str =
     "filter,t_s,err_x_m,err_y_m,err_phi_rad,err_xy_m,sigma_m,deposit";

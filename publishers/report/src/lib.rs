@@ -18,7 +18,8 @@
 //! picture of a node-graph run; `files` writes the CSV and PNG files; `sweep` the files of
 //! `pheromone sweep` (CSV, JSON, exploration against robots and against R_C); `filters` and
 //! `filters_plots` the comparison of localization filters (`sim --compare-filters`, seed 000
-//! Figs. 13–18).
+//! Figs. 13–18); `probe` and `export::live` read a running field (`pheromone probe`,
+//! `pheromone export`).
 
 pub mod export;
 mod files;
@@ -29,6 +30,7 @@ mod heatmap;
 mod maps;
 mod marks;
 mod plots;
+pub mod probe;
 pub mod series;
 mod style;
 mod sweep;

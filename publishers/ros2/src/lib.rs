@@ -14,6 +14,8 @@
 //! - [`record`]: ROS 2 MCAP files.
 //! - `session` (feature `zenoh`): the Zenoh session configured as rmw_zenoh configures a node's.
 //! - `node` (feature `zenoh`): the node itself — publishers, `--deposit-from` subscriptions.
+//! - [`run`]: the loops of `pheromone ros2` (`Ros2Node::run`, feature `zenoh`) and `pheromone
+//!   record` (`record_field`).
 
 pub mod cdr;
 pub mod deps;
@@ -26,6 +28,7 @@ pub mod pose;
 pub mod record;
 pub mod robot;
 pub mod robots;
+pub mod run;
 #[cfg(feature = "zenoh")]
 pub mod session;
 pub mod types;

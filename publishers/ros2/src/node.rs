@@ -461,6 +461,11 @@ impl Ros2Node {
         Some(v[i])
     }
 
+    /// The field it publishes.
+    pub fn field(&self) -> &str {
+        &self.o.field
+    }
+
     /// Flushes the deposits sent and closes the session (tokens are withdrawn).
     pub fn close(mut self) {
         if let Some(d) = self.deposits.as_mut() {

@@ -1,7 +1,9 @@
 //! A frame as files other tools read: a NumPy `.npy` array of every channel ([`npy`]), and one
 //! channel as a ROS map_server map, PGM + YAML, for RViz or map_server ([`ros_map`]). Used by
-//! `pheromone export` and by `pheromone sim --out` (`field_final.npy`).
+//! `pheromone export` and by `pheromone sim --out` (`field_final.npy`); [`live`] waits for the
+//! frame `pheromone export` writes.
 
+pub mod live;
 pub mod npy;
 pub mod ros_map;
 

@@ -4,6 +4,7 @@
 pub mod depositor;
 pub mod follower;
 pub mod follower_antenna;
+pub mod follower_remote;
 pub mod localizer;
 pub mod mapper;
 pub mod role_loop;
