@@ -7,4 +7,4 @@
 # Usage: .ci/thin_binary.sh [cargo clippy options, e.g. --features zenoh]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-CLIPPY_CONF_DIR="$PWD/.ci/thin-binary" cargo clippy -p pheromone --bin pheromone "$@" -- -D warnings
+CLIPPY_CONF_DIR="$PWD/.ci/thin-binary" cargo clippy --no-deps -p pheromone --bin pheromone "$@" -- -D warnings

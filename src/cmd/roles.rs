@@ -427,15 +427,9 @@ fn client_id(a: &FollowerArgs) -> anyhow::Result<u8> {
     }
 }
 
-/// The antenna robot of `--gateway` (`roles::process::follower_remote`).
-fn run_remote_follower(
-    a: &FollowerArgs,
-    scenario: &Scenario,
-    config: &FollowerConfig,
-    gateway: &str,
-) -> anyhow::Result<()> {
-    use roles::process::follower_antenna::RemoteDeposits;
-    use roles::process::follower_remote::{run_remote_follower, RemoteFollowerOptions};
+/// What reading through a gateway needs of the follower: the antenna strategy, a channel the
+/// gateway can name.
+fn check_remote(a: &FollowerArgs, config: &FollowerConfig) -> anyhow::Result<()> {
     if config.strategy != StrategyKind::Antenna {
         return Err(bad(format!(
             "--gateway: only the antenna strategy reads through a gateway (robot {} has '{}')",
@@ -448,6 +442,19 @@ fn run_remote_follower(
             config.channel
         ))
     })?;
+    Ok(())
+}
+
+/// The antenna robot of `--gateway` (`roles::process::follower_remote`).
+fn run_remote_follower(
+    a: &FollowerArgs,
+    scenario: &Scenario,
+    config: &FollowerConfig,
+    gateway: &str,
+) -> anyhow::Result<()> {
+    use roles::process::follower_antenna::RemoteDeposits;
+    use roles::process::follower_remote::{run_remote_follower, RemoteFollowerOptions};
+    check_remote(a, config)?;
     let client_id = client_id(a)?;
     let remote = RemoteFollowerOptions {
         gateway: udp_address("--gateway", gateway)?,
