@@ -1,4 +1,4 @@
-//! The loops of `pheromone ros2` (feature `zenoh`: [`Ros2Node::run`]) and `pheromone record`
+//! The loops of `pheromone ros2` (feature `zenoh`: `Ros2Node::run`) and `pheromone record`
 //! ([`record_field`]): stepped until Ctrl-C/SIGTERM or their end, with the shared housekeeping
 //! (`field::run::Housekeeping`).
 
