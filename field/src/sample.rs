@@ -10,7 +10,7 @@ use crate::geometry::GridGeometry;
 /// see its example); any buffer of the right length is one too:
 ///
 /// ```
-/// use field::{FrameView, GridGeometry, SamplePose};
+/// use pheromone_field::{FrameView, GridGeometry, SamplePose};
 ///
 /// // 4 × 4 cells of 0.5 m, one channel; cell (2, 1), centred at (1.25 m, 0.75 m), holds 1.
 /// let geometry = GridGeometry::new(4, 4, 0.5).unwrap();

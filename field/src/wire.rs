@@ -5,7 +5,7 @@
 //!
 //! The wire types themselves live beside the code that gives them meaning — the field's in
 //! [`crate::messages`] and [`crate::lockstep`], the robots' in `messages`, the graph's
-//! in `graph::shm` — and each is declared with [`wire_type!`](crate::wire_type),
+//! in `pheromone_graph::shm` — and each is declared with [`wire_type!`](crate::wire_type),
 //! which names it `pheromone::<Name>/v<LAYOUT_VERSION>` and pins its size and alignment at
 //! compile time: a change to a wire type does not build until its size is restated here, and the
 //! layout version bumped below. A client built with another layout is then refused by iceoryx2

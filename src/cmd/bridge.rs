@@ -82,8 +82,8 @@ fn positive(flag: &str, v: f64) -> anyhow::Result<Duration> {
 
 #[cfg(feature = "zenoh")]
 pub fn run(a: BridgeArgs) -> anyhow::Result<()> {
-    use bridge::{Bridge, BridgeOptions, FramesOptions};
-    field::shm::check_name(&a.field).map_err(bad_from)?;
+    use pheromone_bridge::{Bridge, BridgeOptions, FramesOptions};
+    pheromone_field::shm::check_name(&a.field).map_err(bad_from)?;
     if a.checksum_every == 0 {
         return Err(bad("--checksum-every 0: must be at least 1"));
     }
@@ -99,7 +99,7 @@ pub fn run(a: BridgeArgs) -> anyhow::Result<()> {
     let keyframe_every = positive("keyframe-every-s", a.keyframe_every_s)?;
     let timeout = positive("timeout", a.timeout)?;
     let duration = a.duration.map(|d| positive("duration", d)).transpose()?;
-    let node = field::shm::create_node(&format!("bridge-{}", std::process::id()))?;
+    let node = pheromone_field::shm::create_node(&format!("bridge-{}", std::process::id()))?;
     let mut bridge = Bridge::start(
         &node,
         BridgeOptions {
@@ -117,7 +117,7 @@ pub fn run(a: BridgeArgs) -> anyhow::Result<()> {
         timeout,
     )
     .map_err(|e| match e {
-        bridge::BridgeError::Security(_) => bad_from(e),
+        pheromone_bridge::BridgeError::Security(_) => bad_from(e),
         e => e.into(),
     })?;
     if a.print_address {
@@ -139,7 +139,7 @@ pub fn run(a: BridgeArgs) -> anyhow::Result<()> {
         bridge.step(Duration::from_millis(20))?;
         if last_cleanup.elapsed() >= Duration::from_secs(1) {
             last_cleanup = Instant::now();
-            field::shm::cleanup_dead_nodes(&node);
+            pheromone_field::shm::cleanup_dead_nodes(&node);
         }
         if last_log.elapsed() >= Duration::from_secs(5) {
             last_log = Instant::now();
@@ -177,8 +177,8 @@ pub fn run(_a: BridgeArgs) -> anyhow::Result<()> {
 
 #[cfg(feature = "zenoh")]
 pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
-    use bridge::{Mirror, MirrorOptions};
-    field::shm::check_name(&a.name).map_err(bad_from)?;
+    use pheromone_bridge::{Mirror, MirrorOptions};
+    pheromone_field::shm::check_name(&a.name).map_err(bad_from)?;
     let Some(endpoint) = endpoint.strip_prefix("zenoh:") else {
         return Err(bad(format!(
             "--mirror {endpoint}: expected zenoh:ENDPOINT, e.g. zenoh:tcp/10.0.0.1:7447"
@@ -186,7 +186,7 @@ pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
     };
     let stale_after = positive("stale-after-s", a.stale_after_s.unwrap_or(1.0))?;
     let duration = a.duration.map(|d| positive("duration", d)).transpose()?;
-    let node = field::shm::create_node(&format!("mirror-{}", a.name))?;
+    let node = pheromone_field::shm::create_node(&format!("mirror-{}", a.name))?;
     let security = a.zenoh.security();
     let mut mirror = Mirror::start(MirrorOptions {
         field: a.name.clone(),
@@ -195,7 +195,7 @@ pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
         security: security.clone(),
     })
     .map_err(|e| match e {
-        bridge::BridgeError::Security(_) => bad_from(e),
+        pheromone_bridge::BridgeError::Security(_) => bad_from(e),
         e => e.into(),
     })?;
     eprintln!("mirror '{}': connecting to {endpoint}", a.name);
@@ -213,13 +213,13 @@ pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
         }
         if let Err(e) = mirror.step(&node, Duration::from_millis(20)) {
             match e {
-                bridge::BridgeError::Config(_) => return Err(bad_from(e)),
+                pheromone_bridge::BridgeError::Config(_) => return Err(bad_from(e)),
                 e => return Err(e.into()),
             }
         }
         if last_cleanup.elapsed() >= Duration::from_secs(1) {
             last_cleanup = Instant::now();
-            field::shm::cleanup_dead_nodes(&node);
+            pheromone_field::shm::cleanup_dead_nodes(&node);
         }
         if last_log.elapsed() >= Duration::from_secs(5) {
             last_log = Instant::now();
@@ -256,15 +256,15 @@ pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
 /// mirror's own session would retry it forever, logging nothing.
 #[cfg(feature = "zenoh")]
 fn watch_refusal(
-    security: bridge::Security,
+    security: pheromone_bridge::Security,
     endpoint: String,
 ) -> std::sync::mpsc::Receiver<String> {
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || loop {
-        match bridge::try_connect(&security, &endpoint) {
+        match pheromone_bridge::try_connect(&security, &endpoint) {
             Ok(()) => return,
             Err(e) => {
-                if let Some(why) = bridge::refusal(&e) {
+                if let Some(why) = pheromone_bridge::refusal(&e) {
                     let _ = tx.send(why);
                     return;
                 }

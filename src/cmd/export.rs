@@ -1,14 +1,14 @@
 //! `pheromone export`: the next frame of a running field as a NumPy `.npy` file (every
 //! channel) or as a ROS map_server map (one channel, PGM + YAML). The writers are
-//! `report::export`.
+//! `pheromone_report::export`.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use clap::Args;
-use field::shm::{create_node, mirror_info, FieldReader, Frame};
-use report::export::npy::write_npy;
-use report::export::ros_map::{write_ros_map, PlaneRef};
+use pheromone_field::shm::{create_node, mirror_info, FieldReader, Frame};
+use pheromone_report::export::npy::write_npy;
+use pheromone_report::export::ros_map::{write_ros_map, PlaneRef};
 
 use super::{bad, seconds};
 
@@ -129,7 +129,7 @@ fn format_of(out: &Path) -> anyhow::Result<Format> {
 
 /// Waits up to `timeout` for a frame newer than the one `reader` holds; whether one came.
 fn wait_fresh(
-    node: &iceoryx2::node::Node<field::shm::Svc>,
+    node: &iceoryx2::node::Node<pheromone_field::shm::Svc>,
     reader: &mut FieldReader,
     field: &str,
     timeout: Duration,
@@ -198,7 +198,7 @@ fn export_ros_map(
 
 /// The map's scale from `--min` / `--max` (defaults from the channel), checked.
 fn map_scale(a: &ExportArgs, cells: &[f32]) -> anyhow::Result<Option<(f32, f32)>> {
-    let (lo, hi) = report::export::ros_map::default_scale(cells);
+    let (lo, hi) = pheromone_report::export::ros_map::default_scale(cells);
     let scale = match (a.min, a.max) {
         (None, None) => None,
         (min, max) => Some((min.unwrap_or(lo), max.unwrap_or(hi))),

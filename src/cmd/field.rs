@@ -4,10 +4,10 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::{Args, ValueEnum};
-use field::checkpoint;
-use field::run::{run_field, FieldRunOptions};
-use field::shm::{create_node, frame_pool};
-use field::{Evaporation, FieldConfig};
+use pheromone_field::checkpoint;
+use pheromone_field::run::{run_field, FieldRunOptions};
+use pheromone_field::shm::{create_node, frame_pool};
+use pheromone_field::{Evaporation, FieldConfig};
 
 use super::{bad, bad_from, bad_in, read_toml, seconds, seconds_or_zero, MAX_SECONDS};
 
@@ -283,14 +283,14 @@ pub fn config_from_args(a: &FieldArgs) -> anyhow::Result<FieldConfig> {
 }
 
 pub fn run(a: FieldArgs) -> anyhow::Result<()> {
-    if a.threads == 0 || a.threads > field::engine::MAX_THREADS {
+    if a.threads == 0 || a.threads > pheromone_field::engine::MAX_THREADS {
         return Err(bad(format!(
             "--threads {}: the tick needs between 1 and {} threads",
             a.threads,
-            field::engine::MAX_THREADS
+            pheromone_field::engine::MAX_THREADS
         )));
     }
-    // `--mirror` runs `bridge::run_mirror` instead (dispatched by main, as this module's
+    // `--mirror` runs `pheromone_bridge::run_mirror` instead (dispatched by main, as this module's
     // arguments are the mirror's too).
     if a.zenoh.any() {
         return Err(bad(
@@ -299,7 +299,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         ));
     }
     let config = config_from_args(&a)?;
-    field::shm::check_name(&a.name).map_err(bad_from)?;
+    pheromone_field::shm::check_name(&a.name).map_err(bad_from)?;
     if a.print_config {
         print!("{}", toml::to_string_pretty(&config)?);
         return Ok(());
@@ -377,7 +377,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
 }
 
 /// Prints the `--json` summary; a field stopped by SIGINT or SIGTERM then exits 130 / 143.
-fn finish(a: &FieldArgs, summary: Option<field::run::FieldRunSummary>) -> anyhow::Result<()> {
+fn finish(a: &FieldArgs, summary: Option<pheromone_field::run::FieldRunSummary>) -> anyhow::Result<()> {
     if a.json {
         match summary {
             Some(s) => println!("{}", serde_json::to_string(&s)?),

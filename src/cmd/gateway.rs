@@ -2,8 +2,8 @@
 //! UDP or a serial line), in front of a running field.
 
 use clap::Args;
-use field::shm::create_node;
-use gateway::{serial, udp, Gateway, GatewayConfig, Source};
+use pheromone_field::shm::create_node;
+use pheromone_gateway::{serial, udp, Gateway, GatewayConfig, Source};
 
 use super::bad;
 
@@ -166,10 +166,10 @@ pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
     let node = create_node(&format!("gateway-{}", std::process::id()))?;
     let mut gateway = match Gateway::attach(&node, &a.field, config, attach_timeout) {
         Ok(g) => g,
-        Err(e @ gateway::GatewayError::Config { .. }) => return Err(bad(e.to_string())),
+        Err(e @ pheromone_gateway::GatewayError::Config { .. }) => return Err(bad(e.to_string())),
         Err(e) => return Err(e.into()),
     };
-    let log = |c: &gateway::GatewayCounters| {
+    let log = |c: &pheromone_gateway::GatewayCounters| {
         eprintln!(
             "gateway: frames {} pir {} deposits {} (repeated {}, undelivered {}) pings {} \
              errors sent {:?} dropped {} rejected {:?}",

@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use clap::Args;
-use field::shm::{create_node, mirror_info, FieldReader, Frame, Svc};
+use pheromone_field::shm::{create_node, mirror_info, FieldReader, Frame, Svc};
 use iceoryx2::prelude::Node;
 
 use super::{bad, seconds_or_zero};

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::Args;
-use roles::depositor::DepositorConfig;
+use pheromone_roles::depositor::DepositorConfig;
 
 use super::{bad, bad_from, seconds};
 
@@ -150,7 +150,7 @@ pub struct Ros2Args {
 }
 
 #[cfg(feature = "zenoh")]
-fn parse_deposit_from(s: &str) -> anyhow::Result<ros2::node::DepositFrom> {
+fn parse_deposit_from(s: &str) -> anyhow::Result<pheromone_ros2::node::DepositFrom> {
     let (topic, id) = match s.split_once('=') {
         Some((t, id)) => {
             let id = id.parse::<u32>().map_err(|e| {
@@ -162,7 +162,7 @@ fn parse_deposit_from(s: &str) -> anyhow::Result<ros2::node::DepositFrom> {
         }
         None => (s, 0),
     };
-    Ok(ros2::node::DepositFrom {
+    Ok(pheromone_ros2::node::DepositFrom {
         topic: topic.to_string(),
         robot_id: id,
     })
@@ -170,15 +170,15 @@ fn parse_deposit_from(s: &str) -> anyhow::Result<ros2::node::DepositFrom> {
 
 #[cfg(feature = "zenoh")]
 pub fn run(a: Ros2Args) -> anyhow::Result<()> {
-    use ros2::node::{Ros2Node, Ros2Options};
-    field::shm::check_name(&a.field).map_err(bad_from)?;
+    use pheromone_ros2::node::{Ros2Node, Ros2Options};
+    pheromone_field::shm::check_name(&a.field).map_err(bad_from)?;
     if !(a.rate_hz.is_finite() && a.rate_hz > 0.0 && a.rate_hz <= 1000.0) {
         return Err(bad(format!(
             "--rate-hz {}: must be within (0, 1000]",
             a.rate_hz
         )));
     }
-    let session = ros2::session::SessionSettings {
+    let session = pheromone_ros2::session::SessionSettings {
         security: a.zenoh.security(),
         env_file: None,
         listen: a.listen.clone(),
@@ -198,14 +198,14 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
     let depositor = a.deposit.config();
     depositor.validate().map_err(bad_from)?;
     let world = world_options(&a)?;
-    let node = field::shm::create_node(&format!("ros2-{}", std::process::id()))?;
+    let node = pheromone_field::shm::create_node(&format!("ros2-{}", std::process::id()))?;
     let options = Ros2Options {
         field: a.field.clone(),
         domain_id: a.domain_id,
         namespace: a.namespace.clone(),
         node_name: a.node_name.clone(),
         frame_id: a.frame_id.clone(),
-        distro: ros2::graph::RosDistro::from_name(&a.ros_distro)
+        distro: pheromone_ros2::rmw_zenoh::RosDistro::from_name(&a.ros_distro)
             .ok_or_else(|| bad(format!("--ros-distro {}: unknown", a.ros_distro)))?,
         rate_hz: a.rate_hz,
         session,
@@ -214,9 +214,9 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
         world,
     };
     let mut ros = Ros2Node::start(&node, options, timeout).map_err(|e| match e {
-        ros2::node::Ros2Error::Name(_)
-        | ros2::node::Ros2Error::Depositor(_)
-        | ros2::node::Ros2Error::Session(_) => bad_from(e),
+        pheromone_ros2::node::Ros2Error::Name(_)
+        | pheromone_ros2::node::Ros2Error::Depositor(_)
+        | pheromone_ros2::node::Ros2Error::Session(_) => bad_from(e),
         e => e.into(),
     })?;
     announce(&a, &ros)?;
@@ -261,11 +261,11 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
 }
 
 #[cfg(feature = "zenoh")]
-fn world_options(a: &Ros2Args) -> anyhow::Result<Option<ros2::node::WorldOptions>> {
+fn world_options(a: &Ros2Args) -> anyhow::Result<Option<pheromone_ros2::node::WorldOptions>> {
     let Some(world) = &a.world else {
         return Ok(None);
     };
-    field::shm::check_name(world).map_err(bad_from)?;
+    pheromone_field::shm::check_name(world).map_err(bad_from)?;
     if !(a.path_rate_hz.is_finite() && a.path_rate_hz > 0.0 && a.path_rate_hz <= 1000.0) {
         return Err(bad(format!(
             "--path-rate-hz {}: must be within (0, 1000]",
@@ -275,7 +275,7 @@ fn world_options(a: &Ros2Args) -> anyhow::Result<Option<ros2::node::WorldOptions
     if a.path_max_poses == 0 {
         return Err(bad("--path-max-poses must be at least 1"));
     }
-    Ok(Some(ros2::node::WorldOptions {
+    Ok(Some(pheromone_ros2::node::WorldOptions {
         world: world.clone(),
         robots: a.robots.clone(),
         path_rate_hz: a.path_rate_hz,
@@ -284,7 +284,7 @@ fn world_options(a: &Ros2Args) -> anyhow::Result<Option<ros2::node::WorldOptions
 }
 
 #[cfg(feature = "zenoh")]
-fn announce(a: &Ros2Args, ros: &ros2::node::Ros2Node) -> anyhow::Result<()> {
+fn announce(a: &Ros2Args, ros: &pheromone_ros2::node::Ros2Node) -> anyhow::Result<()> {
     use std::io::Write;
     eprintln!(
         "ros2 '{}': node {} in {}, publishing {:?}, depositing from {:?}",
@@ -348,18 +348,18 @@ pub struct RecordArgs {
 }
 
 pub fn run_record(a: RecordArgs) -> anyhow::Result<()> {
-    use ros2::frames::{frame_messages, wall_now_ns, FieldTopics};
-    use ros2::record::McapRecorder;
-    field::shm::check_name(&a.field).map_err(bad_from)?;
+    use pheromone_ros2::frames::{frame_messages, wall_now_ns, FieldTopics};
+    use pheromone_ros2::record::McapRecorder;
+    pheromone_field::shm::check_name(&a.field).map_err(bad_from)?;
     if !(a.rate_hz.is_finite() && a.rate_hz > 0.0) {
         return Err(bad(format!("--rate-hz {}: must be positive", a.rate_hz)));
     }
-    let ns = ros2::graph::namespace(&a.namespace).map_err(bad_from)?;
+    let ns = pheromone_ros2::rmw_zenoh::namespace(&a.namespace).map_err(bad_from)?;
     let timeout = seconds("timeout", a.timeout)?;
     let duration = a.duration.map(|d| seconds("duration", d)).transpose()?;
     let period = Duration::from_secs_f64(1.0 / a.rate_hz);
-    let node = field::shm::create_node(&format!("record-{}", std::process::id()))?;
-    let mut reader = field::shm::FieldReader::attach_within(&node, &a.field, timeout)?;
+    let node = pheromone_field::shm::create_node(&format!("record-{}", std::process::id()))?;
+    let mut reader = pheromone_field::shm::FieldReader::attach_within(&node, &a.field, timeout)?;
     let Some(channels) = reader
         .wait_until(timeout, |_| true)?
         .map(|f| f.header.channels as usize)

@@ -7,14 +7,14 @@
 use std::time::Instant;
 
 use pheromone_world::scenario::{Overrides, Scenario};
-use roles::follower::StrategyKind;
-use ros2::record::{McapRecorder, RecordError};
+use pheromone_roles::follower::StrategyKind;
+use pheromone_ros2::record::{McapRecorder, RecordError};
 use serde::Serialize;
-use sim::metrics::{mean_sd, scenario_metrics, welch_t, RunMetrics, RunMode};
-use sim::processes::ProcessRunInfo;
-use sim::record::Recording;
-use sim::ros_record::{McapTotals, SimMcap};
-use sim::single::{run_single_process, RunSummary, SingleProcessOptions};
+use pheromone_sim::metrics::{mean_sd, scenario_metrics, welch_t, RunMetrics, RunMode};
+use pheromone_sim::processes::ProcessRunInfo;
+use pheromone_sim::recording::Recording;
+use pheromone_sim::ros_record::{McapTotals, SimMcap};
+use pheromone_sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 
 use super::roles::load_scenario;
 pub use super::sim_args::SimArgs;
@@ -71,7 +71,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     if a.compare_filters {
         return super::sim_filters::run(&a, &scenario);
     }
-    if a.remote && sim::processes::remote_robots(&scenario).is_empty() {
+    if a.remote && pheromone_sim::processes::remote_robots(&scenario).is_empty() {
         return Err(bad(format!(
             "--remote: scenario '{}' has no robot with an antenna follower (try trail-following)",
             scenario.name
@@ -110,8 +110,8 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     print_summary(&metrics);
     if let Some(dir) = out_dir(&a, &scenario) {
         let mut files =
-            report::write_outputs(&dir, &rec, &metrics, &report::marks(&scenario, &rec))?;
-        files.extend(report::write_plots(&dir, &scenario, &rec)?);
+            pheromone_report::write_outputs(&dir, &rec, &metrics, &pheromone_report::marks(&scenario, &rec))?;
+        files.extend(pheromone_report::write_plots(&dir, &scenario, &rec)?);
         eprintln!(
             "wrote {} file(s) to {} (the picture: {})",
             files.len(),

@@ -4,11 +4,11 @@
 //! from each run become `filters.csv`, six charts and `filters.json`.
 
 use pheromone_world::scenario::{Overrides, Scenario};
-use roles::localizer::FilterKind;
+use pheromone_roles::localizer::FilterKind;
 use serde::Serialize;
-use sim::single::{run_single_process, SingleProcessOptions};
+use pheromone_sim::single::{run_single_process, SingleProcessOptions};
 
-use report::{FilterRun, FilterSummary};
+use pheromone_report::{FilterRun, FilterSummary};
 
 use super::bad;
 use super::sim_args::SimArgs;
@@ -62,7 +62,7 @@ fn run_with(
     scenario: &Scenario,
     filter: FilterKind,
     robot: u32,
-) -> anyhow::Result<Vec<sim::record::RobotSample>> {
+) -> anyhow::Result<Vec<pheromone_sim::recording::RobotSample>> {
     let mut s = scenario.clone();
     s.apply(&Overrides {
         filter: Some(filter),
@@ -90,7 +90,7 @@ fn run_with(
     Ok(rec.robots.remove(&robot).unwrap_or_default())
 }
 
-fn truth_spread_m(series: &[Vec<sim::record::RobotSample>]) -> f64 {
+fn truth_spread_m(series: &[Vec<pheromone_sim::recording::RobotSample>]) -> f64 {
     let mut spread: f64 = 0.0;
     for a in series {
         for b in series {
@@ -158,7 +158,7 @@ pub fn run(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
         );
     }
     if let Some(dir) = out_dir(a, scenario) {
-        let mut files = report::write_filter_comparison(&dir, robot, &runs)?;
+        let mut files = pheromone_report::write_filter_comparison(&dir, robot, &runs)?;
         let path = dir.join("filters.json");
         std::fs::write(&path, serde_json::to_string_pretty(&out)? + "\n")
             .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;

@@ -4,7 +4,7 @@
 //! [`pose`] (validation, tolerances, seed 000's uncertainty-aware ellipse).
 //!
 //! ```
-//! use field::{Deposit, DepositMsg, Kernel, KernelKind};
+//! use pheromone_field::{Deposit, DepositMsg, Kernel, KernelKind};
 //!
 //! // Seed 000's ellipse on channel 0 at (2 m, 3 m): amount τ = 0.2, the pose covariance
 //! // [xx, xy, yy] (m²), cut off at 1 m, γ capped at 100.

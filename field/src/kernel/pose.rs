@@ -1,9 +1,9 @@
 //! Seed 000's pose → deposit rule, written once for every sender (the Rust depositor
-//! `roles::depositor`, the C ABI's `pheromone_deposit_pose`, the ROS 2 pose path): which pose
+//! `pheromone_roles::depositor`, the C ABI's `pheromone_deposit_pose`, the ROS 2 pose path): which pose
 //! estimates are accepted ([`validate_pose`], with the tolerances [`SYMMETRY_REL_TOL`] and
 //! [`PSD_REL_TOL`]), and the uncertainty-aware ellipse a pose deposits ([`EllipseRule`]). The
 //! field then computes γ = τ / det Σxy capped at γmax and cuts the kernel at z_rng
-//! (`field::deposit`).
+//! (`pheromone_field::deposit`).
 //!
 //! A pose is refused, naming the entry and its value, when a number is not finite, the
 //! covariance is not symmetric (|Σij − Σji| > 1e-6·max|Σ|) or not positive semi-definite

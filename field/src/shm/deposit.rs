@@ -26,8 +26,8 @@ use crate::messages::DepositMsg;
 /// ```no_run
 /// use std::time::Duration;
 ///
-/// use field::shm::{create_node, DepositPublisher, ShmError};
-/// use field::{Deposit, Kernel};
+/// use pheromone_field::shm::{create_node, DepositPublisher, ShmError};
+/// use pheromone_field::{Deposit, Kernel};
 ///
 /// fn main() -> Result<(), ShmError> {
 ///     let node = create_node("my-depositor")?;

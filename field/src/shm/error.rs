@@ -284,7 +284,7 @@ pub(crate) fn service_err(
 /// Implements `From` of each per-operation error of [`shm`](crate::shm) for an error type that
 /// holds a [`ShmError`] (`From<ShmError>`, e.g. a `#[from] ShmError` variant), so `?` converts
 /// them as it converts a `ShmError` (`?` applies one `From`, not two):
-/// `field::from_shm_errors!(MyError);`.
+/// `pheromone_field::from_shm_errors!(MyError);`.
 #[macro_export]
 macro_rules! from_shm_errors {
     ($error:ty) => {

@@ -215,8 +215,8 @@ pub fn values_and_gradients_into(
 /// ```no_run
 /// use std::time::Duration;
 ///
-/// use field::shm::{create_node, FieldReader, ShmError};
-/// use field::SamplePose;
+/// use pheromone_field::shm::{create_node, FieldReader, ShmError};
+/// use pheromone_field::SamplePose;
 ///
 /// fn main() -> Result<(), ShmError> {
 ///     let node = create_node("my-reader")?;

@@ -5,7 +5,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
-use gateway_codec::{DepositReply, PirReply};
+use pheromone_gateway_codec::{DepositReply, PirReply};
 
 use super::*;
 
@@ -350,7 +350,7 @@ fn over_a_pty_replies_arriving_a_byte_at_a_time_are_decoded() {
     serial::configure(&pty.slave, nix::sys::termios::BaudRate::B9600).unwrap();
     let mut slave = File::from(pty.slave);
     let responder = std::thread::spawn(move || {
-        let mut decoder = gateway_codec::Decoder::new();
+        let mut decoder = pheromone_gateway_codec::Decoder::new();
         let mut buf = [0u8; 64];
         let mut answered = 0;
         while answered < 3 {

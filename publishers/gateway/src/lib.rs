@@ -9,7 +9,7 @@
 //! of both, with a backup gateway.
 //!
 //! - **PIR:** the two antenna readings at the M3 antenna points, half a wheel base (as the client
-//!   sends it) to each side of the pose ([`field::FrameView::antennas`]), with the sequence of
+//!   sends it) to each side of the pose ([`pheromone_field::FrameView::antennas`]), with the sequence of
 //!   the frame they were read from.
 //! - **DEPOSIT:** a Z-shape reinforcement (seed 002 eq. 1) at (x, y) with the gateway's plateau
 //!   and slope, sent to the field with the client ID as robot ID. Its 1-byte `seq` makes a
@@ -26,9 +26,9 @@ pub mod udp;
 
 use std::time::Duration;
 
-use field::shm::{ConfigSubscriber, DepositPublisher, FieldReader, SendError, ShmError, Svc};
-use field::{Deposit, FieldConfig, Kernel, RejectReason, SamplePose};
-use gateway_codec::{
+use pheromone_field::shm::{ConfigSubscriber, DepositPublisher, FieldReader, SendError, ShmError, Svc};
+use pheromone_field::{Deposit, FieldConfig, Kernel, RejectReason, SamplePose};
+use pheromone_gateway_codec::{
     DecodeError, DepositReply, DepositRequest, DepositStatus, ErrorReason, Frame, Message,
     PirReply, PirRequest, StatusReply,
 };
@@ -130,7 +130,7 @@ pub enum GatewayError {
     },
 }
 
-field::from_shm_errors!(GatewayError);
+pheromone_field::from_shm_errors!(GatewayError);
 
 /// Counters of one gateway, logged once a second and printed at the end.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
@@ -145,7 +145,7 @@ pub struct GatewayCounters {
     /// Deposits the field did not take (none subscribed or its buffer full): not answered, so
     /// the client retries.
     pub deposits_undelivered: u64,
-    /// Deposits refused with the field's own checks (`field::deposit::prepare`), by the
+    /// Deposits refused with the field's own checks (`pheromone_field::deposit::prepare`), by the
     /// field's reason (`out_of_limits`, `negative_on_unsigned`, …): answered, never sent.
     pub deposits_refused: std::collections::BTreeMap<&'static str, u64>,
     pub pings: u64,
@@ -396,7 +396,7 @@ impl Gateway {
         // The field's own checks, with its channels and limits: what it would refuse is answered
         // here, never sent.
         let refused = match self.field_config()? {
-            Some(c) => field::deposit::prepare(&msg, &c.geometry(), &c.channels, &c.limits).err(),
+            Some(c) => pheromone_field::deposit::prepare(&msg, &c.geometry(), &c.channels, &c.limits).err(),
             None => None,
         };
         if let Some(r) = refused {

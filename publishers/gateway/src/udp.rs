@@ -3,8 +3,8 @@
 use std::net::{SocketAddr, UdpSocket};
 use std::time::{Duration, Instant};
 
-use field::shm::{now_ns, Svc};
-use gateway_codec::{decode, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
+use pheromone_field::shm::{now_ns, Svc};
+use pheromone_gateway_codec::{decode, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
 use iceoryx2::node::Node;
 
 use super::{Gateway, GatewayCounters, GatewayError};
@@ -72,10 +72,10 @@ pub fn serve(
             }
         };
         let reply = if n > MAX_WIRE_BYTES {
-            gateway.rejected(&gateway_codec::DecodeError::TooLong)
+            gateway.rejected(&pheromone_gateway_codec::DecodeError::TooLong)
         } else {
             match decode(&datagram[..n]) {
-                None => gateway.rejected(&gateway_codec::DecodeError::Truncated { len: n }),
+                None => gateway.rejected(&pheromone_gateway_codec::DecodeError::Truncated { len: n }),
                 Some(Err(e)) => gateway.rejected(&e),
                 Some(Ok(frame)) => gateway.handle_from(frame, now_ns(), Some(from))?,
             }

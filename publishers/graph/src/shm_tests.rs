@@ -1,7 +1,7 @@
 use super::*;
 use crate::{Graph, GraphConfig, RegionConfig, RegionShape, RegionTable};
 
-use testkit::unique;
+use pheromone_testkit::unique;
 
 fn state() -> GraphState {
     let cfg: GraphConfig = toml::from_str(
@@ -68,8 +68,8 @@ fn snapshot_round_trip() {
 #[test]
 fn server_and_robot_in_two_nodes() {
     let name = unique("two-nodes");
-    let server_node = field::shm::create_node(&unique("server")).unwrap();
-    let robot_node = field::shm::create_node(&unique("robot")).unwrap();
+    let server_node = pheromone_field::shm::create_node(&unique("server")).unwrap();
+    let robot_node = pheromone_field::shm::create_node(&unique("robot")).unwrap();
     let mut server = GraphServer::create(&server_node, &name, state()).unwrap();
     let mut reader = GraphReader::attach(&robot_node, &name).unwrap();
     let updater = GraphUpdater::attach(&robot_node, &name, 4).unwrap();

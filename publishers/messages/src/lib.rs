@@ -1,7 +1,7 @@
 //! Messages between the robot roles: fixed-size `#[repr(C)]`, `ZeroCopySend`, each with a robot id
 //! and a monotonic stamp (ns, CLOCK_MONOTONIC). Type names carry the layout version.
 //!
-//! Services (robot `r<ID>` of world `W`, named by `roles::RobotServices`):
+//! Services (robot `r<ID>` of world `W`, named by `pheromone_roles::RobotServices`):
 //! `pheromone/W/r<ID>/pose` ([`PoseMsg`]), `pheromone/W/r<ID>/cmd` ([`CmdMsg`]),
 //! `pheromone/W/r<ID>/status` ([`FollowerStatusMsg`]), `sim/W/r<ID>/sensors` ([`SensorMsg`]),
 //! `sim/W/r<ID>/truth` ([`TruthMsg`]), `sim/W/r<ID>/laser` ([`LaserMsg`]); each has a `…-ready` event that wakes its receivers.
@@ -30,13 +30,13 @@ pub struct PoseMsg {
 }
 
 // repr(C): numbers and arrays of numbers only.
-field::wire_type!(PoseMsg, "PoseMsg", size = 120, align = 8);
+pheromone_field::wire_type!(PoseMsg, "PoseMsg", size = 120, align = 8);
 
 impl PoseMsg {
     /// The estimate (mean and covariance) without robot, step and stamp: what the one
-    /// pose → deposit rule of `field::kernel::pose` reads.
-    pub fn estimate(&self) -> field::PoseEstimate {
-        field::PoseEstimate {
+    /// pose → deposit rule of `pheromone_field::kernel::pose` reads.
+    pub fn estimate(&self) -> pheromone_field::PoseEstimate {
+        pheromone_field::PoseEstimate {
             x_m: self.x_m,
             y_m: self.y_m,
             theta_rad: self.theta_rad,
@@ -61,7 +61,7 @@ pub struct LandmarkObs {
 }
 
 // repr(C): numbers and arrays of numbers only.
-field::wire_type!(LandmarkObs, "LandmarkObs", size = 16, align = 4);
+pheromone_field::wire_type!(LandmarkObs, "LandmarkObs", size = 16, align = 4);
 
 /// What the world tells one robot after a step: the (noisy) velocity it executed — the control
 /// input of the velocity motion model — and the landmarks in sensor range.
@@ -82,7 +82,7 @@ pub struct SensorMsg {
 }
 
 // repr(C): numbers and an array of `LandmarkObs` only.
-field::wire_type!(
+pheromone_field::wire_type!(
     SensorMsg,
     "SensorMsg",
     size = 56 + 16 * MAX_OBSERVATIONS,
@@ -127,7 +127,7 @@ pub struct TruthMsg {
 }
 
 // repr(C): numbers and arrays of numbers only.
-field::wire_type!(TruthMsg, "TruthMsg", size = 56, align = 8);
+pheromone_field::wire_type!(TruthMsg, "TruthMsg", size = 56, align = 8);
 
 /// Motion command for one robot: linear and angular velocity.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -143,7 +143,7 @@ pub struct CmdMsg {
 }
 
 // repr(C): numbers and arrays of numbers only.
-field::wire_type!(CmdMsg, "CmdMsg", size = 40, align = 8);
+pheromone_field::wire_type!(CmdMsg, "CmdMsg", size = 40, align = 8);
 
 /// What a follower is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
@@ -196,7 +196,7 @@ pub struct FollowerStatusMsg {
 }
 
 // repr(C): numbers and arrays of numbers only.
-field::wire_type!(FollowerStatusMsg, "FollowerStatusMsg", size = 32, align = 8);
+pheromone_field::wire_type!(FollowerStatusMsg, "FollowerStatusMsg", size = 32, align = 8);
 
 /// Most rays one [`ScanMsg`] carries (seed 004's range sensor).
 pub const MAX_RAYS: usize = 64;
@@ -224,7 +224,7 @@ pub struct ScanMsg {
 }
 
 // repr(C): numbers and an array of numbers only.
-field::wire_type!(ScanMsg, "ScanMsg", size = 48 + 4 * MAX_RAYS, align = 8);
+pheromone_field::wire_type!(ScanMsg, "ScanMsg", size = 48 + 4 * MAX_RAYS, align = 8);
 
 impl Default for ScanMsg {
     fn default() -> Self {
@@ -283,7 +283,7 @@ pub struct LaserMsg {
 }
 
 // repr(C): numbers and arrays of numbers only.
-field::wire_type!(
+pheromone_field::wire_type!(
     LaserMsg,
     "LaserMsg",
     size = 40 + 8 * (MAX_LASER_BEAMS / 64) + 4 * MAX_LASER_BEAMS,
@@ -347,7 +347,7 @@ pub struct PeerObs {
 }
 
 // repr(C): numbers only.
-field::wire_type!(PeerObs, "PeerObs", size = 32, align = 8);
+pheromone_field::wire_type!(PeerObs, "PeerObs", size = 32, align = 8);
 
 /// The robots within R_C of one robot after a step (seed 004's rendezvous measurement),
 /// published by the world on `sim/W/r<ID>/rendezvous` when the scenario maps.
@@ -363,7 +363,7 @@ pub struct RendezvousMsg {
 }
 
 // repr(C): numbers and an array of `PeerObs` only.
-field::wire_type!(
+pheromone_field::wire_type!(
     RendezvousMsg,
     "RendezvousMsg",
     size = 24 + 32 * MAX_PEERS,

@@ -6,7 +6,7 @@
 //! is a difference of two recorded poses, or a recorded σ or deposit.
 
 use serde::Serialize;
-use sim::record::RobotSample;
+use pheromone_sim::recording::RobotSample;
 use std::fmt::Write as _;
 
 /// One step of one filter's run: the estimate's error and what the robot deposited.

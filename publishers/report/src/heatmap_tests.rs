@@ -2,7 +2,7 @@ use super::super::marks::{marks, AREA_A_RGB, AREA_B_RGB};
 use super::super::style::{lighter, Rgb, OUTLINE_RGB, ROBOT_RGB, VIRIDIS};
 use super::super::tests::scene;
 use super::*;
-use messages::FollowerState;
+use pheromone_messages::FollowerState;
 use pheromone_world::scenario::Scenario;
 
 #[test]

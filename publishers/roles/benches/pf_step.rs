@@ -16,7 +16,7 @@ use nalgebra::{Matrix3, Vector3};
 use pheromone_world::{
     wall_segments, LaserConfig, RobotConfig, WallConfig, World, WorldConfig, WorldPose,
 };
-use roles::localizer::{EkfConfig, ParticleFilter, PfConfig};
+use pheromone_roles::localizer::{EkfConfig, ParticleFilter, PfConfig};
 
 const PARTICLES: usize = 500;
 

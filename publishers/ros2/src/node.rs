@@ -10,7 +10,7 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use field::shm::{now_ns, DepositPublisher, FieldReader, ShmError, Svc};
+use pheromone_field::shm::{now_ns, DepositPublisher, FieldReader, ShmError, Svc};
 use iceoryx2::node::Node;
 use thiserror::Error;
 use zenoh::handlers::FifoChannelHandler;
@@ -22,7 +22,7 @@ use zenoh::Wait;
 
 use crate::deps::depositor::{Depositor, DepositorConfig, DepositorConfigError};
 use crate::frames::{frame_messages, wall_now_ns, FieldTopics};
-use crate::graph::{
+use crate::rmw_zenoh::{
     self, split_topic_key, topic_key, Attachment, EntityKind, NameError, NodeIdentity, Qos,
     RosDistro,
 };
@@ -47,7 +47,7 @@ pub enum Ros2Error {
     NoFrame(String),
 }
 
-field::from_shm_errors!(Ros2Error);
+pheromone_field::from_shm_errors!(Ros2Error);
 
 fn zerr(action: impl Into<String>, e: impl std::fmt::Display) -> Ros2Error {
     Ros2Error::Zenoh {
@@ -217,8 +217,8 @@ impl Ros2Node {
     /// Attaches to the field (waiting up to `timeout` for its first frame), opens the Zenoh
     /// session and declares the node's publishers, subscriptions and liveliness tokens.
     pub fn start(node: &Node<Svc>, o: Ros2Options, timeout: Duration) -> Result<Self, Ros2Error> {
-        let namespace = graph::namespace(&o.namespace)?;
-        let name = graph::node_name(&o.node_name)?;
+        let namespace = rmw_zenoh::namespace(&o.namespace)?;
+        let name = rmw_zenoh::node_name(&o.node_name)?;
         let mut reader = FieldReader::attach_within(node, &o.field, timeout)?;
         let channels = match reader.wait_until(timeout, |_| true)? {
             Some(f) => f.header.channels as usize,
@@ -526,7 +526,7 @@ fn declare_publisher(
     Ok(RosPublisher {
         publisher,
         _token: declare_token(session, &token_key)?,
-        gid: graph::gid(&token_key),
+        gid: rmw_zenoh::gid(&token_key),
         sequence: 0,
     })
 }
@@ -539,7 +539,7 @@ fn declare_subscription(
     t: &TypeInfo,
     config: &DepositorConfig,
 ) -> Result<RosSubscription, Ros2Error> {
-    let topic = graph::resolve_topic(&identity.namespace, &d.topic)?;
+    let topic = rmw_zenoh::resolve_topic(&identity.namespace, &d.topic)?;
     let token_key = identity.token(
         EntityKind::Subscription,
         entity_id,

@@ -10,7 +10,7 @@ pub mod metrics;
 pub mod observer;
 pub mod paper;
 pub mod processes;
-pub mod record;
+pub mod recording;
 pub mod ros_feed;
 pub mod ros_record;
 pub mod single;

@@ -19,9 +19,9 @@ use super::metrics::exploration;
 use super::single::{run_single_process, SingleProcessOptions};
 use super::sweep_stats::{paired, welch, MeanSd, TTest};
 use pheromone_world::scenario::{Overrides, Scenario, ScenarioError};
-use roles::follower::StrategyKind;
-use roles::mapper::{MergeRule, SteerOn};
-use roles::process::role_loop::ProcessError;
+use pheromone_roles::follower::StrategyKind;
+use pheromone_roles::mapper::{MergeRule, SteerOn};
+use pheromone_roles::process::role_loop::ProcessError;
 
 /// A sweep cannot be planned or one of its runs failed.
 #[derive(Debug, thiserror::Error)]

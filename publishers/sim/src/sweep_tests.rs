@@ -273,7 +273,7 @@ fn the_ablations_parse_and_are_points_of_their_own_without_merging_once() {
 }
 
 /// Samples of robot `id` with no command (standing still).
-fn still(rec: &crate::record::Recording, id: u32) -> usize {
+fn still(rec: &crate::recording::Recording, id: u32) -> usize {
     rec.robots[&id]
         .iter()
         .filter(|s| s.v_m_per_s == 0.0 && s.omega_rad_per_s == 0.0)
@@ -316,7 +316,7 @@ fn a_robot_stands_still_for_the_idle_iterations_after_each_merge() {
         first.step
     );
     // Before it, the same as the run where merging is free; overall, more standing still.
-    let before = |rec: &crate::record::Recording| rec.robots[&first.dst][..from].to_vec();
+    let before = |rec: &crate::recording::Recording| rec.robots[&first.dst][..from].to_vec();
     assert_eq!(
         before(&free)
             .iter()

@@ -5,8 +5,8 @@
 
 use pheromone_world::scenario::{Overrides, Scenario};
 use serde_json::Value;
-use sim::metrics::scenario_metrics;
-use sim::single::{run_single_process, SingleProcessOptions};
+use pheromone_sim::metrics::scenario_metrics;
+use pheromone_sim::single::{run_single_process, SingleProcessOptions};
 
 const SEEDS: [u64; 3] = [0, 1, 2];
 

@@ -1,6 +1,6 @@
 use std::time::{Duration, Instant};
 
-use field::{FrameView, GridGeometry};
+use pheromone_field::{FrameView, GridGeometry};
 
 use super::*;
 use crate::follower::test_support::{gaussian_ridge, synth};

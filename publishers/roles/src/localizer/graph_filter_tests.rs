@@ -1,7 +1,7 @@
 use super::*;
-use graph::agent::{GraphStrategy, RegionsScenario};
-use graph::localize::{graph_landmarks, DepositWeight, Localization, LocalizeConfig};
-use graph::run::{simulate, simulate_with, RunReport};
+use pheromone_graph::agent::{GraphStrategy, RegionsScenario};
+use pheromone_graph::localize::{graph_landmarks, DepositWeight, Localization, LocalizeConfig};
+use pheromone_graph::run::{simulate, simulate_with, RunReport};
 
 fn run(weight: DepositWeight, robots: usize, seed: u64) -> RunReport {
     let sc = RegionsScenario::paper_corridor();

@@ -19,10 +19,10 @@ use std::ffi::CString;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
-use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
-use field::{Deposit, Kernel};
-use pheromone::{
+use pheromone_field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
+use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
+use pheromone_field::{Deposit, Kernel};
+use pheromone_c::{
     pheromone_field_attach, pheromone_field_detach, pheromone_frame_borrow,
     pheromone_frame_release, pheromone_last_error, pheromone_sample_gradient,
     pheromone_sample_many, pheromone_sample_value, pheromone_wait_frame, PheromoneAttachOptions,
@@ -344,7 +344,7 @@ fn sampling_cost(
 /// (Rust `FrameView`, the C ABI per point, one `pheromone_sample_many` call), medians. `h` holds
 /// a borrowed frame equal to `view`'s.
 fn time_sampling(
-    view: &field::FrameView<'_>,
+    view: &pheromone_field::FrameView<'_>,
     h: &CHandle,
     pts: &[(f32, f32)],
     reps: usize,

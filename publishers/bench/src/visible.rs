@@ -1,16 +1,16 @@
 //! Deposit-to-visible latency: a deposit is published (this process), the field (a separate
 //! process ticking at a fixed rate) applies it in its next tick, and a follower (this process's
 //! `FieldReader`) holds a frame that contains it. With `on_deposit`, the field is
-//! `field::run::run_field` publishing as soon as deposits arrive (`--publish-on-deposit-ms 0`),
+//! `pheromone_field::run::run_field` publishing as soon as deposits arrive (`--publish-on-deposit-ms 0`),
 //! and its CPU time (`/proc/PID/schedstat`) is measured while deposits arrive at 10, 100 and
 //! 1000 per second.
 
 use std::time::{Duration, Instant};
 
-use field::run::run_field;
-use field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
-use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
-use field::{Deposit, Kernel};
+use pheromone_field::run::run_field;
+use pheromone_field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
+use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
+use pheromone_field::{Deposit, Kernel};
 
 use crate::peer::{say_ready, say_result, Launcher, Peer, PeerResult, PeerSpec, ReaderWait};
 use crate::BenchError;
@@ -178,7 +178,7 @@ fn centre(run: VisibleRun) -> (f32, f32) {
 /// `run.warmup + run.count` deposits, each sent at a phase of the tick, timed until the follower
 /// holds a frame containing it (the last `count` recorded, with their stages).
 fn deposits_to_visible(
-    node: &iceoryx2::prelude::Node<field::shm::Svc>,
+    node: &iceoryx2::prelude::Node<pheromone_field::shm::Svc>,
     name: &str,
     reader: &mut FieldReader,
     depositor: &mut DepositPublisher,
@@ -240,7 +240,7 @@ impl FollowerPriority {
         let Some(p) = priority else {
             return Self(false);
         };
-        match field::realtime::fifo_for_this_thread(p) {
+        match pheromone_field::realtime::fifo_for_this_thread(p) {
             Ok(()) => Self(true),
             Err(e) => {
                 eprintln!("bench follower: going on without it: {e}");
@@ -253,7 +253,7 @@ impl FollowerPriority {
 impl Drop for FollowerPriority {
     fn drop(&mut self) {
         if self.0 {
-            field::realtime::default_scheduling_for_this_thread();
+            pheromone_field::realtime::default_scheduling_for_this_thread();
         }
     }
 }
@@ -263,8 +263,8 @@ fn wait_for<'r>(
     reader: &'r mut FieldReader,
     wait: ReaderWait,
     timeout: Duration,
-    mut pred: impl FnMut(&field::shm::Frame<'_>) -> bool,
-) -> Result<Option<field::shm::Frame<'r>>, BenchError> {
+    mut pred: impl FnMut(&pheromone_field::shm::Frame<'_>) -> bool,
+) -> Result<Option<pheromone_field::shm::Frame<'r>>, BenchError> {
     if wait == ReaderWait::Event {
         return Ok(reader.wait_until(timeout, pred)?);
     }
@@ -296,7 +296,7 @@ fn small_deposit(x_m: f32, y_m: f32) -> DepositMsg {
 
 /// Sends deposits at `rate` per second for `window` and measures the field's CPU meanwhile.
 fn cpu_at_rate(
-    node: &iceoryx2::prelude::Node<field::shm::Svc>,
+    node: &iceoryx2::prelude::Node<pheromone_field::shm::Svc>,
     reader: &mut FieldReader,
     depositor: &mut DepositPublisher,
     field_pid: u32,
@@ -330,12 +330,12 @@ fn cpu_at_rate(
 }
 
 /// The field process: ticks at `tick_hz` until terminated (with `on_deposit`, also publishes
-/// as soon as deposits arrive: `field::run::run_field` as `pheromone field` runs it).
+/// as soon as deposits arrive: `pheromone_field::run::run_field` as `pheromone field` runs it).
 pub fn field(name: &str, width: u32, tick_hz: f32, wall: WallField) -> Result<(), BenchError> {
     crate::machine::realtime(wall.rt_priority, "bench field")?;
     let node = create_node(&format!("bench-field-{}", std::process::id()))?;
     if wall.on_deposit {
-        let options = field::run::FieldRunOptions {
+        let options = pheromone_field::run::FieldRunOptions {
             name: name.to_string(),
             config: config(width, tick_hz),
             clock: None,

@@ -1,4 +1,4 @@
-//! Seed 004's map merge (`roles::mapper::merge_planes`) beside a same-size memcpy, in this
+//! Seed 004's map merge (`pheromone_roles::mapper::merge_planes`) beside a same-size memcpy, in this
 //! process: one merge of an n × n source map (occupancy and pheromone planes) into an n × n
 //! destination, every cell known in both (so every covered cell is averaged), the source
 //! rotated by 0.3 rad and moved 2 m, against a copy of both planes, by the `adopt-unknown` rule
@@ -9,8 +9,8 @@
 
 use std::hint::black_box;
 
-use field::{ChannelSpec, Evaporation};
-use roles::mapper::{LocalMap, MappingConfig, MergeRule, MergeTransform};
+use pheromone_field::{ChannelSpec, Evaporation};
+use pheromone_roles::mapper::{LocalMap, MappingConfig, MergeRule, MergeTransform};
 use serde::Serialize;
 
 use crate::tick::{median_ns, median_ns_from};
@@ -97,7 +97,7 @@ pub fn measure(side: u32, reps: usize) -> Result<MergeRow, BenchError> {
         let rule = (rule, MappingConfig::default().logodds_max);
         let view = src.view();
         let r = if reference {
-            roles::mapper::merge::merge_planes_reference(
+            pheromone_roles::mapper::merge::merge_planes_reference(
                 &geometry,
                 planes,
                 black_box(&view),
@@ -105,7 +105,7 @@ pub fn measure(side: u32, reps: usize) -> Result<MergeRow, BenchError> {
                 rule,
             )
         } else {
-            roles::mapper::merge_planes(&geometry, planes, black_box(&view), &t, rule)
+            pheromone_roles::mapper::merge_planes(&geometry, planes, black_box(&view), &t, rule)
         };
         r.map(|_| ()).map_err(fail)
     };

@@ -100,7 +100,7 @@ pub(crate) fn measure_hops(cx: &mut Ctx) -> Result<HopReport, BenchError> {
             raw_iceoryx2: hop(true, true)?,
         },
         message_bytes: HopBytes {
-            ours: std::mem::size_of::<messages::PoseMsg>(),
+            ours: std::mem::size_of::<pheromone_messages::PoseMsg>(),
             raw_iceoryx2: std::mem::size_of::<u64>(),
         },
         method: "ping-pong between two processes, one-way = round trip / 2",

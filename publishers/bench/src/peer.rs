@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
-use supervisor::{ChildId, ChildSpec, Supervisor};
+use pheromone_supervisor::{ChildId, ChildSpec, Supervisor};
 
 use crate::BenchError;
 
@@ -21,7 +21,7 @@ pub struct Launcher {
 /// Transport a frame reader receives on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 pub enum FrameTransport {
-    /// `field::shm::FieldReader`: the frame in shared memory, no copy.
+    /// `pheromone_field::shm::FieldReader`: the frame in shared memory, no copy.
     Ours,
     /// The plane serialized with serde (postcard) over a Unix domain socket.
     UdsSerde,
@@ -34,7 +34,7 @@ pub enum FrameTransport {
     CAbi,
 }
 
-/// How a frame reader waits for the next frame (`field::shm::WaitPolicy` on the wire).
+/// How a frame reader waits for the next frame (`pheromone_field::shm::WaitPolicy` on the wire).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 pub enum ReaderWait {
     /// Sleeps on the frame event.
@@ -49,13 +49,13 @@ pub enum ReaderWait {
 }
 
 impl ReaderWait {
-    pub fn policy(self) -> field::shm::WaitPolicy {
+    pub fn policy(self) -> pheromone_field::shm::WaitPolicy {
         match self {
-            ReaderWait::Event => field::shm::WaitPolicy::Event,
+            ReaderWait::Event => pheromone_field::shm::WaitPolicy::Event,
             ReaderWait::Spin { spin_us, .. } => {
-                field::shm::WaitPolicy::Spin(Duration::from_micros(spin_us as u64))
+                pheromone_field::shm::WaitPolicy::Spin(Duration::from_micros(spin_us as u64))
             }
-            ReaderWait::BusyPoll => field::shm::WaitPolicy::BusyPoll,
+            ReaderWait::BusyPoll => pheromone_field::shm::WaitPolicy::BusyPoll,
         }
     }
 
@@ -111,7 +111,7 @@ pub enum PeerSpec {
         width: u32,
         tick_hz: f32,
         core: Option<usize>,
-        /// Run `field::run::run_field` with `publish_on_deposit` (0 ms): a frame as soon as
+        /// Run `pheromone_field::run::run_field` with `publish_on_deposit` (0 ms): a frame as soon as
         /// deposits arrive.
         #[serde(default)]
         on_deposit: bool,
@@ -248,7 +248,7 @@ pub fn say_result(r: &PeerResult) {
 pub struct FieldTimingResult {
     pub ticks: u64,
     pub missed_deadlines: u64,
-    pub lateness: field::run::Lateness,
+    pub lateness: pheromone_field::run::Lateness,
     pub longest_gap_periods: f64,
     /// The field process's CPU over its run (share of one core).
     pub cpu_share: f64,

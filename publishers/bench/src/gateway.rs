@@ -4,7 +4,7 @@
 //! - A field peer ticks a 512² one-channel field; a `pheromone gateway` process serves it on a
 //!   loopback port the system picks (`--udp 127.0.0.1:0 --print-address`, no rate limit).
 //! - **Round trip:** this process sends a PIR with the thin client
-//!   ([`gateway::client::GatewayClient`]) and waits for its reply, one at a time.
+//!   ([`pheromone_gateway::client::GatewayClient`]) and waits for its reply, one at a time.
 //! - **Direct read:** this process's [`FieldReader`] takes the newest frame (`update`) and reads
 //!   `FrameView::antennas` at the same pose: what a follower in shared memory does per step.
 //! - **Throughput:** a client keeps a window of PIRs in flight on one UDP socket (each reply
@@ -16,12 +16,12 @@
 use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 
-use field::shm::{create_node, FieldReader};
-use field::SamplePose;
-use gateway::client::{ClientConfig, GatewayClient, Transport};
-use gateway_codec::{decode, encode, Message, PirRequest, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
+use pheromone_field::shm::{create_node, FieldReader};
+use pheromone_field::SamplePose;
+use pheromone_gateway::client::{ClientConfig, GatewayClient, Transport};
+use pheromone_gateway_codec::{decode, encode, Message, PirRequest, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
 use serde::Serialize;
-use supervisor::{ChildId, ChildSpec, Supervisor};
+use pheromone_supervisor::{ChildId, ChildSpec, Supervisor};
 
 use crate::machine::cpu_ns;
 use crate::peer::{Launcher, Peer, PeerSpec};
@@ -164,7 +164,7 @@ const WIDTH: u32 = 512;
 /// The pose of every PIR: the middle of the field, heading along +x, antennas 0.15 m to each
 /// side.
 fn pir_pose() -> (SamplePose, f32) {
-    let c = 0.5 * WIDTH as f32 * field::FieldConfig::default().cell_size_m;
+    let c = 0.5 * WIDTH as f32 * pheromone_field::FieldConfig::default().cell_size_m;
     (SamplePose::new(c, c, 0.3), 0.15)
 }
 
@@ -266,9 +266,9 @@ pub fn measure_loaded(
         busy.push(p);
     }
     let served = serve(launcher, tag, run, Some(rt_priority))?;
-    let client_rt = field::realtime::fifo_for_this_thread(rt_priority).is_ok();
+    let client_rt = pheromone_field::realtime::fifo_for_this_thread(rt_priority).is_ok();
     let rtt = round_trips(&served.address, run.warmup, run.count);
-    field::realtime::default_scheduling_for_this_thread();
+    pheromone_field::realtime::default_scheduling_for_this_thread();
     let mut served = served;
     let gateway_said = served.sup.stderr_tail(served.gw);
     drop(served);

@@ -5,7 +5,7 @@
 //!   memcpy, in this process (the ambient model's fast pass beside its reference pass);
 //! - `merge_vs_memcpy` (issue 33): seed 004's map merge against a memcpy of its two planes, in
 //!   this process, beside the reference merge;
-//! - `hop_ns`: a small message between two processes, ping-pong / 2: ours (`field::link`,
+//! - `hop_ns`: a small message between two processes, ping-pong / 2: ours (`pheromone_field::link`,
 //!   a 128-byte `PoseMsg`) against raw iceoryx2 publish-subscribe of a `u64`; wait and busy-poll;
 //! - `frame_ns`: a 1 MiB (512²) and a 16 MiB (2048²) frame from publish to "a reader holds it",
 //!   to 1 and to 8 reader processes: ours against a Unix socket with serde (postcard) and Zenoh
@@ -65,7 +65,7 @@ use sections::{
 #[derive(Debug, thiserror::Error)]
 pub enum BenchError {
     #[error(transparent)]
-    Shm(#[from] field::shm::ShmError),
+    Shm(#[from] pheromone_field::shm::ShmError),
     #[error("{what}: {source}")]
     Io {
         what: String,
@@ -84,10 +84,10 @@ pub enum BenchError {
     #[error("interrupted")]
     Interrupted,
     #[error(transparent)]
-    Child(#[from] supervisor::SupervisorError),
+    Child(#[from] pheromone_supervisor::SupervisorError),
 }
 
-field::from_shm_errors!(BenchError);
+pheromone_field::from_shm_errors!(BenchError);
 
 /// How much to measure.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

@@ -4,7 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use field::shm::Svc;
+use pheromone_field::shm::Svc;
 use iceoryx2::prelude::*;
 
 use crate::peer::{say_result, FrameTransport, Launcher, Peer, PeerResult, PeerSpec, ReaderWait};

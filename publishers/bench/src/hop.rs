@@ -1,17 +1,17 @@
-//! Hop latency of a small message between two processes, ping-pong / 2: ours (`field::link`
+//! Hop latency of a small message between two processes, ping-pong / 2: ours (`pheromone_field::link`
 //! with a 128-byte `PoseMsg`, as a localizer sends poses to a depositor) against raw iceoryx2
 //! publish-subscribe of a `u64` (plus the same event in wait mode).
 
 use std::time::{Duration, Instant};
 
-use field::link::{LinkOptions, Receiver, Sender};
-use field::shm::{create_node, now_ns, Svc};
+use pheromone_field::link::{LinkOptions, Receiver, Sender};
+use pheromone_field::shm::{create_node, now_ns, Svc};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use messages::PoseMsg;
+use pheromone_messages::PoseMsg;
 
 use crate::peer::{say_ready, say_result, Launcher, Peer, PeerResult, PeerSpec};
 use crate::BenchError;
@@ -150,7 +150,7 @@ impl End for Raw {
             .map(|s| *s.payload()))
     }
     fn wait(&self, timeout: Duration) -> Result<(), BenchError> {
-        field::shm::listener_timed_wait(&self.listener, timeout)
+        pheromone_field::shm::listener_timed_wait(&self.listener, timeout)
             .map(|_| ())
             .map_err(|e| raw_err("wait", e))
     }

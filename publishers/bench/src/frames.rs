@@ -8,8 +8,8 @@ use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::PathBuf;
 use std::time::Duration;
 
-use field::shm::{create_node, now_ns, FieldReader, FieldServer, Svc};
-use field::{ChannelSpec, Evaporation, FieldConfig};
+use pheromone_field::shm::{create_node, now_ns, FieldReader, FieldServer, Svc};
+use pheromone_field::{ChannelSpec, Evaporation, FieldConfig};
 use iceoryx2::prelude::*;
 use serde::{Deserialize, Serialize};
 

@@ -3,10 +3,10 @@
 //!
 //! - **Origin:** a `pheromone field` process in domain `benchmirA`, `width`² cells, one channel,
 //!   ticking at `tick_hz` (it publishes its inputs for bridges, as every field does).
-//! - **Bridge:** [`bridge::Bridge`] on a thread of this process (domain A), listening
+//! - **Bridge:** [`pheromone_bridge::Bridge`] on a thread of this process (domain A), listening
 //!   on a loopback TCP port the system picks, checksum every 10 frames, a keyframe every `keyframe_every_s`
 //!   (the `pheromone bridge` defaults).
-//! - **Mirror:** [`bridge::Mirror`] on another thread (domain `benchmirB`),
+//! - **Mirror:** [`pheromone_bridge::Mirror`] on another thread (domain `benchmirB`),
 //!   connected to the bridge, publishing the replayed frames in domain B.
 //! - This thread sends deposits to the origin at 10 and then 1000 per second, scattered over the
 //!   field, for `window` each.
@@ -24,15 +24,15 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use bridge::zenoh::{self, Wait};
-use bridge::{
+use pheromone_bridge::zenoh::{self, Wait};
+use pheromone_bridge::{
     session_config_as, Bridge, BridgeOptions, BridgeStats, Keys, Mirror, MirrorOptions, MirrorStats,
 };
-use field::shm::{create_node_in, DepositPublisher};
-use field::DepositMsg;
-use field::{Deposit, Kernel};
+use pheromone_field::shm::{create_node_in, DepositPublisher};
+use pheromone_field::DepositMsg;
+use pheromone_field::{Deposit, Kernel};
 use serde::Serialize;
-use supervisor::{ChildSpec, Supervisor};
+use pheromone_supervisor::{ChildSpec, Supervisor};
 
 use crate::peer::Launcher;
 use crate::stats::Latency;
@@ -250,7 +250,7 @@ fn mirror_worker(name: String, endpoint: String, tag: String) -> Worker {
 /// Waits until `done` holds on `w`'s shared state (checking the thread's error), at most
 /// `timeout`, pausing on `node` (a termination request ends the wait).
 fn wait_for(
-    node: &iceoryx2::node::Node<field::shm::Svc>,
+    node: &iceoryx2::node::Node<pheromone_field::shm::Svc>,
     w: &Worker,
     timeout: Duration,
     what: &str,
@@ -332,15 +332,15 @@ pub fn measure(launcher: &Launcher, tag: &str, run: MirrorRun) -> Result<MirrorR
     sup.stop_all(Duration::from_secs(10));
     drop(node);
     for d in [ORIGIN_DOMAIN, MIRROR_DOMAIN] {
-        if let Ok(c) = field::shm::domain_config_of(Some(d)) {
-            field::shm::cleanup_dead_nodes_of(&c);
+        if let Ok(c) = pheromone_field::shm::domain_config_of(Some(d)) {
+            pheromone_field::shm::cleanup_dead_nodes_of(&c);
         }
     }
     result
 }
 
 fn measure_with(
-    node: &iceoryx2::node::Node<field::shm::Svc>,
+    node: &iceoryx2::node::Node<pheromone_field::shm::Svc>,
     name: &str,
     tag: &str,
     run: MirrorRun,
@@ -372,7 +372,7 @@ fn measure_with(
         asker: &asker,
         keyframe_key: &keyframe_key,
         run,
-        side_m: run.width as f32 * field::FieldConfig::default().cell_size_m,
+        side_m: run.width as f32 * pheromone_field::FieldConfig::default().cell_size_m,
         raw_bytes_per_s,
     };
     let mut rng = 0x9e37_79b9_7f4a_7c15u64;
@@ -424,7 +424,7 @@ fn round(v: f64, digits: i32) -> f64 {
 
 /// What the deposit windows drive and watch, and the run's figures.
 struct Rig<'a> {
-    node: &'a iceoryx2::node::Node<field::shm::Svc>,
+    node: &'a iceoryx2::node::Node<pheromone_field::shm::Svc>,
     bridge: &'a Worker,
     mirror: &'a Worker,
     asker: &'a zenoh::Session,
@@ -517,7 +517,7 @@ fn scattered(rng: &mut u64, side_m: f32) -> f32 {
 
 /// A fresh mirror's catch-up (ms), session open → live (ms) and keyframe bytes.
 fn fresh_mirror_catch_up(
-    node: &iceoryx2::node::Node<field::shm::Svc>,
+    node: &iceoryx2::node::Node<pheromone_field::shm::Svc>,
     name: &str,
     listen: String,
     tag: &str,

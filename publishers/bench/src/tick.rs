@@ -3,8 +3,8 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use field::models::{step_plane_with, Dispatch, PlanePlan, Scratch};
-use field::{ChannelSpec, Evaporation, FieldConfig, Stepper};
+use pheromone_field::models::{step_plane_with, Dispatch, PlanePlan, Scratch};
+use pheromone_field::{ChannelSpec, Evaporation, FieldConfig, Stepper};
 use serde::Serialize;
 
 use crate::BenchError;
@@ -162,6 +162,6 @@ pub fn measure(width: u32, reps: usize) -> Result<TickRow, BenchError> {
         ambient_thread_speedup: ((ambient as f64 / ambient_2 as f64) * 100.0).round() / 100.0,
         ambient_reference_us: us(ambient_reference),
         ambient_reference_ratio: ratio(ambient_reference),
-        kernels: field::models::Dispatch::detect().name(),
+        kernels: pheromone_field::models::Dispatch::detect().name(),
     })
 }

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use messages::FollowerState;
+use pheromone_messages::FollowerState;
 
 /// One row of a robot's time series (one world step).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -33,10 +33,10 @@ pub struct RobotSample {
 
 /// The value a deposit adds at its centre, before any saturation by what the cell holds: γ of
 /// seed 000 eq. 12 (as the field computes it) for the ellipse kernels, the amount otherwise.
-pub fn deposit_peak(m: &field::DepositMsg) -> f32 {
-    use field::deposit::{gamma, ErrorEllipse};
-    match field::KernelKind::from_code(m.kernel) {
-        Some(field::KernelKind::Ellipse | field::KernelKind::Paper) => gamma(
+pub fn deposit_peak(m: &pheromone_field::DepositMsg) -> f32 {
+    use pheromone_field::deposit::{gamma, ErrorEllipse};
+    match pheromone_field::KernelKind::from_code(m.kernel) {
+        Some(pheromone_field::KernelKind::Ellipse | pheromone_field::KernelKind::Paper) => gamma(
             m.amount,
             ErrorEllipse::from_cov(m.cov_xx, m.cov_xy, m.cov_yy).det(),
             m.gamma_max,

@@ -6,7 +6,7 @@
 
 use std::time::{Duration, Instant};
 
-use field::shm::{now_ns, Svc, WaitPolicy};
+use pheromone_field::shm::{now_ns, Svc, WaitPolicy};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -94,7 +94,7 @@ pub fn measure(
 /// The reader process: holds each new sample as soon as `policy` lets it see it.
 pub fn read(source: &str, wait: ReaderWait, skip: usize, count: usize) -> Result<(), BenchError> {
     let policy = wait.policy();
-    let node = field::shm::create_node(&format!("bench-raw-reader-{}", std::process::id()))?;
+    let node = pheromone_field::shm::create_node(&format!("bench-raw-reader-{}", std::process::id()))?;
     let frame = ServiceName::new(source).map_err(|e| raw_err(source, e))?;
     let ready = ServiceName::new(&format!("{source}-ready")).map_err(|e| raw_err(source, e))?;
     let subscriber: Subscriber<Svc, [f32], u64> = node
@@ -141,7 +141,7 @@ pub fn read(source: &str, wait: ReaderWait, skip: usize, count: usize) -> Result
             if waited < spin {
                 std::hint::spin_loop();
             } else {
-                field::shm::listener_timed_wait(&listener, FRAME_TIMEOUT - waited)
+                pheromone_field::shm::listener_timed_wait(&listener, FRAME_TIMEOUT - waited)
                     .map_err(|e| raw_err("wait", e))?;
             }
         }
