@@ -11,7 +11,9 @@
 //! ulps of `P` for its own roundings.
 
 use pheromone_field::ambient::band_rows;
-use pheromone_field::models::{ambient_mean_plane_with, step_plane_with, Dispatch, PlanePlan, Scratch};
+use pheromone_field::models::{
+    ambient_mean_plane_with, step_plane_with, Dispatch, PlanePlan, Scratch,
+};
 use proptest::collection::vec;
 use proptest::prelude::*;
 

@@ -16,9 +16,9 @@ use std::cell::RefCell;
 
 use pheromone_field::deposit::{RejectReason, REJECT_REASONS};
 use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, OwnedField};
+use pheromone_testkit::toml_fuzz;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
-use pheromone_testkit::toml_fuzz;
 
 /// Deposits offered per case: 16 ticks of 256.
 const DEPOSITS_PER_CASE: usize = 4096;

@@ -8,7 +8,9 @@ use approx::assert_relative_eq;
 use pheromone_field::deposit::{prepare, DepositLimits, REJECT_REASONS};
 use pheromone_field::models::{ambient_mean_brute, ambient_mean_plane, CELL_LIMIT};
 use pheromone_field::tune::time_to_threshold_s;
-use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, GridGeometry, OwnedField, Stepper};
+use pheromone_field::{
+    ChannelSpec, DepositMsg, Evaporation, FieldConfig, GridGeometry, OwnedField, Stepper,
+};
 use pheromone_field::{Deposit, Kernel};
 use proptest::collection::vec;
 use proptest::prelude::*;
@@ -781,7 +783,9 @@ fn quantum_counts_whole_seconds_at_50_hz() {
 // The banded, dispatched ambient pass (pheromone_field::ambient, pheromone_field::simd) and threads.
 
 use pheromone_field::ambient::{band_rows, BAND_ROWS_MIN};
-use pheromone_field::models::{ambient_mean_plane_with, step_plane_with, Dispatch, PlanePlan, Scratch};
+use pheromone_field::models::{
+    ambient_mean_plane_with, step_plane_with, Dispatch, PlanePlan, Scratch,
+};
 
 /// Planes taller than one band, so band restarts are exercised.
 fn tall_plane() -> impl Strategy<Value = (usize, usize, Vec<f32>)> {

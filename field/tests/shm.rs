@@ -128,7 +128,10 @@ fn bad_deposits_are_counted_in_the_header_and_never_reach_the_grid() {
         h.deposits_rejected[pheromone_field::RejectReason::NonFinite as usize],
         1
     );
-    assert_eq!(h.deposits_rejected[pheromone_field::RejectReason::NotPsd as usize], 1);
+    assert_eq!(
+        h.deposits_rejected[pheromone_field::RejectReason::NotPsd as usize],
+        1
+    );
     assert_eq!(
         h.deposits_rejected[pheromone_field::RejectReason::UnknownChannel as usize],
         1
@@ -371,7 +374,8 @@ fn a_listener_wait_shorter_than_a_microsecond_does_not_block() {
             .unwrap();
         let listener = service.listener_builder().create().unwrap();
         for ns in [0, 1, 500, 999] {
-            let n = pheromone_field::shm::listener_timed_wait(&listener, Duration::from_nanos(ns)).unwrap();
+            let n = pheromone_field::shm::listener_timed_wait(&listener, Duration::from_nanos(ns))
+                .unwrap();
             assert_eq!(n, 0, "{ns} ns");
         }
         done_tx.send(()).unwrap();

@@ -12,11 +12,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
+use nix::sys::signal::{pthread_sigmask, SigSet, SigmaskHow, Signal};
 use pheromone_field::shm::{
     create_node, DepositClient, FieldReader, FieldServer, ReceiveError, SendError, WaitPolicy,
 };
 use pheromone_field::{ChannelSpec, Deposit, DepositMsg, Evaporation, FieldConfig, Kernel};
-use nix::sys::signal::{pthread_sigmask, SigSet, SigmaskHow, Signal};
 
 static SEEN: AtomicUsize = AtomicUsize::new(0);
 

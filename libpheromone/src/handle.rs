@@ -5,12 +5,12 @@
 
 use std::time::Duration;
 
+use iceoryx2::prelude::*;
 use pheromone_field::messages::FrameHeader;
 use pheromone_field::sample::FrameView;
 use pheromone_field::sample::SamplePose;
 use pheromone_field::shm::{DepositPublisher, FieldReader, Receipt, Svc, WaitPolicy};
 use pheromone_field::{DepositMsg, KernelKind};
-use iceoryx2::prelude::*;
 
 use crate::borrowed::Borrowed;
 use crate::error::{bail, fail, from_shm, Failure};
@@ -247,7 +247,9 @@ impl PheromoneField {
             );
         }
         let done = match (values, gradients) {
-            (Some(v), Some(g)) => pheromone_field::shm::values_and_gradients_into(&f, c, points, v, g),
+            (Some(v), Some(g)) => {
+                pheromone_field::shm::values_and_gradients_into(&f, c, points, v, g)
+            }
             (Some(v), None) => pheromone_field::shm::values_into(&f, c, points, v),
             (None, Some(g)) => {
                 for (p, g) in points.iter().zip(g.iter_mut()) {
@@ -433,8 +435,8 @@ fn wait_alive(
 fn create_node(domain: Option<&str>) -> Result<Node<Svc>, Failure> {
     use std::sync::atomic::{AtomicU32, Ordering};
     static SERIAL: AtomicU32 = AtomicU32::new(0);
-    let config =
-        pheromone_field::shm::domain_config_of(domain).map_err(|e| from_shm("options.iox_domain", &e))?;
+    let config = pheromone_field::shm::domain_config_of(domain)
+        .map_err(|e| from_shm("options.iox_domain", &e))?;
     let name = format!(
         "c-{}-{}",
         std::process::id(),

@@ -8,10 +8,10 @@ use std::cell::Cell;
 use std::ffi::{CStr, CString};
 use std::time::Duration;
 
+use pheromone_c::*;
 use pheromone_field::shm::{create_node, DepositPublisher, FieldReader, FieldServer};
 use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, SamplePose};
 use pheromone_field::{Deposit, Kernel};
-use pheromone_c::*;
 
 /// Counts this thread's allocations while `COUNTING` is on.
 struct Counting;

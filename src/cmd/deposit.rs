@@ -4,9 +4,11 @@
 use std::time::Duration;
 
 use clap::Args;
-use pheromone_field::shm::{create_node, ConfigSubscriber, DepositClient, DepositPublisher, Receipt, Svc};
-use pheromone_field::{DepositMsg, KernelKind};
 use iceoryx2::prelude::Node;
+use pheromone_field::shm::{
+    create_node, ConfigSubscriber, DepositClient, DepositPublisher, Receipt, Svc,
+};
+use pheromone_field::{DepositMsg, KernelKind};
 
 use super::{bad, seconds, seconds_or_zero};
 

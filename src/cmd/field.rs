@@ -377,7 +377,10 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
 }
 
 /// Prints the `--json` summary; a field stopped by SIGINT or SIGTERM then exits 130 / 143.
-fn finish(a: &FieldArgs, summary: Option<pheromone_field::run::FieldRunSummary>) -> anyhow::Result<()> {
+fn finish(
+    a: &FieldArgs,
+    summary: Option<pheromone_field::run::FieldRunSummary>,
+) -> anyhow::Result<()> {
     if a.json {
         match summary {
             Some(s) => println!("{}", serde_json::to_string(&s)?),

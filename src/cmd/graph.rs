@@ -14,8 +14,8 @@ use pheromone_graph::localize::{DepositWeight, Localization, LocalizeConfig};
 use pheromone_graph::processes::{run_graph_robot, run_graph_writer, RobotOptions, WriterOptions};
 use pheromone_graph::run::{simulate_with, RunReport};
 use pheromone_graph::tables::tables_text;
-use serde::Serialize;
 use pheromone_sim::metrics::RunMode;
+use serde::Serialize;
 
 use super::sim_args::SimArgs;
 use super::{bad, bad_from, bad_in};

@@ -4,8 +4,8 @@
 use std::time::Duration;
 
 use clap::Args;
-use pheromone_field::shm::{create_node, mirror_info, FieldReader, Frame, Svc};
 use iceoryx2::prelude::Node;
+use pheromone_field::shm::{create_node, mirror_info, FieldReader, Frame, Svc};
 
 use super::{bad, seconds_or_zero};
 

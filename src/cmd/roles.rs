@@ -3,11 +3,13 @@
 
 use clap::{Args, ValueEnum};
 use pheromone_field::shm::{create_node, WaitPolicy};
-use pheromone_world::scenario::Scenario;
-use pheromone_world::{run_world, WorldOptions};
 use pheromone_roles::depositor::{DepositMode, DepositorConfig};
 use pheromone_roles::follower::{Follower, FollowerConfig, StrategyKind};
-use pheromone_roles::{run_depositor, run_follower, run_localizer, run_mapper, OwnMap, RoleOptions};
+use pheromone_roles::{
+    run_depositor, run_follower, run_localizer, run_mapper, OwnMap, RoleOptions,
+};
+use pheromone_world::scenario::Scenario;
+use pheromone_world::{run_world, WorldOptions};
 
 use super::{bad, bad_from, seconds};
 
@@ -421,7 +423,9 @@ fn run_remote_follower(
     use pheromone_gateway::client::{ClientConfig, DepositRetry, GatewayClient, Transport};
     use pheromone_roles::follower::antenna_source::{AntennaRobot, GatewaySource};
     use pheromone_roles::follower::AntennaFollower;
-    use pheromone_roles::process::follower_antenna::{run_antenna_robot, AntennaRunOptions, RemoteDeposits};
+    use pheromone_roles::process::follower_antenna::{
+        run_antenna_robot, AntennaRunOptions, RemoteDeposits,
+    };
     if config.strategy != StrategyKind::Antenna {
         return Err(bad(format!(
             "--gateway: only the antenna strategy reads through a gateway (robot {} has '{}')",

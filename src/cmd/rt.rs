@@ -38,7 +38,9 @@ impl RtArgs {
         };
         let applied = match pheromone_field::realtime::apply(&o) {
             Ok(applied) => applied,
-            Err(e @ pheromone_field::realtime::RealtimeError::Priority(_)) => return Err(bad(e.to_string())),
+            Err(e @ pheromone_field::realtime::RealtimeError::Priority(_)) => {
+                return Err(bad(e.to_string()))
+            }
             Err(e) => return Err(e.into()),
         };
         for refused in &applied.refused {

@@ -6,15 +6,15 @@
 
 use std::time::Instant;
 
-use pheromone_world::scenario::{Overrides, Scenario};
 use pheromone_roles::follower::StrategyKind;
 use pheromone_ros2::record::{McapRecorder, RecordError};
-use serde::Serialize;
 use pheromone_sim::metrics::{mean_sd, scenario_metrics, welch_t, RunMetrics, RunMode};
 use pheromone_sim::processes::ProcessRunInfo;
 use pheromone_sim::recording::Recording;
 use pheromone_sim::ros_record::{McapTotals, SimMcap};
 use pheromone_sim::single::{run_single_process, RunSummary, SingleProcessOptions};
+use pheromone_world::scenario::{Overrides, Scenario};
+use serde::Serialize;
 
 use super::roles::load_scenario;
 pub use super::sim_args::SimArgs;
@@ -109,8 +109,12 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     let record = record.map(|totals| add_record(&mut metrics, totals));
     print_summary(&metrics);
     if let Some(dir) = out_dir(&a, &scenario) {
-        let mut files =
-            pheromone_report::write_outputs(&dir, &rec, &metrics, &pheromone_report::marks(&scenario, &rec))?;
+        let mut files = pheromone_report::write_outputs(
+            &dir,
+            &rec,
+            &metrics,
+            &pheromone_report::marks(&scenario, &rec),
+        )?;
         files.extend(pheromone_report::write_plots(&dir, &scenario, &rec)?);
         eprintln!(
             "wrote {} file(s) to {} (the picture: {})",

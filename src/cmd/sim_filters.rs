@@ -3,10 +3,10 @@
 //! scripted loss, in the mode `sim` would use; one robot's estimation errors, deposits and σ
 //! from each run become `filters.csv`, six charts and `filters.json`.
 
-use pheromone_world::scenario::{Overrides, Scenario};
 use pheromone_roles::localizer::FilterKind;
-use serde::Serialize;
 use pheromone_sim::single::{run_single_process, SingleProcessOptions};
+use pheromone_world::scenario::{Overrides, Scenario};
+use serde::Serialize;
 
 use pheromone_report::{FilterRun, FilterSummary};
 

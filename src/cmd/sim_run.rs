@@ -3,11 +3,13 @@
 
 use std::path::PathBuf;
 
-use pheromone_world::scenario::Scenario;
-use pheromone_sim::processes::{run_as_processes, ProcessRunError, ProcessRunInfo, ProcessRunOptions};
+use pheromone_sim::processes::{
+    run_as_processes, ProcessRunError, ProcessRunInfo, ProcessRunOptions,
+};
 use pheromone_sim::recording::Recording;
 use pheromone_sim::ros_record::SimMcap;
 use pheromone_sim::single::RunSummary;
+use pheromone_world::scenario::Scenario;
 
 use super::sim_args::SimArgs;
 use super::stop::Stopped;

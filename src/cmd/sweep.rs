@@ -4,13 +4,13 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use pheromone_world::scenario::Scenario;
 use pheromone_roles::follower::StrategyKind;
 use pheromone_roles::mapper::MergeRule;
 use pheromone_sim::sweep::{
     integrations, parse_merge_idle, parse_merge_rules, parse_rc_m, parse_robots, parse_steer,
     parse_strategies, run_sweep, Figure, SweepGrid, SweepResult,
 };
+use pheromone_world::scenario::Scenario;
 
 use super::roles::load_scenario;
 use super::{bad, bad_from};
@@ -186,7 +186,9 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
         Some(n) => n,
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
-    let runs = pheromone_sim::sweep::plan(&base, &grid).map_err(bad_from)?.len();
+    let runs = pheromone_sim::sweep::plan(&base, &grid)
+        .map_err(bad_from)?
+        .len();
     eprintln!(
         "sweep '{}': {runs} run(s) of {} s on {jobs} thread(s)",
         base.name, grid.duration_s

@@ -158,7 +158,8 @@ fn a_sender_killed_while_it_waits_for_its_receipt_is_applied_at_most_once() {
     }
     // One more tick: whatever was taken is applied by then.
     let mut reader =
-        pheromone_field::shm::FieldReader::attach_within(&node, &name, Duration::from_secs(30)).unwrap();
+        pheromone_field::shm::FieldReader::attach_within(&node, &name, Duration::from_secs(30))
+            .unwrap();
     let last = reader
         .wait_until(Duration::from_secs(30), |f| f.header.sequence > first + 1)
         .unwrap();

@@ -22,10 +22,10 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use pheromone_field::shm::{FieldReader, FieldWatch, Svc};
 use iceoryx2::config::Config;
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
+use pheromone_field::shm::{FieldReader, FieldWatch, Svc};
 use pheromone_supervisor::ChildSpec;
 
 use crate::harness::*;

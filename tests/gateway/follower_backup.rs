@@ -9,9 +9,9 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use pheromone_field::shm::{create_node, FieldReader};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
+use pheromone_field::shm::{create_node, FieldReader};
 use pheromone_world::scenario::Scenario;
 use serde_json::Value;
 

@@ -270,7 +270,8 @@ fn sim_regions_localize_reports_the_landmark_work() {
     let held = &l["all"]["holding"];
     assert!(held["compared"].as_u64().unwrap() < held["compared_whole_map"].as_u64().unwrap());
     let path = std::env::temp_dir().join(format!("{}.toml", unique("bad-localize")));
-    let text = pheromone_graph::agent::PAPER_CORRIDOR.to_string() + "\n[localize]\nrho_ref_m = -1.0\n";
+    let text =
+        pheromone_graph::agent::PAPER_CORRIDOR.to_string() + "\n[localize]\nrho_ref_m = -1.0\n";
     std::fs::write(&path, text).unwrap();
     let p = path.display().to_string();
     for mode in [&["--single-process"][..], &[]] {

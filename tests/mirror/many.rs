@@ -28,7 +28,9 @@ struct CleanExtra;
 impl Drop for CleanExtra {
     fn drop(&mut self) {
         for d in &MIRRORS[1..] {
-            pheromone_field::shm::cleanup_dead_nodes_of(&pheromone_field::shm::domain_config_of(Some(d)).unwrap());
+            pheromone_field::shm::cleanup_dead_nodes_of(
+                &pheromone_field::shm::domain_config_of(Some(d)).unwrap(),
+            );
         }
     }
 }

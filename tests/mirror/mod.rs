@@ -164,7 +164,9 @@ struct CleanDomains;
 impl Drop for CleanDomains {
     fn drop(&mut self) {
         for d in [ORIGIN, MIRROR] {
-            pheromone_field::shm::cleanup_dead_nodes_of(&pheromone_field::shm::domain_config_of(Some(d)).unwrap());
+            pheromone_field::shm::cleanup_dead_nodes_of(
+                &pheromone_field::shm::domain_config_of(Some(d)).unwrap(),
+            );
         }
     }
 }
@@ -414,7 +416,8 @@ fn corrupted_lists_and_keyframes_are_rejected_and_counted() {
     assert_identical(&hosts.common(10, |_| true));
     // A third peer puts damaged messages on the mirror's keys.
     let session = zenoh::open(
-        pheromone_bridge::session_config_as("client", &[], std::slice::from_ref(&bridge.endpoint)).unwrap(),
+        pheromone_bridge::session_config_as("client", &[], std::slice::from_ref(&bridge.endpoint))
+            .unwrap(),
     )
     .wait()
     .unwrap();
@@ -491,7 +494,10 @@ fn list_probe_and_export_see_a_mirror_that_lost_its_origin_and_mark_it_stale() {
     field.wait_exit(Duration::from_secs(20));
     bridge.kill();
     // A killed bridge leaves its record of handed-over batches for a successor; none comes.
-    let _ = std::fs::remove_file(pheromone_bridge::journal_path(&format!("{ORIGIN}_iox2_"), &name));
+    let _ = std::fs::remove_file(pheromone_bridge::journal_path(
+        &format!("{ORIGIN}_iox2_"),
+        &name,
+    ));
     until_quiet(&mut hosts.mirror, Duration::from_secs(1));
     let last = hosts.mirror.frame().unwrap().header.sequence;
     let stale = listed("0.3");

@@ -91,7 +91,11 @@ impl Drop for Link {
 }
 
 /// Waits (at most `timeout`) until the mirror says it is stale (`true`) or live.
-pub(super) fn until_mirror(node: &iceoryx2::node::Node<pheromone_field::shm::Svc>, name: &str, stale: bool) {
+pub(super) fn until_mirror(
+    node: &iceoryx2::node::Node<pheromone_field::shm::Svc>,
+    name: &str,
+    stale: bool,
+) {
     eventually(
         Duration::from_secs(30),
         if stale {

@@ -535,7 +535,8 @@ fn the_ros2_node_listens_over_tls_and_asks_for_credentials() {
         "{wrong}"
     );
     let config =
-        pheromone_bridge::session_config_with(&security("right.txt"), "peer", &[], &[endpoint]).unwrap();
+        pheromone_bridge::session_config_with(&security("right.txt"), "peer", &[], &[endpoint])
+            .unwrap();
     let session = pheromone_bridge::zenoh::open(config).wait().unwrap();
     let sub = session.declare_subscriber("**").wait().unwrap();
     let sample = sub.recv_timeout(Duration::from_secs(20)).unwrap();

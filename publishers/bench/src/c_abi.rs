@@ -19,9 +19,6 @@ use std::ffi::CString;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use pheromone_field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
-use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
-use pheromone_field::{Deposit, Kernel};
 use pheromone_c::{
     pheromone_field_attach, pheromone_field_detach, pheromone_frame_borrow,
     pheromone_frame_release, pheromone_last_error, pheromone_sample_gradient,
@@ -29,6 +26,9 @@ use pheromone_c::{
     PheromoneField, PheromoneFrameView, PheromoneStatus, PheromoneWaitPolicy,
     PHEROMONE_MAX_CHANNELS, PHEROMONE_WAIT_BUSY_POLL, PHEROMONE_WAIT_EVENT, PHEROMONE_WAIT_SPIN,
 };
+use pheromone_field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
+use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
+use pheromone_field::{Deposit, Kernel};
 use serde::Serialize;
 
 use crate::frame_run::{record, FRAME_TIMEOUT};

@@ -4,8 +4,8 @@
 
 use std::time::{Duration, Instant};
 
-use pheromone_field::shm::Svc;
 use iceoryx2::prelude::*;
+use pheromone_field::shm::Svc;
 
 use crate::peer::{say_result, FrameTransport, Launcher, Peer, PeerResult, PeerSpec, ReaderWait};
 use crate::BenchError;

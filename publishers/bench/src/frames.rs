@@ -8,9 +8,9 @@ use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::PathBuf;
 use std::time::Duration;
 
+use iceoryx2::prelude::*;
 use pheromone_field::shm::{create_node, now_ns, FieldReader, FieldServer, Svc};
 use pheromone_field::{ChannelSpec, Evaporation, FieldConfig};
-use iceoryx2::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::frame_run::{drive, pause, record, spawn_readers, test_plane, FRAME_TIMEOUT};

@@ -19,9 +19,11 @@ use std::time::{Duration, Instant};
 use pheromone_field::shm::{create_node, FieldReader};
 use pheromone_field::SamplePose;
 use pheromone_gateway::client::{ClientConfig, GatewayClient, Transport};
-use pheromone_gateway_codec::{decode, encode, Message, PirRequest, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
-use serde::Serialize;
+use pheromone_gateway_codec::{
+    decode, encode, Message, PirRequest, MAX_ENCODED_BYTES, MAX_WIRE_BYTES,
+};
 use pheromone_supervisor::{ChildId, ChildSpec, Supervisor};
+use serde::Serialize;
 
 use crate::machine::cpu_ns;
 use crate::peer::{Launcher, Peer, PeerSpec};

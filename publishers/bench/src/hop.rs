@@ -4,13 +4,13 @@
 
 use std::time::{Duration, Instant};
 
-use pheromone_field::link::{LinkOptions, Receiver, Sender};
-use pheromone_field::shm::{create_node, now_ns, Svc};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use pheromone_field::link::{LinkOptions, Receiver, Sender};
+use pheromone_field::shm::{create_node, now_ns, Svc};
 use pheromone_messages::PoseMsg;
 
 use crate::peer::{say_ready, say_result, Launcher, Peer, PeerResult, PeerSpec};

@@ -95,8 +95,8 @@ pub(crate) fn realtime(priority: Option<i32>, who: &str) -> Result<Vec<String>, 
         cpu: None,
         best_effort: true,
     };
-    let applied =
-        pheromone_field::realtime::apply(&o).map_err(|e| crate::BenchError::Peer(format!("{who}: {e}")))?;
+    let applied = pheromone_field::realtime::apply(&o)
+        .map_err(|e| crate::BenchError::Peer(format!("{who}: {e}")))?;
     for r in &applied.refused {
         eprintln!("{who}: going on without it: {r}");
     }

@@ -31,8 +31,8 @@ use pheromone_bridge::{
 use pheromone_field::shm::{create_node_in, DepositPublisher};
 use pheromone_field::DepositMsg;
 use pheromone_field::{Deposit, Kernel};
-use serde::Serialize;
 use pheromone_supervisor::{ChildSpec, Supervisor};
+use serde::Serialize;
 
 use crate::peer::Launcher;
 use crate::stats::Latency;

@@ -5,8 +5,8 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use serde::{Deserialize, Serialize};
 use pheromone_supervisor::{ChildId, ChildSpec, Supervisor};
+use serde::{Deserialize, Serialize};
 
 use crate::BenchError;
 

@@ -6,12 +6,12 @@
 
 use std::time::{Duration, Instant};
 
-use pheromone_field::shm::{now_ns, Svc, WaitPolicy};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use pheromone_field::shm::{now_ns, Svc, WaitPolicy};
 
 use crate::frame_run::{
     drive, pause, record, spawn_readers, test_plane, FrameRun, FrameSamples, FRAME_TIMEOUT,
@@ -94,7 +94,8 @@ pub fn measure(
 /// The reader process: holds each new sample as soon as `policy` lets it see it.
 pub fn read(source: &str, wait: ReaderWait, skip: usize, count: usize) -> Result<(), BenchError> {
     let policy = wait.policy();
-    let node = pheromone_field::shm::create_node(&format!("bench-raw-reader-{}", std::process::id()))?;
+    let node =
+        pheromone_field::shm::create_node(&format!("bench-raw-reader-{}", std::process::id()))?;
     let frame = ServiceName::new(source).map_err(|e| raw_err(source, e))?;
     let ready = ServiceName::new(&format!("{source}-ready")).map_err(|e| raw_err(source, e))?;
     let subscriber: Subscriber<Svc, [f32], u64> = node

@@ -3,9 +3,9 @@
 
 use std::time::{Duration, Instant};
 
+use iceoryx2::node::Node;
 use pheromone_field::shm::{DepositPublisher, FieldReader, InputsSubscriber, SendError, Svc};
 use pheromone_field::DepositMsg;
-use iceoryx2::node::Node;
 use zenoh::qos::CongestionControl;
 use zenoh::Wait;
 

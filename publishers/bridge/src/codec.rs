@@ -298,7 +298,9 @@ pub fn decode_keyframe(bytes: &[u8]) -> Result<(u64, FrameHeader, Vec<f32>), Cod
     let n = std::mem::size_of::<FrameHeader>();
     let header: FrameHeader = wire_from_bytes(m.body)
         .ok_or_else(|| body_err(Kind::Keyframe, "shorter than its header"))?;
-    if header.sequence != m.sequence || header.layout_version != pheromone_field::wire::LAYOUT_VERSION {
+    if header.sequence != m.sequence
+        || header.layout_version != pheromone_field::wire::LAYOUT_VERSION
+    {
         return Err(body_err(
             Kind::Keyframe,
             format!(

@@ -15,11 +15,11 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
 
+use iceoryx2::node::Node;
 use pheromone_field::messages::InputsHeader;
 use pheromone_field::messages::MirrorState;
 use pheromone_field::shm::{now_ns, FieldServer, MirrorStateWriter, Svc};
 use pheromone_field::{DepositMsg, FieldConfig, FrameHeader};
-use iceoryx2::node::Node;
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::query::Reply;
 use zenoh::sample::Sample;

@@ -26,13 +26,15 @@ pub mod udp;
 
 use std::time::Duration;
 
-use pheromone_field::shm::{ConfigSubscriber, DepositPublisher, FieldReader, SendError, ShmError, Svc};
+use iceoryx2::node::Node;
+use pheromone_field::shm::{
+    ConfigSubscriber, DepositPublisher, FieldReader, SendError, ShmError, Svc,
+};
 use pheromone_field::{Deposit, FieldConfig, Kernel, RejectReason, SamplePose};
 use pheromone_gateway_codec::{
     DecodeError, DepositReply, DepositRequest, DepositStatus, ErrorReason, Frame, Message,
     PirReply, PirRequest, StatusReply,
 };
-use iceoryx2::node::Node;
 use serde::Serialize;
 
 /// Deposit seqs remembered per client (M3: the last 16).
@@ -396,7 +398,9 @@ impl Gateway {
         // The field's own checks, with its channels and limits: what it would refuse is answered
         // here, never sent.
         let refused = match self.field_config()? {
-            Some(c) => pheromone_field::deposit::prepare(&msg, &c.geometry(), &c.channels, &c.limits).err(),
+            Some(c) => {
+                pheromone_field::deposit::prepare(&msg, &c.geometry(), &c.channels, &c.limits).err()
+            }
             None => None,
         };
         if let Some(r) = refused {

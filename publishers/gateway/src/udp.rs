@@ -3,9 +3,9 @@
 use std::net::{SocketAddr, UdpSocket};
 use std::time::{Duration, Instant};
 
+use iceoryx2::node::Node;
 use pheromone_field::shm::{now_ns, Svc};
 use pheromone_gateway_codec::{decode, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
-use iceoryx2::node::Node;
 
 use super::{Gateway, GatewayCounters, GatewayError};
 
@@ -75,7 +75,9 @@ pub fn serve(
             gateway.rejected(&pheromone_gateway_codec::DecodeError::TooLong)
         } else {
             match decode(&datagram[..n]) {
-                None => gateway.rejected(&pheromone_gateway_codec::DecodeError::Truncated { len: n }),
+                None => {
+                    gateway.rejected(&pheromone_gateway_codec::DecodeError::Truncated { len: n })
+                }
                 Some(Err(e)) => gateway.rejected(&e),
                 Some(Ok(frame)) => gateway.handle_from(frame, now_ns(), Some(from))?,
             }

@@ -17,10 +17,10 @@
 
 use std::time::Duration;
 
+use iceoryx2::node::Node;
 use pheromone_field::link::{Receiver, Sender};
 use pheromone_field::lockstep::{self, JoinWatch};
 use pheromone_field::shm::{now_ns, Svc};
-use iceoryx2::node::Node;
 
 use super::agent::{GraphStrategy, RegionsScenario};
 use super::localize::Localization;

@@ -10,9 +10,9 @@
 use std::fmt;
 use std::time::{Duration, Instant};
 
+use iceoryx2::node::Node;
 use pheromone_field::link::{Receiver, Sender};
 use pheromone_field::shm::{now_ns, ShmError, Svc};
-use iceoryx2::node::Node;
 
 use super::conflict::{ConflictError, ContendMsg};
 use super::{CaptureOutcome, Dir, GraphError, GraphState, GraphUpdate, MAX_LINKS};

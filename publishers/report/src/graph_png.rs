@@ -109,7 +109,11 @@ impl Frame {
 }
 
 /// The final value of a node's link in one direction, as the report gives it.
-fn link_value(report: &pheromone_graph::run::RunReport, node: &str, dir: pheromone_graph::Dir) -> Option<f32> {
+fn link_value(
+    report: &pheromone_graph::run::RunReport,
+    node: &str,
+    dir: pheromone_graph::Dir,
+) -> Option<f32> {
     let row = report.links.iter().find(|l| l.node == node)?;
     let text = match dir {
         pheromone_graph::Dir::Up => &row.up,

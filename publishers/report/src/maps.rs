@@ -9,9 +9,9 @@
 use plotters::prelude::*;
 
 use super::style::{colour, msg, robot_rgb, Picture, Rgb, FONT};
-use pheromone_world::team::RobotMap;
 use pheromone_roles::mapper::pose_in_frame;
 use pheromone_sim::recording::Recording;
+use pheromone_world::team::RobotMap;
 
 const UNKNOWN: f32 = 160.0;
 /// The true walls (world frame): yellow, on the black of occupied cells.

@@ -13,9 +13,11 @@ use std::collections::BTreeMap;
 
 use pheromone_field::Evaporation;
 
-use pheromone_world::scenario::{BlindLeaderMetric, ExplorationMetric, Scenario};
-use pheromone_sim::metrics::{blind_leader, distance_to_polyline_m, mean_path_error_m, BlindLeader};
+use pheromone_sim::metrics::{
+    blind_leader, distance_to_polyline_m, mean_path_error_m, BlindLeader,
+};
 use pheromone_sim::recording::Recording;
+use pheromone_world::scenario::{BlindLeaderMetric, ExplorationMetric, Scenario};
 
 /// The closed form a probe's readings are compared with: the level `p0` read at `t0_s`,
 /// evaporating by the channel's model with the ambient level held fixed (seed 000 eq. 19).

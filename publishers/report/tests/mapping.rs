@@ -1,9 +1,9 @@
 //! Seed 004's local maps and their merging, run in one process (`pheromone sim ias-ss --merge
 //! --single-process`): what a user relies on in the metrics.
 
-use pheromone_world::scenario::{Overrides, Scenario};
 use pheromone_sim::metrics::scenario_metrics;
 use pheromone_sim::single::{run_single_process, SingleProcessOptions};
+use pheromone_world::scenario::{Overrides, Scenario};
 
 fn metrics(robots: usize, seed: u64, merge: Option<bool>, duration_s: f64) -> serde_json::Value {
     let mut s = Scenario::load("ias-ss").unwrap();

@@ -7,12 +7,14 @@ use std::fs::{self, File};
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
-use pheromone_world::scenario::{Overrides, Scenario};
-use pheromone_report::series::{exploration_over_time, leader_deposits, path_distances, probe_curves};
+use pheromone_report::series::{
+    exploration_over_time, leader_deposits, path_distances, probe_curves,
+};
 use pheromone_report::{write_outputs, write_plots, PLOT_H_PX, PLOT_W_PX};
 use pheromone_sim::metrics::{distance_to_polyline_m, scenario_metrics, RunMetrics, RunMode};
 use pheromone_sim::recording::Recording;
 use pheromone_sim::single::{run_single_process, SingleProcessOptions};
+use pheromone_world::scenario::{Overrides, Scenario};
 
 /// A directory unique to the test, removed on drop.
 struct TempDir(PathBuf);

@@ -7,9 +7,9 @@
 mod merge_support;
 
 use merge_support::{map, transform};
-use proptest::prelude::*;
 use pheromone_roles::mapper::merge::merge_planes_reference;
 use pheromone_roles::mapper::{merge_planes, MapView, MergeRule};
+use proptest::prelude::*;
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]

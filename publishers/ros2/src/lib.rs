@@ -18,12 +18,12 @@
 pub mod cdr;
 pub mod deps;
 pub mod frames;
-pub mod rmw_zenoh;
 pub mod grid;
 #[cfg(feature = "zenoh")]
 pub mod node;
 pub mod pose;
 pub mod record;
+pub mod rmw_zenoh;
 pub mod robot;
 pub mod robots;
 #[cfg(feature = "zenoh")]

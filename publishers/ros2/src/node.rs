@@ -10,8 +10,8 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use pheromone_field::shm::{now_ns, DepositPublisher, FieldReader, ShmError, Svc};
 use iceoryx2::node::Node;
+use pheromone_field::shm::{now_ns, DepositPublisher, FieldReader, ShmError, Svc};
 use thiserror::Error;
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::liveliness::LivelinessToken;
@@ -22,11 +22,11 @@ use zenoh::Wait;
 
 use crate::deps::depositor::{Depositor, DepositorConfig, DepositorConfigError};
 use crate::frames::{frame_messages, wall_now_ns, FieldTopics};
+use crate::pose::{check_pose, PoseWithCovarianceStamped};
 use crate::rmw_zenoh::{
     self, split_topic_key, topic_key, Attachment, EntityKind, NameError, NodeIdentity, Qos,
     RosDistro,
 };
-use crate::pose::{check_pose, PoseWithCovarianceStamped};
 use crate::robots::{robot_topics, WorldRobots};
 use crate::session::{SessionConfigError, SessionSettings};
 use crate::types::{TypeInfo, POSE_COV_STAMPED};

@@ -20,11 +20,11 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
+use iceoryx2::node::Node;
 use pheromone_field::link::Receiver;
 use pheromone_field::lockstep::{self, Participant};
 use pheromone_field::shm::{AttachError, FieldReader, ShmError, Svc};
 use pheromone_field::wire::{ready_service as wake, ROBOT_LINK};
-use iceoryx2::node::Node;
 
 use crate::recording::{deposit_peak, Recording, RobotSample};
 use crate::ros_feed::McapFeed;
@@ -33,11 +33,11 @@ use crate::single::{sigma_max_m, FrameSchedule};
 use pheromone_messages::{
     CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, RendezvousMsg, ScanMsg, TruthMsg,
 };
-use pheromone_world::scenario::Scenario;
-use pheromone_world::team::MappingTeam;
 use pheromone_roles::depositor::Depositor;
 use pheromone_roles::RobotServices;
 use pheromone_ros2::record::RecordError;
+use pheromone_world::scenario::Scenario;
+use pheromone_world::team::MappingTeam;
 
 struct RobotLinks {
     id: u32,

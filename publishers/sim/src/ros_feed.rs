@@ -21,8 +21,8 @@ use std::collections::{BTreeMap, VecDeque};
 use pheromone_field::deposit::prepare;
 use pheromone_field::{DepositMsg, FieldConfig, GridGeometry};
 use pheromone_messages::PoseMsg;
-use pheromone_world::scenario::Scenario;
 use pheromone_ros2::record::RecordError;
+use pheromone_world::scenario::Scenario;
 
 use crate::recording::Recording;
 use crate::ros_record::{McapTotals, PoseRow, SimMcap};

@@ -24,12 +24,14 @@ use std::time::{Duration, Instant};
 
 use pheromone_field::{DepositMsg, GridGeometry};
 use pheromone_messages::PoseMsg;
-use pheromone_world::scenario::Scenario;
 use pheromone_ros2::frames::{frame_cdr, FieldTopics};
 use pheromone_ros2::grid::{FrameRef, Stamp};
 use pheromone_ros2::record::{McapRecorder, RecordError};
-use pheromone_ros2::robot::{covariance_6x6, deposit_cdr, path_cdr, pose_with_covariance_cdr, Pose2};
+use pheromone_ros2::robot::{
+    covariance_6x6, deposit_cdr, path_cdr, pose_with_covariance_cdr, Pose2,
+};
 use pheromone_ros2::types::{TypeInfo, DEPOSIT, PATH, POSE_COV_STAMPED};
+use pheromone_world::scenario::Scenario;
 use serde::Serialize;
 
 use crate::recording::{deposit_peak, Recording, Snapshot};

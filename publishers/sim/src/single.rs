@@ -22,13 +22,13 @@ use serde::Serialize;
 use crate::recording::{deposit_peak, ProbeReading, Recording, RobotSample, Snapshot};
 use crate::ros_record::{PoseRow, SimMcap};
 use pheromone_messages::{FollowerState, LaserMsg, PoseMsg};
-use pheromone_world::scenario::{ProbeSpec, Scenario};
-use pheromone_world::team::MappingTeam;
-use pheromone_world::{StepOutput, World};
 use pheromone_roles::depositor::Depositor;
 use pheromone_roles::follower::{Follower, PoseSource};
 use pheromone_roles::mapper::{pose_msg_in_frame, Pose2, MAP_CHANNELS};
 use pheromone_roles::{Filter, ProcessError};
+use pheromone_world::scenario::{ProbeSpec, Scenario};
+use pheromone_world::team::MappingTeam;
+use pheromone_world::{StepOutput, World};
 
 /// What a run ends with, whichever way it ran.
 #[derive(Debug, Clone, Serialize)]

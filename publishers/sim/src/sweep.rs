@@ -18,10 +18,10 @@ use super::exploration::{exploration_known, exploration_merged};
 use super::metrics::exploration;
 use super::single::{run_single_process, SingleProcessOptions};
 use super::sweep_stats::{paired, welch, MeanSd, TTest};
-use pheromone_world::scenario::{Overrides, Scenario, ScenarioError};
 use pheromone_roles::follower::StrategyKind;
 use pheromone_roles::mapper::{MergeRule, SteerOn};
 use pheromone_roles::process::role_loop::ProcessError;
+use pheromone_world::scenario::{Overrides, Scenario, ScenarioError};
 
 /// A sweep cannot be planned or one of its runs failed.
 #[derive(Debug, thiserror::Error)]

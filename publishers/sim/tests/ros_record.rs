@@ -3,10 +3,10 @@
 
 use std::collections::BTreeMap;
 
-use pheromone_world::scenario::{Overrides, Scenario};
 use pheromone_ros2::record::McapRecorder;
 use pheromone_sim::ros_record::SimMcap;
 use pheromone_sim::single::{run_single_process, SingleProcessOptions};
+use pheromone_world::scenario::{Overrides, Scenario};
 
 /// Topic → log times of its messages.
 fn topics(path: &std::path::Path) -> BTreeMap<String, Vec<u64>> {

@@ -20,11 +20,11 @@ use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
+use iceoryx2::node::Node;
+use iceoryx2::prelude::*;
 use pheromone_field::link::Receiver;
 use pheromone_field::shm::{AttachError, FieldReader, ShmError, Svc};
 use pheromone_field::wire::{ready_service, RobotServices, ROBOT_LINK};
-use iceoryx2::node::Node;
-use iceoryx2::prelude::*;
 
 use super::http::{Request, Server};
 

@@ -3,11 +3,11 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
+use iceoryx2::node::Node;
 use pheromone_field::link::{Receiver, Sender};
 use pheromone_field::lockstep::{self, Conductor, LockstepError};
 use pheromone_field::shm::{now_ns, DepositPublisher, Svc};
 use pheromone_field::DepositMsg;
-use iceoryx2::node::Node;
 
 use crate::scenario::{Scenario, WORLD_DEPOSITOR_ID};
 use crate::{StepOutput, World, WorldPose};

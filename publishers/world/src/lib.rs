@@ -42,7 +42,9 @@ mod walls;
 
 pub use laser::LaserConfig;
 pub use map::{MapError, OccupancyMap};
-pub use pheromone_messages::geometry::{sinc, sinc_derivative, Landmark, NoiseConfig, Segment, WorldPose};
+pub use pheromone_messages::geometry::{
+    sinc, sinc_derivative, Landmark, NoiseConfig, Segment, WorldPose,
+};
 pub use scan::ScanSensorConfig;
 pub use walls::{wall_segments, WallConfig};
 

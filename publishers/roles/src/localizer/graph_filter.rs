@@ -2,11 +2,11 @@
 //! area capture, `pheromone_graph::localize`): `pheromone-graph` defines what a filter must do, this
 //! crate (which depends on it) supplies the EKF.
 
+use nalgebra::Matrix3;
 use pheromone_graph::localize::{
     FilterStep, GraphLandmark, LocalizeConfig, Observation, Odometry, PoseFilter,
 };
 use pheromone_messages::LandmarkObs;
-use nalgebra::Matrix3;
 
 use super::{CheckedFilter, Ekf, EkfConfig, InputLimits};
 use pheromone_messages::{Landmark, NoiseConfig, WorldPose};

@@ -43,7 +43,9 @@ impl MergeTransform {
     /// distance, bearing relative to j's heading, i's heading relative to j's).
     pub fn from_measurement(dst_pose: Pose2, src_pose: Pose2, obs: &PeerObs) -> Self {
         Self {
-            theta_ij_rad: pheromone_messages::wrap_angle(dst_pose[2] + obs.heading_rad - src_pose[2]),
+            theta_ij_rad: pheromone_messages::wrap_angle(
+                dst_pose[2] + obs.heading_rad - src_pose[2],
+            ),
             d_ij_m: obs.range_m,
             alpha_ji_rad: pheromone_messages::wrap_angle(dst_pose[2] + obs.bearing_rad),
             src_robot_m: [src_pose[0], src_pose[1]],

@@ -2,9 +2,9 @@
 
 use std::time::Duration;
 
+use iceoryx2::node::Node;
 use pheromone_field::lockstep::{self, Participant};
 use pheromone_field::shm::{DepositPublisher, Svc};
-use iceoryx2::node::Node;
 
 use crate::depositor::Depositor;
 use crate::{

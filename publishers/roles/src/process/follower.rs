@@ -2,10 +2,10 @@
 
 use std::time::Duration;
 
+use iceoryx2::node::Node;
 use pheromone_field::link::{Receiver, Sender};
 use pheromone_field::lockstep::Participant;
 use pheromone_field::shm::{now_ns, AttachError, FieldReader, Svc};
-use iceoryx2::node::Node;
 
 use crate::follower::{Follower, PoseSource};
 use crate::mapper::{pose_msg_in_frame, Pose2};

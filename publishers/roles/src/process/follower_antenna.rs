@@ -5,9 +5,9 @@
 
 use std::time::{Duration, Instant};
 
+use iceoryx2::node::Node;
 use pheromone_field::link::Receiver;
 use pheromone_field::lockstep::Participant;
-use iceoryx2::node::Node;
 use serde::{Deserialize, Serialize};
 
 use crate::follower::antenna_source::{AntennaRobot, AntennaSource, AntennaStepError, SourceStats};

@@ -1,10 +1,10 @@
 //! The localizer's process loop, and the filter it runs (EKF, UKF, particle filter or
 //! EKF-SLAM).
 
-use pheromone_field::lockstep::Participant;
-use pheromone_field::shm::Svc;
 use iceoryx2::node::Node;
 use nalgebra::Matrix3;
+use pheromone_field::lockstep::Participant;
+use pheromone_field::shm::Svc;
 
 use crate::localizer::{
     CheckedFilter, Ekf, EkfConfig, EkfSlam, EkfSlamConfig, FilterKind, LocalizerError,

@@ -21,11 +21,11 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
+use iceoryx2::node::Node;
 use pheromone_field::link::Receiver;
 use pheromone_field::lockstep::{role, Participant};
 use pheromone_field::shm::{AttachError, FieldReader, FrameWriter, Svc};
 use pheromone_field::{ChannelSpec, Evaporation, FieldConfig};
-use iceoryx2::node::Node;
 
 use crate::mapper::{
     alignment_error_m, pose_in_frame, true_transform, Mapper, MapperCounters, MergeEvent, Pose2,

@@ -6,11 +6,11 @@
 
 use std::time::{Duration, Instant};
 
+use iceoryx2::node::Node;
 use pheromone_field::link::{Receiver, Sender};
 use pheromone_field::lockstep::{LockstepError, Participant};
 use pheromone_field::shm::{AttachError, ShmError, Svc};
 use pheromone_field::ConfigError;
-use iceoryx2::node::Node;
 
 use crate::depositor::DepositorConfigError;
 use crate::follower::FollowerConfigError;

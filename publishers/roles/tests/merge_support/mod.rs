@@ -4,9 +4,9 @@
 //! pheromone levels.
 
 use pheromone_field::GridGeometry;
+use pheromone_roles::mapper::MergeTransform;
 use proptest::collection::vec;
 use proptest::prelude::*;
-use pheromone_roles::mapper::MergeTransform;
 
 fn cell() -> impl Strategy<Value = (f32, f32)> {
     prop_oneof![

@@ -16,12 +16,12 @@ use crate::recording::Recording;
 use crate::ros_feed::McapFeed;
 use crate::ros_record::{McapTotals, SimMcap};
 use crate::single::{role_name, FieldSummary, RobotResult, RunSummary};
-use pheromone_world::scenario::{Scenario, ScenarioError};
-use pheromone_world::World;
-use pheromone_world::{lockstep_participants, mapper_robots, WorldOptions, WorldSummary};
 use pheromone_roles::process::follower_antenna::AntennaRobotSummary;
 use pheromone_roles::{MapperSummary, RoleSummary};
 use pheromone_supervisor::{ChildId, ChildSpec, Supervisor, SupervisorError};
+use pheromone_world::scenario::{Scenario, ScenarioError};
+use pheromone_world::World;
+use pheromone_world::{lockstep_participants, mapper_robots, WorldOptions, WorldSummary};
 
 mod children;
 mod interrupt;

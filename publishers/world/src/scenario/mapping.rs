@@ -45,11 +45,13 @@ impl Scenario {
         self.mapping.validate().map_err(ScenarioError::Mapping)?;
         let robots = self.world.robots.len();
         if robots > MAX_PEERS + 1 {
-            return Err(ScenarioError::Mapping(pheromone_roles::mapper::MappingConfigError {
-                key: "enabled",
-                value: robots as f64,
-                expected: "at most MAX_PEERS + 1 = 17 robots in a mapping world",
-            }));
+            return Err(ScenarioError::Mapping(
+                pheromone_roles::mapper::MappingConfigError {
+                    key: "enabled",
+                    value: robots as f64,
+                    expected: "at most MAX_PEERS + 1 = 17 robots in a mapping world",
+                },
+            ));
         }
         Ok(())
     }

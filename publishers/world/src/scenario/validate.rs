@@ -103,8 +103,13 @@ impl Scenario {
                 source,
             };
             for msg in d.messages().map_err(err)? {
-                pheromone_field::deposit::prepare(&msg, &geometry, &self.field.channels, &self.field.limits)
-                    .map_err(|r| err(DepositError::Refused(r)))?;
+                pheromone_field::deposit::prepare(
+                    &msg,
+                    &geometry,
+                    &self.field.channels,
+                    &self.field.limits,
+                )
+                .map_err(|r| err(DepositError::Refused(r)))?;
             }
         }
         Ok(())
