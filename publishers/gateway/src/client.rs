@@ -703,5 +703,4 @@ fn wait_out(transport: &mut Transport, until: Instant) {
 }
 
 #[cfg(test)]
-#[path = "client_tests.rs"]
 mod tests;

@@ -720,5 +720,4 @@ impl RunLocalization {
 }
 
 #[cfg(test)]
-#[path = "localize_tests.rs"]
 mod tests;

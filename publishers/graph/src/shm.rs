@@ -773,5 +773,4 @@ impl Contention {
 }
 
 #[cfg(test)]
-#[path = "shm_tests.rs"]
 mod tests;

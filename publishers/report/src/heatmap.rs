@@ -604,5 +604,4 @@ pub(super) fn fmt_sig(v: f64) -> String {
 }
 
 #[cfg(test)]
-#[path = "heatmap_tests.rs"]
 mod tests;

@@ -760,5 +760,4 @@ pub fn comparisons(runs: &[RunResult], points: &[Point], figure: Figure) -> Vec<
 }
 
 #[cfg(test)]
-#[path = "sweep_tests.rs"]
 mod tests;

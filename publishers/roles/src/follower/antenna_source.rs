@@ -403,5 +403,4 @@ impl<S: AntennaSource> AntennaRobot<S> {
 }
 
 #[cfg(test)]
-#[path = "antenna_source_tests.rs"]
 mod tests;

@@ -120,5 +120,4 @@ impl PoseFilter for GraphEkf {
 }
 
 #[cfg(test)]
-#[path = "graph_filter_tests.rs"]
 mod tests;
