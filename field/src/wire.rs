@@ -4,7 +4,7 @@
 //! on one of them cannot share the service).
 //!
 //! The wire types themselves live beside the code that gives them meaning — the field's in
-//! [`crate::messages`] and [`crate::lockstep`], the robots' in `messages`, the graph's
+//! [`crate::messages`] and [`crate::process::lockstep`], the robots' in `messages`, the graph's
 //! in `pheromone_graph::shm` — and each is declared with [`wire_type!`](crate::wire_type),
 //! which names it `pheromone::<Name>/v<LAYOUT_VERSION>` and pins its size and alignment at
 //! compile time: a change to a wire type does not build until its size is restated here, and the
@@ -127,9 +127,9 @@ pub fn type_name_of<T: ZeroCopySend + ?Sized>() -> &'static str {
     unsafe { <T as ZeroCopySend>::type_name() }
 }
 
-// ---- links (`crate::link`) -----------------------------------------------------------------
+// ---- links (`crate::process::link`) -----------------------------------------------------------------
 
-/// Limits every side of a link ([`crate::link`]) agrees on (they are part of the service's identity).
+/// Limits every side of a link ([`crate::process::link`]) agrees on (they are part of the service's identity).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LinkOptions {
     pub max_publishers: usize,
@@ -381,7 +381,7 @@ mod tests {
             type_name_of::<DepositMsg>(),
             type_name_of::<FrameHeader>(),
             type_name_of::<ClockMsg>(),
-            type_name_of::<crate::lockstep::StepAck>(),
+            type_name_of::<crate::process::lockstep::StepAck>(),
         ] {
             assert!(name.starts_with("pheromone::"), "{name}");
             assert!(name.ends_with(&v), "{name} does not end with {v}");

@@ -10,7 +10,7 @@
 //! `P' = P − (1 − e)·(P − min(P, α·Pa))` moves by at most `(1 − e)·α` times that plus a few
 //! ulps of `P` for its own roundings.
 
-use pheromone_field::ambient::band_rows;
+use pheromone_field::models::band_rows;
 use pheromone_field::models::{
     ambient_mean_plane_with, step_plane_with, Dispatch, PlanePlan, Scratch,
 };

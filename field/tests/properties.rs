@@ -782,10 +782,10 @@ fn quantum_counts_whole_seconds_at_50_hz() {
 // ---------------------------------------------------------------------------------------------
 // The banded, dispatched ambient pass (pheromone_field::ambient, pheromone_field::simd) and threads.
 
-use pheromone_field::ambient::{band_rows, BAND_ROWS_MIN};
 use pheromone_field::models::{
     ambient_mean_plane_with, step_plane_with, Dispatch, PlanePlan, Scratch,
 };
+use pheromone_field::models::{band_rows, BAND_ROWS_MIN};
 
 /// Planes taller than one band, so band restarts are exercised.
 fn tall_plane() -> impl Strategy<Value = (usize, usize, Vec<f32>)> {

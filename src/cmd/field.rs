@@ -4,8 +4,8 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::{Args, ValueEnum};
-use pheromone_field::checkpoint;
-use pheromone_field::run::{run_field, FieldRunOptions};
+use pheromone_field::process::checkpoint;
+use pheromone_field::process::run::{run_field, FieldRunOptions};
 use pheromone_field::shm::{create_node, frame_pool};
 use pheromone_field::{Evaporation, FieldConfig};
 
@@ -379,7 +379,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
 /// Prints the `--json` summary; a field stopped by SIGINT or SIGTERM then exits 130 / 143.
 fn finish(
     a: &FieldArgs,
-    summary: Option<pheromone_field::run::FieldRunSummary>,
+    summary: Option<pheromone_field::process::run::FieldRunSummary>,
 ) -> anyhow::Result<()> {
     if a.json {
         match summary {

@@ -8,7 +8,7 @@
 use std::time::Duration;
 
 use iceoryx2::prelude::Node;
-use pheromone_field::checkpoint;
+use pheromone_field::process::checkpoint;
 use pheromone_field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldWatch, Svc};
 use pheromone_field::DepositMsg;
 use pheromone_field::{Deposit, Kernel};

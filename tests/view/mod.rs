@@ -315,7 +315,7 @@ fn bad_parameters_get_a_400_naming_them_and_unknown_paths_a_404() {
 
 #[test]
 fn the_view_shows_robot_poses_and_their_recent_paths() {
-    use pheromone_field::link::Sender;
+    use pheromone_field::process::link::Sender;
     use pheromone_field::wire::{ready_service, RobotServices, ROBOT_LINK};
     use pheromone_messages::PoseMsg;
 

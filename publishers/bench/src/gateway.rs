@@ -268,9 +268,9 @@ pub fn measure_loaded(
         busy.push(p);
     }
     let served = serve(launcher, tag, run, Some(rt_priority))?;
-    let client_rt = pheromone_field::realtime::fifo_for_this_thread(rt_priority).is_ok();
+    let client_rt = pheromone_field::process::realtime::fifo_for_this_thread(rt_priority).is_ok();
     let rtt = round_trips(&served.address, run.warmup, run.count);
-    pheromone_field::realtime::default_scheduling_for_this_thread();
+    pheromone_field::process::realtime::default_scheduling_for_this_thread();
     let mut served = served;
     let gateway_said = served.sup.stderr_tail(served.gw);
     drop(served);

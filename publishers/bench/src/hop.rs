@@ -1,4 +1,4 @@
-//! Hop latency of a small message between two processes, ping-pong / 2: ours (`pheromone_field::link`
+//! Hop latency of a small message between two processes, ping-pong / 2: ours (`pheromone_field::process::link`
 //! with a 128-byte `PoseMsg`, as a localizer sends poses to a depositor) against raw iceoryx2
 //! publish-subscribe of a `u64` (plus the same event in wait mode).
 
@@ -9,7 +9,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use pheromone_field::link::{LinkOptions, Receiver, Sender};
+use pheromone_field::process::link::{LinkOptions, Receiver, Sender};
 use pheromone_field::shm::{create_node, now_ns, Svc};
 use pheromone_messages::PoseMsg;
 

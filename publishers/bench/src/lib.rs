@@ -5,7 +5,7 @@
 //!   memcpy, in this process (the ambient model's fast pass beside its reference pass);
 //! - `merge_vs_memcpy` (issue 33): seed 004's map merge against a memcpy of its two planes, in
 //!   this process, beside the reference merge;
-//! - `hop_ns`: a small message between two processes, ping-pong / 2: ours (`pheromone_field::link`,
+//! - `hop_ns`: a small message between two processes, ping-pong / 2: ours (`pheromone_field::process::link`,
 //!   a 128-byte `PoseMsg`) against raw iceoryx2 publish-subscribe of a `u64`; wait and busy-poll;
 //! - `frame_ns`: a 1 MiB (512²) and a 16 MiB (2048²) frame from publish to "a reader holds it",
 //!   to 1 and to 8 reader processes: ours against a Unix socket with serde (postcard) and Zenoh

@@ -90,12 +90,12 @@ pub(crate) fn realtime(priority: Option<i32>, who: &str) -> Result<Vec<String>, 
     let Some(priority) = priority else {
         return Ok(Vec::new());
     };
-    let o = pheromone_field::realtime::RealtimeOptions {
+    let o = pheromone_field::process::realtime::RealtimeOptions {
         priority,
         cpu: None,
         best_effort: true,
     };
-    let applied = pheromone_field::realtime::apply(&o)
+    let applied = pheromone_field::process::realtime::apply(&o)
         .map_err(|e| crate::BenchError::Peer(format!("{who}: {e}")))?;
     for r in &applied.refused {
         eprintln!("{who}: going on without it: {r}");

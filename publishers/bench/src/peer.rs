@@ -111,7 +111,7 @@ pub enum PeerSpec {
         width: u32,
         tick_hz: f32,
         core: Option<usize>,
-        /// Run `pheromone_field::run::run_field` with `publish_on_deposit` (0 ms): a frame as soon as
+        /// Run `pheromone_field::process::run::run_field` with `publish_on_deposit` (0 ms): a frame as soon as
         /// deposits arrive.
         #[serde(default)]
         on_deposit: bool,
@@ -248,7 +248,7 @@ pub fn say_result(r: &PeerResult) {
 pub struct FieldTimingResult {
     pub ticks: u64,
     pub missed_deadlines: u64,
-    pub lateness: pheromone_field::run::Lateness,
+    pub lateness: pheromone_field::process::run::Lateness,
     pub longest_gap_periods: f64,
     /// The field process's CPU over its run (share of one core).
     pub cpu_share: f64,

@@ -1,4 +1,4 @@
-//! Tick timing under load (issue 33): a field process (`pheromone_field::run::run_field`, as `pheromone
+//! Tick timing under load (issue 33): a field process (`pheromone_field::process::run::run_field`, as `pheromone
 //! field` runs it) ticks at a rate for a while beside busy loops (processes this bench starts
 //! and stops, one per core), with and without real-time scheduling (`SCHED_FIFO`, `mlockall`)
 //! and with a spin before each deadline. Tick-start lateness (p50/p99/p99.9/max) comes from the
@@ -6,7 +6,7 @@
 
 use std::time::{Duration, Instant};
 
-use pheromone_field::run::{run_field, FieldRunOptions};
+use pheromone_field::process::run::{run_field, FieldRunOptions};
 use pheromone_field::shm::create_node;
 use serde::Serialize;
 

@@ -1,13 +1,13 @@
 //! Deposit-to-visible latency: a deposit is published (this process), the field (a separate
 //! process ticking at a fixed rate) applies it in its next tick, and a follower (this process's
 //! `FieldReader`) holds a frame that contains it. With `on_deposit`, the field is
-//! `pheromone_field::run::run_field` publishing as soon as deposits arrive (`--publish-on-deposit-ms 0`),
+//! `pheromone_field::process::run::run_field` publishing as soon as deposits arrive (`--publish-on-deposit-ms 0`),
 //! and its CPU time (`/proc/PID/schedstat`) is measured while deposits arrive at 10, 100 and
 //! 1000 per second.
 
 use std::time::{Duration, Instant};
 
-use pheromone_field::run::run_field;
+use pheromone_field::process::run::run_field;
 use pheromone_field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldServer};
 use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
 use pheromone_field::{Deposit, Kernel};
@@ -240,7 +240,7 @@ impl FollowerPriority {
         let Some(p) = priority else {
             return Self(false);
         };
-        match pheromone_field::realtime::fifo_for_this_thread(p) {
+        match pheromone_field::process::realtime::fifo_for_this_thread(p) {
             Ok(()) => Self(true),
             Err(e) => {
                 eprintln!("bench follower: going on without it: {e}");
@@ -253,7 +253,7 @@ impl FollowerPriority {
 impl Drop for FollowerPriority {
     fn drop(&mut self) {
         if self.0 {
-            pheromone_field::realtime::default_scheduling_for_this_thread();
+            pheromone_field::process::realtime::default_scheduling_for_this_thread();
         }
     }
 }
@@ -330,12 +330,12 @@ fn cpu_at_rate(
 }
 
 /// The field process: ticks at `tick_hz` until terminated (with `on_deposit`, also publishes
-/// as soon as deposits arrive: `pheromone_field::run::run_field` as `pheromone field` runs it).
+/// as soon as deposits arrive: `pheromone_field::process::run::run_field` as `pheromone field` runs it).
 pub fn field(name: &str, width: u32, tick_hz: f32, wall: WallField) -> Result<(), BenchError> {
     crate::machine::realtime(wall.rt_priority, "bench field")?;
     let node = create_node(&format!("bench-field-{}", std::process::id()))?;
     if wall.on_deposit {
-        let options = pheromone_field::run::FieldRunOptions {
+        let options = pheromone_field::process::run::FieldRunOptions {
             name: name.to_string(),
             config: config(width, tick_hz),
             clock: None,

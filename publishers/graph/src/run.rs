@@ -745,4 +745,4 @@ pub fn simulate_with(
 }
 
 #[cfg(test)]
-mod run_tests;
+mod tests;

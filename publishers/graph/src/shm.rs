@@ -2,7 +2,7 @@
 //! the [`GraphState`], applies small [`GraphUpdateMsg`]s from robots and publishes immutable
 //! fixed-size [`GraphSnapshot`]s; robots read them with [`GraphReader`] and send updates with
 //! [`GraphUpdater`]. Contention messages (Listing 1's JSON) travel in fixed-size
-//! [`ContendWire`] buffers over [`Contention`]. Safe iceoryx2 API only (via `pheromone_field::link`).
+//! [`ContendWire`] buffers over [`Contention`]. Safe iceoryx2 API only (via `pheromone_field::process::link`).
 //!
 //! Services of a graph `G`: `pheromone/G/graph` (+ `-ready`), `pheromone/G/graph-update`
 //! (+ `-ready`), `pheromone/G/contend` (+ `-ready`).
@@ -11,7 +11,7 @@ use std::fmt;
 use std::time::{Duration, Instant};
 
 use iceoryx2::node::Node;
-use pheromone_field::link::{Receiver, Sender};
+use pheromone_field::process::link::{Receiver, Sender};
 use pheromone_field::shm::{now_ns, ShmError, Svc};
 
 use super::conflict::{ConflictError, ContendMsg};

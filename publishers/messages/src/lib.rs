@@ -6,6 +6,8 @@
 //! `pheromone/W/r<ID>/status` ([`FollowerStatusMsg`]), `sim/W/r<ID>/sensors` ([`SensorMsg`]),
 //! `sim/W/r<ID>/truth` ([`TruthMsg`]), `sim/W/r<ID>/laser` ([`LaserMsg`]); each has a `…-ready` event that wakes its receivers.
 
+#![warn(missing_docs)]
+
 pub mod geometry;
 
 pub use geometry::{sinc, sinc_derivative, Landmark, NoiseConfig, Segment, WorldPose};

@@ -11,7 +11,7 @@ use std::collections::{BTreeMap, VecDeque};
 use crate::deps::{PoseMsg, TruthMsg};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
-use pheromone_field::link::Receiver;
+use pheromone_field::process::link::Receiver;
 use pheromone_field::shm::{AttachError, ReceiveError, Svc};
 use pheromone_field::wire::{ready_service, RobotServices, ROBOT_LINK};
 

@@ -2,7 +2,7 @@
 //! reads the field's frames (no copy, except for the snapshots it keeps), and builds the same
 //! [`Recording`] a single-process run does.
 //!
-//! It takes part in the lockstep (`pheromone_field::lockstep`): it joins the run, and acknowledges each
+//! It takes part in the lockstep (`pheromone_field::process::lockstep`): it joins the run, and acknowledges each
 //! frame once it has recorded it, so it sees every frame, and takes probes and snapshots from
 //! the same frames a single-process run does ([`FrameSchedule`]).
 //!
@@ -21,8 +21,8 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use iceoryx2::node::Node;
-use pheromone_field::link::Receiver;
-use pheromone_field::lockstep::{self, Participant};
+use pheromone_field::process::link::Receiver;
+use pheromone_field::process::lockstep::{self, Participant};
 use pheromone_field::shm::{AttachError, FieldReader, ShmError, Svc};
 use pheromone_field::wire::{ready_service as wake, ROBOT_LINK};
 

@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
-use pheromone_field::link::Receiver;
+use pheromone_field::process::link::Receiver;
 use pheromone_field::shm::{AttachError, FieldReader, ShmError, Svc};
 use pheromone_field::wire::{ready_service, RobotServices, ROBOT_LINK};
 

@@ -4,8 +4,8 @@ use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use iceoryx2::node::Node;
-use pheromone_field::link::{Receiver, Sender};
-use pheromone_field::lockstep::{self, Conductor, LockstepError};
+use pheromone_field::process::link::{Receiver, Sender};
+use pheromone_field::process::lockstep::{self, Conductor, LockstepError};
 use pheromone_field::shm::{now_ns, DepositPublisher, Svc};
 use pheromone_field::DepositMsg;
 
@@ -90,7 +90,7 @@ pub fn mapper_robots(scenario: &Scenario, mapped: bool) -> Vec<u32> {
 }
 
 /// The world process: simulates, publishes sensors and truth, applies commands, makes the
-/// scenario's scripted deposits and conducts the lockstep (`pheromone_field::lockstep`).
+/// scenario's scripted deposits and conducts the lockstep (`pheromone_field::process::lockstep`).
 pub fn run_world(
     node: &Node<Svc>,
     scenario: &Scenario,

@@ -3,7 +3,7 @@
 use std::time::Duration;
 
 use iceoryx2::node::Node;
-use pheromone_field::lockstep::{self, Participant};
+use pheromone_field::process::lockstep::{self, Participant};
 use pheromone_field::shm::{DepositPublisher, Svc};
 
 use crate::depositor::Depositor;

@@ -3,8 +3,8 @@
 use std::time::Duration;
 
 use iceoryx2::node::Node;
-use pheromone_field::link::{Receiver, Sender};
-use pheromone_field::lockstep::Participant;
+use pheromone_field::process::link::{Receiver, Sender};
+use pheromone_field::process::lockstep::Participant;
 use pheromone_field::shm::{now_ns, AttachError, FieldReader, Svc};
 
 use crate::follower::{Follower, PoseSource};

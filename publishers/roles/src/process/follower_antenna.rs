@@ -6,8 +6,8 @@
 use std::time::{Duration, Instant};
 
 use iceoryx2::node::Node;
-use pheromone_field::link::Receiver;
-use pheromone_field::lockstep::Participant;
+use pheromone_field::process::link::Receiver;
+use pheromone_field::process::lockstep::Participant;
 use serde::{Deserialize, Serialize};
 
 use crate::follower::antenna_source::{AntennaRobot, AntennaSource, AntennaStepError, SourceStats};

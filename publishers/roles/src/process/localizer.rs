@@ -3,7 +3,7 @@
 
 use iceoryx2::node::Node;
 use nalgebra::Matrix3;
-use pheromone_field::lockstep::Participant;
+use pheromone_field::process::lockstep::Participant;
 use pheromone_field::shm::Svc;
 
 use crate::localizer::{

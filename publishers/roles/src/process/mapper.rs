@@ -22,8 +22,8 @@ use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use iceoryx2::node::Node;
-use pheromone_field::link::Receiver;
-use pheromone_field::lockstep::{role, Participant};
+use pheromone_field::process::link::Receiver;
+use pheromone_field::process::lockstep::{role, Participant};
 use pheromone_field::shm::{AttachError, FieldReader, FrameWriter, Svc};
 use pheromone_field::{ChannelSpec, Evaporation, FieldConfig};
 

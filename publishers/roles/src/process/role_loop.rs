@@ -1,14 +1,14 @@
 //! The process loops: each role is a library type driven by a short loop that waits on iceoryx2
 //! events (never sleeps). In lockstep (the default) the world conducts every step as
-//! `pheromone_field::lockstep` describes: each role joins the run after creating its ports, a depositor
+//! `pheromone_field::process::lockstep` describes: each role joins the run after creating its ports, a depositor
 //! acknowledges each step once its deposit is sent, and a follower steers on the frame the field
 //! computed for the step, so a run as processes gives the single-process answer.
 
 use std::time::{Duration, Instant};
 
 use iceoryx2::node::Node;
-use pheromone_field::link::{Receiver, Sender};
-use pheromone_field::lockstep::{LockstepError, Participant};
+use pheromone_field::process::link::{Receiver, Sender};
+use pheromone_field::process::lockstep::{LockstepError, Participant};
 use pheromone_field::shm::{AttachError, ShmError, Svc};
 use pheromone_field::ConfigError;
 

@@ -1,13 +1,13 @@
 //! A scenario as separate processes (`pheromone sim`, the default mode): the field, the world,
 //! and each robot's localizer, depositor and follower, each a child of the `pheromone` binary
-//! under one [`Supervisor`], in lockstep (`pheromone_field::lockstep`) with an [`Observer`] in this
+//! under one [`Supervisor`], in lockstep (`pheromone_field::process::lockstep`) with an [`Observer`] in this
 //! process that records what a single-process run records. The result is the single-process
 //! run's for the same seed, key by key.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use pheromone_field::run::FieldRunSummary;
+use pheromone_field::process::run::FieldRunSummary;
 use pheromone_field::shm::{cleanup_dead_nodes, create_node, ShmError};
 use serde::Serialize;
 

@@ -29,8 +29,8 @@ use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 
-use crate::link::{Receiver, Sender};
 use crate::messages::ClockMsg;
+use crate::process::link::{Receiver, Sender};
 use crate::shm::{
     now_ns, service_err, service_name, AttachError, ReceiveError, SendError, ShmError, Svc,
 };

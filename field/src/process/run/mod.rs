@@ -7,9 +7,9 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::{self, Checkpoint, CheckpointError};
 use crate::deposit::RejectReason;
-use crate::lockstep::{self, Participant};
+use crate::process::checkpoint::{self, Checkpoint, CheckpointError};
+use crate::process::lockstep::{self, Participant};
 use crate::shm::{
     wait_or_stop, FieldServer, ShmError, Standby, StandbyError, StandbyEvent, StartError, Svc,
     Takeover, TickError, TickOutcome,

@@ -29,7 +29,7 @@ impl Housekeeper {
             .name("field-housekeeping".into())
             .spawn(move || {
                 // Started by a SCHED_FIFO field, it would compete with the tick at its priority.
-                crate::realtime::default_scheduling_for_this_thread();
+                crate::process::realtime::default_scheduling_for_this_thread();
                 while let Err(RecvTimeoutError::Timeout) = stopped.recv_timeout(every) {
                     let n = crate::shm::cleanup_dead_nodes_of(&config);
                     count.fetch_add(n, Ordering::Relaxed);
