@@ -15,6 +15,11 @@ echo "== module cycles (.ci/module_cycles.py)"
 python3 .ci/test_module_cycles.py
 python3 .ci/module_cycles.py
 
+# Every file and Rust path the Markdown docs name exists (issue 50): a reference to moved code
+# fails here, not in a reader's hands.
+echo "== doc references (.ci/doc_refs.py)"
+python3 .ci/doc_refs.py
+
 # The `test` extra: pytest and the pinned ruff and mypy; the `zenoh` extra (eclipse-zenoh
 # 1.10.2, as the Rust zenoh crate in Cargo.lock; zstandard, xxhash) is for
 # python/tests/test_zenoh_frames.py: a bridge's --frames decoded in Python; the `ros2` extra

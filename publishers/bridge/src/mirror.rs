@@ -56,7 +56,7 @@ pub struct MirrorStats {
     /// Local deposits sent to the origin (each once; resends are counted in
     /// `deposit_batches_resent`).
     pub deposits_forwarded: u64,
-    /// Local deposits refused because more than [`HELD_MAX`] waited for the origin (the oldest
+    /// Local deposits refused because more than `HELD_MAX` (100,000) waited for the origin (the oldest
     /// go).
     pub deposits_refused: u64,
     /// Deposits the bridge answered as handed to the origin's field, and as refused there.

@@ -3,7 +3,7 @@
 //! the field's frame-ready event wakes it, and turns the `PoseWithCovarianceStamped`s of its
 //! `--deposit-from` topics into seed 000 deposits through the depositor library. Liveliness
 //! tokens announce the node, its publishers and its subscriptions to the ROS graph; every
-//! sample carries rmw_zenoh's attachment ([`crate::graph`]). With a world (`--world`), it also
+//! sample carries rmw_zenoh's attachment ([`crate::rmw_zenoh`]). With a world (`--world`), it also
 //! publishes each robot's true and estimated pose and paths ([`crate::robots`]), declaring a
 //! robot's publishers when the robot is found.
 

@@ -1,6 +1,6 @@
 //! What a simulation run records, whichever way it ran (one process in lockstep, or separate
 //! processes observed from outside): per-robot time series, field snapshots at chosen times and
-//! probe readings. [`report`] turns a [`Recording`] into files.
+//! probe readings. `pheromone_report` turns a [`Recording`] into files.
 
 use std::collections::BTreeMap;
 

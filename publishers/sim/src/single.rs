@@ -10,7 +10,7 @@
 //! 5. each follower reads the new frame and decides its command (with own-map steering, its
 //!    robot's map after the mapping team's step instead, at its estimate in the map's frame).
 //!
-//! The run also records what [`report`] draws and what the metrics need, and with `--record`
+//! The run also records what `pheromone_report` draws and what the metrics need, and with `--record`
 //! hands each step's poses, applied deposits and recorded frames to a [`SimMcap`] (whose
 //! thread writes the MCAP file).
 
