@@ -40,51 +40,101 @@ const MAX_CONFIG_BYTES: u32 = 1 << 20;
 /// What is wrong with a checkpoint's bytes.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
 pub enum FormatError {
+    /// The file ends before a part the format requires (a cut-off write or a wrong file).
     #[error("truncated: {len} bytes, the {what} needs at least {needed}")]
     Truncated {
+        /// Length of the file (bytes).
         len: usize,
+        /// Length the missing part needs the file to have at least (bytes).
         needed: usize,
+        /// The part that is missing (e.g. `checksum`, `configuration`).
         what: &'static str,
     },
+    /// The file does not start with [`MAGIC`]: not a checkpoint.
     #[error("not a pheromone checkpoint (the first bytes are {found:02x?}, expected 'PHRMCKPT')")]
-    Magic { found: Vec<u8> },
+    Magic {
+        /// The file's first bytes (at most 8).
+        found: Vec<u8>,
+    },
+    /// The file was written in a format version this build does not read.
     #[error("format version {found}, this build reads version {FORMAT_VERSION}")]
-    Version { found: u32 },
+    Version {
+        /// The file's format version.
+        found: u32,
+    },
+    /// The file was written by a build of another message layout version.
     #[error("message layout version {found}, this build speaks v{LAYOUT_VERSION}")]
-    Layout { found: u32 },
+    Layout {
+        /// The file's layout version.
+        found: u32,
+    },
+    /// The stored checksum does not match the bytes: the file is corrupted.
     #[error("checksum mismatch (stored {stored:#018x}, computed {computed:#018x}): the file is corrupted")]
-    Checksum { stored: u64, computed: u64 },
+    Checksum {
+        /// The checksum the file ends with.
+        stored: u64,
+        /// FNV-1a 64 of the bytes before it.
+        computed: u64,
+    },
+    /// A value is out of range: a size that does not match, a length beyond its bound, a
+    /// non-finite time or cell.
     #[error("{what} = {value}: {reason}")]
     Invalid {
+        /// The value at fault (e.g. `cell count`, `sim_time_s`).
         what: &'static str,
+        /// The value, formatted.
         value: String,
+        /// The rule it breaks.
         reason: String,
     },
+    /// Bytes follow the checksum: the file is longer than its contents say.
     #[error("{extra} unexpected bytes after the checksum")]
-    Trailing { extra: usize },
+    Trailing {
+        /// Number of extra bytes.
+        extra: usize,
+    },
 }
 
 /// A checkpoint problem, naming the file.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckpointError {
+    /// Reading or writing the file (or its temporary, or syncing its directory) failed.
     #[error("checkpoint '{path}': {action}: {source}")]
     Io {
+        /// The checkpoint file.
         path: PathBuf,
+        /// What was being done (`read`, `write`, `fsync`, `rename the temporary file`…).
         action: &'static str,
+        /// The operating system's error.
         source: std::io::Error,
     },
+    /// The file's bytes are not a valid checkpoint.
     #[error("checkpoint '{path}' is refused: {source}")]
-    Format { path: PathBuf, source: FormatError },
+    Format {
+        /// The checkpoint file.
+        path: PathBuf,
+        /// What is wrong with its bytes.
+        source: FormatError,
+    },
+    /// The checkpoint is valid but does not fit the field's configuration (another grid or
+    /// channel count, or a cell outside its channel's range).
     #[error("checkpoint '{path}' does not fit the configuration: {detail}")]
-    Mismatch { path: PathBuf, detail: String },
+    Mismatch {
+        /// The checkpoint file.
+        path: PathBuf,
+        /// What differs.
+        detail: String,
+    },
 }
 
 /// One frame read back from a checkpoint.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Checkpoint {
+    /// The frame's header: geometry, sequence, field time and deposit counters.
     pub header: FrameHeader,
     /// The configuration the field ran with, as TOML (for people and tools; not enforced).
     pub config_toml: String,
+    /// The frame's cells, planes `channel, y, x`; every one finite.
     pub cells: Vec<f32>,
 }
 

@@ -146,6 +146,8 @@ pub struct Receiver<T: Debug + ZeroCopySend + Copy + 'static> {
 }
 
 impl<T: Debug + ZeroCopySend + Copy + 'static> Receiver<T> {
+    /// Opens (or creates) `service` with `options` and subscribes to it, listening for wake-ups
+    /// on the event service `wake` (which several links may share).
     pub fn create(
         node: &Node<Svc>,
         service: &str,

@@ -63,8 +63,11 @@ pub mod role {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[repr(C)]
 pub struct StepAck {
+    /// CLOCK_MONOTONIC (ns) when the acknowledgement was sent.
     pub stamp_ns: u64,
+    /// The step acknowledged.
     pub step: u64,
+    /// The robot the participant serves (0 for a participant of no robot, such as the field).
     pub robot_id: u32,
     /// One of [`role`].
     pub role: u32,
@@ -217,31 +220,50 @@ pub fn collect_step<K: PartialEq>(
 /// Why the conductor gave up.
 #[derive(Debug, thiserror::Error)]
 pub enum LockstepError {
+    /// A shared-memory operation (attaching, sending the clock, receiving acknowledgements)
+    /// failed.
     #[error(transparent)]
     Shm(#[from] ShmError),
     #[error(
         "only {attached} of the {expected} processes of the run ({what}) joined world '{world}' \
          within {timeout_s:.1} s (raise --attach-timeout on a slow host)"
     )]
+    /// Not every participant joined within the attach timeout.
     Attach {
+        /// The world.
         world: String,
+        /// Participants on the clock when the wait gave up.
         attached: usize,
+        /// Participants the run needs.
         expected: usize,
+        /// Who they are, for the message (e.g. `field, localizers, depositors`).
         what: String,
+        /// How long the conductor waited (s).
         timeout_s: f64,
     },
     #[error(
         "world '{world}': step {step} was not acknowledged by {missing} within {timeout_s:.1} s \
          (raise --stall-timeout on a slow host)"
     )]
+    /// Some participants did not acknowledge a step within the stall timeout (a process died
+    /// or hangs, or the host is too slow).
     Stalled {
+        /// The world.
         world: String,
+        /// The step waited for.
         step: u64,
+        /// The participants that did not acknowledge it, sorted and comma-separated (e.g.
+        /// `depositor r2, field`).
         missing: String,
+        /// The longest wait without progress allowed (s).
         timeout_s: f64,
     },
+    /// A termination signal stopped the wait.
     #[error("world '{world}': interrupted")]
-    Interrupted { world: String },
+    Interrupted {
+        /// The world.
+        world: String,
+    },
 }
 
 crate::from_shm_errors!(LockstepError);

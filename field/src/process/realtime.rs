@@ -26,31 +26,52 @@ pub struct RealtimeOptions {
 /// What the OS refused.
 #[derive(Debug, thiserror::Error)]
 pub enum RealtimeError {
+    /// The requested priority is outside `SCHED_FIFO`'s 1..=99.
     #[error("--rt-priority {0}: must be a SCHED_FIFO priority from 1 to 99")]
     Priority(i32),
     #[error(
         "SCHED_FIFO priority {priority} refused ({source}): it needs CAP_SYS_NICE (root) or an \
          RLIMIT_RTPRIO of at least {priority} (`ulimit -r`; here {rlimit})"
     )]
+    /// `sched_setscheduler` refused `SCHED_FIFO`: the process lacks CAP_SYS_NICE and its
+    /// RLIMIT_RTPRIO is below the priority.
     Scheduler {
+        /// The priority asked for.
         priority: i32,
+        /// The process's soft RLIMIT_RTPRIO, formatted (`unlimited`, a number, or why unknown).
         rlimit: String,
+        /// The OS's error.
         source: nix::Error,
     },
     #[error(
         "locking memory (mlockall) refused ({source}): it needs CAP_IPC_LOCK (root) or an \
          RLIMIT_MEMLOCK larger than the process (`ulimit -l`; here {rlimit})"
     )]
-    Lock { rlimit: String, source: nix::Error },
+    /// `mlockall` refused: the process lacks CAP_IPC_LOCK and its RLIMIT_MEMLOCK is too small.
+    Lock {
+        /// The process's soft RLIMIT_MEMLOCK, formatted (`unlimited`, bytes, or why unknown).
+        rlimit: String,
+        /// The OS's error.
+        source: nix::Error,
+    },
+    /// `sched_setaffinity` refused the CPU (it does not exist or is not in the process's set).
     #[error("--rt-cpu {cpu}: pinning refused ({source})")]
-    Pin { cpu: usize, source: nix::Error },
+    Pin {
+        /// The CPU asked for.
+        cpu: usize,
+        /// The OS's error.
+        source: nix::Error,
+    },
 }
 
 /// What the process got.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Applied {
+    /// The `SCHED_FIFO` priority the process runs at; `None` if refused or not asked for.
     pub fifo_priority: Option<i32>,
+    /// Whether every page is locked in memory (`mlockall`).
     pub memory_locked: bool,
+    /// The CPU the process is pinned to; `None` if refused or not asked for.
     pub cpu: Option<usize>,
     /// With `best_effort`: each refusal's message.
     pub refused: Vec<String>,

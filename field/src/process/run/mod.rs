@@ -28,7 +28,9 @@ use stats::TickStats;
 /// How a field process runs.
 #[derive(Debug, Clone)]
 pub struct FieldRunOptions {
+    /// The field's name (`F` of its services `pheromone/F/…`).
     pub name: String,
+    /// The field's configuration (already validated or not: the server validates it).
     pub config: FieldConfig,
     /// Tick once per clock message of this simulated world (lockstep) instead of on wall time.
     pub clock: Option<String>,
@@ -38,6 +40,7 @@ pub struct FieldRunOptions {
     pub duration: Option<Duration>,
     /// Save the frame to this file every `checkpoint_every` and at exit.
     pub checkpoint: Option<PathBuf>,
+    /// Wall time between two periodic checkpoints.
     pub checkpoint_every: Duration,
     /// Resume from this checkpoint (already read and checked against the configuration).
     pub restore: Option<(PathBuf, Checkpoint)>,
@@ -60,8 +63,10 @@ pub struct FieldRunOptions {
 /// Why a field process stopped with an error.
 #[derive(Debug, thiserror::Error)]
 pub enum FieldRunError {
+    /// Starting, ticking, attaching to the clock, or a standby's mirroring failed.
     #[error(transparent)]
     Shm(#[from] ShmError),
+    /// The final checkpoint could not be written.
     #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
 }
@@ -82,8 +87,11 @@ impl FieldRunError {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct CheckpointSummary {
+    /// The checkpoint file.
     pub file: String,
+    /// Checkpoints written, the one at exit included.
     pub written: u64,
+    /// Periodic checkpoints that failed (each logged as a warning).
     pub failed: u64,
 }
 
@@ -91,13 +99,19 @@ pub struct CheckpointSummary {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct StandbySummary {
+    /// Whether the standby took over from its primary.
     pub took_over: bool,
+    /// Frames mirrored from the primary before the takeover.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mirrored_frames: Option<u64>,
+    /// Sequence of the last frame mirrored from the primary.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub last_mirrored_sequence: Option<u64>,
+    /// Time without a frame across the takeover: from the primary's last frame to the
+    /// standby's first (ms).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub takeover_gap_ms: Option<f64>,
+    /// Deposits received after the last mirrored frame and applied to the first own frame.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub deposits_carried: Option<u64>,
 }
@@ -106,10 +120,15 @@ pub struct StandbySummary {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FieldRunSummary {
+    /// The field's name.
     pub field: String,
+    /// Frames this process published.
     pub ticks: u64,
+    /// Sequence number of the last frame (counts from a restored or mirrored frame on).
     pub sequence: u64,
+    /// Field time of the last frame (s).
     pub sim_time_s: f64,
+    /// Deposits applied, cumulative like the frame header's counter.
     pub deposits_applied: u64,
     /// Rejected deposits by reason name.
     pub deposits_rejected: std::collections::BTreeMap<String, u64>,
@@ -117,11 +136,17 @@ pub struct FieldRunSummary {
     pub total_mass: Vec<f64>,
     /// Largest cell of each channel in the last frame.
     pub max: Vec<f32>,
+    /// The longest tick compute (ms).
     pub max_tick_compute_ms: f64,
+    /// The longest wall time between two published frames (ms).
     pub longest_tick_gap_ms: f64,
+    /// iceoryx2 nodes of dead processes removed during the run.
     pub dead_nodes_cleaned: u64,
+    /// Sequence of the checkpoint the run resumed from, if it was restored.
     pub restored_sequence: Option<u64>,
+    /// The checkpoints written, if the run had a checkpoint file.
     pub checkpoint: Option<CheckpointSummary>,
+    /// What the standby phase did, if the process started as a standby.
     pub standby: Option<StandbySummary>,
     /// Wall time from the start to the stop (s).
     pub wall_time_s: f64,

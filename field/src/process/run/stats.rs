@@ -193,9 +193,13 @@ impl Window {
 /// Tick-start lateness over a run (µs), for the `--json` summary.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Lateness {
+    /// Median lateness (µs).
     pub p50_us: u64,
+    /// 99th percentile (µs).
     pub p99_us: u64,
+    /// 99.9th percentile (µs).
     pub p999_us: u64,
+    /// Largest lateness of any tick (µs).
     pub max_us: u64,
 }
 
