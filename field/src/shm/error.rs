@@ -162,7 +162,7 @@ pub enum StartError {
         needed_bytes: u64,
         /// Bytes free on /dev/shm.
         available_bytes: u64,
-        /// Frames in the pool: each reader's and the field's borrowed and buffered frames, plus two.
+        /// Frames in the pool: `(max_readers + 1) × (1 + READER_BORROWED_FRAMES) + 2`.
         frames: u64,
         /// Bytes of one frame's cells.
         frame_bytes: u64,
