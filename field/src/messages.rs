@@ -71,7 +71,8 @@ impl std::str::FromStr for KernelKind {
 pub struct DepositMsg {
     /// Monotonic stamp (ns, CLOCK_MONOTONIC) when the deposit was made.
     pub stamp_ns: u64,
-    /// The depositing robot (set by the publisher or client from its `attach` id).
+    /// The depositing robot (set by the publisher or client from its `attach` id); a tick
+    /// applies its deposits ordered by robot, `u32::MAX` (scripted deposits) first.
     pub robot_id: u32,
     /// Channel index.
     pub channel: u32,

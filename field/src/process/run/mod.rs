@@ -30,7 +30,7 @@ use stats::TickStats;
 pub struct FieldRunOptions {
     /// The field's name (`F` of its services `pheromone/F/…`).
     pub name: String,
-    /// The field's configuration (already validated or not: the server validates it).
+    /// The field's configuration (validated when the server starts).
     pub config: FieldConfig,
     /// Tick once per clock message of this simulated world (lockstep) instead of on wall time.
     pub clock: Option<String>,
