@@ -21,11 +21,11 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, Throughput};
-use field::deposit::{prepare, DepositLimits};
-use field::{
+use pheromone_field::deposit::{prepare, DepositLimits};
+use pheromone_field::{
     ChannelSpec, DepositMsg, Evaporation, FieldConfig, FrameView, GridGeometry, SamplePose, Stepper,
 };
-use field::{Deposit, Kernel};
+use pheromone_field::{Deposit, Kernel};
 
 const CELL_SIZE_M: f32 = 0.05;
 const TICK_HZ: f32 = 50.0;

@@ -4,18 +4,18 @@
 
 use std::time::Duration;
 
-use field::shm::{create_node, DepositPublisher};
-use field::DepositMsg;
-use field::{Deposit, Kernel};
+use pheromone_field::shm::{create_node, DepositPublisher};
+use pheromone_field::DepositMsg;
+use pheromone_field::{Deposit, Kernel};
 
 const FIELD: &str = "main";
 const PERIOD: Duration = Duration::from_millis(200);
 
 fn main() -> anyhow::Result<()> {
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     // A program of its own: Ctrl-C ends the loop below (`node.wait` fails) instead of killing
     // the process before it cleans up.
-    field::shm::handle_termination_requests();
+    pheromone_field::shm::handle_termination_requests();
     let node = create_node(&format!("example-deposit-{}", std::process::id()))?;
     let mut publisher = DepositPublisher::attach_within(&node, FIELD, 1, Duration::from_secs(30))?;
     let mut step = 0u32;

@@ -7,16 +7,16 @@
 
 use std::time::Duration;
 
-use field::shm::{create_node, FieldReader};
+use pheromone_field::shm::{create_node, FieldReader};
 
 const FIELD: &str = "main";
 const POINT_M: (f32, f32) = (12.8, 12.8);
 
 fn main() -> anyhow::Result<()> {
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     // A program of its own: Ctrl-C ends the loop below (`node.wait` fails) instead of killing
     // the process before it cleans up.
-    field::shm::handle_termination_requests();
+    pheromone_field::shm::handle_termination_requests();
     let node = create_node(&format!("example-read-{}", std::process::id()))?;
     let mut reader = FieldReader::attach_within(&node, FIELD, Duration::from_secs(30))?;
     let mut last_print = 0u64;

@@ -22,7 +22,7 @@ case "$profile" in
 esac
 here="$(cd "$(dirname "$0")" && pwd)"
 cd "$here/.."
-cargo build -p libpheromone --profile "$profile"
+cargo build -p pheromone-c --profile "$profile"
 target="${CARGO_TARGET_DIR:-target}/$out"
 version=$(sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -n 1)
 major=${version%%.*}
@@ -32,10 +32,10 @@ real="libpheromone.so.$version"
 mkdir -p "$prefix"
 prefix="$(cd "$prefix" && pwd)"
 install -d "$prefix/lib/pkgconfig" "$prefix/lib/cmake/pheromone" "$prefix/include"
-install -m 755 "$target/libpheromone.so" "$prefix/lib/$real"
+install -m 755 "$target/libpheromone_c.so" "$prefix/lib/$real"
 ln -sfn "$real" "$prefix/lib/$soname"
 ln -sfn "$soname" "$prefix/lib/libpheromone.so"
-install -m 644 "$target/libpheromone.a" "$prefix/lib/libpheromone.a"
+install -m 644 "$target/libpheromone_c.a" "$prefix/lib/libpheromone.a"
 install -m 644 "$here/include/pheromone.h" "$here/include/pheromone.hpp" "$prefix/include/"
 sed -e "s|@PREFIX@|$prefix|" -e "s|@VERSION@|$version|" "$here/cmake/pheromone.pc.in" \
     > "$prefix/lib/pkgconfig/pheromone.pc"

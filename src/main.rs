@@ -80,21 +80,21 @@ enum Command {
 fn main() -> ExitCode {
     // This program owns its process: its nodes stop on SIGINT/SIGTERM through iceoryx2's handler
     // (the library's default is to install none, for programs that embed it).
-    field::shm::handle_termination_requests();
+    pheromone_field::shm::handle_termination_requests();
     let cli = Cli::parse();
-    field::shm::set_verbose(cli.verbose);
+    pheromone_field::shm::set_verbose(cli.verbose);
     // The inherited domain is checked as the flag is, before anything starts.
     if cli.iox_domain.is_none() {
-        if let Ok(d) = std::env::var(field::shm::IOX_DOMAIN_ENV) {
+        if let Ok(d) = std::env::var(pheromone_field::shm::IOX_DOMAIN_ENV) {
             if let Err(e) = cmd::check::parse_iox_domain(&d) {
-                eprintln!("error: {}={d}: {e}", field::shm::IOX_DOMAIN_ENV);
+                eprintln!("error: {}={d}: {e}", pheromone_field::shm::IOX_DOMAIN_ENV);
                 return ExitCode::from(2);
             }
         }
     }
     if let Some(d) = &cli.iox_domain {
         // Single-threaded here: every node this process creates reads it (`domain_config`).
-        std::env::set_var(field::shm::IOX_DOMAIN_ENV, d);
+        std::env::set_var(pheromone_field::shm::IOX_DOMAIN_ENV, d);
     }
     let result = match cli.command {
         Command::Sim(a) => cmd::sim::run(*a),

@@ -364,9 +364,9 @@ fn every_role_explains_itself_in_help() {
 /// Names of the iceoryx2 services whose name contains `tag`.
 fn services_named(tag: &str) -> Vec<String> {
     use iceoryx2::prelude::*;
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     let mut names = Vec::new();
-    <field::shm::Svc as iceoryx2::service::Service>::list(
+    <pheromone_field::shm::Svc as iceoryx2::service::Service>::list(
         iceoryx2::config::Config::global_config(),
         |s| {
             let n = s.static_details.name().to_string();

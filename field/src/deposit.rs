@@ -38,12 +38,18 @@ impl Default for DepositLimits {
 /// A validated deposit, with every constant of its kernel computed once.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PreparedDeposit {
+    /// Index of the target channel in the field's channel list (checked in range).
     pub channel: usize,
+    /// The cells the kernel may reach (its cut-off box, clipped to the grid); only these are
+    /// visited.
     pub cells: CellBox,
+    /// x of the deposit's centre in the world frame (m).
     pub x_m: f32,
+    /// y of the deposit's centre in the world frame (m).
     pub y_m: f32,
     /// Squared cut-off radius z_rng² (m²).
     pub range2_m2: f32,
+    /// The kernel and its precomputed constants.
     pub shape: Shape,
 }
 
@@ -51,13 +57,30 @@ pub struct PreparedDeposit {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Shape {
     /// value = gain·exp(−(a·dx² + 2b·dx·dy + c·dy²)) — both M1 kernels take this form.
-    Quadratic { gain: f32, a: f32, b: f32, c: f32 },
+    Quadratic {
+        /// Peak value at the centre: γ (seed 000 eq. 12), signed like the amount.
+        gain: f32,
+        /// dx² coefficient of the quadratic form (1/m²).
+        a: f32,
+        /// Half the dx·dy coefficient of the quadratic form (1/m²).
+        b: f32,
+        /// dy² coefficient of the quadratic form (1/m²).
+        c: f32,
+    },
     /// Seed 001 eq. 3 / seed 004: Δ = (1 − s·ξprev)·s·ρt·exp(−d²/λ²), s = sign of the amount.
-    Saturating { rho: f32, inv_lambda2: f32 },
+    Saturating {
+        /// ρt, the signed deposit strength, in [−1, 1].
+        rho: f32,
+        /// 1/λ² (1/m²), λ the kernel's width (the message's `sigma_m`); capped at `f32::MAX`.
+        inv_lambda2: f32,
+    },
     /// Seed 002 eq. 1: amount·μ(d), μ = 1 to `plateau_m`, falling linearly to 0 over `slope_m`.
     ZShape {
+        /// Value added on the plateau (Q, signed).
         amount: f32,
+        /// Radius of the full-value plateau c (m, ≥ 0).
         plateau_m: f32,
+        /// Width σ of the linear fall-off beyond the plateau (m, ≥ 0).
         slope_m: f32,
     },
 }
@@ -65,8 +88,9 @@ pub enum Shape {
 /// The 2×2 position covariance, its eigen-decomposition and the γ of seed 000 eq. 12.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ErrorEllipse {
-    /// Largest and smallest eigenvalue (variances, m²), λ1 ≥ λ2 ≥ 0.
+    /// Largest eigenvalue λ1 (variance along the major axis, m²), λ1 ≥ λ2.
     pub lambda1: f32,
+    /// Smallest eigenvalue λ2 (variance along the minor axis, m²), clamped to ≥ 0.
     pub lambda2: f32,
     /// Unit eigenvector of λ1 (the major axis).
     pub major: (f32, f32),

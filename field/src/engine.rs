@@ -23,14 +23,19 @@ pub const MAX_FRAME_BYTES: u64 = 4 << 30;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FieldConfig {
+    /// Grid width in cells (default 512; see [`GridGeometry::width`]).
     #[serde(default = "defaults::width")]
     pub width: u32,
+    /// Grid height in cells (default 512).
     #[serde(default = "defaults::width")]
     pub height: u32,
+    /// Side of a square cell (m, default 0.05).
     #[serde(default = "defaults::cell_size_m")]
     pub cell_size_m: f32,
+    /// World x of the grid's lower-left corner (m, default 0).
     #[serde(default)]
     pub origin_x_m: f32,
+    /// World y of the grid's lower-left corner (m, default 0).
     #[serde(default)]
     pub origin_y_m: f32,
     /// Ticks per second; dt = 1 / tick_hz.
@@ -45,8 +50,11 @@ pub struct FieldConfig {
     /// Deposits the field buffers between two ticks; a publisher whose deposit does not fit is told.
     #[serde(default = "defaults::deposit_buffer")]
     pub deposit_buffer: usize,
+    /// Limits on what a single deposit may ask for (TOML table `[limits]`).
     #[serde(default)]
     pub limits: DepositLimits,
+    /// The channels, in plane order (1 to 64, unique names; TOML `[[channel]]`). Default: one
+    /// channel `trail` with the seed 000 ambient model.
     #[serde(default = "defaults::channels", rename = "channel")]
     pub channels: Vec<ChannelSpec>,
 }
@@ -102,6 +110,7 @@ impl Default for FieldConfig {
 }
 
 impl FieldConfig {
+    /// The grid these settings describe.
     pub fn geometry(&self) -> GridGeometry {
         GridGeometry {
             width: self.width,
@@ -112,6 +121,7 @@ impl FieldConfig {
         }
     }
 
+    /// The regular tick period (s): `1 / tick_hz`.
     pub fn dt_s(&self) -> f32 {
         1.0 / self.tick_hz
     }
@@ -121,6 +131,7 @@ impl FieldConfig {
         self.channels.len() * self.geometry().cells()
     }
 
+    /// Size of one frame's cells in bytes (4 per cell, header not included).
     pub fn frame_bytes(&self) -> u64 {
         self.frame_len() as u64 * 4
     }
@@ -205,15 +216,19 @@ impl FieldConfig {
 /// Cumulative deposit counters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct DepositCounters {
+    /// Deposits applied to a frame.
     pub applied: u64,
+    /// Deposits refused, indexed by `RejectReason as usize`.
     pub rejected: [u64; REJECT_REASONS],
 }
 
 impl DepositCounters {
+    /// Deposits refused, all reasons together.
     pub fn rejected_total(&self) -> u64 {
         self.rejected.iter().sum()
     }
 
+    /// Counts one refusal for `reason`.
     pub fn count(&mut self, reason: RejectReason) {
         self.rejected[reason as usize] += 1;
     }
@@ -222,6 +237,7 @@ impl DepositCounters {
 /// What one tick did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TickReport {
+    /// Deposits the tick applied.
     pub deposits_applied: u32,
     /// Sum of the increments the deposits added (cells × value).
     pub mass_added: f64,
@@ -251,6 +267,7 @@ pub struct Stepper {
     applied: Vec<DepositMsg>,
     /// The last step: field time before it (s), its `dt_s` and its `dt_time_s`.
     last_step: (f64, f32, f64),
+    /// Deposits applied and refused since the field started (or resumed).
     pub counters: DepositCounters,
     /// Field time of the last computed frame (s).
     pub sim_time_s: f64,
@@ -259,6 +276,8 @@ pub struct Stepper {
 }
 
 impl Stepper {
+    /// A stepper for `config` at sequence 0 and field time 0, on one thread; fails if the
+    /// configuration does not validate ([`FieldConfig::validate`]).
     pub fn new(config: FieldConfig) -> Result<Self, ConfigError> {
         config.validate()?;
         let pending = Vec::with_capacity(config.deposit_buffer);
@@ -276,6 +295,7 @@ impl Stepper {
         })
     }
 
+    /// The configuration the stepper was made with.
     pub fn config(&self) -> &FieldConfig {
         &self.config
     }
@@ -300,6 +320,7 @@ impl Stepper {
         self.threads
     }
 
+    /// The grid of the configuration.
     pub fn geometry(&self) -> &GridGeometry {
         &self.geometry
     }
@@ -509,12 +530,14 @@ impl Stepper {
 /// single-process simulator and benchmarks; the shared-memory field runs the same `Stepper`.
 #[derive(Debug, Clone)]
 pub struct OwnedField {
+    /// The engine: configuration, pending deposits, counters and clock.
     pub stepper: Stepper,
     current: Vec<f32>,
     spare: Vec<f32>,
 }
 
 impl OwnedField {
+    /// A field of `config` with every cell 0; fails if the configuration does not validate.
     pub fn new(config: FieldConfig) -> Result<Self, ConfigError> {
         let stepper = Stepper::new(config)?;
         let len = stepper.config().frame_len();
@@ -546,20 +569,24 @@ impl OwnedField {
         Ok(f)
     }
 
+    /// Validates a deposit and queues it for the next tick (see [`Stepper::offer`]).
     pub fn offer(&mut self, msg: &DepositMsg) -> Result<(), Rejection> {
         self.stepper.offer(msg)
     }
 
+    /// Advances one tick period: evaporation and diffusion, then the queued deposits.
     pub fn tick(&mut self) -> TickReport {
         let report = self.stepper.step(&self.current, &mut self.spare);
         std::mem::swap(&mut self.current, &mut self.spare);
         report
     }
 
+    /// The current frame's cells, all planes (`channel, y, x`).
     pub fn cells(&self) -> &[f32] {
         &self.current
     }
 
+    /// The current frame as a [`FrameView`], for sampling.
     pub fn view(&self) -> FrameView<'_> {
         FrameView::new(
             *self.stepper.geometry(),

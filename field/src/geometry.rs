@@ -11,19 +11,28 @@ use crate::error::ConfigError;
 /// Largest width or height accepted, in cells (a 65536² single-channel grid is 16 GiB).
 pub const MAX_SIDE_CELLS: u32 = 65_536;
 
+/// The grid of a field: its size in cells, the side of a (square) cell and where its corner
+/// sits in the world frame. Every plane of every channel uses it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GridGeometry {
+    /// Cells along x (1 to [`MAX_SIDE_CELLS`]).
     pub width: u32,
+    /// Cells along y (1 to [`MAX_SIDE_CELLS`]).
     pub height: u32,
+    /// Side h of a square cell (m, finite and > 0).
     pub cell_size_m: f32,
+    /// World x of the grid's lower-left corner, the left edge of column 0 (m, default 0).
     #[serde(default)]
     pub origin_x_m: f32,
+    /// World y of the grid's lower-left corner, the lower edge of row 0 (m, default 0).
     #[serde(default)]
     pub origin_y_m: f32,
 }
 
 impl GridGeometry {
+    /// A `width × height` grid of `cell_size_m` cells with its corner at the world origin;
+    /// fails as [`GridGeometry::validate`] does.
     pub fn new(width: u32, height: u32, cell_size_m: f32) -> Result<Self, ConfigError> {
         let g = Self {
             width,
@@ -36,6 +45,8 @@ impl GridGeometry {
         Ok(g)
     }
 
+    /// The same grid with its lower-left corner moved to (`origin_x_m`, `origin_y_m`) (m);
+    /// fails if the origin is not finite.
     pub fn with_origin(mut self, origin_x_m: f32, origin_y_m: f32) -> Result<Self, ConfigError> {
         self.origin_x_m = origin_x_m;
         self.origin_y_m = origin_y_m;
@@ -43,6 +54,8 @@ impl GridGeometry {
         Ok(self)
     }
 
+    /// Checks the sizes (1 to [`MAX_SIDE_CELLS`] cells per side), that the cell size is finite
+    /// and > 0 and that the origin is finite; the error names the first setting that fails.
     pub fn validate(&self) -> Result<(), ConfigError> {
         for (name, v) in [("width", self.width), ("height", self.height)] {
             if v == 0 || v > MAX_SIDE_CELLS {
@@ -76,10 +89,12 @@ impl GridGeometry {
         self.width as usize * self.height as usize
     }
 
+    /// Extent of the grid along x (m): `width · cell_size_m`.
     pub fn width_m(&self) -> f32 {
         self.width as f32 * self.cell_size_m
     }
 
+    /// Extent of the grid along y (m): `height · cell_size_m`.
     pub fn height_m(&self) -> f32 {
         self.height as f32 * self.cell_size_m
     }
@@ -140,13 +155,18 @@ impl GridGeometry {
 /// An inclusive rectangle of cells.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CellBox {
+    /// First column (inclusive), ≤ `x1`.
     pub x0: u32,
+    /// First row (inclusive), ≤ `y1`.
     pub y0: u32,
+    /// Last column (inclusive).
     pub x1: u32,
+    /// Last row (inclusive).
     pub y1: u32,
 }
 
 impl CellBox {
+    /// Number of cells in the box.
     pub fn cells(&self) -> usize {
         (self.x1 - self.x0 + 1) as usize * (self.y1 - self.y0 + 1) as usize
     }

@@ -21,6 +21,8 @@ pub enum KernelKind {
 }
 
 impl KernelKind {
+    /// The kernel whose wire code (as in [`DepositMsg::kernel`]) is `code`; `None` for an
+    /// unknown code.
     pub fn from_code(code: u32) -> Option<Self> {
         Some(match code {
             0 => KernelKind::Ellipse,
@@ -31,6 +33,7 @@ impl KernelKind {
         })
     }
 
+    /// The kernel's name in configuration and on the command line (parsed back by `FromStr`).
     pub fn name(self) -> &'static str {
         match self {
             KernelKind::Ellipse => "ellipse",
@@ -68,6 +71,8 @@ impl std::str::FromStr for KernelKind {
 pub struct DepositMsg {
     /// Monotonic stamp (ns, CLOCK_MONOTONIC) when the deposit was made.
     pub stamp_ns: u64,
+    /// The depositing robot (set by the publisher or client from its `attach` id); a tick
+    /// applies its deposits ordered by robot, `u32::MAX` (scripted deposits) first.
     pub robot_id: u32,
     /// Channel index.
     pub channel: u32,
@@ -75,12 +80,15 @@ pub struct DepositMsg {
     pub kernel: u32,
     /// Centre of the deposit, world metres.
     pub x_m: f32,
+    /// y of the deposit's centre, world metres.
     pub y_m: f32,
     /// τ (ellipse, paper), ρt (saturating) or Q (z-shape); negative = anti-pheromone.
     pub amount: f32,
-    /// Position covariance Σxy (m²), for ellipse and paper.
+    /// Position covariance Σxy (m²), for ellipse and paper: the x variance.
     pub cov_xx: f32,
+    /// The x–y covariance of Σxy (m²); Σxy must be positive semi-definite.
     pub cov_xy: f32,
+    /// The y variance of Σxy (m²).
     pub cov_yy: f32,
     /// Cut-off radius z_rng (m), for ellipse, paper and saturating.
     pub range_m: f32,
@@ -88,8 +96,9 @@ pub struct DepositMsg {
     pub gamma_max: f32,
     /// λ (m), for saturating.
     pub sigma_m: f32,
-    /// c and σ (m), for z-shape.
+    /// c and σ (m), for z-shape: radius of the full-value plateau.
     pub plateau_m: f32,
+    /// σ (m), for z-shape: width of the linear fall-off beyond the plateau.
     pub slope_m: f32,
 }
 
@@ -134,9 +143,13 @@ crate::wire_type!(DepositReceipt, "DepositReceipt", size = 16, align = 8);
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct FrameHeader {
+    /// [`LAYOUT_VERSION`] of the field that wrote the frame.
     pub layout_version: u32,
+    /// Channel planes in the frame.
     pub channels: u32,
+    /// Grid width in cells (see [`GridGeometry`](crate::geometry::GridGeometry)).
     pub width: u32,
+    /// Grid height in cells.
     pub height: u32,
     /// Frame number, +1 per tick.
     pub sequence: u64,
@@ -144,8 +157,11 @@ pub struct FrameHeader {
     pub stamp_ns: u64,
     /// Field time at this frame (s).
     pub sim_time_s: f64,
+    /// Side of a square cell (m).
     pub cell_size_m: f32,
+    /// World x of the grid's lower-left corner (m).
     pub origin_x_m: f32,
+    /// World y of the grid's lower-left corner (m).
     pub origin_y_m: f32,
     /// The regular tick period (s), part of the field's configuration. A field that publishes
     /// on deposit also publishes frames between ticks, each stepped by the real elapsed time:
@@ -153,11 +169,13 @@ pub struct FrameHeader {
     pub dt_s: f32,
     /// Compute time of the tick that produced this frame (ns).
     pub tick_compute_ns: u64,
+    /// Deposits applied so far.
     pub deposits_applied: u64,
     /// Rejected deposits, indexed by `RejectReason as usize`.
     pub deposits_rejected: [u64; REJECT_REASONS],
     /// Deposits this frame added (this tick only).
     pub deposits_this_tick: u32,
+    /// Reserved for a later layout; 0.
     pub _reserved: u32,
 }
 
@@ -170,10 +188,12 @@ crate::wire_type!(
 );
 
 impl FrameHeader {
+    /// Deposits refused so far, all reasons together.
     pub fn deposits_rejected_total(&self) -> u64 {
         self.deposits_rejected.iter().sum()
     }
 
+    /// The grid the frame's planes are laid out on.
     pub fn geometry(&self) -> crate::geometry::GridGeometry {
         crate::geometry::GridGeometry {
             width: self.width,
@@ -189,6 +209,7 @@ impl FrameHeader {
         self.channels as usize * self.width as usize * self.height as usize
     }
 
+    /// Whether the frame has no cells (no channels, or an empty grid).
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -203,6 +224,7 @@ pub struct MirrorState {
     /// 1 while the mirror has no live inputs from its origin (none for `--stale-after-s`, or
     /// none applied since its last keyframe); 0 while it follows the origin.
     pub stale: u32,
+    /// Reserved for a later layout; 0.
     pub _reserved: u32,
     /// CLOCK_MONOTONIC (ns) when the newest inputs came from the origin; 0 before any.
     pub last_inputs_ns: u64,
@@ -245,12 +267,17 @@ crate::wire_type!(FieldTiming, "FieldTiming", size = 48, align = 8);
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C)]
 pub struct ClockMsg {
+    /// CLOCK_MONOTONIC (ns) when the tick was sent.
     pub stamp_ns: u64,
+    /// The world step this tick starts (0, 1, …); with `finished`, the number of steps run.
     pub step: u64,
+    /// Simulation time at the start of the step (s).
     pub sim_time_s: f64,
+    /// Length of a simulation step (s).
     pub dt_s: f64,
     /// 1 when the simulation has ended and listeners should stop.
     pub finished: u32,
+    /// Padding for the `#[repr(C)]` layout; 0.
     pub _pad: u32,
 }
 
@@ -276,6 +303,7 @@ pub struct InputsHeader {
     pub dt_time_s: f64,
     /// Cumulative counters after the tick (the frame header's).
     pub deposits_applied: u64,
+    /// Cumulative refused deposits after the tick, all reasons together.
     pub deposits_rejected_total: u64,
     /// The step's dt (s, f32) as the evaporation and diffusion used it.
     pub dt_s: f32,

@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::ambient::{self, BandScratch, Output};
+pub use crate::ambient::{band_rows, BAND_ROWS_MIN};
 use crate::error::ConfigError;
 pub use crate::plan::PlanePlan;
 pub use crate::simd::Dispatch;
@@ -19,6 +20,7 @@ pub enum Evaporation {
     None,
     /// Plain exponential decay: P' = P·e^(−K·dt).
     Exponential {
+        /// Decay rate K (1/s, ≥ 0).
         #[serde(alias = "decay_per_sec")]
         decay_per_s: f32,
     },
@@ -26,18 +28,27 @@ pub enum Evaporation {
     /// P' = P·e^(−K·dt) + (1 − e^(−K·dt))·min(P, α·Pa), Pa = mean over the square window of
     /// half-width `radius_m` centred on the cell (clipped at the grid's edge).
     Ambient {
+        /// Decay rate K (1/s, ≥ 0).
         #[serde(alias = "decay_per_sec")]
         decay_per_s: f32,
+        /// α, the fraction of the ambient mean Pa below which a cell stops decaying, in [0, 1]
+        /// (default 0.5).
         #[serde(default = "default_alpha")]
         alpha: f32,
+        /// Half-width of the ambient window (m, ≥ 0); rounded to whole cells.
         radius_m: f32,
     },
     /// Seed 001 eqs. 6–7 / seed 004 eqs. 3–6: ξ' = ξ − ρ·ξ per tick; deposits saturate at ±1.
-    Saturating { rho_per_tick: f32 },
+    Saturating {
+        /// ρ, the fraction of each cell lost per regular tick, in [0, 1].
+        rho_per_tick: f32,
+    },
     /// Seed 002 counter (MODELS.md M3 reading): every whole `tau_s` of field time each cell
     /// loses `quantum`, never crossing zero.
     Quantum {
+        /// Amount each cell loses per period (≥ 0).
         quantum: f32,
+        /// Period τ of field time between losses (s, > 0).
         #[serde(alias = "tau_secs")]
         tau_s: f32,
     },
@@ -60,7 +71,9 @@ impl Default for Evaporation {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ChannelSpec {
+    /// The channel's name, by which deposits, readers and configuration address it.
     pub name: String,
+    /// How the channel loses pheromone between ticks (default: exponential decay).
     #[serde(default)]
     pub evaporation: Evaporation,
     /// Isotropic diffusion coefficient D (m²/s), explicit 5-point stencil, zero-flux edges.
@@ -73,6 +86,7 @@ pub struct ChannelSpec {
 }
 
 impl ChannelSpec {
+    /// An unsigned channel `name` with the given model and no diffusion.
     pub fn new(name: &str, evaporation: Evaporation) -> Self {
         Self {
             name: name.to_string(),

@@ -28,6 +28,7 @@ pub enum RejectReason {
 pub const REJECT_REASONS: usize = 7;
 
 impl RejectReason {
+    /// Every reason, in discriminant order (the order of the frame header's counters).
     pub const ALL: [RejectReason; REJECT_REASONS] = [
         RejectReason::NonFinite,
         RejectReason::NotPsd,
@@ -55,7 +56,9 @@ impl RejectReason {
 /// A refused deposit: the reason and what was wrong, naming the field and value.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Rejection {
+    /// Which rule the deposit broke; counted in the frame header under its code.
     pub reason: RejectReason,
+    /// Human-readable specifics: the offending message field and value, and the limit.
     pub detail: String,
 }
 

@@ -10,7 +10,7 @@ use crate::geometry::GridGeometry;
 /// see its example); any buffer of the right length is one too:
 ///
 /// ```
-/// use field::{FrameView, GridGeometry, SamplePose};
+/// use pheromone_field::{FrameView, GridGeometry, SamplePose};
 ///
 /// // 4 × 4 cells of 0.5 m, one channel; cell (2, 1), centred at (1.25 m, 0.75 m), holds 1.
 /// let geometry = GridGeometry::new(4, 4, 0.5).unwrap();
@@ -29,20 +29,27 @@ use crate::geometry::GridGeometry;
 /// ```
 #[derive(Debug, Clone, Copy)]
 pub struct FrameView<'a> {
+    /// The grid every plane is laid out on.
     pub geometry: GridGeometry,
+    /// Number of channel planes in `cells`.
     pub channels: usize,
+    /// All planes, channel after channel, each row-major: `channels · geometry.cells()` values.
     pub cells: &'a [f32],
 }
 
 /// A planar pose: position (m) and heading θ (rad, counter-clockwise from +x).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SamplePose {
+    /// x position in the world frame (m).
     pub x_m: f32,
+    /// y position in the world frame (m).
     pub y_m: f32,
+    /// Heading (rad, counter-clockwise from +x).
     pub theta_rad: f32,
 }
 
 impl SamplePose {
+    /// A pose from its coordinates (m, m, rad).
     pub fn new(x_m: f32, y_m: f32, theta_rad: f32) -> Self {
         Self {
             x_m,
@@ -53,6 +60,11 @@ impl SamplePose {
 }
 
 impl<'a> FrameView<'a> {
+    /// A view of `cells` as `channels` planes of `geometry`.
+    ///
+    /// # Panics
+    ///
+    /// If `cells.len()` is not `channels · geometry.cells()`.
     pub fn new(geometry: GridGeometry, channels: usize, cells: &'a [f32]) -> Self {
         assert_eq!(
             cells.len(),

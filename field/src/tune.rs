@@ -3,10 +3,16 @@
 /// Why a tuning question has no answer.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TuneError {
+    /// An input is not finite, or outside the range where the closed form has a solution (a
+    /// non-positive time or rate, or levels in the wrong order relative to each other and to the
+    /// ambient level).
     #[error("{name} = {value}: {reason}")]
     Impossible {
+        /// The input at fault, as the tools name it (`p0`, `ptm`, `tm`, `k`, `level`, `pa`).
         name: &'static str,
+        /// Its value.
         value: f64,
+        /// The condition it breaks.
         reason: String,
     },
 }

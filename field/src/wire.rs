@@ -4,8 +4,8 @@
 //! on one of them cannot share the service).
 //!
 //! The wire types themselves live beside the code that gives them meaning — the field's in
-//! [`crate::messages`] and [`crate::lockstep`], the robots' in `messages`, the graph's
-//! in `graph::shm` — and each is declared with [`wire_type!`](crate::wire_type),
+//! [`crate::messages`] and [`crate::process::lockstep`], the robots' in `messages`, the graph's
+//! in `pheromone_graph::shm` — and each is declared with [`wire_type!`](crate::wire_type),
 //! which names it `pheromone::<Name>/v<LAYOUT_VERSION>` and pins its size and alignment at
 //! compile time: a change to a wire type does not build until its size is restated here, and the
 //! layout version bumped below. A client built with another layout is then refused by iceoryx2
@@ -127,12 +127,14 @@ pub fn type_name_of<T: ZeroCopySend + ?Sized>() -> &'static str {
     unsafe { <T as ZeroCopySend>::type_name() }
 }
 
-// ---- links (`crate::link`) -----------------------------------------------------------------
+// ---- links (`crate::process::link`) -----------------------------------------------------------------
 
-/// Limits every side of a link ([`crate::link`]) agrees on (they are part of the service's identity).
+/// Limits every side of a link ([`crate::process::link`]) agrees on (they are part of the service's identity).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LinkOptions {
+    /// Most senders the service admits at once.
     pub max_publishers: usize,
+    /// Most receivers the service admits at once.
     pub max_subscribers: usize,
     /// Messages a subscriber buffers; with `keep_latest` the oldest is overwritten when full.
     pub buffer: usize,
@@ -153,8 +155,14 @@ impl Default for LinkOptions {
 /// Service names of one field.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct FieldServices {
+    /// The frames (`[f32]` + [`FrameHeader`](crate::messages::FrameHeader)), field → readers:
+    /// `pheromone/F/frame`.
     pub frame: String,
+    /// The event the field notifies after publishing each frame, which wakes readers:
+    /// `pheromone/F/frame-ready`.
     pub frame_ready: String,
+    /// Fire-and-forget deposits ([`DepositMsg`](crate::messages::DepositMsg)), depositors →
+    /// field: `pheromone/F/deposit`.
     pub deposit: String,
     /// Deposits that want an answer (request-response, [`crate::messages::DepositReceipt`]).
     pub deposit_confirm: String,
@@ -293,20 +301,29 @@ pub const ROBOT_LINK: LinkOptions = LinkOptions {
 /// simulations (or test runs) on one host never share a service.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RobotServices {
+    /// Odometry and landmark observations (`SensorMsg`, world → localizer, depositor):
+    /// `sim/W/r<ID>/sensors`.
     pub sensors: String,
+    /// The true pose (`TruthMsg`, world → observers): `sim/W/r<ID>/truth`.
     pub truth: String,
+    /// The pose estimate (`PoseMsg`, localizer → depositor, follower): `pheromone/W/r<ID>/pose`.
     pub pose: String,
+    /// Motion commands (`CmdMsg`, follower → world): `pheromone/W/r<ID>/cmd`.
     pub cmd: String,
+    /// Follower status (`FollowerStatusMsg`, follower → observers): `pheromone/W/r<ID>/status`.
     pub status: String,
-    /// Seed 004's range scan and rendezvous measurement (world → observer), when the scenario
-    /// maps.
+    /// Seed 004's range scan (`ScanMsg`, world → observer), when the scenario maps:
+    /// `sim/W/r<ID>/scan`.
     pub scan: String,
+    /// Seed 004's rendezvous measurement (`RendezvousMsg`, world → observer), when the
+    /// scenario maps: `sim/W/r<ID>/rendezvous`.
     pub rendezvous: String,
     /// Seed 000's laser range scan (world → localizer), when the world has a laser.
     pub laser: String,
 }
 
 impl RobotServices {
+    /// The names of robot `robot` in world `world` (not checked).
     pub fn new(world: &str, robot: u32) -> Self {
         Self {
             sensors: format!("sim/{world}/r{robot}/sensors"),
@@ -381,7 +398,7 @@ mod tests {
             type_name_of::<DepositMsg>(),
             type_name_of::<FrameHeader>(),
             type_name_of::<ClockMsg>(),
-            type_name_of::<crate::lockstep::StepAck>(),
+            type_name_of::<crate::process::lockstep::StepAck>(),
         ] {
             assert!(name.starts_with("pheromone::"), "{name}");
             assert!(name.ends_with(&v), "{name} does not end with {v}");

@@ -1,5 +1,5 @@
-//! The fast ambient pass (four rows' prefix sums at once, `field::ambient`) against the
-//! reference pass (one row at a time), within the bound `field::ambient` proves.
+//! The fast ambient pass (four rows' prefix sums at once, `pheromone_field::ambient`) against the
+//! reference pass (one row at a time), within the bound `pheromone_field::ambient` proves.
 //!
 //! Both passes sum the same terms in different orders. Each window sum is within
 //! `E = (2·W + n_v)·u·S` of the exact one (u = 2⁻⁵³, W the width, `n_v = 2r + 1 + 2B` with B
@@ -10,8 +10,10 @@
 //! `P' = P − (1 − e)·(P − min(P, α·Pa))` moves by at most `(1 − e)·α` times that plus a few
 //! ulps of `P` for its own roundings.
 
-use field::ambient::band_rows;
-use field::models::{ambient_mean_plane_with, step_plane_with, Dispatch, PlanePlan, Scratch};
+use pheromone_field::models::band_rows;
+use pheromone_field::models::{
+    ambient_mean_plane_with, step_plane_with, Dispatch, PlanePlan, Scratch,
+};
 use proptest::collection::vec;
 use proptest::prelude::*;
 

@@ -14,11 +14,11 @@
 
 use std::cell::RefCell;
 
-use field::deposit::{RejectReason, REJECT_REASONS};
-use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, OwnedField};
+use pheromone_field::deposit::{RejectReason, REJECT_REASONS};
+use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, OwnedField};
+use pheromone_testkit::toml_fuzz;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
-use testkit::toml_fuzz;
 
 /// Deposits offered per case: 16 ticks of 256.
 const DEPOSITS_PER_CASE: usize = 4096;
@@ -454,13 +454,13 @@ fn mutated_config_files_are_refused_with_a_reason_never_a_panic() {
 /// non-finite cell.
 #[test]
 fn wild_deposits_through_shared_memory_are_accounted_in_the_frame_header() {
-    use field::shm::{create_node, DepositPublisher, FieldReader, FieldServer};
+    use pheromone_field::shm::{create_node, DepositPublisher, FieldReader, FieldServer};
     use std::time::Duration;
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     let name = format!(
         "fuzz-{}-{}",
         std::process::id(),
-        field::shm::now_ns() % 1_000_000_007
+        pheromone_field::shm::now_ns() % 1_000_000_007
     );
     let node = create_node(&name).unwrap();
     let cfg = FieldConfig {

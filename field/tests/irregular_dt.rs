@@ -4,8 +4,8 @@
 //! closed forms of the evaporation models must hold whatever the steps, and a step longer than
 //! the tick period is clamped to it.
 
-use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, Stepper};
-use field::{Deposit, Kernel};
+use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, Stepper};
+use pheromone_field::{Deposit, Kernel};
 
 fn config(evaporation: Evaporation, tick_hz: f32) -> FieldConfig {
     FieldConfig {

@@ -5,11 +5,13 @@
 //! brute-force one, deposits add exactly what they claim, and no input ever puts a NaN in a frame.
 
 use approx::assert_relative_eq;
-use field::deposit::{prepare, DepositLimits, REJECT_REASONS};
-use field::models::{ambient_mean_brute, ambient_mean_plane, CELL_LIMIT};
-use field::tune::time_to_threshold_s;
-use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, GridGeometry, OwnedField, Stepper};
-use field::{Deposit, Kernel};
+use pheromone_field::deposit::{prepare, DepositLimits, REJECT_REASONS};
+use pheromone_field::models::{ambient_mean_brute, ambient_mean_plane, CELL_LIMIT};
+use pheromone_field::tune::time_to_threshold_s;
+use pheromone_field::{
+    ChannelSpec, DepositMsg, Evaporation, FieldConfig, GridGeometry, OwnedField, Stepper,
+};
+use pheromone_field::{Deposit, Kernel};
 use proptest::collection::vec;
 use proptest::prelude::*;
 
@@ -778,10 +780,12 @@ fn quantum_counts_whole_seconds_at_50_hz() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The banded, dispatched ambient pass (field::ambient, field::simd) and threads.
+// The banded, dispatched ambient pass (pheromone_field::ambient, pheromone_field::simd) and threads.
 
-use field::ambient::{band_rows, BAND_ROWS_MIN};
-use field::models::{ambient_mean_plane_with, step_plane_with, Dispatch, PlanePlan, Scratch};
+use pheromone_field::models::{
+    ambient_mean_plane_with, step_plane_with, Dispatch, PlanePlan, Scratch,
+};
+use pheromone_field::models::{band_rows, BAND_ROWS_MIN};
 
 /// Planes taller than one band, so band restarts are exercised.
 fn tall_plane() -> impl Strategy<Value = (usize, usize, Vec<f32>)> {
@@ -799,7 +803,7 @@ fn dispatches() -> Vec<Dispatch> {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
 
-    /// Over several bands, the fast mean equals brute force within the bound of `field::ambient`
+    /// Over several bands, the fast mean equals brute force within the bound of `pheromone_field::ambient`
     /// (far below 1e-6 relative here, plus a floor for cancellation against the largest cell),
     /// never NaN nor negative, and the AVX2 kernels and any thread count give the same bits as
     /// the portable kernels on one thread.
@@ -911,7 +915,7 @@ proptest! {
 #[test]
 fn set_threads_refuses_zero_and_absurd_counts() {
     let mut s = Stepper::new(FieldConfig::default()).unwrap();
-    for bad in [0usize, field::engine::MAX_THREADS + 1, usize::MAX] {
+    for bad in [0usize, pheromone_field::engine::MAX_THREADS + 1, usize::MAX] {
         let e = s.set_threads(bad).unwrap_err().to_string();
         assert!(e.contains("threads") && e.contains(&bad.to_string()), "{e}");
     }

@@ -3,8 +3,8 @@
 //! A mirror replays the origin's applied deposits (`Stepper::applied` → `Stepper::replay`) and
 //! computes bit-identical frames, whatever order the deposits arrived in at the origin.
 
-use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, Stepper};
-use field::{Deposit, Kernel};
+use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, Stepper};
+use pheromone_field::{Deposit, Kernel};
 
 fn config() -> FieldConfig {
     FieldConfig {

@@ -2,13 +2,13 @@
 
 use std::time::Duration;
 
-use field::shm::{
+use pheromone_field::shm::{
     create_node, AttachError, DepositPublisher, FieldReader, FieldServer, StartError,
 };
-use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
-use field::{Deposit, Kernel};
+use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig};
+use pheromone_field::{Deposit, Kernel};
 
-use testkit::unique;
+use pheromone_testkit::unique;
 
 fn small_config(evaporation: Evaporation) -> FieldConfig {
     FieldConfig {
@@ -22,7 +22,7 @@ fn small_config(evaporation: Evaporation) -> FieldConfig {
 
 #[test]
 fn deposit_arrives_in_a_frame_and_evaporates() {
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     let name = unique("inproc");
     let node = create_node(&name).unwrap();
     let mut server = FieldServer::start(
@@ -74,7 +74,7 @@ fn deposit_arrives_in_a_frame_and_evaporates() {
 
 #[test]
 fn bad_deposits_are_counted_in_the_header_and_never_reach_the_grid() {
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     let name = unique("bad");
     let node = create_node(&name).unwrap();
     let mut server =
@@ -125,12 +125,15 @@ fn bad_deposits_are_counted_in_the_header_and_never_reach_the_grid() {
     let (h, view) = server.latest().unwrap();
     assert_eq!(h.deposits_rejected_total(), 3);
     assert_eq!(
-        h.deposits_rejected[field::RejectReason::NonFinite as usize],
+        h.deposits_rejected[pheromone_field::RejectReason::NonFinite as usize],
         1
     );
-    assert_eq!(h.deposits_rejected[field::RejectReason::NotPsd as usize], 1);
     assert_eq!(
-        h.deposits_rejected[field::RejectReason::UnknownChannel as usize],
+        h.deposits_rejected[pheromone_field::RejectReason::NotPsd as usize],
+        1
+    );
+    assert_eq!(
+        h.deposits_rejected[pheromone_field::RejectReason::UnknownChannel as usize],
         1
     );
     assert_eq!(view.total(0), 0.0);
@@ -138,7 +141,7 @@ fn bad_deposits_are_counted_in_the_header_and_never_reach_the_grid() {
 
 #[test]
 fn a_reader_without_a_field_gets_a_clear_error() {
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     let name = unique("nofield");
     let node = create_node(&name).unwrap();
     let err = FieldReader::attach(&node, &name).err().unwrap();
@@ -148,7 +151,7 @@ fn a_reader_without_a_field_gets_a_clear_error() {
 
 #[test]
 fn a_second_field_with_the_same_name_is_refused() {
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     let name = unique("twice");
     let node = create_node(&name).unwrap();
     let _first = FieldServer::start(&node, &name, small_config(Evaporation::None), None).unwrap();
@@ -162,10 +165,10 @@ fn a_second_field_with_the_same_name_is_refused() {
 /// type name of another layout.
 #[derive(Debug, Clone, Copy)]
 #[repr(C)]
-struct OtherLayoutDeposit(field::DepositMsg);
+struct OtherLayoutDeposit(pheromone_field::DepositMsg);
 
 fn other_layout_name(name: &str) -> &'static str {
-    let v = field::wire::LAYOUT_VERSION + 1;
+    let v = pheromone_field::wire::LAYOUT_VERSION + 1;
     Box::leak(format!("pheromone::{name}/v{v}").into_boxed_str())
 }
 
@@ -182,7 +185,7 @@ unsafe impl iceoryx2::prelude::ZeroCopySend for OtherLayoutDeposit {
 #[test]
 fn a_client_built_with_another_layout_is_refused_by_a_running_field() {
     use iceoryx2::prelude::*;
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     let name = unique("layout-new");
     let node = create_node(&name).unwrap();
     let _field = FieldServer::start(&node, &name, small_config(Evaporation::None), None).unwrap();
@@ -206,7 +209,7 @@ fn a_client_built_with_another_layout_is_refused_by_a_running_field() {
 #[test]
 fn a_client_with_another_message_layout_gets_a_clear_error() {
     use iceoryx2::prelude::*;
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     let name = unique("layout");
     let node = create_node(&name).unwrap();
     // A field of the next layout created the deposit service.
@@ -220,7 +223,7 @@ fn a_client_with_another_message_layout_gets_a_clear_error() {
     assert!(matches!(err, AttachError::Layout { .. }), "{err}");
     assert!(
         err.to_string()
-            .contains(field::wire_type_name!("DepositMsg")),
+            .contains(pheromone_field::wire_type_name!("DepositMsg")),
         "{err}"
     );
 }
@@ -248,7 +251,7 @@ fn a_node_directory_left_by_a_killed_process_is_removed_and_a_live_ones_kept() {
     // A pid above the kernel's limit (4194304) belongs to no process.
     let gone = orphan(base, 99_999_999);
     let alive = orphan(base + 1, std::process::id());
-    field::shm::cleanup_dead_nodes_of(&config);
+    pheromone_field::shm::cleanup_dead_nodes_of(&config);
     let (gone_left, alive_left) = (gone.exists(), alive.exists());
     std::fs::remove_dir_all(&alive).unwrap();
     assert!(!gone_left, "the dead process's node directory is removed");
@@ -262,8 +265,8 @@ fn a_node_directory_left_by_a_killed_process_is_removed_and_a_live_ones_kept() {
 /// timeout when none comes.
 #[test]
 fn every_wait_policy_sees_the_next_frame_and_honours_its_timeout() {
-    use field::shm::WaitPolicy;
-    field::shm::set_verbose(false);
+    use pheromone_field::shm::WaitPolicy;
+    pheromone_field::shm::set_verbose(false);
     let name = unique("waitpolicy");
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let (started_tx, started_rx) = std::sync::mpsc::channel();
@@ -328,7 +331,7 @@ fn every_wait_policy_sees_the_next_frame_and_honours_its_timeout() {
 /// error that names the value.
 #[test]
 fn wait_policies_parse_from_their_names_and_refuse_anything_else() {
-    use field::shm::WaitPolicy;
+    use pheromone_field::shm::WaitPolicy;
     for (text, policy) in [
         ("event", WaitPolicy::Event),
         ("busy-poll", WaitPolicy::BusyPoll),
@@ -359,7 +362,7 @@ fn wait_policies_parse_from_their_names_and_refuse_anything_else() {
 #[test]
 fn a_listener_wait_shorter_than_a_microsecond_does_not_block() {
     use iceoryx2::prelude::*;
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     let name = unique("subus");
     let (done_tx, done) = std::sync::mpsc::channel();
     let waiter = std::thread::spawn(move || {
@@ -371,7 +374,8 @@ fn a_listener_wait_shorter_than_a_microsecond_does_not_block() {
             .unwrap();
         let listener = service.listener_builder().create().unwrap();
         for ns in [0, 1, 500, 999] {
-            let n = field::shm::listener_timed_wait(&listener, Duration::from_nanos(ns)).unwrap();
+            let n = pheromone_field::shm::listener_timed_wait(&listener, Duration::from_nanos(ns))
+                .unwrap();
             assert_eq!(n, 0, "{ns} ns");
         }
         done_tx.send(()).unwrap();

@@ -12,11 +12,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
-use field::shm::{
+use nix::sys::signal::{pthread_sigmask, SigSet, SigmaskHow, Signal};
+use pheromone_field::shm::{
     create_node, DepositClient, FieldReader, FieldServer, ReceiveError, SendError, WaitPolicy,
 };
-use field::{ChannelSpec, Deposit, DepositMsg, Evaporation, FieldConfig, Kernel};
-use nix::sys::signal::{pthread_sigmask, SigSet, SigmaskHow, Signal};
+use pheromone_field::{ChannelSpec, Deposit, DepositMsg, Evaporation, FieldConfig, Kernel};
 
 static SEEN: AtomicUsize = AtomicUsize::new(0);
 
@@ -104,10 +104,10 @@ fn config() -> FieldConfig {
 
 fn main() {
     const WAITS: usize = 4;
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     install_handler();
     let before = dispositions();
-    let name = testkit::unique("sig");
+    let name = pheromone_testkit::unique("sig");
 
     // The field: its first frame, then no tick until told to stop.
     let (started_tx, started_rx) = mpsc::channel();

@@ -19,7 +19,7 @@
 
 /**
  * The layout version of the field's shared-memory types this library speaks
- * (`field::wire::LAYOUT_VERSION`). Pass it in `PheromoneAttachOptions::layout_version`: a program
+ * (`pheromone_field::wire::LAYOUT_VERSION`). Pass it in `PheromoneAttachOptions::layout_version`: a program
  * compiled against another `pheromone.h` is refused at attach, and a field of another layout
  * refuses this library.
  */
@@ -250,7 +250,7 @@ typedef struct {
 } PheromoneEllipseParams;
 
 /**
- * How `pheromone_wait_frame` waits (Rust's `field::shm::WaitPolicy`).
+ * How `pheromone_wait_frame` waits (Rust's `pheromone_field::shm::WaitPolicy`).
  */
 typedef struct {
   /**

@@ -2,9 +2,9 @@
 //! handle's reader holds, so sampling rebuilds the `FrameView` without asking iceoryx2 again.
 #![allow(unsafe_code)]
 
-use field::sample::FrameView;
-use field::shm::Frame;
-use field::GridGeometry;
+use pheromone_field::sample::FrameView;
+use pheromone_field::shm::Frame;
+use pheromone_field::GridGeometry;
 
 /// A borrowed frame's view, valid while the reader keeps the sample (the handle does not update
 /// its reader while a frame is borrowed, and drops this before it does).

@@ -1,11 +1,11 @@
 //! Seed 000's uncertainty-aware deposit from a pose estimate, from C: the C parameters checked
-//! ([`check_params`]), then the field's one pose → deposit rule (`field::kernel::pose`:
-//! validation, tolerances, the ellipse), the same the Rust depositor (`roles::depositor`, mode
+//! ([`check_params`]), then the field's one pose → deposit rule (`pheromone_field::kernel::pose`:
+//! validation, tolerances, the ellipse), the same the Rust depositor (`pheromone_roles::depositor`, mode
 //! `uncertainty-aware`) and the ROS 2 pose path use. A refusal is `BadArgument` with the rule's
 //! message, naming the entry and its value.
 
-use field::kernel::pose::{EllipseRule, PoseEstimate, PoseRejection};
-use field::{DepositMsg, KernelKind};
+use pheromone_field::kernel::pose::{EllipseRule, PoseEstimate, PoseRejection};
+use pheromone_field::{DepositMsg, KernelKind};
 
 use crate::error::{bail, Failure};
 use crate::types::{PheromoneEllipseParams, PheromonePoseEstimate, PheromoneStatus};

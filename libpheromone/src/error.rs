@@ -4,7 +4,7 @@
 use std::cell::RefCell;
 use std::fmt::{self, Write};
 
-use field::shm::{AttachError, NameError, ReceiveError, SendError};
+use pheromone_field::shm::{AttachError, NameError, ReceiveError, SendError};
 
 use crate::types::{PheromoneStatus, PHEROMONE_ERROR_CAPACITY};
 

@@ -5,12 +5,12 @@
 
 use std::time::Duration;
 
-use field::messages::FrameHeader;
-use field::sample::FrameView;
-use field::sample::SamplePose;
-use field::shm::{DepositPublisher, FieldReader, Receipt, Svc, WaitPolicy};
-use field::{DepositMsg, KernelKind};
 use iceoryx2::prelude::*;
+use pheromone_field::messages::FrameHeader;
+use pheromone_field::sample::FrameView;
+use pheromone_field::sample::SamplePose;
+use pheromone_field::shm::{DepositPublisher, FieldReader, Receipt, Svc, WaitPolicy};
+use pheromone_field::{DepositMsg, KernelKind};
 
 use crate::borrowed::Borrowed;
 use crate::error::{bail, fail, from_shm, Failure};
@@ -55,7 +55,7 @@ impl PheromoneField {
                 o.c.layout_version
             );
         }
-        field::shm::check_name(name).map_err(|e| from_shm("field name", &e))?;
+        pheromone_field::shm::check_name(name).map_err(|e| from_shm("field name", &e))?;
         let domain = effective_domain(o.iox_domain);
         let node = create_node(domain.as_deref())?;
         let place = match &domain {
@@ -247,8 +247,10 @@ impl PheromoneField {
             );
         }
         let done = match (values, gradients) {
-            (Some(v), Some(g)) => field::shm::values_and_gradients_into(&f, c, points, v, g),
-            (Some(v), None) => field::shm::values_into(&f, c, points, v),
+            (Some(v), Some(g)) => {
+                pheromone_field::shm::values_and_gradients_into(&f, c, points, v, g)
+            }
+            (Some(v), None) => pheromone_field::shm::values_into(&f, c, points, v),
             (None, Some(g)) => {
                 for (p, g) in points.iter().zip(g.iter_mut()) {
                     let (gx, gy) = f.gradient(c, p[0], p[1]);
@@ -391,7 +393,7 @@ impl PheromoneField {
 fn effective_domain(option: Option<&str>) -> Option<String> {
     match option {
         Some(d) => Some(d.to_string()),
-        None => std::env::var(field::shm::IOX_DOMAIN_ENV).ok(),
+        None => std::env::var(pheromone_field::shm::IOX_DOMAIN_ENV).ok(),
     }
     .filter(|d| !d.is_empty())
 }
@@ -433,8 +435,8 @@ fn wait_alive(
 fn create_node(domain: Option<&str>) -> Result<Node<Svc>, Failure> {
     use std::sync::atomic::{AtomicU32, Ordering};
     static SERIAL: AtomicU32 = AtomicU32::new(0);
-    let config =
-        field::shm::domain_config_of(domain).map_err(|e| from_shm("options.iox_domain", &e))?;
+    let config = pheromone_field::shm::domain_config_of(domain)
+        .map_err(|e| from_shm("options.iox_domain", &e))?;
     let name = format!(
         "c-{}-{}",
         std::process::id(),
@@ -453,7 +455,7 @@ fn create_node(domain: Option<&str>) -> Result<Node<Svc>, Failure> {
                 format_args!("cannot create the iceoryx2 node '{name}': {e:?}"),
             )
         })?;
-    field::shm::cleanup_dead_nodes(&node);
+    pheromone_field::shm::cleanup_dead_nodes(&node);
     Ok(node)
 }
 
@@ -509,11 +511,11 @@ fn sample_pose(p: PheromonePose) -> Result<SamplePose, Failure> {
 }
 
 /// The covariance of an ellipse or paper deposit must be positive semi-definite: the field's own
-/// check (`field::deposit::cov_xy_is_psd`, by which the field refuses it as `not_psd`), made here
+/// check (`pheromone_field::deposit::cov_xy_is_psd`, by which the field refuses it as `not_psd`), made here
 /// so that `pheromone_deposit`, which gets no receipt, refuses it to the caller instead of the
 /// field dropping it.
 fn check_psd(xx: f32, xy: f32, yy: f32) -> Result<(), Failure> {
-    if !field::deposit::cov_xy_is_psd(xx, xy, yy) {
+    if !pheromone_field::deposit::cov_xy_is_psd(xx, xy, yy) {
         bail!(
             BAD,
             "deposit covariance [[{xx}, {xy}], [{xy}, {yy}]] (cov_xx, cov_xy, cov_yy): not \
@@ -550,7 +552,7 @@ pub fn deposit_msg(d: &PheromoneDeposit) -> Result<DepositMsg, Failure> {
     if matches!(kernel, KernelKind::Ellipse | KernelKind::Paper) {
         check_psd(d.cov_xx, d.cov_xy, d.cov_yy)?;
     }
-    let params = field::KernelParams {
+    let params = pheromone_field::KernelParams {
         cov_m2: [d.cov_xx, d.cov_xy, d.cov_yy],
         range_m: d.range_m,
         gamma_max: d.gamma_max,
@@ -558,11 +560,11 @@ pub fn deposit_msg(d: &PheromoneDeposit) -> Result<DepositMsg, Failure> {
         plateau_m: d.plateau_m,
         slope_m: d.slope_m,
     };
-    let deposit = field::Deposit {
+    let deposit = pheromone_field::Deposit {
         channel: d.channel,
         x_m: d.x_m,
         y_m: d.y_m,
-        kernel: field::Kernel::from_params(kernel, d.amount, &params),
+        kernel: pheromone_field::Kernel::from_params(kernel, d.amount, &params),
     };
     Ok(deposit.into())
 }

@@ -3,13 +3,13 @@
 //! library, never Rust enums (a C caller can pass any number).
 
 /// The layout version of the field's shared-memory types this library speaks
-/// (`field::wire::LAYOUT_VERSION`). Pass it in `PheromoneAttachOptions::layout_version`: a program
+/// (`pheromone_field::wire::LAYOUT_VERSION`). Pass it in `PheromoneAttachOptions::layout_version`: a program
 /// compiled against another `pheromone.h` is refused at attach, and a field of another layout
 /// refuses this library.
 pub const PHEROMONE_LAYOUT_VERSION: u32 = 1;
 const _: () = assert!(
-    PHEROMONE_LAYOUT_VERSION == field::wire::LAYOUT_VERSION,
-    "PHEROMONE_LAYOUT_VERSION must follow field::wire::LAYOUT_VERSION"
+    PHEROMONE_LAYOUT_VERSION == pheromone_field::wire::LAYOUT_VERSION,
+    "PHEROMONE_LAYOUT_VERSION must follow pheromone_field::wire::LAYOUT_VERSION"
 );
 
 /// The version of this library and of the `pheromone.h` it ships with (the crate's version;
@@ -162,7 +162,7 @@ pub const PHEROMONE_WAIT_SPIN: u32 = 1;
 /// `PheromoneWaitPolicy::kind`: poll until the frame comes (one core at 100 %).
 pub const PHEROMONE_WAIT_BUSY_POLL: u32 = 2;
 
-/// How `pheromone_wait_frame` waits (Rust's `field::shm::WaitPolicy`).
+/// How `pheromone_wait_frame` waits (Rust's `pheromone_field::shm::WaitPolicy`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PheromoneWaitPolicy {
@@ -315,7 +315,7 @@ pub struct PheromoneEllipseParams {
 
 impl Default for PheromoneEllipseParams {
     fn default() -> Self {
-        // roles::depositor::DepositorConfig::default().
+        // pheromone_roles::depositor::DepositorConfig::default().
         Self {
             channel: 0,
             anti_pheromone: 0,

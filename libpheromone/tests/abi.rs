@@ -8,10 +8,10 @@ use std::cell::Cell;
 use std::ffi::{CStr, CString};
 use std::time::Duration;
 
-use field::shm::{create_node, DepositPublisher, FieldReader, FieldServer};
-use field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, SamplePose};
-use field::{Deposit, Kernel};
-use pheromone::*;
+use pheromone_c::*;
+use pheromone_field::shm::{create_node, DepositPublisher, FieldReader, FieldServer};
+use pheromone_field::{ChannelSpec, DepositMsg, Evaporation, FieldConfig, SamplePose};
+use pheromone_field::{Deposit, Kernel};
 
 /// Counts this thread's allocations while `COUNTING` is on.
 struct Counting;
@@ -137,7 +137,7 @@ fn empty_view() -> PheromoneFrameView {
 
 /// The C sampling calls on the borrowed frame of `h` against `FrameView`'s, at 20 poses and on
 /// both channels, bit for bit.
-fn compare_sampling(h: *mut PheromoneField, view: &field::FrameView<'_>) {
+fn compare_sampling(h: *mut PheromoneField, view: &pheromone_field::FrameView<'_>) {
     for i in 0..20 {
         let (x, y, theta) = (
             -1.0 + 0.37 * i as f32,
@@ -184,7 +184,7 @@ fn compare_sampling(h: *mut PheromoneField, view: &field::FrameView<'_>) {
 /// `pheromone_sample_many` on the borrowed frame of `h`: values only, gradients only, both, on
 /// both channels, equal bit for bit to `FrameView`'s point by point (points inside, on the
 /// border and outside the grid); a non-finite point and two NULL outputs refused by name.
-fn compare_sample_many(h: *mut PheromoneField, view: &field::FrameView<'_>) {
+fn compare_sample_many(h: *mut PheromoneField, view: &pheromone_field::FrameView<'_>) {
     let xy: Vec<f32> = (0..200)
         .flat_map(|i| [-1.5 + 0.041 * i as f32, -0.3 + 0.019 * i as f32])
         .collect();
@@ -348,7 +348,7 @@ fn hot_path_allocations(h: *mut PheromoneField, server: &mut FieldServer) {
 
 #[test]
 fn sampling_gives_frame_views_numbers_and_the_hot_calls_do_not_allocate() {
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     let name = unique("capi");
     let node = create_node(&name).unwrap();
     let mut server = FieldServer::start(&node, &name, config(), None).unwrap();
@@ -409,7 +409,7 @@ fn sampling_gives_frame_views_numbers_and_the_hot_calls_do_not_allocate() {
 /// A frame header of the next layout: the same bytes, another iceoryx2 type name.
 #[derive(Debug, Clone, Copy, Default)]
 #[repr(C)]
-struct OtherLayoutHeader(field::FrameHeader);
+struct OtherLayoutHeader(pheromone_field::FrameHeader);
 
 // SAFETY: a `#[repr(C)]` wrapper of a wire type (plain numbers); only its type name differs.
 unsafe impl iceoryx2::prelude::ZeroCopySend for OtherLayoutHeader {
@@ -421,7 +421,7 @@ unsafe impl iceoryx2::prelude::ZeroCopySend for OtherLayoutHeader {
 #[test]
 fn a_missing_field_bad_arguments_and_a_field_of_another_layout_are_refused_by_name() {
     use iceoryx2::prelude::*;
-    field::shm::set_verbose(false);
+    pheromone_field::shm::set_verbose(false);
     let missing = unique("capi-missing");
     let (status, msg) = attach(&missing).unwrap_err();
     assert_eq!(status, PheromoneStatus::NoField);

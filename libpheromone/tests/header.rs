@@ -24,7 +24,7 @@ fn the_committed_header_equals_the_generated_one() {
     assert!(
         committed == generated,
         "{} differs from what cbindgen generates from libpheromone/src: regenerate it with \
-         PHEROMONE_BLESS_HEADER=1 cargo test -p libpheromone --test header, and commit it",
+         PHEROMONE_BLESS_HEADER=1 cargo test -p pheromone-c --test header, and commit it",
         path.display()
     );
 }

@@ -66,7 +66,7 @@ pub fn parse_iox_domain(s: &str) -> Result<String, String> {
     if s.is_empty() {
         return Ok(String::new());
     }
-    field::shm::check_name(s)
+    pheromone_field::shm::check_name(s)
         .map(|()| s.to_owned())
         .map_err(|e| e.to_string())
 }

@@ -4,9 +4,11 @@
 use std::time::Duration;
 
 use clap::Args;
-use field::shm::{create_node, ConfigSubscriber, DepositClient, DepositPublisher, Receipt, Svc};
-use field::{DepositMsg, KernelKind};
 use iceoryx2::prelude::Node;
+use pheromone_field::shm::{
+    create_node, ConfigSubscriber, DepositClient, DepositPublisher, Receipt, Svc,
+};
+use pheromone_field::{DepositMsg, KernelKind};
 
 use super::{bad, seconds, seconds_or_zero};
 
@@ -95,7 +97,7 @@ impl DepositArgs {
         if let Some((flag, v)) = numbers.iter().find(|(_, v)| !v.is_finite()) {
             return Err(bad(format!("{flag} {v}: must be a finite number")));
         }
-        let params = field::KernelParams {
+        let params = pheromone_field::KernelParams {
             cov_m2: [self.cov[0], self.cov[1], self.cov[2]],
             range_m: self.range,
             gamma_max: self.gamma_max,
@@ -103,11 +105,11 @@ impl DepositArgs {
             plateau_m: self.plateau,
             slope_m: self.slope,
         };
-        Ok(DepositMsg::from(field::Deposit {
+        Ok(DepositMsg::from(pheromone_field::Deposit {
             channel: self.channel,
             x_m: self.x,
             y_m: self.y,
-            kernel: field::Kernel::from_params(self.kernel, self.amount, &params),
+            kernel: pheromone_field::Kernel::from_params(self.kernel, self.amount, &params),
         }))
     }
 
@@ -177,13 +179,13 @@ fn refusal_detail(
     node: &Node<Svc>,
     config: Option<&ConfigSubscriber>,
     msg: &DepositMsg,
-    reason: field::RejectReason,
+    reason: pheromone_field::RejectReason,
 ) -> String {
     let deadline = std::time::Instant::now() + Duration::from_secs(1);
     while let Some(sub) = config {
         if let Ok(Some(c)) = sub.latest() {
             let g = c.geometry();
-            if let Err(r) = field::deposit::prepare(msg, &g, &c.channels, &c.limits) {
+            if let Err(r) = pheromone_field::deposit::prepare(msg, &g, &c.channels, &c.limits) {
                 return r.to_string();
             }
             break;

@@ -161,7 +161,7 @@ fn export_ros_map(
 
 /// The map's scale from `--min` / `--max` (defaults from the channel), checked.
 fn map_scale(a: &ExportArgs, cells: &[f32]) -> anyhow::Result<Option<(f32, f32)>> {
-    let (lo, hi) = report::export::ros_map::default_scale(cells);
+    let (lo, hi) = pheromone_report::export::ros_map::default_scale(cells);
     let scale = match (a.min, a.max) {
         (None, None) => None,
         (min, max) => Some((min.unwrap_or(lo), max.unwrap_or(hi))),

@@ -4,10 +4,10 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::{Args, ValueEnum};
-use field::checkpoint;
-use field::run::{run_field, FieldRunOptions};
-use field::shm::{create_node, frame_pool};
-use field::{Evaporation, FieldConfig};
+use pheromone_field::process::checkpoint;
+use pheromone_field::process::run::{run_field, FieldRunOptions};
+use pheromone_field::shm::{create_node, frame_pool};
+use pheromone_field::{Evaporation, FieldConfig};
 
 use super::{bad, bad_from, bad_in, read_toml};
 
@@ -302,7 +302,7 @@ pub fn run(a: FieldArgs) -> anyhow::Result<()> {
         ));
     }
     let config = config_from_args(&a)?;
-    field::shm::check_name(&a.name).map_err(bad_from)?;
+    pheromone_field::shm::check_name(&a.name).map_err(bad_from)?;
     if a.print_config {
         print!("{}", toml::to_string_pretty(&config)?);
         return Ok(());
@@ -365,7 +365,10 @@ fn run_options(a: &FieldArgs, config: FieldConfig) -> anyhow::Result<FieldRunOpt
 }
 
 /// Prints the `--json` summary; a field stopped by SIGINT or SIGTERM then exits 130 / 143.
-fn finish(a: &FieldArgs, summary: Option<field::run::FieldRunSummary>) -> anyhow::Result<()> {
+fn finish(
+    a: &FieldArgs,
+    summary: Option<pheromone_field::process::run::FieldRunSummary>,
+) -> anyhow::Result<()> {
     if a.json {
         match summary {
             Some(s) => println!("{}", serde_json::to_string(&s)?),

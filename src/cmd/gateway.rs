@@ -169,7 +169,7 @@ pub fn run(a: GatewayArgs) -> anyhow::Result<()> {
     let attach_timeout = Duration::from_secs_f64(a.attach_timeout);
     let mut gateway = match Gateway::attach(&node, &a.field, config, attach_timeout) {
         Ok(g) => g,
-        Err(e @ gateway::GatewayError::Config { .. }) => return Err(bad(e.to_string())),
+        Err(e @ pheromone_gateway::GatewayError::Config { .. }) => return Err(bad(e.to_string())),
         Err(e) => return Err(e.into()),
     };
     eprintln!(

@@ -7,15 +7,15 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
-use field::shm::create_node;
-use graph::agent::{GraphStrategy, RegionsScenario, Until, BUILTIN_REGIONS};
-use graph::compare::{compare, comparison_text, Comparison};
-use graph::localize::{DepositWeight, Localization, LocalizeConfig};
-use graph::processes::{run_graph_robot, run_graph_writer, RobotOptions, WriterOptions};
-use graph::run::{simulate_with, RunReport};
-use graph::tables::tables_text;
+use pheromone_field::shm::create_node;
+use pheromone_graph::agent::{GraphStrategy, RegionsScenario, Until, BUILTIN_REGIONS};
+use pheromone_graph::compare::{compare, comparison_text, Comparison};
+use pheromone_graph::localize::{DepositWeight, Localization, LocalizeConfig};
+use pheromone_graph::processes::{run_graph_robot, run_graph_writer, RobotOptions, WriterOptions};
+use pheromone_graph::run::{simulate_with, RunReport};
+use pheromone_graph::tables::tables_text;
+use pheromone_sim::metrics::RunMode;
 use serde::Serialize;
-use sim::metrics::RunMode;
 
 use super::sim_args::SimArgs;
 use super::{bad, bad_from, bad_in};
@@ -57,7 +57,7 @@ pub fn load_regions(name: &str) -> anyhow::Result<RegionsScenario> {
 fn localization(scenario: &RegionsScenario, deposit: DepositWeight) -> Localization<'static> {
     Localization {
         config: scenario.localize_config(deposit),
-        make_filter: &roles::localizer::graph_filter::make_graph_ekf,
+        make_filter: &pheromone_roles::localizer::graph_filter::make_graph_ekf,
     }
 }
 
@@ -108,7 +108,7 @@ fn secs(what: &str, v: f64) -> anyhow::Result<Duration> {
 }
 
 pub fn run_writer(a: GraphArgs) -> anyhow::Result<()> {
-    field::shm::check_name(&a.name).map_err(bad_from)?;
+    pheromone_field::shm::check_name(&a.name).map_err(bad_from)?;
     let scenario = load_regions(&a.scenario)?;
     let o = WriterOptions {
         name: a.name.clone(),
@@ -165,14 +165,14 @@ pub struct GraphRobotArgs {
     /// only the free areas'. Its link deposits are its constant −1 (`constant`) or −1 × ρ_t of
     /// its covariance (`rho`); its summary reports the landmark comparisons and step times.
     #[arg(long, value_name = "constant|rho")]
-    pub localize: Option<graph::localize::DepositWeight>,
+    pub localize: Option<pheromone_graph::localize::DepositWeight>,
     /// Print this robot's summary as one JSON object on stdout.
     #[arg(long)]
     pub json: bool,
 }
 
 pub fn run_robot(a: GraphRobotArgs) -> anyhow::Result<()> {
-    field::shm::check_name(&a.name).map_err(bad_from)?;
+    pheromone_field::shm::check_name(&a.name).map_err(bad_from)?;
     if a.robot == 0 || a.robot as usize > a.robots {
         return Err(bad(format!(
             "--robot {}: ids run from 1 to --robots ({})",
@@ -282,11 +282,11 @@ fn robot_counts(a: &SimArgs, scenario: &RegionsScenario) -> anyhow::Result<Vec<u
     };
     if let Some(&n) = counts
         .iter()
-        .find(|&&n| n == 0 || n > graph::shm::MAX_GRAPH_ROBOTS)
+        .find(|&&n| n == 0 || n > pheromone_graph::shm::MAX_GRAPH_ROBOTS)
     {
         return Err(bad(format!(
             "robots {n}: a regions run takes 1 to {}",
-            graph::shm::MAX_GRAPH_ROBOTS
+            pheromone_graph::shm::MAX_GRAPH_ROBOTS
         )));
     }
     Ok(counts)
@@ -376,7 +376,7 @@ fn write_sim_out(
             r.strategy.name(),
             r.robots
         ));
-        report::write_graph_png(&png, &state, r, dock)?;
+        pheromone_report::write_graph_png(&png, &state, r, dock)?;
     }
     eprintln!(
         "wrote metrics.json, tables.txt and {} picture(s) of the graph to {}",
@@ -394,7 +394,7 @@ fn run_as_processes(
     seed: u64,
     localize: Option<LocalizeConfig>,
 ) -> anyhow::Result<RunReport> {
-    Ok(sim::processes::run_graph_as_processes(
+    Ok(pheromone_sim::processes::run_graph_as_processes(
         &std::env::current_exe()?,
         &a.scenario,
         strategy,

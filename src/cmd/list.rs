@@ -1,8 +1,8 @@
 //! `pheromone list`: the fields on this host, like `iox2 service list` (the work is
-//! `field::shm::survey`).
+//! `pheromone_field::shm::survey`).
 
 use clap::Args;
-use field::shm::{create_node, survey, FieldInfo};
+use pheromone_field::shm::{create_node, survey, FieldInfo};
 
 use super::seconds;
 

@@ -4,7 +4,6 @@
 use std::time::Duration;
 
 use clap::Args;
-use field::shm::{create_node, mirror_info, FieldReader, Frame, Svc};
 use iceoryx2::prelude::Node;
 use report::probe::{follow, last_value, probe_line, wait_for, Level, ProbeError, ProbePoint};
 

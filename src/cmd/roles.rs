@@ -2,12 +2,14 @@
 //! same scenario (a built-in name or a TOML file) and runs its part of it.
 
 use clap::{Args, ValueEnum};
-use field::shm::{create_node, WaitPolicy};
+use pheromone_field::shm::{create_node, WaitPolicy};
+use pheromone_roles::depositor::{DepositMode, DepositorConfig};
+use pheromone_roles::follower::{Follower, FollowerConfig, StrategyKind};
+use pheromone_roles::{
+    run_depositor, run_follower, run_localizer, run_mapper, OwnMap, RoleOptions,
+};
 use pheromone_world::scenario::Scenario;
 use pheromone_world::{run_world, WorldOptions};
-use roles::depositor::{DepositMode, DepositorConfig};
-use roles::follower::{Follower, FollowerConfig, StrategyKind};
-use roles::{run_depositor, run_follower, run_localizer, run_mapper, OwnMap, RoleOptions};
 
 use super::{bad, bad_from, seconds};
 
@@ -54,7 +56,7 @@ pub fn load_scenario(name: &str) -> anyhow::Result<Scenario> {
 /// Checks the names, then applies --rt-priority (as `who`, e.g. "depositor r3").
 fn check_names(c: &Common, who: &str) -> anyhow::Result<()> {
     for n in [&c.world, &c.field] {
-        field::shm::check_name(n).map_err(bad_from)?;
+        pheromone_field::shm::check_name(n).map_err(bad_from)?;
     }
     c.rt.apply(who)
 }
@@ -145,7 +147,7 @@ pub struct LocalizerArgs {
     #[arg(
         long,
         value_name = "XMIN,YMIN,XMAX,YMAX",
-        value_parser = roles::localizer::parse_landmark_region,
+        value_parser = pheromone_roles::localizer::parse_landmark_region,
         allow_hyphen_values = true,
         conflicts_with = "slam"
     )]
@@ -153,20 +155,20 @@ pub struct LocalizerArgs {
     /// The filter: ekf (landmarks, the default), ukf (landmarks, seed 000 eqs. 6–8) or pf
     /// (particle filter with the world's laser). Overrides the scenario's `filter` of the robot.
     #[arg(long, value_name = "ekf|ukf|pf", value_parser = parse_filter, conflicts_with = "slam")]
-    pub filter: Option<roles::localizer::FilterKind>,
+    pub filter: Option<pheromone_roles::localizer::FilterKind>,
     /// Particles of the particle filter (10..=100000). Overrides the scenario's `pf.particles`.
     #[arg(long, value_name = "N", value_parser = parse_particles)]
     pub particles: Option<usize>,
 }
 
 /// `--filter ekf|ukf|pf`.
-pub fn parse_filter(text: &str) -> Result<roles::localizer::FilterKind, String> {
+pub fn parse_filter(text: &str) -> Result<pheromone_roles::localizer::FilterKind, String> {
     text.parse()
 }
 
 /// `--particles N`: an integer in [10, 100000].
 pub fn parse_particles(text: &str) -> Result<usize, String> {
-    roles::localizer::parse_particles(text)
+    pheromone_roles::localizer::parse_particles(text)
 }
 
 pub fn run_localizer_cmd(a: LocalizerArgs) -> anyhow::Result<()> {
@@ -525,7 +527,7 @@ pub fn run_follower_cmd(a: FollowerArgs) -> anyhow::Result<()> {
     };
     // Own-map steering (`[mapping] steer_on`): the robot's map frame, published by its mapper.
     let own_map = scenario.own_map_start(a.robot).map(|start| OwnMap {
-        field: field::wire::map_field(&options.world, a.robot),
+        field: pheromone_field::wire::map_field(&options.world, a.robot),
         start,
     });
     let summary = run_follower(

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::Args;
-use roles::depositor::DepositorConfig;
+use pheromone_roles::depositor::DepositorConfig;
 
 use super::{bad, bad_from};
 
@@ -150,7 +150,7 @@ pub struct Ros2Args {
 }
 
 #[cfg(feature = "zenoh")]
-fn parse_deposit_from(s: &str) -> anyhow::Result<ros2::node::DepositFrom> {
+fn parse_deposit_from(s: &str) -> anyhow::Result<pheromone_ros2::node::DepositFrom> {
     let (topic, id) = match s.split_once('=') {
         Some((t, id)) => {
             let id = id.parse::<u32>().map_err(|e| {
@@ -162,7 +162,7 @@ fn parse_deposit_from(s: &str) -> anyhow::Result<ros2::node::DepositFrom> {
         }
         None => (s, 0),
     };
-    Ok(ros2::node::DepositFrom {
+    Ok(pheromone_ros2::node::DepositFrom {
         topic: topic.to_string(),
         robot_id: id,
     })
@@ -225,7 +225,7 @@ fn ros2_options(a: &Ros2Args) -> anyhow::Result<ros2::node::Ros2Options> {
         namespace: a.namespace.clone(),
         node_name: a.node_name.clone(),
         frame_id: a.frame_id.clone(),
-        distro: ros2::graph::RosDistro::from_name(&a.ros_distro)
+        distro: pheromone_ros2::rmw_zenoh::RosDistro::from_name(&a.ros_distro)
             .ok_or_else(|| bad(format!("--ros-distro {}: unknown", a.ros_distro)))?,
         rate_hz: a.rate_hz,
         session,
@@ -236,7 +236,7 @@ fn ros2_options(a: &Ros2Args) -> anyhow::Result<ros2::node::Ros2Options> {
 }
 
 #[cfg(feature = "zenoh")]
-fn announce(a: &Ros2Args, ros: &ros2::node::Ros2Node) -> anyhow::Result<()> {
+fn announce(a: &Ros2Args, ros: &pheromone_ros2::node::Ros2Node) -> anyhow::Result<()> {
     use std::io::Write;
     eprintln!(
         "ros2 '{}': node {} in {}, publishing {:?}, depositing from {:?}",

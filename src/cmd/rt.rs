@@ -1,6 +1,6 @@
 //! `--rt-priority N [--rt-cpu C] [--rt-best-effort]`: real-time scheduling for the processes
 //! that serve a control loop (the field, the gateway, every robot role), the work of
-//! `field::realtime`.
+//! `pheromone_field::process::realtime`.
 
 use clap::Args;
 
@@ -31,14 +31,16 @@ impl RtArgs {
         let Some(priority) = self.rt_priority else {
             return Ok(());
         };
-        let o = field::realtime::RealtimeOptions {
+        let o = pheromone_field::process::realtime::RealtimeOptions {
             priority,
             cpu: self.rt_cpu,
             best_effort: self.rt_best_effort,
         };
-        let applied = match field::realtime::apply(&o) {
+        let applied = match pheromone_field::process::realtime::apply(&o) {
             Ok(applied) => applied,
-            Err(e @ field::realtime::RealtimeError::Priority(_)) => return Err(bad(e.to_string())),
+            Err(e @ pheromone_field::process::realtime::RealtimeError::Priority(_)) => {
+                return Err(bad(e.to_string()))
+            }
             Err(e) => return Err(e.into()),
         };
         for refused in &applied.refused {

@@ -6,6 +6,13 @@
 
 use std::time::Instant;
 
+use pheromone_roles::follower::StrategyKind;
+use pheromone_ros2::record::{McapRecorder, RecordError};
+use pheromone_sim::metrics::{mean_sd, scenario_metrics, welch_t, RunMetrics, RunMode};
+use pheromone_sim::processes::ProcessRunInfo;
+use pheromone_sim::recording::Recording;
+use pheromone_sim::ros_record::{McapTotals, SimMcap};
+use pheromone_sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 use pheromone_world::scenario::{Overrides, Scenario};
 use roles::follower::StrategyKind;
 use ros2::record::{McapRecorder, RecordError};

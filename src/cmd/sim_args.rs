@@ -101,7 +101,7 @@ pub struct SimArgs {
         value_name = "event|spin:US|busy-poll",
         conflicts_with = "single_process"
     )]
-    pub follower_wait: Option<field::shm::WaitPolicy>,
+    pub follower_wait: Option<pheromone_field::shm::WaitPolicy>,
     /// Real-time scheduling for the run's control loops: every child but the view and the ROS 2
     /// bridge (the field, the world, each role and mapper, the gateway) gets `--rt-priority N`
     /// (SCHED_FIFO N and memory locked, docs/field.md). A child the OS refuses fails the run
@@ -145,14 +145,14 @@ pub struct SimArgs {
     /// robot's own local map, merged maps included (needs --merge or --no-merge), or `shared`,
     /// the shared field [default: the scenario's, shared].
     #[arg(long, value_name = "own-map|shared")]
-    pub steer: Option<roles::mapper::SteerOn>,
+    pub steer: Option<pheromone_roles::mapper::SteerOn>,
     /// EKF-SLAM localizers (the map of landmarks is not given to them).
     #[arg(long)]
     pub slam: bool,
     /// Every localizer's filter: ekf (default), ukf, or pf (particle filter; turns the world's
     /// laser of seed 000 Table 1 on).
     #[arg(long, value_name = "ekf|ukf|pf", value_parser = super::roles::parse_filter, conflicts_with = "slam")]
-    pub filter: Option<roles::localizer::FilterKind>,
+    pub filter: Option<pheromone_roles::localizer::FilterKind>,
     /// Particles of every particle filter (10..=100000).
     #[arg(long, value_name = "N", value_parser = super::roles::parse_particles)]
     pub particles: Option<usize>,
@@ -176,7 +176,7 @@ pub struct SimArgs {
     /// Fig. 6). As processes each `graph-robot` owns its localizer; the metrics (all but the
     /// step times) equal --single-process's. Off by default (no localizer).
     #[arg(long, value_name = "constant|rho")]
-    pub localize: Option<graph::localize::DepositWeight>,
+    pub localize: Option<pheromone_graph::localize::DepositWeight>,
     /// Seconds the whole run may take before it is stopped as failed (separate processes).
     #[arg(long, value_parser = super::secs(), default_value_t = 900.0, value_name = "SECS")]
     pub timeout: f64,

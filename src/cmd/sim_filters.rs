@@ -3,6 +3,8 @@
 //! scripted loss, in the mode `sim` would use; one robot's estimation errors, deposits and σ
 //! from each run become `filters.csv`, six charts and `filters.json`.
 
+use pheromone_roles::localizer::FilterKind;
+use pheromone_sim::single::{run_single_process, SingleProcessOptions};
 use pheromone_world::scenario::{Overrides, Scenario};
 use report::filters::{truth_spread_m, Comparison};
 use report::{FilterRun, FilterSummary};
@@ -47,7 +49,7 @@ fn run_with(
     scenario: &Scenario,
     filter: FilterKind,
     robot: u32,
-) -> anyhow::Result<Vec<sim::record::RobotSample>> {
+) -> anyhow::Result<Vec<pheromone_sim::recording::RobotSample>> {
     let mut s = scenario.clone();
     s.apply(&Overrides {
         filter: Some(filter),
@@ -116,7 +118,7 @@ pub fn run(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
         eprintln!("{}", f.line());
     }
     if let Some(dir) = out_dir(a, scenario) {
-        let mut files = report::write_filter_comparison(&dir, robot, &runs)?;
+        let mut files = pheromone_report::write_filter_comparison(&dir, robot, &runs)?;
         let path = dir.join("filters.json");
         std::fs::write(&path, serde_json::to_string_pretty(&out)? + "\n")
             .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;

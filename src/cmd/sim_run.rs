@@ -3,11 +3,13 @@
 
 use std::path::PathBuf;
 
+use pheromone_sim::processes::{
+    run_as_processes, ProcessRunError, ProcessRunInfo, ProcessRunOptions,
+};
+use pheromone_sim::recording::Recording;
+use pheromone_sim::ros_record::SimMcap;
+use pheromone_sim::single::RunSummary;
 use pheromone_world::scenario::Scenario;
-use sim::processes::{run_as_processes, ProcessRunError, ProcessRunInfo, ProcessRunOptions};
-use sim::record::Recording;
-use sim::ros_record::SimMcap;
-use sim::single::RunSummary;
 
 use super::sim_args::SimArgs;
 use super::stop::Stopped;

@@ -1,16 +1,16 @@
-//! `pheromone sweep`: seed 004's grid of experiments (`sim::sweep`) on all cores,
-//! with a progress bar, a summary on stderr and the files of `report::write_sweep`.
+//! `pheromone sweep`: seed 004's grid of experiments (`pheromone_sim::sweep`) on all cores,
+//! with a progress bar, a summary on stderr and the files of `pheromone_report::write_sweep`.
 
 use std::path::PathBuf;
 
 use clap::Args;
-use pheromone_world::scenario::Scenario;
-use roles::follower::StrategyKind;
-use roles::mapper::MergeRule;
-use sim::sweep::{
+use pheromone_roles::follower::StrategyKind;
+use pheromone_roles::mapper::MergeRule;
+use pheromone_sim::sweep::{
     integrations, parse_merge_idle, parse_merge_rules, parse_rc_m, parse_robots, parse_steer,
     parse_strategies, run_sweep, Figure, SweepGrid, SweepResult,
 };
+use pheromone_world::scenario::Scenario;
 
 use super::roles::load_scenario;
 use super::{bad, bad_from};
@@ -186,7 +186,9 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
         Some(n) => n,
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
-    let runs = sim::sweep::plan(&base, &grid).map_err(bad_from)?.len();
+    let runs = pheromone_sim::sweep::plan(&base, &grid)
+        .map_err(bad_from)?
+        .len();
     eprintln!(
         "sweep '{}': {runs} run(s) of {} s on {jobs} thread(s)",
         base.name, grid.duration_s
@@ -204,11 +206,11 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("pheromone-out").join(format!("sweep-{}", base.name)));
-    let paper = sim::paper::seed004()?;
-    eprint!("{}", report::paper_table(&result, &paper));
-    let files = report::write_sweep(&dir, &result, &paper)?;
+    let paper = pheromone_sim::paper::seed004()?;
+    eprint!("{}", pheromone_report::paper_table(&result, &paper));
+    let files = pheromone_report::write_sweep(&dir, &result, &paper)?;
     eprintln!("wrote {} file(s) to {}", files.len(), dir.display());
-    if let [rc_m] = report::rc_values(&result)[..] {
+    if let [rc_m] = pheromone_report::rc_values(&result)[..] {
         eprintln!("no sweep_rc.png: the sweep has one R_C ({rc_m} m); give --rc-m two or more");
     }
     if a.json {
@@ -240,7 +242,7 @@ fn print_summary(r: &SweepResult) {
         );
     }
     for c in &r.comparisons {
-        let t = |x: Option<sim::sweep_stats::TTest>| {
+        let t = |x: Option<pheromone_sim::sweep_stats::TTest>| {
             x.map_or("undefined".to_string(), |x| {
                 format!("{:.2} (df {:.1})", x.t, x.df)
             })

@@ -63,7 +63,7 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
             pa,
             json,
         } => {
-            let k = field::tune::k_per_s(p0, ptm, tm, pa).map_err(bad_from)?;
+            let k = pheromone_field::tune::k_per_s(p0, ptm, tm, pa).map_err(bad_from)?;
             if json {
                 println!(
                     "{}",
@@ -86,7 +86,8 @@ pub fn run(args: TuneArgs) -> anyhow::Result<()> {
                 (None, Some(d)) => d * p0,
                 (None, None) => return Err(bad("give --level or --delta")),
             };
-            let t = field::tune::time_to_threshold_s(p0, k, level, pa).map_err(bad_from)?;
+            let t =
+                pheromone_field::tune::time_to_threshold_s(p0, k, level, pa).map_err(bad_from)?;
             if json {
                 println!(
                     "{}",

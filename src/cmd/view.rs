@@ -1,9 +1,9 @@
 //! `pheromone view`: a live web page of a running field (heat map, robots, statistics).
 
 use clap::Args;
-use field::shm::create_node;
-use view::server::{bind, serve, View, ViewConfig};
-use view::MAX_SIDE_LIMIT;
+use pheromone_field::shm::create_node;
+use pheromone_view::server::{bind, serve, View, ViewConfig};
+use pheromone_view::MAX_SIDE_LIMIT;
 
 use super::bad;
 
@@ -43,7 +43,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             a.max_side
         )));
     }
-    field::shm::check_name(&a.field).map_err(super::bad_from)?;
+    pheromone_field::shm::check_name(&a.field).map_err(super::bad_from)?;
     let walls_m = match &a.scenario {
         Some(name) => scenario_walls(name)?,
         None => Vec::new(),

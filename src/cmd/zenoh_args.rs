@@ -75,8 +75,8 @@ impl ZenohArgs {
 
     /// The bridge library's settings (the files are read when the session opens).
     #[cfg(feature = "zenoh")]
-    pub fn security(&self) -> bridge::Security {
-        bridge::Security {
+    pub fn security(&self) -> pheromone_bridge::Security {
+        pheromone_bridge::Security {
             config_file: self.zenoh_config.clone(),
             tls_root_ca: self.tls_root_ca.clone(),
             tls_cert: self.tls_cert.clone(),

@@ -129,9 +129,9 @@ fn refused_deposits_exit_2_naming_the_value_and_no_wait_still_sends() {
 fn a_sender_killed_while_it_waits_for_its_receipt_is_applied_at_most_once() {
     let name = unique("confirm-kill");
     let f = field(&name, 0.2);
-    let node = field::shm::create_node(&unique("confirm-watch")).unwrap();
+    let node = pheromone_field::shm::create_node(&unique("confirm-watch")).unwrap();
     let watch = eventually(Duration::from_secs(30), "the field's services", || {
-        field::shm::FieldWatch::open(&node, &name).ok()
+        pheromone_field::shm::FieldWatch::open(&node, &name).ok()
     });
     let first = counters(&name)["sequence"].as_u64().unwrap();
     let kills = 3;
@@ -158,7 +158,8 @@ fn a_sender_killed_while_it_waits_for_its_receipt_is_applied_at_most_once() {
     }
     // One more tick: whatever was taken is applied by then.
     let mut reader =
-        field::shm::FieldReader::attach_within(&node, &name, Duration::from_secs(30)).unwrap();
+        pheromone_field::shm::FieldReader::attach_within(&node, &name, Duration::from_secs(30))
+            .unwrap();
     let last = reader
         .wait_until(Duration::from_secs(30), |f| f.header.sequence > first + 1)
         .unwrap();

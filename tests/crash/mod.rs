@@ -22,11 +22,11 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use field::shm::{FieldReader, FieldWatch, Svc};
 use iceoryx2::config::Config;
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
-use supervisor::ChildSpec;
+use pheromone_field::shm::{FieldReader, FieldWatch, Svc};
+use pheromone_supervisor::ChildSpec;
 
 use crate::harness::*;
 
@@ -179,7 +179,7 @@ impl Run {
         loop {
             let (alive, _) = self.nodes();
             if alive.is_empty() {
-                cleaned += field::shm::cleanup_dead_nodes_of(&self.config);
+                cleaned += pheromone_field::shm::cleanup_dead_nodes_of(&self.config);
                 // A process killed while it created its node leaves an entry iceoryx2 lists as
                 // dead but cannot read ("?"), nor remove.
                 cleaned += self.remove_half_created_nodes();
@@ -467,7 +467,7 @@ pub fn interrupt_all(procs: Vec<Proc>) {
 pub fn wait_attached(
     run: &Run,
     status: &FieldWatch,
-    attached: impl Fn(&field::shm::FieldStatus) -> bool,
+    attached: impl Fn(&pheromone_field::shm::FieldStatus) -> bool,
     what: &str,
     timeout: Duration,
     mut supervise: impl FnMut(),
@@ -558,7 +558,7 @@ fn clients_killed_at_any_instant_leave_the_field_ticking_and_attach_again() {
         Role::Reader,
     ];
     let mut procs: Vec<(Role, Proc)> = persistent.iter().map(|&r| (r, spawn(r))).collect();
-    let expected = |s: &field::shm::FieldStatus| s.subscribers == 4 && s.depositors == 2;
+    let expected = |s: &pheromone_field::shm::FieldStatus| s.subscribers == 4 && s.depositors == 2;
     let all_attached = |what: &str| {
         eventually(WAIT, what, || {
             let s = status.status();

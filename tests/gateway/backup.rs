@@ -6,7 +6,7 @@
 
 use std::time::{Duration, Instant};
 
-use gateway::client::{ClientConfig, GatewayClient, Transport, Which};
+use pheromone_gateway::client::{ClientConfig, GatewayClient, Transport, Which};
 
 use super::free_port;
 use crate::harness::*;

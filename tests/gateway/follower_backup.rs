@@ -9,9 +9,9 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use field::shm::{create_node, FieldReader};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
+use pheromone_field::shm::{create_node, FieldReader};
 use pheromone_world::scenario::Scenario;
 use serde_json::Value;
 
@@ -89,9 +89,9 @@ fn primary_goes_away(signal: Signal) {
     );
     // Both gateways serve before the robots start (a robot fails when neither answers).
     for port in [p_port, b_port] {
-        let mut probe = gateway::client::GatewayClient::new(
-            gateway::client::Transport::udp(&format!("127.0.0.1:{port}")).unwrap(),
-            gateway::client::ClientConfig {
+        let mut probe = pheromone_gateway::client::GatewayClient::new(
+            pheromone_gateway::client::Transport::udp(&format!("127.0.0.1:{port}")).unwrap(),
+            pheromone_gateway::client::ClientConfig {
                 client_id: 200,
                 ..Default::default()
             },

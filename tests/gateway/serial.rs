@@ -9,8 +9,8 @@ use std::fs::File;
 use std::io::Write;
 use std::time::{Duration, Instant};
 
-use gateway::client::{ClientConfig, GatewayClient, Transport};
-use gateway_codec::{encoded_len, Message, PirReply, PirRequest};
+use pheromone_gateway::client::{ClientConfig, GatewayClient, Transport};
+use pheromone_gateway_codec::{encoded_len, Message, PirReply, PirRequest};
 
 use crate::harness::*;
 
@@ -23,7 +23,8 @@ fn a_client_on_a_pty_pings_deposits_and_reads_the_deposit_through_a_serial_gatew
     // starts or stops.
     let slave_path = nix::unistd::ttyname(&pty.slave).expect("ttyname");
     let slave_path = slave_path.to_str().expect("a UTF-8 pty path").to_string();
-    gateway::serial::configure(&pty.slave, nix::sys::termios::BaudRate::B9600).expect("raw slave");
+    pheromone_gateway::serial::configure(&pty.slave, nix::sys::termios::BaudRate::B9600)
+        .expect("raw slave");
     let gateway = Proc::spawn(&[
         "gateway",
         "--field",

@@ -270,7 +270,8 @@ fn sim_regions_localize_reports_the_landmark_work() {
     let held = &l["all"]["holding"];
     assert!(held["compared"].as_u64().unwrap() < held["compared_whole_map"].as_u64().unwrap());
     let path = std::env::temp_dir().join(format!("{}.toml", unique("bad-localize")));
-    let text = graph::agent::PAPER_CORRIDOR.to_string() + "\n[localize]\nrho_ref_m = -1.0\n";
+    let text =
+        pheromone_graph::agent::PAPER_CORRIDOR.to_string() + "\n[localize]\nrho_ref_m = -1.0\n";
     std::fs::write(&path, text).unwrap();
     let p = path.display().to_string();
     for mode in [&["--single-process"][..], &[]] {
@@ -301,7 +302,7 @@ fn nodes_named(tag: &str) -> Vec<String> {
     use iceoryx2::node::NodeView;
     use iceoryx2::prelude::*;
     let mut names = Vec::new();
-    Node::<field::shm::Svc>::list(iceoryx2::config::Config::global_config(), |state| {
+    Node::<pheromone_field::shm::Svc>::list(iceoryx2::config::Config::global_config(), |state| {
         let name = |d: &Option<iceoryx2::node::NodeDetails>| {
             d.as_ref().map(|d| d.name().as_str().to_string())
         };

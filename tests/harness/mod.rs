@@ -9,21 +9,21 @@ use std::path::PathBuf;
 use std::process::Output;
 use std::time::{Duration, Instant};
 
-use supervisor::ChildSpec;
+use pheromone_supervisor::ChildSpec;
 
 /// Path of the `pheromone` binary under test.
 pub fn bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_pheromone"))
 }
 
-pub use testkit::{unique, Cmd};
+pub use pheromone_testkit::{unique, Cmd};
 
 /// Runs `pheromone ARGS` to completion.
 pub fn run(args: &[&str]) -> Output {
-    testkit::Cli::new(&bin()).args(args).output()
+    pheromone_testkit::Cli::new(&bin()).args(args).output()
 }
 
-pub use testkit::Proc;
+pub use pheromone_testkit::Proc;
 
 /// `Proc::spawn(args)`: the `pheromone` binary under test, started under the supervisor.
 pub trait SpawnExt {

@@ -108,7 +108,7 @@ fn list_shows_two_fields_with_rates_and_readers_then_one_when_a_field_stops() {
     reader.line();
     let node = run.node("list-test");
     let depositor = eventually(WAIT, "a depositor on lb", || {
-        field::shm::DepositPublisher::attach(&node, "lb", 3).ok()
+        pheromone_field::shm::DepositPublisher::attach(&node, "lb", 3).ok()
     });
     let fields = eventually(WAIT, "list to show both fields", || {
         let f = list(&run);

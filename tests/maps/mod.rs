@@ -106,7 +106,7 @@ fn a_scenario_map_is_relative_to_the_scenario_and_malformed_maps_exit_2_naming_f
     let scenario = dir.join("on-a-map.toml");
     std::fs::write(&scenario, scenario_with_map("maps/rooms.yaml")).unwrap();
     // Run from elsewhere: the map is found beside the scenario.
-    let o = testkit::Cli::new(&bin())
+    let o = pheromone_testkit::Cli::new(&bin())
         .args([
             "sim",
             scenario.to_str().unwrap(),

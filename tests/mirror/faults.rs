@@ -1,5 +1,5 @@
 //! A mirror behind a link with delay, jitter and loss: the test kit's fault-injecting TCP
-//! proxy (`testkit::proxy`) between the mirror and its bridge on loopback. While it lags, the
+//! proxy (`pheromone_testkit::proxy`) between the mirror and its bridge on loopback. While it lags, the
 //! mirror's frame of sequence s is the origin's frame of s; once deposits stop it catches up
 //! bit-identically. A second test measures the mirror's lag and the link's bytes/s over a grid
 //! of delays and losses (the table in docs/mirrors.md).
@@ -10,8 +10,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use bridge::codec;
-use testkit::proxy::{Faults, FaultyProxy};
+use pheromone_bridge::codec;
+use pheromone_testkit::proxy::{Faults, FaultyProxy};
 
 use super::{assert_identical, bridge, deposit, origin_field, CleanDomains, Hosts, ORIGIN};
 use crate::harness::*;

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use field::shm::create_node_in;
+use pheromone_field::shm::create_node_in;
 
 use super::netns::until_mirror;
 use super::{assert_identical, bridge, bridge_on, mirror, origin_field, CleanDomains, Hosts};
@@ -165,7 +165,7 @@ struct Parties {
     field: Proc,
     bridge: super::BridgeProc,
     mirror: Proc,
-    watcher: iceoryx2::node::Node<field::shm::Svc>,
+    watcher: iceoryx2::node::Node<pheromone_field::shm::Svc>,
 }
 
 impl Parties {

@@ -11,9 +11,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use bridge::codec;
-use field::shm::{create_node_in, FieldReader};
-use supervisor::ChildSpec;
+use pheromone_bridge::codec;
+use pheromone_field::shm::{create_node_in, FieldReader};
+use pheromone_supervisor::ChildSpec;
 
 use super::netns::ip;
 use super::{origin_field, CleanDomains, MIRROR, ORIGIN};
@@ -28,7 +28,9 @@ struct CleanExtra;
 impl Drop for CleanExtra {
     fn drop(&mut self) {
         for d in &MIRRORS[1..] {
-            field::shm::cleanup_dead_nodes_of(&field::shm::domain_config_of(Some(d)).unwrap());
+            pheromone_field::shm::cleanup_dead_nodes_of(
+                &pheromone_field::shm::domain_config_of(Some(d)).unwrap(),
+            );
         }
     }
 }
@@ -132,7 +134,7 @@ fn depositor(
 struct Host {
     reader: FieldReader,
     seen: BTreeMap<u64, (u64, u64)>,
-    _node: iceoryx2::node::Node<field::shm::Svc>,
+    _node: iceoryx2::node::Node<pheromone_field::shm::Svc>,
 }
 
 impl Host {

@@ -7,10 +7,10 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use bridge::codec;
-use bridge::zenoh::{self, Wait};
-use field::shm::{create_node_in, FieldReader};
-use supervisor::{ChildId, ChildSpec, Supervisor};
+use pheromone_bridge::codec;
+use pheromone_bridge::zenoh::{self, Wait};
+use pheromone_field::shm::{create_node_in, FieldReader};
+use pheromone_supervisor::{ChildId, ChildSpec, Supervisor};
 
 use super::harness::*;
 
@@ -150,8 +150,8 @@ struct Hosts {
     mirror: FieldReader,
     // Dropped after the readers (declaration order).
     _nodes: (
-        iceoryx2::node::Node<field::shm::Svc>,
-        iceoryx2::node::Node<field::shm::Svc>,
+        iceoryx2::node::Node<pheromone_field::shm::Svc>,
+        iceoryx2::node::Node<pheromone_field::shm::Svc>,
     ),
 }
 
@@ -164,7 +164,9 @@ struct CleanDomains;
 impl Drop for CleanDomains {
     fn drop(&mut self) {
         for d in [ORIGIN, MIRROR] {
-            field::shm::cleanup_dead_nodes_of(&field::shm::domain_config_of(Some(d)).unwrap());
+            pheromone_field::shm::cleanup_dead_nodes_of(
+                &pheromone_field::shm::domain_config_of(Some(d)).unwrap(),
+            );
         }
     }
 }
@@ -194,7 +196,7 @@ impl Hosts {
     fn common(
         &mut self,
         common: usize,
-        pred: impl Fn(&field::shm::Frame<'_>) -> bool,
+        pred: impl Fn(&pheromone_field::shm::Frame<'_>) -> bool,
     ) -> Vec<(u64, u64, u64)> {
         let mut o = BTreeMap::new();
         let mut m = BTreeMap::new();
@@ -240,7 +242,7 @@ fn assert_identical(both: &[(u64, u64, u64)]) {
     }
 }
 
-fn value_at(f: &field::shm::Frame<'_>, x: f32, y: f32) -> f32 {
+fn value_at(f: &pheromone_field::shm::Frame<'_>, x: f32, y: f32) -> f32 {
     f.view.value(0, x, y)
 }
 
@@ -278,7 +280,7 @@ fn mirror_exit(m: Proc) -> serde_json::Value {
 fn until_quiet(r: &mut FieldReader, quiet: Duration) {
     let deadline = Instant::now() + Duration::from_secs(20);
     while r
-        .wait_frame_with(field::shm::WaitPolicy::Event, quiet)
+        .wait_frame_with(pheromone_field::shm::WaitPolicy::Event, quiet)
         .unwrap()
     {
         assert!(
@@ -414,13 +416,14 @@ fn corrupted_lists_and_keyframes_are_rejected_and_counted() {
     assert_identical(&hosts.common(10, |_| true));
     // A third peer puts damaged messages on the mirror's keys.
     let session = zenoh::open(
-        bridge::session_config_as("client", &[], std::slice::from_ref(&bridge.endpoint)).unwrap(),
+        pheromone_bridge::session_config_as("client", &[], std::slice::from_ref(&bridge.endpoint))
+            .unwrap(),
     )
     .wait()
     .unwrap();
-    let keys = bridge::Keys::of(&name);
+    let keys = pheromone_bridge::Keys::of(&name);
     let seq = hosts.origin.frame().unwrap().header.sequence + 1_000_000;
-    let header = field::messages::InputsHeader {
+    let header = pheromone_field::messages::InputsHeader {
         sequence: seq,
         epoch: 1,
         dt_s: 0.02,
@@ -491,7 +494,10 @@ fn list_probe_and_export_see_a_mirror_that_lost_its_origin_and_mark_it_stale() {
     field.wait_exit(Duration::from_secs(20));
     bridge.kill();
     // A killed bridge leaves its record of handed-over batches for a successor; none comes.
-    let _ = std::fs::remove_file(bridge::journal_path(&format!("{ORIGIN}_iox2_"), &name));
+    let _ = std::fs::remove_file(pheromone_bridge::journal_path(
+        &format!("{ORIGIN}_iox2_"),
+        &name,
+    ));
     until_quiet(&mut hosts.mirror, Duration::from_secs(1));
     let last = hosts.mirror.frame().unwrap().header.sequence;
     let stale = listed("0.3");

@@ -8,8 +8,8 @@ use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use field::shm::{create_node_in, mirror_info};
-use supervisor::ChildSpec;
+use pheromone_field::shm::{create_node_in, mirror_info};
+use pheromone_supervisor::ChildSpec;
 
 use super::{assert_identical, deposit, origin_field, CleanDomains, Hosts, MIRROR, ORIGIN};
 use crate::harness::*;
@@ -91,7 +91,11 @@ impl Drop for Link {
 }
 
 /// Waits (at most `timeout`) until the mirror says it is stale (`true`) or live.
-pub(super) fn until_mirror(node: &iceoryx2::node::Node<field::shm::Svc>, name: &str, stale: bool) {
+pub(super) fn until_mirror(
+    node: &iceoryx2::node::Node<pheromone_field::shm::Svc>,
+    name: &str,
+    stale: bool,
+) {
     eventually(
         Duration::from_secs(30),
         if stale {

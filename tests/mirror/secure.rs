@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use bridge::zenoh::Wait;
+use pheromone_bridge::zenoh::Wait;
 
 use super::netns::{Link, ADDR_A};
 use super::{assert_identical, deposit, origin_field, CleanDomains, Hosts, MIRROR, ORIGIN};
@@ -230,7 +230,7 @@ fn a_mirror_over_tls_with_a_password_is_bit_identical_to_its_origin() {
     let first = started.elapsed();
     deposit(ORIGIN, &name, "2.5", "2.5");
     assert_identical(&hosts.common(10, |f| super::value_at(f, 2.5, 2.5) > 0.1));
-    let node = field::shm::create_node_in(&unique("mirtls-watch"), Some(MIRROR)).unwrap();
+    let node = pheromone_field::shm::create_node_in(&unique("mirtls-watch"), Some(MIRROR)).unwrap();
     super::netns::until_mirror(&node, &name, false);
     println!(
         "TLS + password mirror: 10 bit-identical frames {:.2} s after it started",
@@ -452,7 +452,7 @@ fn an_access_control_rule_keeps_a_viewer_mirror_from_depositing() {
     assert_identical(&hosts.common(20, |f| super::value_at(f, 4.5, 1.5) > 0.1));
     // The mirror sends an unanswered batch again after `RESEND_AFTER`: follow the origin (50 Hz)
     // for three of those before asking whether it did (20 frames, 0.4 s, were not always one).
-    let frames_per_resend = (bridge::RESEND_AFTER.as_secs_f64() * 50.0).ceil() as usize;
+    let frames_per_resend = (pheromone_bridge::RESEND_AFTER.as_secs_f64() * 50.0).ceil() as usize;
     assert_identical(&hosts.common(3 * frames_per_resend, |_| true));
     let o = hosts.origin.frame().unwrap();
     assert_eq!(
@@ -508,9 +508,9 @@ fn the_ros2_node_listens_over_tls_and_asks_for_credentials() {
         "--duration",
         "60",
     ];
-    let mut sup = supervisor::Supervisor::new(&bin());
+    let mut sup = pheromone_supervisor::Supervisor::new(&bin());
     let id = sup
-        .spawn(supervisor::ChildSpec::new(
+        .spawn(pheromone_supervisor::ChildSpec::new(
             "ros2",
             None,
             args.iter().map(|a| a.to_string()).collect(),
@@ -523,20 +523,21 @@ fn the_ros2_node_listens_over_tls_and_asks_for_credentials() {
         .trim()
         .to_string();
     assert!(endpoint.starts_with("tls/127.0.0.1:"), "{endpoint}");
-    let security = |password: &str| bridge::Security {
+    let security = |password: &str| pheromone_bridge::Security {
         tls_root_ca: Some(pki.dir.join("ca.pem")),
         user: Some("robot".into()),
         password_file: Some(pki.dir.join(password)),
         ..Default::default()
     };
-    let wrong = bridge::try_connect(&security("wrong.txt"), &endpoint).unwrap_err();
+    let wrong = pheromone_bridge::try_connect(&security("wrong.txt"), &endpoint).unwrap_err();
     assert!(
-        bridge::refusal(&wrong).is_some_and(|w| w.contains("credentials")),
+        pheromone_bridge::refusal(&wrong).is_some_and(|w| w.contains("credentials")),
         "{wrong}"
     );
     let config =
-        bridge::session_config_with(&security("right.txt"), "peer", &[], &[endpoint]).unwrap();
-    let session = bridge::zenoh::open(config).wait().unwrap();
+        pheromone_bridge::session_config_with(&security("right.txt"), "peer", &[], &[endpoint])
+            .unwrap();
+    let session = pheromone_bridge::zenoh::open(config).wait().unwrap();
     let sub = session.declare_subscriber("**").wait().unwrap();
     let sample = sub.recv_timeout(Duration::from_secs(20)).unwrap();
     assert!(
@@ -562,7 +563,7 @@ fn sim_passes_the_security_flags_to_its_ros2_child() {
     let _rm = RemoveDir(dir.clone());
     std::fs::write(dir.join("bad.json5"), "{ this is not json5").unwrap();
     let sim = |extra: &[&str]| {
-        testkit::Cli::new(&bin())
+        pheromone_testkit::Cli::new(&bin())
             .args(["sim", "trail", "--no-out", "--zenoh-config", "bad.json5"])
             .args(extra)
             .current_dir(&dir)

@@ -4,10 +4,10 @@
 //! inputs message is refused, keyframes and downsampled frames round-trip, a corrupted keyframe
 //! fails its checksum.
 
-use bridge::codec::*;
-use field::messages::InputsHeader;
-use field::{Deposit, Kernel};
-use field::{DepositMsg, FrameHeader};
+use pheromone_bridge::codec::*;
+use pheromone_field::messages::InputsHeader;
+use pheromone_field::{Deposit, Kernel};
+use pheromone_field::{DepositMsg, FrameHeader};
 #[test]
 fn every_flipped_byte_is_rejected() {
     let h = InputsHeader {
@@ -44,7 +44,7 @@ fn every_flipped_byte_is_rejected() {
 #[test]
 fn keyframes_and_frames_round_trip() {
     let header = FrameHeader {
-        layout_version: field::wire::LAYOUT_VERSION,
+        layout_version: pheromone_field::wire::LAYOUT_VERSION,
         channels: 1,
         width: 5,
         height: 3,
@@ -111,7 +111,7 @@ fn deposit_batches_and_their_answers_are_the_documented_bytes() {
     let batch = encode_deposits(answer.mirror_id, 9, &[d, d]);
     let raw: Vec<u8> = [d, d]
         .iter()
-        .flat_map(|m| field::shm::wire_bytes(m).to_vec())
+        .flat_map(|m| pheromone_field::shm::wire_bytes(m).to_vec())
         .collect();
     assert_eq!(batch, envelope(5, answer.mirror_id, 9, &raw));
     assert_eq!(

@@ -2,9 +2,9 @@
 
 use std::time::Duration;
 
-use field::shm::{create_node, now_ns, DepositPublisher, FieldReader};
-use field::DepositMsg;
-use field::{Deposit, Kernel};
+use pheromone_field::shm::{create_node, now_ns, DepositPublisher, FieldReader};
+use pheromone_field::DepositMsg;
+use pheromone_field::{Deposit, Kernel};
 
 use crate::harness::*;
 

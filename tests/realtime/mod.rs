@@ -7,7 +7,7 @@ use std::time::Duration;
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 
-use field::shm::{create_node, FieldReader};
+use pheromone_field::shm::{create_node, FieldReader};
 
 use crate::harness::*;
 
@@ -166,21 +166,27 @@ fn a_field_that_spins_longer_than_its_period_ticks_at_its_rate_and_stops() {
     );
     let node = create_node(&unique("rt-spin-depositor")).unwrap();
     let mut reader = FieldReader::attach_within(&node, &name, Duration::from_secs(30)).unwrap();
-    let mut depositor =
-        field::shm::DepositPublisher::attach_within(&node, &name, 1, Duration::from_secs(10))
-            .unwrap();
+    let mut depositor = pheromone_field::shm::DepositPublisher::attach_within(
+        &node,
+        &name,
+        1,
+        Duration::from_secs(10),
+    )
+    .unwrap();
     depositor
-        .send(field::DepositMsg::from(field::Deposit {
-            channel: 0,
-            x_m: 1.0,
-            y_m: 1.0,
-            kernel: field::Kernel::Ellipse {
-                tau: 0.01,
-                cov_m2: [0.01, 0.0, 0.01],
-                range_m: 0.5,
-                gamma_max: 100.0,
+        .send(pheromone_field::DepositMsg::from(
+            pheromone_field::Deposit {
+                channel: 0,
+                x_m: 1.0,
+                y_m: 1.0,
+                kernel: pheromone_field::Kernel::Ellipse {
+                    tau: 0.01,
+                    cov_m2: [0.01, 0.0, 0.01],
+                    range_m: 0.5,
+                    gamma_max: 100.0,
+                },
             },
-        }))
+        ))
         .unwrap();
     eventually(Duration::from_secs(10), "the deposit in a frame", || {
         reader.wait_frame(Duration::from_millis(100)).unwrap();

@@ -7,11 +7,11 @@
 
 use std::time::Duration;
 
-use field::checkpoint;
-use field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldWatch, Svc};
-use field::DepositMsg;
-use field::{Deposit, Kernel};
 use iceoryx2::prelude::Node;
+use pheromone_field::process::checkpoint;
+use pheromone_field::shm::{create_node, now_ns, DepositPublisher, FieldReader, FieldWatch, Svc};
+use pheromone_field::DepositMsg;
+use pheromone_field::{Deposit, Kernel};
 
 use crate::harness::*;
 

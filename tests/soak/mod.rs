@@ -13,7 +13,7 @@
 
 use std::time::{Duration, Instant};
 
-use field::shm::FieldWatch;
+use pheromone_field::shm::FieldWatch;
 
 use crate::crash::{
     env_u64, exited, interrupt_all, kill, wait_attached, FrameWatch, Rng, Run, LIVENESS, WAIT,
@@ -69,7 +69,7 @@ fn a_field_and_eight_robots_survive_random_kills_and_leave_nothing_behind() {
         run.spawn(&cmd.argv(), &name)
     };
     let mut procs: Vec<Proc> = (0..clients).map(spawn).collect();
-    let attached = |s: &field::shm::FieldStatus| {
+    let attached = |s: &pheromone_field::shm::FieldStatus| {
         s.publishers == 1
             && s.subscribers == readers as usize + 1
             && s.depositors == depositors as usize

@@ -315,13 +315,13 @@ fn bad_parameters_get_a_400_naming_them_and_unknown_paths_a_404() {
 
 #[test]
 fn the_view_shows_robot_poses_and_their_recent_paths() {
-    use field::link::Sender;
-    use field::wire::{ready_service, RobotServices, ROBOT_LINK};
-    use messages::PoseMsg;
+    use pheromone_field::process::link::Sender;
+    use pheromone_field::wire::{ready_service, RobotServices, ROBOT_LINK};
+    use pheromone_messages::PoseMsg;
 
     let world = unique("view-w");
     let (_name, _field, _view, port) = field_and_view("view-robots", &["--world", &world]);
-    let node = field::shm::create_node(&unique("view-test-poses")).unwrap();
+    let node = pheromone_field::shm::create_node(&unique("view-test-poses")).unwrap();
     let pose = RobotServices::new(&world, 2).pose;
     let sender =
         Sender::<PoseMsg>::create(&node, &pose, &ready_service(&pose), ROBOT_LINK).unwrap();

@@ -4,7 +4,7 @@
 //! [`pose`] (validation, tolerances, seed 000's uncertainty-aware ellipse).
 //!
 //! ```
-//! use field::{Deposit, DepositMsg, Kernel, KernelKind};
+//! use pheromone_field::{Deposit, DepositMsg, Kernel, KernelKind};
 //!
 //! // Seed 000's ellipse on channel 0 at (2 m, 3 m): amount τ = 0.2, the pose covariance
 //! // [xx, xy, yy] (m²), cut off at 1 m, γ capped at 100.
@@ -31,30 +31,43 @@ pub enum Kernel {
     /// Seed 000, the project's default: γ·exp(−½ dᵀΣ⁻¹d) with γ = min(τ/det Σ, γmax), cut at
     /// `range_m`.
     Ellipse {
+        /// τ, the deposited amount (negative = anti-pheromone); γ = τ / det Σ, capped at ±γmax.
         tau: f32,
         /// Position covariance Σxy as `[xx, xy, yy]` (m²).
         cov_m2: [f32; 3],
+        /// Cut-off radius z_rng (m, > 0): cells farther from the centre get nothing.
         range_m: f32,
+        /// γmax, the cap on the peak value γ (> 0).
         gamma_max: f32,
     },
     /// Seed 000 eq. 14 as printed: γ·exp(−(u²/λ1² + v²/λ2²)), cut at `range_m`.
     Paper {
+        /// τ, the deposited amount (negative = anti-pheromone); γ = τ / det Σ, capped at ±γmax.
         tau: f32,
+        /// Position covariance Σxy as `[xx, xy, yy]` (m²); λ1, λ2 are its eigenvalues.
         cov_m2: [f32; 3],
+        /// Cut-off radius z_rng (m, > 0).
         range_m: f32,
+        /// γmax, the cap on the peak value γ (> 0).
         gamma_max: f32,
     },
     /// Seeds 001/004 eq. 3: ρt·exp(−d²/λ²) with λ = `sigma_m`, cut at `range_m`; the cell
     /// saturates at ±1.
     Saturating {
+        /// ρt, the signed strength, in [−1, 1].
         rho: f32,
+        /// λ, the kernel's width (m, > 0).
         sigma_m: f32,
+        /// Cut-off radius (m, > 0).
         range_m: f32,
     },
     /// Seed 002 eq. 1: Q·μ(d), full inside `plateau_m`, falling to zero over `slope_m`.
     ZShape {
+        /// Q, the value added on the plateau (negative = anti-pheromone).
         amount: f32,
+        /// c, radius of the full-value plateau (m, ≥ 0).
         plateau_m: f32,
+        /// σ, width of the linear fall-off beyond the plateau (m, ≥ 0).
         slope_m: f32,
     },
 }
@@ -130,9 +143,13 @@ impl Kernel {
 /// One deposit: a kernel placed at (`x_m`, `y_m`) world metres on `channel`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Deposit {
+    /// Index of the target channel in the field's configuration.
     pub channel: u32,
+    /// x of the kernel's centre in the world frame (m).
     pub x_m: f32,
+    /// y of the kernel's centre in the world frame (m).
     pub y_m: f32,
+    /// The kernel's shape and amount.
     pub kernel: Kernel,
 }
 

@@ -1,9 +1,9 @@
 //! Seed 000's pose → deposit rule, written once for every sender (the Rust depositor
-//! `roles::depositor`, the C ABI's `pheromone_deposit_pose`, the ROS 2 pose path): which pose
+//! `pheromone_roles::depositor`, the C ABI's `pheromone_deposit_pose`, the ROS 2 pose path): which pose
 //! estimates are accepted ([`validate_pose`], with the tolerances [`SYMMETRY_REL_TOL`] and
 //! [`PSD_REL_TOL`]), and the uncertainty-aware ellipse a pose deposits ([`EllipseRule`]). The
 //! field then computes γ = τ / det Σxy capped at γmax and cuts the kernel at z_rng
-//! (`field::deposit`).
+//! (`pheromone_field::deposit`).
 //!
 //! A pose is refused, naming the entry and its value, when a number is not finite, the
 //! covariance is not symmetric (|Σij − Σji| > 1e-6·max|Σ|) or not positive semi-definite
@@ -16,9 +16,14 @@ use crate::messages::KernelKind;
 /// A pose estimate: the mean (m, rad) and its 3×3 covariance, row-major over x, y, θ.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PoseEstimate {
+    /// Estimated x position in the world frame (m).
     pub x_m: f64,
+    /// Estimated y position in the world frame (m).
     pub y_m: f64,
+    /// Estimated heading (rad, counter-clockwise from +x); not used by the deposit.
     pub theta_rad: f64,
+    /// Covariance of (x, y, θ), row-major 3×3 (m², m·rad, rad²); must be symmetric and
+    /// positive semi-definite within [`SYMMETRY_REL_TOL`] and [`PSD_REL_TOL`].
     pub cov: [f64; 9],
 }
 
@@ -64,21 +69,38 @@ impl PoseRejectReason {
 pub enum PoseRejection {
     /// A number is NaN or infinite.
     #[error("pose rejected (non_finite): {name} = {value}")]
-    NonFinite { name: &'static str, value: f64 },
+    NonFinite {
+        /// The entry: `x_m`, `y_m`, `theta_rad` or `cov_<row><col>` (e.g. `cov_xtheta`).
+        name: &'static str,
+        /// Its value (NaN or ±∞).
+        value: f64,
+    },
     /// Σ is not symmetric.
     #[error("pose rejected (not_symmetric): cov[{row}][{col}] = {upper} but cov[{col}][{row}] = {lower}")]
     NotSymmetric {
+        /// Row of the upper-triangle entry (0 = x, 1 = y, 2 = θ).
         row: usize,
+        /// Column of the upper-triangle entry (> `row`).
         col: usize,
+        /// Σ\[row\]\[col\].
         upper: f64,
+        /// Σ\[col\]\[row\], which differs from `upper` by more than the tolerance.
         lower: f64,
     },
     /// Σ has a negative eigenvalue.
     #[error("pose rejected (not_psd): covariance has eigenvalue {min_eigenvalue} < 0")]
-    NotPsd { min_eigenvalue: f64 },
+    NotPsd {
+        /// The smallest eigenvalue of Σ's symmetric part, below −[`PSD_REL_TOL`]·max|Σ|.
+        min_eigenvalue: f64,
+    },
     /// A finite `f64` that does not fit the `f32` message.
     #[error("pose rejected (out_of_range): {name} = {value} does not fit the f32 deposit message")]
-    OutOfRange { name: &'static str, value: f64 },
+    OutOfRange {
+        /// The value's name (`x_m`, `y_m`, `cov_xx`, `cov_yy`).
+        name: &'static str,
+        /// The value, beyond `f32`'s range.
+        value: f64,
+    },
 }
 
 impl PoseRejection {
@@ -176,15 +198,20 @@ pub fn ellipse_cov_m2(cov: &[f64; 9], min_sigma_m: f32) -> Result<[f32; 3], Pose
 /// capped at `gamma_max` by the field, cut at `range_m`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EllipseRule {
+    /// Index of the channel the deposits go to.
     pub channel: u32,
     /// [`KernelKind::Ellipse`] (the project's default) or [`KernelKind::Paper`] (eq. 14 as
     /// printed).
     pub kernel: KernelKind,
+    /// τ, the amount of each deposit; its sign is flipped with `anti_pheromone`.
     pub tau: f32,
+    /// Cut-off radius z_rng of the kernel (m, > 0).
     pub range_m: f32,
+    /// γmax, the cap the field applies to γ = τ/det Σxy (> 0).
     pub gamma_max: f32,
     /// σ floor of each position variance (m; 0 = off).
     pub min_sigma_m: f32,
+    /// Deposit −τ (anti-pheromone, on a signed channel) instead of τ.
     pub anti_pheromone: bool,
 }
 

@@ -198,11 +198,22 @@ impl ConfirmServer {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Receipt {
     /// In frame `sequence`.
-    Applied { sequence: u64 },
+    Applied {
+        /// The first frame that holds the deposit.
+        sequence: u64,
+    },
     /// Refused at frame `sequence` (and counted in its header under `reason`).
-    Rejected { sequence: u64, reason: RejectReason },
+    Rejected {
+        /// The frame whose header counts the refusal.
+        sequence: u64,
+        /// Why the field refused it.
+        reason: RejectReason,
+    },
     /// Every deposit published before the flush is in frame `sequence` or earlier.
-    Flushed { sequence: u64 },
+    Flushed {
+        /// The frame by which every earlier deposit was applied or refused.
+        sequence: u64,
+    },
     /// A mirror forwards it to its origin.
     Forwarded,
 }
@@ -234,6 +245,8 @@ pub struct DepositClient {
 }
 
 impl DepositClient {
+    /// Opens field `field`'s confirm service now, depositing as robot `robot_id`; fails (e.g.
+    /// [`AttachError::NoField`]) if the field is not running.
     pub fn attach(node: &Node<Svc>, field: &str, robot_id: u32) -> Result<Self, AttachError> {
         let names = FieldServices::new(field)?;
         let client = open_confirm_service(node, &names)?
@@ -254,6 +267,8 @@ impl DepositClient {
         })
     }
 
+    /// As [`DepositClient::attach`], retrying for at most `timeout` while the field is not up
+    /// yet (its services do not exist, or are being created).
     pub fn attach_within(
         node: &Node<Svc>,
         field: &str,

@@ -26,8 +26,8 @@ use crate::messages::DepositMsg;
 /// ```no_run
 /// use std::time::Duration;
 ///
-/// use field::shm::{create_node, DepositPublisher, ShmError};
-/// use field::{Deposit, Kernel};
+/// use pheromone_field::shm::{create_node, DepositPublisher, ShmError};
+/// use pheromone_field::{Deposit, Kernel};
 ///
 /// fn main() -> Result<(), ShmError> {
 ///     let node = create_node("my-depositor")?;
@@ -64,6 +64,9 @@ pub struct DepositPublisher {
 }
 
 impl DepositPublisher {
+    /// Opens field `field`'s deposit services now, depositing as robot `robot_id`; fails (e.g.
+    /// [`AttachError::NoField`]) if the field is not running. The confirm service, used for
+    /// flushes, is optional.
     pub fn attach(node: &Node<Svc>, field: &str, robot_id: u32) -> Result<Self, AttachError> {
         let names = FieldServices::new(field)?;
         let publisher = open_deposit_service(node, &names)?
@@ -116,6 +119,8 @@ impl DepositPublisher {
         true
     }
 
+    /// As [`DepositPublisher::attach`], retrying for at most `timeout` while the field is not
+    /// up yet (its services do not exist, or are being created).
     pub fn attach_within(
         node: &Node<Svc>,
         field: &str,

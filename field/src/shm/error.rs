@@ -37,6 +37,7 @@ pub struct ServiceError {
     pub service: String,
     /// What was being done ("open", "create subscriber", "send"…).
     pub action: &'static str,
+    /// iceoryx2's error.
     #[source]
     pub source: Cause,
 }
@@ -47,11 +48,18 @@ pub enum NameError {
     /// A field, robot or iceoryx2-domain name is not 1–64 characters of `A–Z a–z 0–9 _ -`
     /// ([`check_name`](super::check_name)).
     #[error("invalid name '{name}': {reason}")]
-    Invalid { name: String, reason: String },
+    Invalid {
+        /// The name as given.
+        name: String,
+        /// What is wrong with it (empty, too long, a character outside the set).
+        reason: String,
+    },
     /// iceoryx2 refuses a service, node or file-prefix name made from a name.
     #[error("invalid iceoryx2 name '{name}'")]
     Iceoryx {
+        /// The service, node or file-prefix name iceoryx2 refused.
         name: String,
+        /// iceoryx2's error.
         #[source]
         source: Cause,
     },
@@ -70,25 +78,42 @@ pub enum AttachError {
     /// iceoryx2 could not create the process's node.
     #[error("cannot create the iceoryx2 node '{name}'")]
     Node {
+        /// The node's name.
         name: String,
+        /// iceoryx2's error.
         #[source]
         source: iceoryx2::node::NodeCreationFailure,
     },
     /// The field's frame or deposit service does not exist: no field of that name runs (yet;
     /// the `attach_within`s retry on it).
     #[error("no field called '{field}' is running (service '{service}' does not exist)")]
-    NoField { field: String, service: String },
+    NoField {
+        /// The field asked for.
+        field: String,
+        /// The service that was not found (e.g. `pheromone/F/frame`).
+        service: String,
+    },
     /// The service exists with other message types: its creator was built with another layout
     /// version.
     #[error(
         "service '{service}' was created with another message layout: this build speaks \
          {ours} (layout v{LAYOUT_VERSION}); rebuild the client and the field from the same version"
     )]
-    Layout { service: String, ours: &'static str },
+    Layout {
+        /// The service whose message types differ.
+        service: String,
+        /// The type name this build uses (`pheromone::<Name>/v<LAYOUT_VERSION>`).
+        ours: &'static str,
+    },
     /// The field's current frame, taken by a reader as it attaches, has not as many cells as
     /// its header says.
     #[error("the frame received has {got} cells but its header says {expected}")]
-    BadFrame { got: usize, expected: usize },
+    BadFrame {
+        /// Cells the frame holds.
+        got: usize,
+        /// Cells its header (channels × width × height) says it has.
+        expected: usize,
+    },
     /// Opening a service, creating a port on it, taking a reader's first frame or announcing a
     /// lockstep join failed (the `attach_within`s retry on it).
     #[error(transparent)]
@@ -97,7 +122,10 @@ pub enum AttachError {
     /// handler ran; nothing was consumed). Not in a process that called
     /// [`handle_termination_requests`](super::handle_termination_requests).
     #[error("attaching to field '{field}' was interrupted by a signal")]
-    Interrupted { field: String },
+    Interrupted {
+        /// The field being attached to.
+        field: String,
+    },
 }
 
 /// Why a field could not start: a [`FieldServer`](super::FieldServer) (its services, its first
@@ -111,13 +139,18 @@ pub enum StartError {
     /// The configuration is invalid (`FieldConfig::validate`, or a thread count).
     #[error("field '{field}': the configuration is invalid")]
     Config {
+        /// The field being started.
         field: String,
+        /// The setting at fault.
         #[source]
         source: crate::ConfigError,
     },
     /// A live process publishes the field's frames already.
     #[error("another field process already publishes '{field}'")]
-    AlreadyRunning { field: String },
+    AlreadyRunning {
+        /// The field's name.
+        field: String,
+    },
     /// /dev/shm has less room than the frame pool needs ([`frame_pool`](super::frame_pool)).
     #[error(
         "the field needs {needed_bytes} bytes of shared memory ({frames} frames of {frame_bytes} \
@@ -125,9 +158,13 @@ pub enum StartError {
          enlarge /dev/shm"
     )]
     NoMemory {
+        /// Bytes the frame pool needs: `frames × frame_bytes`.
         needed_bytes: u64,
+        /// Bytes free on /dev/shm.
         available_bytes: u64,
+        /// Frames in the pool: `(max_readers + 1) × (1 + READER_BORROWED_FRAMES) + 2`.
         frames: u64,
+        /// Bytes of one frame's cells.
         frame_bytes: u64,
     },
     /// The field's frame service exists with other message types: a process of another layout
@@ -136,11 +173,21 @@ pub enum StartError {
         "service '{service}' was created with another message layout: this build speaks \
          {ours} (layout v{LAYOUT_VERSION}); rebuild the client and the field from the same version"
     )]
-    Layout { service: String, ours: &'static str },
+    Layout {
+        /// The service whose message types differ.
+        service: String,
+        /// The type name this build uses (`pheromone::<Name>/v<LAYOUT_VERSION>`).
+        ours: &'static str,
+    },
     /// The restored frame (a checkpoint's, or a standby's last mirrored one) has not the
     /// configuration's number of cells.
     #[error("the restored frame has {got} cells, the configuration needs {expected}")]
-    RestoreMismatch { got: usize, expected: usize },
+    RestoreMismatch {
+        /// Cells the restored frame holds.
+        got: usize,
+        /// Cells the configuration needs (channels × width × height).
+        expected: usize,
+    },
     /// Creating a service or a port, or publishing the first frame or the configuration, failed.
     #[error(transparent)]
     Service(#[from] ServiceError),
@@ -156,11 +203,16 @@ pub enum SendError {
     #[error(
         "deposit not delivered: no field is subscribed to '{service}' or its deposit buffer is full"
     )]
-    NoSubscriber { service: String },
+    NoSubscriber {
+        /// The deposit service (`pheromone/F/deposit`).
+        service: String,
+    },
     /// iceoryx2 could not send the deposit.
     #[error("deposit on '{service}' not delivered")]
     NotDelivered {
+        /// The deposit service.
         service: String,
+        /// iceoryx2's error.
         #[source]
         source: Cause,
     },
@@ -170,7 +222,12 @@ pub enum SendError {
         "no receipt from the field on '{service}' within {timeout_s} s: the deposit may still be \
          applied (once), or not at all"
     )]
-    Unconfirmed { service: String, timeout_s: f64 },
+    Unconfirmed {
+        /// The confirm service (`pheromone/F/deposit-confirm`).
+        service: String,
+        /// How long the client waited (s).
+        timeout_s: f64,
+    },
     /// A signal the program handles itself cut short the wait for a confirmed deposit's receipt
     /// (its handler ran): as with `Unconfirmed`, the deposit may still be applied, once, or not
     /// at all. Not in a process that called
@@ -179,7 +236,10 @@ pub enum SendError {
         "the wait for the receipt on '{service}' was interrupted by a signal: the deposit may \
          still be applied (once), or not at all"
     )]
-    Interrupted { service: String },
+    Interrupted {
+        /// The service waited on.
+        service: String,
+    },
     /// iceoryx2 could not send a link's message or a confirmed deposit, or receive its receipt.
     #[error(transparent)]
     Service(#[from] ServiceError),
@@ -193,12 +253,20 @@ pub enum SendError {
 pub enum ReceiveError {
     /// A frame's cells are not as many as its header says.
     #[error("the frame received has {got} cells but its header says {expected}")]
-    BadFrame { got: usize, expected: usize },
+    BadFrame {
+        /// Cells the frame holds.
+        got: usize,
+        /// Cells its header (channels × width × height) says it has.
+        expected: usize,
+    },
     /// A signal the program handles itself cut the wait short (its handler ran; nothing was
     /// consumed): the program looks at its own flags and waits again if it wants. Not in a
     /// process that called [`handle_termination_requests`](super::handle_termination_requests).
     #[error("the wait on '{service}' was interrupted by a signal")]
-    Interrupted { service: String },
+    Interrupted {
+        /// The service waited on.
+        service: String,
+    },
     /// Receiving or waiting failed, or a received configuration cannot be read.
     #[error(transparent)]
     Service(#[from] ServiceError),
@@ -214,11 +282,21 @@ pub enum ReceiveError {
 pub enum TickError {
     /// The previous frame the field holds has not the configuration's number of cells.
     #[error("the frame received has {got} cells but its header says {expected}")]
-    BadFrame { got: usize, expected: usize },
+    BadFrame {
+        /// Cells the previous frame holds.
+        got: usize,
+        /// Cells the configuration needs.
+        expected: usize,
+    },
     /// A mirror's keyframe ([`FieldServer::reset_to`](super::FieldServer::reset_to)) has not
     /// the configuration's number of cells.
     #[error("the restored frame has {got} cells, the configuration needs {expected}")]
-    RestoreMismatch { got: usize, expected: usize },
+    RestoreMismatch {
+        /// Cells the restored frame holds.
+        got: usize,
+        /// Cells the configuration needs (channels × width × height).
+        expected: usize,
+    },
     /// Draining the deposits, loaning, sending or receiving a frame, publishing its inputs, or
     /// connecting readers failed.
     #[error(transparent)]
@@ -234,7 +312,12 @@ pub enum StandbyError {
     Attach(#[from] AttachError),
     /// The standby's configuration is invalid, or the primary's frames are not of its grid.
     #[error("the standby cannot mirror field '{field}': {detail}")]
-    Mismatch { field: String, detail: String },
+    Mismatch {
+        /// The field being mirrored.
+        field: String,
+        /// What differs (the setting, or the frame's size against the grid's).
+        detail: String,
+    },
     /// Its own frames could not be prepared (/dev/shm too small, the publisher) or the first
     /// published at the takeover.
     #[error(transparent)]
@@ -284,7 +367,7 @@ pub(crate) fn service_err(
 /// Implements `From` of each per-operation error of [`shm`](crate::shm) for an error type that
 /// holds a [`ShmError`] (`From<ShmError>`, e.g. a `#[from] ShmError` variant), so `?` converts
 /// them as it converts a `ShmError` (`?` applies one `From`, not two):
-/// `field::from_shm_errors!(MyError);`.
+/// `pheromone_field::from_shm_errors!(MyError);`.
 #[macro_export]
 macro_rules! from_shm_errors {
     ($error:ty) => {

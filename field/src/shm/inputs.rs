@@ -114,6 +114,8 @@ pub struct InputsPublisher {
     // Its history hands the configuration to every bridge that attaches (on the connection
     // update each `send` makes).
     config: Publisher<Svc, [u8], ()>,
+    /// This run's id, written into every [`InputsHeader`](crate::messages::InputsHeader): a
+    /// restarted field has another, so a mirror knows the sequence started again.
     pub epoch: u64,
 }
 
@@ -182,6 +184,8 @@ pub struct InputsSubscriber {
 }
 
 impl InputsSubscriber {
+    /// Subscribes to field `field`'s inputs and configuration services (opening or creating
+    /// them, so the bridge may start before the field).
     pub fn attach(node: &Node<Svc>, field: &str) -> Result<Self, AttachError> {
         let names = FieldServices::new(field)?;
         let subscriber = inputs_service::<AttachError>(node, &names)?

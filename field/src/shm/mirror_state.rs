@@ -27,6 +27,7 @@ impl MirrorStateWriter {
         })
     }
 
+    /// Replaces the mirror's published state.
     pub fn set(&self, state: MirrorState) {
         self.board.set(state);
     }
@@ -41,7 +42,9 @@ pub struct MirrorInfo {
     pub inputs_age_s: Option<f64>,
     /// Seconds since the mirror went stale (`None` while live).
     pub stale_for_s: Option<f64>,
+    /// Times the mirror went stale after following its origin.
     pub stale_periods: u64,
+    /// Sequence of the newest frame the mirror published.
     pub last_sequence: u64,
 }
 

@@ -508,6 +508,7 @@ impl FieldWatch {
         })
     }
 
+    /// The port counts now.
     pub fn status(&self) -> FieldStatus {
         let (f, d) = (self.frames.dynamic_config(), self.deposits.dynamic_config());
         FieldStatus {

@@ -102,7 +102,9 @@ impl std::fmt::Display for WaitPolicy {
 
 /// A frame lent by a `FieldReader`: the header and a sampling view of the cells.
 pub struct Frame<'a> {
+    /// The frame's header: sequence, field time, geometry, counters.
     pub header: &'a FrameHeader,
+    /// The cells, for sampling.
     pub view: FrameView<'a>,
 }
 
@@ -132,12 +134,22 @@ impl Frame<'_> {
 /// Why a batch of samples was refused (nothing was written).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum SampleManyError {
+    /// The channel index names no channel of the frame.
     #[error("channel = {channel}: the frame has {channels} channel(s)")]
-    Channel { channel: usize, channels: usize },
+    Channel {
+        /// The channel asked for.
+        channel: usize,
+        /// Channels the frame has.
+        channels: usize,
+    },
+    /// An output slice is shorter than the list of points.
     #[error("{what} has room for {got} point(s), {points} point(s) given")]
     Length {
+        /// The output slice (`values` or `gradients`).
         what: &'static str,
+        /// Its length.
         got: usize,
+        /// Number of points given.
         points: usize,
     },
 }
@@ -215,8 +227,8 @@ pub fn values_and_gradients_into(
 /// ```no_run
 /// use std::time::Duration;
 ///
-/// use field::shm::{create_node, FieldReader, ShmError};
-/// use field::SamplePose;
+/// use pheromone_field::shm::{create_node, FieldReader, ShmError};
+/// use pheromone_field::SamplePose;
 ///
 /// fn main() -> Result<(), ShmError> {
 ///     let node = create_node("my-reader")?;

@@ -21,8 +21,11 @@ use crate::sample::FrameView;
 /// What one `FieldServer::tick` did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TickOutcome {
+    /// Deposits applied and mass added by the tick.
     pub report: TickReport,
+    /// Sequence number of the frame the tick published.
     pub sequence: u64,
+    /// Compute time of the tick (ns), as written into the frame header.
     pub compute_ns: u64,
     /// Deposits refused this tick (validation), counted by reason in the header.
     pub rejected: u64,
@@ -366,14 +369,17 @@ impl FieldServer {
         Ok((report, compute_ns))
     }
 
+    /// The field's name.
     pub fn field(&self) -> &str {
         &self.field
     }
 
+    /// The configuration the field runs with.
     pub fn config(&self) -> &FieldConfig {
         self.stepper.config()
     }
 
+    /// The engine: counters, clock and sequence of the last frame.
     pub fn stepper(&self) -> &Stepper {
         &self.stepper
     }

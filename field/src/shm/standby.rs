@@ -45,7 +45,10 @@ fn primary_alive(factory: &FrameFactory, own_node: &iceoryx2::identifiers::Uniqu
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StandbyEvent {
     /// A newer frame of the primary was mirrored.
-    Mirrored { sequence: u64 },
+    Mirrored {
+        /// Sequence of the frame mirrored.
+        sequence: u64,
+    },
     /// No newer frame; the primary is alive, or silent for less than the takeover threshold.
     Waiting,
     /// The primary is gone (no publisher, or its process died): call `Standby::take_over`.
@@ -181,6 +184,7 @@ impl Standby {
         )
     }
 
+    /// The name of the field mirrored.
     pub fn field(&self) -> &str {
         &self.field
     }

@@ -17,10 +17,15 @@ use crate::wire;
 /// What `pheromone list` shows of one field.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct FieldInfo {
+    /// The field's name (`F` of `pheromone/F/frame`).
     pub name: String,
+    /// Grid width in cells.
     pub width: u32,
+    /// Grid height in cells.
     pub height: u32,
+    /// Channel planes per frame.
     pub channels: u32,
+    /// Side of a square cell (m).
     pub cell_size_m: f32,
     /// Sequence of the newest frame seen.
     pub sequence: u64,

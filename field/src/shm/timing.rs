@@ -14,6 +14,8 @@ pub struct TimingWriter {
 }
 
 impl TimingWriter {
+    /// Creates field `field`'s timing blackboard, with no tick yet (`max_lateness_ns` =
+    /// `u64::MAX`: no deadline so far).
     pub fn create(node: &Node<Svc>, field: &str) -> Result<Self, StartError> {
         let names = FieldServices::new(field)?;
         let initial = FieldTiming {
@@ -25,6 +27,7 @@ impl TimingWriter {
         })
     }
 
+    /// Replaces the published totals.
     pub fn set(&self, timing: FieldTiming) {
         self.board.set(timing);
     }
@@ -33,12 +36,18 @@ impl TimingWriter {
 /// What a reader shows of a field's timing.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct TimingInfo {
+    /// Frames published by the field's run so far.
     pub ticks: u64,
+    /// Wall-time ticks that started more than the slack after their deadline.
     pub missed_deadlines: u64,
-    /// `None` while no tick had a wall-time deadline (lockstep).
+    /// The latest a tick started after its deadline (ms); `None` while no tick had a
+    /// wall-time deadline (lockstep).
     pub max_tick_lateness_ms: Option<f64>,
+    /// The longest time between two published frames (ms).
     pub longest_tick_gap_ms: f64,
+    /// The longest tick compute (ms).
     pub max_tick_compute_ms: f64,
+    /// A tick later than this after its deadline is missed (ms).
     pub deadline_slack_ms: f64,
 }
 

@@ -71,6 +71,7 @@ impl FrameWriter {
         })
     }
 
+    /// The name of the field written.
     pub fn field(&self) -> &str {
         &self.field
     }

@@ -12,7 +12,7 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::time::{Duration, Instant};
 
-use field::DepositMsg;
+use pheromone_field::DepositMsg;
 
 /// A batch not answered for this long is sent again (then every `RESEND_AFTER` while live).
 pub const RESEND_AFTER: Duration = Duration::from_millis(500);

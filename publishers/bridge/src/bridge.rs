@@ -3,9 +3,9 @@
 
 use std::time::{Duration, Instant};
 
-use field::shm::{DepositPublisher, FieldReader, InputsSubscriber, SendError, Svc};
-use field::DepositMsg;
 use iceoryx2::node::Node;
+use pheromone_field::shm::{DepositPublisher, FieldReader, InputsSubscriber, SendError, Svc};
+use pheromone_field::DepositMsg;
 use zenoh::qos::CongestionControl;
 use zenoh::Wait;
 
@@ -530,7 +530,7 @@ fn current(
     epoch: u64,
     last_inputs: Option<u64>,
     epoch_since_ns: u64,
-) -> Option<(field::FrameHeader, &[f32])> {
+) -> Option<(pheromone_field::FrameHeader, &[f32])> {
     let s = reader.sample()?;
     let h = *s.user_header();
     (epoch != 0 && last_inputs.is_some_and(|l| l >= h.sequence) && h.stamp_ns >= epoch_since_ns)

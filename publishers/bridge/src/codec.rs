@@ -3,10 +3,10 @@
 //! body) followed by its body. A message whose envelope or checksum does not hold is rejected
 //! whole, with an error naming what was wrong.
 
-use field::messages::InputsHeader;
-use field::shm::wire_vec_from_bytes;
-use field::shm::{f32s_from_bytes, wire_bytes, wire_from_bytes, wire_slice_bytes};
-use field::{DepositMsg, FrameHeader};
+use pheromone_field::messages::InputsHeader;
+use pheromone_field::shm::wire_vec_from_bytes;
+use pheromone_field::shm::{f32s_from_bytes, wire_bytes, wire_from_bytes, wire_slice_bytes};
+use pheromone_field::{DepositMsg, FrameHeader};
 use xxhash_rust::xxh3::xxh3_64;
 
 /// First bytes of every message.
@@ -21,7 +21,7 @@ pub const FLAG_ZSTD: u16 = 1;
 /// smooth gradients of a pheromone field.
 pub const ZSTD_LEVEL: i32 = 1;
 /// Largest decompressed keyframe or frame accepted (the field's own limit).
-pub const MAX_DECOMPRESSED_BYTES: usize = field::engine::MAX_FRAME_BYTES as usize;
+pub const MAX_DECOMPRESSED_BYTES: usize = pheromone_field::engine::MAX_FRAME_BYTES as usize;
 
 /// What a message carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -298,7 +298,9 @@ pub fn decode_keyframe(bytes: &[u8]) -> Result<(u64, FrameHeader, Vec<f32>), Cod
     let n = std::mem::size_of::<FrameHeader>();
     let header: FrameHeader = wire_from_bytes(m.body)
         .ok_or_else(|| body_err(Kind::Keyframe, "shorter than its header"))?;
-    if header.sequence != m.sequence || header.layout_version != field::wire::LAYOUT_VERSION {
+    if header.sequence != m.sequence
+        || header.layout_version != pheromone_field::wire::LAYOUT_VERSION
+    {
         return Err(body_err(
             Kind::Keyframe,
             format!(
@@ -306,7 +308,7 @@ pub fn decode_keyframe(bytes: &[u8]) -> Result<(u64, FrameHeader, Vec<f32>), Cod
                 header.sequence,
                 header.layout_version,
                 m.sequence,
-                field::wire::LAYOUT_VERSION
+                pheromone_field::wire::LAYOUT_VERSION
             ),
         ));
     }

@@ -27,7 +27,7 @@ pub use zenoh;
 #[derive(Debug, thiserror::Error)]
 pub enum BridgeError {
     #[error(transparent)]
-    Shm(#[from] field::shm::ShmError),
+    Shm(#[from] pheromone_field::shm::ShmError),
     #[error("zenoh: {action}: {detail}")]
     Zenoh { action: String, detail: String },
     #[error("the bridge's record of handed-over batches {path}: {detail}")]
@@ -50,7 +50,7 @@ pub enum BridgeError {
     },
 }
 
-field::from_shm_errors!(BridgeError);
+pheromone_field::from_shm_errors!(BridgeError);
 
 pub(crate) fn zerr(action: &str, e: impl std::fmt::Display) -> BridgeError {
     BridgeError::Zenoh {

@@ -15,11 +15,11 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
 
-use field::messages::InputsHeader;
-use field::messages::MirrorState;
-use field::shm::{now_ns, FieldServer, MirrorStateWriter, Svc};
-use field::{DepositMsg, FieldConfig, FrameHeader};
 use iceoryx2::node::Node;
+use pheromone_field::messages::InputsHeader;
+use pheromone_field::messages::MirrorState;
+use pheromone_field::shm::{now_ns, FieldServer, MirrorStateWriter, Svc};
+use pheromone_field::{DepositMsg, FieldConfig, FrameHeader};
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::query::Reply;
 use zenoh::sample::Sample;
@@ -56,7 +56,7 @@ pub struct MirrorStats {
     /// Local deposits sent to the origin (each once; resends are counted in
     /// `deposit_batches_resent`).
     pub deposits_forwarded: u64,
-    /// Local deposits refused because more than [`HELD_MAX`] waited for the origin (the oldest
+    /// Local deposits refused because more than `HELD_MAX` (100,000) waited for the origin (the oldest
     /// go).
     pub deposits_refused: u64,
     /// Deposits the bridge answered as handed to the origin's field, and as refused there.

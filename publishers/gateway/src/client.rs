@@ -22,7 +22,7 @@ use std::net::{SocketAddr, ToSocketAddrs, UdpSocket};
 use std::os::fd::OwnedFd;
 use std::time::{Duration, Instant};
 
-use gateway_codec::{
+use pheromone_gateway_codec::{
     decode, encode, DecodeError, DepositRequest, DepositStatus, EncodeError, ErrorReason, Frame,
     Message, PirRequest, StatusReply, MAX_ENCODED_BYTES, MAX_WIRE_BYTES,
 };
@@ -161,7 +161,7 @@ enum Link {
     Udp(UdpSocket),
     Serial {
         file: File,
-        decoder: Box<gateway_codec::Decoder>,
+        decoder: Box<pheromone_gateway_codec::Decoder>,
         buf: Box<[u8; 512]>,
         at: usize,
         len: usize,
@@ -239,7 +239,7 @@ impl Transport {
             name: name.to_string(),
             link: Link::Serial {
                 file,
-                decoder: Box::new(gateway_codec::Decoder::new()),
+                decoder: Box::new(pheromone_gateway_codec::Decoder::new()),
                 buf: Box::new([0; 512]),
                 at: 0,
                 len: 0,
@@ -703,5 +703,4 @@ fn wait_out(transport: &mut Transport, until: Instant) {
 }
 
 #[cfg(test)]
-#[path = "client_tests.rs"]
 mod tests;

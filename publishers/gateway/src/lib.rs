@@ -10,7 +10,7 @@
 //! opens it.
 //!
 //! - **PIR:** the two antenna readings at the M3 antenna points, half a wheel base (as the client
-//!   sends it) to each side of the pose ([`field::FrameView::antennas`]), with the sequence of
+//!   sends it) to each side of the pose ([`pheromone_field::FrameView::antennas`]), with the sequence of
 //!   the frame they were read from.
 //! - **DEPOSIT:** a Z-shape reinforcement (seed 002 eq. 1) at (x, y) with the gateway's plateau
 //!   and slope, sent to the field with the client ID as robot ID. Its 1-byte `seq` makes a
@@ -28,13 +28,15 @@ pub mod udp;
 
 use std::time::Duration;
 
-use field::shm::{ConfigSubscriber, DepositPublisher, FieldReader, SendError, ShmError, Svc};
-use field::{Deposit, FieldConfig, Kernel, RejectReason, SamplePose};
-use gateway_codec::{
+use iceoryx2::node::Node;
+use pheromone_field::shm::{
+    ConfigSubscriber, DepositPublisher, FieldReader, SendError, ShmError, Svc,
+};
+use pheromone_field::{Deposit, FieldConfig, Kernel, RejectReason, SamplePose};
+use pheromone_gateway_codec::{
     DecodeError, DepositReply, DepositRequest, DepositStatus, ErrorReason, Frame, Message,
     PirReply, PirRequest, StatusReply,
 };
-use iceoryx2::node::Node;
 use serde::Serialize;
 
 /// How often a serving gateway calls its log with the counters.
@@ -135,7 +137,7 @@ pub enum GatewayError {
     },
 }
 
-field::from_shm_errors!(GatewayError);
+pheromone_field::from_shm_errors!(GatewayError);
 
 /// Counters of one gateway, logged once a second and printed at the end.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
@@ -150,7 +152,7 @@ pub struct GatewayCounters {
     /// Deposits the field did not take (none subscribed or its buffer full): not answered, so
     /// the client retries.
     pub deposits_undelivered: u64,
-    /// Deposits refused with the field's own checks (`field::deposit::prepare`), by the
+    /// Deposits refused with the field's own checks (`pheromone_field::deposit::prepare`), by the
     /// field's reason (`out_of_limits`, `negative_on_unsigned`, …): answered, never sent.
     pub deposits_refused: std::collections::BTreeMap<&'static str, u64>,
     pub pings: u64,
@@ -420,7 +422,9 @@ impl Gateway {
         // The field's own checks, with its channels and limits: what it would refuse is answered
         // here, never sent.
         let refused = match self.field_config()? {
-            Some(c) => field::deposit::prepare(&msg, &c.geometry(), &c.channels, &c.limits).err(),
+            Some(c) => {
+                pheromone_field::deposit::prepare(&msg, &c.geometry(), &c.channels, &c.limits).err()
+            }
             None => None,
         };
         if let Some(r) = refused {

@@ -19,6 +19,8 @@ use gateway_codec::{Decoder, MAX_ENCODED_BYTES};
 use iceoryx2::node::Node;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::termios::{self, BaudRate, ControlFlags, SetArg, SpecialCharacterIndices};
+use pheromone_field::shm::{now_ns, Svc};
+use pheromone_gateway_codec::{Decoder, MAX_ENCODED_BYTES};
 
 use super::{Gateway, GatewayCounters, GatewayError, LOG_EVERY};
 

@@ -7,6 +7,8 @@ use field::run::Housekeeping;
 use field::shm::{now_ns, Svc};
 use gateway_codec::{decode, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
 use iceoryx2::node::Node;
+use pheromone_field::shm::{now_ns, Svc};
+use pheromone_gateway_codec::{decode, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
 
 use super::{Gateway, GatewayCounters, GatewayError, LOG_EVERY};
 
@@ -72,10 +74,12 @@ pub fn serve(
             }
         };
         let reply = if n > MAX_WIRE_BYTES {
-            gateway.rejected(&gateway_codec::DecodeError::TooLong)
+            gateway.rejected(&pheromone_gateway_codec::DecodeError::TooLong)
         } else {
             match decode(&datagram[..n]) {
-                None => gateway.rejected(&gateway_codec::DecodeError::Truncated { len: n }),
+                None => {
+                    gateway.rejected(&pheromone_gateway_codec::DecodeError::Truncated { len: n })
+                }
                 Some(Err(e)) => gateway.rejected(&e),
                 Some(Ok(frame)) => gateway.handle_from(frame, now_ns(), Some(from))?,
             }

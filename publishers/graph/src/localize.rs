@@ -6,7 +6,7 @@
 //!   velocity motion model's control with the α1..α4 noise of Algorithm 1 line 5) and noisy
 //!   range-bearing-signature observations of the landmarks in range; seeded, deterministic.
 //! - [`PoseFilter`] is the filter a robot runs. The landmark EKF lives in `pheromone-roles`
-//!   (`roles::localizer::graph_filter`), which depends on this crate; a run is given a
+//!   (`pheromone_roles::localizer::graph_filter`), which depends on this crate; a run is given a
 //!   [`MakeFilter`] that builds one per robot.
 //! - [`RobotLocalizer`]: each step, the robot matches its observations only against Algorithm 1
 //!   lines 10–14's L_set ([`crate::RegionTable::landmark_set`]): a region holder against its
@@ -720,5 +720,4 @@ impl RunLocalization {
 }
 
 #[cfg(test)]
-#[path = "localize_tests.rs"]
 mod tests;

@@ -17,10 +17,10 @@
 
 use std::time::Duration;
 
-use field::link::{Receiver, Sender};
-use field::lockstep::{self, JoinWatch};
-use field::shm::{now_ns, Svc};
 use iceoryx2::node::Node;
+use pheromone_field::process::link::{Receiver, Sender};
+use pheromone_field::process::lockstep::{self, JoinWatch};
+use pheromone_field::shm::{now_ns, Svc};
 
 use super::agent::{GraphStrategy, RegionsScenario};
 use super::localize::Localization;
@@ -59,20 +59,20 @@ pub enum GraphRunError {
         waited_s: f64,
     },
     #[error(transparent)]
-    Lockstep(#[from] field::lockstep::LockstepError),
+    Lockstep(#[from] pheromone_field::process::lockstep::LockstepError),
     #[error("graph '{name}': the writer is gone (last step seen: {step})")]
     WriterGone { name: String, step: u64 },
     #[error("graph '{0}': interrupted")]
     Interrupted(String),
 }
 
-impl From<field::shm::ShmError> for GraphRunError {
-    fn from(e: field::shm::ShmError) -> Self {
+impl From<pheromone_field::shm::ShmError> for GraphRunError {
+    fn from(e: pheromone_field::shm::ShmError) -> Self {
         GraphRunError::Shm(e.into())
     }
 }
 
-field::from_shm_errors!(GraphRunError);
+pheromone_field::from_shm_errors!(GraphRunError);
 
 impl From<super::GraphError> for GraphRunError {
     fn from(e: super::GraphError) -> Self {
@@ -99,7 +99,7 @@ pub fn run_graph_writer(
     let updates: Receiver<GraphUpdateMsg> = Receiver::create(node, &upd, &upd_wake, UPDATE_LINK)?;
     let joins = JoinWatch::create(node, &o.name)?;
     // Every robot reads the first snapshot: wait until all are attached.
-    // The lockstep of `field::lockstep`: every robot joins once its ports exist.
+    // The lockstep of `pheromone_field::process::lockstep`: every robot joins once its ports exist.
     joins.wait(node, o.robots, "graph robots", o.attach_timeout, || {
         snapshots.receivers().min(updates.senders())
     })?;
@@ -203,7 +203,7 @@ pub fn run_graph_robot(
     let mut reader = GraphReader::attach(node, name)?;
     let updater = GraphUpdater::attach(node, name, robot.id())?;
     let mut contention = Contention::attach(node, name)?;
-    // Every port of this robot exists: tell the writer (`field::lockstep`).
+    // Every port of this robot exists: tell the writer (`pheromone_field::process::lockstep`).
     let _joined = lockstep::announce_join(node, name)?;
     if !contention.wait_listeners(robots, timeout)? {
         return Err(GraphRunError::NoListeners {

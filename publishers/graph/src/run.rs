@@ -745,5 +745,4 @@ pub fn simulate_with(
 }
 
 #[cfg(test)]
-#[path = "run_tests.rs"]
-mod run_tests;
+mod tests;

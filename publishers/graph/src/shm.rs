@@ -2,7 +2,7 @@
 //! the [`GraphState`], applies small [`GraphUpdateMsg`]s from robots and publishes immutable
 //! fixed-size [`GraphSnapshot`]s; robots read them with [`GraphReader`] and send updates with
 //! [`GraphUpdater`]. Contention messages (Listing 1's JSON) travel in fixed-size
-//! [`ContendWire`] buffers over [`Contention`]. Safe iceoryx2 API only (via `field::link`).
+//! [`ContendWire`] buffers over [`Contention`]. Safe iceoryx2 API only (via `pheromone_field::process::link`).
 //!
 //! Services of a graph `G`: `pheromone/G/graph` (+ `-ready`), `pheromone/G/graph-update`
 //! (+ `-ready`), `pheromone/G/contend` (+ `-ready`).
@@ -10,9 +10,9 @@
 use std::fmt;
 use std::time::{Duration, Instant};
 
-use field::link::{Receiver, Sender};
-use field::shm::{now_ns, ShmError, Svc};
 use iceoryx2::node::Node;
+use pheromone_field::process::link::{Receiver, Sender};
+use pheromone_field::shm::{now_ns, ShmError, Svc};
 
 use super::conflict::{ConflictError, ContendMsg};
 use super::{CaptureOutcome, Dir, GraphError, GraphState, GraphUpdate, MAX_LINKS};
@@ -45,7 +45,7 @@ pub struct NodeSlot {
 }
 
 // repr(C): numbers and arrays of numbers only.
-field::wire_type!(
+pheromone_field::wire_type!(
     NodeSlot,
     "GraphNodeSlot",
     size = 12 + 12 * MAX_LINKS,
@@ -78,7 +78,7 @@ pub struct RegionSlot {
 }
 
 // repr(C): numbers and arrays of numbers only.
-field::wire_type!(
+pheromone_field::wire_type!(
     RegionSlot,
     "GraphRegionSlot",
     size = 20 + 4 * (MAX_CAPTURERS + MAX_GRAPH_ROBOTS),
@@ -121,7 +121,7 @@ pub struct GraphSnapshot {
 }
 
 // repr(C): numbers and arrays of `NodeSlot` and `RegionSlot` only.
-field::wire_type!(
+pheromone_field::wire_type!(
     GraphSnapshot,
     "GraphSnapshot",
     size = 72 + 60 * MAX_NODES + 116 * MAX_REGIONS,
@@ -282,7 +282,7 @@ pub struct GraphUpdateMsg {
 }
 
 // repr(C): numbers and arrays of numbers only.
-field::wire_type!(GraphUpdateMsg, "GraphUpdateMsg", size = 48, align = 8);
+pheromone_field::wire_type!(GraphUpdateMsg, "GraphUpdateMsg", size = 48, align = 8);
 
 impl GraphUpdateMsg {
     pub fn new(robot_id: u32, u: GraphUpdate) -> Self {
@@ -353,7 +353,7 @@ pub struct ContendWire {
 }
 
 // repr(C): numbers and arrays of numbers only.
-field::wire_type!(
+pheromone_field::wire_type!(
     ContendWire,
     "ContendWire",
     size = 4 + CONTEND_BYTES,
@@ -421,7 +421,7 @@ pub enum GraphShmError {
     Conflict(#[from] ConflictError),
 }
 
-field::from_shm_errors!(GraphShmError);
+pheromone_field::from_shm_errors!(GraphShmError);
 
 /// How a snapshot's structure differs from the scenario's graph.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -463,8 +463,8 @@ pub enum UpdateRejected {
     Refused(#[from] GraphError),
 }
 
-pub use field::wire::graph_services;
-pub(crate) use field::wire::{
+pub use pheromone_field::wire::graph_services;
+pub(crate) use pheromone_field::wire::{
     GRAPH_CONTEND_LINK as CONTEND_LINK, GRAPH_SNAPSHOT_LINK as SNAPSHOT_LINK,
     GRAPH_UPDATE_LINK as UPDATE_LINK,
 };
@@ -773,5 +773,4 @@ impl Contention {
 }
 
 #[cfg(test)]
-#[path = "shm_tests.rs"]
 mod tests;

@@ -4,9 +4,9 @@
 use std::cmp::Ordering;
 use std::time::{Duration, Instant};
 
-use graph::agent::RegionsScenario;
-use graph::shm::{GraphReader, GraphServer, GraphUpdater};
-use graph::{
+use pheromone_graph::agent::RegionsScenario;
+use pheromone_graph::shm::{GraphReader, GraphServer, GraphUpdater};
+use pheromone_graph::{
     CaptureOutcome, ContendMsg, Dir, Graph, GraphState, GraphUpdate, RegionConfig, RegionShape,
     RegionTable, RgbRes, DEAD_END,
 };
@@ -293,7 +293,7 @@ proptest! {
     }
 }
 
-use testkit::unique;
+use pheromone_testkit::unique;
 
 /// Six threads, each its own iceoryx2 node, fire capture attempts at one server at once; every
 /// published snapshot shows at most Max-R holders.
@@ -301,7 +301,7 @@ use testkit::unique;
 fn threads_capturing_at_once_never_exceed_max_r() {
     let name = unique("threads");
     let max_r = 2;
-    let node = field::shm::create_node(&unique("srv")).unwrap();
+    let node = pheromone_field::shm::create_node(&unique("srv")).unwrap();
     let mut server = GraphServer::create(&node, &name, one_region_state(max_r)).unwrap();
     let mut reader = GraphReader::attach(&node, &name).unwrap();
     let robots: u32 = 6;
@@ -314,7 +314,7 @@ fn threads_capturing_at_once_never_exceed_max_r() {
             let name = name.clone();
             let done = done.clone();
             std::thread::spawn(move || {
-                let node = field::shm::create_node(&unique(&format!("r{id}"))).unwrap();
+                let node = pheromone_field::shm::create_node(&unique(&format!("r{id}"))).unwrap();
                 let up = GraphUpdater::attach(&node, &name, id).unwrap();
                 for _ in 0..rounds {
                     up.send(GraphUpdate::Capture {

@@ -10,12 +10,16 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WorldPose {
+    /// x position in the world frame (m).
     pub x_m: f64,
+    /// y position in the world frame (m).
     pub y_m: f64,
+    /// Heading (rad, counter-clockwise from +x); not necessarily wrapped.
     pub theta_rad: f64,
 }
 
 impl WorldPose {
+    /// A pose from its coordinates (m, m, rad).
     pub fn new(x_m: f64, y_m: f64, theta_rad: f64) -> Self {
         Self {
             x_m,
@@ -52,8 +56,11 @@ pub fn sinc_derivative(x: f64) -> f64 {
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Landmark {
+    /// x position in the world frame (m).
     pub x_m: f64,
+    /// y position in the world frame (m).
     pub y_m: f64,
+    /// Identifying signature sensed with the landmark; 0 (the default) = none / ambiguous.
     #[serde(default)]
     pub signature: u32,
 }
@@ -61,7 +68,9 @@ pub struct Landmark {
 /// A wall segment from `a_m` to `b_m`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Segment {
+    /// One end, `[x, y]` in the world frame (m).
     pub a_m: [f64; 2],
+    /// The other end, `[x, y]` in the world frame (m).
     pub b_m: [f64; 2],
 }
 

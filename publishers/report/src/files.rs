@@ -8,7 +8,7 @@ use std::path::Path;
 
 use super::style::Picture;
 use super::{ReportError, ROBOT_CSV_HEADER};
-use sim::record::RobotSample;
+use pheromone_sim::recording::RobotSample;
 
 pub(super) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
     fs::write(path, bytes).map_err(|source| ReportError::Io {

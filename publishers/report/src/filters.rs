@@ -5,8 +5,8 @@
 //! uncertainty against its deposits (Fig. 18, log–log). Nothing here is made up: every value
 //! is a difference of two recorded poses, or a recorded σ or deposit.
 
+use pheromone_sim::recording::RobotSample;
 use serde::Serialize;
-use sim::record::RobotSample;
 use std::fmt::Write as _;
 
 /// One step of one filter's run: the estimate's error and what the robot deposited.

@@ -20,8 +20,8 @@ const GRAPH_TEXT_RGB: [u8; 3] = [30, 30, 35];
 /// pheromone, dashed black −∞), terminal nodes red, the others green, the dock orange.
 pub fn write_graph_png(
     path: &Path,
-    state: &graph::GraphState,
-    report: &graph::run::RunReport,
+    state: &pheromone_graph::GraphState,
+    report: &pheromone_graph::run::RunReport,
     dock: usize,
 ) -> Result<(), ReportError> {
     let nodes = state.graph.nodes();
@@ -65,7 +65,7 @@ struct Frame {
 
 impl Frame {
     /// The frame around the nodes and the region boxes, with a margin.
-    fn around(nodes: &[graph::Node], regions: &[graph::Region]) -> Frame {
+    fn around(nodes: &[pheromone_graph::Node], regions: &[pheromone_graph::Region]) -> Frame {
         let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
         let mut grow = |x: f64, y: f64| {
             x0 = x0.min(x);
@@ -109,13 +109,17 @@ impl Frame {
 }
 
 /// The final value of a node's link in one direction, as the report gives it.
-fn link_value(report: &graph::run::RunReport, node: &str, dir: graph::Dir) -> Option<f32> {
+fn link_value(
+    report: &pheromone_graph::run::RunReport,
+    node: &str,
+    dir: pheromone_graph::Dir,
+) -> Option<f32> {
     let row = report.links.iter().find(|l| l.node == node)?;
     let text = match dir {
-        graph::Dir::Up => &row.up,
-        graph::Dir::Down => &row.down,
-        graph::Dir::Left => &row.left,
-        graph::Dir::Right => &row.right,
+        pheromone_graph::Dir::Up => &row.up,
+        pheromone_graph::Dir::Down => &row.down,
+        pheromone_graph::Dir::Left => &row.left,
+        pheromone_graph::Dir::Right => &row.right,
     };
     match text.as_str() {
         "-inf" => Some(f32::NEG_INFINITY),
@@ -124,7 +128,7 @@ fn link_value(report: &graph::run::RunReport, node: &str, dir: graph::Dir) -> Op
 }
 
 /// The largest finite |value| among the report's links, at least 1.
-fn max_abs_value(report: &graph::run::RunReport) -> f32 {
+fn max_abs_value(report: &pheromone_graph::run::RunReport) -> f32 {
     report
         .links
         .iter()
@@ -138,8 +142,8 @@ fn max_abs_value(report: &graph::run::RunReport) -> f32 {
 fn draw_regions(
     root: &Root<'_>,
     frame: &Frame,
-    regions: &[graph::Region],
-    report: &graph::run::RunReport,
+    regions: &[pheromone_graph::Region],
+    report: &pheromone_graph::run::RunReport,
     text: &TextStyle<'_>,
 ) -> Result<(), String> {
     for (r, area) in regions.iter().zip(&report.areas) {
@@ -174,8 +178,8 @@ fn draw_regions(
 fn draw_links(
     root: &Root<'_>,
     frame: &Frame,
-    nodes: &[graph::Node],
-    report: &graph::run::RunReport,
+    nodes: &[pheromone_graph::Node],
+    report: &pheromone_graph::run::RunReport,
     max_abs: f32,
 ) -> Result<(), String> {
     for n in nodes {
@@ -217,7 +221,7 @@ fn link_rgb(v: f32, max_abs: f32) -> [u8; 3] {
 fn draw_nodes(
     root: &Root<'_>,
     frame: &Frame,
-    nodes: &[graph::Node],
+    nodes: &[pheromone_graph::Node],
     dock: usize,
     text: &TextStyle<'_>,
 ) -> Result<(), String> {
@@ -239,8 +243,8 @@ fn draw_nodes(
 }
 
 /// The picture's title: scenario, strategy, robots and the goal (`until`), reached when or not.
-fn title(report: &graph::run::RunReport) -> String {
-    use graph::agent::Until;
+fn title(report: &pheromone_graph::run::RunReport) -> String {
+    use pheromone_graph::agent::Until;
     let goal = match (report.until, report.finish_s) {
         (Until::Served, Some(t)) => format!("every region served at {t:.1} s"),
         (Until::Captured, Some(t)) => format!("every region captured at {t:.1} s"),
@@ -260,8 +264,8 @@ fn title(report: &graph::run::RunReport) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use graph::agent::{GraphStrategy, RegionsScenario};
-    use graph::run::simulate;
+    use pheromone_graph::agent::{GraphStrategy, RegionsScenario};
+    use pheromone_graph::run::simulate;
 
     /// Runs that reach their goal say so: a run for a fixed time (regions-backup, until =
     /// time) was titled "goal not reached" before the time goal counted as reached.

@@ -14,7 +14,7 @@ use super::style::{
     colour, lighter, msg, robot_rgb, ColourMap, Picture, Rgb, FONT, OUTLINE_RGB, STRIP_RGB,
     TEXT_RGB, WALL_RGB,
 };
-use sim::record::{Recording, RobotSample, Snapshot};
+use pheromone_sim::recording::{Recording, RobotSample, Snapshot};
 
 /// The field part of the picture is at least this many pixels wide (if the cap below allows it).
 const MIN_WIDTH_PX: usize = 800;
@@ -604,5 +604,4 @@ pub(super) fn fmt_sig(v: f64) -> String {
 }
 
 #[cfg(test)]
-#[path = "heatmap_tests.rs"]
 mod tests;

@@ -41,8 +41,8 @@ use std::path::{Path, PathBuf};
 
 use files::{robot_csv, write_file, write_png};
 use heatmap::render_snapshot;
+use pheromone_sim::recording::{Recording, Snapshot};
 use pheromone_world::scenario::Scenario;
-use sim::record::{Recording, Snapshot};
 
 pub use filters::{FilterRun, FilterSummary};
 pub use filters_plots::write_filter_comparison;

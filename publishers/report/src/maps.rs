@@ -9,9 +9,9 @@
 use plotters::prelude::*;
 
 use super::style::{colour, msg, robot_rgb, Picture, Rgb, FONT};
+use pheromone_roles::mapper::pose_in_frame;
+use pheromone_sim::recording::Recording;
 use pheromone_world::team::RobotMap;
-use roles::mapper::pose_in_frame;
-use sim::record::Recording;
 
 const UNKNOWN: f32 = 160.0;
 /// The true walls (world frame): yellow, on the black of occupied cells.
@@ -340,7 +340,7 @@ mod tests {
     use crate::tests::sample;
 
     fn map() -> RobotMap {
-        let geometry = field::GridGeometry::new(10, 10, 1.0)
+        let geometry = pheromone_field::GridGeometry::new(10, 10, 1.0)
             .unwrap()
             .with_origin(-5.0, -5.0)
             .unwrap();

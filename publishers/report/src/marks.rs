@@ -5,9 +5,9 @@
 //! on the run, so only in the pictures from that time on).
 
 use super::style::{robot_rgb, Rgb};
+use pheromone_sim::recording::Recording;
+use pheromone_sim::wrong_area::wrong_area;
 use pheromone_world::scenario::Scenario;
-use sim::record::Recording;
-use sim::wrong_area::wrong_area;
 
 /// Outline of area A (`wrong_area`): magenta, apart from the robots' colours, the walls' grey
 /// and both colour maps.

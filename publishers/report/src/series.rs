@@ -11,11 +11,13 @@
 
 use std::collections::BTreeMap;
 
-use field::Evaporation;
+use pheromone_field::Evaporation;
 
+use pheromone_sim::metrics::{
+    blind_leader, distance_to_polyline_m, mean_path_error_m, BlindLeader,
+};
+use pheromone_sim::recording::Recording;
 use pheromone_world::scenario::{BlindLeaderMetric, ExplorationMetric, Scenario};
-use sim::metrics::{blind_leader, distance_to_polyline_m, mean_path_error_m, BlindLeader};
-use sim::record::Recording;
 
 /// The closed form a probe's readings are compared with: the level `p0` read at `t0_s`,
 /// evaporating by the channel's model with the ambient level held fixed (seed 000 eq. 19).
@@ -107,7 +109,7 @@ fn closed_form(scenario: &Scenario, rec: &Recording, c: &ProbeCurve) -> Option<C
             let (x, y) = g.cell_at(c.x_m, c.y_m)?;
             let r = (radius_m / g.cell_size_m).round() as usize;
             let plane = snap.plane(c.channel as usize);
-            let pa = field::models::ambient_mean_brute(
+            let pa = pheromone_field::models::ambient_mean_brute(
                 plane,
                 snap.width as usize,
                 x as usize,

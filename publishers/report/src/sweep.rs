@@ -6,7 +6,7 @@
 //! no line). Both plot the sweep's figure (`--figure`: known, merged or visited) mean per
 //! robot, mean ± sd over the trials (error bars); merge on is a solid line with filled dots,
 //! merge off a dashed line with hollow dots, each legend entry starts with "merge" or "no
-//! merge" and names the steering; the paper's own values (`sim::paper`) are black crosses
+//! merge" and names the steering; the paper's own values (`pheromone_sim::paper`) are black crosses
 //! (robots chart) and its peak R_C a dotted vertical line (R_C chart). `sweep_paper.md` puts
 //! each of the paper's values beside what the sweep measured.
 
@@ -25,8 +25,8 @@ use super::files::{write_file, write_png};
 use super::plots::{blank, series_labels, text, titled};
 use super::style::{colour, msg, series_rgb, Picture, Rgb};
 use super::ReportError;
-use sim::paper::{PaperKind, PaperValue};
-use sim::sweep::{Point, PointKey, SweepResult};
+use pheromone_sim::paper::{PaperKind, PaperValue};
+use pheromone_sim::sweep::{Point, PointKey, SweepResult};
 
 /// Header of `sweep.csv`.
 pub const SWEEP_CSV_HEADER: &str = "robots,rc_m,merge,strategy,steer_on,merge_rule,\
@@ -116,11 +116,11 @@ pub fn write_sweep(
 }
 
 /// The figure's words on a chart.
-fn figure_words(f: sim::sweep::Figure) -> &'static str {
+fn figure_words(f: pheromone_sim::sweep::Figure) -> &'static str {
     match f {
-        sim::sweep::Figure::Known => "known: mapped or merged",
-        sim::sweep::Figure::Merged => "merged: visited or received by a merge",
-        sim::sweep::Figure::Visited => "visited",
+        pheromone_sim::sweep::Figure::Known => "known: mapped or merged",
+        pheromone_sim::sweep::Figure::Merged => "merged: visited or received by a merge",
+        pheromone_sim::sweep::Figure::Visited => "visited",
     }
 }
 
@@ -134,7 +134,7 @@ pub fn paper_table(r: &SweepResult, paper: &[PaperValue]) -> String {
         r.trials,
         r.figure.name()
     );
-    for (p, ours) in sim::paper::beside(paper, r) {
+    for (p, ours) in pheromone_sim::paper::beside(paper, r) {
         let what = match p.kind {
             PaperKind::MeanPct => format!("mean {} %", p.value),
             PaperKind::MaxPct => format!("at most {} %", p.value),
@@ -415,7 +415,7 @@ fn draw_line<'a, 'b: 'a>(
     rgb: Rgb,
     (lo, hi): (f64, f64),
     pad: f64,
-    figure: sim::sweep::Figure,
+    figure: pheromone_sim::sweep::Figure,
 ) -> Result<(), String> {
     let style = colour(rgb).stroke_width(2);
     let mut xy: Vec<(f64, f64)> = l
@@ -487,7 +487,7 @@ fn draw_error_bars<'a, 'b: 'a>(
     axis: Axis,
     style: ShapeStyle,
     cap: f64,
-    figure: sim::sweep::Figure,
+    figure: pheromone_sim::sweep::Figure,
 ) -> Result<(), String> {
     for p in &l.points {
         let x = axis.x(&p.key);
@@ -566,9 +566,9 @@ fn draw_paper<'a, 'b: 'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use roles::follower::StrategyKind;
-    use roles::mapper::SteerOn;
-    use sim::sweep::{comparisons, points, Figure, RunResult};
+    use pheromone_roles::follower::StrategyKind;
+    use pheromone_roles::mapper::SteerOn;
+    use pheromone_sim::sweep::{comparisons, points, Figure, RunResult};
 
     fn run(robots: usize, merge: bool, seed: u64, known: f64) -> RunResult {
         RunResult {
@@ -630,7 +630,7 @@ mod tests {
         );
         assert_eq!(c.paired, None, "equal differences: undefined");
         let dir = std::env::temp_dir().join(format!("sweep-report-{}", std::process::id()));
-        let paper = sim::paper::seed004().unwrap();
+        let paper = pheromone_sim::paper::seed004().unwrap();
         let files = write_sweep(&dir, &r, &paper).unwrap();
         // One R_C (8 m): no R_C chart.
         assert_eq!(rc_values(&r), [8.0]);

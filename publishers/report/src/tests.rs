@@ -2,13 +2,13 @@ use std::io::BufReader;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use super::*;
-use messages::FollowerState;
-use sim::record::ProbeReading;
+use pheromone_messages::FollowerState;
+use pheromone_sim::recording::ProbeReading;
 use std::fs::File;
 
 use super::heatmap::{fmt_sig, Layout};
 use super::style::{lighter, Rgb, NAN_RGB, ROBOT_RGB, VIRIDIS};
-use sim::record::RobotSample;
+use pheromone_sim::recording::RobotSample;
 
 /// A directory under the system temp dir, unique per test and process, removed on drop.
 struct TempDir(PathBuf);

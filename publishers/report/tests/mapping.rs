@@ -1,9 +1,9 @@
 //! Seed 004's local maps and their merging, run in one process (`pheromone sim ias-ss --merge
 //! --single-process`): what a user relies on in the metrics.
 
+use pheromone_sim::metrics::scenario_metrics;
+use pheromone_sim::single::{run_single_process, SingleProcessOptions};
 use pheromone_world::scenario::{Overrides, Scenario};
-use sim::metrics::scenario_metrics;
-use sim::single::{run_single_process, SingleProcessOptions};
 
 fn metrics(robots: usize, seed: u64, merge: Option<bool>, duration_s: f64) -> serde_json::Value {
     let mut s = Scenario::load("ias-ss").unwrap();
@@ -71,7 +71,7 @@ fn the_final_maps_are_pictured_in_their_own_frame_and_in_the_world() {
     .unwrap();
     let (_, rec) = run_single_process(&s, SingleProcessOptions::default()).unwrap();
     let dir = std::env::temp_dir().join(format!("pheromone-maps-{}", std::process::id()));
-    let written = report::write_plots(&dir, &s, &rec).unwrap();
+    let written = pheromone_report::write_plots(&dir, &s, &rec).unwrap();
     for id in [0, 1] {
         for name in [format!("map_r{id}.png"), format!("map_r{id}_world.png")] {
             let path = dir.join(&name);

@@ -1,4 +1,4 @@
-//! The charts `pheromone sim` writes (`report::write_plots`), from real single-process runs of
+//! The charts `pheromone sim` writes (`pheromone_report::write_plots`), from real single-process runs of
 //! the built-in scenarios: each is a PNG of the expected size that is not blank, and the series
 //! it draws are the run's — its probe readings, its trajectories, its deposits — and end at
 //! (or carry) the run's metrics.
@@ -7,12 +7,14 @@ use std::fs::{self, File};
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
+use pheromone_report::series::{
+    exploration_over_time, leader_deposits, path_distances, probe_curves,
+};
+use pheromone_report::{write_outputs, write_plots, PLOT_H_PX, PLOT_W_PX};
+use pheromone_sim::metrics::{distance_to_polyline_m, scenario_metrics, RunMetrics, RunMode};
+use pheromone_sim::recording::Recording;
+use pheromone_sim::single::{run_single_process, SingleProcessOptions};
 use pheromone_world::scenario::{Overrides, Scenario};
-use report::series::{exploration_over_time, leader_deposits, path_distances, probe_curves};
-use report::{write_outputs, write_plots, PLOT_H_PX, PLOT_W_PX};
-use sim::metrics::{distance_to_polyline_m, scenario_metrics, RunMetrics, RunMode};
-use sim::record::Recording;
-use sim::single::{run_single_process, SingleProcessOptions};
 
 /// A directory unique to the test, removed on drop.
 struct TempDir(PathBuf);
@@ -57,7 +59,7 @@ fn write_all(
     m: &serde_json::Value,
     chart: &str,
 ) -> PathBuf {
-    write_outputs(dir, rec, m, &report::marks(s, rec)).unwrap();
+    write_outputs(dir, rec, m, &pheromone_report::marks(s, rec)).unwrap();
     let written = write_plots(dir, s, rec).unwrap();
     let path = dir.join(chart);
     assert!(written.contains(&path), "{chart} not in {written:?}");

@@ -19,10 +19,10 @@ use std::hint::black_box;
 use std::path::PathBuf;
 
 use criterion::{BatchSize, BenchmarkId, Criterion, Throughput};
-use messages::LandmarkObs;
 use nalgebra::Matrix3;
+use pheromone_messages::LandmarkObs;
+use pheromone_roles::localizer::{CheckedFilter, Ekf, EkfConfig};
 use pheromone_world::{Landmark, WorldPose};
-use roles::localizer::{CheckedFilter, Ekf, EkfConfig};
 
 const MAP_SIZES: &[usize] = &[50, 200, 1000];
 /// Observations per update (what a 5 m sensor sees in the corridor).

@@ -11,8 +11,8 @@ use std::hint::black_box;
 use std::path::PathBuf;
 
 use criterion::{BenchmarkId, Criterion, Throughput};
-use field::{ChannelSpec, Evaporation};
-use roles::mapper::{LocalMap, MappingConfig, MergeTransform};
+use pheromone_field::{ChannelSpec, Evaporation};
+use pheromone_roles::mapper::{LocalMap, MappingConfig, MergeTransform};
 
 const SIDES: &[u32] = &[256, 512, 1024];
 const GROUP: &str = "map_merge";

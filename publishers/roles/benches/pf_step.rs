@@ -13,10 +13,10 @@ use std::hint::black_box;
 
 use criterion::{BatchSize, Criterion};
 use nalgebra::{Matrix3, Vector3};
+use pheromone_roles::localizer::{EkfConfig, ParticleFilter, PfConfig};
 use pheromone_world::{
     wall_segments, LaserConfig, RobotConfig, WallConfig, World, WorldConfig, WorldPose,
 };
-use roles::localizer::{EkfConfig, ParticleFilter, PfConfig};
 
 const PARTICLES: usize = 500;
 

@@ -4,7 +4,7 @@
 //! strategies) and seed 004's mapper. Nothing here knows the simulator: a role takes its own
 //! configuration ([`LocalizerSetup`], [`MapperSetup`], `DepositorConfig`, `FollowerConfig`) and
 //! the messages of `pheromone-messages`; the simulated world, the scenario files that build
-//! these configurations and the lockstep conductor are `pheromone-world`. [`role_loop`] holds
+//! these configurations and the lockstep conductor are `pheromone-world`. `process::role_loop` holds
 //! what every role's loop shares: the robots' service names, the options and summary of a role,
 //! and the loop that handles one message per step.
 

@@ -7,20 +7,20 @@
 //!
 //! `PHEROMONE_FUZZ_CASES` (default 256) scales the number of cases.
 
-use field::{
+use nalgebra::Matrix3;
+use pheromone_field::{
     ChannelSpec, DepositMsg, Evaporation, FieldConfig, FrameView, GridGeometry, OwnedField,
 };
-use messages::{LandmarkObs, PoseMsg, SensorMsg, MAX_OBSERVATIONS};
-use nalgebra::Matrix3;
+use pheromone_messages::{LandmarkObs, PoseMsg, SensorMsg, MAX_OBSERVATIONS};
+use pheromone_roles::depositor::{msg_is_finite, DepositMode, Depositor, DepositorConfig};
+use pheromone_roles::follower::{Follower, FollowerConfig, StrategyKind};
+use pheromone_roles::localizer::{CheckedFilter, Ekf, EkfConfig, EkfSlam, EkfSlamConfig};
+use pheromone_testkit::toml_fuzz;
 use pheromone_world::scenario::Scenario;
 use pheromone_world::{Landmark, OccupancyMap, RobotConfig, World, WorldConfig, WorldPose};
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
 use proptest::test_runner::{Config, TestRunner};
-use roles::depositor::{msg_is_finite, DepositMode, Depositor, DepositorConfig};
-use roles::follower::{Follower, FollowerConfig, StrategyKind};
-use roles::localizer::{CheckedFilter, Ekf, EkfConfig, EkfSlam, EkfSlamConfig};
-use testkit::toml_fuzz;
 
 fn cases(default: u32) -> u32 {
     match std::env::var("PHEROMONE_FUZZ_CASES") {

@@ -6,11 +6,13 @@
 
 mod merge_support;
 
-use field::GridGeometry;
 use merge_support::{map, transform};
+use pheromone_field::GridGeometry;
+use pheromone_roles::mapper::merge::{average_logodds_bound, merge_planes_reference};
+use pheromone_roles::mapper::{
+    merge_planes, MapError, MapView, MergeRule, MergeStats, MergeTransform,
+};
 use proptest::prelude::*;
-use roles::mapper::merge::{average_logodds_bound, merge_planes_reference};
-use roles::mapper::{merge_planes, MapError, MapView, MergeRule, MergeStats, MergeTransform};
 
 type Planes = (Vec<f32>, Vec<f32>);
 

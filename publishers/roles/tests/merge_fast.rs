@@ -7,9 +7,9 @@
 mod merge_support;
 
 use merge_support::{map, transform};
+use pheromone_roles::mapper::merge::merge_planes_reference;
+use pheromone_roles::mapper::{merge_planes, MapView, MergeRule};
 use proptest::prelude::*;
-use roles::mapper::merge::merge_planes_reference;
-use roles::mapper::{merge_planes, MapView, MergeRule};
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]

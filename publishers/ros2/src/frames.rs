@@ -1,10 +1,10 @@
 //! What a frame becomes on ROS 2: its topics and their messages, shared by the Zenoh node and
 //! the MCAP recorder.
 
-use field::shm::{now_ns, FieldReader};
+use pheromone_field::shm::{now_ns, FieldReader};
 
-use crate::graph::{resolve_topic, NameError};
 use crate::grid::{grid_map_cdr, layer_name, occupancy_grid_cdr, FrameRef, Stamp};
+use crate::rmw_zenoh::{resolve_topic, NameError};
 use crate::types::{TypeInfo, GRID_MAP, OCCUPANCY_GRID};
 
 /// The field's topics (absolute names) and types: index 0 is the GridMap, index `1 + c` channel

@@ -16,7 +16,7 @@
 //! whose values are all equal (`hi ≤ lo`) is all 0. The message has no field for the scale (its
 //! `MapMetaData` holds only geometry): the GridMap topic carries the values themselves.
 
-use field::geometry::GridGeometry;
+use pheromone_field::geometry::GridGeometry;
 
 use crate::cdr::CdrWriter;
 

@@ -9,7 +9,7 @@
 //!   (`pheromone_msgs/msg/Deposit`), what `pheromone sim --record` writes besides the field.
 //! - [`robots`]: a simulated world's robots (truth and localizer links) as pose and path
 //!   messages, for the node's `--world`.
-//! - [`graph`]: rmw_zenoh's key expressions, liveliness tokens, GIDs and attachments.
+//! - [`rmw_zenoh`]: rmw_zenoh's key expressions, liveliness tokens, GIDs and attachments.
 //! - [`frames`]: the topics of a field and the messages of its current frame.
 //! - [`record`]: ROS 2 MCAP files.
 //! - `session` (feature `zenoh`): the Zenoh session configured as rmw_zenoh configures a node's.
@@ -20,12 +20,12 @@
 pub mod cdr;
 pub mod deps;
 pub mod frames;
-pub mod graph;
 pub mod grid;
 #[cfg(feature = "zenoh")]
 pub mod node;
 pub mod pose;
 pub mod record;
+pub mod rmw_zenoh;
 pub mod robot;
 pub mod robots;
 pub mod run;

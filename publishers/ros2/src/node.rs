@@ -3,15 +3,15 @@
 //! the field's frame-ready event wakes it, and turns the `PoseWithCovarianceStamped`s of its
 //! `--deposit-from` topics into seed 000 deposits through the depositor library. Liveliness
 //! tokens announce the node, its publishers and its subscriptions to the ROS graph; every
-//! sample carries rmw_zenoh's attachment ([`crate::graph`]). With a world (`--world`), it also
+//! sample carries rmw_zenoh's attachment ([`crate::rmw_zenoh`]). With a world (`--world`), it also
 //! publishes each robot's true and estimated pose and paths ([`crate::robots`]), declaring a
 //! robot's publishers when the robot is found.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use field::shm::{now_ns, DepositPublisher, FieldReader, ShmError, Svc};
 use iceoryx2::node::Node;
+use pheromone_field::shm::{now_ns, DepositPublisher, FieldReader, ShmError, Svc};
 use thiserror::Error;
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::liveliness::LivelinessToken;
@@ -22,11 +22,11 @@ use zenoh::Wait;
 
 use crate::deps::depositor::{Depositor, DepositorConfig, DepositorConfigError};
 use crate::frames::{frame_messages, wall_now_ns, FieldTopics};
-use crate::graph::{
+use crate::pose::{check_pose, PoseWithCovarianceStamped};
+use crate::rmw_zenoh::{
     self, split_topic_key, topic_key, Attachment, EntityKind, NameError, NodeIdentity, Qos,
     RosDistro,
 };
-use crate::pose::{check_pose, PoseWithCovarianceStamped};
 use crate::robots::{robot_topics, WorldRobots};
 use crate::session::{SessionConfigError, SessionSettings};
 use crate::types::{TypeInfo, POSE_COV_STAMPED};
@@ -47,7 +47,7 @@ pub enum Ros2Error {
     NoFrame(String),
 }
 
-field::from_shm_errors!(Ros2Error);
+pheromone_field::from_shm_errors!(Ros2Error);
 
 fn zerr(action: impl Into<String>, e: impl std::fmt::Display) -> Ros2Error {
     Ros2Error::Zenoh {
@@ -217,8 +217,8 @@ impl Ros2Node {
     /// Attaches to the field (waiting up to `timeout` for its first frame), opens the Zenoh
     /// session and declares the node's publishers, subscriptions and liveliness tokens.
     pub fn start(node: &Node<Svc>, o: Ros2Options, timeout: Duration) -> Result<Self, Ros2Error> {
-        let namespace = graph::namespace(&o.namespace)?;
-        let name = graph::node_name(&o.node_name)?;
+        let namespace = rmw_zenoh::namespace(&o.namespace)?;
+        let name = rmw_zenoh::node_name(&o.node_name)?;
         let mut reader = FieldReader::attach_within(node, &o.field, timeout)?;
         let channels = match reader.wait_until(timeout, |_| true)? {
             Some(f) => f.header.channels as usize,
@@ -531,7 +531,7 @@ fn declare_publisher(
     Ok(RosPublisher {
         publisher,
         _token: declare_token(session, &token_key)?,
-        gid: graph::gid(&token_key),
+        gid: rmw_zenoh::gid(&token_key),
         sequence: 0,
     })
 }
@@ -544,7 +544,7 @@ fn declare_subscription(
     t: &TypeInfo,
     config: &DepositorConfig,
 ) -> Result<RosSubscription, Ros2Error> {
-    let topic = graph::resolve_topic(&identity.namespace, &d.topic)?;
+    let topic = rmw_zenoh::resolve_topic(&identity.namespace, &d.topic)?;
     let token_key = identity.token(
         EntityKind::Subscription,
         entity_id,

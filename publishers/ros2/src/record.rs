@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
-use crate::graph::Qos;
+use crate::rmw_zenoh::Qos;
 use crate::types::{ros2msg_schema, TypeInfo, GRID_MAP, OCCUPANCY_GRID};
 
 /// The ROS 2 distribution whose type hashes and bag format the files follow.

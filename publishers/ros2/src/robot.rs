@@ -3,7 +3,7 @@
 //! and columns 0, 1 and 5 of the 6×6 one, the rest 0), a trajectory as `nav_msgs/msg/Path`, a
 //! deposit as this project's `pheromone_msgs/msg/Deposit` (types::DEPOSIT, docs/ros2.md).
 
-use field::{DepositMsg, KernelKind};
+use pheromone_field::{DepositMsg, KernelKind};
 
 use crate::cdr::CdrWriter;
 use crate::grid::{header, Stamp};

@@ -9,14 +9,14 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use crate::deps::{PoseMsg, TruthMsg};
-use field::link::Receiver;
-use field::shm::{AttachError, ReceiveError, Svc};
-use field::wire::{ready_service, RobotServices, ROBOT_LINK};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
+use pheromone_field::process::link::Receiver;
+use pheromone_field::shm::{AttachError, ReceiveError, Svc};
+use pheromone_field::wire::{ready_service, RobotServices, ROBOT_LINK};
 
-use crate::graph::{resolve_topic, NameError};
 use crate::grid::Stamp;
+use crate::rmw_zenoh::{resolve_topic, NameError};
 use crate::robot::{covariance_6x6, path_cdr, pose_with_covariance_cdr, Pose2};
 use crate::types::{TypeInfo, PATH, POSE_COV_STAMPED};
 

@@ -11,11 +11,11 @@
 
 use serde::Serialize;
 
-use crate::record::Recording;
+use crate::recording::Recording;
+use pheromone_roles::mapper::{pose_in_frame, MappingConfig};
 use pheromone_world::scenario::{ExplorationMetric, Scenario};
 use pheromone_world::team::{MappingRecord, MergeEvent, RobotMap};
 use pheromone_world::World;
-use roles::mapper::{pose_in_frame, MappingConfig};
 
 /// `exploration_known`, shaped like `exploration`.
 #[derive(Debug, Clone, Serialize)]

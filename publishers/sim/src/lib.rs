@@ -1,6 +1,6 @@
-//! Running a scenario: its file format ([`scenario`]), the single-process runner ([`single`]),
-//! the run as separate processes ([`processes`]) with its [`supervisor`] and [`observer`],
-//! what a run records ([`record`]; as a ROS 2 MCAP file, [`ros_record`] and the observer's
+//! Running a scenario: its file format (`pheromone_world::scenario`), the single-process runner ([`single`]),
+//! the run as separate processes ([`processes`]) with its supervisor (`pheromone_supervisor`) and [`observer`],
+//! what a run records ([`recording`]; as a ROS 2 MCAP file, [`ros_record`] and the observer's
 //! [`ros_feed`]) and the metrics computed from it ([`metrics`], seed 000's
 //! `wrong_area` in [`wrong_area`]), and seed 004's grid of experiments ([`sweep`], its statistics in
 //! [`sweep_stats`], the paper's own figures beside it in [`paper`]), and seed 004's comparison of
@@ -11,7 +11,7 @@ pub mod metrics;
 pub mod observer;
 pub mod paper;
 pub mod processes;
-pub mod record;
+pub mod recording;
 pub mod ros_feed;
 pub mod ros_record;
 pub mod single;

@@ -19,7 +19,7 @@ use serde::Serialize;
 
 use crate::exploration::MappingMetrics;
 use crate::processes::ProcessReport;
-use crate::record::{ProbeReading, Recording};
+use crate::recording::{ProbeReading, Recording};
 use crate::ros_record::McapTotals;
 use crate::single::{FieldSummary, RobotResult, RunSummary};
 use crate::wrong_area::WrongArea;

@@ -2,7 +2,7 @@
 //! reads the field's frames (no copy, except for the snapshots it keeps), and builds the same
 //! [`Recording`] a single-process run does.
 //!
-//! It takes part in the lockstep (`field::lockstep`): it joins the run, and acknowledges each
+//! It takes part in the lockstep (`pheromone_field::process::lockstep`): it joins the run, and acknowledges each
 //! frame once it has recorded it, so it sees every frame, and takes probes and snapshots from
 //! the same frames a single-process run does ([`FrameSchedule`]).
 //!
@@ -20,24 +20,24 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use field::link::Receiver;
-use field::lockstep::{self, Participant};
-use field::shm::{AttachError, FieldReader, ShmError, Svc};
-use field::wire::{ready_service as wake, ROBOT_LINK};
 use iceoryx2::node::Node;
+use pheromone_field::process::link::Receiver;
+use pheromone_field::process::lockstep::{self, Participant};
+use pheromone_field::shm::{AttachError, FieldReader, ShmError, Svc};
+use pheromone_field::wire::{ready_service as wake, ROBOT_LINK};
 
-use crate::record::{deposit_peak, Recording, RobotSample};
+use crate::recording::{deposit_peak, Recording, RobotSample};
 use crate::ros_feed::McapFeed;
 use crate::ros_record::McapTotals;
 use crate::single::{sigma_max_m, FrameSchedule};
-use messages::{
+use pheromone_messages::{
     CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg, RendezvousMsg, ScanMsg, TruthMsg,
 };
+use pheromone_roles::depositor::Depositor;
+use pheromone_roles::RobotServices;
+use pheromone_ros2::record::RecordError;
 use pheromone_world::scenario::Scenario;
 use pheromone_world::team::MappingTeam;
-use roles::depositor::Depositor;
-use roles::RobotServices;
-use ros2::record::RecordError;
 
 struct RobotLinks {
     id: u32,
@@ -279,7 +279,7 @@ impl Observer {
     }
 
     /// The header of the newest frame seen: the field's counters up to it.
-    pub fn last_header(&self) -> Option<field::FrameHeader> {
+    pub fn last_header(&self) -> Option<pheromone_field::FrameHeader> {
         self.field.frame().map(|f| *f.header)
     }
 

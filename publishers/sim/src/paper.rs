@@ -3,7 +3,7 @@
 //! only the values its text states (a mean, a maximum, a t, a bound every t exceeds, the R_C
 //! where exploration peaks).
 
-use roles::follower::StrategyKind;
+use pheromone_roles::follower::StrategyKind;
 
 use super::sweep::{Figure, PointKey, SweepResult};
 
@@ -326,7 +326,7 @@ mod tests {
                         rc_m,
                         merge: true,
                         strategy: StrategyKind::Inverse,
-                        steer_on: roles::mapper::SteerOn::OwnMap,
+                        steer_on: pheromone_roles::mapper::SteerOn::OwnMap,
                         integration: Default::default(),
                     },
                     seed,

@@ -11,20 +11,20 @@
 //! deposits the field applied are on no service it reads: it predicts them, as the field makes
 //! them, from what it has — the scenario's scripted deposits due by the step's time (the world
 //! sends them) and the deposits its copies of the robots' depositors make — checked with the
-//! field's own validation (`field::deposit::prepare`) and put in the field's canonical order
+//! field's own validation (`pheromone_field::deposit::prepare`) and put in the field's canonical order
 //! (the world's first, then by robot id). Each step's count is compared with the
 //! `deposits_this_tick` of the field's frame; a step where they differ is counted
 //! ([`McapTotals::deposit_mismatches`]) and said once on stderr.
 
 use std::collections::{BTreeMap, VecDeque};
 
-use field::deposit::prepare;
-use field::{DepositMsg, FieldConfig, GridGeometry};
-use messages::PoseMsg;
+use pheromone_field::deposit::prepare;
+use pheromone_field::{DepositMsg, FieldConfig, GridGeometry};
+use pheromone_messages::PoseMsg;
+use pheromone_ros2::record::RecordError;
 use pheromone_world::scenario::Scenario;
-use ros2::record::RecordError;
 
-use crate::record::Recording;
+use crate::recording::Recording;
 use crate::ros_record::{McapTotals, PoseRow, SimMcap};
 
 /// The most steps held back waiting for a late pose; the oldest then goes out without it.

@@ -1,5 +1,5 @@
 //! `pheromone sim --record FILE.mcap`: the run as a ROS 2 MCAP file (profile `ros2`, `ros2msg`
-//! schemas, CDR messages, written by `ros2::record::McapRecorder` as `pheromone record --mcap`
+//! schemas, CDR messages, written by `pheromone_ros2::record::McapRecorder` as `pheromone record --mcap`
 //! writes its files), stamped with simulated time (docs/ros2.md, "pheromone sim --record"):
 //!
 //! - `/pheromone/grid_map` and `/pheromone/occupancy/channel_<c>`: each field frame the run
@@ -22,17 +22,19 @@ use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use field::{DepositMsg, GridGeometry};
-use messages::PoseMsg;
+use pheromone_field::{DepositMsg, GridGeometry};
+use pheromone_messages::PoseMsg;
+use pheromone_ros2::frames::{frame_cdr, FieldTopics};
+use pheromone_ros2::grid::{FrameRef, Stamp};
+use pheromone_ros2::record::{McapRecorder, RecordError};
+use pheromone_ros2::robot::{
+    covariance_6x6, deposit_cdr, path_cdr, pose_with_covariance_cdr, Pose2,
+};
+use pheromone_ros2::types::{TypeInfo, DEPOSIT, PATH, POSE_COV_STAMPED};
 use pheromone_world::scenario::Scenario;
-use ros2::frames::{frame_cdr, FieldTopics};
-use ros2::grid::{FrameRef, Stamp};
-use ros2::record::{McapRecorder, RecordError};
-use ros2::robot::{covariance_6x6, deposit_cdr, path_cdr, pose_with_covariance_cdr, Pose2};
-use ros2::types::{TypeInfo, DEPOSIT, PATH, POSE_COV_STAMPED};
 use serde::Serialize;
 
-use crate::record::{deposit_peak, Recording, Snapshot};
+use crate::recording::{deposit_peak, Recording, Snapshot};
 
 /// `header.frame_id` of every message.
 pub const FRAME_ID: &str = "map";

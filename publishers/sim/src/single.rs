@@ -10,25 +10,25 @@
 //! 5. each follower reads the new frame and decides its command (with own-map steering, its
 //!    robot's map after the mapping team's step instead, at its estimate in the map's frame).
 //!
-//! The run also records what [`report`] draws and what the metrics need, and with `--record`
+//! The run also records what `pheromone_report` draws and what the metrics need, and with `--record`
 //! hands each step's poses, applied deposits and recorded frames to a [`SimMcap`] (whose
 //! thread writes the MCAP file).
 
 use std::collections::{BTreeMap, VecDeque};
 
-use field::{DepositMsg, FieldConfig, FrameView, OwnedField, RejectReason};
+use pheromone_field::{DepositMsg, FieldConfig, FrameView, OwnedField, RejectReason};
 use serde::Serialize;
 
-use crate::record::{deposit_peak, ProbeReading, Recording, RobotSample, Snapshot};
+use crate::recording::{deposit_peak, ProbeReading, Recording, RobotSample, Snapshot};
 use crate::ros_record::{PoseRow, SimMcap};
-use messages::{FollowerState, LaserMsg, PoseMsg};
+use pheromone_messages::{FollowerState, LaserMsg, PoseMsg};
+use pheromone_roles::depositor::Depositor;
+use pheromone_roles::follower::{Follower, PoseSource};
+use pheromone_roles::mapper::{pose_msg_in_frame, Pose2, MAP_CHANNELS};
+use pheromone_roles::{Filter, ProcessError};
 use pheromone_world::scenario::{ProbeSpec, Scenario};
 use pheromone_world::team::MappingTeam;
 use pheromone_world::{StepOutput, World};
-use roles::depositor::Depositor;
-use roles::follower::{Follower, PoseSource};
-use roles::mapper::{pose_msg_in_frame, Pose2, MAP_CHANNELS};
-use roles::{Filter, ProcessError};
 
 /// What a run ends with, whichever way it ran.
 #[derive(Debug, Clone, Serialize)]
@@ -100,7 +100,7 @@ pub struct RobotResult {
 
 /// The role a robot plays, as reported: `leader`, `follower`, `depositor`, `explorer`…
 pub fn role_name(scenario: &Scenario, id: u32) -> String {
-    use roles::follower::StrategyKind as K;
+    use pheromone_roles::follower::StrategyKind as K;
     let Some(r) = scenario.roles(id) else {
         return "idle".into();
     };
@@ -220,7 +220,7 @@ impl Robot {
         if let Some((f, source)) = self.follower.as_mut() {
             let steer = match source {
                 PoseSource::Estimate => pose,
-                PoseSource::Truth => messages::truth_as_pose(&out.truth),
+                PoseSource::Truth => pheromone_messages::truth_as_pose(&out.truth),
             };
             let steer = match own_map {
                 Some(start) => pose_msg_in_frame(start, &steer),

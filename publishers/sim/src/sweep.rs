@@ -18,10 +18,10 @@ use super::exploration::{exploration_known, exploration_merged};
 use super::metrics::exploration;
 use super::single::{run_single_process, SingleProcessOptions};
 use super::sweep_stats::{paired, welch, MeanSd, TTest};
+use pheromone_roles::follower::StrategyKind;
+use pheromone_roles::mapper::{MergeRule, SteerOn};
+use pheromone_roles::process::role_loop::ProcessError;
 use pheromone_world::scenario::{Overrides, Scenario, ScenarioError};
-use roles::follower::StrategyKind;
-use roles::mapper::{MergeRule, SteerOn};
-use roles::process::role_loop::ProcessError;
 
 /// A sweep cannot be planned or one of its runs failed.
 #[derive(Debug, thiserror::Error)]
@@ -760,5 +760,4 @@ pub fn comparisons(runs: &[RunResult], points: &[Point], figure: Figure) -> Vec<
 }
 
 #[cfg(test)]
-#[path = "sweep_tests.rs"]
 mod tests;

@@ -5,8 +5,8 @@
 
 use serde::Serialize;
 
-use crate::record::{Recording, RobotSample};
-use messages::FollowerState;
+use crate::recording::{Recording, RobotSample};
+use pheromone_messages::FollowerState;
 use pheromone_world::scenario::{Scenario, WrongAreaMetric};
 
 /// The outcome of a run, for the leader and each follower. Positions are [x, y] in metres.

@@ -3,13 +3,13 @@
 //! go; on the shared field it changes only what they know. Runs in one process; that the
 //! processes run equals it is tests/processes.
 
+use pheromone_roles::mapper::{pose_in_frame, SteerOn};
+use pheromone_sim::exploration::exploration_merged;
+use pheromone_sim::metrics::{scenario_metrics, ScenarioMetrics};
+use pheromone_sim::recording::{Recording, RobotSample};
+use pheromone_sim::single::{run_single_process, SingleProcessOptions};
 use pheromone_world::scenario::{ExplorationMetric, Overrides, Scenario};
 use pheromone_world::team::MergeEvent;
-use roles::mapper::{pose_in_frame, SteerOn};
-use sim::exploration::exploration_merged;
-use sim::metrics::{scenario_metrics, ScenarioMetrics};
-use sim::record::{Recording, RobotSample};
-use sim::single::{run_single_process, SingleProcessOptions};
 
 /// ias-ss with `robots` robots for `duration_s`, mapping on (`merge`), steering on `steer`;
 /// exchanges from iteration 11, the same pair every 10 iterations.

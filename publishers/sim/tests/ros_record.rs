@@ -3,10 +3,10 @@
 
 use std::collections::BTreeMap;
 
+use pheromone_ros2::record::McapRecorder;
+use pheromone_sim::ros_record::SimMcap;
+use pheromone_sim::single::{run_single_process, SingleProcessOptions};
 use pheromone_world::scenario::{Overrides, Scenario};
-use ros2::record::McapRecorder;
-use sim::ros_record::SimMcap;
-use sim::single::{run_single_process, SingleProcessOptions};
 
 /// Topic → log times of its messages.
 fn topics(path: &std::path::Path) -> BTreeMap<String, Vec<u64>> {
@@ -81,7 +81,7 @@ fn a_recording_dropped_mid_run_is_finished_with_what_it_got() {
     let mut rows = 0;
     // What a failing run does: its recorder is dropped, not finished.
     let mut poses = |o: &mut SimMcap, k: u64| {
-        o.poses(vec![sim::ros_record::PoseRow {
+        o.poses(vec![pheromone_sim::ros_record::PoseRow {
             robot: s.world.robots[0].id,
             t_s: k as f64 * 0.1,
             truth: [k as f64, 0.0, 0.0],

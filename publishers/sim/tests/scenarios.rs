@@ -2,11 +2,11 @@
 //! with assertions on the metrics a user relies on. Durations are shortened where the claim
 //! holds earlier, to keep the suite quick.
 
+use pheromone_roles::follower::StrategyKind;
+use pheromone_sim::metrics::{scenario_metrics, ScenarioMetrics};
+use pheromone_sim::recording::Recording;
+use pheromone_sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 use pheromone_world::scenario::{Overrides, Scenario, BUILTIN};
-use roles::follower::StrategyKind;
-use sim::metrics::{scenario_metrics, ScenarioMetrics};
-use sim::record::Recording;
-use sim::single::{run_single_process, RunSummary, SingleProcessOptions};
 
 fn run(name: &str, o: Overrides) -> (Scenario, RunSummary, Recording, ScenarioMetrics) {
     let mut s = Scenario::load(name).unwrap();

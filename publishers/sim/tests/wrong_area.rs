@@ -3,10 +3,10 @@
 //! followers end there, with uncertainty-aware deposits they give the trail up within a few
 //! metres of the loss, explore, and none ends in A.
 
+use pheromone_sim::metrics::scenario_metrics;
+use pheromone_sim::single::{run_single_process, SingleProcessOptions};
 use pheromone_world::scenario::{Overrides, Scenario};
 use serde_json::Value;
-use sim::metrics::scenario_metrics;
-use sim::single::{run_single_process, SingleProcessOptions};
 
 const SEEDS: [u64; 3] = [0, 1, 2];
 

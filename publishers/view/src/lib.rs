@@ -25,8 +25,8 @@ pub mod server;
 use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
 
-use field::deposit::RejectReason;
-use field::messages::FrameHeader;
+use pheromone_field::deposit::RejectReason;
+use pheromone_field::messages::FrameHeader;
 use serde::Serialize;
 
 /// Largest `max_side` a request may ask for.
@@ -434,12 +434,12 @@ pub struct RobotTrack {
 /// The robots' recent paths, [`PATH_LENGTH`] positions each.
 #[derive(Debug, Default)]
 pub struct RobotPaths {
-    tracks: BTreeMap<u32, (messages::PoseMsg, VecDeque<[f64; 2]>)>,
+    tracks: BTreeMap<u32, (pheromone_messages::PoseMsg, VecDeque<[f64; 2]>)>,
 }
 
 impl RobotPaths {
     /// Adds a pose of robot `id`; a pose with a non-finite position is ignored.
-    pub fn push(&mut self, id: u32, pose: messages::PoseMsg) {
+    pub fn push(&mut self, id: u32, pose: pheromone_messages::PoseMsg) {
         if !(pose.x_m.is_finite() && pose.y_m.is_finite() && pose.theta_rad.is_finite()) {
             return;
         }

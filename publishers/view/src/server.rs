@@ -20,16 +20,16 @@ use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
-use field::link::Receiver;
-use field::shm::{AttachError, FieldReader, ShmError, Svc};
-use field::wire::{ready_service, RobotServices, ROBOT_LINK};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::*;
+use pheromone_field::process::link::Receiver;
+use pheromone_field::shm::{AttachError, FieldReader, ShmError, Svc};
+use pheromone_field::wire::{ready_service, RobotServices, ROBOT_LINK};
 
 use super::http::{Request, Server};
 
 use super::{parse_frame_query, snapshot, QueryError, RobotPaths, StatsTracker};
-use messages::PoseMsg;
+use pheromone_messages::PoseMsg;
 
 const PAGE_HTML: &str = include_str!("page/index.html");
 const PAGE_JS: &str = include_str!("page/view.js");

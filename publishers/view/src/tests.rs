@@ -176,7 +176,7 @@ fn the_tick_rate_comes_from_sequences_over_stamps() {
 #[test]
 fn robot_paths_keep_the_last_positions_and_skip_non_finite_poses() {
     let mut r = RobotPaths::default();
-    let pose = |x: f64| messages::PoseMsg {
+    let pose = |x: f64| pheromone_messages::PoseMsg {
         x_m: x,
         y_m: 1.0,
         ..Default::default()

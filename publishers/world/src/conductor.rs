@@ -3,16 +3,16 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use field::link::{Receiver, Sender};
-use field::lockstep::{self, Conductor, LockstepError};
-use field::shm::{now_ns, DepositPublisher, Svc};
-use field::DepositMsg;
 use iceoryx2::node::Node;
+use pheromone_field::process::link::{Receiver, Sender};
+use pheromone_field::process::lockstep::{self, Conductor, LockstepError};
+use pheromone_field::shm::{now_ns, DepositPublisher, Svc};
+use pheromone_field::DepositMsg;
 
 use crate::scenario::{Scenario, WORLD_DEPOSITOR_ID};
 use crate::{StepOutput, World, WorldPose};
-use messages::{CmdMsg, LaserMsg, RendezvousMsg, ScanMsg, SensorMsg, TruthMsg};
-use roles::{receiver, sender, ProcessError, RobotServices};
+use pheromone_messages::{CmdMsg, LaserMsg, RendezvousMsg, ScanMsg, SensorMsg, TruthMsg};
+use pheromone_roles::{receiver, sender, ProcessError, RobotServices};
 
 /// Options of the world process.
 #[derive(Debug, Clone)]
@@ -90,7 +90,7 @@ pub fn mapper_robots(scenario: &Scenario, mapped: bool) -> Vec<u32> {
 }
 
 /// The world process: simulates, publishes sensors and truth, applies commands, makes the
-/// scenario's scripted deposits and conducts the lockstep (`field::lockstep`).
+/// scenario's scripted deposits and conducts the lockstep (`pheromone_field::process::lockstep`).
 pub fn run_world(
     node: &Node<Svc>,
     scenario: &Scenario,

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use super::walls::SegmentIndex;
 use super::{World, WorldError, WorldPose};
-use messages::{LaserMsg, MAX_LASER_BEAMS};
+use pheromone_messages::{LaserMsg, MAX_LASER_BEAMS};
 
 /// Mixed into the world's seed for the laser's RNG.
 const LASER_SEED: u64 = 0x6c61_7365_7230_3030;

@@ -16,7 +16,7 @@
 //! - Observations: range and bearing (relative to the heading, wrapped to (−π, π]) with a
 //!   signature, to landmarks within `sensor_range_m`, optionally within a field of view and in
 //!   line of sight, nearest first, at most
-//!   [`MAX_OBSERVATIONS`](messages::MAX_OBSERVATIONS) — the measurement of seed 001
+//!   [`MAX_OBSERVATIONS`](pheromone_messages::MAX_OBSERVATIONS) — the measurement of seed 001
 //!   Algorithm 1 line 9.
 //! - Walls: axis-aligned rectangles and polylines; a ROS map_server PGM+YAML map becomes wall
 //!   rectangles with [`OccupancyMap`].
@@ -42,7 +42,9 @@ mod walls;
 
 pub use laser::LaserConfig;
 pub use map::{MapError, OccupancyMap};
-pub use messages::geometry::{sinc, sinc_derivative, Landmark, NoiseConfig, Segment, WorldPose};
+pub use pheromone_messages::geometry::{
+    sinc, sinc_derivative, Landmark, NoiseConfig, Segment, WorldPose,
+};
 pub use scan::ScanSensorConfig;
 pub use walls::{wall_segments, WallConfig};
 
@@ -53,10 +55,10 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use messages::{SensorMsg, TruthMsg};
+use pheromone_messages::{SensorMsg, TruthMsg};
 use walls::{inside_rect, SegmentIndex};
 
-pub use messages::wrap_angle;
+pub use pheromone_messages::wrap_angle;
 
 /// Differential-drive motion by wheel travel (seed 000 eqs. 27–33).
 ///

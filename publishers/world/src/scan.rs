@@ -13,8 +13,8 @@ use rand_distr::StandardNormal;
 
 use super::walls::SegmentIndex;
 use super::{wrap_angle, World};
-use messages::{PeerObs, RendezvousMsg, ScanMsg, MAX_PEERS};
-use roles::mapper::MappingConfig;
+use pheromone_messages::{PeerObs, RendezvousMsg, ScanMsg, MAX_PEERS};
+use pheromone_roles::mapper::MappingConfig;
 
 /// Mixed into the world's seed for the mapping RNG.
 const MAPPING_SEED: u64 = 0x6d61_7070_696e_6721;

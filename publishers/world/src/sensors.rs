@@ -9,7 +9,7 @@ use rand::Rng;
 use rand_distr::StandardNormal;
 
 use super::{wrap_angle, NoiseConfig, World, WorldPose};
-use messages::{LandmarkObs, MAX_OBSERVATIONS};
+use pheromone_messages::{LandmarkObs, MAX_OBSERVATIONS};
 
 impl World {
     pub(super) fn normal(&mut self) -> f64 {

@@ -12,16 +12,16 @@
 use std::collections::BTreeMap;
 
 use crate::scenario::Scenario;
-use messages::{PoseMsg, RendezvousMsg, ScanMsg};
-pub use roles::mapper::{alignment_error_m, true_transform, MergeEvent};
-use roles::mapper::{MapError, MapView, Mapper, MapperCounters, MappingConfig, Pose2};
+use pheromone_messages::{PoseMsg, RendezvousMsg, ScanMsg};
+pub use pheromone_roles::mapper::{alignment_error_m, true_transform, MergeEvent};
+use pheromone_roles::mapper::{MapError, MapView, Mapper, MapperCounters, MappingConfig, Pose2};
 
 /// A robot's final map, in its own frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RobotMap {
     /// The robot's true start pose in the world (the map's frame, for pictures and metrics).
     pub start: Pose2,
-    pub geometry: field::GridGeometry,
+    pub geometry: pheromone_field::GridGeometry,
     pub occupancy: Vec<f32>,
     pub pheromone: Vec<f32>,
 }
@@ -78,7 +78,7 @@ impl MappingTeam {
     fn exchange(&mut self, step: u64) {
         let n = self.mappers.len();
         // What each robot offers: its map and estimate at the end of the last step.
-        let mut offers: Vec<Option<(roles::mapper::LocalMap, Pose2)>> = vec![None; n];
+        let mut offers: Vec<Option<(pheromone_roles::mapper::LocalMap, Pose2)>> = vec![None; n];
         let mut merges = Vec::new();
         for j in 0..n {
             let Some(rv) = self.previous[j] else { continue };
@@ -163,7 +163,7 @@ mod tests {
     use super::*;
     use crate::scenario::Overrides;
     use crate::wrap_angle;
-    use messages::PeerObs;
+    use pheromone_messages::PeerObs;
 
     /// Three robots of `ias-ss` with merging, exchanges from iteration 2 (step 20; 10 steps an
     /// iteration), the same pair at most every 3 iterations.

@@ -6,7 +6,7 @@ use std::fmt::Display;
 /// The arguments of one `pheromone` command line (without the program).
 ///
 /// ```
-/// use testkit::Cmd;
+/// use pheromone_testkit::Cmd;
 /// let field = Cmd::field("f1").grid(64, 64).tick_hz(50).json();
 /// assert_eq!(
 ///     field.argv(),

@@ -12,7 +12,7 @@ use std::process::{Command, Output};
 use std::time::Duration;
 
 use nix::sys::signal::Signal;
-use supervisor::{ChildId, ChildSpec, Supervisor};
+use pheromone_supervisor::{ChildId, ChildSpec, Supervisor};
 
 /// A name no other test (or test run) on this host uses: the tag, the process id, a counter and
 /// the clock's nanoseconds.

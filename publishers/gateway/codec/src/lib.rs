@@ -56,7 +56,7 @@
 //! # Use
 //!
 //! ```
-//! use gateway_codec::{decode, encode, Decoder, Message, PirRequest, MAX_ENCODED_BYTES};
+//! use pheromone_gateway_codec::{decode, encode, Decoder, Message, PirRequest, MAX_ENCODED_BYTES};
 //!
 //! let pir = Message::Pir(PirRequest {
 //!     x_m: 1.5,

@@ -1,6 +1,6 @@
 //! Unit tests of the decoder: each rejection reason, resynchronisation, the length bound.
 
-use gateway_codec::{
+use pheromone_gateway_codec::{
     decode, encode, DecodeError, Decoder, EncodeError, ErrorReason, Frame, Message, PirRequest,
     Rejection, CRC, MAX_ENCODED_BYTES, MAX_FRAME_BYTES, MAX_WIRE_BYTES,
 };

@@ -6,7 +6,9 @@
 mod common;
 
 use common::Rng;
-use gateway_codec::{DecodeError, Decoder, Frame, Rejection, MAX_ENCODED_BYTES, REJECTIONS};
+use pheromone_gateway_codec::{
+    DecodeError, Decoder, Frame, Rejection, MAX_ENCODED_BYTES, REJECTIONS,
+};
 
 /// Outcomes seen from the outside, to compare with the decoder's own counters.
 #[derive(Default)]

@@ -4,7 +4,7 @@
 mod common;
 
 use common::*;
-use gateway_codec::{
+use pheromone_gateway_codec::{
     decode, encode, encoded_len, Decoder, EncodeError, Frame, Message, DLE, MAX_ENCODED_BYTES,
 };
 use proptest::prelude::*;
@@ -82,20 +82,20 @@ proptest! {
     fn all_dle_payloads_round_trip(m in message()) {
         let dle_f32 = f32::from_bits(0x1010_1010);
         let m = match m {
-            Message::Pir(_) => Message::Pir(gateway_codec::PirRequest {
+            Message::Pir(_) => Message::Pir(pheromone_gateway_codec::PirRequest {
                 x_m: dle_f32, y_m: dle_f32, theta_rad: dle_f32, half_wheel_base_m: dle_f32,
                 channel: 0x10,
             }),
-            Message::PirReply(_) => Message::PirReply(gateway_codec::PirReply {
+            Message::PirReply(_) => Message::PirReply(pheromone_gateway_codec::PirReply {
                 p_left: dle_f32, p_right: dle_f32, frame_seq: 0x1010_1010,
             }),
-            Message::Deposit(_) => Message::Deposit(gateway_codec::DepositRequest {
+            Message::Deposit(_) => Message::Deposit(pheromone_gateway_codec::DepositRequest {
                 seq: 0x10, x_m: dle_f32, y_m: dle_f32, amount: dle_f32, channel: 0x10,
             }),
-            Message::DepositReply(r) => Message::DepositReply(gateway_codec::DepositReply {
+            Message::DepositReply(r) => Message::DepositReply(pheromone_gateway_codec::DepositReply {
                 seq: 0x10, status: r.status,
             }),
-            Message::Status(_) => Message::Status(gateway_codec::StatusReply {
+            Message::Status(_) => Message::Status(pheromone_gateway_codec::StatusReply {
                 frame_seq: 0x1010_1010, field_time_s: dle_f32, channels: 0x10,
             }),
             other => other,

@@ -2,7 +2,7 @@
 //! the page: decoding them gives the documented message, and encoding the message gives them back.
 //! A client that knows only the page's bytes agrees with this codec.
 
-use gateway_codec::{
+use pheromone_gateway_codec::{
     decode, encode, Decoder, DepositReply, DepositRequest, DepositStatus, ErrorReason, Message,
     PirReply, PirRequest, StatusReply, CRC, MAX_ENCODED_BYTES,
 };

@@ -54,7 +54,7 @@ pub fn write_npy(
 /// Writes `dir/field_final.npy`: every channel of a run's last snapshot (`pheromone sim --out`).
 pub fn write_snapshot(
     dir: &Path,
-    snap: &sim::record::Snapshot,
+    snap: &pheromone_sim::recording::Snapshot,
 ) -> Result<std::path::PathBuf, ExportError> {
     let path = dir.join("field_final.npy");
     write_npy(

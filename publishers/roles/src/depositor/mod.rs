@@ -1,5 +1,5 @@
 //! The depositor role: turns a localizer's pose estimate (`PoseMsg`, mean + 3×3 covariance) into
-//! deposit requests for the field (`field::DepositMsg`). Pure library code; the iceoryx2 loop
+//! deposit requests for the field (`pheromone_field::DepositMsg`). Pure library code; the iceoryx2 loop
 //! lives elsewhere.
 //!
 //! Three modes (MODELS.md M1, M2/M4):
@@ -22,10 +22,10 @@
 //! that do not fit the `f32` deposit message) are rejected with a [`PoseRejection`] and counted
 //! by reason; no `DepositMsg` carrying a non-finite value is ever produced.
 
-use field::{Deposit, DepositMsg, EllipseRule, Kernel, KernelKind};
+use pheromone_field::{Deposit, DepositMsg, EllipseRule, Kernel, KernelKind};
 use serde::{Deserialize, Serialize};
 
-use messages::PoseMsg;
+use pheromone_messages::PoseMsg;
 
 /// Which M1 kernel an ellipse deposit uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -198,15 +198,15 @@ impl DepositorConfig {
     }
 }
 
-pub use field::kernel::pose::{
+pub use pheromone_field::kernel::pose::{
     fit_f32, PoseRejectReason, PoseRejection, POSE_REJECT_REASONS, PSD_REL_TOL, SYMMETRY_REL_TOL,
 };
 
-/// Checks a pose by the field's one rule (`field::kernel::pose::validate_pose`): finite mean
+/// Checks a pose by the field's one rule (`pheromone_field::kernel::pose::validate_pose`): finite mean
 /// and covariance, covariance symmetric and positive semi-definite (MODELS.md M1: anything else
 /// is bad input, rejected with a reason, never deposited).
 pub fn validate_pose(pose: &PoseMsg) -> Result<(), PoseRejection> {
-    field::kernel::pose::validate_pose(&pose.estimate())
+    pheromone_field::kernel::pose::validate_pose(&pose.estimate())
 }
 
 /// ρt = ρmax·exp(−trace(Σxy)/σ0²) — the project's choice for the strength of seed 001 eq. 3 /

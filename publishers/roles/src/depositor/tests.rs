@@ -1,7 +1,7 @@
 use super::*;
 use approx::assert_relative_eq;
-use field::deposit::{gamma, prepare, DepositLimits, ErrorEllipse};
-use field::{ChannelSpec, Evaporation, FieldConfig, OwnedField};
+use pheromone_field::deposit::{gamma, prepare, DepositLimits, ErrorEllipse};
+use pheromone_field::{ChannelSpec, Evaporation, FieldConfig, OwnedField};
 use proptest::prelude::*;
 
 /// A 10 m × 10 m, 0.05 m field with one channel that never evaporates.

@@ -7,11 +7,11 @@
 //! follows, it decides; on the first step it reports `TrailAbandoned`, the explorer takes over
 //! for good (until `reset`) and every decision is reported as `LeaderLost`.
 
-use field::{FrameView, SamplePose};
+use pheromone_field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use super::{invalid, Decision, FollowerConfigError, FollowerStrategy, StrategyKind};
-use messages::FollowerState;
+use pheromone_messages::FollowerState;
 
 /// `[robot.follower.after_loss]`: what a follower does once it has given a trail up.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -96,7 +96,7 @@ impl FollowerStrategy for ExploreAfterLoss {
 
 #[cfg(test)]
 mod tests {
-    use field::{FrameView, GridGeometry};
+    use pheromone_field::{FrameView, GridGeometry};
 
     use super::*;
     use crate::follower::{FollowerConfig, GradientConfig};

@@ -2,14 +2,14 @@
 //! (eq. 5 with the MODELS.md M3 convention), turn toward the stronger one, forward speed
 //! K·(1 − |P_L − P_R|) (the evident intent of eq. 6).
 
-use field::{FrameView, SamplePose};
+use pheromone_field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use super::{
     check_nonneg, check_positive, invalid, Decision, FollowerConfigError, FollowerStrategy,
     StrategyKind,
 };
-use messages::FollowerState;
+use pheromone_messages::FollowerState;
 
 /// Settings of the `antenna` strategy.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

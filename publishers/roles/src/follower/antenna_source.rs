@@ -22,13 +22,13 @@
 
 use std::time::Instant;
 
-use field::shm::{FieldReader, ShmError};
-use field::SamplePose;
+use pheromone_field::shm::{FieldReader, ShmError};
+use pheromone_field::SamplePose;
 use serde::{Deserialize, Serialize};
 
 use super::{AntennaFollower, FollowError, FollowOutput, FollowerStrategy};
-use gateway::client::{ClientError, GatewayClient};
-use messages::{CmdMsg, FollowerStatusMsg, PoseMsg};
+use pheromone_gateway::client::{ClientError, GatewayClient};
+use pheromone_messages::{CmdMsg, FollowerStatusMsg, PoseMsg};
 
 /// Two antenna readings and the frame they were read from.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -58,7 +58,7 @@ pub enum AntennaSourceError {
     NoDeposits { source_name: String },
 }
 
-field::from_shm_errors!(AntennaSourceError);
+pheromone_field::from_shm_errors!(AntennaSourceError);
 
 /// What a source did, for the role's summary.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -403,5 +403,4 @@ impl<S: AntennaSource> AntennaRobot<S> {
 }
 
 #[cfg(test)]
-#[path = "antenna_source_tests.rs"]
 mod tests;

@@ -2,14 +2,14 @@
 //! adapts its speed to the sensed level by the Table 2 speed table, and rejects a trail below an
 //! absolute level or δ·P0 (MODELS.md M1).
 
-use field::{FrameView, SamplePose};
+use pheromone_field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use super::{
     check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError,
     FollowerStrategy, StrategyKind,
 };
-use messages::FollowerState;
+use pheromone_messages::FollowerState;
 
 // ---------------------------------------------------------------------------------------------
 // Speed adaptation (seed 000 Table 2)
@@ -436,7 +436,7 @@ impl FollowerStrategy for GradientFollower {
 mod tests {
     use std::f64::consts::{FRAC_PI_2, PI};
 
-    use field::{ChannelSpec, Evaporation, FieldConfig, GridGeometry, OwnedField};
+    use pheromone_field::{ChannelSpec, Evaporation, FieldConfig, GridGeometry, OwnedField};
 
     use super::*;
     use crate::follower::test_support::{gaussian_ridge, mean, simulate, swept_rad, synth, Robot};
@@ -723,7 +723,7 @@ mod tests {
     #[test]
     fn gradient_follows_a_deposited_trail_until_it_fades() {
         use crate::depositor::{Depositor, DepositorConfig};
-        use messages::PoseMsg;
+        use pheromone_messages::PoseMsg;
         let mut f = OwnedField::new(FieldConfig {
             width: 200,
             height: 200,

@@ -35,10 +35,10 @@ mod test_support;
 use std::fmt;
 use std::str::FromStr;
 
-use field::{FrameView, SamplePose};
+use pheromone_field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
-use messages::{CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg};
+use pheromone_messages::{CmdMsg, FollowerState, FollowerStatusMsg, PoseMsg};
 
 pub use after_loss::{AfterLossConfig, ExploreAfterLoss};
 pub use antenna::{AntennaConfig, AntennaFollower};
@@ -87,7 +87,7 @@ pub trait FollowerStrategy: Send {
 }
 
 /// Angle wrapped into (−π, π]: the world's, one function for the whole crate.
-pub use messages::wrap_angle;
+pub use pheromone_messages::wrap_angle;
 
 /// A follower setting that is out of range.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

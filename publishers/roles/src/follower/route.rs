@@ -1,14 +1,14 @@
 //! The `route` strategy: a leader driven through waypoints, as the tele-operated or planned
 //! leader of seed 000. It ignores the field.
 
-use field::{FrameView, SamplePose};
+use pheromone_field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
 use super::{
     check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError,
     FollowerStrategy, StrategyKind,
 };
-use messages::FollowerState;
+use pheromone_messages::FollowerState;
 
 /// Settings of the `route` strategy: a leader that drives through waypoints, as the
 /// tele-operated or planned leader of seed 000 does. It ignores the field.

@@ -4,7 +4,7 @@
 
 use std::f64::consts::{FRAC_PI_2, PI};
 
-use field::{FrameView, SamplePose};
+use pheromone_field::{FrameView, SamplePose};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -13,7 +13,7 @@ use super::{
     check_nonneg, check_positive, invalid, wrap_angle, Decision, FollowerConfigError,
     FollowerStrategy, StrategyKind,
 };
-use messages::FollowerState;
+use pheromone_messages::FollowerState;
 
 /// Settings of the `inverse` and `uniform` strategies.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -563,7 +563,7 @@ mod tests {
     fn on_an_occupancy_grid_a_sector_with_cells_seen_occupied_is_blocked() {
         // A robot's own map: occupancy log-odds (channel 0), pheromone (channel 1, empty). A
         // wall seen occupied (log-odds 2) 1 m to the robot's left; free cells (−1) elsewhere.
-        let g = field::GridGeometry {
+        let g = pheromone_field::GridGeometry {
             width: 50,
             height: 50,
             cell_size_m: 0.2,

@@ -1,7 +1,7 @@
 //! Test helpers shared by the follower strategies' unit tests: synthetic fields, a unicycle
 //! robot and the closed-loop simulation.
 
-use field::{FrameView, GridGeometry, SamplePose};
+use pheromone_field::{FrameView, GridGeometry, SamplePose};
 
 use super::{wrap_angle, Decision, FollowerStrategy};
 

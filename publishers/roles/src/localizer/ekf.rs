@@ -13,8 +13,8 @@ use super::models::{
 use super::{
     invalid, CheckedFilter, EkfConfig, EkfCounters, InputLimits, LocalizerError, UpdateStats,
 };
-use messages::{wrap_angle, Landmark, WorldPose};
-use messages::{LandmarkObs, PoseMsg};
+use pheromone_messages::{wrap_angle, Landmark, WorldPose};
+use pheromone_messages::{LandmarkObs, PoseMsg};
 
 /// Landmark-based EKF localization (seed 001 Algorithm 1).
 #[derive(Debug, Clone)]
@@ -297,7 +297,7 @@ mod tests {
         arena, corridor, initial_cov, some_obs, CAPTURED, OMEGA_RADPS, V_MPS,
     };
     use crate::localizer::LossConfig;
-    use messages::SensorMsg;
+    use pheromone_messages::SensorMsg;
     use pheromone_world::World;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;

@@ -1,15 +1,15 @@
 //! The landmark [`Ekf`] as the pose filter of graph robots (seed 001 Algorithm 1 coupled to
-//! area capture, `graph::localize`): `pheromone-graph` defines what a filter must do, this
+//! area capture, `pheromone_graph::localize`): `pheromone-graph` defines what a filter must do, this
 //! crate (which depends on it) supplies the EKF.
 
-use graph::localize::{
+use nalgebra::Matrix3;
+use pheromone_graph::localize::{
     FilterStep, GraphLandmark, LocalizeConfig, Observation, Odometry, PoseFilter,
 };
-use messages::LandmarkObs;
-use nalgebra::Matrix3;
+use pheromone_messages::LandmarkObs;
 
 use super::{CheckedFilter, Ekf, EkfConfig, InputLimits};
-use messages::{Landmark, NoiseConfig, WorldPose};
+use pheromone_messages::{Landmark, NoiseConfig, WorldPose};
 
 /// A graph robot's EKF: association restricted to the L_set it is given each step.
 #[derive(Debug, Clone)]
@@ -61,7 +61,7 @@ impl GraphEkf {
     }
 }
 
-/// Builds a boxed [`GraphEkf`]: the `make_filter` of a `graph::localize::Localization`.
+/// Builds a boxed [`GraphEkf`]: the `make_filter` of a `pheromone_graph::localize::Localization`.
 pub fn make_graph_ekf(
     config: &LocalizeConfig,
     map: &[GraphLandmark],
@@ -120,5 +120,4 @@ impl PoseFilter for GraphEkf {
 }
 
 #[cfg(test)]
-#[path = "graph_filter_tests.rs"]
 mod tests;

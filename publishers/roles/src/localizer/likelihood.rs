@@ -3,7 +3,7 @@
 //! segment, capped at `cap_m`.
 
 use super::{invalid, LocalizerError};
-use messages::Segment;
+use pheromone_messages::Segment;
 
 /// Most cells a grid may have.
 pub const MAX_GRID_CELLS: usize = 16_000_000;

@@ -80,8 +80,8 @@ impl std::str::FromStr for FilterKind {
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use messages::NoiseConfig;
-use messages::{LandmarkObs, SensorMsg, MAX_OBSERVATIONS};
+use pheromone_messages::NoiseConfig;
+use pheromone_messages::{LandmarkObs, SensorMsg, MAX_OBSERVATIONS};
 
 /// Inputs beyond these limits are rejected as absurd.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -595,7 +595,7 @@ fn validate_common(
 mod tests {
     use super::*;
     use crate::localizer::test_support::{corridor, initial_cov, CAPTURED};
-    use messages::WorldPose;
+    use pheromone_messages::WorldPose;
 
     #[test]
     fn malformed_landmark_region_is_rejected_naming_the_key() {

@@ -6,8 +6,8 @@
 
 use nalgebra::{Matrix2, Matrix2x3, Matrix3, Matrix3x2, Vector2, Vector3};
 
-use messages::{sinc, sinc_derivative, wrap_angle, NoiseConfig};
-use messages::{LandmarkObs, PoseMsg};
+use pheromone_messages::{sinc, sinc_derivative, wrap_angle, NoiseConfig};
+use pheromone_messages::{LandmarkObs, PoseMsg};
 
 /// Velocity motion model: the pose change, G_t and V_t (seed 001 Algorithm 1 lines 3, 4, 6).
 ///

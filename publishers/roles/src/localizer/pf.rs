@@ -28,8 +28,8 @@ use super::{
     check_message, invalid, CheckedFilter, EkfConfig, EkfCounters, InputLimits, LocalizerError,
     UpdateStats,
 };
-use messages::{wrap_angle, Landmark, Segment, WorldPose};
-use messages::{LandmarkObs, LaserMsg, PoseMsg, SensorMsg, MAX_LASER_BEAMS};
+use pheromone_messages::{wrap_angle, Landmark, Segment, WorldPose};
+use pheromone_messages::{LandmarkObs, LaserMsg, PoseMsg, SensorMsg, MAX_LASER_BEAMS};
 
 /// Fewest particles a filter may have.
 pub const MIN_PARTICLES: usize = 10;

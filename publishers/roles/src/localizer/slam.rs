@@ -15,8 +15,8 @@ use super::{
     invalid, validate_common, CheckedFilter, EkfCounters, EkfSlamConfig, InputLimits,
     LocalizerError, SlamAssociation, UpdateStats,
 };
-use messages::{wrap_angle, WorldPose};
-use messages::{LandmarkObs, PoseMsg};
+use pheromone_messages::{wrap_angle, WorldPose};
+use pheromone_messages::{LandmarkObs, PoseMsg};
 
 /// A landmark estimated by [`EkfSlam`].
 #[derive(Debug, Clone, Copy, PartialEq)]

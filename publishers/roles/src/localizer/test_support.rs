@@ -3,7 +3,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use messages::LandmarkObs;
+use pheromone_messages::LandmarkObs;
 use pheromone_world::{Landmark, RobotConfig, WallConfig, WorldConfig, WorldPose};
 
 pub(super) const V_MPS: f64 = 0.6;

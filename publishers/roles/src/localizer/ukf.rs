@@ -22,8 +22,8 @@ use super::models::{
 use super::{
     invalid, CheckedFilter, EkfConfig, EkfCounters, InputLimits, LocalizerError, UpdateStats,
 };
-use messages::{wrap_angle, Landmark, WorldPose};
-use messages::{LandmarkObs, PoseMsg};
+use pheromone_messages::{wrap_angle, Landmark, WorldPose};
+use pheromone_messages::{LandmarkObs, PoseMsg};
 
 /// The UKF's scaling parameters (seed 000 eq. 6: α, κ; β for w_c⁰).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

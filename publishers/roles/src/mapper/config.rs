@@ -4,7 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use messages::MAX_RAYS;
+use pheromone_messages::MAX_RAYS;
 
 /// Seed 004's mapping settings. Every length in metres, every angle in radians; one
 /// *iteration* is `iteration_s` of simulated time (one decision of the sector strategy).

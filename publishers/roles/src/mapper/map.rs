@@ -2,13 +2,13 @@
 //! frame Σ (origin = its start pose, x along its start heading), updated from its pose estimate
 //! and its range scans (seed 004 §3, MODELS.md M4).
 
-use field::{
+use pheromone_field::{
     ChannelSpec, DepositMsg, Evaporation, FieldConfig, FrameHeader, GridGeometry, Stepper,
 };
 
 use super::config::{MappingConfig, MergeRule};
 use super::MapError;
-use messages::{PoseMsg, ScanMsg};
+use pheromone_messages::{PoseMsg, ScanMsg};
 
 /// Channel names of a map frame, in plane order.
 pub const MAP_CHANNELS: [&str; 2] = ["occupancy", "pheromone"];
@@ -23,7 +23,7 @@ pub fn pose_in_frame(origin: Pose2, pose: Pose2) -> Pose2 {
     [
         c * dx + s * dy,
         -s * dx + c * dy,
-        messages::wrap_angle(pose[2] - origin[2]),
+        pheromone_messages::wrap_angle(pose[2] - origin[2]),
     ]
 }
 

@@ -14,13 +14,13 @@
 //! the other. `adopt-unknown` averages in log-odds where both maps know a cell, and a cell
 //! unknown in one map takes the other map's occupancy and pheromone.
 
-use field::GridGeometry;
+use pheromone_field::GridGeometry;
 
 use super::config::MergeRule;
 use super::map::{reach_m, LocalMap, MapView, Pose2};
 pub use super::merge_logodds::{average_logodds, average_logodds_bound};
 use super::MapError;
-use messages::PeerObs;
+use pheromone_messages::PeerObs;
 
 /// Eqs. 7–10: Σi (source) → Σj (destination).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -43,9 +43,11 @@ impl MergeTransform {
     /// distance, bearing relative to j's heading, i's heading relative to j's).
     pub fn from_measurement(dst_pose: Pose2, src_pose: Pose2, obs: &PeerObs) -> Self {
         Self {
-            theta_ij_rad: messages::wrap_angle(dst_pose[2] + obs.heading_rad - src_pose[2]),
+            theta_ij_rad: pheromone_messages::wrap_angle(
+                dst_pose[2] + obs.heading_rad - src_pose[2],
+            ),
             d_ij_m: obs.range_m,
-            alpha_ji_rad: messages::wrap_angle(dst_pose[2] + obs.bearing_rad),
+            alpha_ji_rad: pheromone_messages::wrap_angle(dst_pose[2] + obs.bearing_rad),
             src_robot_m: [src_pose[0], src_pose[1]],
             dst_robot_m: [dst_pose[0], dst_pose[1]],
         }

@@ -30,7 +30,7 @@ pub use merge::{
 };
 
 use crate::depositor::Depositor;
-use messages::{PeerObs, PoseMsg, ScanMsg};
+use pheromone_messages::{PeerObs, PoseMsg, ScanMsg};
 
 /// Why a scan, a deposit or a map to merge was refused. Each names the value.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -38,7 +38,7 @@ pub enum MapError {
     #[error("{0}")]
     Config(#[source] MappingConfigError),
     #[error("local map geometry: {0}")]
-    Field(#[source] field::ConfigError),
+    Field(#[source] pheromone_field::ConfigError),
     #[error("map frame: header says {channels} channels of {width} × {height} cells, but the frame holds {len} cells")]
     Length {
         channels: u32,
@@ -128,7 +128,7 @@ impl Mapper {
         id: u32,
         config: &MappingConfig,
         start: Pose2,
-        channel: &field::ChannelSpec,
+        channel: &pheromone_field::ChannelSpec,
         dt_s: f64,
         depositor: Option<Depositor>,
     ) -> Result<Self, MapError> {
@@ -247,7 +247,7 @@ impl Mapper {
     pub fn accept_frame(
         &mut self,
         step: u64,
-        header: &field::FrameHeader,
+        header: &pheromone_field::FrameHeader,
         cells: &[f32],
         src_pose: Pose2,
         obs: &PeerObs,

@@ -1,7 +1,7 @@
-use field::{ChannelSpec, Evaporation, FrameHeader};
+use pheromone_field::{ChannelSpec, Evaporation, FrameHeader};
 
 use super::*;
-use messages::{PeerObs, PoseMsg, ScanMsg};
+use pheromone_messages::{PeerObs, PoseMsg, ScanMsg};
 
 /// The rule most tests here check geometry with: a cell unknown in the destination takes the
 /// source's values, so a merge into an empty map reproduces the source.

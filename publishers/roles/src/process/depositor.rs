@@ -2,15 +2,15 @@
 
 use std::time::Duration;
 
-use field::lockstep::{self, Participant};
-use field::shm::{DepositPublisher, Svc};
 use iceoryx2::node::Node;
+use pheromone_field::process::lockstep::{self, Participant};
+use pheromone_field::shm::{DepositPublisher, Svc};
 
 use crate::depositor::Depositor;
 use crate::{
     receiver, role_loop, summary_of, ProcessError, RobotServices, RoleOptions, RoleSummary,
 };
-use messages::PoseMsg;
+use pheromone_messages::PoseMsg;
 
 /// The depositor process: pose → deposits into the field. In lockstep it acknowledges each
 /// step once its deposit is in the field's queue; a deposit the field did not take ends the run

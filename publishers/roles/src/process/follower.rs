@@ -2,17 +2,17 @@
 
 use std::time::Duration;
 
-use field::link::{Receiver, Sender};
-use field::lockstep::Participant;
-use field::shm::{now_ns, AttachError, FieldReader, Svc};
 use iceoryx2::node::Node;
+use pheromone_field::process::link::{Receiver, Sender};
+use pheromone_field::process::lockstep::Participant;
+use pheromone_field::shm::{now_ns, AttachError, FieldReader, Svc};
 
 use crate::follower::{Follower, PoseSource};
 use crate::mapper::{pose_msg_in_frame, Pose2};
 use crate::{
     receiver, role_loop, sender, summary_of, ProcessError, RobotServices, RoleOptions, RoleSummary,
 };
-use messages::{CmdMsg, FollowerStatusMsg, PoseMsg, TruthMsg};
+use pheromone_messages::{CmdMsg, FollowerStatusMsg, PoseMsg, TruthMsg};
 
 /// Steps without a new frame after which a follower checks whether its field is still alive.
 const STALE_STEPS: u32 = 10;
@@ -53,7 +53,7 @@ pub fn run_follower(
             (follower, own_map),
             dt_s,
             receiver::<TruthMsg>(node, &s.truth)?,
-            messages::truth_as_pose,
+            pheromone_messages::truth_as_pose,
         ),
     }
 }
@@ -61,7 +61,7 @@ pub fn run_follower(
 /// Whether `header` is the frame a follower steers on at link step `step`: the field's frame
 /// `step + 1` (its tick of the step), or with own-map steering the map frame `step` (the
 /// mapper's frame after the step; its frame 0 before the first step has field time 0).
-fn frame_of_step(header: &field::FrameHeader, step: u64, own_map: bool) -> bool {
+fn frame_of_step(header: &pheromone_field::FrameHeader, step: u64, own_map: bool) -> bool {
     if own_map {
         header.sequence > step || (header.sequence == step && header.sim_time_s > 0.0)
     } else {

@@ -5,9 +5,9 @@
 
 use std::time::{Duration, Instant};
 
-use field::link::Receiver;
-use field::lockstep::Participant;
 use iceoryx2::node::Node;
+use pheromone_field::process::link::Receiver;
+use pheromone_field::process::lockstep::Participant;
 use serde::{Deserialize, Serialize};
 
 use crate::follower::antenna_source::{AntennaRobot, AntennaSource, AntennaStepError, SourceStats};
@@ -15,8 +15,8 @@ use crate::follower::PoseSource;
 use crate::{
     receiver, role_loop, sender, summary_of, ProcessError, RobotServices, RoleOptions, RoleSummary,
 };
-use field::shm::Svc;
-use messages::{CmdMsg, FollowerStatusMsg, PoseMsg, TruthMsg};
+use pheromone_field::shm::Svc;
+use pheromone_messages::{CmdMsg, FollowerStatusMsg, PoseMsg, TruthMsg};
 
 /// Deposits an antenna robot makes through its gateway as it goes (a leader laying a trail
 /// remotely).
@@ -70,7 +70,7 @@ pub fn run_antenna_robot<S: AntennaSource>(
             robot,
             run,
             receiver::<TruthMsg>(node, &s.truth)?,
-            messages::truth_as_pose,
+            pheromone_messages::truth_as_pose,
         ),
     }
 }

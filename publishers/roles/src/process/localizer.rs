@@ -1,10 +1,10 @@
 //! The localizer's process loop, and the filter it runs (EKF, UKF, particle filter or
 //! EKF-SLAM).
 
-use field::lockstep::Participant;
-use field::shm::Svc;
 use iceoryx2::node::Node;
 use nalgebra::Matrix3;
+use pheromone_field::process::lockstep::Participant;
+use pheromone_field::shm::Svc;
 
 use crate::localizer::{
     CheckedFilter, Ekf, EkfConfig, EkfSlam, EkfSlamConfig, FilterKind, LocalizerError,
@@ -14,7 +14,7 @@ use crate::{
     receiver, role_loop, sender, sim_stamp_ns, summary_of, ProcessError, RobotServices,
     RoleOptions, RoleSummary,
 };
-use messages::{Landmark, LaserMsg, PoseMsg, Segment, SensorMsg, WorldPose};
+use pheromone_messages::{Landmark, LaserMsg, PoseMsg, Segment, SensorMsg, WorldPose};
 
 /// Mixed into a particle filter's seed.
 const PF_SEED: u64 = 0x7061_7274_6963_6c65;

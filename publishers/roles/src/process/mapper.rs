@@ -1,6 +1,6 @@
 //! The mapper's process loop (`pheromone mapper --robot ID`): one robot's [`Mapper`] fed the
 //! robot's pose estimate, its scan and its rendezvous measurement of each step, its local map
-//! published as a frame of field `<world>-map-r<ID>` ([`field::wire::map_field`]; two channels,
+//! published as a frame of field `<world>-map-r<ID>` ([`pheromone_field::wire::map_field`]; two channels,
 //! [`MAP_CHANNELS`], in the robot's own frame; with own-map steering its robot's follower steers
 //! on it, `process::follower`), and Algorithm 1's exchanges made zero-copy: at a
 //! rendezvous the mapper holds its peer's map frame in shared memory and merges from it
@@ -12,7 +12,7 @@
 //! mapper's acknowledgement, `role::MAPPER`):
 //! 1. on an exchange step, merge the frames (maps of the end of step k − 1) of the peers due in
 //!    the rendezvous of step k − 1, placed with both robots' estimates of step k − 1, exactly as
-//!    `sim::mapping::MappingTeam` does in one process;
+//!    `pheromone_sim::mapping::MappingTeam` does in one process;
 //! 2. take the estimate, deposit and scan of step k; publish map frame k (sequence = k);
 //! 3. when step k + 1 is an exchange step, wait until every peer of the rendezvous of step k
 //!    has published its frame k and keep holding it (no peer publishes frame k + 1 before this
@@ -21,11 +21,11 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use field::link::Receiver;
-use field::lockstep::{role, Participant};
-use field::shm::{AttachError, FieldReader, FrameWriter, Svc};
-use field::{ChannelSpec, Evaporation, FieldConfig};
 use iceoryx2::node::Node;
+use pheromone_field::process::link::Receiver;
+use pheromone_field::process::lockstep::{role, Participant};
+use pheromone_field::shm::{AttachError, FieldReader, FrameWriter, Svc};
+use pheromone_field::{ChannelSpec, Evaporation, FieldConfig};
 
 use crate::mapper::{
     alignment_error_m, pose_in_frame, true_transform, Mapper, MapperCounters, MergeEvent, Pose2,
@@ -34,7 +34,7 @@ use crate::mapper::{
 use crate::{
     receiver, role_loop, summary_of, ProcessError, RobotServices, RoleOptions, RoleSummary,
 };
-use messages::{PoseMsg, RendezvousMsg, ScanMsg};
+use pheromone_messages::{PoseMsg, RendezvousMsg, ScanMsg};
 
 /// What a mapper process reports at exit.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -111,7 +111,7 @@ pub fn run_mapper(
         peers: peer_starts,
     } = setup;
     let team = peer_starts.len() + 1;
-    let map_field = field::wire::map_field(&o.world, robot);
+    let map_field = pheromone_field::wire::map_field(&o.world, robot);
     let mut writer =
         FrameWriter::start(node, &map_field, map_field_config(&mapper, dt_s, team + 4))?;
     let s = RobotServices::new(&o.world, robot);
@@ -128,7 +128,7 @@ pub fn run_mapper(
                 poses: receiver::<PoseMsg>(node, &ps.pose)?,
                 pose: None,
                 reader: None,
-                field: field::wire::map_field(&o.world, id),
+                field: pheromone_field::wire::map_field(&o.world, id),
             },
         );
     }
@@ -240,7 +240,7 @@ impl HasStep for PoseMsg {
     }
 }
 
-impl HasStep for messages::LaserMsg {
+impl HasStep for pheromone_messages::LaserMsg {
     fn step(&self) -> u64 {
         self.step
     }

@@ -1,16 +1,16 @@
 //! The process loops: each role is a library type driven by a short loop that waits on iceoryx2
 //! events (never sleeps). In lockstep (the default) the world conducts every step as
-//! `field::lockstep` describes: each role joins the run after creating its ports, a depositor
+//! `pheromone_field::process::lockstep` describes: each role joins the run after creating its ports, a depositor
 //! acknowledges each step once its deposit is sent, and a follower steers on the frame the field
 //! computed for the step, so a run as processes gives the single-process answer.
 
 use std::time::{Duration, Instant};
 
-use field::link::{Receiver, Sender};
-use field::lockstep::{LockstepError, Participant};
-use field::shm::{AttachError, ShmError, Svc};
-use field::ConfigError;
 use iceoryx2::node::Node;
+use pheromone_field::process::link::{Receiver, Sender};
+use pheromone_field::process::lockstep::{LockstepError, Participant};
+use pheromone_field::shm::{AttachError, ShmError, Svc};
+use pheromone_field::ConfigError;
 
 use crate::depositor::DepositorConfigError;
 use crate::follower::FollowerConfigError;
@@ -73,10 +73,10 @@ pub enum ProcessError {
     },
 }
 
-field::from_shm_errors!(ProcessError);
+pheromone_field::from_shm_errors!(ProcessError);
 
-pub use field::wire::RobotServices;
-use field::wire::{ready_service as wake, ROBOT_LINK};
+pub use pheromone_field::wire::RobotServices;
+use pheromone_field::wire::{ready_service as wake, ROBOT_LINK};
 
 /// `robot N: ` where an error names the robot.
 fn robot_prefix(robot: &Option<u32>) -> String {
@@ -123,7 +123,7 @@ pub struct RoleOptions {
     /// How a reader of the field (the follower) waits for the frame of its step in lockstep
     /// (`FieldReader::wait_frame_with`); the result is the same for every policy, only the
     /// latency and the CPU spent waiting differ.
-    pub frame_wait: field::shm::WaitPolicy,
+    pub frame_wait: pheromone_field::shm::WaitPolicy,
 }
 
 /// Runs `on_step` for every new message on `rx` until the world ends or a termination request.

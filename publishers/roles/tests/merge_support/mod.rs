@@ -3,10 +3,10 @@
 //! any rotation, unknown / free / occupied cells (log-odds beyond any clamp included) and
 //! pheromone levels.
 
-use field::GridGeometry;
+use pheromone_field::GridGeometry;
+use pheromone_roles::mapper::MergeTransform;
 use proptest::collection::vec;
 use proptest::prelude::*;
-use roles::mapper::MergeTransform;
 
 fn cell() -> impl Strategy<Value = (f32, f32)> {
     prop_oneof![

@@ -1,7 +1,7 @@
 //! A run's children: their command lines, spawning the field, world, roles and gateway in order, waiting for the observer to join, and their reports.
 
 use super::*;
-use field::shm::AttachError;
+use pheromone_field::shm::AttachError;
 
 /// `v` as owned arguments.
 pub(super) fn args(v: &[&str]) -> Vec<String> {
@@ -131,7 +131,7 @@ impl ChildArgs {
 /// What the waits of a run's start share: the observer's node, when the first process started,
 /// and how long every process may take to join.
 pub(super) struct RunStart<'a> {
-    pub(super) node: &'a iceoryx2::node::Node<field::shm::Svc>,
+    pub(super) node: &'a iceoryx2::node::Node<pheromone_field::shm::Svc>,
     pub(super) started: Instant,
     pub(super) attach_timeout: Duration,
 }
@@ -375,7 +375,7 @@ pub(super) fn join_observer(
 /// (`--print-address`), waited for until `deadline` (woken by the line, or by Ctrl-C and a
 /// failed child within 100 ms).
 pub(super) fn gateway_address(
-    node: &iceoryx2::node::Node<field::shm::Svc>,
+    node: &iceoryx2::node::Node<pheromone_field::shm::Svc>,
     sup: &mut Supervisor,
     id: ChildId,
     deadline: Instant,

@@ -1,27 +1,27 @@
 //! A scenario as separate processes (`pheromone sim`, the default mode): the field, the world,
 //! and each robot's localizer, depositor and follower, each a child of the `pheromone` binary
-//! under one [`Supervisor`], in lockstep (`field::lockstep`) with an [`Observer`] in this
+//! under one [`Supervisor`], in lockstep (`pheromone_field::process::lockstep`) with an [`Observer`] in this
 //! process that records what a single-process run records. The result is the single-process
 //! run's for the same seed, key by key.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use field::run::FieldRunSummary;
-use field::shm::{cleanup_dead_nodes, create_node, ShmError};
+use pheromone_field::process::run::FieldRunSummary;
+use pheromone_field::shm::{cleanup_dead_nodes, create_node, ShmError};
 use serde::Serialize;
 
 use crate::observer::Observer;
-use crate::record::Recording;
+use crate::recording::Recording;
 use crate::ros_feed::McapFeed;
 use crate::ros_record::{McapTotals, SimMcap};
 use crate::single::{role_name, FieldSummary, RobotResult, RunSummary};
+use pheromone_roles::process::follower_antenna::AntennaRobotSummary;
+use pheromone_roles::{MapperSummary, RoleSummary};
+use pheromone_supervisor::{ChildId, ChildSpec, Supervisor, SupervisorError};
 use pheromone_world::scenario::{Scenario, ScenarioError};
 use pheromone_world::World;
 use pheromone_world::{lockstep_participants, mapper_robots, WorldOptions, WorldSummary};
-use roles::process::follower_antenna::AntennaRobotSummary;
-use roles::{MapperSummary, RoleSummary};
-use supervisor::{ChildId, ChildSpec, Supervisor, SupervisorError};
 
 mod children;
 mod interrupt;
@@ -60,7 +60,7 @@ pub struct ProcessRunOptions<'a> {
     /// thin clients, PIR over UDP loopback) instead of shared memory.
     pub remote: bool,
     /// Passed to every follower that reads the field in shared memory as `--wait`.
-    pub follower_wait: Option<field::shm::WaitPolicy>,
+    pub follower_wait: Option<pheromone_field::shm::WaitPolicy>,
     /// `--record`: the observer writes the run to this MCAP file (finished also when the run
     /// fails).
     pub record: Option<SimMcap>,
@@ -75,7 +75,7 @@ pub fn remote_robots(scenario: &Scenario) -> Vec<u32> {
         .filter(|r| {
             scenario
                 .follower_config(r.id)
-                .is_some_and(|f| f.strategy == roles::follower::StrategyKind::Antenna)
+                .is_some_and(|f| f.strategy == pheromone_roles::follower::StrategyKind::Antenna)
         })
         .map(|r| r.id)
         .collect()
@@ -105,7 +105,7 @@ pub enum ProcessRunError {
     #[error("--remote: scenario '{scenario}' has no robot with an antenna follower")]
     NoRemoteRobot { scenario: String },
     #[error("--record: {0}")]
-    Record(#[from] ros2::record::RecordError),
+    Record(#[from] pheromone_ros2::record::RecordError),
     #[error("interrupted: stopped every process of the run")]
     Interrupted,
     #[error("the run took longer than {timeout_s} s: stopped every process")]
@@ -116,7 +116,7 @@ pub enum ProcessRunError {
     NotStopped { who: String, timeout_s: f64 },
 }
 
-field::from_shm_errors!(ProcessRunError);
+pheromone_field::from_shm_errors!(ProcessRunError);
 
 /// One child's summary, as `metrics.json` lists them.
 #[derive(Debug, Clone, Serialize)]
@@ -338,7 +338,7 @@ fn record_until_the_world_ends(
     let mut startup = None;
     let mut wind_down: Option<Instant> = None;
     while sup.exit_status(world).is_none() {
-        if wind_down.is_none() && !field::shm::wait_or_stop(start.node, Duration::ZERO) {
+        if wind_down.is_none() && !pheromone_field::shm::wait_or_stop(start.node, Duration::ZERO) {
             sup.signal(world, nix::sys::signal::Signal::SIGTERM);
             wind_down = Some(Instant::now() + WIND_DOWN);
         }
@@ -392,7 +392,7 @@ fn run_summary(
 ) -> RunSummary {
     let mut fs = match rec.snapshots.last() {
         Some(snap) => {
-            let view = field::FrameView::new(
+            let view = pheromone_field::FrameView::new(
                 scenario.field.geometry(),
                 scenario.field.channels.len(),
                 &snap.planes,
@@ -438,12 +438,12 @@ fn run_summary(
 pub fn run_graph_as_processes(
     exe: &Path,
     scenario: &str,
-    strategy: graph::agent::GraphStrategy,
+    strategy: pheromone_graph::agent::GraphStrategy,
     robots: usize,
     seed: u64,
     timeout: Duration,
-    localize: Option<graph::localize::LocalizeConfig>,
-) -> Result<graph::run::RunReport, ProcessRunError> {
+    localize: Option<pheromone_graph::localize::LocalizeConfig>,
+) -> Result<pheromone_graph::run::RunReport, ProcessRunError> {
     use std::sync::atomic::{AtomicU32, Ordering};
     static RUN: AtomicU32 = AtomicU32::new(0);
     let tag = format!(
@@ -497,7 +497,7 @@ pub fn run_graph_as_processes(
             // Woken by the first child that exits; the bound lets Ctrl-C through.
             sup.poll(Duration::from_millis(100));
         }
-        let mut report: graph::run::RunReport = sup.summary(writer)?;
+        let mut report: pheromone_graph::run::RunReport = sup.summary(writer)?;
         let end_timeout = Duration::from_secs(15);
         let end = Instant::now() + end_timeout;
         for &id in &ids {

@@ -2,12 +2,12 @@
 //! `Scenario::validate`, the flags `Scenario::apply` takes, and the scripted deposits. Each
 //! variant names the setting and the value; the error it stems from is its source.
 
-use field::ConfigError;
+use pheromone_field::ConfigError;
 
 use crate::{MapError, WorldError};
-use roles::depositor::DepositorConfigError;
-use roles::follower::FollowerConfigError;
-use roles::localizer::LocalizerError;
+use pheromone_roles::depositor::DepositorConfigError;
+use pheromone_roles::follower::FollowerConfigError;
+use pheromone_roles::localizer::LocalizerError;
 
 /// Why a scenario could not be loaded, validated or changed.
 #[derive(Debug, thiserror::Error)]
@@ -36,7 +36,7 @@ pub enum ScenarioError {
     Unknown(String),
     /// `[mapping]` is refused.
     #[error("{0}")]
-    Mapping(#[source] roles::mapper::MappingConfigError),
+    Mapping(#[source] pheromone_roles::mapper::MappingConfigError),
     /// `[field]` is refused.
     #[error("field: {0}")]
     Field(#[source] ConfigError),
@@ -163,7 +163,7 @@ pub enum DepositError {
     /// The field would refuse it (NaN, a covariance that is not positive definite, a channel
     /// the field lacks, outside the grid…).
     #[error("the field would refuse it: {0}")]
-    Refused(#[source] field::Rejection),
+    Refused(#[source] pheromone_field::Rejection),
 }
 
 impl ScenarioError {

@@ -8,9 +8,9 @@
 //! in its own frame ([`Scenario::own_map_start`]).
 
 use super::{Overrides, Scenario, ScenarioError};
-use messages::MAX_PEERS;
-use roles::follower::{FollowerConfig, StrategyKind};
-use roles::mapper::{MappingConfig, Pose2, SteerOn, MAP_CHANNELS};
+use pheromone_messages::MAX_PEERS;
+use pheromone_roles::follower::{FollowerConfig, StrategyKind};
+use pheromone_roles::mapper::{MappingConfig, Pose2, SteerOn, MAP_CHANNELS};
 
 impl Scenario {
     /// `--merge` / `--no-merge` and `--rc-m`.
@@ -45,11 +45,13 @@ impl Scenario {
         self.mapping.validate().map_err(ScenarioError::Mapping)?;
         let robots = self.world.robots.len();
         if robots > MAX_PEERS + 1 {
-            return Err(ScenarioError::Mapping(roles::mapper::MappingConfigError {
-                key: "enabled",
-                value: robots as f64,
-                expected: "at most MAX_PEERS + 1 = 17 robots in a mapping world",
-            }));
+            return Err(ScenarioError::Mapping(
+                pheromone_roles::mapper::MappingConfigError {
+                    key: "enabled",
+                    value: robots as f64,
+                    expected: "at most MAX_PEERS + 1 = 17 robots in a mapping world",
+                },
+            ));
         }
         Ok(())
     }
@@ -114,7 +116,7 @@ impl Scenario {
 
     /// The field channel robot `id`'s pheromone map follows: its depositor's (channel 0 without
     /// one).
-    pub fn mapping_channel(&self, id: u32) -> field::ChannelSpec {
+    pub fn mapping_channel(&self, id: u32) -> pheromone_field::ChannelSpec {
         let c = self
             .roles(id)
             .and_then(|r| r.depositor.as_ref())

@@ -4,13 +4,13 @@
 
 use std::path::Path;
 
-use field::{DepositMsg, FieldConfig, KernelKind};
+use pheromone_field::{DepositMsg, FieldConfig, KernelKind};
 use serde::{Deserialize, Serialize};
 
 use crate::WorldConfig;
-use roles::depositor::{DepositMode, DepositorConfig};
-use roles::follower::{FollowerConfig, StrategyKind};
-use roles::localizer::{EkfConfig, FilterKind, PfConfig, UkfConfig};
+use pheromone_roles::depositor::{DepositMode, DepositorConfig};
+use pheromone_roles::follower::{FollowerConfig, StrategyKind};
+use pheromone_roles::localizer::{EkfConfig, FilterKind, PfConfig, UkfConfig};
 
 mod error;
 mod map;
@@ -23,7 +23,7 @@ pub use error::{DepositError, ScenarioError};
 pub use starts::StartArea;
 
 /// The robot id the world's scripted deposits carry: after every robot's in a tick's
-/// canonical order (`field::shm::FieldServer::tick`).
+/// canonical order (`pheromone_field::shm::FieldServer::tick`).
 pub const WORLD_DEPOSITOR_ID: u32 = u32::MAX;
 
 /// Built-in scenarios: (name, TOML text).
@@ -69,7 +69,7 @@ pub const DEFAULT_SCENARIO: &str = "blind-leader";
 pub(super) fn builtin_names() -> String {
     BUILTIN
         .iter()
-        .chain(graph::agent::BUILTIN_REGIONS.iter())
+        .chain(pheromone_graph::agent::BUILTIN_REGIONS.iter())
         .map(|(n, _)| *n)
         .collect::<Vec<_>>()
         .join(", ")
@@ -112,7 +112,7 @@ pub struct Scenario {
     pub metrics: MetricsConfig,
     /// Seed 004's local maps and their merging (`scenario/mapping.rs`); off by default.
     #[serde(default)]
-    pub mapping: roles::mapper::MappingConfig,
+    pub mapping: pheromone_roles::mapper::MappingConfig,
     /// Robots start at random poses in this rectangle, drawn from the seed (`starts.rs`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub start_area: Option<StartArea>,
@@ -305,7 +305,7 @@ pub struct Overrides {
     /// `--no-scripted-loss`: every localizer's loss script (`localizer.loss.after_s`) is off.
     pub no_scripted_loss: bool,
     /// `--steer own-map|shared`: what the sector followers steer on (`[mapping] steer_on`).
-    pub steer_on: Option<roles::mapper::SteerOn>,
+    pub steer_on: Option<pheromone_roles::mapper::SteerOn>,
 }
 
 /// What runs for one robot: a localizer always, a depositor and a follower if configured.
@@ -395,7 +395,7 @@ impl ScriptedDeposit {
             .kernel
             .parse::<KernelKind>()
             .map_err(|e| DepositError::Kernel(e.into()))?;
-        let params = field::KernelParams {
+        let params = pheromone_field::KernelParams {
             cov_m2: self.cov,
             range_m: self.range_m,
             gamma_max: self.gamma_max,
@@ -404,11 +404,11 @@ impl ScriptedDeposit {
             slope_m: self.slope_m,
         };
         let one = |x_m: f32, y_m: f32| {
-            DepositMsg::from(field::Deposit {
+            DepositMsg::from(pheromone_field::Deposit {
                 channel: self.channel,
                 x_m,
                 y_m,
-                kernel: field::Kernel::from_params(kernel, self.amount, &params),
+                kernel: pheromone_field::Kernel::from_params(kernel, self.amount, &params),
             })
         };
         match (self.to_x_m, self.to_y_m, self.spacing_m) {

@@ -2,10 +2,10 @@
 //! place of the scenario (which it does not know), so that the robot stack runs the same on a
 //! real robot, fed its own configuration.
 
-use roles::depositor::Depositor;
-use roles::localizer::FilterKind;
-use roles::mapper::{MapError, Mapper, Pose2};
-use roles::{LocalizerSetup, MapperSetup, ProcessError};
+use pheromone_roles::depositor::Depositor;
+use pheromone_roles::localizer::FilterKind;
+use pheromone_roles::mapper::{MapError, Mapper, Pose2};
+use pheromone_roles::{LocalizerSetup, MapperSetup, ProcessError};
 
 use super::{Scenario, ScenarioError};
 use crate::{wall_segments, WorldError};
@@ -111,9 +111,9 @@ mod tests {
         let id = scenario.robots[0].id;
         scenario.robots[0].localizer.landmark_region_m = Some([8.0, 0.0, 24.0, 4.0]);
         let setup = scenario.localizer_setup(id, false).unwrap();
-        assert!(roles::Filter::new(&setup).is_ok());
+        assert!(pheromone_roles::Filter::new(&setup).is_ok());
         let slam = scenario.localizer_setup(id, true).unwrap();
-        let e = roles::Filter::new(&slam)
+        let e = pheromone_roles::Filter::new(&slam)
             .err()
             .expect("EKF-SLAM accepted a landmark region");
         assert!(e.to_string().contains("landmark_region_m"), "{e}");

@@ -75,7 +75,7 @@ impl Scenario {
     /// The robot's filter: its settings valid; the loss script only with the EKF; a particle
     /// filter only with the world's laser.
     fn validate_filter(&self, r: &super::RobotRoles) -> Result<(), ScenarioError> {
-        use roles::localizer::{FilterKind, LocalizerError};
+        use pheromone_roles::localizer::{FilterKind, LocalizerError};
         let robot = r.id;
         let err = |source| ScenarioError::Localizer { robot, source };
         r.ukf.validate().map_err(err)?;
@@ -103,8 +103,13 @@ impl Scenario {
                 source,
             };
             for msg in d.messages().map_err(err)? {
-                field::deposit::prepare(&msg, &geometry, &self.field.channels, &self.field.limits)
-                    .map_err(|r| err(DepositError::Refused(r)))?;
+                pheromone_field::deposit::prepare(
+                    &msg,
+                    &geometry,
+                    &self.field.channels,
+                    &self.field.limits,
+                )
+                .map_err(|r| err(DepositError::Refused(r)))?;
             }
         }
         Ok(())

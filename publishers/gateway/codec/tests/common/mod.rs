@@ -1,7 +1,7 @@
 //! Strategies and helpers shared by the codec's tests.
 #![allow(dead_code)]
 
-use gateway_codec::{
+use pheromone_gateway_codec::{
     DepositReply, DepositRequest, DepositStatus, ErrorReason, Message, PirReply, PirRequest,
     StatusReply,
 };
@@ -119,10 +119,10 @@ pub fn message() -> impl Strategy<Value = Message> {
 
 /// Bit-exact comparison (`-0.0` and `0.0` differ), so a round trip must keep every bit.
 pub fn same_bits(a: &Message, b: &Message) -> bool {
-    let mut x = [0u8; gateway_codec::MAX_ENCODED_BYTES];
-    let mut y = [0u8; gateway_codec::MAX_ENCODED_BYTES];
-    let n = gateway_codec::encode(a, 0, &mut x).unwrap();
-    let m = gateway_codec::encode(b, 0, &mut y).unwrap();
+    let mut x = [0u8; pheromone_gateway_codec::MAX_ENCODED_BYTES];
+    let mut y = [0u8; pheromone_gateway_codec::MAX_ENCODED_BYTES];
+    let n = pheromone_gateway_codec::encode(a, 0, &mut x).unwrap();
+    let m = pheromone_gateway_codec::encode(b, 0, &mut y).unwrap();
     x[..n] == y[..m]
 }
 

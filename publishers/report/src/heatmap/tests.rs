@@ -1,0 +1,238 @@
+use super::super::marks::{marks, AREA_A_RGB, AREA_B_RGB};
+use super::super::style::{lighter, Rgb, OUTLINE_RGB, ROBOT_RGB, VIRIDIS};
+use super::super::tests::scene;
+use super::*;
+use pheromone_messages::FollowerState;
+use pheromone_world::scenario::Scenario;
+
+#[test]
+fn trajectories_stop_at_the_snapshot_time() {
+    let mut rec = scene();
+    rec.snapshots[0].t_s = 4.0; // robot 0 is at x = 3 m then
+    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &[]).unwrap();
+    let layout = Layout::for_grid(100, 50, 0.1);
+    let at = |x_m: f64, y_m: f64| {
+        let (x, y) = layout.pixel_from_world(x_m, y_m);
+        pic.get(x as usize, y as usize)
+    };
+    assert_eq!(at(2.0, 1.0), ROBOT_RGB[0]);
+    assert_eq!(at(5.0, 1.0), VIRIDIS[0]);
+    // The marker sits at the position at t = 4 s: the robot's colour inside an outline.
+    assert_eq!(at(3.0, 1.0), ROBOT_RGB[0]);
+    assert_eq!(at(3.0 + 6.0 / 80.0, 1.0), OUTLINE_RGB);
+}
+
+#[test]
+fn a_gap_in_the_estimates_breaks_the_dashed_line() {
+    let mut rec = scene();
+    let rows = rec.robots.get_mut(&1).unwrap();
+    for r in &mut rows[4..=6] {
+        r.est_pose = None; // x = 3 … 4 m
+    }
+    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &[]).unwrap();
+    let layout = Layout::for_grid(100, 50, 0.1);
+    let row = |x0_m: f64, x1_m: f64| -> Vec<Rgb> {
+        let (x0, y) = layout.pixel_from_world(x0_m, 2.5);
+        let (x1, _) = layout.pixel_from_world(x1_m, 2.5);
+        (x0 as usize..x1 as usize)
+            .map(|x| pic.get(x, y as usize))
+            .collect()
+    };
+    let shade = lighter(ROBOT_RGB[1]);
+    assert!(row(1.0, 2.5).contains(&shade));
+    assert!(row(4.5, 6.0).contains(&shade));
+    assert!(row(2.6, 4.4).iter().all(|&c| c == VIRIDIS[0]));
+}
+
+#[test]
+fn paths_are_anti_aliased() {
+    // A diagonal true path: pixels beside it are blends of the path's colour and the cells'.
+    let mut rec = scene();
+    let rows = rec.robots.get_mut(&0).unwrap();
+    for (i, r) in rows.iter_mut().enumerate() {
+        r.true_pose = [1.0 + 0.3 * i as f64, 0.5 + 0.2 * i as f64, 0.0];
+    }
+    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &[]).unwrap();
+    let layout = Layout::for_grid(100, 50, 0.1);
+    let (a, b) = (ROBOT_RGB[0], VIRIDIS[0]);
+    let mut full = 0;
+    let mut blends = 0;
+    for k in 0..40 {
+        let t = 0.1 + 0.02 * k as f64;
+        let (x, y) = layout.pixel_from_world(1.0 + 3.0 * t, 0.5 + 2.0 * t);
+        for dy in -4i64..=4 {
+            let c = pic.get(x as usize, (y as i64 + dy) as usize);
+            if c == a {
+                full += 1;
+            } else if c != b {
+                // Between the two colours, channel by channel.
+                let between = (0..3).all(|i| c[i].min(a[i].max(b[i])) >= a[i].min(b[i]));
+                assert!(between, "{c:?} is not a blend of {a:?} and {b:?}");
+                blends += 1;
+            }
+        }
+    }
+    assert!(full >= 40, "{full} pixels of the path's own colour");
+    assert!(
+        blends >= 40,
+        "{blends} blended pixels: the path is not anti-aliased"
+    );
+}
+
+#[test]
+fn picture_size_stays_between_800_and_2000_pixels() {
+    for (w, h) in [
+        (30, 20),
+        (100, 50),
+        (600, 400),
+        (512, 512),
+        (1500, 900),
+        (10, 1000),
+    ] {
+        let l = Layout::for_grid(w, h, 0.05);
+        assert_eq!(l.decimate, 1);
+        assert!(
+            l.field_w_px().max(l.field_h_px()) <= MAX_SIDE_PX,
+            "{w}×{h}: {l:?}"
+        );
+        if (h as usize) * MIN_WIDTH_PX.div_ceil(w as usize) <= MAX_SIDE_PX {
+            assert!(l.field_w_px() >= MIN_WIDTH_PX, "{w}×{h}: {l:?}");
+        }
+        let (pw, ph) = l.picture_px();
+        assert_eq!(pw as usize, l.field_w_px() + (LEFT_PX + RIGHT_PX) as usize);
+        assert_eq!(
+            ph as usize,
+            l.field_h_px() + (TOP_PX + AXIS_PX + STRIP_PX) as usize
+        );
+    }
+    // A grid larger than the cap is reduced by whole blocks, keeping each block's max.
+    let l = Layout::for_grid(5000, 7, 0.05);
+    assert_eq!(
+        (l.decimate, l.blocks_w, l.blocks_h, l.scale),
+        (3, 1667, 3, 1)
+    );
+    let mut plane = vec![0.0f32; 5000 * 7];
+    plane[6 * 5000 + 4999] = 2.0; // the last, partial block
+    assert_eq!(l.block_value(&plane, 1666, 2), 2.0);
+    assert_eq!(l.block_value(&plane, 0, 0), 0.0);
+}
+
+#[test]
+fn colour_bar_ticks_are_round_include_the_ends_and_never_overlap() {
+    for (lo, hi, width) in [
+        (0.0, 7.0, 400),
+        (0.0, 340.0, 436),
+        (0.0, 0.0123, 300),
+        (-2.5, 2.5, 380),
+        (0.0, 1.0e6, 200),
+        (0.0, 49.97, 120),
+    ] {
+        let ticks = bar_ticks(lo, hi, width);
+        assert!(ticks.len() >= 2, "{lo}…{hi}: {ticks:?}");
+        assert_eq!(ticks[0], lo);
+        assert_eq!(*ticks.last().unwrap(), hi);
+        let px = |v: f64| (v - lo) / (hi - lo) * width as f64;
+        for p in ticks.windows(2) {
+            assert!(p[1] > p[0], "{ticks:?}");
+            if ticks.len() > 2 {
+                let half = (text_width(&fmt_sig(p[0])) + text_width(&fmt_sig(p[1]))) as f64 / 2.0;
+                assert!(
+                    px(p[1]) - px(p[0]) > half,
+                    "{lo}…{hi} in {width} px: {ticks:?}"
+                );
+            }
+        }
+    }
+    // The bar sits right of the legend's half of the strip.
+    let (x0, x1) = bar_span_px(800);
+    assert!(x0 > 400 && x1 <= 800 - RIGHT_PX as i32);
+}
+
+/// A recording of `scenario`'s grid (zero everywhere) at `t_s`, with robot 1 in the corridor,
+/// "leader lost" from t = 30 s at x = 15 m, at x = 16 m by t = 31 s.
+fn blank_run(scenario: &Scenario, t_s: f64) -> Recording {
+    let f = &scenario.field;
+    let mut rec = Recording::default();
+    rec.snapshots.push(Snapshot {
+        t_s,
+        width: f.width,
+        height: f.height,
+        cell_size_m: f.cell_size_m,
+        channels: vec!["leader".into()],
+        planes: vec![0.0; (f.width * f.height) as usize],
+    });
+    let mut lost = super::super::tests::sample(30.0, 15.0, 1.5);
+    lost.state = Some(FollowerState::LeaderLost);
+    let mut before = super::super::tests::sample(29.9, 14.95, 1.5);
+    before.state = Some(FollowerState::Following);
+    let mut after = super::super::tests::sample(31.0, 16.0, 1.5);
+    after.state = Some(FollowerState::LeaderLost);
+    rec.robots.insert(1, vec![before, lost, after]);
+    rec
+}
+
+#[test]
+fn wrong_area_marks_a_b_and_where_a_follower_explored() {
+    let s = Scenario::load("wrong-area").unwrap();
+    let w = s.metrics.wrong_area.clone().unwrap();
+    let layout = Layout::for_grid(s.field.width, s.field.height, s.field.cell_size_m);
+    let draw = |t_s: f64| {
+        let rec = blank_run(&s, t_s);
+        render_snapshot(&rec, &rec.snapshots[0], 0, &marks(&s, &rec)).unwrap()
+    };
+    let pic = draw(80.0);
+    let at = |x_m: f64, y_m: f64| {
+        let (x, y) = layout.pixel_from_world(x_m, y_m);
+        pic.get(x.round() as usize, y.round() as usize)
+    };
+    // A's outline, at 39 points along each of its four sides.
+    let ([x0, y0], [x1, y1]) = (w.a_min_m, w.a_max_m);
+    for k in 1..40 {
+        let f = k as f64 / 40.0;
+        let (x, y) = (x0 + f * (x1 - x0), y0 + f * (y1 - y0));
+        for (px, py) in [(x, y0), (x, y1), (x0, y), (x1, y)] {
+            assert_eq!(
+                at(px, py),
+                AREA_A_RGB,
+                "A's outline at ({px:.2}, {py:.2}) m"
+            );
+        }
+    }
+    // Inside A, off its outline and label: the cells.
+    assert_eq!(at(20.5, 5.0), VIRIDIS[0]);
+    // B: a circle of b_radius_m around b_m, its centre left as it is.
+    let (bx, by, r) = (w.b_m[0], w.b_m[1], w.b_radius_m);
+    for deg in [0.0f64, 30.0, 60.0, 120.0, 150.0, 180.0, 210.0, 330.0] {
+        let (x, y) = (
+            bx + r * deg.to_radians().cos(),
+            by + r * deg.to_radians().sin(),
+        );
+        assert_eq!(at(x, y), AREA_B_RGB, "B's circle at {deg}°");
+    }
+    assert_eq!(at(bx, by), VIRIDIS[0]);
+    // Robot 1's colour on the cross where it started exploring, from then on only.
+    assert_eq!(at(15.0 + 0.1, 1.5 + 0.1), ROBOT_RGB[1]);
+    let early = draw(20.0);
+    let (x, y) = layout.pixel_from_world(15.1, 1.6);
+    assert_eq!(
+        early.get(x.round() as usize, y.round() as usize),
+        VIRIDIS[0]
+    );
+
+    // A scenario without `wrong_area` marks nothing: neither colour anywhere.
+    let plain = Scenario::load("blind-leader").unwrap();
+    assert!(plain.metrics.wrong_area.is_none());
+    let rec = blank_run(&plain, 80.0);
+    assert!(marks(&plain, &rec).is_empty());
+    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &marks(&plain, &rec)).unwrap();
+    let (pw, ph) = (pic.width as usize, pic.height as usize);
+    for y in 0..ph {
+        for x in 0..pw {
+            let c = pic.get(x, y);
+            assert!(
+                c != AREA_A_RGB && c != AREA_B_RGB,
+                "a mark's colour at ({x}, {y})"
+            );
+        }
+    }
+}
