@@ -1,5 +1,9 @@
 //! `pheromone`: the command-line front end. Thin glue over the `field` and `publishers` crates.
 
+// The CLI's doc comments are its `--help` text (clap), written for a terminal: `<NAME>` and
+// `[mapping]` in them are placeholders and TOML tables, not HTML tags or links.
+#![allow(rustdoc::invalid_html_tags, rustdoc::broken_intra_doc_links)]
+
 mod cmd;
 
 use std::process::ExitCode;

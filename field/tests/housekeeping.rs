@@ -1,12 +1,12 @@
-//! `field::run::Housekeeping`, the chores of every long-running command's loop: its end (a
+//! `pheromone_field::process::run::Housekeeping`, the chores of every long-running command's loop: its end (a
 //! duration; a termination request ends it too, see `signals.rs`), the status line's period,
 //! and the dead-node cleanup inline or on a thread of its own.
 
 use std::time::{Duration, Instant};
 
-use field::run::Housekeeping;
-use field::shm::create_node;
-use testkit::unique;
+use pheromone_field::process::run::Housekeeping;
+use pheromone_field::shm::create_node;
+use pheromone_testkit::unique;
 
 #[test]
 fn the_loop_ends_after_its_duration_with_a_status_line_due_once_a_period() {

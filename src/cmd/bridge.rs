@@ -71,13 +71,13 @@ pub struct BridgeArgs {
 
 /// The bridge's options from its flags (their parsers have checked the values).
 #[cfg(feature = "zenoh")]
-fn bridge_options(a: &BridgeArgs) -> bridge::BridgeOptions {
-    bridge::BridgeOptions {
+fn bridge_options(a: &BridgeArgs) -> pheromone_bridge::BridgeOptions {
+    pheromone_bridge::BridgeOptions {
         field: a.field.clone(),
         listen: a.listen.clone(),
         checksum_every: a.checksum_every,
         keyframe_every: Duration::from_secs_f64(a.keyframe_every_s),
-        frames: a.frames.then_some(bridge::FramesOptions {
+        frames: a.frames.then_some(pheromone_bridge::FramesOptions {
             rate_hz: a.rate_hz,
             downsample: a.downsample,
         }),
@@ -88,14 +88,15 @@ fn bridge_options(a: &BridgeArgs) -> bridge::BridgeOptions {
 
 #[cfg(feature = "zenoh")]
 pub fn run(a: BridgeArgs) -> anyhow::Result<()> {
-    field::shm::check_name(&a.field).map_err(bad_from)?;
-    let node = field::shm::create_node(&format!("bridge-{}", std::process::id()))?;
+    pheromone_field::shm::check_name(&a.field).map_err(bad_from)?;
+    let node = pheromone_field::shm::create_node(&format!("bridge-{}", std::process::id()))?;
     let timeout = Duration::from_secs_f64(a.timeout);
-    let bridge =
-        bridge::Bridge::start(&node, bridge_options(&a), timeout).map_err(|e| match e {
-            bridge::BridgeError::Security(_) => bad_from(e),
+    let bridge = pheromone_bridge::Bridge::start(&node, bridge_options(&a), timeout).map_err(
+        |e| match e {
+            pheromone_bridge::BridgeError::Security(_) => bad_from(e),
             e => e.into(),
-        })?;
+        },
+    )?;
     if a.print_address {
         let locators = bridge.listen_locators()?;
         eprintln!("bridge '{}': listening on {locators:?}", a.field);
@@ -127,8 +128,8 @@ pub fn run(_a: BridgeArgs) -> anyhow::Result<()> {
 
 #[cfg(feature = "zenoh")]
 pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
-    use bridge::{BridgeError, Mirror, MirrorOptions};
-    field::shm::check_name(&a.name).map_err(bad_from)?;
+    use pheromone_bridge::{BridgeError, Mirror, MirrorOptions};
+    pheromone_field::shm::check_name(&a.name).map_err(bad_from)?;
     // The flag's parser checked the `zenoh:` prefix and the endpoint.
     let endpoint = endpoint.strip_prefix("zenoh:").unwrap_or(endpoint);
     // `field --duration` takes 0 (a field that only starts); a mirror needs a positive one.
@@ -140,7 +141,7 @@ pub fn run_mirror(a: &FieldArgs, endpoint: &str) -> anyhow::Result<()> {
         }
         d => d.map(Duration::from_secs_f64),
     };
-    let node = field::shm::create_node(&format!("mirror-{}", a.name))?;
+    let node = pheromone_field::shm::create_node(&format!("mirror-{}", a.name))?;
     let mirror = Mirror::start(MirrorOptions {
         field: a.name.clone(),
         connect: vec![endpoint.to_string()],

@@ -1,15 +1,15 @@
 //! `pheromone export`: the next frame of a running field as a NumPy `.npy` file (every
 //! channel) or as a ROS map_server map (one channel, PGM + YAML). The writers are
-//! `report::export`, the wait for the frame `report::export::live`.
+//! `pheromone_report::export`, the wait for the frame `pheromone_report::export::live`.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use clap::Args;
-use field::shm::{create_node, FieldReader, Frame};
-use report::export::live::next_frame;
-use report::export::npy::write_npy;
-use report::export::ros_map::{write_ros_map, PlaneRef};
+use pheromone_field::shm::{create_node, FieldReader, Frame};
+use pheromone_report::export::live::next_frame;
+use pheromone_report::export::npy::write_npy;
+use pheromone_report::export::ros_map::{write_ros_map, PlaneRef};
 
 use super::bad;
 

@@ -293,7 +293,7 @@ fn model_of(e: Evaporation) -> ModelArg {
 }
 
 pub fn run(a: FieldArgs) -> anyhow::Result<()> {
-    // `--mirror` runs `bridge::run_mirror` instead (dispatched by main, as this module's
+    // `--mirror` runs `pheromone_bridge::run_mirror` instead (dispatched by main, as this module's
     // arguments are the mirror's too).
     if a.zenoh.any() {
         return Err(bad(

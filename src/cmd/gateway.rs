@@ -4,9 +4,9 @@
 use std::time::Duration;
 
 use clap::Args;
-use field::shm::create_node;
-use gateway::line::Line;
-use gateway::{serial, Gateway, GatewayConfig, Source};
+use pheromone_field::shm::create_node;
+use pheromone_gateway::line::Line;
+use pheromone_gateway::{serial, Gateway, GatewayConfig, Source};
 
 use super::bad;
 

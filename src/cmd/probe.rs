@@ -1,11 +1,14 @@
 //! `pheromone probe`: a minimal reader for scripts, tests and first steps (the same as the
-//! `read` example). The waits are `report::probe`.
+//! `read` example). The waits are `pheromone_report::probe`.
 
 use std::time::Duration;
 
 use clap::Args;
 use iceoryx2::prelude::Node;
-use report::probe::{follow, last_value, probe_line, wait_for, Level, ProbeError, ProbePoint};
+use pheromone_field::shm::{create_node, mirror_info, FieldReader, Frame, Svc};
+use pheromone_report::probe::{
+    follow, last_value, probe_line, wait_for, Level, ProbeError, ProbePoint,
+};
 
 use super::bad_from;
 

@@ -447,15 +447,15 @@ fn check_remote(a: &FollowerArgs, config: &FollowerConfig) -> anyhow::Result<()>
     Ok(())
 }
 
-/// The antenna robot of `--gateway` (`roles::process::follower_remote`).
+/// The antenna robot of `--gateway` (`pheromone_roles::process::follower_remote`).
 fn run_remote_follower(
     a: &FollowerArgs,
     scenario: &Scenario,
     config: &FollowerConfig,
     gateway: &str,
 ) -> anyhow::Result<()> {
-    use roles::process::follower_antenna::RemoteDeposits;
-    use roles::process::follower_remote::{run_remote_follower, RemoteFollowerOptions};
+    use pheromone_roles::process::follower_antenna::RemoteDeposits;
+    use pheromone_roles::process::follower_remote::{run_remote_follower, RemoteFollowerOptions};
     check_remote(a, config)?;
     let client_id = client_id(a)?;
     let remote = RemoteFollowerOptions {

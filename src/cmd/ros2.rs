@@ -170,10 +170,10 @@ fn parse_deposit_from(s: &str) -> anyhow::Result<pheromone_ros2::node::DepositFr
 
 #[cfg(feature = "zenoh")]
 pub fn run(a: Ros2Args) -> anyhow::Result<()> {
-    use ros2::node::{Ros2Error, Ros2Node};
-    field::shm::check_name(&a.field).map_err(bad_from)?;
+    use pheromone_ros2::node::{Ros2Error, Ros2Node};
+    pheromone_field::shm::check_name(&a.field).map_err(bad_from)?;
     let options = ros2_options(&a)?;
-    let node = field::shm::create_node(&format!("ros2-{}", std::process::id()))?;
+    let node = pheromone_field::shm::create_node(&format!("ros2-{}", std::process::id()))?;
     let timeout = Duration::from_secs_f64(a.timeout);
     let ros = Ros2Node::start(&node, options, timeout).map_err(|e| match e {
         Ros2Error::Name(_) | Ros2Error::Depositor(_) | Ros2Error::Session(_) => bad_from(e),
@@ -189,8 +189,8 @@ pub fn run(a: Ros2Args) -> anyhow::Result<()> {
 
 /// The node's options from its flags (their parsers have checked the numbers).
 #[cfg(feature = "zenoh")]
-fn ros2_options(a: &Ros2Args) -> anyhow::Result<ros2::node::Ros2Options> {
-    let session = ros2::session::SessionSettings {
+fn ros2_options(a: &Ros2Args) -> anyhow::Result<pheromone_ros2::node::Ros2Options> {
+    let session = pheromone_ros2::session::SessionSettings {
         security: a.zenoh.security(),
         env_file: None,
         listen: a.listen.clone(),
@@ -209,8 +209,8 @@ fn ros2_options(a: &Ros2Args) -> anyhow::Result<ros2::node::Ros2Options> {
     depositor.validate().map_err(bad_from)?;
     let world = match &a.world {
         Some(world) => {
-            field::shm::check_name(world).map_err(bad_from)?;
-            Some(ros2::node::WorldOptions {
+            pheromone_field::shm::check_name(world).map_err(bad_from)?;
+            Some(pheromone_ros2::node::WorldOptions {
                 world: world.clone(),
                 robots: a.robots.clone(),
                 path_rate_hz: a.path_rate_hz,
@@ -219,7 +219,7 @@ fn ros2_options(a: &Ros2Args) -> anyhow::Result<ros2::node::Ros2Options> {
         }
         None => None,
     };
-    Ok(ros2::node::Ros2Options {
+    Ok(pheromone_ros2::node::Ros2Options {
         field: a.field.clone(),
         domain_id: a.domain_id,
         namespace: a.namespace.clone(),
@@ -300,8 +300,8 @@ pub struct RecordArgs {
 }
 
 pub fn run_record(a: RecordArgs) -> anyhow::Result<()> {
-    use ros2::run::{record_field, RecordOptions};
-    field::shm::check_name(&a.field).map_err(bad_from)?;
+    use pheromone_ros2::run::{record_field, RecordOptions};
+    pheromone_field::shm::check_name(&a.field).map_err(bad_from)?;
     let options = RecordOptions {
         field: a.field.clone(),
         mcap: a.mcap.clone(),
@@ -312,7 +312,7 @@ pub fn run_record(a: RecordArgs) -> anyhow::Result<()> {
         duration: a.duration.map(Duration::from_secs_f64),
         frames: a.frames,
     };
-    let node = field::shm::create_node(&format!("record-{}", std::process::id()))?;
+    let node = pheromone_field::shm::create_node(&format!("record-{}", std::process::id()))?;
     let summary = match record_field(&node, &options) {
         Ok(s) => s,
         Err(e) if e.is_bad_input() => return Err(bad_from(e)),

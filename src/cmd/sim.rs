@@ -8,20 +8,13 @@ use std::time::Instant;
 
 use pheromone_roles::follower::StrategyKind;
 use pheromone_ros2::record::{McapRecorder, RecordError};
-use pheromone_sim::metrics::{mean_sd, scenario_metrics, welch_t, RunMetrics, RunMode};
+use pheromone_sim::metrics::{RunMetrics, RunMode};
 use pheromone_sim::processes::ProcessRunInfo;
 use pheromone_sim::recording::Recording;
 use pheromone_sim::ros_record::{McapTotals, SimMcap};
 use pheromone_sim::single::{run_single_process, RunSummary, SingleProcessOptions};
+use pheromone_sim::trials::TrialsError;
 use pheromone_world::scenario::{Overrides, Scenario};
-use roles::follower::StrategyKind;
-use ros2::record::{McapRecorder, RecordError};
-use sim::metrics::{RunMetrics, RunMode};
-use sim::processes::ProcessRunInfo;
-use sim::record::Recording;
-use sim::ros_record::{McapTotals, SimMcap};
-use sim::single::{run_single_process, RunSummary, SingleProcessOptions};
-use sim::trials::TrialsError;
 
 use super::roles::load_scenario;
 pub use super::sim_args::SimArgs;
@@ -89,7 +82,7 @@ fn scenario_of(a: &SimArgs) -> anyhow::Result<Scenario> {
 
 /// One run of the scenario, its summary, metrics and files.
 fn run_scenario(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
-    if a.remote && sim::processes::remote_robots(scenario).is_empty() {
+    if a.remote && pheromone_sim::processes::remote_robots(scenario).is_empty() {
         return Err(bad(format!(
             "--remote: scenario '{}' has no robot with an antenna follower (try trail-following)",
             scenario.name
@@ -142,8 +135,13 @@ fn write_outputs(
     metrics: &RunMetrics,
 ) -> anyhow::Result<()> {
     if let Some(dir) = out_dir(a, scenario) {
-        let mut files = report::write_outputs(&dir, rec, metrics, &report::marks(scenario, rec))?;
-        files.extend(report::write_plots(&dir, scenario, rec)?);
+        let mut files = pheromone_report::write_outputs(
+            &dir,
+            rec,
+            metrics,
+            &pheromone_report::marks(scenario, rec),
+        )?;
+        files.extend(pheromone_report::write_plots(&dir, scenario, rec)?);
         eprintln!(
             "wrote {} file(s) to {} (the picture: {})",
             files.len(),
@@ -311,7 +309,7 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
         }
         Ok(rec)
     };
-    let out = match sim::trials::run_trials(scenario, trials, ours, run, || bar.inc(1)) {
+    let out = match pheromone_sim::trials::run_trials(scenario, trials, ours, run, || bar.inc(1)) {
         Ok(out) => out,
         Err(TrialsError::Run(e)) => return Err(e),
         Err(TrialsError::Scenario(e)) => return Err(bad_from(e)),

@@ -3,13 +3,11 @@
 //! scripted loss, in the mode `sim` would use; one robot's estimation errors, deposits and σ
 //! from each run become `filters.csv`, six charts and `filters.json`.
 
+use pheromone_report::filters::{truth_spread_m, Comparison};
+use pheromone_report::{FilterRun, FilterSummary};
 use pheromone_roles::localizer::FilterKind;
 use pheromone_sim::single::{run_single_process, SingleProcessOptions};
 use pheromone_world::scenario::{Overrides, Scenario};
-use report::filters::{truth_spread_m, Comparison};
-use report::{FilterRun, FilterSummary};
-use roles::localizer::FilterKind;
-use sim::single::{run_single_process, SingleProcessOptions};
 
 use super::bad;
 use super::sim_args::SimArgs;

@@ -1,13 +1,13 @@
 //! The loops of `pheromone bridge` and `pheromone field --mirror`: a started [`Bridge`] or
 //! [`Mirror`] stepped until Ctrl-C/SIGTERM or its duration, with the shared housekeeping
-//! (`field::run::Housekeeping`: dead nodes cleaned up every second, a status line every 5 s).
+//! (`pheromone_field::process::run::Housekeeping`: dead nodes cleaned up every second, a status line every 5 s).
 
 use std::sync::mpsc;
 use std::time::Duration;
 
-use field::run::Housekeeping;
-use field::shm::Svc;
 use iceoryx2::node::Node;
+use pheromone_field::process::run::Housekeeping;
+use pheromone_field::shm::Svc;
 
 use super::{Bridge, BridgeError, BridgeStats, Mirror, MirrorStats, Security};
 

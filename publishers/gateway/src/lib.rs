@@ -6,7 +6,7 @@
 //! frame of a field it reads ([`FieldReader`]) and forwards deposits to the field
 //! ([`DepositPublisher`]). [`udp`] serves it on a UDP socket (one frame per datagram),
 //! [`serial`] on a serial line (a byte stream, half duplex); [`client`] is the thin client's side
-//! of both, with a backup gateway; [`line`] is either place to serve on, as `pheromone gateway`
+//! of both, with a backup gateway; [`line`](mod@line) is either place to serve on, as `pheromone gateway`
 //! opens it.
 //!
 //! - **PIR:** the two antenna readings at the M3 antenna points, half a wheel base (as the client

@@ -4,8 +4,8 @@
 use std::fs::File;
 use std::net::UdpSocket;
 
-use field::shm::Svc;
 use iceoryx2::node::Node;
+use pheromone_field::shm::Svc;
 
 use super::{serial, udp, Gateway, GatewayCounters, GatewayError};
 

@@ -13,12 +13,10 @@ use std::os::fd::AsFd;
 use std::os::unix::fs::OpenOptionsExt;
 use std::time::Duration;
 
-use field::run::Housekeeping;
-use field::shm::{now_ns, Svc};
-use gateway_codec::{Decoder, MAX_ENCODED_BYTES};
 use iceoryx2::node::Node;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::termios::{self, BaudRate, ControlFlags, SetArg, SpecialCharacterIndices};
+use pheromone_field::process::run::Housekeeping;
 use pheromone_field::shm::{now_ns, Svc};
 use pheromone_gateway_codec::{Decoder, MAX_ENCODED_BYTES};
 

@@ -3,10 +3,8 @@
 use std::net::{SocketAddr, UdpSocket};
 use std::time::Duration;
 
-use field::run::Housekeeping;
-use field::shm::{now_ns, Svc};
-use gateway_codec::{decode, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
 use iceoryx2::node::Node;
+use pheromone_field::process::run::Housekeeping;
 use pheromone_field::shm::{now_ns, Svc};
 use pheromone_gateway_codec::{decode, MAX_ENCODED_BYTES, MAX_WIRE_BYTES};
 

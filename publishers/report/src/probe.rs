@@ -4,8 +4,8 @@
 
 use std::time::{Duration, Instant};
 
-use field::shm::{FieldReader, Frame, ShmError, Svc};
 use iceoryx2::node::Node;
+use pheromone_field::shm::{FieldReader, Frame, ShmError, Svc};
 
 /// The point and channel probed.
 #[derive(Debug, Clone, Copy)]
@@ -46,7 +46,7 @@ pub enum ProbeError {
     NoChannel { channel: usize, channels: usize },
 }
 
-field::from_shm_errors!(ProbeError);
+pheromone_field::from_shm_errors!(ProbeError);
 
 /// Waits up to `timeout` (in slices, so that Ctrl-C or SIGTERM is seen between them) until the
 /// value at `p` meets `level`; whether it did.

@@ -1,18 +1,18 @@
 //! The loops of `pheromone ros2` (feature `zenoh`: `Ros2Node::run`) and `pheromone record`
 //! ([`record_field`]): stepped until Ctrl-C/SIGTERM or their end, with the shared housekeeping
-//! (`field::run::Housekeeping`).
+//! (`pheromone_field::process::run::Housekeeping`).
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use field::run::Housekeeping;
-use field::shm::{FieldReader, ShmError, Svc};
 use iceoryx2::node::Node;
+use pheromone_field::process::run::Housekeeping;
+use pheromone_field::shm::{FieldReader, ShmError, Svc};
 use thiserror::Error;
 
 use crate::frames::{frame_messages, wall_now_ns, FieldTopics};
-use crate::graph::NameError;
 use crate::record::{McapRecorder, RecordError};
+use crate::rmw_zenoh::NameError;
 
 /// How long one step waits for a frame or a message.
 const STEP: Duration = Duration::from_millis(20);
@@ -105,7 +105,7 @@ pub enum RecordRunError {
     NoFrame { field: String, timeout: Duration },
 }
 
-field::from_shm_errors!(RecordRunError);
+pheromone_field::from_shm_errors!(RecordRunError);
 
 impl RecordRunError {
     /// The error is the user's input (a namespace, a file that cannot be created).
@@ -137,7 +137,7 @@ impl RecordSummary {
 /// `o.rate_hz` frames a second, until the node is asked to stop (Ctrl-C, SIGTERM), the
 /// duration or the number of frames; each frame's messages close a chunk and are flushed.
 pub fn record_field(node: &Node<Svc>, o: &RecordOptions) -> Result<RecordSummary, RecordRunError> {
-    let ns = crate::graph::namespace(&o.namespace)?;
+    let ns = crate::rmw_zenoh::namespace(&o.namespace)?;
     let period = Duration::from_secs_f64(1.0 / o.rate_hz);
     let mut reader = FieldReader::attach_within(node, &o.field, o.timeout)?;
     let Some(channels) = reader

@@ -2,12 +2,12 @@
 //! follower strategies on the same seeds, each run's `exploration.mean` kept, and Welch's t
 //! between the two ([`Trials`], written as `trials.json`).
 
+use pheromone_roles::follower::StrategyKind;
 use pheromone_world::scenario::{Overrides, Scenario, ScenarioError};
-use roles::follower::StrategyKind;
 use serde::Serialize;
 
 use crate::metrics::{mean_sd, scenario_metrics, welch_t};
-use crate::record::Recording;
+use crate::recording::Recording;
 
 /// `--trials`: the exploration of each strategy over the same seeds, and Welch's t between them
 /// (`trials.json`).

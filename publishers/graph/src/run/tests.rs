@@ -1,7 +1,7 @@
 //! Tests of the lockstep graph runs (`run.rs`).
 
 #[cfg(test)]
-mod tests {
+mod runs {
     use super::super::*;
     use crate::tables::tables_text;
 

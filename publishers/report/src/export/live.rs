@@ -4,8 +4,8 @@
 
 use std::time::{Duration, Instant};
 
-use field::shm::{mirror_info, FieldReader, MirrorInfo, ShmError, Svc};
 use iceoryx2::node::Node;
+use pheromone_field::shm::{mirror_info, FieldReader, MirrorInfo, ShmError, Svc};
 
 /// Waiting for the frame failed.
 #[derive(Debug, thiserror::Error)]
@@ -16,7 +16,7 @@ pub enum WaitError {
     Interrupted(String),
 }
 
-field::from_shm_errors!(WaitError);
+pheromone_field::from_shm_errors!(WaitError);
 
 /// What [`next_frame`] found; the frame is the one the reader then holds.
 #[derive(Debug, Clone)]

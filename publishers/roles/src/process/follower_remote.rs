@@ -3,9 +3,11 @@
 
 use std::time::Duration;
 
-use field::shm::Svc;
-use gateway::client::{ClientConfig, ClientError, DepositRetry, GatewayClient, Transport};
 use iceoryx2::node::Node;
+use pheromone_field::shm::Svc;
+use pheromone_gateway::client::{
+    ClientConfig, ClientError, DepositRetry, GatewayClient, Transport,
+};
 
 use super::follower_antenna::{
     run_antenna_robot, AntennaRobotSummary, AntennaRunOptions, RemoteDeposits,
