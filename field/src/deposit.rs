@@ -120,8 +120,12 @@ impl ErrorEllipse {
     }
 }
 
-/// γ = τ / det Σxy, capped at ±γmax (seed 000 eq. 12; a zero determinant gives the cap).
+/// γ = τ / det Σxy, capped at ±γmax (seed 000 eq. 12; a zero determinant gives the cap, and
+/// τ = 0 gives 0 whatever the determinant: a deposit of nothing adds nothing).
 pub fn gamma(tau: f32, det_m4: f32, gamma_max: f32) -> f32 {
+    if tau == 0.0 {
+        return 0.0;
+    }
     let g = if det_m4 > 0.0 {
         tau as f64 / det_m4 as f64
     } else {
@@ -448,5 +452,21 @@ pub fn z_shape(x: f32, c: f32, sigma: f32) -> f32 {
         1.0 - (x - c) / sigma
     } else {
         0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::gamma;
+
+    #[test]
+    fn gamma_is_tau_over_det_capped_and_zero_for_no_amount() {
+        assert_eq!(gamma(0.2, 0.01, 100.0), 20.0);
+        assert_eq!(gamma(0.2, 0.0, 100.0), 100.0);
+        assert_eq!(gamma(-0.2, 0.0, 100.0), -100.0);
+        // Amount 0 (or -0) with a zero covariance deposited ±γmax before.
+        assert_eq!(gamma(0.0, 0.0, 100.0), 0.0);
+        assert_eq!(gamma(-0.0, 0.0, 100.0), 0.0);
+        assert_eq!(gamma(0.0, 1e-4, 100.0), 0.0);
     }
 }

@@ -315,14 +315,14 @@ pub struct PheromoneEllipseParams {
 
 impl Default for PheromoneEllipseParams {
     fn default() -> Self {
-        // pheromone_roles::depositor::DepositorConfig::default().
+        // pheromone_field::kernel::defaults, as pheromone_roles::depositor::DepositorConfig.
         Self {
             channel: 0,
             anti_pheromone: 0,
             kernel: PHEROMONE_KERNEL_ELLIPSE,
-            tau: 0.2,
-            gamma_max: 100.0,
-            range_m: 1.0,
+            tau: pheromone_field::kernel::defaults::TAU,
+            gamma_max: pheromone_field::kernel::defaults::GAMMA_MAX,
+            range_m: pheromone_field::kernel::defaults::RANGE_M,
             min_sigma_m: 0.0,
         }
     }

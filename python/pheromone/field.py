@@ -226,6 +226,18 @@ class Frame:
 #: (seconds), as `pheromone deposit --receipt-timeout`: the field answers at its next tick.
 DEFAULT_RECEIPT_TIMEOUT_S = 60.0
 
+#: The deposit parameters `deposit()` uses when a kernel's parameter is not given: Rust's
+#: `pheromone_field::kernel::defaults`, as `pheromone deposit` takes them
+#: (python/tests/test_defaults.py compares the two).
+DEPOSIT_DEFAULTS: dict[str, Any] = {
+    "cov": (0.01, 0.0, 0.01),
+    "range_m": 1.0,
+    "gamma_max": 100.0,
+    "sigma_m": 0.1,
+    "plateau_m": 0.2,
+    "slope_m": 0.3,
+}
+
 #: The parameters each kernel uses (`deposit` refuses the others).
 _KERNEL_PARAMS = {
     "ellipse": ("cov", "range_m", "gamma_max"),
@@ -734,14 +746,7 @@ class Field:
         unused = [k for k, v in given.items() if v is not None and k not in _KERNEL_PARAMS[kernel]]
         if unused:
             raise ValueError(f"kernel '{kernel}' does not use {', '.join(unused)}")
-        d: dict[str, Any] = {
-            "cov": (0.01, 0.0, 0.01),
-            "range_m": 1.0,
-            "gamma_max": 100.0,
-            "sigma_m": 0.1,
-            "plateau_m": 0.2,
-            "slope_m": 0.3,
-        }
+        d: dict[str, Any] = dict(DEPOSIT_DEFAULTS)
         d.update({k: v for k, v in given.items() if v is not None})
         cov_t = tuple(d["cov"])
         if len(cov_t) != 3:

@@ -5,6 +5,7 @@ use std::time::Duration;
 
 use clap::Args;
 use iceoryx2::prelude::Node;
+use pheromone_field::kernel::defaults;
 use pheromone_field::shm::{
     create_node, ConfigSubscriber, DepositClient, DepositPublisher, Receipt, Svc,
 };
@@ -43,22 +44,22 @@ pub struct DepositArgs {
     #[arg(long, value_parser = super::f32_any(), allow_negative_numbers = true)]
     pub amount: f32,
     /// Position covariance Σxy as xx,xy,yy (m²).
-    #[arg(long, value_parser = super::f32_any(), value_delimiter = ',', default_values_t = [0.01, 0.0, 0.01], allow_negative_numbers = true)]
+    #[arg(long, value_parser = super::f32_any(), value_delimiter = ',', default_values_t = defaults::COV_M2, allow_negative_numbers = true)]
     pub cov: Vec<f32>,
     /// Cut-off radius z_rng (m).
-    #[arg(long, value_parser = super::f32_pos(1e6), default_value_t = 1.0)]
+    #[arg(long, value_parser = super::f32_pos(1e6), default_value_t = defaults::RANGE_M)]
     pub range: f32,
     /// γ cap (ellipse, paper).
-    #[arg(long, value_parser = super::f32_pos(1e9), default_value_t = 100.0)]
+    #[arg(long, value_parser = super::f32_pos(1e9), default_value_t = defaults::GAMMA_MAX)]
     pub gamma_max: f32,
     /// λ (m), saturating kernel.
-    #[arg(long, value_parser = super::f32_pos(1e6), default_value_t = 0.1)]
+    #[arg(long, value_parser = super::f32_pos(1e6), default_value_t = defaults::SATURATING_SIGMA_M)]
     pub sigma: f32,
     /// Z-shape plateau c (m).
-    #[arg(long, value_parser = super::f32_in(0.0, 1e6), default_value_t = 0.2)]
+    #[arg(long, value_parser = super::f32_in(0.0, 1e6), default_value_t = defaults::PLATEAU_M)]
     pub plateau: f32,
     /// Z-shape slope length σ (m).
-    #[arg(long, value_parser = super::f32_in(0.0, 1e6), default_value_t = 0.3)]
+    #[arg(long, value_parser = super::f32_in(0.0, 1e6), default_value_t = defaults::SLOPE_M)]
     pub slope: f32,
     /// Seconds to wait for the field to exist.
     #[arg(long, value_parser = super::secs0(), default_value_t = 10.0)]

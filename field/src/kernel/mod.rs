@@ -19,6 +19,7 @@
 //! assert_eq!(Deposit::from_msg(&msg), Some(deposit));
 //! ```
 
+pub mod defaults;
 pub mod pose;
 
 pub use pose::{EllipseRule, PoseEstimate, PoseRejectReason, PoseRejection};

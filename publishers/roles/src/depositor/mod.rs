@@ -22,6 +22,7 @@
 //! that do not fit the `f32` deposit message) are rejected with a [`PoseRejection`] and counted
 //! by reason; no `DepositMsg` carrying a non-finite value is ever produced.
 
+use pheromone_field::kernel::defaults;
 use pheromone_field::{Deposit, DepositMsg, EllipseRule, Kernel, KernelKind};
 use serde::{Deserialize, Serialize};
 
@@ -124,9 +125,9 @@ impl Default for DepositorConfig {
             kernel: EllipseKernel::Ellipse,
             channel: 0,
             anti_pheromone: false,
-            tau: 0.2,
-            gamma_max: 100.0,
-            range_m: 1.0,
+            tau: defaults::TAU,
+            gamma_max: defaults::GAMMA_MAX,
+            range_m: defaults::RANGE_M,
             interval_m: 0.25,
             interval_s: 0.0,
             constant_sigma_m: 0.1,
