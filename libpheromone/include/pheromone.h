@@ -398,6 +398,33 @@ typedef struct {
 } PheromonePoseEstimate;
 
 /**
+ * Whether the field is alive and which of its processes the handle reads
+ * (`pheromone_field_liveness`).
+ */
+typedef struct {
+  /**
+   * 1 while a live process publishes the field's frames; 0 once that process died (a scan
+   * of the host's iceoryx2 nodes: ask when frames stop coming, not per frame).
+   */
+  uint32_t alive;
+  /**
+   * Reserved: 0.
+   */
+  uint32_t reserved;
+  /**
+   * How many field processes the handle has taken frames from: 1 after its first frame, one
+   * more each time a restarted field (or a standby that took over) publishes under the name.
+   * A change means the field's state may have been reset and its sequence numbers restarted.
+   */
+  uint64_t generation;
+  /**
+   * The sequence number of the newest frame the handle holds (a field's first frame is 0;
+   * 0 also while the handle holds none).
+   */
+  uint64_t sequence;
+} PheromoneLiveness;
+
+/**
  * Every status, in the order of their values.
  */
 #define PheromoneStatus_ALL { PheromoneStatus_Ok, PheromoneStatus_Timeout, PheromoneStatus_NoField, PheromoneStatus_BadArgument, PheromoneStatus_Layout, PheromoneStatus_NoFrame, PheromoneStatus_Borrowed, PheromoneStatus_NotDelivered, PheromoneStatus_ShmError, PheromoneStatus_Internal, PheromoneStatus_Rejected, PheromoneStatus_Interrupted, PheromoneStatus_FieldDead, }
@@ -629,6 +656,22 @@ PheromoneStatus pheromone_deposit_pose(PheromoneField *field, const PheromonePos
  * `field` is a live handle; `out_fd` is valid for a write.
  */
 PheromoneStatus pheromone_field_fd(const PheromoneField *field, int *out_fd);
+
+/**
+ * Whether the field's process is alive and which generation of it the handle reads, in
+ * `*out` (`PheromoneLiveness`): `alive` turns 0 when the field's process died, `generation`
+ * counts the field processes the handle has taken frames from (one more after each restart
+ * or standby takeover under the name), `sequence` is the newest frame's. A handle keeps
+ * working across a restart: wait as before; a new `generation` says the field's state may have
+ * been reset. `alive` scans the host's iceoryx2 nodes: call it when frames stop coming, not per
+ * frame. Does not wait, does not change the handle's frame.
+ *
+ * Thread safety: one thread at a time per handle, as every call on it.
+ *
+ * # Safety
+ * `field` is a live handle; `out` is valid for a write.
+ */
+PheromoneStatus pheromone_field_liveness(const PheromoneField *field, PheromoneLiveness *out);
 
 /**
  * A static description of `status` (a `PheromoneStatus` value), e.g. "no field of that name

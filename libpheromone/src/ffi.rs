@@ -539,6 +539,33 @@ pub unsafe extern "C" fn pheromone_field_fd(
     })
 }
 
+/// Whether the field's process is alive and which generation of it the handle reads, in
+/// `*out` (`PheromoneLiveness`): `alive` turns 0 when the field's process died, `generation`
+/// counts the field processes the handle has taken frames from (one more after each restart
+/// or standby takeover under the name), `sequence` is the newest frame's. A handle keeps
+/// working across a restart: wait as before; a new `generation` says the field's state may have
+/// been reset. `alive` scans the host's iceoryx2 nodes: call it when frames stop coming, not per
+/// frame. Does not wait, does not change the handle's frame.
+///
+/// Thread safety: one thread at a time per handle, as every call on it.
+///
+/// # Safety
+/// `field` is a live handle; `out` is valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn pheromone_field_liveness(
+    field: *const PheromoneField,
+    out: *mut PheromoneLiveness,
+) -> PheromoneStatus {
+    guard(|| {
+        // SAFETY: forwarded from this function's contract.
+        let f = unsafe { arg(field, "field") }?;
+        // SAFETY: forwarded from this function's contract.
+        let out = unsafe { arg_mut(out, "out") }?;
+        *out = f.liveness();
+        Ok(())
+    })
+}
+
 /// A static description of `status` (a `PheromoneStatus` value), e.g. "no field of that name
 /// is running" for `PHEROMONE_STATUS_NO_FIELD`; "unknown status" for a value that is none.
 /// Never NULL. (`pheromone_last_error()` says more about the last failure.)

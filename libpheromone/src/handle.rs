@@ -16,10 +16,10 @@ use crate::borrowed::Borrowed;
 use crate::error::{bail, fail, from_shm, Failure};
 use crate::types::{
     PheromoneAttachOptions, PheromoneDeposit, PheromoneEllipseParams, PheromoneFrameView,
-    PheromonePose, PheromonePoseEstimate, PheromoneReceipt, PheromoneStatus, PheromoneWaitPolicy,
-    PHEROMONE_LAYOUT_VERSION, PHEROMONE_MAX_CHANNELS, PHEROMONE_RECEIPT_APPLIED,
-    PHEROMONE_RECEIPT_FORWARDED, PHEROMONE_RECEIPT_REJECTED, PHEROMONE_WAIT_BUSY_POLL,
-    PHEROMONE_WAIT_EVENT, PHEROMONE_WAIT_SPIN,
+    PheromoneLiveness, PheromonePose, PheromonePoseEstimate, PheromoneReceipt, PheromoneStatus,
+    PheromoneWaitPolicy, PHEROMONE_LAYOUT_VERSION, PHEROMONE_MAX_CHANNELS,
+    PHEROMONE_RECEIPT_APPLIED, PHEROMONE_RECEIPT_FORWARDED, PHEROMONE_RECEIPT_REJECTED,
+    PHEROMONE_WAIT_BUSY_POLL, PHEROMONE_WAIT_EVENT, PHEROMONE_WAIT_SPIN,
 };
 
 const BAD: PheromoneStatus = PheromoneStatus::BadArgument;
@@ -184,6 +184,17 @@ impl PheromoneField {
     /// `pheromone_field_fd`'s).
     pub fn frame_ready_listener(&self) -> &iceoryx2::port::listener::Listener<Svc> {
         self.reader.frame_ready_listener()
+    }
+
+    /// Whether the field's process is alive, which generation of it the handle reads, and the
+    /// sequence of the newest frame held (`pheromone_field_liveness`).
+    pub fn liveness(&self) -> PheromoneLiveness {
+        PheromoneLiveness {
+            alive: u32::from(self.reader.field_alive()),
+            reserved: 0,
+            generation: self.reader.generation(),
+            sequence: self.reader.frame().map_or(0, |f| f.header.sequence),
+        }
     }
 
     /// Ends the borrow (the view's pointers must not be used any more).

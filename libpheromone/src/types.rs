@@ -155,6 +155,25 @@ pub struct PheromoneReceipt {
     pub reason: u32,
 }
 
+/// Whether the field is alive and which of its processes the handle reads
+/// (`pheromone_field_liveness`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PheromoneLiveness {
+    /// 1 while a live process publishes the field's frames; 0 once that process died (a scan
+    /// of the host's iceoryx2 nodes: ask when frames stop coming, not per frame).
+    pub alive: u32,
+    /// Reserved: 0.
+    pub reserved: u32,
+    /// How many field processes the handle has taken frames from: 1 after its first frame, one
+    /// more each time a restarted field (or a standby that took over) publishes under the name.
+    /// A change means the field's state may have been reset and its sequence numbers restarted.
+    pub generation: u64,
+    /// The sequence number of the newest frame the handle holds (a field's first frame is 0;
+    /// 0 also while the handle holds none).
+    pub sequence: u64,
+}
+
 /// `PheromoneWaitPolicy::kind`: sleep on the frame event until the field notifies.
 pub const PHEROMONE_WAIT_EVENT: u32 = 0;
 /// `PheromoneWaitPolicy::kind`: poll for `spin_ns`, then sleep on the event.

@@ -217,8 +217,14 @@ done
 kill -KILL "$dead_pid"
 wait "$dead_pid" 2>/dev/null || true
 "$work/abi_test" dead "$dead"
+echo "-- pheromone_field_liveness: the holder sees the field die, then restarted (generation 2)"
+echo dead >&"$hold_fd"
+start_field "$dead" {hold_fd}>&- # the field must not keep the holder's stdin open
+echo restarted >&"$hold_fd"
 exec {hold_fd}>&-
 wait "$holder" || { cat "$work/hold.out" >&2; exit 1; }
+grep -x "dead: alive 0 generation 1" "$work/hold.out"
+grep -x "restarted: alive 1 generation 2" "$work/hold.out"
 
 echo "-- the C example's poll loop: frames of a 100 Hz field and a 50 ms timer in one poll"
 "$work/poll_loop" "$a" 30 5 >"$work/poll.out" || { cat "$work/poll.out" >&2; exit 1; }

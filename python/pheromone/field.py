@@ -412,6 +412,10 @@ class Field:
         self.cell_size_m = self.origin_x_m = self.origin_y_m = 0.0
         self._header_type = header_type
         self._latest: Optional[Frame] = None
+        # The iceoryx2 publisher (field process) of the newest frame, and how many this client
+        # has taken frames from (`generation`).
+        self._publisher_id: Optional[int] = None
+        self._generation = 0
         self._subscriber: Any = None
         self._listener: Any = None
         self._publisher: Any = None
@@ -444,6 +448,15 @@ class Field:
     def origin(self) -> tuple[float, float]:
         """`(origin_x_m, origin_y_m)`: the world coordinates (m) of the grid's corner."""
         return (self.origin_x_m, self.origin_y_m)
+
+    @property
+    def generation(self) -> int:
+        """How many field processes this client has taken frames from: 0 before its first frame,
+        1 from then on, one more each time a restarted field (or a standby that took over)
+        publishes under the name. A change means the field's state may have been reset (a
+        restart without `--restore` starts empty) and its sequence numbers restarted. As Rust's
+        `FieldReader::generation` and C's `pheromone_field_liveness`."""
+        return self._generation
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -555,7 +568,11 @@ class Field:
             s = self._receive()
             if s is None:
                 return fresh
+            publisher = s.header.publisher_id.value
             frame = self._frame_of(s)
+            if publisher != self._publisher_id:
+                self._publisher_id = publisher
+                self._generation += 1
             previous, self._latest = self._latest, frame
             if previous is not None and _only_ours(previous):
                 previous.close()

@@ -123,6 +123,20 @@ def test_attach_waits_for_a_field_that_starts_later(start_field):
         t.join()
 
 
+def test_generation_counts_the_field_processes_a_client_read_across_a_restart(start_field):
+    f = start_field("gen", *GRID)
+    with attach(f) as field:
+        assert field.generation == 1
+        f.kill()  # SIGKILL: no goodbye from the field
+        field.wait_frame(0.2)  # nothing comes from a dead field
+        assert field.generation == 1
+        start_field("gen", *GRID)  # the same name again
+        for _ in deadline_loop(10, "a frame of the restarted field"):
+            if field.wait_frame(0.1) and field.generation == 2:
+                break
+        assert field.generation == 2
+
+
 def _shm_mapping(address):
     """The /proc/self/maps line of the mapping holding `address`."""
     with open("/proc/self/maps") as m:

@@ -156,6 +156,7 @@ fn a_reader_keeps_its_frame_when_the_field_is_killed_and_sees_the_field_restarte
     let mut reader = FieldReader::attach_within(&node, &name, WAIT).unwrap();
     let before = value_at(&mut reader, 3.0, 3.0, 1.0, "the first field");
     assert!(reader.field_alive());
+    assert_eq!(reader.generation(), 1, "frames of one field process");
     drop(field); // SIGKILL
     eventually(WAIT, "the reader to notice the field is gone", || {
         (!reader.field_alive()).then_some(())
@@ -174,6 +175,11 @@ fn a_reader_keeps_its_frame_when_the_field_is_killed_and_sees_the_field_restarte
     // A new field without --restore starts empty.
     assert_eq!(frame.view.value(0, 3.0, 3.0), 0.0);
     assert!(reader.field_alive());
+    assert_eq!(
+        reader.generation(),
+        2,
+        "the restarted field is the second process read"
+    );
     deposit(&name, 1.0, 1.0, 0.5);
     value_at(&mut reader, 1.0, 1.0, 1.0, "the restarted field");
     drop(reader);

@@ -260,6 +260,10 @@ pub struct FieldReader {
     /// back writes to the publisher's shared completion queue, which is better done while no new
     /// frame is awaited than between a frame's arrival and the reader holding it.
     replaced: Option<FrameSample>,
+    /// The publisher (field process) of the newest frame, and how many publishers this reader
+    /// has taken frames from ([`FieldReader::generation`]).
+    origin: Option<iceoryx2::identifiers::UniquePublisherId>,
+    generation: u64,
 }
 
 impl FieldReader {
@@ -285,6 +289,8 @@ impl FieldReader {
             listener,
             latest: None,
             replaced: None,
+            origin: None,
+            generation: 0,
         };
         // The current frame (the field's history), if it has come already.
         reader.update().map_err(|e| match e {
@@ -321,6 +327,15 @@ impl FieldReader {
         live_frame_publishers(&self.service, &self.node_config) > 0
     }
 
+    /// How many field processes this reader has taken frames from: 0 before its first frame, 1
+    /// from then on, and one more each time a restarted field (or a standby that took over)
+    /// publishes under the name. A change tells the reader that the field's state may have been
+    /// reset (a restart without `--restore` starts empty) and its sequence numbers restarted.
+    /// Free: counted as frames arrive.
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+
     /// Readers (subscribers of the frame service) attached now, this one included.
     pub fn readers(&self) -> usize {
         self.service.dynamic_config().number_of_subscribers()
@@ -343,6 +358,10 @@ impl FieldReader {
                             got: s.payload().len(),
                             expected: s.user_header().len(),
                         });
+                    }
+                    if self.origin != Some(s.origin()) {
+                        self.origin = Some(s.origin());
+                        self.generation += 1;
                     }
                     self.replaced = self.latest.replace(s);
                     fresh = true;

@@ -7,8 +7,11 @@
  *   abi_test confirm FIELD X Y                 confirmed deposits: applied in frame N (and
  *                                              seen there), refused with the field's reason,
  *                                              no receipt within a zero timeout
- *   abi_test hold FIELD                        attaches, prints "holding", detaches at the end
- *                                              of stdin
+ *   abi_test hold FIELD                        attaches (generation 1, alive), prints "holding";
+ *                                              on the stdin line "dead" waits until the field is
+ *                                              no longer alive, on "restarted" until a frame of
+ *                                              generation 2 comes (alive again); detaches at the
+ *                                              end of stdin
  *   abi_test dead FIELD                        the field's process died while another process
  *                                              holds its services: PHEROMONE_STATUS_FIELD_DEAD
  *
@@ -352,20 +355,47 @@ static int run_confirm(const char *name, float x, float y) {
     return failures ? 1 : 0;
 }
 
+/* Waits (in 50 ms frame waits, at most 200 of them) until `*l` says `alive` and at least
+ * `generation`; returns whether it did. */
+static int await_liveness(PheromoneField *f, PheromoneLiveness *l, uint32_t alive,
+                          uint64_t generation) {
+    PheromoneWaitPolicy event = {PHEROMONE_WAIT_EVENT, 0};
+    for (int i = 0; i < 200; i++) {
+        PheromoneStatus s = pheromone_wait_frame(f, event, SECOND_NS / 20);
+        if (s != PHEROMONE_STATUS_OK && s != PHEROMONE_STATUS_TIMEOUT) return 0;
+        if (pheromone_field_liveness(f, l) != PHEROMONE_STATUS_OK) return 0;
+        if (l->alive == alive && l->generation >= generation) return 1;
+    }
+    return 0;
+}
+
 static int run_hold(const char *name) {
     PheromoneAttachOptions o;
     PheromoneField *f = NULL;
+    PheromoneLiveness l;
     char line[64];
     MUST(pheromone_attach_options_init(&o));
     o.attach_timeout_ns = 10 * SECOND_NS;
     o.deposits = 0;
     MUST(pheromone_field_attach(name, &o, &f));
+    CHECK(await_liveness(f, &l, 1, 1) && l.generation == 1,
+          "a live field's first frames: alive %u generation %" PRIu64, l.alive, l.generation);
     printf("holding\n");
     fflush(stdout);
     while (fgets(line, sizeof line, stdin) != NULL) {
+        if (strcmp(line, "dead\n") == 0) {
+            CHECK(await_liveness(f, &l, 0, 1) && l.generation == 1,
+                  "the killed field: alive %u generation %" PRIu64, l.alive, l.generation);
+            printf("dead: alive %u generation %" PRIu64 "\n", l.alive, l.generation);
+        } else if (strcmp(line, "restarted\n") == 0) {
+            CHECK(await_liveness(f, &l, 1, 2) && l.generation == 2,
+                  "the restarted field: alive %u generation %" PRIu64, l.alive, l.generation);
+            printf("restarted: alive %u generation %" PRIu64 "\n", l.alive, l.generation);
+        }
+        fflush(stdout);
     }
     MUST(pheromone_field_detach(f));
-    return 0;
+    return failures ? 1 : 0;
 }
 
 static int run_dead(const char *name) {
