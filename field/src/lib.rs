@@ -23,6 +23,7 @@ pub mod geometry;
 pub mod kernel;
 pub mod messages;
 pub mod models;
+pub mod outfile;
 mod plan;
 pub mod process;
 mod reject;
