@@ -1,6 +1,9 @@
 //! A Rust program that embeds the field keeps its own SIGTERM handling (issue 47): its handler
 //! runs during a blocking wait on a live field, the wait returns "interrupted", every SIGTERM
-//! sent from outside reaches the handler, and no signal's disposition changes.
+//! sent from outside reaches the handler, and no signal's disposition changes. A standby's poll
+//! is interrupted the same way. Then the program registers its stop flag (`shm::stop_when`),
+//! which its handler sets: a busy-poll wait (no system call a signal could cut) ends
+//! "interrupted", and the library's loops (lockstep's wait for participants) see the request.
 //!
 //! Its own test binary without libtest's harness (`harness = false`): the waits run on the main
 //! thread, the only one that does not block SIGTERM, so a SIGTERM sent to the process (by the
@@ -8,20 +11,29 @@
 //! first frame and never ticks, so only a signal can end a wait early.
 #![allow(unsafe_code)]
 
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{mpsc, Arc};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{mpsc, Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 use nix::sys::signal::{pthread_sigmask, SigSet, SigmaskHow, Signal};
+use pheromone_field::process::lockstep::{Conductor, LockstepError};
 use pheromone_field::shm::{
-    create_node, DepositClient, FieldReader, FieldServer, ReceiveError, SendError, WaitPolicy,
+    create_node, should_stop, stop_when, DepositClient, FieldReader, FieldServer, ReceiveError,
+    SendError, Standby, StandbyError, StandbyEvent, WaitPolicy,
 };
 use pheromone_field::{ChannelSpec, Deposit, DepositMsg, Evaporation, FieldConfig, Kernel};
 
 static SEEN: AtomicUsize = AtomicUsize::new(0);
 
+/// The program's stop flag, once it registered one with the library (`stop_when`).
+static STOP: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+
 extern "C" fn on_term(_: libc::c_int) {
     SEEN.fetch_add(1, Ordering::SeqCst);
+    // An atomic load of the cell, then an atomic store: async-signal-safe.
+    if let Some(flag) = STOP.get() {
+        flag.store(true, Ordering::SeqCst);
+    }
 }
 
 /// The handler and flags of every signal that has a disposition.
@@ -144,7 +156,7 @@ fn main() {
     let done = Arc::new(AtomicUsize::new(0));
     let sending = {
         let done = Arc::clone(&done);
-        spawn_blocking_sigterm(move || sender(done, WAITS + 1))
+        spawn_blocking_sigterm(move || sender(done, WAITS + 3))
     };
     for i in 1..=WAITS {
         let at_start = SEEN.load(Ordering::SeqCst);
@@ -186,7 +198,59 @@ fn main() {
     );
     done.store(WAITS + 1, Ordering::SeqCst);
 
+    // A standby mirroring the field: a poll with no frame to mirror is cut short.
+    let mut standby =
+        Standby::attach_within(&node, &name, config(), Duration::from_secs(10)).expect("standby");
+    let at_start = SEEN.load(Ordering::SeqCst);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let r = loop {
+        assert!(
+            Instant::now() < deadline,
+            "the standby's polls were not interrupted within 60 s"
+        );
+        match standby.poll(Duration::from_secs(5)) {
+            Ok(StandbyEvent::Mirrored { .. } | StandbyEvent::Waiting) => continue,
+            other => break other,
+        }
+    };
+    assert!(
+        matches!(r, Err(StandbyError::Interrupted { .. })),
+        "standby poll: {r:?}, expected StandbyError::Interrupted"
+    );
+    assert!(
+        SEEN.load(Ordering::SeqCst) > at_start,
+        "standby: the handler did not run"
+    );
+    drop(standby);
+    done.store(WAITS + 2, Ordering::SeqCst);
+
+    // The program's stop flag: its handler sets it, a busy poll sees it.
+    let flag = Arc::new(AtomicBool::new(false));
+    assert!(stop_when(Arc::clone(&flag)), "the first stop flag is taken");
+    assert!(
+        !stop_when(Arc::new(AtomicBool::new(false))),
+        "a second stop flag is refused"
+    );
+    STOP.set(Arc::clone(&flag)).expect("the handler's flag");
+    assert!(!should_stop(&node), "no stop before the signal");
+    let r = reader.wait_frame_with(WaitPolicy::BusyPoll, Duration::from_secs(60));
+    assert!(
+        matches!(r, Err(ReceiveError::Interrupted { .. })),
+        "busy-poll wait: {r:?}, expected ReceiveError::Interrupted"
+    );
+    assert!(flag.load(Ordering::SeqCst), "the handler set the flag");
+    done.store(WAITS + 3, Ordering::SeqCst);
     let sent = sending.join().expect("sender");
+    // A loop of the library ends on it: lockstep's wait for participants that never come.
+    assert!(should_stop(&node), "should_stop after the flag is set");
+    let conductor = Conductor::create(&node, &format!("{name}-world"), true).expect("conductor");
+    let r = conductor.wait_for_participants(&node, 1, "robots", Duration::from_secs(60));
+    assert!(
+        matches!(r, Err(LockstepError::Interrupted { .. })),
+        "lockstep wait: {r:?}, expected LockstepError::Interrupted"
+    );
+    drop(conductor);
+
     assert_eq!(
         SEEN.load(Ordering::SeqCst),
         sent,
@@ -199,7 +263,7 @@ fn main() {
     stop_tx.send(()).expect("stop the field");
     server.join().expect("field thread");
     println!(
-        "signals: {WAITS} waits and a confirmed deposit interrupted; the handler saw {sent} of \
-         {sent} SIGTERMs"
+        "signals: {WAITS} waits, a confirmed deposit, a standby poll and a busy poll interrupted; \
+         the handler saw {sent} of {sent} SIGTERMs; lockstep stopped on the program's flag"
     );
 }

@@ -141,7 +141,7 @@ impl JoinWatch {
                     timeout_s: timeout.as_secs_f64(),
                 });
             }
-            if node.wait(Duration::ZERO).is_err() {
+            if crate::shm::should_stop(node) {
                 return Err(LockstepError::Interrupted {
                     world: self.world.clone(),
                 });
@@ -202,7 +202,7 @@ pub fn collect_step<K: PartialEq>(
                 timeout_s: stall.as_secs_f64(),
             });
         }
-        if node.wait(Duration::ZERO).is_err() {
+        if crate::shm::should_stop(node) {
             return Err(LockstepError::Interrupted {
                 world: world.to_string(),
             });

@@ -325,6 +325,13 @@ pub enum StandbyError {
     /// Receiving the primary's frames or deposits, or waiting for them, failed.
     #[error(transparent)]
     Service(#[from] ServiceError),
+    /// A signal the program handles itself cut the wait for the primary's next frame short
+    /// (only where the program owns its signals, see `shm::stop_when`).
+    #[error("the standby's wait on '{service}' was interrupted by a signal")]
+    Interrupted {
+        /// The frame-ready event service waited on.
+        service: String,
+    },
 }
 
 /// Any error of the field's shared memory, for a caller that mixes operations; `?` converts

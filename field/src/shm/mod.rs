@@ -82,7 +82,10 @@ pub use reader::{
     SampleManyError, WaitPolicy,
 };
 pub use server::{FieldServer, TickOutcome};
-pub use signals::{handle_termination_requests, handles_termination_requests, stop_requested};
+pub use signals::{
+    handle_termination_requests, handles_termination_requests, should_stop, stop_requested,
+    stop_when,
+};
 pub use standby::{Standby, StandbyEvent, Takeover};
 pub use survey::{field_names, survey, FieldInfo};
 pub use timing::{field_timing, TimingInfo, TimingWriter};
@@ -95,14 +98,15 @@ pub use crate::wire::READER_BORROWED_FRAMES;
 /// Deposit publishers' and readers' event id for "frame ready".
 const FRAME_READY: EventId = EventId::new(0);
 
-/// Waits on the node for `d`; `false` once SIGINT or SIGTERM asked the process to stop (only in a
-/// process that called [`handle_termination_requests`]). Any other signal that cuts the sleep
-/// short (SIGCONT after a SIGSTOP or Ctrl-Z, SIGCHLD, a signal the program handles itself…) is
-/// not a request to stop, although `node.wait` reports it as an interrupt.
+/// Waits on the node for `d`; `false` once the process was asked to stop: SIGINT or SIGTERM in a
+/// process that called [`handle_termination_requests`], or the program's flag ([`stop_when`]).
+/// Any other signal that cuts the sleep short (SIGCONT after a SIGSTOP or Ctrl-Z, SIGCHLD, a
+/// signal the program handles itself…) is not a request to stop, although `node.wait` reports
+/// it as an interrupt.
 pub fn wait_or_stop(node: &Node<Svc>, d: Duration) -> bool {
     use iceoryx2::node::NodeWaitFailure;
     match node.wait(d) {
-        Ok(()) => true,
+        Ok(()) => !should_stop(node),
         Err(NodeWaitFailure::TerminationRequest) => false,
         Err(NodeWaitFailure::Interrupt) => !stop_requested(),
     }

@@ -415,9 +415,10 @@ impl FieldReader {
 
     /// Waits up to `timeout` for a frame newer than the one held, the way `policy` says;
     /// returns whether one came. A wake-up for a frame already taken waits again. A signal
-    /// the program handles cuts the sleep on the event short with `ReceiveError::Interrupted`
-    /// (the polling part of `Spin` and `BusyPoll` makes no system call a signal could cut: it
-    /// goes on until the frame or the timeout); in a process that handles termination requests
+    /// the program handles cuts the sleep on the event short with `ReceiveError::Interrupted`;
+    /// the polling part of `Spin` and `BusyPoll` makes no system call a signal could cut, so it
+    /// ends with `Interrupted` once the program's stop flag is set (`shm::stop_when`), else it
+    /// goes on until the frame or the timeout. In a process that handles termination requests
     /// through iceoryx2, Ctrl-C ends the wait with `false` instead.
     pub fn wait_frame_with(
         &mut self,
@@ -436,6 +437,11 @@ impl FieldReader {
             }
             if start.elapsed() >= spin {
                 break;
+            }
+            if super::signals::program_stop_flag_set() {
+                return Err(ReceiveError::Interrupted {
+                    service: self.names.frame_ready.clone(),
+                });
             }
             std::hint::spin_loop();
         }

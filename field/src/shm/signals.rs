@@ -8,14 +8,49 @@
 //! "interrupted" error (`ReceiveError::Interrupted`, `SendError::Interrupted`,
 //! `AttachError::Interrupted`) so the program's loop can look at its own flags.
 //!
+//! The library's loops (the field's run loop `process::run::run_field`, lockstep, the roles'
+//! loops, `Housekeeping`) end on a stop request. A program that owns its signals tells them
+//! which flag means "stop" with [`stop_when`] (its own handler sets the flag, e.g. signal-hook's
+//! `flag::register`); a signal wakes their waits, and they look at the flag ([`should_stop`]).
+//!
 //! A program that wants iceoryx2's handling instead — the `pheromone` binary, the examples —
 //! calls [`handle_termination_requests`] once, first thing in `main`: from then on every node
 //! this process creates handles termination requests (its `wait` fails on SIGINT/SIGTERM), the
 //! waits treat other interruptions as spurious wake-ups, and [`stop_requested`] reports Ctrl-C.
 
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::Duration;
+
+use iceoryx2::node::Node;
+
+use super::Svc;
 
 static PROCESS_HANDLES_TERMINATION: AtomicBool = AtomicBool::new(false);
+
+/// The program's stop flag ([`stop_when`]).
+static PROGRAM_STOP_FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+
+/// For a program that keeps its own signal handling: the library's loops end once `flag` is
+/// true (the program's SIGINT/SIGTERM handler sets it; a signal also wakes their waits, so they
+/// end within one of their wait slices). Only the program's `main` calls it, once; a second call
+/// with another flag returns false and changes nothing. Installs no handler.
+pub fn stop_when(flag: Arc<AtomicBool>) -> bool {
+    PROGRAM_STOP_FLAG.set(flag).is_ok()
+}
+
+/// Whether the program's own stop flag ([`stop_when`]) is set.
+pub(crate) fn program_stop_flag_set() -> bool {
+    PROGRAM_STOP_FLAG
+        .get()
+        .is_some_and(|f| f.load(Ordering::SeqCst))
+}
+
+/// Whether a loop on `node` should end now: a termination request (in a program that called
+/// [`handle_termination_requests`]) or the program's stop flag ([`stop_when`]). Waits nothing.
+pub fn should_stop(node: &Node<Svc>) -> bool {
+    node.wait(Duration::ZERO).is_err() || program_stop_flag_set()
+}
 
 /// For a program's `main`, never for a library: from now on this process's nodes install
 /// iceoryx2's SIGINT/SIGTERM handler (replacing the program's own) and `node.wait` fails on a
@@ -31,12 +66,13 @@ pub fn handles_termination_requests() -> bool {
     PROCESS_HANDLES_TERMINATION.load(Ordering::SeqCst)
 }
 
-/// Whether SIGINT or SIGTERM asked this process to stop: only in a process that called
-/// [`handle_termination_requests`] (reading it installs and consumes iceoryx2's handler's
-/// record); always false otherwise, where the program's own handler sees the signal.
+/// Whether this process was asked to stop: SIGINT or SIGTERM in a process that called
+/// [`handle_termination_requests`] (reading it consumes iceoryx2's handler's record), or the
+/// program's stop flag ([`stop_when`]). Never asks iceoryx2's handler otherwise.
 pub fn stop_requested() -> bool {
-    handles_termination_requests()
-        && iceoryx2_bb_posix::signal::SignalHandler::termination_requested()
+    program_stop_flag_set()
+        || (handles_termination_requests()
+            && iceoryx2_bb_posix::signal::SignalHandler::termination_requested())
 }
 
 /// The iceoryx2 signal handling of a node this process creates.

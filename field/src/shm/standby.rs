@@ -11,7 +11,7 @@ use super::{
     check_shm_space, cleanup_dead_nodes, now_ns, open_deposit_service, open_frame_ready_service,
     open_frame_service, retry_attach, service_err, wait_interruptible, AttachError,
     DepositSubscriber, FieldServer, FieldServices, FrameFactory, FramePublisher, FrameSample,
-    FrameSubscriber, StandbyError, StartError, Svc,
+    FrameSubscriber, StandbyError, StartError, Svc, Woken,
 };
 use crate::engine::{FieldConfig, Stepper};
 use crate::messages::{DepositMsg, FrameHeader};
@@ -179,7 +179,9 @@ impl Standby {
             |e| match e {
                 StandbyError::Attach(e) => e.field_not_up_yet(),
                 StandbyError::Start(StartError::Service(_)) | StandbyError::Service(_) => true,
-                StandbyError::Mismatch { .. } | StandbyError::Start(_) => false,
+                StandbyError::Mismatch { .. }
+                | StandbyError::Start(_)
+                | StandbyError::Interrupted { .. } => false,
             },
         )
     }
@@ -272,7 +274,8 @@ impl Standby {
     }
 
     /// Waits up to `timeout` for the primary's next frame and mirrors it; tells when the primary
-    /// is gone.
+    /// is gone. Where the program owns its signals, a signal that cuts the wait short with no
+    /// frame is `StandbyError::Interrupted` (poll again to go on).
     pub fn poll(&mut self, timeout: Duration) -> Result<StandbyEvent, StandbyError> {
         let mut fresh = self.receive_frames()?;
         if !fresh {
@@ -285,10 +288,14 @@ impl Standby {
             } else {
                 timeout.min(until_limit)
             };
-            // Interrupted or not, it looks at the frames and the primary's silence below (a
-            // signal the program handles is not consumed here).
-            wait_interruptible(&self.listener, timeout, &self.names.frame_ready)?;
+            let woken = wait_interruptible(&self.listener, timeout, &self.names.frame_ready)?;
             fresh = self.receive_frames()?;
+            if !fresh && woken == Woken::Interrupted {
+                // The program's own handler ran: its loop looks at its flags, then polls again.
+                return Err(StandbyError::Interrupted {
+                    service: self.names.frame_ready.clone(),
+                });
+            }
         }
         if fresh {
             self.pending.clear();

@@ -220,7 +220,7 @@ pub fn run_graph_robot(
             if let Some(s) = reader.wait_newer(seq, Duration::from_millis(100))? {
                 break *s;
             }
-            if node.wait(Duration::ZERO).is_err() {
+            if pheromone_field::shm::should_stop(node) {
                 return Err(GraphRunError::Interrupted(name.to_string()));
             }
             if reader.writers() == 0 && seq > 0 {

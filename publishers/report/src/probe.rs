@@ -72,7 +72,7 @@ pub fn wait_for(
         if left.is_zero() {
             return Ok(false);
         }
-        if node.wait(Duration::ZERO).is_err() {
+        if pheromone_field::shm::should_stop(node) {
             return Err(ProbeError::Interrupted(p));
         }
     }

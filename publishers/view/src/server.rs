@@ -400,7 +400,7 @@ fn stall_after(tick_hz: f64) -> Duration {
 
 /// Serves `view` on `server` until the node sees a termination request (Ctrl-C, SIGTERM).
 pub fn serve(node: &Node<Svc>, server: &Server, view: &mut View) -> Result<(), ViewError> {
-    while node.wait(Duration::ZERO).is_ok() {
+    while !pheromone_field::shm::should_stop(node) {
         view.poll(node)?;
         if let Some(request) = server.recv_timeout(REQUEST_SLICE) {
             view.respond(node, request)?;

@@ -487,7 +487,7 @@ fn await_command(
             Some(_) => deadline = Instant::now() + stall,
             None => {}
         }
-        if node.wait(Duration::ZERO).is_err() {
+        if pheromone_field::shm::should_stop(node) {
             return Ok(None);
         }
         if Instant::now() > deadline {

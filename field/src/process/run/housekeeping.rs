@@ -94,8 +94,7 @@ impl Housekeeping {
     /// Whether the loop goes on: not once the node was asked to stop (Ctrl-C, SIGTERM) nor
     /// past the duration.
     pub fn running(&self, node: &Node<Svc>) -> bool {
-        node.wait(Duration::ZERO).is_ok()
-            && self.duration.is_none_or(|d| self.started.elapsed() < d)
+        !crate::shm::should_stop(node) && self.duration.is_none_or(|d| self.started.elapsed() < d)
     }
 
     /// Runs the cleanup if it is due; `true` once per status period (the caller then writes

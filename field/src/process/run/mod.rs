@@ -400,15 +400,19 @@ fn run_standby(
         standby.latest().map(|h| h.sequence).unwrap_or(0)
     );
     loop {
-        if node.wait(Duration::ZERO).is_err() || o.duration.is_some_and(|d| started.elapsed() >= d)
-        {
+        if crate::shm::should_stop(node) || o.duration.is_some_and(|d| started.elapsed() >= d) {
             eprintln!(
                 "field '{}': standby stopped after mirroring {} frames",
                 o.name, standby.mirrored
             );
             return Ok(None);
         }
-        if standby.poll(period)? == StandbyEvent::PrimaryGone {
+        let event = match standby.poll(period) {
+            // The program's own handler ran; the check above sees its stop flag.
+            Err(StandbyError::Interrupted { .. }) => continue,
+            other => other?,
+        };
+        if event == StandbyEvent::PrimaryGone {
             let mirrored = standby.mirrored;
             let (server, takeover) = standby.take_over(node)?;
             return Ok(Some((server, takeover, mirrored)));

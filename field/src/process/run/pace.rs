@@ -191,7 +191,7 @@ impl Pace for Lockstep {
                     break;
                 }
                 None => {
-                    if node.wait(Duration::ZERO).is_err() {
+                    if crate::shm::should_stop(node) {
                         return Ok(Next::Stop);
                     }
                     if self.clock.conductor_gone() {
@@ -206,7 +206,7 @@ impl Pace for Lockstep {
                 }
             }
         }
-        if node.wait(Duration::ZERO).is_err() {
+        if crate::shm::should_stop(node) {
             return Ok(Next::Stop);
         }
         Ok(Next::Tick)
@@ -273,7 +273,7 @@ impl DepositWake {
         let deadline = metronome.deadline;
         let poll_from = spin::sleep_until(deadline, metronome.spin);
         loop {
-            if node.wait(Duration::ZERO).is_err() {
+            if crate::shm::should_stop(node) {
                 return Ok(Wake::Stop);
             }
             let now = Instant::now();

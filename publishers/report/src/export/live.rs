@@ -74,7 +74,7 @@ fn wait_fresh(
         fresh = reader
             .frame()
             .is_some_and(|f| Some(f.header.sequence) != held);
-        if node.wait(Duration::ZERO).is_err() {
+        if pheromone_field::shm::should_stop(node) {
             return Err(WaitError::Interrupted(field.to_string()));
         }
     }

@@ -171,7 +171,7 @@ fn wait_for_step_frame(
         {
             return Ok(true);
         }
-        if end.conductor_gone() || node.wait(Duration::ZERO).is_err() {
+        if end.conductor_gone() || pheromone_field::shm::should_stop(node) {
             return Ok(false);
         }
         reader.wait_frame_with(o.frame_wait, Duration::from_millis(100))?;

@@ -114,7 +114,7 @@ fn drive<
                 match robot.step_pose(&p, run.dt_s, want, slice) {
                     Ok(Some((out, _))) => break Some(out),
                     Ok(None) if Instant::now() < give_up => {
-                        if end.conductor_gone() || node.wait(Duration::ZERO).is_err() {
+                        if end.conductor_gone() || pheromone_field::shm::should_stop(node) {
                             return Ok(());
                         }
                     }

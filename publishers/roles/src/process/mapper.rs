@@ -222,7 +222,7 @@ pub(super) fn recv_step<
             }
         }
         let left = deadline.saturating_duration_since(Instant::now());
-        if left.is_zero() || node.wait(Duration::ZERO).is_err() {
+        if left.is_zero() || pheromone_field::shm::should_stop(node) {
             return Ok(None);
         }
         *backlog = rx.recv_timeout(left.min(Duration::from_millis(100)))?;
@@ -284,7 +284,7 @@ fn hold_peer_frames(
             held = reader
                 .wait_until(Duration::from_millis(20), |f| f.header.sequence >= k)?
                 .is_some();
-            if node.wait(Duration::ZERO).is_err() {
+            if pheromone_field::shm::should_stop(node) {
                 break;
             }
         }

@@ -159,7 +159,7 @@ pub(crate) fn role_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + C
         if end.finished()? {
             break;
         }
-        if node.wait(Duration::ZERO).is_err() {
+        if pheromone_field::shm::should_stop(node) {
             return Ok(());
         }
     }
@@ -186,7 +186,7 @@ pub(crate) fn role_loop<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + C
         }
         // Woken by the upstream's next message (or the bound).
         rx.wait(Duration::from_millis(50))?;
-        if node.wait(Duration::ZERO).is_err() {
+        if pheromone_field::shm::should_stop(node) {
             return Ok(());
         }
     }

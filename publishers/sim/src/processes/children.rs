@@ -383,7 +383,7 @@ pub(super) fn gateway_address(
 ) -> Result<String, ProcessRunError> {
     loop {
         sup.check()?;
-        if node.wait(Duration::ZERO).is_err() {
+        if pheromone_field::shm::should_stop(node) {
             return Err(ProcessRunError::Interrupted);
         }
         let left = deadline.saturating_duration_since(Instant::now());

@@ -491,7 +491,7 @@ pub fn run_graph_as_processes(
                     timeout_s: timeout.as_secs_f64(),
                 });
             }
-            if node.wait(Duration::ZERO).is_err() {
+            if pheromone_field::shm::should_stop(&node) {
                 return Err(ProcessRunError::Interrupted);
             }
             // Woken by the first child that exits; the bound lets Ctrl-C through.
