@@ -207,7 +207,7 @@ fn bridge_worker(name: String, keyframe_every: Duration) -> Worker {
             .next()
             .ok_or("the bridge listens nowhere")?;
         lock(shared).endpoint = Some(endpoint);
-        while !stop.load(Ordering::Relaxed) && !pheromone_field::shm::should_stop(node) {
+        while !stop.load(Ordering::Relaxed) && !pheromone_field::shm::should_stop(&node) {
             bridge
                 .step(Duration::from_millis(20))
                 .map_err(|e| e.to_string())?;
@@ -231,7 +231,7 @@ fn mirror_worker(name: String, endpoint: String, tag: String) -> Worker {
         })
         .map_err(|e| e.to_string())?;
         lock(shared).opened_at = Some(opened);
-        while !stop.load(Ordering::Relaxed) && !pheromone_field::shm::should_stop(node) {
+        while !stop.load(Ordering::Relaxed) && !pheromone_field::shm::should_stop(&node) {
             mirror
                 .step(&node, Duration::from_millis(20))
                 .map_err(|e| e.to_string())?;
