@@ -15,7 +15,9 @@
 #   - the C++ test (shared and static) reads probe's value zero-copy and deposits; one live
 #     borrow per Field, a Frame outliving its Field; the -fno-exceptions build;
 #   - a C and a C++ program keep their own SIGTERM handler through blocking waits (INTERRUPTED);
-#   - SONAME and version macros; the poll loop example; FIELD_DEAD; domain-naming errors.
+#   - SONAME and version macros; the poll loop example; FIELD_DEAD; domain-naming errors;
+#   - the C tests, both examples and the C++ tests again built with ASan and UBSan (errors abort
+#     the program, leaks fail it), on a field of their own.
 # Needs cc, c++, cmake, pkg-config, valgrind and python3. Env: PHEROMONE_BIN (the `pheromone`
 # binary; default target/debug/pheromone, built if missing).
 set -euo pipefail
@@ -61,7 +63,7 @@ signal_program() {
     "$@" "$waits" <"$fifo" >"$out" 2>"$err" &
     pid=$!
     exec {fd}>"$fifo"
-    seen_line() { grep -qx "$1" "$out"; }
+    seen_line() { grep -qsx "$1" "$out"; }
     alive_or_fail() {
         kill -0 "$pid" 2>/dev/null && return 0
         echo "$label exited early:" >&2
@@ -266,4 +268,43 @@ valgrind --error-exitcode=99 --leak-check=full --errors-for-leak-kinds=definite,
 grep -E "ERROR SUMMARY|definitely lost|indirectly lost" "$work/vg-cpp.log" | sed 's/^==[0-9]*== /C++: /'
 "$work/cpp/follower" "$a" 0.3 0.5 20 | tail -n 1
 signal_program "C++" 4 "$work/cpp/signal_test_cpp" "$still"
+
+echo "-- ASan and UBSan: the C tests, the examples and the C++ tests, built with -fsanitize"
+# The host program instrumented, as a C or C++ user builds theirs; the Rust library is not
+# (ASan still checks every access the host makes to the borrowed planes and every free).
+# Leaks fail the run (LeakSanitizer, at exit); any UB report aborts it.
+san="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
+export ASAN_OPTIONS="detect_leaks=1:halt_on_error=1:abort_on_error=0:exitcode=97"
+export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
+for prog in libpheromone/tests/c/abi_test.c libpheromone/tests/c/signal_test.c \
+    examples/c/read_deposit.c examples/c/poll_loop.c; do
+    out="$work/san-$(basename "$prog" .c)"
+    # shellcheck disable=SC2046,SC2086
+    cc -std=c99 -Wall -Wextra -Werror -O1 -g $san "$prog" -o "$out" \
+        $(pkg-config --cflags --libs pheromone) "$rpath" -lm
+done
+sf="$tag-san"
+start_field "$sf"
+"$BIN" deposit --field "$sf" --x 1.0 --y 0.5 --amount 0.02 --cov 0.04,0.01,0.09 --range 1.5 \
+    --timeout 10 2>/dev/null
+"$BIN" probe --field "$sf" --x 1.0 --y 0.5 --above 0 --timeout 10 >/dev/null
+"$work/san-abi_test" errors "$tag-missing" "$sf"
+"$work/san-abi_test" sample "$sf" "${points[@]}" >/dev/null
+"$work/san-abi_test" frames "$sf" -0.5 1.0
+"$work/san-abi_test" confirm "$sf" 2.5 -1.0
+"$work/san-read_deposit" "$sf" 20 >/dev/null
+"$work/san-poll_loop" "$sf" 30 5 >/dev/null
+signal_program "C-asan" 4 "$work/san-signal_test" "$still"
+cmake -S libpheromone/tests/cpp -B "$work/cpp-san" -DCMAKE_PREFIX_PATH="$prefix" \
+    -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS="$san" -DCMAKE_EXE_LINKER_FLAGS="$san" \
+    >"$work/cmake-san.log" 2>&1 || { cat "$work/cmake-san.log" >&2; exit 1; }
+cmake --build "$work/cpp-san" >>"$work/cmake-san.log" 2>&1 || { cat "$work/cmake-san.log" >&2; exit 1; }
+for t in wrapper_test wrapper_test_static nothrow_test; do
+    v=$(probe "$sf" 1.0 0.5)
+    "$work/cpp-san/$t" "$sf" 1.0 0.5 "$v" "$tag-missing" >/dev/null
+done
+"$work/cpp-san/follower" "$sf" 0.3 0.5 20 >/dev/null
+signal_program "C++-asan" 4 "$work/cpp-san/signal_test_cpp" "$still"
+unset ASAN_OPTIONS UBSAN_OPTIONS
+echo "ASan and UBSan: no error, no leak in 4 C and 5 C++ programs"
 echo "c_abi: ok"
