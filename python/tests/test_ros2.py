@@ -162,7 +162,8 @@ def test_topics_tokens_and_messages_are_rmw_zenohs_and_equal_the_field(
     cfg.write_text(TWO_CHANNELS)
     f = start_field("r2", "--config", str(cfg))
     _deposit_cells(f.name)
-    node = ros2_node(f.name, "--deposit-from", "/amcl_pose=3", "--domain-id", "7")
+    node = ros2_node(f.name, "--deposit-from", "/amcl_pose=3", "--domain-id", "7",
+                     "--occupancy", "frame")
     npy = tmp_path / "frame.npy"
     run_cli("export", "--field", f.name, "--out", npy)
     cells = np.load(npy)
@@ -334,12 +335,13 @@ def test_record_writes_a_ros2_mcap_that_rosbags_reads(start_field, store, tmp_pa
 
 
 def test_nothing_is_serialized_while_nobody_subscribes(start_field, ros2_node, tmp_path):
-    """Zenoh's matching status: frames due while no subscriber matches any topic are counted and
-    not serialized; a subscriber that comes gets the next frame."""
+    """Zenoh's matching status: with --cache-rate-hz 0 (no refresh of the maps' transient-local
+    cache), frames due while no subscriber matches any topic are counted and not serialized; a
+    subscriber that comes gets the next frame."""
     cfg = tmp_path / "two.toml"
     cfg.write_text(TWO_CHANNELS)
     f = start_field("idle", "--config", str(cfg))
-    node = ros2_node(f.name)
+    node = ros2_node(f.name, "--cache-rate-hz", "0")
     with _session(node.endpoint) as s:
         _tokens(s, 4)
         # 10 field frames (0.2 s at 50 Hz: about 4 of the node's 20 Hz periods), nobody listening.
@@ -360,5 +362,6 @@ def test_nothing_is_serialized_while_nobody_subscribes(start_field, ros2_node, t
         sub.undeclare()
     summary = node.stop()["ros2"]
     assert summary["frames_without_subscribers"] >= 1, summary
+    assert summary["frames_for_cache"] == 0, summary
     assert summary["frames_published"] >= 1, summary
     assert summary["messages_published"] == 3 * summary["frames_published"], summary

@@ -107,10 +107,13 @@ def test_sim_ros2_publishes_poses_and_paths_that_match_the_run(tmp_path):
     ]), tokens
     for t in tokens:
         parts = t.split("/")
-        if parts[5] == "MP":
+        if parts[5] == "MP" and "robot_0" in t:
             # Reliable, volatile, keep last 1 with rmw_zenoh's current defaults (volatile since
             # ros2/rmw_zenoh#521): only the depth differs from them.
             assert len(parts) == 13 and parts[12] == "::,1:,:,:,,", t
+        elif parts[5] == "MP" and "%pheromone%" in t:
+            # The maps: reliable, transient local, keep last 1.
+            assert len(parts) == 13 and parts[12] == ":1:,1:,:,:,,", t
 
     def msgs(topic, t):
         key = f"0/robot_0/{topic}/{dds(t)}/{hashes[t]}"

@@ -48,14 +48,61 @@ impl RosDepositArgs {
     }
 }
 
+/// How the OccupancyGrids' values are scaled (docs/ros2.md, "OccupancyGrid").
+#[derive(Args, Debug, Clone)]
+pub struct OccupancyArgs {
+    /// The OccupancyGrid scale: linear (fixed: --occupancy-min → 0, --occupancy-max → 100,
+    /// clamped; the same value is the same occupancy in every frame), binary (100 from
+    /// --occupancy-max up, else 0) or frame (min(0, smallest) → 0 and largest → 100 of each
+    /// channel and frame: not comparable between frames).
+    #[arg(long, value_name = "MODE", value_parser = pheromone_ros2::grid::OccupancyMode::NAMES, default_value = "linear")]
+    pub occupancy: String,
+    /// The value that is occupancy 0 (linear).
+    #[arg(long, value_parser = super::f32_in(-1e9, 1e9), value_name = "V", default_value_t = 0.0)]
+    pub occupancy_min: f32,
+    /// The value that is occupancy 100 (linear), and binary's threshold.
+    #[arg(long, value_parser = super::f32_in(-1e9, 1e9), value_name = "V", default_value_t = 1.0)]
+    pub occupancy_max: f32,
+    /// What a trail is: cost (occupancy as scaled) or free (100 − occupancy: the trail is free
+    /// space, the rest cost).
+    #[arg(long, value_name = "AS", value_parser = ["cost", "free"], default_value = "cost")]
+    pub occupancy_trail: String,
+    /// Cells under this value have no data: −1 (unknown) [default: only non-finite cells].
+    #[arg(long, value_parser = super::f32_in(-1e9, 1e9), value_name = "V")]
+    pub occupancy_unknown_below: Option<f32>,
+}
+
+impl OccupancyArgs {
+    /// The library's occupancy settings; a linear or binary scale needs min < max.
+    pub fn occupancy(&self) -> anyhow::Result<pheromone_ros2::grid::Occupancy> {
+        use pheromone_ros2::grid::{Occupancy, OccupancyMode};
+        let mode = OccupancyMode::from_name(&self.occupancy)
+            .ok_or_else(|| bad(format!("--occupancy {}: unknown", self.occupancy)))?;
+        if mode == OccupancyMode::Linear && self.occupancy_min >= self.occupancy_max {
+            return Err(bad(format!(
+                "--occupancy-min {} must be under --occupancy-max {}",
+                self.occupancy_min, self.occupancy_max
+            )));
+        }
+        Ok(Occupancy {
+            mode,
+            min: self.occupancy_min,
+            max: self.occupancy_max,
+            trail_free: self.occupancy_trail == "free",
+            unknown_below: self.occupancy_unknown_below,
+        })
+    }
+}
+
 /// Show a running field to ROS 2 nodes over Zenoh, in the wire format of rmw_zenoh_cpp
 /// (docs/ros2.md), and let ROS 2 robots deposit into it.
 ///
 /// Publishes, at most --rate-hz times a second and each time the field publishes a frame,
 /// `<ns>/pheromone/grid_map` (grid_map_msgs/msg/GridMap: every channel a float32 layer named
 /// channel_<c>) and `<ns>/pheromone/occupancy/channel_<c>` (nav_msgs/msg/OccupancyGrid, the
-/// channel scaled to 0–100 between min(0, its smallest value) and its largest), in frame
-/// --frame-id, with the field's cell size and lower-left corner. Each
+/// channel on the scale of --occupancy), in frame --frame-id, with the field's cell size and
+/// lower-left corner; both transient local with a one-sample cache (a late subscriber gets the
+/// newest map at once). Each
 /// --deposit-from TOPIC[=ROBOT_ID] subscribes a geometry_msgs/msg/PoseWithCovarianceStamped
 /// topic (AMCL's /amcl_pose, robot_localization's pose) and turns each pose into seed 000's
 /// deposit: γ = τ / det Σxy at the pose, the shape of its error ellipse, again once the robot
@@ -78,6 +125,17 @@ pub struct Ros2Args {
     /// Most frames published per second.
     #[arg(long, value_parser = super::f64_pos(1000.0), value_name = "HZ", default_value_t = 10.0)]
     pub rate_hz: f64,
+    /// While no subscriber matches, the maps are still serialized this many times a second into
+    /// their transient-local cache (a late joiner's first map is at most 1/HZ old); 0: nothing
+    /// is serialized while nobody subscribes.
+    #[arg(long, value_parser = super::f64_in(0.0, 1000.0), value_name = "HZ", default_value_t = 1.0)]
+    pub cache_rate_hz: f64,
+    /// The time base of every stamp: wall (the wall clock, a live field) or sim (the field's
+    /// simulated time, and /clock is published) [default: sim with --world, else wall].
+    #[arg(long, value_name = "BASE", value_parser = ["wall", "sim"])]
+    pub time: Option<String>,
+    #[command(flatten)]
+    pub occupancy: OccupancyArgs,
     /// ROS domain id (the first component of every key expression).
     #[arg(long, value_parser = super::int::<u32>(0, 232), default_value_t = 0)]
     pub domain_id: u32,
@@ -207,18 +265,6 @@ fn ros2_options(a: &Ros2Args) -> anyhow::Result<pheromone_ros2::node::Ros2Option
         .collect::<anyhow::Result<Vec<_>>>()?;
     let depositor = a.deposit.config();
     depositor.validate().map_err(bad_from)?;
-    let world = match &a.world {
-        Some(world) => {
-            pheromone_field::shm::check_name(world).map_err(bad_from)?;
-            Some(pheromone_ros2::node::WorldOptions {
-                world: world.clone(),
-                robots: a.robots.clone(),
-                path_rate_hz: a.path_rate_hz,
-                path_max_poses: a.path_max_poses,
-            })
-        }
-        None => None,
-    };
     Ok(pheromone_ros2::node::Ros2Options {
         field: a.field.clone(),
         domain_id: a.domain_id,
@@ -228,11 +274,46 @@ fn ros2_options(a: &Ros2Args) -> anyhow::Result<pheromone_ros2::node::Ros2Option
         distro: pheromone_ros2::rmw_zenoh::RosDistro::from_name(&a.ros_distro)
             .ok_or_else(|| bad(format!("--ros-distro {}: unknown", a.ros_distro)))?,
         rate_hz: a.rate_hz,
+        cache_rate_hz: a.cache_rate_hz,
+        time: time_base(a)?,
+        occupancy: a.occupancy.occupancy()?,
         session,
         deposit_from,
         depositor,
-        world,
+        world: world_options(a)?,
     })
+}
+
+/// `--world`'s options.
+#[cfg(feature = "zenoh")]
+fn world_options(a: &Ros2Args) -> anyhow::Result<Option<pheromone_ros2::node::WorldOptions>> {
+    let Some(world) = &a.world else {
+        return Ok(None);
+    };
+    pheromone_field::shm::check_name(world).map_err(bad_from)?;
+    Ok(Some(pheromone_ros2::node::WorldOptions {
+        world: world.clone(),
+        robots: a.robots.clone(),
+        path_rate_hz: a.path_rate_hz,
+        path_max_poses: a.path_max_poses,
+    }))
+}
+
+/// `--time`: simulated time by default with `--world` (whose poses carry simulated time, so
+/// `--time wall` is refused with it), else the wall clock.
+#[cfg(feature = "zenoh")]
+fn time_base(a: &Ros2Args) -> anyhow::Result<pheromone_ros2::frames::TimeBase> {
+    use pheromone_ros2::frames::TimeBase;
+    let default = if a.world.is_some() { "sim" } else { "wall" };
+    let name = a.time.as_deref().unwrap_or(default);
+    let time = TimeBase::from_name(name).ok_or_else(|| bad(format!("--time {name}: unknown")))?;
+    if time == TimeBase::Wall && a.world.is_some() {
+        return Err(bad(
+            "--time wall with --world: the world's poses carry simulated time (one time base \
+             a session: --time sim)",
+        ));
+    }
+    Ok(time)
 }
 
 #[cfg(feature = "zenoh")]
@@ -294,6 +375,8 @@ pub struct RecordArgs {
     /// Stop after this many frames.
     #[arg(long, value_parser = super::int::<u64>(1, 1_000_000_000_000), value_name = "N")]
     pub frames: Option<u64>,
+    #[command(flatten)]
+    pub occupancy: OccupancyArgs,
     /// At exit, print one JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
@@ -311,6 +394,7 @@ pub fn run_record(a: RecordArgs) -> anyhow::Result<()> {
         timeout: Duration::from_secs_f64(a.timeout),
         duration: a.duration.map(Duration::from_secs_f64),
         frames: a.frames,
+        occupancy: a.occupancy.occupancy()?,
     };
     let node = pheromone_field::shm::create_node(&format!("record-{}", std::process::id()))?;
     let summary = match record_field(&node, &options) {

@@ -89,6 +89,10 @@ pub struct SimArgs {
     #[arg(long, value_name = "ENDPOINT", value_parser = super::check::zenoh_endpoint(), num_args = 0..=1,
           default_missing_value = "tcp/127.0.0.1:7447", conflicts_with = "single_process")]
     pub ros2: Option<String>,
+    /// The ROS 2 distribution of the --ros2 child's graph (`pheromone ros2 --ros-distro`:
+    /// humble, jazzy, kilted or rolling). Only with --ros2.
+    #[arg(long, value_name = "DISTRO", value_parser = ["humble", "jazzy", "kilted", "rolling"], requires = "ros2")]
+    pub ros_distro: Option<String>,
     /// TLS, credentials and Zenoh configuration of the --ros2 child (`pheromone ros2`'s flags
     /// of the same names, passed on to it; docs/mirrors.md, "Security"). Only with --ros2.
     #[command(flatten)]

@@ -49,7 +49,7 @@ pub(super) fn run_processes(
             progress,
             view: a.view.clone(),
             ros2: a.ros2.clone(),
-            ros2_args: a.zenoh.to_args(),
+            ros2_args: ros2_args(a),
             rt_args: rt_args(a.rt_priority, a.rt_best_effort),
             remote: a.remote,
             follower_wait: a.follower_wait,
@@ -63,6 +63,15 @@ pub(super) fn run_processes(
         }
         e => e.into(),
     })
+}
+
+/// What the --ros2 child gets besides the run's names: the security flags, `--ros-distro`.
+fn ros2_args(a: &SimArgs) -> Vec<String> {
+    let mut v = a.zenoh.to_args();
+    if let Some(d) = &a.ros_distro {
+        v.extend(["--ros-distro".to_string(), d.clone()]);
+    }
+    v
 }
 
 /// What a run as processes refuses of the flags and the scenario; what it says it starts

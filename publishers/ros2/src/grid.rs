@@ -11,10 +11,15 @@
 //!   `column_index` (size `height`, stride `width·height`) and `row_index` (size `width`,
 //!   stride `width`), as `grid_map_ros` writes them; `info.pose` is the field's centre.
 //!
-//! OccupancyGrid scaling (0–100): with `lo = min(0, smallest value)` and `hi = the largest
-//! value` of the channel in this frame, a cell is `round(100·(v − lo)/(hi − lo))`; a channel
-//! whose values are all equal (`hi ≤ lo`) is all 0. The message has no field for the scale (its
-//! `MapMetaData` holds only geometry): the GridMap topic carries the values themselves.
+//! OccupancyGrid values ([`Occupancy`], `--occupancy`): by default a fixed scale, the same for
+//! every frame (`linear`: `round(100·(v − min)/(max − min))` clamped to 0–100, with `min` and
+//! `max` given, 0 and 1 by default), or `binary` (100 from `max` up, else 0), or the per-frame
+//! scale of before (`frame`: `min(0, smallest value)` to the largest value of the channel in
+//! this frame; not comparable between frames). `trail = free` inverts the value (`100 − value`):
+//! a trail is then free space and the rest cost. A cell with no data (a non-finite value, or a
+//! value under `unknown_below` when given) is −1 in every mode. The message has no field for
+//! the scale (its `MapMetaData` holds only geometry): the GridMap topic carries the values
+//! themselves.
 
 use pheromone_field::geometry::GridGeometry;
 
@@ -124,41 +129,138 @@ pub fn grid_map_cdr(f: &FrameRef<'_>) -> Vec<u8> {
     w.finish()
 }
 
-/// The 0–100 scale of one channel in one frame (see the module documentation).
+/// How a channel's values become occupancy (0–100, −1 unknown): `--occupancy` (see the module
+/// documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Occupancy {
+    pub mode: OccupancyMode,
+    /// The value that is 0 (`linear`).
+    pub min: f32,
+    /// The value that is 100 (`linear`), the threshold of `binary`.
+    pub max: f32,
+    /// `true`: a trail is free space (`100 − value`); `false`: a trail is cost.
+    pub trail_free: bool,
+    /// Cells under this value have no data (−1); non-finite cells always.
+    pub unknown_below: Option<f32>,
+}
+
+/// The scale of [`Occupancy`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OccupancyMode {
+    /// Fixed: `min` → 0, `max` → 100, linear between, clamped.
+    Linear,
+    /// Fixed: 100 from `max` up, else 0.
+    Binary,
+    /// Per channel and frame: `min(0, smallest)` → 0, largest → 100 (not comparable between
+    /// frames).
+    Frame,
+}
+
+impl OccupancyMode {
+    pub const NAMES: [&'static str; 3] = ["linear", "binary", "frame"];
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "linear" => Some(Self::Linear),
+            "binary" => Some(Self::Binary),
+            "frame" => Some(Self::Frame),
+            _ => None,
+        }
+    }
+}
+
+impl Default for Occupancy {
+    /// Linear from 0 to 1, trail = cost, no data only where a value is not finite.
+    fn default() -> Self {
+        Self {
+            mode: OccupancyMode::Linear,
+            min: 0.0,
+            max: 1.0,
+            trail_free: false,
+            unknown_below: None,
+        }
+    }
+}
+
+/// The scale of one channel in one frame: [`Occupancy`] with `frame`'s bounds resolved.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OccupancyScale {
     pub lo: f32,
     pub hi: f32,
+    binary: bool,
+    trail_free: bool,
+    unknown_below: f32,
 }
 
 impl OccupancyScale {
-    pub fn of(plane: &[f32]) -> Self {
-        let (mut lo, mut hi) = (0.0f32, f32::NEG_INFINITY);
-        for &v in plane {
-            lo = lo.min(v);
-            hi = hi.max(v);
+    /// The scale `o` gives `plane`.
+    pub fn new(o: &Occupancy, plane: &[f32]) -> Self {
+        let (lo, hi) = match o.mode {
+            OccupancyMode::Frame => {
+                let (mut lo, mut hi) = (0.0f32, f32::NEG_INFINITY);
+                for &v in plane.iter().filter(|v| v.is_finite()) {
+                    lo = lo.min(v);
+                    hi = hi.max(v);
+                }
+                (lo, hi)
+            }
+            _ => (o.min, o.max),
+        };
+        Self {
+            lo,
+            hi,
+            binary: o.mode == OccupancyMode::Binary,
+            trail_free: o.trail_free,
+            unknown_below: o.unknown_below.unwrap_or(f32::NEG_INFINITY),
         }
-        Self { lo, hi }
     }
 
-    /// The occupancy value (0–100) of `v`.
+    /// The per-frame scale of `plane`, trail = cost (`--occupancy frame`).
+    pub fn of(plane: &[f32]) -> Self {
+        let o = Occupancy {
+            mode: OccupancyMode::Frame,
+            ..Occupancy::default()
+        };
+        Self::new(&o, plane)
+    }
+
+    /// The occupancy value (0–100, or −1 for no data) of `v`.
     #[inline]
     pub fn value(&self, v: f32) -> i8 {
+        if !v.is_finite() || v < self.unknown_below {
+            return -1;
+        }
         let span = self.hi - self.lo;
-        if span.is_finite() && span > 0.0 {
+        let x = if self.binary {
+            if v >= self.hi {
+                100
+            } else {
+                0
+            }
+        } else if span.is_finite() && span > 0.0 {
             (100.0 * (v - self.lo) / span).round().clamp(0.0, 100.0) as i8
         } else {
             0
+        };
+        if self.trail_free {
+            100 - x
+        } else {
+            x
         }
     }
 }
 
-/// Channel `channel` of the frame as a CDR `nav_msgs/msg/OccupancyGrid`, and its scale.
-pub fn occupancy_grid_cdr(f: &FrameRef<'_>, channel: usize) -> (Vec<u8>, OccupancyScale) {
+/// Channel `channel` of the frame as a CDR `nav_msgs/msg/OccupancyGrid` with occupancy `o`, and
+/// its scale.
+pub fn occupancy_grid_cdr(
+    f: &FrameRef<'_>,
+    channel: usize,
+    o: &Occupancy,
+) -> (Vec<u8>, OccupancyScale) {
     let g = &f.geometry;
     let n = g.cells();
     let plane = f.plane(channel);
-    let scale = OccupancyScale::of(plane);
+    let scale = OccupancyScale::new(o, plane);
     let mut w = CdrWriter::with_capacity(160 + f.frame_id.len() + n);
     header(&mut w, f.stamp, f.frame_id);
     w.i32(f.stamp.sec);
@@ -229,7 +331,11 @@ mod tests {
         assert_eq!(neg.value(0.0), 50);
         assert_eq!(OccupancyScale::of(&[0.0, 0.0]).value(0.0), 0);
         let cells: Vec<f32> = (0..12).map(|v| v as f32).collect();
-        let (b, scale) = occupancy_grid_cdr(&frame(&cells), 1);
+        let frame_mode = Occupancy {
+            mode: OccupancyMode::Frame,
+            ..Occupancy::default()
+        };
+        let (b, scale) = occupancy_grid_cdr(&frame(&cells), 1, &frame_mode);
         assert_eq!((scale.lo, scale.hi), (0.0, 11.0));
         let tail = &b[b.len() - 6..];
         let want: Vec<u8> = (6..12)
@@ -238,5 +344,40 @@ mod tests {
         assert_eq!(tail, &want[..]);
         let n = u32::from_le_bytes(b[b.len() - 10..b.len() - 6].try_into().unwrap());
         assert_eq!(n, 6);
+    }
+
+    #[test]
+    fn fixed_scales_invert_and_mark_missing_data() {
+        let linear = Occupancy {
+            max: 2.0,
+            ..Occupancy::default()
+        };
+        let plane = [0.0, 0.5, 1.0, 4.0, -1.0, f32::NAN];
+        let s = OccupancyScale::new(&linear, &plane);
+        let got: Vec<i8> = plane.iter().map(|&v| s.value(v)).collect();
+        assert_eq!(got, [0, 25, 50, 100, 0, -1]);
+        // The same value, the same occupancy, whatever else the frame holds.
+        assert_eq!(OccupancyScale::new(&linear, &[0.5, 100.0]).value(0.5), 25);
+        let free = Occupancy {
+            trail_free: true,
+            unknown_below: Some(1e-3),
+            ..linear
+        };
+        let s = OccupancyScale::new(&free, &plane);
+        let got: Vec<i8> = plane.iter().map(|&v| s.value(v)).collect();
+        assert_eq!(got, [-1, 75, 50, 0, -1, -1]);
+        let binary = Occupancy {
+            mode: OccupancyMode::Binary,
+            max: 1.0,
+            ..Occupancy::default()
+        };
+        let s = OccupancyScale::new(&binary, &plane);
+        let got: Vec<i8> = plane.iter().map(|&v| s.value(v)).collect();
+        assert_eq!(got, [0, 0, 100, 100, 0, -1]);
+        assert_eq!(
+            OccupancyMode::from_name("frame"),
+            Some(OccupancyMode::Frame)
+        );
+        assert_eq!(OccupancyMode::from_name("log"), None);
     }
 }

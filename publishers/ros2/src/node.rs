@@ -6,6 +6,13 @@
 //! sample carries rmw_zenoh's attachment ([`crate::rmw_zenoh`]). With a world (`--world`), it also
 //! publishes each robot's true and estimated pose and paths ([`crate::robots`]), declaring a
 //! robot's publishers when the robot is found.
+//!
+//! The maps (GridMap, OccupancyGrids) are offered transient local with a one-sample cache,
+//! declared as rmw_zenoh declares a transient-local publisher (`rmw_publisher_data.cpp`:
+//! zenoh-ext's `AdvancedPublisher` with a cache of `depth` samples, publisher detection and,
+//! being reliable, sporadic heartbeats every 500 ms for sample-miss detection), so a late
+//! joiner gets the newest map when it subscribes. In simulated time (`--time sim`) the node
+//! also publishes `/clock`.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -16,12 +23,13 @@ use thiserror::Error;
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
-use zenoh::qos::CongestionControl;
+use zenoh::qos::{CongestionControl, Reliability};
 use zenoh::sample::Sample;
 use zenoh::Wait;
 
 use crate::deps::depositor::{Depositor, DepositorConfig, DepositorConfigError};
-use crate::frames::{frame_messages, wall_now_ns, FieldTopics};
+use crate::frames::{clock_cdr, frame_messages, wall_now_ns, FieldTopics, TimeBase};
+use crate::grid::{Occupancy, Stamp};
 use crate::pose::{check_pose, PoseWithCovarianceStamped};
 use crate::rmw_zenoh::{
     self, split_topic_key, topic_key, Attachment, EntityKind, NameError, NodeIdentity, Qos,
@@ -29,7 +37,7 @@ use crate::rmw_zenoh::{
 };
 use crate::robots::{robot_topics, WorldRobots};
 use crate::session::{SessionConfigError, SessionSettings};
-use crate::types::{TypeInfo, POSE_COV_STAMPED};
+use crate::types::{TypeInfo, CLOCK, POSE_COV_STAMPED};
 
 #[derive(Debug, Error)]
 pub enum Ros2Error {
@@ -73,6 +81,14 @@ pub struct Ros2Options {
     /// Whose rmw_zenoh conventions the keys and tokens follow.
     pub distro: RosDistro,
     pub rate_hz: f64,
+    /// While no subscriber matches, the maps are still serialized this often (per second) into
+    /// their transient-local cache, so a late joiner gets a map at most 1/`cache_rate_hz` old
+    /// at once; 0: never (nothing serialized while nobody subscribes).
+    pub cache_rate_hz: f64,
+    /// The session's time base: every stamp, and `/clock` in simulated time.
+    pub time: TimeBase,
+    /// How the OccupancyGrids' values are scaled.
+    pub occupancy: Occupancy,
     /// The Zenoh session: rmw_zenoh's settings, a file's, and the flags over them.
     pub session: SessionSettings,
     pub deposit_from: Vec<DepositFrom>,
@@ -100,6 +116,11 @@ pub struct Ros2Stats {
     /// Frames due while no subscriber matched any of the field's topics (Zenoh's matching
     /// status): nothing was serialized for them.
     pub frames_without_subscribers: u64,
+    /// Frames serialized while no subscriber matched, only to keep the maps' transient-local
+    /// cache fresh (at most `cache_rate_hz` a second).
+    pub frames_for_cache: u64,
+    /// `/clock` messages published (`--time sim`).
+    pub clock_published: u64,
     pub messages_published: u64,
     pub bytes_published: u64,
     pub last_sequence: u64,
@@ -137,8 +158,15 @@ impl Ros2Stats {
     }
 }
 
+/// A volatile topic's plain publisher, or a transient-local topic's advanced one (with its
+/// cache).
+enum ZPublisher {
+    Volatile(Publisher<'static>),
+    TransientLocal(zenoh_ext::AdvancedPublisher<'static>),
+}
+
 struct RosPublisher {
-    publisher: Publisher<'static>,
+    publisher: ZPublisher,
     _token: LivelinessToken,
     gid: [u8; 16],
     sequence: i64,
@@ -148,10 +176,11 @@ impl RosPublisher {
     /// Whether a subscriber somewhere matches the publisher (Zenoh's matching status; if it
     /// cannot be read, as if one did).
     fn matched(&self) -> bool {
-        match self.publisher.matching_status().wait() {
-            Ok(s) => s.matching(),
-            Err(_) => true,
-        }
+        let status = match &self.publisher {
+            ZPublisher::Volatile(p) => p.matching_status().wait(),
+            ZPublisher::TransientLocal(p) => p.matching_status().wait(),
+        };
+        status.map_or(true, |s| s.matching())
     }
 
     fn put(&mut self, cdr: Vec<u8>) -> Result<(), Ros2Error> {
@@ -160,12 +189,14 @@ impl RosPublisher {
             sequence_number: self.sequence,
             source_timestamp_ns: wall_now_ns(),
             source_gid: self.gid,
+        }
+        .encode()
+        .to_vec();
+        let (done, key) = match &self.publisher {
+            ZPublisher::Volatile(p) => (p.put(cdr).attachment(att).wait(), p.key_expr()),
+            ZPublisher::TransientLocal(p) => (p.put(cdr).attachment(att).wait(), p.key_expr()),
         };
-        self.publisher
-            .put(cdr)
-            .attachment(att.encode().to_vec())
-            .wait()
-            .map_err(|e| zerr(format!("put {}", self.publisher.key_expr()), e))
+        done.map_err(|e| zerr(format!("put {key}"), e))
     }
 }
 
@@ -186,6 +217,8 @@ pub struct Ros2Node {
     deposits: Option<DepositPublisher>,
     topics: FieldTopics,
     publishers: Vec<RosPublisher>,
+    /// `/clock` (`--time sim`) and the newest time it published.
+    clock: Option<(RosPublisher, Stamp)>,
     subscriptions: Vec<RosSubscription>,
     pose_type: TypeInfo,
     identity: NodeIdentity,
@@ -195,14 +228,30 @@ pub struct Ros2Node {
     period: Duration,
     /// When the next frame is due (`None`: the first frame is).
     next_publish: Option<Instant>,
+    /// While nobody subscribes: when the maps' cache is refreshed next (`None`: now).
+    next_cache: Option<Instant>,
     /// Frame-to-publish latencies (µs), one per published frame.
     pub latencies_us: Vec<u32>,
     pub stats: Ros2Stats,
 }
 
-/// The QoS of the field's topics: reliable, volatile, keep last 1.
+/// The QoS of the robots' topics: reliable, volatile, keep last 1.
 pub const PUBLISHER_QOS: Qos = Qos {
     reliable: true,
+    transient_local: false,
+    depth: 1,
+};
+/// The QoS of the maps (GridMap, OccupancyGrids): reliable, transient local, keep last 1, as a
+/// map server offers them.
+pub const MAP_QOS: Qos = Qos {
+    reliable: true,
+    transient_local: true,
+    depth: 1,
+};
+/// The QoS of `/clock`: rclcpp's `ClockQoS` (the sensor-data profile with depth 1: best
+/// effort, volatile, keep last 1), what simulators and `ros2 bag play --clock` offer.
+pub const CLOCK_QOS: Qos = Qos {
+    reliable: false,
     transient_local: false,
     depth: 1,
 };
@@ -248,14 +297,25 @@ impl Ros2Node {
                 &session,
                 &identity,
                 1 + i as u32,
-                topic,
-                t,
+                (topic, t),
+                MAP_QOS,
             )?);
         }
+        let mut next_id = 1 + publishers.len() as u32;
+        let clock = match o.time {
+            TimeBase::Sim => {
+                let topic = rmw_zenoh::resolve_topic("/", "/clock")?;
+                let t = o.distro.type_info(&TypeInfo::of(CLOCK));
+                let p = declare_publisher(&session, &identity, next_id, (&topic, &t), CLOCK_QOS)?;
+                next_id += 1;
+                Some((p, Stamp::default()))
+            }
+            TimeBase::Wall => None,
+        };
         let pose_type = o.distro.type_info(&TypeInfo::of(POSE_COV_STAMPED));
         let mut subscriptions = Vec::new();
         for (i, d) in o.deposit_from.iter().enumerate() {
-            let id = (1 + publishers.len() + i) as u32;
+            let id = next_id + i as u32;
             subscriptions.push(declare_subscription(
                 &session,
                 &identity,
@@ -266,7 +326,7 @@ impl Ros2Node {
             )?);
         }
         let period = Duration::from_secs_f64(1.0 / o.rate_hz);
-        let next_entity = (1 + publishers.len() + subscriptions.len()) as u32;
+        let next_entity = next_id + subscriptions.len() as u32;
         let world = o.world.as_ref().map(WorldBridge::new);
         Ok(Self {
             o,
@@ -276,6 +336,7 @@ impl Ros2Node {
             deposits,
             topics,
             publishers,
+            clock,
             subscriptions,
             pose_type,
             identity,
@@ -283,6 +344,7 @@ impl Ros2Node {
             world,
             period,
             next_publish: None,
+            next_cache: None,
             latencies_us: Vec::new(),
             stats: Ros2Stats::default(),
         })
@@ -307,8 +369,11 @@ impl Ros2Node {
     /// it if the rate allows.
     pub fn step(&mut self, timeout: Duration) -> Result<(), Ros2Error> {
         self.take_poses();
-        if self.reader.wait_frame(timeout)? && self.due() {
-            self.publish_frame()?;
+        if self.reader.wait_frame(timeout)? {
+            self.publish_clock()?;
+            if self.due() {
+                self.publish_frame()?;
+            }
         }
         self.take_poses();
         Ok(())
@@ -329,8 +394,8 @@ impl Ros2Node {
                         &self.session,
                         &self.identity,
                         self.next_entity,
-                        &topic,
-                        &self.o.distro.type_info(&t),
+                        (&topic, &self.o.distro.type_info(&t)),
+                        PUBLISHER_QOS,
                     )?);
                     self.next_entity += 1;
                 }
@@ -406,16 +471,56 @@ impl Ros2Node {
         });
     }
 
+    /// `--time sim`: the newest frame's field time on `/clock`, when it advanced and someone
+    /// subscribes.
+    fn publish_clock(&mut self) -> Result<(), Ros2Error> {
+        let Some((p, last)) = self.clock.as_mut() else {
+            return Ok(());
+        };
+        let Some(frame) = self.reader.frame() else {
+            return Ok(());
+        };
+        let stamp = TimeBase::Sim.frame_stamp(frame.header);
+        if stamp > *last && p.matched() {
+            p.put(clock_cdr(stamp))?;
+            *last = stamp;
+            self.stats.clock_published += 1;
+            self.stats.messages_published += 1;
+        }
+        Ok(())
+    }
+
+    /// While nobody subscribes, whether the maps' cache is due for a fresh frame (and if so,
+    /// when the next one is).
+    fn cache_due(&mut self) -> bool {
+        if self.o.cache_rate_hz <= 0.0 || self.next_cache.is_some_and(|t| Instant::now() < t) {
+            return false;
+        }
+        let period = Duration::from_secs_f64(1.0 / self.o.cache_rate_hz);
+        self.next_cache = Some(Instant::now() + period);
+        true
+    }
+
     fn publish_frame(&mut self) -> Result<(), Ros2Error> {
-        if !self.publishers.iter().any(RosPublisher::matched) {
-            // Nobody listens: the frame is not serialized (the schedule goes on).
+        let matched = self.publishers.iter().any(RosPublisher::matched);
+        if !matched && !self.cache_due() {
+            // Nobody listens and the cache is fresh enough: the frame is not serialized (the
+            // schedule goes on).
             self.schedule_next();
             self.stats.frames_without_subscribers += 1;
             return Ok(());
         }
-        let Some(fm) = frame_messages(&self.reader, &self.o.frame_id) else {
+        let Some(fm) = frame_messages(
+            &self.reader,
+            &self.o.frame_id,
+            self.o.time,
+            &self.o.occupancy,
+        ) else {
             return Ok(());
         };
+        if !matched {
+            self.stats.frames_for_cache += 1;
+        }
         if fm.messages.len() != self.publishers.len() {
             // The field restarted with another channel count: its topics are not ours.
             return Ok(());
@@ -510,24 +615,47 @@ fn declare_token(session: &zenoh::Session, key: &str) -> Result<LivelinessToken,
         .map_err(|e| zerr(format!("declare liveliness token {key}"), e))
 }
 
+/// rmw_zenoh's heartbeat period for a reliable transient-local publisher
+/// (`SAMPLE_MISS_DETECTION_HEARTBEAT_PERIOD`, rmw_publisher_data.cpp).
+const SAMPLE_MISS_DETECTION_HEARTBEAT_PERIOD: Duration = Duration::from_millis(500);
+
+/// Declares a publisher of `topic` with QoS `qos` as rmw_zenoh's `PublisherData::make` does
+/// (rmw_publisher_data.cpp): congestion control *drop* (keep-last), the reliability of the QoS,
+/// and for transient local zenoh-ext's advanced publisher with a cache of `depth` samples,
+/// publisher detection and, when reliable, sporadic heartbeats; then its liveliness token.
 fn declare_publisher(
     session: &zenoh::Session,
     identity: &NodeIdentity,
     entity_id: u32,
-    topic: &str,
-    t: &TypeInfo,
+    (topic, t): (&str, &TypeInfo),
+    qos: Qos,
 ) -> Result<RosPublisher, Ros2Error> {
-    let token_key = identity.token(
-        EntityKind::Publisher,
-        entity_id,
-        Some((topic, t, PUBLISHER_QOS)),
-    );
+    use zenoh_ext::{AdvancedPublisherBuilderExt, CacheConfig, MissDetectionConfig};
+    let token_key = identity.token(EntityKind::Publisher, entity_id, Some((topic, t, qos)));
     let key = topic_key(identity.domain_id, topic, t);
-    let publisher = session
+    let builder = session
         .declare_publisher(key.clone())
         .congestion_control(CongestionControl::Drop)
-        .wait()
-        .map_err(|e| zerr(format!("declare publisher {key}"), e))?;
+        .reliability(if qos.reliable {
+            Reliability::Reliable
+        } else {
+            Reliability::BestEffort
+        });
+    let err = |e| zerr(format!("declare publisher {key}"), e);
+    let publisher = if qos.transient_local {
+        let mut b = builder
+            .advanced()
+            .cache(CacheConfig::default().max_samples(qos.depth as usize))
+            .publisher_detection();
+        if qos.reliable {
+            let miss = MissDetectionConfig::default()
+                .sporadic_heartbeat(SAMPLE_MISS_DETECTION_HEARTBEAT_PERIOD);
+            b = b.sample_miss_detection(miss);
+        }
+        ZPublisher::TransientLocal(b.wait().map_err(err)?)
+    } else {
+        ZPublisher::Volatile(builder.wait().map_err(err)?)
+    };
     Ok(RosPublisher {
         publisher,
         _token: declare_token(session, &token_key)?,

@@ -10,7 +10,8 @@ use pheromone_field::process::run::Housekeeping;
 use pheromone_field::shm::{FieldReader, ShmError, Svc};
 use thiserror::Error;
 
-use crate::frames::{frame_messages, wall_now_ns, FieldTopics};
+use crate::frames::{frame_messages, wall_now_ns, FieldTopics, TimeBase};
+use crate::grid::Occupancy;
 use crate::record::{McapRecorder, RecordError};
 use crate::rmw_zenoh::NameError;
 
@@ -86,6 +87,8 @@ pub struct RecordOptions {
     pub duration: Option<Duration>,
     /// Stop after this many frames.
     pub frames: Option<u64>,
+    /// How the OccupancyGrids' values are scaled.
+    pub occupancy: Occupancy,
 }
 
 /// Why a recording failed.
@@ -161,7 +164,7 @@ pub fn record_field(node: &Node<Svc>, o: &RecordOptions) -> Result<RecordSummary
     let mut fresh = true;
     while chores.running(node) && o.frames.is_none_or(|n| frames < n) {
         if (fresh || reader.wait_frame(STEP)?) && last.is_none_or(|t| t.elapsed() >= period) {
-            if let Some(fm) = frame_messages(&reader, &o.frame_id) {
+            if let Some(fm) = frame_messages(&reader, &o.frame_id, TimeBase::Wall, &o.occupancy) {
                 if fm.messages.len() == topics.names.len() {
                     let log_ns = fm.stamp.as_ns().max(0) as u64;
                     for (i, m) in fm.messages.iter().enumerate() {

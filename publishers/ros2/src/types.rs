@@ -127,6 +127,8 @@ const MA_LAYOUT: &str = "std_msgs/msg/MultiArrayLayout";
 const F32_MULTI: &str = "std_msgs/msg/Float32MultiArray";
 const GRID_MAP_INFO: &str = "grid_map_msgs/msg/GridMapInfo";
 pub const GRID_MAP: &str = "grid_map_msgs/msg/GridMap";
+/// The simulated time of a ROS 2 graph (`/clock`).
+pub const CLOCK: &str = "rosgraph_msgs/msg/Clock";
 /// This project's deposit message (docs/ros2.md, "Deposits"): no standard ROS type carries a
 /// deposit's kernel and parameters.
 pub const DEPOSIT: &str = "pheromone_msgs/msg/Deposit";
@@ -136,6 +138,7 @@ pub fn fields(name: &str) -> Option<&'static [Field]> {
     Some(match name {
         TIME => fields![f("sec", Int32), f("nanosec", Uint32)],
         HEADER => fields![f("stamp", Msg(TIME)), f("frame_id", Str)],
+        CLOCK => fields![f("clock", Msg(TIME))],
         POINT => fields![f("x", Float64), f("y", Float64), f("z", Float64)],
         QUATERNION => fields![
             f("x", Float64),
