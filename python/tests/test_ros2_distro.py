@@ -127,9 +127,10 @@ def test_a_distros_keys_tokens_gids_and_attachments(distro, start_field, store, 
             grid_tok = next(t for t in toks if "%pheromone%grid_map" in t)
             p = grid_tok.split("/")
             assert p[10:12] == [dds(GRID), hashes[GRID]]
-            assert p[12] == qos_keyexpr(1), grid_tok
+            # The maps: reliable, transient local, keep last 1.
+            assert p[12] == qos_keyexpr(1, transient_local=True), grid_tok
             # The token a receiver rebuilds from the parts it parsed, as Entity::make writes it.
-            rebuilt = "/".join([*p[:12], qos_keyexpr(1)])
+            rebuilt = "/".join([*p[:12], qos_keyexpr(1, transient_local=True)])
             assert rebuilt == grid_tok
             sub_p = ents["MS"].split("/")
             assert sub_p[9:13] == ["%amcl_pose", dds(POSE), hashes[POSE], qos_keyexpr(10)]
