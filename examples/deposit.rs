@@ -8,7 +8,6 @@ use pheromone_field::shm::{create_node, DepositPublisher};
 use pheromone_field::DepositMsg;
 use pheromone_field::{Deposit, Kernel};
 
-const FIELD: &str = "main";
 const PERIOD: Duration = Duration::from_millis(200);
 
 fn main() -> anyhow::Result<()> {
@@ -16,10 +15,14 @@ fn main() -> anyhow::Result<()> {
     // A program of its own: Ctrl-C ends the loop below (`node.wait` fails) instead of killing
     // the process before it cleans up.
     pheromone_field::shm::handle_termination_requests();
+    // The field's name: the first argument, else the default field `main`.
+    let field = std::env::args()
+        .nth(1)
+        .unwrap_or_else(|| "main".to_string());
     let node = create_node(&format!("example-deposit-{}", std::process::id()))?;
-    let mut publisher = DepositPublisher::attach_within(&node, FIELD, 1, Duration::from_secs(30))?;
+    let mut publisher = DepositPublisher::attach_within(&node, &field, 1, Duration::from_secs(30))?;
     let mut step = 0u32;
-    while node.wait(PERIOD).is_ok() {
+    while pheromone_field::shm::wait_or_stop(&node, PERIOD) {
         let angle = step as f32 * 0.1;
         let (x, y) = (12.8 + 3.0 * angle.cos(), 12.8 + 3.0 * angle.sin());
         // Σxy grows from (5 cm)² to (25 cm)² and back: γ = τ/det Σxy falls as uncertainty grows.

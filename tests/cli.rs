@@ -3,10 +3,12 @@
 mod bench;
 mod confirm;
 mod crash;
+mod examples;
 mod flags;
 mod gateway;
 mod graph;
 mod harness;
+mod hostile;
 mod inspect;
 mod maps;
 #[cfg(feature = "zenoh")]
