@@ -172,3 +172,74 @@ def test_a_distros_keys_tokens_gids_and_attachments(distro, start_field, store, 
     assert summary["attachments"] == {"positional": 2, "keyed": 1}, summary
     assert _probe(f.name, 2.6, 0.7) == 0.0
     assert math.isclose(_probe(f.name, *a), 0.2 / 0.01, rel_tol=1e-5)
+
+
+def qos_keyexpr_tl_default(depth, transient_local):
+    """qos_to_keyexpr of the releases before ros2/rmw_zenoh#521 (Humble 0.1.0-0.1.1, Jazzy
+    0.2.0-0.2.2), whose default durability is transient local: volatile is written (2),
+    transient local left out."""
+    dur = "" if transient_local else "2"
+    d = "" if depth == 42 else str(depth)
+    return f":{dur}:,{d}:,:,:,,"
+
+
+@pytest.mark.parametrize(("distro", "release", "tl_default"),
+                         [("humble", "0.1.1", True), ("jazzy", "0.2.2", True),
+                          ("jazzy", "0.2.3", False)])
+def test_an_older_release_gets_the_keyed_attachment_and_its_qos_defaults(
+        distro, release, tl_default, start_field, store, tmp_path):
+    """--rmw-zenoh-release: the samples carry the keyed attachment, read back with zenoh-ext's
+    deserializer as upstream's attachment_helpers.cpp of those releases reads it (key, int64,
+    key, int64, key, 16 bytes); the tokens' QoS strings are written against the release's
+    default durability, so the GID a receiver of that release computes from the token is the
+    one in the attachment."""
+    from zenoh.ext import z_deserialize
+
+    cfg = tmp_path / "field.toml"
+    cfg.write_text(FIELD)
+    f = start_field(f"{distro[:3]}{release[-1]}", "--config", str(cfg))
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    err = open(tmp_path / "ros2.stderr", "wb")
+    node = subprocess.Popen(
+        [str(BIN), "ros2", "--field", f.name, "--listen", endpoint, "--ros-distro", distro,
+         "--rmw-zenoh-release", release, "--deposit-from", "/amcl_pose", "--json",
+         "--rate-hz", "20"], stdout=subprocess.PIPE, stderr=err)
+    STARTED_PIDS.add(node.pid)
+    h = type_hash(distro, store, GRID)
+    try:
+        with _client(endpoint) as s:
+            for _ in deadline_loop(20, "the node's 4 liveliness tokens"):
+                toks = sorted(str(r.ok.key_expr)
+                              for r in s.liveliness().get("@ros2_lv/**", timeout=2.0)
+                              if r.ok is not None)
+                if len(toks) >= 4:
+                    break
+                time.sleep(0.05)
+            grid_tok = next(t for t in toks if "%pheromone%grid_map" in t)
+            sub_tok = next(t for t in toks if t.split("/")[5] == "MS")
+            want_map = (qos_keyexpr_tl_default(1, True) if tl_default
+                        else qos_keyexpr(1, transient_local=True))
+            want_sub = qos_keyexpr_tl_default(10, False) if tl_default else qos_keyexpr(10)
+            assert grid_tok.split("/")[12] == want_map, grid_tok
+            assert sub_tok.split("/")[12] == want_sub, sub_tok
+            got = []
+            sub = s.declare_subscriber(f"0/pheromone/grid_map/{dds(GRID)}/{h}", got.append)
+            for _ in deadline_loop(15, "a GridMap"):
+                if got:
+                    break
+                time.sleep(0.02)
+            sub.undeclare()
+        node.send_signal(signal.SIGINT)
+        node.communicate(timeout=20)
+    finally:
+        if node.poll() is None:
+            node.kill()
+            node.communicate()
+        err.close()
+    assert node.returncode == 0, (tmp_path / "ros2.stderr").read_text(errors="replace")
+    att = got[0].attachment
+    assert len(att.to_bytes()) == 77
+    k1, seq, k2, stamp, k3, g = z_deserialize(tuple[str, Int64, str, Int64, str, bytes], att)
+    assert (k1, k2, k3) == ("sequence_number", "source_timestamp", "source_gid")
+    assert seq >= 1 and abs(stamp - time.time_ns()) < 60e9
+    assert g == gid(grid_tok)

@@ -154,6 +154,12 @@ pub struct Ros2Args {
     /// attachment conventions (docs/ros2.md, "ROS 2 distributions").
     #[arg(long, value_name = "DISTRO", value_parser = ["humble", "jazzy", "kilted", "rolling"], default_value = "jazzy")]
     pub ros_distro: String,
+    /// The distribution's rmw_zenoh release X.Y.Z, when older than its current one: Humble
+    /// 0.1.0–0.1.1 and Jazzy 0.2.0–0.2.3 get the keyed attachment, Humble 0.1.0–0.1.1 and Jazzy
+    /// 0.2.0–0.2.2 QoS strings against a transient-local default (docs/ros2.md, "ROS 2
+    /// distributions") [default: the current release's conventions].
+    #[arg(long, value_name = "X.Y.Z")]
+    pub rmw_zenoh_release: Option<String>,
     /// Zenoh endpoint to connect to, e.g. a router: tcp/ROS_HOST:7447 (repeatable); replaces
     /// the configuration's connect endpoints [default: the file's, else rmw_zenoh's
     /// tcp/localhost:7447].
@@ -265,14 +271,18 @@ fn ros2_options(a: &Ros2Args) -> anyhow::Result<pheromone_ros2::node::Ros2Option
         .collect::<anyhow::Result<Vec<_>>>()?;
     let depositor = a.deposit.config();
     depositor.validate().map_err(bad_from)?;
+    let distro = pheromone_ros2::rmw_zenoh::RosDistro::from_name(&a.ros_distro)
+        .ok_or_else(|| bad(format!("--ros-distro {}: unknown", a.ros_distro)))?;
     Ok(pheromone_ros2::node::Ros2Options {
         field: a.field.clone(),
         domain_id: a.domain_id,
         namespace: a.namespace.clone(),
         node_name: a.node_name.clone(),
         frame_id: a.frame_id.clone(),
-        distro: pheromone_ros2::rmw_zenoh::RosDistro::from_name(&a.ros_distro)
-            .ok_or_else(|| bad(format!("--ros-distro {}: unknown", a.ros_distro)))?,
+        distro,
+        conventions: distro
+            .conventions(a.rmw_zenoh_release.as_deref())
+            .map_err(bad_from)?,
         rate_hz: a.rate_hz,
         cache_rate_hz: a.cache_rate_hz,
         time: time_base(a)?,

@@ -32,8 +32,8 @@ use crate::frames::{clock_cdr, frame_messages, wall_now_ns, FieldTopics, TimeBas
 use crate::grid::{Occupancy, Stamp};
 use crate::pose::{check_pose, PoseWithCovarianceStamped};
 use crate::rmw_zenoh::{
-    self, split_topic_key, topic_key, Attachment, EntityKind, NameError, NodeIdentity, Qos,
-    RosDistro,
+    self, split_topic_key, topic_key, Attachment, AttachmentLayout, Conventions, EntityKind,
+    NameError, NodeIdentity, Qos, RosDistro,
 };
 use crate::robots::{robot_topics, WorldRobots};
 use crate::session::{SessionConfigError, SessionSettings};
@@ -80,6 +80,9 @@ pub struct Ros2Options {
     pub frame_id: String,
     /// Whose rmw_zenoh conventions the keys and tokens follow.
     pub distro: RosDistro,
+    /// The conventions of the distribution's rmw_zenoh release (`--rmw-zenoh-release`): the
+    /// attachment layout, the default durability of the tokens' QoS strings.
+    pub conventions: Conventions,
     pub rate_hz: f64,
     /// While no subscriber matches, the maps are still serialized this often (per second) into
     /// their transient-local cache, so a late joiner gets a map at most 1/`cache_rate_hz` old
@@ -170,6 +173,7 @@ struct RosPublisher {
     _token: LivelinessToken,
     gid: [u8; 16],
     sequence: i64,
+    layout: AttachmentLayout,
 }
 
 impl RosPublisher {
@@ -190,8 +194,7 @@ impl RosPublisher {
             source_timestamp_ns: wall_now_ns(),
             source_gid: self.gid,
         }
-        .encode()
-        .to_vec();
+        .encode_as(self.layout);
         let (done, key) = match &self.publisher {
             ZPublisher::Volatile(p) => (p.put(cdr).attachment(att).wait(), p.key_expr()),
             ZPublisher::TransientLocal(p) => (p.put(cdr).attachment(att).wait(), p.key_expr()),
@@ -289,6 +292,7 @@ impl Ros2Node {
             zid: session.info().zid().wait().to_string(),
             namespace,
             name,
+            conventions: o.conventions,
         };
         let node_token = declare_token(&session, &identity.token(EntityKind::Node, 0, None))?;
         let mut publishers = Vec::new();
@@ -661,6 +665,7 @@ fn declare_publisher(
         _token: declare_token(session, &token_key)?,
         gid: rmw_zenoh::gid(&token_key),
         sequence: 0,
+        layout: identity.conventions.attachment_layout(),
     })
 }
 

@@ -20,6 +20,11 @@
 //!   Both are read ([`Attachment::decode_any`]); the positional one is written.
 //! - Distributions ([`RosDistro`]): Humble has no type hashes, so its rmw_zenoh writes
 //!   `TypeHashNotSupported` where the RIHS01 hash goes, in keys and tokens.
+//! - Releases ([`Conventions`]): the releases before the current ones on Zenoh 1.x wrote the
+//!   keyed attachment (Humble 0.1.0–0.1.1, Jazzy 0.2.0–0.2.3) and took transient local as the
+//!   default durability (Humble 0.1.0–0.1.1, Jazzy 0.2.0–0.2.2; volatile since
+//!   ros2/rmw_zenoh#521, in Jazzy 0.2.3 and Humble 0.1.2), from rmw_zenoh_cpp's CHANGELOG.rst
+//!   on the humble and jazzy branches.
 
 use thiserror::Error;
 
@@ -72,6 +77,81 @@ impl RosDistro {
                 ..t.clone()
             },
             _ => t.clone(),
+        }
+    }
+}
+
+/// What differs on the wire between the releases of one distribution's rmw_zenoh: the
+/// attachment layout and the default durability a token's QoS string is written against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Conventions {
+    /// Write the keyed attachment (each value after its name), else the positional one.
+    pub keyed_attachment: bool,
+    /// The release's default durability is transient local (before ros2/rmw_zenoh#521).
+    pub transient_local_default: bool,
+}
+
+/// Why an `--rmw-zenoh-release` was refused.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("--rmw-zenoh-release {release} with --ros-distro {distro}: {reason}")]
+pub struct ReleaseError {
+    pub distro: &'static str,
+    pub release: String,
+    pub reason: &'static str,
+}
+
+impl RosDistro {
+    /// The conventions of rmw_zenoh release `release` (`X.Y.Z`) of this distribution; `None`:
+    /// its current release (positional attachment, volatile default). Humble's releases are
+    /// 0.1.x, Jazzy's 0.2.x; Kilted's (0.6.x) and Rolling's have the current conventions from
+    /// the start.
+    pub fn conventions(self, release: Option<&str>) -> Result<Conventions, ReleaseError> {
+        let Some(release) = release else {
+            return Ok(Conventions::default());
+        };
+        let err = |reason| ReleaseError {
+            distro: self.name(),
+            release: release.to_string(),
+            reason,
+        };
+        let v: Vec<u32> = release
+            .split('.')
+            .map(|p| p.parse::<u32>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| err("not X.Y.Z"))?;
+        let [major, minor, patch] = v[..] else {
+            return Err(err("not X.Y.Z"));
+        };
+        // (the distribution's 0.<series>.x, first positional patch, first volatile-default patch)
+        let (series, positional_from, volatile_from) = match self {
+            RosDistro::Humble => (1, 2, 2),
+            RosDistro::Jazzy => (2, 4, 3),
+            RosDistro::Kilted | RosDistro::Rolling => {
+                return Err(err(
+                    "every release of it has the current conventions: leave the flag out",
+                ))
+            }
+        };
+        if major != 0 || minor != series {
+            return Err(err(match self {
+                RosDistro::Humble => "Humble's releases are 0.1.x",
+                _ => "Jazzy's releases are 0.2.x",
+            }));
+        }
+        Ok(Conventions {
+            keyed_attachment: patch < positional_from,
+            transient_local_default: patch < volatile_from,
+        })
+    }
+}
+
+impl Conventions {
+    /// The attachment layout these conventions write.
+    pub fn attachment_layout(self) -> AttachmentLayout {
+        if self.keyed_attachment {
+            AttachmentLayout::Keyed
+        } else {
+            AttachmentLayout::Positional
         }
     }
 }
@@ -174,8 +254,18 @@ impl Qos {
     /// their defaults and hash it into the GID, so a token written with the old default gets a
     /// GID other than the one in its samples' attachments.
     pub fn keyexpr(&self) -> String {
+        self.keyexpr_against(false)
+    }
+
+    /// [`Qos::keyexpr`] against a release whose default durability is transient local
+    /// (`transient_local_default`: before ros2/rmw_zenoh#521) or volatile.
+    pub fn keyexpr_against(&self, transient_local_default: bool) -> String {
         let rel = if self.reliable { "" } else { "2" };
-        let dur = if self.transient_local { "1" } else { "" };
+        let dur = match (self.transient_local, transient_local_default) {
+            (true, false) => "1",
+            (false, true) => "2",
+            _ => "",
+        };
         let depth = if self.depth == 42 {
             String::new()
         } else {
@@ -212,6 +302,10 @@ pub struct NodeIdentity {
     /// Absolute namespace.
     pub namespace: String,
     pub name: String,
+    /// Its rmw_zenoh release's conventions: the QoS strings of its tokens are written against
+    /// the release's default durability ([`Qos::keyexpr_against`]), its samples carry the
+    /// release's attachment layout.
+    pub conventions: Conventions,
 }
 
 impl NodeIdentity {
@@ -236,7 +330,7 @@ impl NodeIdentity {
                 mangle(topic),
                 t.dds_name,
                 t.hash,
-                qos.keyexpr()
+                qos.keyexpr_against(self.conventions.transient_local_default)
             ));
         }
         s
@@ -280,6 +374,28 @@ pub struct Attachment {
 pub const ATTACHMENT_LEN: usize = 33;
 
 impl Attachment {
+    /// The attachment in `layout`.
+    pub fn encode_as(&self, layout: AttachmentLayout) -> Vec<u8> {
+        let positional = self.encode();
+        match layout {
+            AttachmentLayout::Positional => positional.to_vec(),
+            AttachmentLayout::Keyed => {
+                let mut k = Vec::with_capacity(77);
+                for (key, v) in [
+                    ("sequence_number", &positional[..8]),
+                    ("source_timestamp", &positional[8..16]),
+                    ("source_gid", &positional[16..]),
+                ] {
+                    k.push(key.len() as u8);
+                    k.extend_from_slice(key.as_bytes());
+                    k.extend_from_slice(v);
+                }
+                k
+            }
+        }
+    }
+
+    /// The positional attachment.
     pub fn encode(&self) -> [u8; ATTACHMENT_LEN] {
         let mut b = [0u8; ATTACHMENT_LEN];
         b[..8].copy_from_slice(&self.sequence_number.to_le_bytes());
@@ -388,6 +504,7 @@ mod tests {
             zid: "abc".into(),
             namespace: "/".into(),
             name: "pheromone".into(),
+            conventions: Conventions::default(),
         };
         assert_eq!(
             id.token(EntityKind::Node, 0, None),
@@ -417,6 +534,9 @@ mod tests {
             ..qos
         };
         assert_eq!(tl.keyexpr(), ":1:,:,:,:,,");
+        // Against a release whose default durability is transient local.
+        assert_eq!(tl.keyexpr_against(true), "::,:,:,:,,");
+        assert_eq!(qos.keyexpr_against(true), ":2:,1:,:,:,,");
         let humble = RosDistro::Humble.type_info(&t);
         assert_eq!(
             topic_key(0, "/m", &humble),
@@ -456,6 +576,8 @@ mod tests {
             k.extend_from_slice(v);
         }
         assert_eq!(k.len(), 77);
+        assert_eq!(a.encode_as(AttachmentLayout::Keyed), k);
+        assert_eq!(a.encode_as(AttachmentLayout::Positional), b.to_vec());
         assert_eq!(
             Attachment::decode_any(&k),
             Some((a, AttachmentLayout::Keyed))
@@ -463,5 +585,32 @@ mod tests {
         assert_eq!(Attachment::decode_any(&k[..76]), None);
         k[1] = b'S';
         assert_eq!(Attachment::decode_any(&k), None);
+    }
+
+    #[test]
+    fn releases_pick_their_conventions() {
+        let c = |d: RosDistro, r| d.conventions(Some(r)).unwrap();
+        let keyed_tl = Conventions {
+            keyed_attachment: true,
+            transient_local_default: true,
+        };
+        assert_eq!(c(RosDistro::Humble, "0.1.1"), keyed_tl);
+        assert_eq!(c(RosDistro::Humble, "0.1.2"), Conventions::default());
+        assert_eq!(c(RosDistro::Jazzy, "0.2.2"), keyed_tl);
+        assert_eq!(
+            c(RosDistro::Jazzy, "0.2.3"),
+            Conventions {
+                keyed_attachment: true,
+                transient_local_default: false,
+            }
+        );
+        assert_eq!(c(RosDistro::Jazzy, "0.2.4"), Conventions::default());
+        assert_eq!(
+            RosDistro::Jazzy.conventions(None),
+            Ok(Conventions::default())
+        );
+        assert!(RosDistro::Jazzy.conventions(Some("0.1.1")).is_err());
+        assert!(RosDistro::Humble.conventions(Some("0.1")).is_err());
+        assert!(RosDistro::Rolling.conventions(Some("0.6.0")).is_err());
     }
 }
