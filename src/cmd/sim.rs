@@ -7,7 +7,7 @@
 use std::time::Instant;
 
 use pheromone_roles::follower::StrategyKind;
-use pheromone_ros2::record::{McapRecorder, RecordError};
+use pheromone_ros2::record::{ChunkCompression, McapRecorder, RecordError};
 use pheromone_sim::metrics::{RunMetrics, RunMode};
 use pheromone_sim::processes::ProcessRunInfo;
 use pheromone_sim::recording::Recording;
@@ -227,7 +227,9 @@ fn start_record(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<Option<SimMc
     let Some(path) = &a.record else {
         return Ok(None);
     };
-    let file = McapRecorder::create(path)
+    let compression = ChunkCompression::from_name(&a.record_compression)
+        .ok_or_else(|| bad(format!("--record-compression {}", a.record_compression)))?;
+    let file = McapRecorder::create_with(path, compression)
         .map_err(|e| bad(format!("--record {}: {}", path.display(), e)))?;
     Ok(Some(SimMcap::start(file, scenario)?))
 }

@@ -98,18 +98,59 @@ pub struct McapRecorder {
     pub bytes: u64,
 }
 
+/// How the file's chunks are compressed (`--record-compression`, `record --compression`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ChunkCompression {
+    /// Uncompressed chunks.
+    #[default]
+    None,
+    /// Zstandard (what rosbag2's MCAP storage writes with its `zstd_fast` and `zstd_small`
+    /// presets).
+    Zstd,
+    /// LZ4 frames.
+    Lz4,
+}
+
+impl ChunkCompression {
+    pub const NAMES: [&'static str; 3] = ["none", "zstd", "lz4"];
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "none" => Some(Self::None),
+            "zstd" => Some(Self::Zstd),
+            "lz4" => Some(Self::Lz4),
+            _ => None,
+        }
+    }
+
+    fn mcap(self) -> Option<mcap::Compression> {
+        match self {
+            Self::None => None,
+            Self::Zstd => Some(mcap::Compression::Zstd),
+            Self::Lz4 => Some(mcap::Compression::Lz4),
+        }
+    }
+}
+
 impl McapRecorder {
+    /// A new file with uncompressed chunks.
     pub fn create(path: &Path) -> Result<Self, RecordError> {
+        Self::create_with(path, ChunkCompression::None)
+    }
+
+    /// A new file whose chunks are compressed with `compression`.
+    pub fn create_with(path: &Path, compression: ChunkCompression) -> Result<Self, RecordError> {
         let err = |action, e: &dyn std::fmt::Display| RecordError {
             path: path.to_path_buf(),
             action,
             detail: e.to_string(),
         };
-        let file = File::create(path).map_err(|e| err("create", &e))?;
+        // A regular file or a new path only (never through a link, into a FIFO or a device).
+        let file = pheromone_field::outfile::open_in_place(path).map_err(|e| err("create", &e))?;
         let writer = mcap::WriteOptions::new()
             .profile("ros2")
             .library("pheromone-ros2")
-            .compression(None)
+            .compression(compression.mcap())
             .create(BufWriter::new(file))
             .map_err(|e| err("write header", &e))?;
         Ok(Self {
