@@ -16,6 +16,7 @@ pub mod ros_feed;
 pub mod ros_record;
 pub mod single;
 pub mod sweep;
+pub mod sweep_shard;
 pub mod sweep_stats;
 pub mod trials;
 pub mod wrong_area;

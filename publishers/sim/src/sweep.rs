@@ -230,7 +230,7 @@ pub fn integrations(base: &Scenario, rules: &[MergeRule], idle: &[u32]) -> Vec<I
 }
 
 /// The exploration figure a sweep compares and charts (every run records all three).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Figure {
     /// `exploration_known`: sectors mapped by the robot's sensor or merged into its final map.
@@ -443,6 +443,61 @@ pub struct SweepResult {
     pub runs: Vec<RunResult>,
 }
 
+/// The most shards a sweep is split into.
+pub const MAX_SHARDS: usize = 100_000;
+
+/// The `K`-th of `N` slices of a sweep's runs (`K` from 0; `pheromone sweep --shard K/N`,
+/// [`sweep_shard`](super::sweep_shard)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    /// The whole sweep: shard 0 of 1.
+    pub const WHOLE: Shard = Shard { index: 0, count: 1 };
+
+    /// Whether the run at plan index `i` is in this shard.
+    pub fn holds(self, i: usize) -> bool {
+        i % self.count == self.index
+    }
+
+    /// The plan indices of this shard's runs, of a sweep of `total` runs, ascending.
+    pub fn indices(self, total: usize) -> Vec<usize> {
+        (self.index..total).step_by(self.count).collect()
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+    /// `K/N`: `N` from 1 to [`MAX_SHARDS`], `K` from 0 to `N − 1`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = |why: &str| format!("{s:?}: {why}");
+        let (k, n) = s
+            .split_once('/')
+            .ok_or_else(|| bad("expected K/N, e.g. 0/4 (K from 0 to N-1)"))?;
+        let n: usize = match n.trim().parse() {
+            Ok(n) if (1..=MAX_SHARDS).contains(&n) => n,
+            _ => return Err(bad("N is not a number of shards from 1 to 100000")),
+        };
+        match k.trim().parse::<usize>() {
+            Ok(k) if k < n => Ok(Shard { index: k, count: n }),
+            _ => Err(bad(&format!(
+                "K is not a shard index from 0 to {} (shards count from 0, as $SLURM_ARRAY_TASK_ID with --array=0-{})",
+                n - 1,
+                n - 1
+            ))),
+        }
+    }
+}
+
 /// The runs of a sweep: each point's scenario with its overrides, `trials` seeds each, in grid
 /// order. Without merging, R_C only decides which rendezvous the world measures, and nobody
 /// uses them: those points run once, at the first R_C of the list. Every point is checked
@@ -596,8 +651,25 @@ pub fn run_sweep(
     jobs: usize,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SweepResult, SweepError> {
+    run_sweep_shard(base, grid, Shard::WHOLE, jobs, progress)
+}
+
+/// [`run_sweep`] of `shard`'s runs only (plan indices `i % N == K`, [`Shard::holds`]): the
+/// result's runs are the shard's, in plan order, and its points and comparisons theirs.
+pub fn run_sweep_shard(
+    base: &Scenario,
+    grid: &SweepGrid,
+    shard: Shard,
+    jobs: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<SweepResult, SweepError> {
     let started = Instant::now();
-    let runs = plan(base, grid)?;
+    let runs: Vec<_> = plan(base, grid)?
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| shard.holds(*i))
+        .map(|(_, run)| run)
+        .collect();
     let total = runs.len();
     // The largest runs first, so that the last ones to finish are short.
     let mut order: Vec<usize> = (0..total).collect();
