@@ -1,7 +1,8 @@
 //! Scenario-specific metrics computed from a run's [`Recording`], the same way for a
 //! single-process and a multi-process run.
 //! - `mean_path_error_m` (seed 002): the mean distance between the robot and the target path,
-//!   sampled every 0.2 s over 10 s.
+//!   sampled every 0.2 s over 10 s; `turning_share` beside it: the share of those samples at
+//!   which the robot turned (|ω| > 0.01 rad/s), 0 for a robot that drives blind beside the trail.
 //! - `exploration` (seed 004): the share of the map's sectors each robot has visited.
 //! - `blind_leader` (seed 000): where the leader got lost, when the follower gave the trail up,
 //!   and how far the follower strayed from the leader's true path.
@@ -32,6 +33,11 @@ pub struct ScenarioMetrics {
     /// when the run has no sample in its window.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mean_path_error_m: Option<BTreeMap<String, Option<f64>>>,
+    /// Seed 002: the share of each path metric's samples at which the robot turned
+    /// (|ω| > [`TURNING_RAD_PER_S`]): a follower whose antennas saturate (both read 1) drives
+    /// straight on, and its path error is then the width of that dead band.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub turning_share: Option<BTreeMap<String, Option<f64>>>,
     /// Seed 004: sectors visited.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub exploration: Option<Exploration>,
@@ -54,6 +60,12 @@ pub fn scenario_metrics(scenario: &Scenario, rec: &Recording) -> ScenarioMetrics
             m.paths
                 .iter()
                 .map(|p| (p.name.clone(), mean_path_error_m(p, rec)))
+                .collect()
+        }),
+        turning_share: (!m.paths.is_empty()).then(|| {
+            m.paths
+                .iter()
+                .map(|p| (p.name.clone(), turning_share(p, rec)))
                 .collect()
         }),
         exploration: m.exploration.as_ref().map(|e| exploration(e, rec)),
@@ -166,21 +178,49 @@ pub fn project_on_polyline(p: [f64; 2], line: &[[f64; 2]]) -> (f64, f64) {
     best
 }
 
+/// The samples of a path metric: one row every `every_s` over its window.
+fn path_samples<'a>(
+    m: &'a PathMetric,
+    rec: &'a Recording,
+) -> impl Iterator<Item = &'a crate::recording::RobotSample> + 'a {
+    let mut next = m.from_s;
+    let end = m.from_s + m.over_s + 1e-9;
+    rec.robots
+        .get(&m.robot)
+        .into_iter()
+        .flatten()
+        .filter(move |r| {
+            let take = r.t_s + 1e-9 >= next && r.t_s <= end;
+            if take {
+                next += m.every_s;
+            }
+            take
+        })
+}
+
 /// Seed 002's evaluation: mean distance to the path every `every_s` over the window; `None`
 /// when the run has no sample in it.
 pub fn mean_path_error_m(m: &PathMetric, rec: &Recording) -> Option<f64> {
-    let rows = rec.robots.get(&m.robot)?;
-    let mut sum = 0.0;
-    let mut n = 0usize;
-    let mut next = m.from_s;
-    let end = m.from_s + m.over_s + 1e-9;
-    for r in rows {
-        if r.t_s + 1e-9 >= next && r.t_s <= end {
-            sum += distance_to_polyline_m([r.true_pose[0], r.true_pose[1]], &m.points);
-            n += 1;
-            next += m.every_s;
-        }
-    }
+    mean(
+        path_samples(m, rec)
+            .map(|r| distance_to_polyline_m([r.true_pose[0], r.true_pose[1]], &m.points)),
+    )
+}
+
+/// A turn rate above this counts as turning (rad/s) for [`turning_share`].
+pub const TURNING_RAD_PER_S: f64 = 0.01;
+
+/// The share of a path metric's samples at which the robot turned (|ω| > [`TURNING_RAD_PER_S`]);
+/// `None` when the run has no sample in the window.
+pub fn turning_share(m: &PathMetric, rec: &Recording) -> Option<f64> {
+    mean(
+        path_samples(m, rec)
+            .map(|r| f64::from(u8::from(r.omega_rad_per_s.abs() > TURNING_RAD_PER_S))),
+    )
+}
+
+fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
+    let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
     (n > 0).then(|| sum / n as f64)
 }
 

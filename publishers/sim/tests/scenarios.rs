@@ -71,11 +71,17 @@ fn blind_leader_follower_stops_where_the_leader_got_lost_unless_deposits_are_con
 }
 
 #[test]
-fn trail_following_stays_within_a_tenth_of_a_metre_of_both_paths() {
+fn trail_following_turns_and_stays_within_a_few_centimetres_of_both_paths() {
     let (_, _, _, m) = run("trail-following", Overrides::default());
     for path in ["straight", "curved"] {
         let e = m.mean_path_error_m.as_ref().unwrap()[path].unwrap();
-        assert!(e < 0.15, "{path}: mean path error {e:.3} m");
+        // Antennas that saturate (issue 49) drive a fixed heading ~8 cm beside the trail.
+        assert!(e < 0.04, "{path}: mean path error {e:.3} m");
+        let turning = m.turning_share.as_ref().unwrap()[path].unwrap();
+        assert!(
+            turning >= 0.5,
+            "{path}: turned at {turning:.2} of the samples"
+        );
     }
 }
 
