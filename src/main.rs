@@ -4,9 +4,39 @@
 // `[mapping]` in them are placeholders and TOML tables, not HTML tags or links.
 #![allow(rustdoc::invalid_html_tags, rustdoc::broken_intra_doc_links)]
 
+// Printing never panics (issue 54): std's `println!`, `eprintln!`, `print!` and `eprint!` panic
+// when stdout or stderr is a pipe whose reader has gone (`pheromone sim … 2>&1 | head -1`), which
+// stopped a run before it wrote its files. These shadow them in the whole binary (declared
+// before `mod cmd`) and drop what cannot be written: the run goes on, writes its files and exits
+// with its own status.
+macro_rules! println {
+    () => { $crate::print_quietly(false, format_args!("\n")) };
+    ($($arg:tt)*) => { $crate::print_quietly(false, format_args!("{}\n", format_args!($($arg)*))) };
+}
+macro_rules! eprintln {
+    () => { $crate::print_quietly(true, format_args!("\n")) };
+    ($($arg:tt)*) => { $crate::print_quietly(true, format_args!("{}\n", format_args!($($arg)*))) };
+}
+macro_rules! print {
+    ($($arg:tt)*) => { $crate::print_quietly(false, format_args!($($arg)*)) };
+}
+macro_rules! eprint {
+    ($($arg:tt)*) => { $crate::print_quietly(true, format_args!($($arg)*)) };
+}
+
 mod cmd;
 
 use std::process::ExitCode;
+
+/// Writes to stderr (`to_stderr`) or stdout, dropping what a closed pipe or a full disk refuses.
+fn print_quietly(to_stderr: bool, args: std::fmt::Arguments) {
+    use std::io::Write as _;
+    let _ = if to_stderr {
+        std::io::stderr().write_fmt(args)
+    } else {
+        std::io::stdout().write_fmt(args)
+    };
+}
 
 use clap::{CommandFactory, Parser, Subcommand};
 

@@ -268,6 +268,30 @@ pub fn open_private_append(path: &Path) -> Result<File, OutputError> {
     Ok(file)
 }
 
+/// Opens a regular file to read without following a symbolic link (`O_NOFOLLOW`, then `fstat`;
+/// `O_NONBLOCK`, so a FIFO planted there does not block the open).
+pub fn open_private_read(path: &Path) -> Result<File, OutputError> {
+    let file = OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_CLOEXEC)
+        .open(path)
+        .map_err(|e| match e.raw_os_error() {
+            Some(libc::ELOOP) => OutputError::NotRegular {
+                path: path.to_path_buf(),
+                kind: "a symbolic link",
+            },
+            _ => OutputError::io(path, "open")(e),
+        })?;
+    let meta = file.metadata().map_err(OutputError::io(path, "inspect"))?;
+    if !meta.file_type().is_file() {
+        return Err(OutputError::NotRegular {
+            path: path.to_path_buf(),
+            kind: kind_of(meta.file_type()),
+        });
+    }
+    Ok(file)
+}
+
 /// This process's effective user id.
 fn effective_uid() -> u32 {
     nix::unistd::geteuid().as_raw()
@@ -309,10 +333,16 @@ pub fn private_dir(path: &Path) -> Result<(), OutputError> {
     Ok(())
 }
 
+/// `$TMPDIR/pheromone-<uid>`: where this user's state under `$TMPDIR` goes (not created; see
+/// [`user_state_dir`]).
+pub fn user_state_base() -> PathBuf {
+    std::env::temp_dir().join(format!("pheromone-{}", effective_uid()))
+}
+
 /// `$TMPDIR/pheromone-<uid>/<sub>`: this user's state directory for `sub`, both levels made and
 /// checked by [`private_dir`].
 pub fn user_state_dir(sub: &str) -> Result<PathBuf, OutputError> {
-    let base = std::env::temp_dir().join(format!("pheromone-{}", effective_uid()));
+    let base = user_state_base();
     private_dir(&base)?;
     let dir = base.join(sub);
     private_dir(&dir)?;

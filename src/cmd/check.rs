@@ -163,12 +163,19 @@ pub fn parse_in_file(s: &str) -> Result<PathBuf, String> {
     Ok(path)
 }
 
-/// A file to write: not a directory, in a directory that exists.
+/// A file to write: a regular file or a new path (never a symbolic link, FIFO or device:
+/// `pheromone_field::outfile`), in a directory that exists.
 pub fn parse_out_file(s: &str) -> Result<PathBuf, String> {
     let path = PathBuf::from(s);
     if s.is_empty() || path.is_dir() || s.ends_with('/') {
         return Err("expected a file name, not a directory".into());
     }
+    pheromone_field::outfile::check_destination(&path).map_err(|e| match e {
+        pheromone_field::outfile::OutputError::NotRegular { kind, .. } => {
+            format!("is {kind}, not a regular file: refusing to write there")
+        }
+        other => other.to_string(),
+    })?;
     let parent = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),

@@ -363,11 +363,9 @@ fn write_sim_out(
         .clone()
         .unwrap_or_else(|| Path::new("pheromone-out").join(&scenario.name));
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    std::fs::write(
-        dir.join("metrics.json"),
-        serde_json::to_string_pretty(metrics)?,
-    )?;
-    std::fs::write(dir.join("tables.txt"), text)?;
+    let json = serde_json::to_string_pretty(metrics)?;
+    pheromone_field::outfile::write_file(&dir.join("metrics.json"), json.as_bytes())?;
+    pheromone_field::outfile::write_file(&dir.join("tables.txt"), text.as_bytes())?;
     let state = scenario.validate()?;
     let dock = scenario.dock_node(&state.graph)?;
     for r in runs {

@@ -321,7 +321,10 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
     if let Some(dir) = out_dir(a, scenario) {
         std::fs::create_dir_all(&dir)?;
         let path = dir.join("trials.json");
-        std::fs::write(&path, serde_json::to_string_pretty(&out)?)?;
+        pheromone_field::outfile::write_file(
+            &path,
+            serde_json::to_string_pretty(&out)?.as_bytes(),
+        )?;
         eprintln!("wrote {}", path.display());
     }
     if a.json {

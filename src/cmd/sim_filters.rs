@@ -118,8 +118,8 @@ pub fn run(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
     if let Some(dir) = out_dir(a, scenario) {
         let mut files = pheromone_report::write_filter_comparison(&dir, robot, &runs)?;
         let path = dir.join("filters.json");
-        std::fs::write(&path, serde_json::to_string_pretty(&out)? + "\n")
-            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let json = serde_json::to_string_pretty(&out)? + "\n";
+        pheromone_field::outfile::write_file(&path, json.as_bytes())?;
         files.push(path);
         eprintln!("wrote {} file(s) to {}", files.len(), dir.display());
     }

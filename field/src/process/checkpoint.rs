@@ -17,13 +17,12 @@
 //! | 8 + 4 × N | number N of cells (= width × height × channels), the cells as `f32`, planes `channel, y, x` |
 //! | 8 | FNV-1a 64 checksum of every byte before it |
 //!
-//! A file is written to `FILE.tmp`, synced, renamed over `FILE` and the directory synced, so a
+//! A file is written to a temporary file beside it (`crate::outfile`), synced, renamed over `FILE`
+//! (a regular file or a new path, never a link, FIFO or device) and the directory synced, so a
 //! crash leaves either the previous checkpoint or the new one, never a torn file. Reading checks
 //! the magic, both versions, the sizes, the checksum and that every cell is finite; a restore
 //! also checks the geometry and channels against the configuration (`Checkpoint::check_against`).
 
-use std::fs::File;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::deposit::REJECT_REASONS;
@@ -108,6 +107,9 @@ pub enum CheckpointError {
         /// The operating system's error.
         source: std::io::Error,
     },
+    /// Writing the file failed, or its path names something other than a regular file.
+    #[error("checkpoint {0}")]
+    Output(#[from] crate::outfile::OutputError),
     /// The file's bytes are not a valid checkpoint.
     #[error("checkpoint '{path}' is refused: {source}")]
     Format {
@@ -368,14 +370,8 @@ fn finite_cells(raw: &[u8]) -> Result<Vec<f32>, FormatError> {
     Ok(cells)
 }
 
-/// `FILE.tmp` beside `FILE`.
-fn temporary_path(path: &Path) -> PathBuf {
-    let mut name = path.file_name().unwrap_or_default().to_os_string();
-    name.push(".tmp");
-    path.with_file_name(name)
-}
-
-/// Writes a checkpoint atomically: `FILE.tmp`, fsync, rename over `FILE`, fsync the directory.
+/// Writes a checkpoint atomically ([`crate::outfile::OutFile`]: a temporary file beside `FILE`,
+/// fsync, rename over `FILE`, fsync the directory); `FILE` must be a regular file or a new path.
 /// Returns the bytes written.
 pub fn write_atomic(
     path: &Path,
@@ -383,28 +379,10 @@ pub fn write_atomic(
     config: &FieldConfig,
     cells: &[f32],
 ) -> Result<u64, CheckpointError> {
-    let io = |action: &'static str| {
-        move |source| CheckpointError::Io {
-            path: path.to_path_buf(),
-            action,
-            source,
-        }
-    };
-    let bytes = encode(header, config, cells);
-    let tmp = temporary_path(path);
-    let mut f = File::create(&tmp).map_err(io("create the temporary file"))?;
-    f.write_all(&bytes).map_err(io("write"))?;
-    f.sync_all().map_err(io("fsync"))?;
-    drop(f);
-    std::fs::rename(&tmp, path).map_err(io("rename the temporary file"))?;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    File::open(dir)
-        .and_then(|d| d.sync_all())
-        .map_err(io("fsync the directory"))?;
-    Ok(bytes.len() as u64)
+    Ok(crate::outfile::write_file(
+        path,
+        &encode(header, config, cells),
+    )?)
 }
 
 /// Reads and checks a checkpoint file.
@@ -606,7 +584,11 @@ mod tests {
         std::fs::write(&path, b"old").unwrap();
         let n = write_atomic(&path, &header, &config, &cells).unwrap();
         assert_eq!(n, std::fs::metadata(&path).unwrap().len());
-        assert!(!temporary_path(&path).exists());
+        assert_eq!(
+            std::fs::read_dir(&dir).unwrap().count(),
+            1,
+            "a temporary file is left"
+        );
         assert_eq!(read(&path).unwrap().cells, cells);
         std::fs::write(&path, b"PHRMCKPT").unwrap();
         let e = read(&path).unwrap_err().to_string();

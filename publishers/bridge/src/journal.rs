@@ -6,8 +6,13 @@
 //! killed after handing a batch to the field and before its answer reached the mirror left no
 //! trace of it, and its successor applied the resent batch a second time.
 //!
-//! The file is `<temp>/pheromone/bridge-batches/<iceoryx2 prefix><field>` (one per field and
-//! iceoryx2 domain, shared by the bridges of that field), a sequence of 32-byte little-endian
+//! The file is `$TMPDIR/pheromone-<uid>/bridge-batches/<iceoryx2 prefix><field>` (one per user,
+//! field and iceoryx2 domain, shared by the bridges of that field). Both directories are
+//! private (`pheromone_field::outfile::private_dir`: mode 0700, owned by the user, checked when
+//! they exist), the file is never followed through a symbolic link and is rewritten through a
+//! temporary file beside it (`outfile::write_file`), so another user can neither plant a link
+//! that makes a bridge truncate someone else's file nor read or edit the record. It is a sequence
+//! of 32-byte little-endian
 //! records `[mirror u64][batch u64][kind u32][forwarded u32][refused u32][0 u32]`:
 //! - kind 0, *handing*: written before the first deposit of the batch goes to the field;
 //! - kind 1, *handed*: written after the last, with the answer;
@@ -21,9 +26,11 @@
 //! for its successor. Two bridges of one field in one domain share the file, and the first to
 //! stop removes it: run one bridge per field and host.
 
-use std::fs::{File, OpenOptions};
+use std::fs::File;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
+
+use pheromone_field::outfile;
 
 use crate::batches::{Known, Seen};
 
@@ -105,33 +112,34 @@ pub fn path_for(prefix: &str, field: &str) -> PathBuf {
             _ => format!("%{c:02X}"),
         })
         .collect();
-    std::env::temp_dir()
-        .join("pheromone")
+    pheromone_field::outfile::user_state_base()
         .join("bridge-batches")
         .join(escaped)
 }
 
 impl Journal {
     /// Opens (creating) the file at `path`, loads what it holds into `seen` and rewrites it
-    /// compacted.
+    /// compacted. The file's directory and the one above it are made private (or refused when
+    /// they are not: another user's, open to others, a symbolic link); the file must be a
+    /// regular file or missing.
     pub fn open(path: &Path, seen: &mut Seen) -> std::io::Result<(Self, Recovered)> {
-        if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir)?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        if let Some(base) = dir.parent().filter(|b| !b.as_os_str().is_empty()) {
+            outfile::private_dir(base).map_err(std::io::Error::other)?;
         }
+        outfile::private_dir(dir).map_err(std::io::Error::other)?;
         let mut bytes = Vec::new();
-        match File::open(path) {
-            Ok(mut f) => {
-                f.read_to_end(&mut bytes)?;
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(e),
+        if outfile::check_destination(path).map_err(std::io::Error::other)? {
+            outfile::open_private_read(path)
+                .map_err(std::io::Error::other)?
+                .read_to_end(&mut bytes)?;
         }
         // A record cut short by the crash is dropped (its batch is then not known).
         let records = bytes.chunks_exact(RECORD_BYTES).map(Record::parse);
         let recovered = load(records, seen);
         let mut j = Self {
             path: path.to_path_buf(),
-            file: File::create(path)?,
+            file: outfile::open_private_append(path).map_err(std::io::Error::other)?,
             appended: 0,
         };
         j.compact(seen)?;
@@ -176,9 +184,6 @@ impl Journal {
 
     /// Rewrites the file with what `seen` holds (a temporary file renamed over it).
     fn compact(&mut self, seen: &Seen) -> std::io::Result<()> {
-        let tmp = self
-            .path
-            .with_extension(format!("tmp{}", std::process::id()));
         let mut out = Vec::new();
         for k in seen.known() {
             let r = match k {
@@ -187,9 +192,8 @@ impl Journal {
             };
             out.extend_from_slice(&r.bytes());
         }
-        std::fs::write(&tmp, &out)?;
-        std::fs::rename(&tmp, &self.path)?;
-        self.file = OpenOptions::new().append(true).open(&self.path)?;
+        outfile::write_file(&self.path, &out).map_err(std::io::Error::other)?;
+        self.file = outfile::open_private_append(&self.path).map_err(std::io::Error::other)?;
         self.appended = 0;
         Ok(())
     }
@@ -235,11 +239,46 @@ fn load(records: impl Iterator<Item = Record>, seen: &mut Seen) -> Recovered {
 mod tests {
     use super::*;
 
+    /// `<temp>/pheromone-journal-test-<pid>-<name>/j/journal`: its directories private, as the
+    /// journal wants them (the test removes the top one, [`base_of`]).
     fn temp(name: &str) -> PathBuf {
-        std::env::temp_dir().join(format!(
-            "pheromone-journal-test-{}-{name}",
-            std::process::id()
-        ))
+        std::env::temp_dir()
+            .join(format!(
+                "pheromone-journal-test-{}-{name}",
+                std::process::id()
+            ))
+            .join("j")
+            .join("journal")
+    }
+
+    fn base_of(path: &Path) -> &Path {
+        path.parent().and_then(Path::parent).unwrap()
+    }
+
+    #[test]
+    fn a_planted_symlink_or_a_directory_open_to_others_is_refused_and_nothing_is_truncated() {
+        use std::os::unix::fs::PermissionsExt;
+        let path = temp("planted");
+        let dir = path.parent().unwrap();
+        // A first bridge makes the directories; the link is planted after it stopped.
+        drop(Journal::open(&path, &mut Seen::default()).unwrap());
+        let victim = dir.parent().unwrap().join("victim");
+        std::fs::write(&victim, b"someone else's file").unwrap();
+        std::os::unix::fs::symlink(&victim, &path).unwrap();
+        let e = Journal::open(&path, &mut Seen::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("symbolic link") && e.contains("journal"), "{e}");
+        assert_eq!(std::fs::read(&victim).unwrap(), b"someone else's file");
+        std::fs::remove_file(&path).unwrap();
+        // The journal's directory opened to every user: refused, naming its mode.
+        std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o777)).unwrap();
+        let e = Journal::open(&path, &mut Seen::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("mode 777"), "{e}");
+        assert!(!path.exists());
+        std::fs::remove_dir_all(base_of(&path)).unwrap();
     }
 
     #[test]
@@ -282,6 +321,7 @@ mod tests {
         assert_eq!(third.earlier(7, 5), Some((0, 0)));
         drop(j);
         assert!(!path.exists(), "removed on a clean stop");
+        std::fs::remove_dir_all(base_of(&path)).unwrap();
     }
 
     #[test]
@@ -289,6 +329,8 @@ mod tests {
         let path = temp("cut");
         let mut bytes = Record::new(HANDED, 1, 1, (5, 0)).bytes().to_vec();
         bytes.extend_from_slice(&[1, 2, 3]);
+        outfile::private_dir(path.parent().unwrap().parent().unwrap()).unwrap();
+        outfile::private_dir(path.parent().unwrap()).unwrap();
         std::fs::write(&path, bytes).unwrap();
         let mut seen = Seen::default();
         let (j, r) = Journal::open(&path, &mut seen).unwrap();
@@ -297,5 +339,6 @@ mod tests {
         drop(j);
         let p = path_for("lab_iox2_", "a/b c");
         assert_eq!(p.file_name().unwrap(), "lab_iox2_a%2Fb%20c");
+        std::fs::remove_dir_all(base_of(&path)).unwrap();
     }
 }

@@ -2,19 +2,19 @@
 //! picture as an 8-bit RGB PNG.
 
 use std::fmt::Write as _;
-use std::fs::{self, File};
-use std::io::{BufWriter, Write as _};
 use std::path::Path;
+
+use pheromone_field::outfile::OutFile;
 
 use super::style::Picture;
 use super::{ReportError, ROBOT_CSV_HEADER};
 use pheromone_sim::recording::RobotSample;
 
+/// Writes the whole file through [`pheromone_field::outfile`]: a regular file or a new path only,
+/// never a half-written file under its name.
 pub(super) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
-    fs::write(path, bytes).map_err(|source| ReportError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    pheromone_field::outfile::write_file(path, bytes)?;
+    Ok(())
 }
 
 pub(super) fn robot_csv(rows: &[RobotSample]) -> String {
@@ -53,11 +53,7 @@ pub(super) fn write_png(path: &Path, pic: &Picture) -> Result<(), ReportError> {
         path: path.to_path_buf(),
         source,
     };
-    let file = File::create(path).map_err(|source| ReportError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let mut out = BufWriter::new(file);
+    let mut out = OutFile::create(path)?;
     {
         let mut encoder = png::Encoder::new(&mut out, pic.width, pic.height);
         encoder.set_color(png::ColorType::Rgb);
@@ -67,8 +63,6 @@ pub(super) fn write_png(path: &Path, pic: &Picture) -> Result<(), ReportError> {
         writer.write_image_data(&pic.rgb).map_err(png_err)?;
         writer.finish().map_err(png_err)?;
     }
-    out.flush().map_err(|source| ReportError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    out.commit()?;
+    Ok(())
 }

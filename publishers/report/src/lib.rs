@@ -34,6 +34,7 @@ pub mod probe;
 pub mod series;
 mod style;
 mod sweep;
+mod sweep_shard;
 
 use std::fmt::Write as _;
 use std::fs;
@@ -50,6 +51,7 @@ pub use graph_png::write_graph_png;
 pub use marks::{marks, Mark, Shape};
 pub use plots::{PLOT_H_PX, PLOT_W_PX};
 pub use sweep::{paper_table, rc_values, sweep_csv, write_sweep, SWEEP_CSV_HEADER};
+pub use sweep_shard::{parse_sweep_csv, read_shard, write_shard, ShardFileError};
 
 /// Writing the outputs of a run failed.
 #[derive(Debug, thiserror::Error)]
@@ -84,6 +86,9 @@ pub enum ReportError {
     /// Writing `field_final.npy` failed.
     #[error(transparent)]
     Export(#[from] crate::export::ExportError),
+    /// Writing a file failed, or its path names something other than a regular file.
+    #[error(transparent)]
+    Output(#[from] pheromone_field::outfile::OutputError),
 }
 
 /// Header of `robot_<id>.csv`.

@@ -7,19 +7,14 @@ pub mod live;
 pub mod npy;
 pub mod ros_map;
 
-use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Writing an export failed.
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
-    /// Creating or writing the file failed.
-    #[error("{}: {source}", path.display())]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    /// Writing the file failed, or its path names something other than a regular file.
+    #[error(transparent)]
+    Output(#[from] pheromone_field::outfile::OutputError),
     /// The cells do not fill the announced shape.
     #[error("{} values for {channels} × {height} × {width} cells", len)]
     Shape {
@@ -33,18 +28,10 @@ pub enum ExportError {
     Scale { min: f32, max: f32 },
 }
 
-/// Writes `bytes` to `path.tmp` and renames it to `path`: a reader never sees half a file.
+/// Writes `bytes` to a temporary file beside `path` and renames it over `path`
+/// ([`pheromone_field::outfile`]): a reader never sees half a file, and a path naming anything
+/// but a regular file is refused.
 pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
-    let io = |source| ExportError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    let mut f = std::fs::File::create(&tmp).map_err(io)?;
-    f.write_all(bytes).map_err(io)?;
-    f.sync_all().map_err(io)?;
-    drop(f);
-    std::fs::rename(&tmp, path).map_err(io)
+    pheromone_field::outfile::write_file(path, bytes)?;
+    Ok(())
 }
