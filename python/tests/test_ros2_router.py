@@ -22,6 +22,7 @@ import signal
 import struct
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -35,6 +36,7 @@ REQUIRED = os.environ.get("PHEROMONE_REQUIRE_ZENOH") == "1"
 
 try:
     import zenoh
+    import zenoh.ext
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 except ImportError as e:
     if REQUIRED:
@@ -137,8 +139,9 @@ class Node:
     def __init__(self, tmp_path, field, args, env=None):
         self.err_path = tmp_path / "ros2.stderr"
         self.err = open(self.err_path, "wb")
+        rate = [] if "--rate-hz" in args else ["--rate-hz", "20"]
         self.proc = subprocess.Popen(
-            [str(BIN), "ros2", "--field", field, "--json", "--rate-hz", "20", *args],
+            [str(BIN), "ros2", "--field", field, "--json", *rate, *args],
             stdout=subprocess.PIPE, stderr=self.err, env={**os.environ, **(env or {})})
         STARTED_PIDS.add(self.proc.pid)
 
@@ -315,3 +318,56 @@ def test_zenoh_session_config_uri_configures_the_node_as_it_does_an_rmw_zenoh_no
                            env={**os.environ, **env})
         assert p.returncode == 2, p.stderr
         assert named in p.stderr, p.stderr
+
+
+def test_a_late_ros_peer_behind_the_router_gets_the_newest_map(router, start_field, start_node,
+                                                                store, tmp_path):
+    """A map every 4 s; a ROS peer subscribes volatile and sees each as it comes; right after
+    one, another ROS peer (a new session, as a node started later) subscribes as rmw_zenoh_cpp's
+    transient-local subscription does (rmw_subscription_data.cpp: zenoh-ext advanced
+    subscriber, history with late-publisher detection, max_samples 1, heartbeat recovery,
+    subscriber detection): through the router it gets that map from the node's cache, before
+    the next one is published. The latency is printed, not asserted."""
+    f = _field_with_deposit(start_field, tmp_path, "lj")
+    node = start_node(f.name, "--connect", router.endpoint, "--rate-hz", "0.25")
+    key = f"0/pheromone/grid_map/{dds(GRID)}/{store.hash_rihs01(GRID)}"
+    early_peer, late_peer = ros_peer(router.endpoint), ros_peer(router.endpoint)
+    early, late = [], []
+    joined = threading.Event()
+
+    def on_late(s):
+        late.append((time.monotonic(), s))
+        joined.set()
+
+    try:
+        _tokens(early_peer, 3)
+        sub = early_peer.declare_subscriber(key, early.append)
+        for _ in deadline_loop(20, "a map through the router"):
+            if early:
+                break
+            time.sleep(0.01)
+        count = len(early)
+        for _ in deadline_loop(20, "the next map through the router"):
+            if len(early) > count:
+                break
+            time.sleep(0.005)
+        newest = early[-1]
+        t0 = time.monotonic()
+        adv = zenoh.ext.declare_advanced_subscriber(
+            late_peer, key, on_late,
+            history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=1),
+            recovery=zenoh.ext.RecoveryConfig(heartbeat=True), subscriber_detection=True)
+        assert joined.wait(15), "the late ROS peer got no map"
+        t1, first = late[0]
+        meanwhile = len(early) - (count + 1)
+        adv.undeclare()
+        sub.undeclare()
+    finally:
+        early_peer.close()
+        late_peer.close()
+    print(f"\nrouter eclipse-zenoh {router.version}: the late peer got the newest map "
+          f"{(t1 - t0) * 1e3:.1f} ms after subscribing")
+    assert meanwhile == 0, "a map was published before the late peer got one"
+    assert bytes(first.payload.to_bytes()) == bytes(newest.payload.to_bytes())
+    assert bytes(first.attachment.to_bytes()) == bytes(newest.attachment.to_bytes())
+    node.stop()

@@ -231,8 +231,8 @@ pub struct Ros2Node {
     period: Duration,
     /// When the next frame is due (`None`: the first frame is).
     next_publish: Option<Instant>,
-    /// While nobody subscribes: when the maps' cache is refreshed next (`None`: now).
-    next_cache: Option<Instant>,
+    /// While nobody subscribes: when the maps' cache is refreshed.
+    cache: CacheRefresh,
     /// Frame-to-publish latencies (µs), one per published frame.
     pub latencies_us: Vec<u32>,
     pub stats: Ros2Stats,
@@ -330,6 +330,7 @@ impl Ros2Node {
             )?);
         }
         let period = Duration::from_secs_f64(1.0 / o.rate_hz);
+        let o_cache_rate_hz = o.cache_rate_hz;
         let next_entity = next_id + subscriptions.len() as u32;
         let world = o.world.as_ref().map(WorldBridge::new);
         Ok(Self {
@@ -348,7 +349,7 @@ impl Ros2Node {
             world,
             period,
             next_publish: None,
-            next_cache: None,
+            cache: CacheRefresh::new(o_cache_rate_hz),
             latencies_us: Vec::new(),
             stats: Ros2Stats::default(),
         })
@@ -494,20 +495,9 @@ impl Ros2Node {
         Ok(())
     }
 
-    /// While nobody subscribes, whether the maps' cache is due for a fresh frame (and if so,
-    /// when the next one is).
-    fn cache_due(&mut self) -> bool {
-        if self.o.cache_rate_hz <= 0.0 || self.next_cache.is_some_and(|t| Instant::now() < t) {
-            return false;
-        }
-        let period = Duration::from_secs_f64(1.0 / self.o.cache_rate_hz);
-        self.next_cache = Some(Instant::now() + period);
-        true
-    }
-
     fn publish_frame(&mut self) -> Result<(), Ros2Error> {
         let matched = self.publishers.iter().any(RosPublisher::matched);
-        if !matched && !self.cache_due() {
+        if !matched && !self.cache.due(Instant::now()) {
             // Nobody listens and the cache is fresh enough: the frame is not serialized (the
             // schedule goes on).
             self.schedule_next();
@@ -581,6 +571,35 @@ impl Ros2Node {
             d.flush(Duration::from_secs(1));
         }
         let _ = self.session.close().wait();
+    }
+}
+
+/// While nobody subscribes, when the maps' transient-local cache gets a fresh frame: at most once
+/// a period (`--cache-rate-hz`; never for 0), the first one at once.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct CacheRefresh {
+    period: Option<Duration>,
+    next: Option<Instant>,
+}
+
+impl CacheRefresh {
+    fn new(rate_hz: f64) -> Self {
+        Self {
+            period: (rate_hz > 0.0).then(|| Duration::from_secs_f64(1.0 / rate_hz)),
+            next: None,
+        }
+    }
+
+    /// Whether a frame due at `now` goes into the cache (and if so, when the next one may).
+    fn due(&mut self, now: Instant) -> bool {
+        let Some(period) = self.period else {
+            return false;
+        };
+        if self.next.is_some_and(|t| now < t) {
+            return false;
+        }
+        self.next = Some(now + period);
+        true
     }
 }
 
@@ -758,5 +777,25 @@ fn handle_pose(
                 .entry(e.reason().name().to_string())
                 .or_default() += 1;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cache_is_refreshed_at_most_once_a_period_and_never_at_rate_zero() {
+        let t0 = Instant::now();
+        let ms = Duration::from_millis;
+        let mut c = CacheRefresh::new(2.0);
+        // Frames due every 100 ms for 1.2 s: the first, then one every 500 ms.
+        let cached: Vec<u64> = (0..12)
+            .filter(|&i| c.due(t0 + ms(100 * i)))
+            .map(|i| 100 * i)
+            .collect();
+        assert_eq!(cached, [0, 500, 1000]);
+        let mut never = CacheRefresh::new(0.0);
+        assert!(!(0..10).any(|i| never.due(t0 + ms(1000 * i))));
     }
 }
