@@ -168,6 +168,8 @@ fn main() -> ExitCode {
             eprintln!("error: {}", cmd::one_line(&e));
             if e.downcast_ref::<cmd::BadInput>().is_some() {
                 ExitCode::from(2)
+            } else if e.downcast_ref::<cmd::deposit::NotTaken>().is_some() {
+                ExitCode::from(3)
             } else {
                 ExitCode::from(1)
             }

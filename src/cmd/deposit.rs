@@ -19,7 +19,10 @@ use super::{bad, seconds, seconds_or_zero};
 /// frame), exits 2 naming the value when the field refuses it (NaN, a covariance that is not
 /// positive semi-definite, a channel the field lacks, outside the grid…), and exits 1 when no
 /// receipt came within --receipt-timeout (the deposit may then still be applied, once: at most
-/// once). --no-wait sends it without a receipt, as a loop would.
+/// once). --no-wait sends it without a receipt, as a loop would, and waits (at most
+/// --receipt-timeout) only until the field has taken it from its queue: exit 0 once taken, exit 3
+/// "queued, not confirmed" when the field did not take it in time (a stopped or very slow
+/// field; the deposit may be lost when the command exits).
 #[derive(Args, Debug)]
 pub struct DepositArgs {
     /// Field name.
@@ -68,7 +71,9 @@ pub struct DepositArgs {
     /// slower than one tick a minute needs more).
     #[arg(long, value_parser = super::secs(), default_value_t = 60.0)]
     pub receipt_timeout: f64,
-    /// Send without waiting for a receipt (no confirmation that the field applied it).
+    /// Send without waiting for a receipt: wait only until the field has taken the deposit from
+    /// its queue (no confirmation that it applied it); exit status 3 if it did not within
+    /// --receipt-timeout.
     #[arg(long)]
     pub no_wait: bool,
 }
@@ -131,15 +136,7 @@ pub fn run_deposit(a: DepositArgs) -> anyhow::Result<()> {
     let msg = a.msg()?;
     let node = create_node(&format!("deposit-{}", std::process::id()))?;
     if a.no_wait {
-        let mut publisher =
-            DepositPublisher::attach_within(&node, &a.field, a.robot, attach_timeout)?;
-        publisher.send(msg)?;
-        eprintln!(
-            "deposit sent to field '{}' (not confirmed: --no-wait): {}",
-            a.field,
-            a.what()
-        );
-        return Ok(());
+        return send_unconfirmed(&node, &a, msg, attach_timeout, receipt_timeout);
     }
     let mut client = DepositClient::attach_within(&node, &a.field, a.robot, attach_timeout)?;
     // Subscribed before sending: the field hands its configuration over with the frame that
@@ -172,6 +169,52 @@ pub fn run_deposit(a: DepositArgs) -> anyhow::Result<()> {
             a.field
         )),
     }
+}
+
+/// `--no-wait`'s end when the field did not take the deposit from its queue in time: exit
+/// status 3 ("queued, not confirmed").
+#[derive(Debug)]
+pub struct NotTaken(pub String);
+
+impl std::fmt::Display for NotTaken {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for NotTaken {}
+
+/// `--no-wait`: sends on publish-subscribe and waits (at most `timeout`) for the field to take
+/// the deposit from its queue (a flush), since a deposit still queued when this process exits
+/// is lost with its ports.
+fn send_unconfirmed(
+    node: &Node<Svc>,
+    a: &DepositArgs,
+    msg: DepositMsg,
+    attach_timeout: Duration,
+    timeout: Duration,
+) -> anyhow::Result<()> {
+    let mut publisher = DepositPublisher::attach_within(node, &a.field, a.robot, attach_timeout)?;
+    publisher.send(msg)?;
+    if publisher.flush(timeout) {
+        eprintln!(
+            "deposit taken by field '{}' from its queue (not confirmed: --no-wait): {}",
+            a.field,
+            a.what()
+        );
+        return Ok(());
+    }
+    // Already waited: dropping the publisher does not wait again.
+    publisher.flush_timeout = Duration::ZERO;
+    Err(NotTaken(format!(
+        "deposit queued for field '{}', not confirmed: the field did not take it within \
+         --receipt-timeout {} s (stopped or slower than that?); it may be lost now that this \
+         command exits: {}",
+        a.field,
+        a.receipt_timeout,
+        a.what()
+    ))
+    .into())
 }
 
 /// Why the field refused `msg`, naming the value: the field's own check with its configuration,

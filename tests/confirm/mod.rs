@@ -170,3 +170,45 @@ fn a_sender_killed_while_it_waits_for_its_receipt_is_applied_at_most_once() {
     eprintln!("{applied} of {kills} killed senders' deposits applied");
     assert!(applied <= kills as u64, "applied twice: {summary}");
 }
+
+#[test]
+fn no_wait_to_a_field_slower_than_1_hz_waits_until_taken_and_a_stopped_field_exits_3() {
+    use nix::sys::signal::{kill, Signal};
+    use nix::unistd::Pid;
+    // One tick every 2.5 s: each deposit waits longer in the queue than the publisher's own
+    // 1 s flush on drop, which lost every one of them (issue 54 item 3).
+    let name = unique("nowait-slow");
+    let f = field(&name, 0.4);
+    let no_wait = || {
+        Cmd::deposit(&name)
+            .at(2, 2)
+            .amount(1)
+            .arg("--no-wait")
+            .timeout(30)
+    };
+    for _ in 0..2 {
+        let o = run(&no_wait().argv());
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains("taken by field"), "{}", stderr(&o));
+    }
+    eventually(Duration::from_secs(30), "both deposits applied", || {
+        (counters(&name)["deposits_applied"] == 2).then_some(())
+    });
+    // A stopped field takes nothing: "queued, not confirmed", exit 3.
+    let pid = Pid::from_raw(f.pid() as i32);
+    kill(pid, Signal::SIGSTOP).unwrap();
+    let o = run(&no_wait().opt("--receipt-timeout", 1).argv());
+    kill(pid, Signal::SIGCONT).unwrap();
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("queued") && stderr(&o).contains("not confirmed"),
+        "{}",
+        stderr(&o)
+    );
+    f.interrupt();
+    let summary = json(&f.wait_exit(Duration::from_secs(20)));
+    assert!(
+        summary["deposits_applied"].as_u64().unwrap() >= 2,
+        "{summary}"
+    );
+}
