@@ -8,8 +8,9 @@ use pheromone_roles::follower::StrategyKind;
 use pheromone_roles::mapper::MergeRule;
 use pheromone_sim::sweep::{
     integrations, parse_merge_idle, parse_merge_rules, parse_rc_m, parse_robots, parse_steer,
-    parse_strategies, run_sweep, Figure, SweepGrid, SweepResult,
+    parse_strategies, run_sweep_shard, Figure, Shard, SweepGrid, SweepResult,
 };
+use pheromone_sim::sweep_shard::{sweep_id, ShardRecord};
 use pheromone_world::scenario::Scenario;
 
 use super::roles::load_scenario;
@@ -20,7 +21,7 @@ use super::{bad, bad_from};
 /// Every combination of --robots × --rc-m × merge {on, off} × --strategies × --steer runs
 /// --trials times (seeds 1..=T), each run the single-process simulation of the scenario
 /// (deterministic for a seed) with mapping on. Runs go to --jobs worker threads from one queue,
-/// the largest first. Per run it records `exploration_known` (sectors mapped by the robot's
+/// the largest first (`--shard K/N`: only the K-th of N slices, see below). Per run it records `exploration_known` (sectors mapped by the robot's
 /// sensor or merged into its map), `exploration_merged` (visited or received through a merge:
 /// the paper's count) and `exploration` (visited), team and mean per robot; per point the mean
 /// ± sd of each over the trials; at equal points it compares merge on vs off and inverse vs
@@ -41,13 +42,24 @@ use super::{bad, bad_from};
 /// --steer own-map,shared --figure merged` (30 m × 20 m, no inner walls, random starts in the
 /// top-left 5 m × 5 m, 1000 iterations, 10 seeds).
 ///
+/// On a cluster: `--shard K/N` runs every N-th run of the plan from the K-th (K from 0 to N-1;
+/// every run is in exactly one shard) and writes the shard's sweep.csv rows and shard.json
+/// (which shard of which sweep: a hash of the scenario and every flag but --shard, --jobs and
+/// --out) into --out [default: pheromone-out/sweep-<SCENARIO>-shard-K-of-N]; then `pheromone
+/// sweep merge DIR… --out DIR` writes the files of the unsharded sweep from one directory per
+/// shard. A Slurm array: `sbatch --array=0-3` with `--shard $SLURM_ARRAY_TASK_ID/4`; a Kubernetes
+/// Indexed Job: `--shard $JOB_COMPLETION_INDEX/4` (examples/slurm/, docs/mapping.md).
+///
 /// Time (measured on a 2-core machine, release build): one 1000 s run takes 0.4 s (1 robot) to
 /// 3.4 s (8 robots), so the default sweep (robots 1,2,4,6,8 × merge on/off × 10 trials = 100
 /// runs of the paper's 1000 iterations) takes about a minute and a half on 2 cores; R_C and
 /// strategy lists multiply it. Without merging R_C changes nothing: those points run once, at
 /// the first R_C.
 #[derive(Args, Debug)]
+#[command(args_conflicts_with_subcommands = true)]
 pub struct SweepArgs {
+    #[command(subcommand)]
+    pub command: Option<SweepCommand>,
     /// Scenario: a built-in name or a TOML file; it needs [metrics.exploration] (ias-ss).
     #[arg(default_value = "ias-ss")]
     pub scenario: String,
@@ -111,6 +123,43 @@ pub struct SweepArgs {
     /// Directory for the files [default: pheromone-out/sweep-<SCENARIO>].
     #[arg(long, value_name = "DIR", value_parser = super::check::out_dir())]
     pub out: Option<PathBuf>,
+    /// Run only the K-th of N slices of the sweep's runs (every N-th run of the plan from the
+    /// K-th; K from 0 to N-1, as $SLURM_ARRAY_TASK_ID with `sbatch --array=0-(N-1)` or
+    /// $JOB_COMPLETION_INDEX in a Kubernetes Indexed Job) and write sweep.csv and shard.json
+    /// for `pheromone sweep merge`.
+    #[arg(long, value_name = "K/N", value_parser = parse_shard)]
+    pub shard: Option<Shard>,
+    /// Print sweep.json on stdout as well (with --shard: shard.json).
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_shard(s: &str) -> Result<Shard, String> {
+    s.parse()
+}
+
+#[derive(clap::Subcommand, Debug)]
+pub enum SweepCommand {
+    Merge(MergeArgs),
+}
+
+/// Join the shards of one sweep (`pheromone sweep … --shard K/N`) into the files the unsharded
+/// sweep writes: sweep.csv (the same rows in the same order: the shards' rows byte for byte),
+/// sweep.json, sweep_paper.md and the charts.
+///
+/// Give one directory per shard, every K from 0 to N-1 once. A missing shard, a shard given
+/// twice (the same directory twice, or a re-run shard in a second directory beside the first:
+/// re-run a shard into its own directory, which it replaces) or shards of different sweeps (another
+/// scenario, another flag) exit with status 2 naming them. In sweep.json, `jobs` is the sum
+/// of the shards' threads and `wall_s` the longest shard's; each row's wall_s is its run's own.
+#[derive(Args, Debug)]
+pub struct MergeArgs {
+    /// The shards' --out directories.
+    #[arg(required = true, value_name = "DIR")]
+    pub dirs: Vec<PathBuf>,
+    /// Directory for the sweep's files.
+    #[arg(long, value_name = "DIR", value_parser = super::check::out_dir())]
+    pub out: PathBuf,
     /// Print sweep.json on stdout as well.
     #[arg(long)]
     pub json: bool,
@@ -178,6 +227,9 @@ fn with_integration(
 }
 
 pub fn run(a: SweepArgs) -> anyhow::Result<()> {
+    if let Some(SweepCommand::Merge(m)) = a.command {
+        return merge(m);
+    }
     let (grid, rules, idle) = grid(&a)?;
     let base = load_scenario(&a.scenario)?;
     let grid = with_integration(grid, &base, (&rules, &idle));
@@ -186,37 +238,100 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
         Some(n) => n,
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
-    let runs = pheromone_sim::sweep::plan(&base, &grid)
+    let total = pheromone_sim::sweep::plan(&base, &grid)
         .map_err(bad_from)?
         .len();
+    let shard = a.shard.unwrap_or(Shard::WHOLE);
+    let runs = shard.indices(total).len();
+    let of = a
+        .shard
+        .map_or(String::new(), |k| format!(" (shard {k} of {total} runs)"));
     eprintln!(
-        "sweep '{}': {runs} run(s) of {} s on {jobs} thread(s)",
+        "sweep '{}': {runs} run(s){of} of {} s on {jobs} thread(s)",
         base.name, grid.duration_s
     );
+    let result = with_bar(runs, &|progress| {
+        run_sweep_shard(&base, &grid, shard, jobs, progress)
+    })?;
+    let Some(shard) = a.shard else {
+        print_summary(&result);
+        let dir = a.out.clone().unwrap_or_else(|| default_out(&base.name, ""));
+        return write_outputs(&dir, &result, a.json);
+    };
+    let record = ShardRecord::new(sweep_id(&base, &grid), shard, total, &result);
+    let suffix = format!("-shard-{}-of-{}", shard.index, shard.count);
+    let dir = a
+        .out
+        .clone()
+        .unwrap_or_else(|| default_out(&base.name, &suffix));
+    let files = pheromone_report::write_shard(&dir, &result, &record)?;
+    eprintln!(
+        "shard {shard} of sweep {} done: {} run(s) in {:.1} s; wrote {} file(s) to {}",
+        record.sweep,
+        result.runs.len(),
+        result.wall_s,
+        files.len(),
+        dir.display()
+    );
+    if a.json {
+        println!("{}", serde_json::to_string(&record)?);
+    }
+    Ok(())
+}
+
+fn default_out(scenario: &str, suffix: &str) -> PathBuf {
+    PathBuf::from("pheromone-out").join(format!("sweep-{scenario}{suffix}"))
+}
+
+/// `run` with a progress bar of `runs` runs (drawn on a terminal only).
+fn with_bar(
+    runs: usize,
+    run: &dyn Fn(
+        &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<SweepResult, pheromone_sim::sweep::SweepError>,
+) -> anyhow::Result<SweepResult> {
     let bar = indicatif::ProgressBar::new(runs as u64);
     if let Ok(style) =
         indicatif::ProgressStyle::with_template("{spinner} [{bar:40}] {pos}/{len} runs ({eta})")
     {
         bar.set_style(style.progress_chars("=> "));
     }
-    let result = run_sweep(&base, &grid, jobs, &|done, _| bar.set_position(done as u64))?;
+    let result = run(&|done, _| bar.set_position(done as u64))?;
     bar.finish_and_clear();
-    print_summary(&result);
-    let dir = a
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("pheromone-out").join(format!("sweep-{}", base.name)));
+    Ok(result)
+}
+
+/// The sweep's files (`pheromone_report::write_sweep`) and what they say on stderr.
+fn write_outputs(dir: &std::path::Path, result: &SweepResult, json: bool) -> anyhow::Result<()> {
     let paper = pheromone_sim::paper::seed004()?;
-    eprint!("{}", pheromone_report::paper_table(&result, &paper));
-    let files = pheromone_report::write_sweep(&dir, &result, &paper)?;
+    eprint!("{}", pheromone_report::paper_table(result, &paper));
+    let files = pheromone_report::write_sweep(dir, result, &paper)?;
     eprintln!("wrote {} file(s) to {}", files.len(), dir.display());
-    if let [rc_m] = pheromone_report::rc_values(&result)[..] {
+    if let [rc_m] = pheromone_report::rc_values(result)[..] {
         eprintln!("no sweep_rc.png: the sweep has one R_C ({rc_m} m); give --rc-m two or more");
     }
-    if a.json {
-        println!("{}", serde_json::to_string(&result)?);
+    if json {
+        println!("{}", serde_json::to_string(result)?);
     }
     Ok(())
+}
+
+/// `pheromone sweep merge`: the shards read back, checked and joined.
+fn merge(m: MergeArgs) -> anyhow::Result<()> {
+    let shards = m
+        .dirs
+        .iter()
+        .map(|d| pheromone_report::read_shard(d).map_err(bad_from))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let (sweep, count) = (shards[0].record.sweep.clone(), shards[0].record.shard.count);
+    let result = pheromone_sim::sweep_shard::merge(shards).map_err(bad_from)?;
+    eprintln!(
+        "merged {count} shard(s) of sweep {sweep}: {} run(s) of '{}'",
+        result.runs.len(),
+        result.scenario
+    );
+    print_summary(&result);
+    write_outputs(&m.out, &result, m.json)
 }
 
 fn print_summary(r: &SweepResult) {
