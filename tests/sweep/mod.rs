@@ -8,6 +8,8 @@ use std::path::Path;
 
 use crate::harness::*;
 
+mod shards;
+
 fn is_png(path: &Path) -> bool {
     let b = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     // Signature, then the IHDR chunk with a non-zero width and height.
