@@ -69,3 +69,8 @@ echo "== python: pytest python/tests"
 # libpheromone from C and C++ (cc, c++, pkg-config, CMake, valgrind) against live fields.
 echo "== libpheromone: C and C++ (libpheromone/tests/c_abi.sh)"
 bash libpheromone/tests/c_abi.sh
+
+# A sweep spread by a real scheduler (issue 52): a one-node Slurm (Debian's slurm-wlm, munge) on
+# private ports, an array of 4 shards and the dependent merge, equal to the unsharded sweep.
+echo "== sweep under Slurm (tests/slurm/slurm_sweep.sh)"
+bash tests/slurm/slurm_sweep.sh
