@@ -166,7 +166,7 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             eprintln!("error: {}", cmd::one_line(&e));
-            if e.downcast_ref::<cmd::BadInput>().is_some() {
+            if cmd::is_bad_input(&e) {
                 ExitCode::from(2)
             } else if e.downcast_ref::<cmd::deposit::NotTaken>().is_some() {
                 ExitCode::from(3)

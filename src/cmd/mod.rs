@@ -60,6 +60,24 @@ impl Error for BadInput {
     }
 }
 
+/// Whether `e` is bad input (exit status 2): a [`BadInput`], or a field, robot or domain name
+/// that breaks the naming rules, wherever it was found (an attach, a start).
+pub fn is_bad_input(e: &anyhow::Error) -> bool {
+    use pheromone_field::shm::{AttachError, NameError, StartError};
+    e.chain().any(|c| {
+        c.is::<BadInput>()
+            || matches!(c.downcast_ref(), Some(NameError::Invalid { .. }))
+            || matches!(
+                c.downcast_ref(),
+                Some(AttachError::Name(NameError::Invalid { .. }))
+            )
+            || matches!(
+                c.downcast_ref(),
+                Some(StartError::Name(NameError::Invalid { .. }))
+            )
+    })
+}
+
 /// A `BadInput` error with a message and no cause.
 pub fn bad(msg: impl Into<String>) -> anyhow::Error {
     anyhow::Error::new(BadInput {

@@ -31,6 +31,7 @@ fn follower_strategy(a: &SimArgs) -> anyhow::Result<Option<StrategyKind>> {
 }
 
 pub fn run(a: SimArgs) -> anyhow::Result<()> {
+    create_out_dir(&a)?;
     if super::graph::is_regions(&a.scenario) {
         if a.record.is_some() {
             return Err(bad(format!(
@@ -56,6 +57,16 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         return super::sim_filters::run(&a, &scenario);
     }
     run_scenario(&a, &scenario)
+}
+
+/// `--out DIR` is made before the run, so a directory that cannot be made (`/proc/x`, a file
+/// on the way) is bad input now rather than an error after the run.
+fn create_out_dir(a: &SimArgs) -> anyhow::Result<()> {
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| bad(format!("--out {}: cannot create it: {e}", dir.display())))?;
+    }
+    Ok(())
 }
 
 /// The scenario of `a` with its flags' overrides.

@@ -219,3 +219,37 @@ fn a_write_error_leaves_whole_files_or_none_and_no_temporary_file() {
     let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
     serde_json::from_str::<serde_json::Value>(&metrics).expect("metrics.json is whole");
 }
+
+#[test]
+fn an_out_dir_that_cannot_be_made_merge_without_peers_and_bad_field_names_exit_2_before_running() {
+    // /proc refuses new directories, even root's: refused before the run, not after it.
+    let o = run(&["sim", "trail", "--out", "/proc/nonexistent/x"]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(
+        e.contains("--out /proc/nonexistent/x") && !e.contains("done"),
+        "{e}"
+    );
+    // --merge in a world of one robot would merge nothing.
+    let o = run(&["sim", "trail", "--single-process", "--no-out", "--merge"]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("--merge") && e.contains("1 robot"), "{e}");
+    // A name outside the naming rules is bad input wherever it is given.
+    let dir = Scratch::new("names");
+    let npy = dir.join("x.npy").display().to_string();
+    let cases: [&[&str]; 4] = [
+        &["probe", "--field", "a/b", "--x", "0", "--y", "0"],
+        &[
+            "deposit", "--field", "a b", "--x", "0", "--y", "0", "--amount", "1",
+        ],
+        &["export", "--field", "a/b", "--out", &npy],
+        &["field", "--name", "a/b", "--ticks", "1"],
+    ];
+    for argv in cases {
+        let o = run(argv);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{}: {e}", argv.join(" "));
+        assert!(e.contains("invalid name"), "{}: {e}", argv.join(" "));
+    }
+}
