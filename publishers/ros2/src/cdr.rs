@@ -5,7 +5,7 @@
 //!
 //! Written by hand, not with a serde-based crate such as `cdr-encoding`, for the bulk of the
 //! messages: a GridMap layer is the field's plane read back to front (grid_map's column-major
-//! order), an OccupancyGrid is the plane scaled to 0–100. [`CdrWriter::f32_seq_from`] writes
+//! order), an OccupancyGrid is the plane on its occupancy scale. [`CdrWriter::f32_seq_from`] writes
 //! such a transform straight from the shared frame into a buffer sized once in advance,
 //! without building a `Vec<f32>` (or a serde sequence) of the layer first; the rest of the
 //! format needed here (seven primitive kinds, strings, sequences) is this page.
