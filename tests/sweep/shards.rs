@@ -1,7 +1,7 @@
 //! `pheromone sweep --shard K/N` and `pheromone sweep merge`: four shards merged are the
-//! unsharded sweep (CSV rows byte for byte but each run's own wall time, the JSON but its
-//! threads and wall time, the paper table and the chart byte for byte); a missing, duplicated or
-//! foreign shard exits with status 2 naming it.
+//! unsharded sweep (sweep.csv, the paper table and the chart byte for byte, the JSON but its
+//! threads and wall time, each run's wall time its shard's); a missing, duplicated or foreign
+//! shard exits with status 2 naming it.
 
 use std::path::Path;
 
@@ -29,15 +29,6 @@ fn sweep(extra: &[&str]) {
 
 fn read(path: &Path) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
-
-/// A sweep.csv without its last column (wall_s: each run's own measured time).
-fn without_wall_time(csv: &[u8]) -> String {
-    let text = String::from_utf8(csv.to_vec()).unwrap();
-    text.lines()
-        .map(|l| &l[..l.rfind(',').unwrap()])
-        .collect::<Vec<_>>()
-        .join("\n")
 }
 
 /// sweep.json without the two values that depend on how the runs were spread.
@@ -69,22 +60,47 @@ fn four_shards_merged_are_the_unsharded_sweep_and_bad_sets_exit_2() {
     let o = merge(&given, &dir("merged"));
     assert!(o.status.success(), "{}", stderr(&o));
     let (whole, merged) = (dir("whole"), dir("merged"));
-    let csv = read(&merged.join("sweep.csv"));
-    assert_eq!(
-        without_wall_time(&csv),
-        without_wall_time(&read(&whole.join("sweep.csv")))
-    );
-    // Each merged row is its shard's row, wall time included, byte for byte.
-    let mut rows: Vec<String> = Vec::new();
-    for d in &shards {
-        let text = String::from_utf8(read(&d.join("sweep.csv"))).unwrap();
-        rows.extend(text.lines().skip(1).map(str::to_string));
+    // The CSV holds what the runs computed: the same bytes, however the runs were spread.
+    for name in ["sweep.csv", "sweep_paper.md", "sweep_robots.png"] {
+        assert!(
+            read(&whole.join(name)) == read(&merged.join(name)),
+            "{name}"
+        );
     }
-    let merged_rows: Vec<&str> = std::str::from_utf8(&csv).unwrap().lines().skip(1).collect();
-    assert_eq!(merged_rows.len(), 8);
-    assert!(merged_rows.iter().all(|r| rows.iter().any(|x| x == r)));
+    // Each run's wall time is its shard's, in sweep_times.csv beside the rows.
+    let times = String::from_utf8(read(&merged.join("sweep_times.csv"))).unwrap();
+    let keys = |text: &str| -> Vec<String> {
+        text.lines()
+            .skip(1)
+            .map(|l| l.rsplit_once(',').unwrap().0.to_string())
+            .collect()
+    };
+    let csv = String::from_utf8(read(&merged.join("sweep.csv"))).unwrap();
+    let key_of_row = |l: &str| l.split(',').take(8).collect::<Vec<_>>().join(",");
+    assert_eq!(
+        keys(&times),
+        csv.lines().skip(1).map(key_of_row).collect::<Vec<_>>()
+    );
+    assert_eq!(keys(&times).len(), 8);
+    let record: serde_json::Value =
+        serde_json::from_slice(&read(&shards[2].join("shard.json"))).unwrap();
+    assert_eq!(record["runs"], serde_json::json!([2, 6]), "{record}");
+    assert_eq!(record["shard"], serde_json::json!({"index": 2, "count": 4}));
+    let t2: f64 = times
+        .lines()
+        .nth(3)
+        .unwrap()
+        .rsplit_once(',')
+        .unwrap()
+        .1
+        .parse()
+        .unwrap();
+    assert_eq!(Some(t2), record["run_wall_s"][0].as_f64());
     for name in ["sweep_paper.md", "sweep_robots.png"] {
-        assert!(read(&whole.join(name)) == read(&merged.join(name)), "{name}");
+        assert!(
+            read(&whole.join(name)) == read(&merged.join(name)),
+            "{name}"
+        );
     }
     assert_eq!(
         json_without_timing(&merged.join("sweep.json")),
@@ -115,7 +131,10 @@ fn four_shards_merged_are_the_unsharded_sweep_and_bad_sets_exit_2() {
     let o = merge(&[&shards[0], &shards[1], &shards[2], &other], &dir("bad"));
     let e = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{e}");
-    assert!(e.contains("are shards of different sweeps") && e.contains("other"), "{e}");
+    assert!(
+        e.contains("are shards of different sweeps") && e.contains("other"),
+        "{e}"
+    );
     assert!(!dir("bad").exists(), "a refused merge writes nothing");
     let o = run(&["sweep", "ias-ss", "--shard", "4/4"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

@@ -50,7 +50,10 @@ pub use filters_plots::write_filter_comparison;
 pub use graph_png::write_graph_png;
 pub use marks::{marks, Mark, Shape};
 pub use plots::{PLOT_H_PX, PLOT_W_PX};
-pub use sweep::{paper_table, rc_values, sweep_csv, write_sweep, SWEEP_CSV_HEADER};
+pub use sweep::{
+    paper_table, rc_values, sweep_csv, sweep_times_csv, write_sweep, SWEEP_CSV_HEADER,
+    SWEEP_TIMES_CSV_HEADER,
+};
 pub use sweep_shard::{parse_sweep_csv, read_shard, write_shard, ShardFileError};
 
 /// Writing the outputs of a run failed.

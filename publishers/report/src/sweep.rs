@@ -1,4 +1,5 @@
-//! What `pheromone sweep` writes: `sweep.csv` (one row per run), `sweep.json` (the points with
+//! What `pheromone sweep` writes: `sweep.csv` (one row per run: what it computed, the same bytes
+//! on every host), `sweep_times.csv` (each run's wall time), `sweep.json` (the points with
 //! mean ± sd, the comparisons with Welch's and the paired t) and the charts drawn like the
 //! run's (plotters, `PLOT_W_PX` × `PLOT_H_PX`): `sweep_robots.png`, exploration against the
 //! number of robots (whole-number ticks) with and without merging, and `sweep_rc.png`,
@@ -26,11 +27,33 @@ use super::plots::{blank, series_labels, text, titled};
 use super::style::{colour, msg, series_rgb, Picture, Rgb};
 use super::ReportError;
 use pheromone_sim::paper::{PaperKind, PaperValue};
-use pheromone_sim::sweep::{Point, PointKey, SweepResult};
+use pheromone_sim::sweep::{Point, PointKey, RunResult, SweepResult};
 
-/// Header of `sweep.csv`.
+/// Header of `sweep.csv`: what each run computed, nothing it measured, so that the same sweep
+/// writes the same bytes on any host, at any `--jobs`, sharded or not (each run's wall time is in
+/// `sweep_times.csv`).
 pub const SWEEP_CSV_HEADER: &str = "robots,rc_m,merge,strategy,steer_on,merge_rule,\
-merge_idle_iterations,seed,known_mean,known_team,merged_mean,merged_team,visited_mean,visited_team,merges,alignment_error_m,wall_s";
+merge_idle_iterations,seed,known_mean,known_team,merged_mean,merged_team,visited_mean,visited_team,merges,alignment_error_m";
+
+/// Header of `sweep_times.csv`: each run's point and seed, and its wall time (s).
+pub const SWEEP_TIMES_CSV_HEADER: &str =
+    "robots,rc_m,merge,strategy,steer_on,merge_rule,merge_idle_iterations,seed,wall_s";
+
+/// A run's point and seed, the first eight columns of both CSV files.
+fn run_key(x: &RunResult) -> String {
+    let k = &x.point;
+    format!(
+        "{},{},{},{},{},{},{},{}",
+        k.robots,
+        k.rc_m,
+        k.merge,
+        k.strategy.name(),
+        k.steer_on.name(),
+        k.integration.merge_rule.name(),
+        k.integration.merge_idle_iterations,
+        x.seed
+    )
+}
 
 /// `sweep.csv`: one row per run, in grid order.
 pub fn sweep_csv(r: &SweepResult) -> String {
@@ -40,15 +63,8 @@ pub fn sweep_csv(r: &SweepResult) -> String {
         // Writing into a String cannot fail.
         let _ = writeln!(
             text,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            x.point.robots,
-            x.point.rc_m,
-            x.point.merge,
-            x.point.strategy.name(),
-            x.point.steer_on.name(),
-            x.point.integration.merge_rule.name(),
-            x.point.integration.merge_idle_iterations,
-            x.seed,
+            "{},{},{},{},{},{},{},{},{}",
+            run_key(x),
             x.known_mean,
             x.known_team,
             x.merged_mean,
@@ -59,13 +75,22 @@ pub fn sweep_csv(r: &SweepResult) -> String {
             x.alignment_error_m
                 .map(|e| e.to_string())
                 .unwrap_or_default(),
-            x.wall_s,
         );
     }
     text
 }
 
-/// Writes `sweep.csv`, `sweep.json`, `sweep_paper.md` (the paper's values beside ours),
+/// `sweep_times.csv`: each run's wall time, in the rows' order of `sweep.csv`.
+pub fn sweep_times_csv(r: &SweepResult) -> String {
+    let mut text = String::from(SWEEP_TIMES_CSV_HEADER);
+    text.push('\n');
+    for x in &r.runs {
+        let _ = writeln!(text, "{},{}", run_key(x), x.wall_s);
+    }
+    text
+}
+
+/// Writes `sweep.csv`, `sweep_times.csv`, `sweep.json`, `sweep_paper.md` (the paper's values beside ours),
 /// `sweep_robots.png` and, when the sweep has two radii or more ([`rc_values`]),
 /// `sweep_rc.png` into `dir` (created if needed) and returns the paths written.
 pub fn write_sweep(
@@ -80,6 +105,9 @@ pub fn write_sweep(
     let mut written = Vec::new();
     let path = dir.join("sweep.csv");
     write_file(&path, sweep_csv(r).as_bytes())?;
+    written.push(path);
+    let path = dir.join("sweep_times.csv");
+    write_file(&path, sweep_times_csv(r).as_bytes())?;
     written.push(path);
     let path = dir.join("sweep.json");
     let json = serde_json::to_string_pretty(r).map_err(|source| ReportError::Json {
@@ -634,7 +662,7 @@ mod tests {
         let files = write_sweep(&dir, &r, &paper).unwrap();
         // One R_C (8 m): no R_C chart.
         assert_eq!(rc_values(&r), [8.0]);
-        assert_eq!(files.len(), 4, "{files:?}");
+        assert_eq!(files.len(), 5, "{files:?}");
         assert!(!dir.join("sweep_rc.png").exists());
         let csv = fs::read_to_string(dir.join("sweep.csv")).unwrap();
         assert_eq!(csv.lines().count(), 1 + 8);
@@ -687,7 +715,7 @@ mod tests {
         };
         assert_eq!(rc_values(&r2), [4.0, 8.0]);
         let files = write_sweep(&dir, &r2, &paper).unwrap();
-        assert_eq!(files.len(), 5, "{files:?}");
+        assert_eq!(files.len(), 6, "{files:?}");
         let md = fs::read_to_string(dir.join("sweep_paper.md")).unwrap();
         // Table 9 is about 5 robots: this sweep has none.
         assert!(

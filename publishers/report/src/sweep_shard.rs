@@ -1,6 +1,6 @@
 //! What `pheromone sweep --shard K/N` writes and `pheromone sweep merge` reads back: the shard's
 //! `sweep.csv` (its rows, in the format of [`sweep_csv`]) and `shard.json`
-//! ([`ShardRecord`]: which shard of which sweep). The CSV is read back exactly: each number is
+//! ([`ShardRecord`]: which shard of which sweep, and each row's wall time). The CSV is read back exactly: each number is
 //! written as Rust prints an `f64` (the shortest text that parses back to the same value), so
 //! the merged sweep's rows are the shards' rows byte for byte.
 
@@ -69,13 +69,17 @@ pub fn read_shard(dir: &Path) -> Result<ShardRuns, ShardFileError> {
             path: dir.join("shard.json"),
             source,
         })?;
-    let runs = parse_sweep_csv(&read("sweep.csv")?).map_err(|(line, detail)| {
-        ShardFileError::Csv {
+    let mut runs =
+        parse_sweep_csv(&read("sweep.csv")?).map_err(|(line, detail)| ShardFileError::Csv {
             path: dir.join("sweep.csv"),
             line,
             detail,
+        })?;
+    if record.run_wall_s.len() == runs.len() {
+        for (run, &t) in runs.iter_mut().zip(&record.run_wall_s) {
+            run.wall_s = t;
         }
-    })?;
+    }
     Ok(ShardRuns {
         dir: dir.to_path_buf(),
         record,
@@ -83,7 +87,8 @@ pub fn read_shard(dir: &Path) -> Result<ShardRuns, ShardFileError> {
     })
 }
 
-/// The runs of a `sweep.csv`; an error is the line (from 1) and what is wrong with it.
+/// The runs of a `sweep.csv` (their `wall_s`: NaN, it is not in the file); an error is the line
+/// (from 1) and what is wrong with it.
 pub fn parse_sweep_csv(text: &str) -> Result<Vec<RunResult>, (usize, String)> {
     let mut lines = text.lines();
     match lines.next() {
@@ -104,8 +109,8 @@ pub fn parse_sweep_csv(text: &str) -> Result<Vec<RunResult>, (usize, String)> {
 /// One row of `sweep.csv`, every column parsed as [`sweep_csv`] wrote it.
 fn parse_row(line: &str) -> Result<RunResult, String> {
     let c: Vec<&str> = line.split(',').collect();
-    if c.len() != 17 {
-        return Err(format!("{} column(s), expected 17", c.len()));
+    if c.len() != 16 {
+        return Err(format!("{} column(s), expected 16", c.len()));
     }
     fn p<T: std::str::FromStr>(c: &[&str], i: usize) -> Result<T, String> {
         let name = SWEEP_CSV_HEADER.split(',').nth(i).unwrap_or("?");
@@ -136,7 +141,8 @@ fn parse_row(line: &str) -> Result<RunResult, String> {
             "" => None,
             _ => Some(p(&c, 15)?),
         },
-        wall_s: p(&c, 16)?,
+        // Not in sweep.csv: `read_shard` takes it from `shard.json`.
+        wall_s: f64::NAN,
     })
 }
 
@@ -199,11 +205,15 @@ mod tests {
             ..r.clone()
         };
         assert_eq!(sweep_csv(&again), sweep_csv(&r));
+        assert_eq!(again.runs[1].wall_s, 0.017);
         // A damaged row is named by file, line and column.
         let text = sweep_csv(&r).replace("uniform", "sideways");
         let (line, detail) = parse_sweep_csv(&text).unwrap_err();
         assert_eq!(line, 2);
-        assert!(detail.contains("strategy") && detail.contains("sideways"), "{detail}");
+        assert!(
+            detail.contains("strategy") && detail.contains("sideways"),
+            "{detail}"
+        );
         fs::write(dir.join("sweep.csv"), "robots\n").unwrap();
         let e = read_shard(&dir).unwrap_err().to_string();
         assert!(e.contains("sweep.csv:1: header"), "{e}");

@@ -48,6 +48,8 @@ pub struct ShardRecord {
     pub total_runs: usize,
     /// The plan index of each row of `sweep.csv`, in order.
     pub runs: Vec<usize>,
+    /// Each row's wall time (s), in order (`sweep.csv` holds only what the runs computed).
+    pub run_wall_s: Vec<f64>,
     pub scenario: String,
     pub duration_s: f64,
     pub trials: u32,
@@ -67,6 +69,7 @@ impl ShardRecord {
             shard,
             total_runs,
             runs: shard.indices(total_runs),
+            run_wall_s: result.runs.iter().map(|r| r.wall_s).collect(),
             scenario: result.scenario.clone(),
             duration_s: result.duration_s,
             trials: result.trials,
@@ -103,7 +106,11 @@ pub enum MergeError {
         first: PathBuf,
         second: PathBuf,
     },
-    #[error("sweep {sweep}: missing shard(s) {} of {count} (given: {})", list(missing), list(given))]
+    #[error(
+        "sweep {sweep}: missing shard(s) {} of {count} (given: {})",
+        list(missing),
+        list(given)
+    )]
     Missing {
         sweep: String,
         count: usize,
@@ -115,7 +122,10 @@ pub enum MergeError {
 }
 
 fn list(v: &[usize]) -> String {
-    v.iter().map(|k| k.to_string()).collect::<Vec<_>>().join(", ")
+    v.iter()
+        .map(|k| k.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// One shard as read back: its directory, its record and its rows.
@@ -159,6 +169,13 @@ fn check_rows(s: &ShardRuns) -> Result<(), MergeError> {
         return Err(bad(format!(
             "shard.json: the runs of shard {} of a {}-run sweep are not its plan indices",
             r.shard, r.total_runs
+        )));
+    }
+    if r.run_wall_s.len() != r.runs.len() {
+        return Err(bad(format!(
+            "shard.json lists {} run(s) and {} wall time(s)",
+            r.runs.len(),
+            r.run_wall_s.len()
         )));
     }
     if r.runs.len() != s.runs.len() {

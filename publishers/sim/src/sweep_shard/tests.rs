@@ -4,7 +4,7 @@ use pheromone_roles::follower::StrategyKind;
 
 fn grid() -> SweepGrid {
     SweepGrid {
-        robots: vec![1, 2],
+        robots: vec![2, 3],
         rc_m: vec![],
         merge: vec![true, false],
         strategies: vec![StrategyKind::Inverse],
@@ -93,23 +93,34 @@ fn merged_shards_are_the_unsharded_sweep_and_bad_sets_are_named() {
     };
     assert_eq!(json(&merged), json(&whole));
     assert_eq!(merged.jobs, 3);
+    let times = |r: &SweepResult| r.runs.iter().map(|x| x.wall_s).collect::<Vec<_>>();
+    assert_eq!(times(&merged)[1], shards[1].record.run_wall_s[0]);
+    assert_eq!(times(&merged)[4], shards[1].record.run_wall_s[1]);
 
     let e = merge(shards[..2].to_vec()).unwrap_err().to_string();
     assert!(e.contains("missing shard(s) 2 of 3"), "{e}");
-    let e = merge(vec![shards[0].clone(), shards[1].clone(), shards[1].clone()])
-        .unwrap_err()
-        .to_string();
+    let e = merge(vec![
+        shards[0].clone(),
+        shards[1].clone(),
+        shards[1].clone(),
+    ])
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("shard 1/3 given twice: dir1 and dir1"), "{e}");
     let mut other = shards.clone();
     other[2].record.sweep = "0123456789abcdef".into();
     let e = merge(other).unwrap_err().to_string();
     assert!(
-        e.contains("dir0 and dir2 are shards of different sweeps") && e.contains("0123456789abcdef"),
+        e.contains("dir0 and dir2 are shards of different sweeps")
+            && e.contains("0123456789abcdef"),
         "{e}"
     );
     let mut short = shards.clone();
     short[1].runs.pop();
     let e = merge(short).unwrap_err().to_string();
-    assert!(e.contains("dir1: sweep.csv has 2 row(s), shard.json lists 3"), "{e}");
+    assert!(
+        e.contains("dir1: sweep.csv has 2 row(s), shard.json lists 3"),
+        "{e}"
+    );
     assert!(matches!(merge(Vec::new()), Err(MergeError::Empty)));
 }
