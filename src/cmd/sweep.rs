@@ -31,7 +31,8 @@ use super::{bad, bad_from};
 /// shared field (every robot's deposits, at any range), `own-map` on its own merged map (seed
 /// 004's Algorithm 2); each is its own point (CSV column steer_on, a chart line of its own).
 ///
-/// Writes into --out: sweep.csv (one row per run), sweep.json (points and comparisons),
+/// Writes into --out: sweep.csv (one row per run: what it computed, the same bytes on any host
+/// and at any --jobs), sweep_times.csv (each run's wall time), sweep.json (points and comparisons),
 /// sweep_paper.md (each of the paper's values, docs/paper/seed004.csv, beside ours),
 /// sweep_robots.png (exploration vs robots, with and without merging, the paper's values as
 /// black crosses) and, when --rc-m lists two radii or more, sweep_rc.png (exploration vs R_C,
@@ -144,14 +145,15 @@ pub enum SweepCommand {
 }
 
 /// Join the shards of one sweep (`pheromone sweep … --shard K/N`) into the files the unsharded
-/// sweep writes: sweep.csv (the same rows in the same order: the shards' rows byte for byte),
+/// sweep writes: sweep.csv (the same rows in the same order, byte for byte), sweep_times.csv,
 /// sweep.json, sweep_paper.md and the charts.
 ///
 /// Give one directory per shard, every K from 0 to N-1 once. A missing shard, a shard given
 /// twice (the same directory twice, or a re-run shard in a second directory beside the first:
 /// re-run a shard into its own directory, which it replaces) or shards of different sweeps (another
 /// scenario, another flag) exit with status 2 naming them. In sweep.json, `jobs` is the sum
-/// of the shards' threads and `wall_s` the longest shard's; each row's wall_s is its run's own.
+/// of the shards' threads and `wall_s` the longest shard's; sweep_times.csv has each run's
+/// wall time as its shard measured it.
 #[derive(Args, Debug)]
 pub struct MergeArgs {
     /// The shards' --out directories.
@@ -283,12 +285,13 @@ fn default_out(scenario: &str, suffix: &str) -> PathBuf {
     PathBuf::from("pheromone-out").join(format!("sweep-{scenario}{suffix}"))
 }
 
+/// What a sweep calls after each run: (runs done, runs in all).
+type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
+
 /// `run` with a progress bar of `runs` runs (drawn on a terminal only).
 fn with_bar(
     runs: usize,
-    run: &dyn Fn(
-        &(dyn Fn(usize, usize) + Sync),
-    ) -> Result<SweepResult, pheromone_sim::sweep::SweepError>,
+    run: &dyn Fn(Progress<'_>) -> Result<SweepResult, pheromone_sim::sweep::SweepError>,
 ) -> anyhow::Result<SweepResult> {
     let bar = indicatif::ProgressBar::new(runs as u64);
     if let Ok(style) =

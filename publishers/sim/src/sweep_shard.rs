@@ -89,16 +89,13 @@ pub enum MergeError {
     #[error("{}: shard.json format {found}, this build reads format {SHARD_FORMAT}", dir.display())]
     Format { dir: PathBuf, found: u32 },
     #[error(
-        "{} and {} are shards of different sweeps ({} {a_id}, {} {b_id}; every shard needs the same scenario and flags but --shard, --jobs and --out)",
-        a.display(), b.display(), a_what, b_what
+        "{} and {} are shards of different sweeps ({detail}; every shard needs the same scenario and flags but --shard, --jobs and --out)",
+        a.display(), b.display()
     )]
     DifferentSweeps {
         a: PathBuf,
-        a_id: String,
-        a_what: String,
         b: PathBuf,
-        b_id: String,
-        b_what: String,
+        detail: String,
     },
     #[error("shard {shard} given twice: {} and {} (give each shard's directory once)", first.display(), second.display())]
     Duplicate {
@@ -142,11 +139,14 @@ fn same_sweep(a: &ShardRuns, b: &ShardRuns) -> Result<(), MergeError> {
     if a.record.sweep != b.record.sweep || a.record.shard.count != b.record.shard.count {
         return Err(MergeError::DifferentSweeps {
             a: a.dir.clone(),
-            a_id: a.record.sweep.clone(),
-            a_what: what(a),
             b: b.dir.clone(),
-            b_id: b.record.sweep.clone(),
-            b_what: what(b),
+            detail: format!(
+                "{} of sweep {}, {} of sweep {}",
+                what(a),
+                a.record.sweep,
+                what(b),
+                b.record.sweep
+            ),
         });
     }
     Ok(())
