@@ -20,6 +20,7 @@ pub mod deposit;
 pub mod engine;
 pub mod error;
 pub mod geometry;
+pub mod infile;
 pub mod kernel;
 pub mod messages;
 pub mod models;

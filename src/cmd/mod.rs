@@ -121,8 +121,9 @@ pub fn one_line(e: &anyhow::Error) -> String {
 
 /// Reads a TOML file into `T`; any problem is `BadInput` naming the file, line and key.
 pub fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| bad_in(format!("{}: cannot read", path.display()), e))?;
+    let text =
+        pheromone_field::infile::read_text_bounded(path, pheromone_field::infile::MAX_TEXT_BYTES)
+            .map_err(|e| bad_in(format!("{}: cannot read", path.display()), e))?;
     toml::from_str(&text).map_err(|e| bad_in(path.display().to_string(), e))
 }
 

@@ -253,3 +253,92 @@ fn an_out_dir_that_cannot_be_made_merge_without_peers_and_bad_field_names_exit_2
         assert!(e.contains("invalid name"), "{}: {e}", argv.join(" "));
     }
 }
+
+#[test]
+fn files_that_claim_too_much_or_nothing_are_refused_with_exit_2_naming_what() {
+    let dir = Scratch::new("limits");
+    let trail = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenarios/trail.toml"),
+    )
+    .unwrap();
+    let many: String = (1..300)
+        .map(|i| format!("\n[[world.robots]]\nid = {i}\nstart = {{ x_m = 1.0, y_m = 2.5, theta_rad = 0.0 }}\n"))
+        .collect();
+    let cases = [
+        (
+            trail.replacen("name = \"trail\"", "name = \"tr\\u0000ail\"", 1),
+            "control characters",
+        ),
+        (trail.replacen("t_s = 0.0", "t_s = -5.0", 1), "t_s"),
+        (format!("{trail}{many}"), "300 robots"),
+        (
+            "name = \"nothing\"\nduration_s = 1.0\n[world]\ndt_s = 0.02\n".to_string(),
+            "0 robots and no [[deposit]]",
+        ),
+    ];
+    for (i, (text, says)) in cases.iter().enumerate() {
+        assert_ne!(text, &trail, "case {i} changed nothing");
+        let path = dir.join(&format!("s{i}.toml"));
+        std::fs::write(&path, text).unwrap();
+        let p = path.display().to_string();
+        let o = run(&["sim", &p, "--single-process", "--no-out"]);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "case {i}: {e}");
+        assert!(e.contains(says) && e.contains(&p), "case {i}: {e}");
+    }
+    // A device or a file over its limit is never read into memory: --config, --map, --restore.
+    let big = dir.join("big.toml");
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len((16 << 20) + 1)
+        .unwrap();
+    let big = big.display().to_string();
+    let name = unique("lim");
+    let cases: [(Vec<&str>, &str); 4] = [
+        (
+            vec![
+                "field",
+                "--name",
+                &name,
+                "--ticks",
+                "1",
+                "--config",
+                "/dev/zero",
+            ],
+            "character device",
+        ),
+        (
+            vec!["field", "--name", &name, "--ticks", "1", "--config", &big],
+            "limit of 16777216 bytes",
+        ),
+        (
+            vec![
+                "field",
+                "--name",
+                &name,
+                "--ticks",
+                "1",
+                "--restore",
+                "/dev/zero",
+            ],
+            "character device",
+        ),
+        (
+            vec![
+                "sim",
+                "trail",
+                "--single-process",
+                "--no-out",
+                "--map",
+                &big,
+            ],
+            "limit of 16777216 bytes",
+        ),
+    ];
+    for (argv, says) in cases {
+        let o = run(&argv);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{}: {e}", argv.join(" "));
+        assert!(e.contains(says), "{}: {e}", argv.join(" "));
+    }
+}

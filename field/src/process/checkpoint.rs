@@ -385,12 +385,19 @@ pub fn write_atomic(
     )?)
 }
 
+/// The largest checkpoint read (bytes): 4 GiB, a billion cells.
+pub const MAX_CHECKPOINT_BYTES: u64 = 4 << 30;
+
 /// Reads and checks a checkpoint file.
 pub fn read(path: &Path) -> Result<Checkpoint, CheckpointError> {
-    let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io {
-        path: path.to_path_buf(),
-        action: "read",
-        source,
+    // A checkpoint of the largest grid of `FieldConfig` is larger; this bounds what a pipe or a
+    // wrong file can make the field read (a device is refused).
+    let bytes = crate::infile::read_bounded(path, MAX_CHECKPOINT_BYTES).map_err(|source| {
+        CheckpointError::Io {
+            path: path.to_path_buf(),
+            action: "read",
+            source,
+        }
     })?;
     decode(&bytes).map_err(|source| CheckpointError::Format {
         path: path.to_path_buf(),

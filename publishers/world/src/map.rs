@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use pheromone_field::infile;
 use thiserror::Error;
 
 use super::WallConfig;
@@ -75,19 +76,25 @@ impl OccupancyMap {
     /// Loads `map.yaml` and the image it names (a relative `image` is relative to the YAML's
     /// directory). Errors name the file ([`MapError::File`]) and the line or byte.
     pub fn load(yaml_path: &Path) -> Result<Self, MapError> {
-        let text = std::fs::read_to_string(yaml_path).map_err(|source| MapError::Io {
-            path: yaml_path.to_path_buf(),
-            source,
-        })?;
+        let text =
+            infile::read_text_bounded(yaml_path, infile::MAX_TEXT_BYTES).map_err(|source| {
+                MapError::Io {
+                    path: yaml_path.to_path_buf(),
+                    source,
+                }
+            })?;
         let yaml = parse_map_yaml(&text).map_err(|e| e.in_file(yaml_path))?;
         let image_path = yaml_path
             .parent()
             .unwrap_or_else(|| Path::new("."))
             .join(&yaml.image);
-        let bytes = std::fs::read(&image_path).map_err(|source| MapError::Io {
-            path: image_path.clone(),
-            source,
-        })?;
+        let bytes =
+            infile::read_bounded(&image_path, infile::MAX_IMAGE_BYTES).map_err(|source| {
+                MapError::Io {
+                    path: image_path.clone(),
+                    source,
+                }
+            })?;
         let image = parse_pgm(&bytes).map_err(|e| e.in_file(&image_path))?;
         Ok(Self::from_yaml_and_image(&yaml, image))
     }

@@ -442,7 +442,11 @@ impl Scenario {
     pub fn load(name_or_path: &str) -> Result<Self, ScenarioError> {
         let path = Path::new(name_or_path);
         if path.is_file() {
-            let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+            let text = pheromone_field::infile::read_text_bounded(
+                path,
+                pheromone_field::infile::MAX_TEXT_BYTES,
+            )
+            .map_err(|source| ScenarioError::Read {
                 origin: path.display().to_string(),
                 source,
             })?;

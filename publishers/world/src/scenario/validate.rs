@@ -3,10 +3,18 @@
 
 use super::{DepositError, Scenario, ScenarioError};
 
+/// The most robots a scenario may have (each is up to four processes in a run as processes).
+pub const MAX_ROBOTS: usize = 256;
+/// The most landmarks a scenario's world may have.
+pub const MAX_LANDMARKS: usize = 100_000;
+/// The most `[[deposit]]` entries a scenario may have.
+pub const MAX_SCRIPTED_DEPOSITS: usize = 100_000;
+
 impl Scenario {
     /// Cross-checks the parts: sizes, the field clock against the world step, robot ids.
     pub fn validate(&self) -> Result<(), ScenarioError> {
         self.validate_clock()?;
+        self.validate_sizes()?;
         self.validate_robot_roles()?;
         self.validate_scripted_deposits()?;
         crate::World::new(self.world.clone(), self.seed).map_err(ScenarioError::World)?;
@@ -23,6 +31,61 @@ impl Scenario {
         self.validate_follower_channels(channels)?;
         self.validate_mapping()?;
         self.validate_exploration()
+    }
+
+    /// What a file can claim, bounded (issue 54): a name without control characters, at most
+    /// [`MAX_ROBOTS`] robots (none only with scripted deposits), at most [`MAX_LANDMARKS`] landmarks and [`MAX_SCRIPTED_DEPOSITS`]
+    /// scripted deposits, each at a time ≥ 0.
+    fn validate_sizes(&self) -> Result<(), ScenarioError> {
+        if self.name.is_empty() || self.name.chars().any(char::is_control) {
+            return Err(ScenarioError::value(
+                "name",
+                format!("{:?}", self.name),
+                "must be a non-empty name without control characters (NUL, newline…)",
+            ));
+        }
+        let robots = self.world.robots.len();
+        if robots > MAX_ROBOTS {
+            return Err(ScenarioError::value(
+                "world.robots",
+                format!("{robots} robots"),
+                "must be at most 256 robots",
+            ));
+        }
+        if robots == 0 && self.deposits.is_empty() {
+            return Err(ScenarioError::value(
+                "world.robots",
+                "0 robots and no [[deposit]]",
+                "a run needs a robot or a scripted deposit",
+            ));
+        }
+        let landmarks = self.world.landmarks.len();
+        if landmarks > MAX_LANDMARKS {
+            return Err(ScenarioError::value(
+                "world.landmarks",
+                format!("{landmarks} landmarks"),
+                "must be at most 100000 landmarks",
+            ));
+        }
+        if self.deposits.len() > MAX_SCRIPTED_DEPOSITS {
+            return Err(ScenarioError::value(
+                "deposit",
+                format!("{} scripted deposits", self.deposits.len()),
+                "must be at most 100000 [[deposit]] entries",
+            ));
+        }
+        if let Some((i, d)) = self
+            .deposits
+            .iter()
+            .enumerate()
+            .find(|(_, d)| !(d.t_s.is_finite() && d.t_s >= 0.0))
+        {
+            return Err(ScenarioError::NegativeTime {
+                key: format!("deposit {}: t_s", i + 1),
+                value: d.t_s,
+            });
+        }
+        Ok(())
     }
 
     /// The field, the duration, and the field's tick against the world's step.
