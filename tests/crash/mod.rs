@@ -89,18 +89,23 @@ impl Run {
         }
     }
 
-    /// Starts `pheromone ARGS` in the run's directory; stderr goes to `<name>.log` there.
+    /// Starts `pheromone ARGS` in the run's directory; stderr goes to `<name>.log` there. The
+    /// run's iceoryx2 prefix comes from its config file, whatever domain the caller's shell
+    /// names (`PHEROMONE_IOX_DOMAIN` would replace the prefix).
     pub fn spawn(&self, args: &[&str], name: &str) -> Proc {
         let mut spec = ChildSpec::new(name, None, args.iter().map(|a| a.to_string()).collect());
         spec.cwd = Some(self.dir.clone());
         spec.log_file = Some(self.dir.join(format!("{name}.log")));
+        spec.env_remove = vec![pheromone_field::shm::IOX_DOMAIN_ENV.to_string()];
         Proc::spawn_spec(spec)
     }
 
-    /// Runs `pheromone ARGS` to completion in the run's directory.
+    /// Runs `pheromone ARGS` to completion in the run's directory (without the caller's
+    /// `PHEROMONE_IOX_DOMAIN`, as [`Run::spawn`]).
     pub fn run(&self, args: &[&str]) -> std::process::Output {
         Command::new(bin())
             .args(args)
+            .env_remove(pheromone_field::shm::IOX_DOMAIN_ENV)
             .current_dir(&self.dir)
             .output()
             .expect("run pheromone")

@@ -51,6 +51,7 @@ impl Follower {
                 "probe", "--field", field, "--x", "0.5", "--y", "0.5", "--follow",
             ])
             .args(["--rate-hz", rate_hz, "--timeout", "20"])
+            .env_remove(pheromone_field::shm::IOX_DOMAIN_ENV)
             .current_dir(&run.dir)
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())

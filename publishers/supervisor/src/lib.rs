@@ -38,6 +38,9 @@ pub struct ChildSpec {
     pub cwd: Option<PathBuf>,
     /// Also write every stderr line to this file (created anew).
     pub log_file: Option<PathBuf>,
+    /// Environment variables the child does not inherit (e.g. `PHEROMONE_IOX_DOMAIN` where the
+    /// child's iceoryx2 configuration comes from its working directory).
+    pub env_remove: Vec<String>,
 }
 
 impl ChildSpec {
@@ -48,6 +51,7 @@ impl ChildSpec {
             args,
             cwd: None,
             log_file: None,
+            env_remove: Vec::new(),
         }
     }
 
@@ -169,6 +173,9 @@ impl Supervisor {
         death::die_with_parent(&mut command);
         if let Some(dir) = &spec.cwd {
             command.current_dir(dir);
+        }
+        for var in &spec.env_remove {
+            command.env_remove(var);
         }
         let mut child = command
             .args(&spec.args)
