@@ -3,7 +3,8 @@
 //! what a run records ([`recording`]; as a ROS 2 MCAP file, [`ros_record`] and the observer's
 //! [`ros_feed`]) and the metrics computed from it ([`metrics`], seed 000's
 //! `wrong_area` in [`wrong_area`]), and seed 004's grid of experiments ([`sweep`], its statistics in
-//! [`sweep_stats`], the paper's own figures beside it in [`paper`]), and seed 004's comparison of
+//! [`sweep_stats`], the paper's own figures beside it in [`paper`], split over a scheduler's tasks
+//! and joined again in [`sweep_shard`]), and seed 004's comparison of
 //! two strategies over seeds ([`trials`], `sim --trials`).
 
 pub mod exploration;
