@@ -124,6 +124,7 @@ fn a_checkpoint_path_turned_into_a_fifo_while_the_field_runs_is_left_a_fifo() {
     field.interrupt();
     let o = field.wait_exit(Duration::from_secs(20));
     assert!(is_fifo(&file), "the FIFO was replaced: {}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(
         stderr(&o).contains("FIFO") && stderr(&o).contains("field.ckpt"),
         "{}",
