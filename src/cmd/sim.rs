@@ -50,6 +50,14 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     // From here SIGINT/SIGTERM end the run with what it has (exit status 130/143).
     super::stop::install()?;
     let scenario = scenario_of(&a)?;
+    // `sim --merge` on one robot merges nothing (a sweep's one-robot point keeps it: its row is
+    // the baseline).
+    let robots = scenario.world.robots.len();
+    if a.merge && robots < 2 {
+        return Err(bad(format!(
+            "--merge with {robots} robot(s): maps merge between robots that meet: needs at least 2 robots"
+        )));
+    }
     if let Some(t) = a.trials {
         return run_trials(&a, &scenario, t);
     }

@@ -35,20 +35,6 @@ impl Scenario {
         Ok(())
     }
 
-    /// `--merge` on a world of one robot would merge nothing (there is no one to meet): refused,
-    /// naming the flag, once `--robots` has applied.
-    pub(super) fn check_merge_has_peers(&self, o: &Overrides) -> Result<(), ScenarioError> {
-        let robots = self.world.robots.len();
-        if o.merge == Some(true) && robots < 2 {
-            return Err(ScenarioError::Flag {
-                flag: "--merge",
-                value: format!("with {robots} robot(s)"),
-                reason: "maps merge between robots that meet: needs at least 2 robots",
-            });
-        }
-        Ok(())
-    }
-
     /// `[mapping]`, when enabled: its values, and a world small enough for one rendezvous
     /// message per robot.
     pub(super) fn validate_mapping(&self) -> Result<(), ScenarioError> {

@@ -533,7 +533,6 @@ impl Scenario {
                 }
             }
         }
-        self.check_merge_has_peers(o)?;
         self.apply_localizers(o);
         self.validate()
     }
