@@ -500,10 +500,20 @@ class Field:
                     f"could not be opened within {timeout_s} s: {_open_error(last)})"
                 ) from None
             time.sleep(min(left, 0.02))
-        self._subscriber = (
-            self._frames.subscriber_builder().buffer_size(_wire.FRAME_SUBSCRIBER_BUFFER).create()
-        )
-        self._listener = self._ready.listener_builder().create()
+        try:
+            self._subscriber = (
+                self._frames.subscriber_builder()
+                .buffer_size(_wire.FRAME_SUBSCRIBER_BUFFER)
+                .create()
+            )
+            self._listener = self._ready.listener_builder().create()
+        except (iox2.SubscriberCreateError, iox2.ListenerCreateError) as e:
+            self._frames = self._ready = self._subscriber = None
+            raise PheromoneError(
+                f"field '{self.name}': no reader slot left on service '{self._frame_service}' "
+                f"({e!r}): every reader the field allows is attached (pheromone field "
+                f"--max-readers); detach one or restart the field with more"
+            ) from None
         # The field's history hands a late reader the current frame at its next tick.
         while not self.update():
             left = deadline - time.monotonic()

@@ -416,3 +416,27 @@ def test_attach_leaves_iceoryx2s_log_level_alone_and_set_log_level_is_the_caller
     assert calls == [iox2.LogLevel.Error]
     with pytest.raises(ValueError, match="'loud'"):
         pheromone.set_log_level("loud")
+
+
+def test_a_reader_beyond_max_readers_is_refused_naming_the_field_and_the_flag(start_field):
+    f = start_field("full", *GRID, "--max-readers", "2")
+    held = []
+    refused = None
+    try:
+        # Two readers and whatever the field itself counts: attach until one is refused.
+        for _ in range(8):
+            try:
+                held.append(attach(f))
+            except pheromone.PheromoneError as e:
+                refused = e
+                break
+        assert refused is not None, f"{len(held)} readers attached to a field of --max-readers 2"
+        assert not isinstance(refused, pheromone.FieldNotFound), refused
+        msg = str(refused)
+        assert f.name in msg and "--max-readers" in msg, msg
+        assert len(held) >= 2, f"only {len(held)} reader(s) attached before the refusal: {msg}"
+        # The readers that attached still read.
+        assert held[0].wait_frame(10)
+    finally:
+        for r in held:
+            r.close()
