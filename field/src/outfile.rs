@@ -217,16 +217,11 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<u64, OutputError> {
     out.commit()
 }
 
-/// Opens `path` to be written in place from its start (a new file, or a regular file truncated):
-/// for a record that a writer killed midway should leave readable up to where it got. Refuses
-/// what [`check_destination`] refuses, also when it appears between the check and the open
-/// (`O_NOFOLLOW`, then `fstat`).
-pub fn open_in_place(path: &Path) -> Result<File, OutputError> {
-    check_destination(path)?;
-    let file = OpenOptions::new()
-        .write(true)
-        .create(true)
-        .mode(0o666)
+/// Opens `path` with `options` plus `O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC` (a symbolic link is
+/// refused, a FIFO planted there does not block the open), then checks with `fstat` that what
+/// was opened is a regular file.
+fn open_regular(path: &Path, options: &mut OpenOptions) -> Result<File, OutputError> {
+    let file = options
         .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_CLOEXEC)
         .open(path)
         .map_err(|e| match e.raw_os_error() {
@@ -243,6 +238,19 @@ pub fn open_in_place(path: &Path) -> Result<File, OutputError> {
             kind: kind_of(meta.file_type()),
         });
     }
+    Ok(file)
+}
+
+/// Opens `path` to be written in place from its start (a new file, or a regular file truncated):
+/// for a record that a writer killed midway should leave readable up to where it got. Refuses
+/// what [`check_destination`] refuses, also when it appears between the check and the open
+/// (`O_NOFOLLOW`, then `fstat`).
+pub fn open_in_place(path: &Path) -> Result<File, OutputError> {
+    check_destination(path)?;
+    let file = open_regular(
+        path,
+        OpenOptions::new().write(true).create(true).mode(0o666),
+    )?;
     file.set_len(0).map_err(OutputError::io(path, "truncate"))?;
     Ok(file)
 }
@@ -251,45 +259,16 @@ pub fn open_in_place(path: &Path) -> Result<File, OutputError> {
 /// there; a symbolic link or anything but a regular file is refused.
 pub fn open_private_append(path: &Path) -> Result<File, OutputError> {
     check_destination(path)?;
-    let file = OpenOptions::new()
-        .append(true)
-        .create(true)
-        .mode(0o600)
-        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_CLOEXEC)
-        .open(path)
-        .map_err(OutputError::io(path, "open"))?;
-    let meta = file.metadata().map_err(OutputError::io(path, "inspect"))?;
-    if !meta.file_type().is_file() {
-        return Err(OutputError::NotRegular {
-            path: path.to_path_buf(),
-            kind: kind_of(meta.file_type()),
-        });
-    }
-    Ok(file)
+    open_regular(
+        path,
+        OpenOptions::new().append(true).create(true).mode(0o600),
+    )
 }
 
 /// Opens a regular file to read without following a symbolic link (`O_NOFOLLOW`, then `fstat`;
 /// `O_NONBLOCK`, so a FIFO planted there does not block the open).
 pub fn open_private_read(path: &Path) -> Result<File, OutputError> {
-    let file = OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_CLOEXEC)
-        .open(path)
-        .map_err(|e| match e.raw_os_error() {
-            Some(libc::ELOOP) => OutputError::NotRegular {
-                path: path.to_path_buf(),
-                kind: "a symbolic link",
-            },
-            _ => OutputError::io(path, "open")(e),
-        })?;
-    let meta = file.metadata().map_err(OutputError::io(path, "inspect"))?;
-    if !meta.file_type().is_file() {
-        return Err(OutputError::NotRegular {
-            path: path.to_path_buf(),
-            kind: kind_of(meta.file_type()),
-        });
-    }
-    Ok(file)
+    open_regular(path, OpenOptions::new().read(true))
 }
 
 /// This process's effective user id.
