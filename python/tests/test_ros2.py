@@ -71,12 +71,16 @@ def zenoh_bin():
 
 
 class Ros2Node:
+    """`pheromone ros2` on the field, listening on a free port; `--rate-hz 20` unless the
+    caller's arguments set it."""
+
     def __init__(self, tmp_path, field, *args):
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.err = open(tmp_path / "ros2.stderr", "wb")
+        rate = [] if "--rate-hz" in args else ["--rate-hz", "20"]
         self.proc = subprocess.Popen(
-            [str(BIN), "ros2", "--field", field, "--listen", self.endpoint, "--json",
-             "--rate-hz", "20", *args],
+            [str(BIN), "ros2", "--field", field, "--listen", self.endpoint, "--json", *rate,
+             *args],
             stdout=subprocess.PIPE, stderr=self.err)
         STARTED_PIDS.add(self.proc.pid)
 

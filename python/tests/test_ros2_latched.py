@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from ros_msgs import GRID, OCC, dds, free_port, register_grid_map
 
-from conftest import BIN, STARTED_PIDS, deadline_loop, run_cli
+from conftest import BIN, deadline_loop, run_cli
 
 REQUIRED = os.environ.get("PHEROMONE_REQUIRE_ZENOH") == "1"
 
@@ -34,7 +34,7 @@ except ImportError as e:
     pytest.skip(f"pip install './python[zenoh,ros2]' for these tests ({e})",
                 allow_module_level=True)
 
-from test_ros2 import TWO_CHANNELS, Ros2Node, _session, _tokens, zenoh_bin  # noqa: E402, F401
+from test_ros2 import TWO_CHANNELS, _session, _tokens, ros2_node, zenoh_bin  # noqa: E402, F401
 
 #: The token's QoS of a reliable, transient-local, keep-last-1 publisher (rmw_zenoh's
 #: qos_to_keyexpr; its defaults are reliable, volatile, keep last 42).
@@ -46,33 +46,10 @@ def store():
     return register_grid_map(get_typestore(Stores.ROS2_JAZZY), get_types_from_msg)
 
 
-class _Node(Ros2Node):
-    """test_ros2's node with the caller's --rate-hz (default 20)."""
-
-    def __init__(self, tmp_path, field, *args):
-        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
-        self.err = open(tmp_path / "ros2.stderr", "wb")
-        rate = [] if "--rate-hz" in args else ["--rate-hz", "20"]
-        self.proc = subprocess.Popen(
-            [str(BIN), "ros2", "--field", field, "--listen", self.endpoint, "--json", *rate,
-             *args],
-            stdout=subprocess.PIPE, stderr=self.err)
-        STARTED_PIDS.add(self.proc.pid)
-
-
 @pytest.fixture
-def node(tmp_path, zenoh_bin):  # noqa: F811
-    started = []
-
-    def start(field, *args):
-        n = _Node(tmp_path, field, *args)
-        started.append(n)
-        return n
-
-    yield start
-    for n in started:
-        if n.proc.poll() is None:
-            n.stop()
+def node(ros2_node):  # noqa: F811
+    """test_ros2's node (its --rate-hz 20 unless a test sets it)."""
+    return ros2_node
 
 
 def _late_joiner(session, key, on_sample):
