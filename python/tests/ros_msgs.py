@@ -1,8 +1,14 @@
 """What the ROS 2 tests (test_ros2*.py, test_sim_record.py) share: grid_map_msgs for rosbags (not
 in its ROS 2 stores; the .msg texts of the jazzy branch of ANYbotics/grid_map, comments left
-out), the type names, the field they start, rmw_zenoh's DDS spelling and a free port."""
+out), the type names, the field they start, rmw_zenoh's DDS spelling, a free port, and a
+`sim --ros2` run watched by a listening Zenoh peer."""
 
+import contextlib
+import json
 import socket
+import subprocess
+
+from conftest import BIN, STARTED_PIDS
 
 GRID = "grid_map_msgs/msg/GridMap"
 OCC = "nav_msgs/msg/OccupancyGrid"
@@ -57,3 +63,41 @@ def free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def listening_session(endpoint):
+    """A Zenoh peer listening on `endpoint` (no multicast, no shared memory), for `sim --ros2`
+    to connect to. Needs eclipse-zenoh."""
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("transport/shared_memory/enabled", "false")
+    return zenoh.open(conf)
+
+
+def run_sim_watching_tokens(z, args, err_path):
+    """Runs `pheromone sim ARGS` to its end while session `z` collects the ROS 2 liveliness
+    tokens (`@ros2_lv/0/**`) it sees; returns (exit status, tokens, stdout); stderr goes to
+    `err_path`."""
+    tokens = set()
+    with open(err_path, "wb") as err:
+        p = subprocess.Popen([str(BIN), "sim", *map(str, args)], stdout=subprocess.PIPE,
+                             stderr=err)
+        STARTED_PIDS.add(p.pid)
+        try:
+            while p.poll() is None:
+                for r in z.liveliness().get("@ros2_lv/0/**", timeout=1.0):
+                    if r.ok is not None:
+                        tokens.add(str(r.ok.key_expr))
+                # Between two looks, wait for the sim to end (not a fixed sleep).
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    p.wait(timeout=0.2)
+            out, _ = p.communicate(timeout=60)
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.communicate()
+    return p.returncode, tokens, out

@@ -5,22 +5,25 @@ and computes the Clock's RIHS01 hash; the run's `robot_0.csv` has the simulated 
 runs with `--ros-distro rolling` (sim passes it on). Needs a `pheromone` binary built with
 `--features zenoh`; skipped without it unless PHEROMONE_REQUIRE_ZENOH=1."""
 
-import contextlib
 import csv
-import json
 import os
-import subprocess
 import threading
 
 import pytest
-from ros_msgs import GRID, POSE, dds, free_port, register_grid_map
-
-from conftest import BIN, STARTED_PIDS
+from ros_msgs import (
+    GRID,
+    POSE,
+    dds,
+    free_port,
+    listening_session,
+    register_grid_map,
+    run_sim_watching_tokens,
+)
 
 REQUIRED = os.environ.get("PHEROMONE_REQUIRE_ZENOH") == "1"
 
 try:
-    import zenoh
+    import zenoh  # noqa: F401  (the skip below when it is missing)
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 except ImportError as e:
     if REQUIRED:
@@ -32,58 +35,33 @@ CLOCK = "rosgraph_msgs/msg/Clock"
 SIM_S = 4.0
 
 
-def _listening_session(endpoint):
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("transport/shared_memory/enabled", "false")
-    return zenoh.open(conf)
-
-
 def _t(stamp):
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def _run_sim(tmp_path, endpoint, z, tokens):
+def _run_sim(tmp_path, endpoint, z):
     out = tmp_path / "out"
-    err = open(tmp_path / "sim.stderr", "wb")
-    p = subprocess.Popen([str(BIN), "sim", "blind-leader", "--duration", str(SIM_S),
-                          "--realtime", "--ros2", endpoint, "--ros-distro", "rolling",
-                          "--out", str(out), "--json"],
-                         stdout=subprocess.PIPE, stderr=err)
-    STARTED_PIDS.add(p.pid)
-    try:
-        while p.poll() is None:
-            for r in z.liveliness().get("@ros2_lv/0/**", timeout=1.0):
-                if r.ok is not None:
-                    tokens.add(str(r.ok.key_expr))
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                p.wait(timeout=0.2)
-        p.communicate(timeout=60)
-    finally:
-        if p.poll() is None:
-            p.kill()
-            p.communicate()
-    err.close()
-    assert p.returncode == 0, open(err.name, errors="replace").read()
-    return out
+    rc, tokens, _ = run_sim_watching_tokens(
+        z, ["blind-leader", "--duration", SIM_S, "--realtime", "--ros2", endpoint,
+            "--ros-distro", "rolling", "--out", out, "--json"], tmp_path / "sim.stderr")
+    assert rc == 0, (tmp_path / "sim.stderr").read_text(errors="replace")
+    return out, tokens
 
 
 def test_sim_ros2_publishes_clock_and_stamps_everything_in_simulated_time(tmp_path):
     store = register_grid_map(get_typestore(Stores.ROS2_JAZZY), get_types_from_msg)
     hashes = {t: store.hash_rihs01(t) for t in (CLOCK, GRID, POSE)}
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    got, tokens, lock = {}, set(), threading.Lock()
+    got, lock = {}, threading.Lock()
 
     def on_sample(s):
         with lock:
             got.setdefault(str(s.key_expr), []).append(bytes(s.payload.to_bytes()))
 
-    with _listening_session(endpoint) as z:
+    with listening_session(endpoint) as z:
         subs = [z.declare_subscriber(k, on_sample)
                 for k in ("0/clock/**", "0/pheromone/grid_map/**", "0/robot_0/true_pose/**")]
-        out = _run_sim(tmp_path, endpoint, z, tokens)
+        out, tokens = _run_sim(tmp_path, endpoint, z)
         for s in subs:
             s.undeclare()
 

@@ -5,25 +5,20 @@ with rosbags (Stores.ROS2_JAZZY) and compared with the run's `robot_0.csv` (docs
 Needs a `pheromone` binary built with `--features zenoh` and `pip install './python[zenoh]'
 rosbags`; skipped without them unless PHEROMONE_REQUIRE_ZENOH=1."""
 
-import contextlib
 import csv
-import json
 import math
 import os
 import struct
-import subprocess
 import threading
 
 import numpy as np
 import pytest
-from ros_msgs import POSE, dds, free_port
-
-from conftest import BIN, STARTED_PIDS
+from ros_msgs import POSE, dds, free_port, listening_session, run_sim_watching_tokens
 
 REQUIRED = os.environ.get("PHEROMONE_REQUIRE_ZENOH") == "1"
 
 try:
-    import zenoh
+    import zenoh  # noqa: F401  (the skip below when it is missing)
     from rosbags.typesys import Stores, get_typestore
 except ImportError as e:
     if REQUIRED:
@@ -33,15 +28,6 @@ except ImportError as e:
 
 PATH = "nav_msgs/msg/Path"
 SIM_S = "4"
-
-
-def _listening_session(endpoint):
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("transport/shared_memory/enabled", "false")
-    return zenoh.open(conf)
 
 
 def _stamp(h):
@@ -70,31 +56,13 @@ def test_sim_ros2_publishes_poses_and_paths_that_match_the_run(tmp_path):
                 (bytes(s.payload.to_bytes()), bytes(s.attachment.to_bytes())))
 
     out = tmp_path / "out"
-    with _listening_session(endpoint) as z:
+    with listening_session(endpoint) as z:
         sub = z.declare_subscriber("0/robot_0/**", on_sample)
-        tokens = set()
-        err = open(tmp_path / "sim.stderr", "wb")
-        p = subprocess.Popen([str(BIN), "sim", "blind-leader", "--duration", SIM_S, "--realtime",
-                              "--ros2", endpoint, "--out", str(out), "--json"],
-                             stdout=subprocess.PIPE, stderr=err)
-        STARTED_PIDS.add(p.pid)
-        try:
-            while p.poll() is None:
-                for r in z.liveliness().get("@ros2_lv/0/**", timeout=1.0):
-                    if r.ok is not None:
-                        tokens.add(str(r.ok.key_expr))
-                # Between two looks, wait for the sim to end (not a fixed sleep).
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    p.wait(timeout=0.2)
-            p.communicate(timeout=60)
-        finally:
-            if p.poll() is None:
-                p.kill()
-                p.communicate()
-        err.close()
+        rc, tokens, _ = run_sim_watching_tokens(
+            z, ["blind-leader", "--duration", SIM_S, "--realtime", "--ros2", endpoint,
+                "--out", out, "--json"], tmp_path / "sim.stderr")
         sub.undeclare()
-    text = open(err.name, errors="replace").read()
-    assert p.returncode == 0, text
+    assert rc == 0, (tmp_path / "sim.stderr").read_text(errors="replace")
 
     # Liveliness: the robot's four publishers, with the hashes rosbags computes.
     pubs = sorted(tuple(t.split("/")[9:12]) for t in tokens
