@@ -6,6 +6,11 @@
 //! - Laser: a likelihood field ([`DistanceGrid`]): each returned beam's end point scores
 //!   z_hit·N(d; 0, σ_hit²) + z_rand/range_max, d its distance to the nearest wall; beams
 //!   without a return are skipped. `beam_stride` uses every k-th beam.
+//! - Free space (`free_space`, issue 48 part 4): a particle off the free space (on a wall, or
+//!   not reachable from the start pose: inside solid building) weighs [`OFF_FREE_SPACE_LOG`];
+//!   a beam whose path from the particle up to its reading less a margin (3σ_hit + 7.5 % of
+//!   the range; all of `range_max` for a beam without a return) crosses a wall scores
+//!   [`THROUGH_WALL_FACTOR`] of z_rand/range_max: the beam passed where the map has a wall.
 //! - Landmarks (`use_landmarks`): each observation scores the best landmark of a compatible
 //!   signature with N(ν; 0, Q_t), its Mahalanobis distance² capped at `landmark_d2_cap` (an
 //!   outlier costs at most that much).
@@ -36,6 +41,11 @@ pub const MIN_PARTICLES: usize = 10;
 /// Most particles a filter may have.
 pub const MAX_PARTICLES: usize = 100_000;
 
+/// Log-weight added to a particle off the free space: never accepted while any particle is on it.
+pub const OFF_FREE_SPACE_LOG: f64 = -1.0e4;
+/// Likelihood factor of a beam that passed through a wall of the map (against z_rand/range_max).
+pub const THROUGH_WALL_FACTOR: f64 = 1.0e-4;
+
 /// Settings of [`ParticleFilter`] (`[robot.pf]`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -56,6 +66,8 @@ pub struct PfConfig {
     pub landmark_d2_cap: f64,
     /// Resample when the effective sample size is below this share of M, in (0, 1].
     pub resample_fraction: f64,
+    /// Reject particles off the free space and beams through walls (see the module).
+    pub free_space: bool,
 }
 
 impl Default for PfConfig {
@@ -69,6 +81,7 @@ impl Default for PfConfig {
             use_landmarks: true,
             landmark_d2_cap: 25.0,
             resample_fraction: 0.5,
+            free_space: true,
         }
     }
 }
@@ -180,7 +193,8 @@ impl ParticleFilter {
         if !mean.iter().all(|v| v.is_finite()) || !valid_covariance3(&initial_cov) {
             return Err(LocalizerError::InvalidInitialState);
         }
-        let grid = DistanceGrid::new(walls, 1.0, pf.grid_cell_m, 5.0 * pf.sigma_hit_m)?;
+        let mut grid = DistanceGrid::new(walls, 1.0, pf.grid_cell_m, 5.0 * pf.sigma_hit_m)?;
+        grid.mark_free_from(mean.x, mean.y);
         let l = (initial_cov + Matrix3::identity() * 1e-15)
             .cholesky()
             .ok_or(LocalizerError::InvalidInitialState)?
@@ -260,24 +274,76 @@ impl ParticleFilter {
 
     /// Adds each particle's laser log-likelihood (likelihood field).
     pub fn weigh_laser(&mut self, laser: &LaserMsg) {
-        let sigma = self.pf.sigma_hit_m;
-        let norm = self.pf.z_hit / (std::f64::consts::TAU.sqrt() * sigma);
-        let rand = (1.0 - self.pf.z_hit) / f64::from(laser.range_max_m).max(1e-3);
-        let beams: Vec<(f64, f64)> = laser
+        let beams = self.beams(laser);
+        let rand = self.z_rand_density(laser);
+        for (p, lw) in self.particles.iter().zip(self.log_w.iter_mut()) {
+            *lw += Self::beams_log_likelihood(&self.grid, &self.pf, *p, &beams, rand);
+        }
+    }
+
+    /// The log-likelihood of `laser` seen from `pose`: the laser's and the free space's terms
+    /// (what a particle there would add to its log-weight).
+    pub fn pose_log_likelihood(&self, pose: [f64; 3], laser: &LaserMsg) -> f64 {
+        let beams = self.beams(laser);
+        let rand = self.z_rand_density(laser);
+        let free = self.pf.free_space && !self.grid.is_free(pose[0], pose[1]);
+        Self::beams_log_likelihood(&self.grid, &self.pf, pose, &beams, rand)
+            + if free { OFF_FREE_SPACE_LOG } else { 0.0 }
+    }
+
+    /// The beams used (angle, range, returned): every `beam_stride`-th; without a return only
+    /// with `free_space`.
+    fn beams(&self, laser: &LaserMsg) -> Vec<(f64, f64, bool)> {
+        laser
             .beams()
             .step_by(self.pf.beam_stride)
-            .filter(|b| b.2)
-            .map(|(a, r, _)| (f64::from(a), f64::from(r)))
-            .collect();
+            .filter(|b| b.2 || self.pf.free_space)
+            .map(|(a, r, hit)| (f64::from(a), f64::from(r), hit))
+            .collect()
+    }
+
+    fn z_rand_density(&self, laser: &LaserMsg) -> f64 {
+        (1.0 - self.pf.z_hit) / f64::from(laser.range_max_m).max(1e-3)
+    }
+
+    /// Σ over `beams` of ln(z_hit·N(d; 0, σ²) + z_rand/range_max) for a returned beam, or
+    /// ln(THROUGH_WALL_FACTOR) (times z_rand/range_max for a returned beam) when its path up to
+    /// its reading less the margin crosses a wall (with `free_space`).
+    fn beams_log_likelihood(
+        grid: &DistanceGrid,
+        pf: &PfConfig,
+        p: [f64; 3],
+        beams: &[(f64, f64, bool)],
+        rand: f64,
+    ) -> f64 {
+        let sigma = pf.sigma_hit_m;
+        let norm = pf.z_hit / (std::f64::consts::TAU.sqrt() * sigma);
         let inv_2s2 = 0.5 / (sigma * sigma);
-        for (p, lw) in self.particles.iter().zip(self.log_w.iter_mut()) {
-            let mut sum = 0.0;
-            for &(a, r) in &beams {
-                let (s, c) = (p[2] + a).sin_cos();
-                let d = self.grid.distance_m(p[0] + r * c, p[1] + r * s);
+        let through = THROUGH_WALL_FACTOR.ln();
+        let mut sum = 0.0;
+        for &(a, r, hit) in beams {
+            let angle = p[2] + a;
+            let clear_m = r - 3.0 * sigma - 0.075 * r;
+            if pf.free_space && clear_m > 0.0 && !grid.ray_clear(p[0], p[1], angle, clear_m) {
+                sum += through + if hit { rand.ln() } else { 0.0 };
+            } else if hit {
+                let (s, c) = angle.sin_cos();
+                let d = grid.distance_m(p[0] + r * c, p[1] + r * s);
                 sum += (norm * (-d * d * inv_2s2).exp() + rand).ln();
             }
-            *lw += sum;
+        }
+        sum
+    }
+
+    /// Adds [`OFF_FREE_SPACE_LOG`] to each particle off the free space (with `free_space`).
+    fn weigh_free_space(&mut self) {
+        if !self.pf.free_space {
+            return;
+        }
+        for (p, lw) in self.particles.iter().zip(self.log_w.iter_mut()) {
+            if !self.grid.is_free(p[0], p[1]) {
+                *lw += OFF_FREE_SPACE_LOG;
+            }
         }
     }
 
@@ -325,6 +391,7 @@ impl ParticleFilter {
 
     /// Normalizes the weights, resamples when they degenerate, and computes the estimate.
     fn finish_update(&mut self) {
+        self.weigh_free_space();
         let max = self.log_w.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         if !max.is_finite() {
             self.log_w.fill(0.0);

@@ -164,7 +164,7 @@ pub(super) fn repeating_corridor() -> WorldConfig {
 
 /// The particle filter on the repeating corridor, starting with σ_x = 1.2 m (within half a
 /// period): the final position error after 20 m of driving along it, and the final NEES.
-fn corridor_error_m(particles: usize, seed: u64) -> (f64, f64) {
+fn corridor_error_m(particles: usize, seed: u64, free_space: bool) -> (f64, f64) {
     let cfg = repeating_corridor();
     let walls = wall_segments(&cfg.walls).unwrap();
     let noise = cfg.noise;
@@ -182,6 +182,7 @@ fn corridor_error_m(particles: usize, seed: u64) -> (f64, f64) {
     };
     let pfc = PfConfig {
         particles,
+        free_space,
         ..PfConfig::default()
     };
     let mut pf = ParticleFilter::new(ekf, pfc, Vec::new(), &walls, start, cov0, seed).unwrap();
@@ -198,9 +199,16 @@ fn corridor_error_m(particles: usize, seed: u64) -> (f64, f64) {
 
 #[test]
 fn pf_tracks_with_enough_particles_and_diverges_with_too_few_in_a_repeating_corridor() {
+    // The end-point model alone (`free_space = false`): the failure of few particles.
     let seeds = 0..6u64;
-    let many: Vec<(f64, f64)> = seeds.clone().map(|s| corridor_error_m(1000, s)).collect();
-    let few: Vec<(f64, f64)> = seeds.clone().map(|s| corridor_error_m(10, s)).collect();
+    let many: Vec<(f64, f64)> = seeds
+        .clone()
+        .map(|s| corridor_error_m(1000, s, false))
+        .collect();
+    let few: Vec<(f64, f64)> = seeds
+        .clone()
+        .map(|s| corridor_error_m(10, s, false))
+        .collect();
     eprintln!("final (error m, NEES), 1000 particles: {many:.2?}; 10 particles: {few:.2?}");
     assert!(many.iter().all(|(e, _)| *e < 0.3), "{many:?}");
     // Diverged: off by more than half an alcove, and sure of it (NEES beyond χ²(3)'s 99.9 %
@@ -211,5 +219,131 @@ fn pf_tracks_with_enough_particles_and_diverges_with_too_few_in_a_repeating_corr
         "10 particles lost track in only {lost} of 6 runs: {few:?}"
     );
     // Seeded: the same seed gives the same run.
-    assert_eq!(corridor_error_m(10, 1), few[1]);
+    assert_eq!(corridor_error_m(10, 1, false), few[1]);
+}
+
+/// With the free space (issue 48 part 4) the same corridor is less aliased: a pose off by a
+/// fraction of a period sends beams through the alcoves' walls. 1000 particles stay
+/// consistent, and even 10 keep the right place.
+#[test]
+fn the_free_space_keeps_few_particles_in_place_in_the_repeating_corridor() {
+    let seeds = 0..6u64;
+    let many: Vec<(f64, f64)> = seeds
+        .clone()
+        .map(|s| corridor_error_m(1000, s, true))
+        .collect();
+    let few: Vec<(f64, f64)> = seeds
+        .clone()
+        .map(|s| corridor_error_m(10, s, true))
+        .collect();
+    eprintln!("free space: 1000 particles: {many:.2?}; 10 particles: {few:.2?}");
+    assert!(many.iter().all(|(e, n)| *e < 0.1 && *n < 16.27), "{many:?}");
+    let kept = few.iter().filter(|(e, _)| *e < 0.3).count();
+    assert!(
+        kept >= 5,
+        "10 particles kept the place in only {kept} of 6 runs: {few:?}"
+    );
+}
+
+/// A rectangle's four walls as a closed polyline.
+fn room(min: [f64; 2], max: [f64; 2]) -> WallConfig {
+    WallConfig::Polyline {
+        points_m: vec![min, [max[0], min[1]], max, [min[0], max[1]]],
+        closed: true,
+    }
+}
+
+/// The scan a robot at `pose` takes among `walls` (seed 000 Table 1's laser), and a particle
+/// filter started there with the given free-space setting.
+fn scan_and_filter(
+    walls: Vec<WallConfig>,
+    pose: WorldPose,
+    free_space: bool,
+) -> (ParticleFilter, pheromone_messages::LaserMsg) {
+    let cfg = WorldConfig {
+        robots: vec![RobotConfig {
+            id: 1,
+            start: pose,
+            noise: None,
+        }],
+        walls,
+        laser: Some(LaserConfig::default()),
+        ..WorldConfig::default()
+    };
+    let segments = wall_segments(&cfg.walls).unwrap();
+    let mut world = World::new(cfg, 7).unwrap();
+    world.step(&[(0.0, 0.0)]);
+    let laser = world.laser_outputs()[0];
+    let pfc = PfConfig {
+        particles: 10,
+        beam_stride: 1,
+        free_space,
+        ..PfConfig::default()
+    };
+    let cov0 = Matrix3::from_diagonal(&Vector3::new(1e-4, 1e-4, 1e-6));
+    let truth = world.poses()[0];
+    let pf = ParticleFilter::new(
+        EkfConfig::default(),
+        pfc,
+        Vec::new(),
+        &segments,
+        truth,
+        cov0,
+        1,
+    )
+    .unwrap();
+    (pf, laser)
+}
+
+/// ln p(scan | candidate) − ln p(scan | truth), end points alone and with the free space.
+fn alias_gap(walls: Vec<WallConfig>, truth: WorldPose, candidate: [f64; 3]) -> (f64, f64) {
+    let t = [truth.x_m, truth.y_m, truth.theta_rad];
+    let (pf, laser) = scan_and_filter(walls.clone(), truth, false);
+    let ends = pf.pose_log_likelihood(candidate, &laser) - pf.pose_log_likelihood(t, &laser);
+    let (pf, laser) = scan_and_filter(walls, truth, true);
+    let free = pf.pose_log_likelihood(candidate, &laser) - pf.pose_log_likelihood(t, &laser);
+    (ends, free)
+}
+
+/// Issue 48 part 4, the aliased corridor: two identical 3 m corridors side by side, the second
+/// closed off (solid building as far as the robot can reach). From a pose shifted by the
+/// corridor's width every beam ends on a wall exactly as from the truth, so the end points
+/// alone cannot tell them apart; the free space never accepts the closed-off one.
+#[test]
+fn a_pose_in_a_closed_off_aliased_corridor_is_never_accepted() {
+    let walls = vec![room([0.0, 0.0], [30.0, 3.0]), room([0.0, 3.0], [30.0, 6.0])];
+    let truth = WorldPose::new(10.0, 1.5, 0.0);
+    let (ends, free) = alias_gap(walls, truth, [10.0, 4.5, 0.0]);
+    eprintln!("closed-off alias: end points {ends:.2}, with free space {free:.2}");
+    assert!(ends.abs() < 3.0, "end points alone: {ends}");
+    assert!(
+        free < super::pf::OFF_FREE_SPACE_LOG / 2.0,
+        "free space: {free}"
+    );
+}
+
+/// Issue 48 part 4, beyond a wall the beam passed: a room of the corridor's width north of it
+/// (reachable through a door), 2.5 m deep ahead of the pose shifted into it. The corridor's
+/// long beams have no return, which end points alone ignore, so the shifted pose fits nearly
+/// as well as the truth; those beams would have crossed the room's end wall, and the free
+/// space puts the shifted pose far below the truth.
+#[test]
+fn a_pose_whose_beams_would_cross_a_wall_is_rejected_in_an_aliased_corridor() {
+    let corridor = WallConfig::Polyline {
+        points_m: vec![
+            [6.0, 3.0],
+            [0.0, 3.0],
+            [0.0, 0.0],
+            [30.0, 0.0],
+            [30.0, 3.0],
+            [7.0, 3.0],
+        ],
+        closed: false,
+    };
+    let walls = vec![corridor, room([6.0, 3.0], [12.5, 6.0])];
+    let truth = WorldPose::new(10.0, 1.5, 0.0);
+    let (ends, free) = alias_gap(walls, truth, [10.0, 4.5, 0.0]);
+    eprintln!("room alias: end points {ends:.2}, with free space {free:.2}");
+    assert!(free < ends - 50.0, "end points {ends}, free space {free}");
+    assert!(free < -50.0, "free space {free}");
 }
