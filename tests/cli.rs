@@ -17,6 +17,7 @@ mod on_deposit;
 mod processes;
 mod realtime;
 mod reliability;
+mod rundir;
 mod soak;
 mod sweep;
 mod view;

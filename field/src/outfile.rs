@@ -43,6 +43,14 @@ pub enum OutputError {
         /// What it is (`a symbolic link`, `a FIFO`, `a character device`, …).
         kind: &'static str,
     },
+    /// A link to repoint ([`replace_symlink`]) is something else: it is not replaced.
+    #[error("{}: is {kind}, not a symbolic link: refusing to replace it", path.display())]
+    NotSymlink {
+        /// The link's path.
+        path: PathBuf,
+        /// What is there (`a directory`, `a regular file`, …).
+        kind: &'static str,
+    },
     /// A state directory is not private to this user.
     #[error("{}: {reason}: refusing to keep state there", path.display())]
     NotPrivate {
@@ -81,6 +89,8 @@ fn kind_of(t: std::fs::FileType) -> &'static str {
         "a symbolic link"
     } else if t.is_dir() {
         "a directory"
+    } else if t.is_file() {
+        "a regular file"
     } else if t.is_fifo() {
         "a FIFO"
     } else if t.is_char_device() {
@@ -269,6 +279,38 @@ pub fn open_private_append(path: &Path) -> Result<File, OutputError> {
 /// `O_NONBLOCK`, so a FIFO planted there does not block the open).
 pub fn open_private_read(path: &Path) -> Result<File, OutputError> {
     open_regular(path, OpenOptions::new().read(true))
+}
+
+/// Points the symbolic link `link` at `target` (a path relative to the link's directory): a new
+/// link made under a random name beside it (`.NAME.XXXXXX.tmp`), then renamed over `link`, so a
+/// reader sees the old target or the new one. Anything at `link` but a symbolic link (a
+/// directory, a regular file) is refused, not replaced.
+pub fn replace_symlink(link: &Path, target: &Path) -> Result<(), OutputError> {
+    match std::fs::symlink_metadata(link) {
+        Ok(m) if !m.file_type().is_symlink() => {
+            return Err(OutputError::NotSymlink {
+                path: link.to_path_buf(),
+                kind: kind_of(m.file_type()),
+            })
+        }
+        Ok(_) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => return Err(OutputError::io(link, "inspect")(e)),
+    }
+    let mut prefix = std::ffi::OsString::from(".");
+    prefix.push(link.file_name().unwrap_or_default());
+    prefix.push(".");
+    let tmp = tempfile::Builder::new()
+        .prefix(&prefix)
+        .suffix(".tmp")
+        .make_in(directory_of(link), |p| {
+            std::os::unix::fs::symlink(target, p)
+        })
+        .map_err(OutputError::io(link, "create a temporary link beside"))?;
+    // On an error the temporary link is dropped with the error, hence removed.
+    tmp.persist(link)
+        .map_err(|e| OutputError::io(link, "rename a new link over")(e.error))?;
+    Ok(())
 }
 
 /// This process's effective user id.

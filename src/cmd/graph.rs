@@ -5,7 +5,6 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
 use clap::Args;
 use pheromone_field::shm::create_node;
 use pheromone_graph::agent::{GraphStrategy, RegionsScenario, Until, BUILTIN_REGIONS};
@@ -204,7 +203,7 @@ pub fn run_robot(a: GraphRobotArgs) -> anyhow::Result<()> {
 
 /// `pheromone sim` on a `regions` scenario: every robot count of the scenario (or --robots)
 /// with both strategies (or --strategy), then the comparison of the time to the goal.
-pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
+pub fn run_sim(a: &SimArgs, out: &super::out::Output) -> anyhow::Result<()> {
     refuse_grid_flags(a)?;
     let scenario = load_regions(&a.scenario)?;
     let seed = a.seed.unwrap_or(scenario.seed);
@@ -239,8 +238,8 @@ pub fn run_sim(a: &SimArgs) -> anyhow::Result<()> {
         comparison,
         runs,
     };
-    if !a.no_out {
-        write_sim_out(a, &scenario, &metrics, &text)?;
+    if let Some(dir) = out.dir(&scenario.name, &[seed])? {
+        write_sim_out(&dir, &scenario, &metrics, &text)?;
     }
     if a.json {
         println!("{}", serde_json::to_string(&metrics)?);
@@ -352,17 +351,12 @@ struct RegionsMetrics {
 
 /// Writes `metrics.json`, `tables.txt` and a picture of the graph per run into the out dir.
 fn write_sim_out(
-    a: &SimArgs,
+    dir: &Path,
     scenario: &RegionsScenario,
     metrics: &RegionsMetrics,
     text: &str,
 ) -> anyhow::Result<()> {
     let runs = &metrics.runs;
-    let dir = a
-        .out
-        .clone()
-        .unwrap_or_else(|| Path::new("pheromone-out").join(&scenario.name));
-    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let json = serde_json::to_string_pretty(metrics)?;
     pheromone_field::outfile::write_file(&dir.join("metrics.json"), json.as_bytes())?;
     pheromone_field::outfile::write_file(&dir.join("tables.txt"), text.as_bytes())?;

@@ -10,6 +10,7 @@ pub mod flags;
 pub mod gateway;
 pub mod graph;
 pub mod list;
+pub mod out;
 pub mod probe;
 pub mod roles;
 pub mod ros2;

@@ -16,9 +16,10 @@ use pheromone_sim::single::{run_single_process, RunSummary, SingleProcessOptions
 use pheromone_sim::trials::TrialsError;
 use pheromone_world::scenario::{Overrides, Scenario};
 
+use super::out::Output;
 use super::roles::load_scenario;
 pub use super::sim_args::SimArgs;
-use super::sim_run::{out_dir, run_processes};
+use super::sim_run::run_processes;
 use super::stop::{self, Stopped};
 use super::{bad, bad_from, bad_in};
 
@@ -31,7 +32,14 @@ fn follower_strategy(a: &SimArgs) -> anyhow::Result<Option<StrategyKind>> {
 }
 
 pub fn run(a: SimArgs) -> anyhow::Result<()> {
-    create_out_dir(&a)?;
+    let out = Output::plan("sim", a.out.as_deref(), a.no_out, a.force)?;
+    out.make_named()?;
+    let result = dispatch(&a, &out);
+    out.finish(result)
+}
+
+/// The run `a` asks for: a node-graph scenario, trials, filters compared, or one run.
+fn dispatch(a: &SimArgs, out: &Output) -> anyhow::Result<()> {
     if super::graph::is_regions(&a.scenario) {
         if a.record.is_some() {
             return Err(bad(format!(
@@ -39,7 +47,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
                 a.scenario
             )));
         }
-        return super::graph::run_sim(&a);
+        return super::graph::run_sim(a, out);
     }
     if a.localize.is_some() {
         return Err(bad(format!(
@@ -49,7 +57,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     }
     // From here SIGINT/SIGTERM end the run with what it has (exit status 130/143).
     super::stop::install()?;
-    let scenario = scenario_of(&a)?;
+    let scenario = scenario_of(a)?;
     // `sim --merge` on one robot merges nothing (a sweep's one-robot point keeps it: its row is
     // the baseline).
     let robots = scenario.world.robots.len();
@@ -59,22 +67,12 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         )));
     }
     if let Some(t) = a.trials {
-        return run_trials(&a, &scenario, t);
+        return run_trials(a, &scenario, t, out);
     }
     if a.compare_filters {
-        return super::sim_filters::run(&a, &scenario);
+        return super::sim_filters::run(a, &scenario, out);
     }
-    run_scenario(&a, &scenario)
-}
-
-/// `--out DIR` is made before the run, so a directory that cannot be made (`/proc/x`, a file
-/// on the way) is bad input now rather than an error after the run.
-fn create_out_dir(a: &SimArgs) -> anyhow::Result<()> {
-    if let Some(dir) = &a.out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| bad(format!("--out {}: cannot create it: {e}", dir.display())))?;
-    }
-    Ok(())
+    run_scenario(a, &scenario, out)
 }
 
 /// The scenario of `a` with its flags' overrides.
@@ -100,7 +98,7 @@ fn scenario_of(a: &SimArgs) -> anyhow::Result<Scenario> {
 }
 
 /// One run of the scenario, its summary, metrics and files.
-fn run_scenario(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
+fn run_scenario(a: &SimArgs, scenario: &Scenario, out: &Output) -> anyhow::Result<()> {
     if a.remote && pheromone_sim::processes::remote_robots(scenario).is_empty() {
         return Err(bad(format!(
             "--remote: scenario '{}' has no robot with an antenna follower (try trail-following)",
@@ -138,7 +136,7 @@ fn run_scenario(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
     // A file that could not be written fails the run, after its other outputs.
     let record = record.map(|totals| add_record(&mut metrics, totals));
     print_summary(&metrics);
-    write_outputs(a, scenario, &rec, &metrics)?;
+    write_outputs(a, (scenario, out), &rec, &metrics)?;
     record?;
     if interrupted {
         return Err(Stopped::by_requested().into());
@@ -149,11 +147,11 @@ fn run_scenario(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
 /// `--out DIR`'s files and the `--json` metrics.
 fn write_outputs(
     a: &SimArgs,
-    scenario: &Scenario,
+    (scenario, out): (&Scenario, &Output),
     rec: &Recording,
     metrics: &RunMetrics,
 ) -> anyhow::Result<()> {
-    if let Some(dir) = out_dir(a, scenario) {
+    if let Some(dir) = out.dir(&scenario.name, &[scenario.seed])? {
         let mut files = pheromone_report::write_outputs(
             &dir,
             rec,
@@ -299,7 +297,7 @@ fn progress_bar(steps: u64) -> indicatif::ProgressBar {
 // ---------------------------------------------------------------------------------------------
 // Trials (seed 004's comparison)
 
-fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<()> {
+fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32, out: &Output) -> anyhow::Result<()> {
     if trials < 2 {
         return Err(bad(format!("--trials {trials}: needs at least 2")));
     }
@@ -330,24 +328,25 @@ fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32) -> anyhow::Result<(
         }
         Ok(rec)
     };
-    let out = match pheromone_sim::trials::run_trials(scenario, trials, ours, run, || bar.inc(1)) {
-        Ok(out) => out,
+    let result = match pheromone_sim::trials::run_trials(scenario, trials, ours, run, || bar.inc(1))
+    {
+        Ok(r) => r,
         Err(TrialsError::Run(e)) => return Err(e),
         Err(TrialsError::Scenario(e)) => return Err(bad_from(e)),
     };
     bar.finish_and_clear();
-    eprintln!("{}", out.summary_line());
-    if let Some(dir) = out_dir(a, scenario) {
-        std::fs::create_dir_all(&dir)?;
+    eprintln!("{}", result.summary_line());
+    let seeds: Vec<u64> = (0..u64::from(trials)).map(|i| scenario.seed + i).collect();
+    if let Some(dir) = out.dir(&scenario.name, &seeds)? {
         let path = dir.join("trials.json");
         pheromone_field::outfile::write_file(
             &path,
-            serde_json::to_string_pretty(&out)?.as_bytes(),
+            serde_json::to_string_pretty(&result)?.as_bytes(),
         )?;
         eprintln!("wrote {}", path.display());
     }
     if a.json {
-        println!("{}", serde_json::to_string(&out)?);
+        println!("{}", serde_json::to_string(&result)?);
     }
     Ok(())
 }

@@ -37,10 +37,17 @@ pub struct SimArgs {
     /// Simulated seconds (default: the scenario's duration_s).
     #[arg(long, value_parser = super::secs(), value_name = "SECS")]
     pub duration: Option<f64>,
-    /// Write heat maps (PNG, with the robots' true and estimated trajectories), a CSV per robot
-    /// and metrics.json into this directory [default: pheromone-out/<SCENARIO>].
+    /// Write heat maps (PNG, with the robots' true and estimated trajectories), a CSV per robot,
+    /// metrics.json and run.json (the command line, version, seeds, start and end) into this
+    /// directory, which must be empty unless --force [default: a new
+    /// pheromone-out/<SCENARIO>/<UTC time>-<tag>/ per run; pheromone-out/latest and
+    /// pheromone-out/<SCENARIO>/latest link to the newest].
     #[arg(long, value_name = "DIR", value_parser = super::check::out_dir())]
     pub out: Option<PathBuf>,
+    /// Write into a non-empty --out DIR (an earlier run's files that this run does not write
+    /// stay; run.json lists this run's).
+    #[arg(long, requires = "out")]
+    pub force: bool,
     /// Write no files.
     #[arg(long, conflicts_with = "out")]
     pub no_out: bool,

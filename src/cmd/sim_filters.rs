@@ -10,8 +10,9 @@ use pheromone_sim::single::{run_single_process, SingleProcessOptions};
 use pheromone_world::scenario::{Overrides, Scenario};
 
 use super::bad;
+use super::out::Output;
 use super::sim_args::SimArgs;
-use super::sim_run::{out_dir, run_processes};
+use super::sim_run::run_processes;
 use super::stop::{self, Stopped};
 
 /// The robot compared: `--compare-robot`, or the lowest id with a depositor.
@@ -75,7 +76,7 @@ fn run_with(
     Ok(rec.robots.remove(&robot).unwrap_or_default())
 }
 
-pub fn run(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
+pub fn run(a: &SimArgs, scenario: &Scenario, output: &Output) -> anyhow::Result<()> {
     let robot = robot_of(a, scenario)?;
     eprintln!(
         "sim '{}' (seed {}) --compare-filters: robot {robot}, once with each of ekf, ukf and pf, \
@@ -115,7 +116,7 @@ pub fn run(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
     for f in &out.filters {
         eprintln!("{}", f.line());
     }
-    if let Some(dir) = out_dir(a, scenario) {
+    if let Some(dir) = output.dir(&scenario.name, &[scenario.seed])? {
         let mut files = pheromone_report::write_filter_comparison(&dir, robot, &runs)?;
         let path = dir.join("filters.json");
         let json = serde_json::to_string_pretty(&out)? + "\n";

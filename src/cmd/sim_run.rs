@@ -1,7 +1,5 @@
-//! What `pheromone sim` and `sim --compare-filters` share: where a run writes its files, and a
-//! scenario run as separate processes with the flags of `sim`.
-
-use std::path::PathBuf;
+//! What `pheromone sim` and `sim --compare-filters` share: a scenario run as separate processes
+//! with the flags of `sim` (where a run writes its files: `out.rs`).
 
 use pheromone_sim::processes::{
     run_as_processes, ProcessRunError, ProcessRunInfo, ProcessRunOptions,
@@ -13,17 +11,6 @@ use pheromone_world::scenario::Scenario;
 
 use super::sim_args::SimArgs;
 use super::stop::Stopped;
-
-pub(super) fn out_dir(a: &SimArgs, scenario: &Scenario) -> Option<PathBuf> {
-    if a.no_out {
-        return None;
-    }
-    Some(
-        a.out
-            .clone()
-            .unwrap_or_else(|| PathBuf::from("pheromone-out").join(&scenario.name)),
-    )
-}
 
 pub(super) fn run_processes(
     a: &SimArgs,

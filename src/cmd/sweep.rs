@@ -13,6 +13,7 @@ use pheromone_sim::sweep::{
 use pheromone_sim::sweep_shard::{sweep_id, ShardRecord};
 use pheromone_world::scenario::Scenario;
 
+use super::out::Output;
 use super::roles::load_scenario;
 use super::{bad, bad_from};
 
@@ -116,14 +117,21 @@ pub struct SweepArgs {
     #[arg(long, value_parser = super::int::<u32>(1, 100_000), value_name = "T", default_value_t = 10)]
     pub trials: u32,
     /// Simulated seconds per run (one IAS-SS iteration a second: the paper's 1000 iterations).
-    #[arg(long = "duration-s", value_parser = super::secs(), value_name = "S", default_value_t = 1000.0)]
+    /// (`--duration-s`, its old name, is taken too.)
+    #[arg(long = "duration", alias = "duration-s", value_parser = super::secs(), value_name = "SECS", default_value_t = 1000.0)]
     pub duration_s: f64,
     /// Worker threads [default: the available parallelism].
     #[arg(long, value_parser = super::int::<usize>(1, 1024), value_name = "N")]
     pub jobs: Option<usize>,
-    /// Directory for the files [default: pheromone-out/sweep-<SCENARIO>].
+    /// Directory for the files and run.json, which must be empty unless --force [default: a
+    /// new pheromone-out/sweep-<SCENARIO>/<UTC time>-<tag>/ per sweep (with --shard:
+    /// pheromone-out/sweep-<SCENARIO>-shard-K-of-N/<UTC time>-<tag>/); `latest` links to the
+    /// newest].
     #[arg(long, value_name = "DIR", value_parser = super::check::out_dir())]
     pub out: Option<PathBuf>,
+    /// Write into a non-empty --out DIR (a re-run shard replacing its directory's files).
+    #[arg(long, requires = "out")]
+    pub force: bool,
     /// Run only the K-th of N slices of the sweep's runs (every N-th run of the plan from the
     /// K-th; K from 0 to N-1, as $SLURM_ARRAY_TASK_ID with `sbatch --array=0-(N-1)` or
     /// $JOB_COMPLETION_INDEX in a Kubernetes Indexed Job) and write sweep.csv and shard.json
@@ -159,9 +167,12 @@ pub struct MergeArgs {
     /// The shards' --out directories.
     #[arg(required = true, value_name = "DIR")]
     pub dirs: Vec<PathBuf>,
-    /// Directory for the sweep's files.
+    /// Directory for the sweep's files and run.json, which must be empty unless --force.
     #[arg(long, value_name = "DIR", value_parser = super::check::out_dir())]
     pub out: PathBuf,
+    /// Write into a non-empty --out DIR.
+    #[arg(long)]
+    pub force: bool,
     /// Print sweep.json on stdout as well.
     #[arg(long)]
     pub json: bool,
@@ -172,7 +183,7 @@ pub struct MergeArgs {
 fn grid(a: &SweepArgs) -> anyhow::Result<(SweepGrid, Vec<MergeRule>, Vec<u32>)> {
     if !(a.duration_s.is_finite() && a.duration_s > 0.0) {
         return Err(bad(format!(
-            "--duration-s {}: must be a number of seconds > 0",
+            "--duration {}: must be a number of seconds > 0",
             a.duration_s
         )));
     }
@@ -229,10 +240,19 @@ fn with_integration(
 }
 
 pub fn run(a: SweepArgs) -> anyhow::Result<()> {
-    if let Some(SweepCommand::Merge(m)) = a.command {
-        return merge(m);
+    if let Some(SweepCommand::Merge(m)) = &a.command {
+        let out = Output::plan("sweep", Some(&m.out), false, m.force)?;
+        let result = merge(m, &out);
+        return out.finish(result);
     }
-    let (grid, rules, idle) = grid(&a)?;
+    let out = Output::plan("sweep", a.out.as_deref(), false, a.force)?;
+    let result = sweep(&a, &out);
+    out.finish(result)
+}
+
+/// The sweep (or its shard) run and written.
+fn sweep(a: &SweepArgs, out: &Output) -> anyhow::Result<()> {
+    let (grid, rules, idle) = grid(a)?;
     let base = load_scenario(&a.scenario)?;
     let grid = with_integration(grid, &base, (&rules, &idle));
     let jobs = match a.jobs {
@@ -255,17 +275,18 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
     let result = with_bar(runs, &|progress| {
         run_sweep_shard(&base, &grid, shard, jobs, progress)
     })?;
+    let seeds: Vec<u64> = (1..=u64::from(grid.trials)).collect();
     let Some(shard) = a.shard else {
         print_summary(&result);
-        let dir = a.out.clone().unwrap_or_else(|| default_out(&base.name, ""));
-        return write_outputs(&dir, &result, a.json);
+        let dir = out.dir_in(&format!("sweep-{}", base.name), &base.name, &seeds)?;
+        return write_outputs(&dir.unwrap_or_default(), &result, a.json);
     };
     let record = ShardRecord::new(sweep_id(&base, &grid), shard, total, &result);
-    let suffix = format!("-shard-{}-of-{}", shard.index, shard.count);
-    let dir = a
-        .out
-        .clone()
-        .unwrap_or_else(|| default_out(&base.name, &suffix));
+    let name = format!(
+        "sweep-{}-shard-{}-of-{}",
+        base.name, shard.index, shard.count
+    );
+    let dir = out.dir_in(&name, &base.name, &seeds)?.unwrap_or_default();
     let files = pheromone_report::write_shard(&dir, &result, &record)?;
     eprintln!(
         "shard {shard} of sweep {} done: {} run(s) in {:.1} s; wrote {} file(s) to {}",
@@ -279,10 +300,6 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string(&record)?);
     }
     Ok(())
-}
-
-fn default_out(scenario: &str, suffix: &str) -> PathBuf {
-    PathBuf::from("pheromone-out").join(format!("sweep-{scenario}{suffix}"))
 }
 
 /// What a sweep calls after each run: (runs done, runs in all).
@@ -320,7 +337,7 @@ fn write_outputs(dir: &std::path::Path, result: &SweepResult, json: bool) -> any
 }
 
 /// `pheromone sweep merge`: the shards read back, checked and joined.
-fn merge(m: MergeArgs) -> anyhow::Result<()> {
+fn merge(m: &MergeArgs, out: &Output) -> anyhow::Result<()> {
     let shards = m
         .dirs
         .iter()
@@ -334,7 +351,9 @@ fn merge(m: MergeArgs) -> anyhow::Result<()> {
         result.scenario
     );
     print_summary(&result);
-    write_outputs(&m.out, &result, m.json)
+    let seeds: Vec<u64> = (1..=u64::from(result.trials)).collect();
+    let dir = out.dir(&result.scenario, &seeds)?.unwrap_or_default();
+    write_outputs(&dir, &result, m.json)
 }
 
 fn print_summary(r: &SweepResult) {

@@ -94,7 +94,7 @@ const DOMAINS: &[(&str, &str, Domain)] = &[
     ("sim", "--attach-timeout", SECS),
     ("sim", "--stall-timeout", SECS),
     ("sweep", "--trials", int(1.0, 100_000.0)),
-    ("sweep", "--duration-s", SECS),
+    ("sweep", "--duration", SECS),
     ("sweep", "--jobs", int(1.0, 1024.0)),
     ("field", "--width", int(1.0, 65_536.0)),
     ("field", "--height", int(1.0, 65_536.0)),

@@ -96,7 +96,7 @@ CONF
 export SLURM_CONF=$tmp/slurm.conf
 
 # The unsharded sweep, here, while the daemons start.
-sweep=(ias-ss --robots 2,3 --trials 2 --duration-s 40)
+sweep=(ias-ss --robots 2,3 --trials 2 --duration 40)
 "$bin" sweep "${sweep[@]}" --jobs 1 --out "$tmp/whole" 2>"$tmp/whole.log"
 
 for _ in $(seq 100); do [ -S "$tmp/munge/munge.socket" ] && break; sleep 0.1; done

@@ -31,6 +31,7 @@ fn a_tiny_sweep_writes_a_row_per_run_the_points_and_the_robots_chart() {
         "1,2",
         "--trials",
         "2",
+        // The old name of --duration, still taken (hidden).
         "--duration-s",
         "120",
         "--jobs",

@@ -15,7 +15,7 @@ const SWEEP: &[&str] = &[
     "2,3",
     "--trials",
     "2",
-    "--duration-s",
+    "--duration",
     "40",
     "--jobs",
     "1",

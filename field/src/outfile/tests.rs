@@ -157,3 +157,31 @@ fn a_private_dir_is_made_0700_and_a_shared_linked_or_foreign_one_is_refused() {
     assert!(private_dir(&file).is_err());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn replace_symlink_makes_and_repoints_a_link_and_refuses_a_directory_or_a_file() {
+    let dir = scratch("latest");
+    std::fs::create_dir(dir.join("a")).unwrap();
+    std::fs::create_dir(dir.join("b")).unwrap();
+    let link = dir.join("latest");
+    replace_symlink(&link, Path::new("a")).unwrap();
+    assert_eq!(std::fs::read_link(&link).unwrap(), Path::new("a"));
+    replace_symlink(&link, Path::new("b")).unwrap();
+    assert_eq!(std::fs::read_link(&link).unwrap(), Path::new("b"));
+    assert_eq!(names_in(&dir), ["a", "b", "latest"]);
+    // A directory or a regular file under the link's name is left as it is.
+    for (name, kind) in [("a", "a directory"), ("f", "a regular file")] {
+        if name == "f" {
+            std::fs::write(dir.join("f"), b"x").unwrap();
+        }
+        let e = replace_symlink(&dir.join(name), Path::new("b")).unwrap_err();
+        let text = e.to_string();
+        assert!(text.contains(name), "{text}");
+        assert!(matches!(e, OutputError::NotSymlink { .. }), "{text}");
+        assert!(text.contains(kind), "{text}");
+    }
+    assert!(dir.join("a").is_dir());
+    assert_eq!(std::fs::read(dir.join("f")).unwrap(), b"x");
+    assert_eq!(names_in(&dir), ["a", "b", "f", "latest"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

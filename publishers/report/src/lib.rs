@@ -31,6 +31,7 @@ mod maps;
 mod marks;
 mod plots;
 pub mod probe;
+pub mod rundir;
 pub mod series;
 mod style;
 mod sweep;
