@@ -38,7 +38,7 @@ fn print_quietly(to_stderr: bool, args: std::fmt::Arguments) {
     };
 }
 
-use clap::{CommandFactory, Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 /// A zero-copy shared-memory pheromone field for robots on one host.
 ///
@@ -111,11 +111,21 @@ enum Command {
     Flags,
 }
 
+/// The command line, where a negative number is a value wherever a value is expected (`--x -3`;
+/// `--robots -1` is refused by its flag's parser, naming it, not taken for an unknown flag).
+fn parse_cli() -> Cli {
+    fn negatives(c: clap::Command) -> clap::Command {
+        c.allow_negative_numbers(true).mut_subcommands(negatives)
+    }
+    let matches = negatives(Cli::command()).get_matches();
+    Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
+}
+
 fn main() -> ExitCode {
     // This program owns its process: its nodes stop on SIGINT/SIGTERM through iceoryx2's handler
     // (the library's default is to install none, for programs that embed it).
     pheromone_field::shm::handle_termination_requests();
-    let cli = Cli::parse();
+    let cli = parse_cli();
     pheromone_field::shm::set_verbose(cli.verbose);
     // The inherited domain is checked as the flag is, before anything starts.
     if cli.iox_domain.is_none() {

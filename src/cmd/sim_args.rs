@@ -51,6 +51,11 @@ pub struct SimArgs {
     /// Write no files.
     #[arg(long, conflicts_with = "out")]
     pub no_out: bool,
+    /// Print the TOML of the built-in scenario NAME and exit, to start a scenario of your own
+    /// (`pheromone sim --print-scenario wrong-area > mine.toml`, edit, `pheromone sim
+    /// mine.toml`).
+    #[arg(long, value_name = "NAME")]
+    pub print_scenario: Option<String>,
     /// Also write the run, as it goes, to this ROS 2 MCAP file (profile ros2, CDR; for Foxglove
     /// and `ros2 bag play`), stamped with simulated time: the field as
     /// grid_map_msgs/msg/GridMap (/pheromone/grid_map) and one nav_msgs/msg/OccupancyGrid per

@@ -310,12 +310,7 @@ fn with_bar(
     runs: usize,
     run: &dyn Fn(Progress<'_>) -> Result<SweepResult, pheromone_sim::sweep::SweepError>,
 ) -> anyhow::Result<SweepResult> {
-    let bar = indicatif::ProgressBar::new(runs as u64);
-    if let Ok(style) =
-        indicatif::ProgressStyle::with_template("{spinner} [{bar:40}] {pos}/{len} runs ({eta})")
-    {
-        bar.set_style(style.progress_chars("=> "));
-    }
+    let bar = super::sim::progress_bar_of(runs as u64, "runs");
     let result = run(&|done, _| bar.set_position(done as u64))?;
     bar.finish_and_clear();
     Ok(result)

@@ -161,3 +161,49 @@ fn a_sweep_writes_its_own_run_directory_with_run_json() {
     assert_eq!(info["command"][1], "sweep");
     std::fs::remove_dir_all(&cwd).unwrap();
 }
+
+#[test]
+fn print_scenario_prints_a_built_in_scenario_that_loads_back_as_a_file() {
+    let cwd = scratch("print-scenario");
+    let o = run(&["sim", "--print-scenario", "wrong-area"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let file = cwd.join("mine.toml");
+    std::fs::write(&file, &o.stdout).unwrap();
+    let f = file.to_str().unwrap();
+    let args = [
+        "sim",
+        f,
+        "--single-process",
+        "--duration",
+        "3",
+        "--no-out",
+        "--json",
+    ];
+    let o = run_in(&cwd, &args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(json(&o)["scenario"], "wrong-area");
+    // A node-graph one prints too; an unknown name is bad input naming the built-in ones.
+    let o = run(&["sim", "--print-scenario", "regions"]);
+    assert!(stdout(&o).contains("dock"), "{}", stderr(&o));
+    let o = run(&["sim", "--print-scenario", "nope"]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("nope") && e.contains("blind-leader"), "{e}");
+    std::fs::remove_dir_all(&cwd).unwrap();
+}
+
+#[test]
+fn a_negative_number_is_a_value_refused_by_its_flag_not_an_unknown_argument() {
+    for args in [
+        &["sim", "trail", "--no-out", "--duration", "-5"][..],
+        &["sweep", "ias-ss", "--duration", "-5"][..],
+    ] {
+        let o = run(args);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+        assert!(
+            e.contains("--duration -5") && !e.contains("unexpected"),
+            "{args:?}: {e}"
+        );
+    }
+}
