@@ -243,3 +243,41 @@ def test_an_older_release_gets_the_keyed_attachment_and_its_qos_defaults(
     assert (k1, k2, k3) == ("sequence_number", "source_timestamp", "source_gid")
     assert seq >= 1 and abs(stamp - time.time_ns()) < 60e9
     assert g == gid(grid_tok)
+
+
+def test_sim_passes_the_release_on_to_its_ros2_child(store, tmp_path):
+    """`sim --ros2 --ros-distro jazzy --rmw-zenoh-release 0.2.2`: the child writes that release's
+    conventions (the GridMap token's QoS string against a transient-local default, the keyed
+    attachment with the token's GID), as sim passes `--ros-distro` on; a release the
+    distribution does not have is refused before the run starts, and the flag needs --ros2."""
+    from ros_msgs import listening_session, run_sim_watching_tokens
+    from zenoh.ext import z_deserialize
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    got = []
+    with listening_session(endpoint) as z:
+        sub = z.declare_subscriber(f"0/pheromone/grid_map/{dds(GRID)}/{store.hash_rihs01(GRID)}",
+                                   got.append)
+        rc, tokens, _ = run_sim_watching_tokens(
+            z, ["blind-leader", "--duration", 3, "--realtime", "--ros2", endpoint,
+                "--ros-distro", "jazzy", "--rmw-zenoh-release", "0.2.2", "--no-out"],
+            tmp_path / "sim.stderr")
+        sub.undeclare()
+    assert rc == 0, (tmp_path / "sim.stderr").read_text(errors="replace")
+    [grid_tok] = [t for t in tokens if "%pheromone%grid_map" in t]
+    assert grid_tok.split("/")[12] == qos_keyexpr_tl_default(1, True), grid_tok
+    assert got, "no GridMap from the sim's ros2 child"
+    att = got[0].attachment
+    assert len(att.to_bytes()) == 77
+    k1, seq, k2, _, k3, g = z_deserialize(tuple[str, Int64, str, Int64, str, bytes], att)
+    assert (k1, k2, k3) == ("sequence_number", "source_timestamp", "source_gid")
+    assert seq >= 1 and g == gid(grid_tok)
+
+    for args, says in [(["--ros2", endpoint, "--ros-distro", "rolling",
+                         "--rmw-zenoh-release", "0.2.2"], "--rmw-zenoh-release 0.2.2"),
+                       (["--ros2", endpoint, "--rmw-zenoh-release", "0.3.0"], "0.2.x"),
+                       (["--rmw-zenoh-release", "0.2.2"], "--ros2")]:
+        p = subprocess.run([str(BIN), "sim", "blind-leader", "--duration", "1", "--no-out",
+                            *args], capture_output=True, timeout=60)
+        assert p.returncode == 2, (args, p.stderr)
+        assert says in p.stderr.decode(errors="replace"), (args, p.stderr)

@@ -16,7 +16,8 @@ use super::{bad, bad_from};
 /// read of the same antennas, with the PIRs per second one gateway core serves. With `--features
 /// zenoh`, a field mirror over Zenoh (a 1024² origin at 100 Hz in one iceoryx2 domain, a bridge,
 /// a mirror in another): bytes on the wire against raw frames at 10 and 1000 deposits/s,
-/// origin-to-mirror lag, keyframe size and catch-up. `--only mirror` (or any list of sections)
+/// origin-to-mirror lag, keyframe size and catch-up; and `pheromone ros2`'s CPU per published MB
+/// against a plain Zenoh publisher of the same bytes. `--only mirror` (or any list of sections)
 /// runs part of it. Progress goes to stderr. The default run takes a few minutes; `--quick` under
 /// a minute.
 #[derive(Args)]
@@ -70,6 +71,9 @@ enum SectionArg {
     Timing,
     /// Seed 004's map merge vs memcpy.
     Merge,
+    /// CPU per published MB of `pheromone ros2` against a plain Zenoh publisher (a build with
+    /// --features zenoh).
+    Ros2,
 }
 
 impl From<SectionArg> for Section {
@@ -84,6 +88,7 @@ impl From<SectionArg> for Section {
             SectionArg::CAbi => Section::CAbi,
             SectionArg::Timing => Section::Timing,
             SectionArg::Merge => Section::Merge,
+            SectionArg::Ros2 => Section::Ros2,
         }
     }
 }
@@ -97,10 +102,15 @@ pub struct BenchPeerArgs {
 
 pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     // --tick-hz and --visible-width: their parsers have checked the ranges.
-    if !pheromone_bench::ZENOH_BUILT && a.only.iter().any(|s| matches!(s, SectionArg::Mirror)) {
-        return Err(bad(
-            "--only mirror: this build has no Zenoh: rebuild with `cargo build --release --features zenoh`",
-        ));
+    let zenoh_only = a
+        .only
+        .iter()
+        .find(|s| matches!(s, SectionArg::Mirror | SectionArg::Ros2));
+    if let (false, Some(s)) = (pheromone_bench::ZENOH_BUILT, zenoh_only) {
+        return Err(bad(format!(
+            "--only {}: this build has no Zenoh: rebuild with `cargo build --release --features zenoh`",
+            serde_json::to_string(&Section::from(*s))?.trim_matches('"')
+        )));
     }
     let program = std::env::current_exe().context("find this executable to start the peers")?;
     let opts = Options {
@@ -205,6 +215,9 @@ fn print_tables(r: &Report) {
     }
     if let Some(c) = &r.c_abi {
         print_c_abi(c);
+    }
+    if let Some(x) = &r.ros2 {
+        print_ros2(x);
     }
     print_targets(r);
 }
@@ -516,6 +529,36 @@ fn print_mirror(m: &pheromone_bench::MirrorSection) {
         m.start_to_live_ms,
         m.checksums_matched,
         m.checksum_mismatches
+    );
+}
+
+/// Issue 46: `pheromone ros2` against a plain Zenoh publisher, CPU per published MB.
+fn print_ros2(x: &pheromone_bench::ros2::Ros2Report) {
+    println!(
+        "\nros2, {w}x{w} field at {} Hz, topics of {:?} bytes, one subscriber",
+        x.rate_hz,
+        x.topic_bytes,
+        w = x.width
+    );
+    println!("publisher            frames/s      MB/s   CPU (core)   CPU ms/MB");
+    for (who, p) in [("pheromone ros2", &x.ros2), ("plain Zenoh", &x.plain_zenoh)] {
+        println!(
+            "{who:<18} {:>10.1} {:>9.1} {:>12.3} {:>11.2}",
+            p.frames_per_s, p.mb_per_s, p.cpu_share, p.cpu_ms_per_mb
+        );
+    }
+    println!(
+        "ratio {:.2}; with nobody subscribed for {:.1} s: {:.3} of a core, {} frames not \
+         serialized, {} for the transient-local cache",
+        x.cpu_per_mb_ratio,
+        x.idle.seconds,
+        x.idle.cpu_share,
+        x.idle
+            .frames_without_subscribers
+            .map_or("?".into(), |n| n.to_string()),
+        x.idle
+            .frames_for_cache
+            .map_or("?".into(), |n| n.to_string()),
     );
 }
 

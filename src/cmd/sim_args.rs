@@ -108,6 +108,11 @@ pub struct SimArgs {
     /// humble, jazzy, kilted or rolling). Only with --ros2.
     #[arg(long, value_name = "DISTRO", value_parser = ["humble", "jazzy", "kilted", "rolling"], requires = "ros2")]
     pub ros_distro: Option<String>,
+    /// The distribution's rmw_zenoh release X.Y.Z of the --ros2 child's graph, when older than
+    /// its current one (`pheromone ros2 --rmw-zenoh-release`; docs/ros2.md, "ROS 2
+    /// distributions"). Only with --ros2.
+    #[arg(long, value_name = "X.Y.Z", requires = "ros2")]
+    pub rmw_zenoh_release: Option<String>,
     /// TLS, credentials and Zenoh configuration of the --ros2 child (`pheromone ros2`'s flags
     /// of the same names, passed on to it; docs/mirrors.md, "Security"). Only with --ros2.
     #[command(flatten)]

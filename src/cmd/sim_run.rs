@@ -52,13 +52,33 @@ pub(super) fn run_processes(
     })
 }
 
-/// What the --ros2 child gets besides the run's names: the security flags, `--ros-distro`.
+/// What the --ros2 child gets besides the run's names: the security flags, `--ros-distro`,
+/// `--rmw-zenoh-release`.
 fn ros2_args(a: &SimArgs) -> Vec<String> {
     let mut v = a.zenoh.to_args();
     if let Some(d) = &a.ros_distro {
         v.extend(["--ros-distro".to_string(), d.clone()]);
     }
+    if let Some(r) = &a.rmw_zenoh_release {
+        v.extend(["--rmw-zenoh-release".to_string(), r.clone()]);
+    }
     v
+}
+
+/// `--ros-distro` with `--rmw-zenoh-release`: a release that distribution has (refused before
+/// the run starts, not by its child).
+fn check_ros2_release(a: &SimArgs) -> anyhow::Result<()> {
+    use pheromone_ros2::rmw_zenoh::RosDistro;
+    let Some(release) = &a.rmw_zenoh_release else {
+        return Ok(());
+    };
+    let name = a.ros_distro.as_deref().unwrap_or("jazzy");
+    let distro = RosDistro::from_name(name)
+        .ok_or_else(|| super::bad(format!("--ros-distro {name}: unknown")))?;
+    distro
+        .conventions(Some(release))
+        .map(|_| ())
+        .map_err(super::bad_from)
 }
 
 /// What a run as processes refuses of the flags and the scenario; what it says it starts
@@ -87,6 +107,7 @@ fn check_process_flags(a: &SimArgs, scenario: &Scenario) -> anyhow::Result<()> {
              child: give --ros2 too",
         ));
     }
+    check_ros2_release(a)?;
     if let Some(e) = &a.ros2 {
         eprintln!("sim: ros2: connecting to {e} (stops with the run)");
     }

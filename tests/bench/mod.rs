@@ -151,6 +151,7 @@ fn bench_smoke_run_reports_every_figure_as_one_json_object() {
     );
 
     check_mirror(&r, zenoh_built);
+    check_ros2(&r, zenoh_built);
 
     // libpheromone's C reader beside the Rust reader, as ratios of the same run.
     let c = &r["c_abi"];
@@ -313,6 +314,79 @@ fn check_mirror(r: &Value, zenoh_built: bool) {
         names.iter().any(|n| n.starts_with("mirror wire bytes")),
         "{names:?}"
     );
+}
+
+/// Issue 46's `ros2` section: `pheromone ros2` and the plain Zenoh publisher each measured
+/// (frames reached the subscriber, CPU used), the ratio, and its target (≤ 1.5); null without
+/// Zenoh.
+fn check_ros2(r: &Value, zenoh_built: bool) {
+    let x = &r["ros2"];
+    if !zenoh_built {
+        assert!(x.is_null(), "a ros2 section without zenoh: {x}");
+        return;
+    }
+    let topics = x["topic_bytes"].as_array().expect("ros2.topic_bytes");
+    // A GridMap and one OccupancyGrid (the bench field has one channel of 512² cells).
+    assert_eq!(topics.len(), 2, "{x}");
+    assert!(
+        topics
+            .iter()
+            .all(|b| b.as_u64().is_some_and(|b| b > 512 * 512)),
+        "{x}"
+    );
+    for who in ["ros2", "plain_zenoh"] {
+        for k in [
+            "window_s",
+            "frames_per_s",
+            "mb_per_s",
+            "cpu_share",
+            "cpu_ms_per_mb",
+        ] {
+            positive(&x[who], k, &format!("ros2.{who}"));
+        }
+    }
+    let ratio = positive(x, "cpu_per_mb_ratio", "ros2");
+    let idle = &x["idle"];
+    positive(idle, "seconds", "ros2.idle");
+    assert!(
+        idle["cpu_share"].as_f64().is_some_and(|c| c >= 0.0),
+        "{idle}"
+    );
+    // Nobody subscribed: frames skipped, not serialized.
+    assert!(
+        idle["frames_without_subscribers"]
+            .as_u64()
+            .is_some_and(|n| n >= 1),
+        "{idle}"
+    );
+    let targets = r["targets"].as_array().expect("targets");
+    let t = targets
+        .iter()
+        .find(|t| {
+            t["name"]
+                .as_str()
+                .is_some_and(|n| n.starts_with("pheromone ros2 CPU per published MB"))
+        })
+        .unwrap_or_else(|| panic!("no ros2 target in {targets:?}"));
+    assert_eq!(t["op"], "<=", "{t}");
+    assert_eq!(t["limit"].as_f64(), Some(1.5), "{t}");
+    let measured = t["measured"].as_f64().expect("measured");
+    assert!((measured - ratio).abs() <= 0.01 * ratio, "{t} vs {ratio}");
+}
+
+#[test]
+fn bench_only_ros2_reports_its_cpu_per_mb_row() {
+    let out = run(&["bench", "--smoke", "--json", "--only", "ros2"]);
+    if !cfg!(feature = "zenoh") {
+        assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+        assert!(stderr(&out).contains("--only ros2"), "{}", stderr(&out));
+        return;
+    }
+    assert!(out.status.success(), "bench failed: {}", stderr(&out));
+    let r = json(&out);
+    assert_eq!(r["sections"], serde_json::json!(["ros2"]), "{r}");
+    check_ros2(&r, true);
+    assert!(r["mirror"].is_null(), "{r}");
 }
 
 #[test]

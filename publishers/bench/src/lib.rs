@@ -19,7 +19,9 @@
 //!   and sampling cost, as ratios measured in the same run;
 //! - `mirror` (feature `zenoh`): a field mirrored over Zenoh to a second iceoryx2 domain — bytes
 //!   on the wire against raw frames at 10 and 1000 deposits/s, origin-to-mirror lag, keyframe size
-//!   and catch-up.
+//!   and catch-up;
+//! - `ros2` (feature `zenoh`, issue 46): CPU per published megabyte of `pheromone ros2` against a
+//!   plain Zenoh publisher of the same bytes ([`ros2`]).
 //!
 //! `Options::only` runs a subset of these sections (`pheromone bench --only mirror`).
 //!
@@ -38,6 +40,7 @@ pub mod merge;
 pub mod mirror;
 pub mod peer;
 pub mod raw_frames;
+pub mod ros2;
 mod sections;
 pub mod stats;
 pub mod targets;
@@ -218,10 +221,12 @@ pub enum Section {
     Timing,
     /// `merge_vs_memcpy`: seed 004's map merge against a same-size memcpy.
     Merge,
+    /// `ros2`: CPU per published MB of `pheromone ros2` against plain Zenoh (feature `zenoh`).
+    Ros2,
 }
 
 impl Section {
-    pub const ALL: [Section; 9] = [
+    pub const ALL: [Section; 10] = [
         Section::Tick,
         Section::Hop,
         Section::Frames,
@@ -231,6 +236,7 @@ impl Section {
         Section::CAbi,
         Section::Timing,
         Section::Merge,
+        Section::Ros2,
     ];
 }
 
@@ -376,6 +382,8 @@ pub struct Report {
     pub mirror: Option<MirrorSection>,
     /// Issue 29: libpheromone's C reader against the Rust reader.
     pub c_abi: Option<c_abi::CAbiReport>,
+    /// Issue 46: `pheromone ros2`'s CPU per published MB against plain Zenoh; null without Zenoh.
+    pub ros2: Option<ros2::Ros2Report>,
     pub targets: Vec<Target>,
     pub elapsed_s: f64,
 }
@@ -491,6 +499,7 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         gateway_pir_loaded_rt,
         mirror,
         c_abi,
+        ros2: sections::measure_ros2(&mut cx)?,
         targets: Vec::new(),
         elapsed_s: 0.0,
     };
@@ -559,6 +568,11 @@ pub fn run_peer(spec_json: &str) -> Result<(), BenchError> {
             visible::field(&name, width, tick_hz, wall)
         }
         PeerSpec::Busy { seconds } => timing::busy(seconds),
+        PeerSpec::PlainZenoh {
+            connect,
+            topic_bytes,
+            rate_hz,
+        } => ros2::plain_publisher(&connect, &topic_bytes, rate_hz),
         PeerSpec::TimedField {
             name,
             width,

@@ -124,6 +124,13 @@ pub enum PeerSpec {
     },
     /// A core's worth of work for `seconds` (`timing`).
     Busy { seconds: f64 },
+    /// A plain Zenoh publisher (`ros2`): a buffer of each size on its own key, `rate_hz` times
+    /// a second, through a peer session connected to `connect`, until terminated.
+    PlainZenoh {
+        connect: String,
+        topic_bytes: Vec<u64>,
+        rate_hz: f64,
+    },
     /// `run_field` for `seconds`, then its tick timing (`timing`).
     TimedField {
         name: String,
@@ -145,6 +152,7 @@ impl PeerSpec {
             PeerSpec::Field { .. } => "field",
             PeerSpec::Busy { .. } => "busy loop",
             PeerSpec::TimedField { .. } => "timed field",
+            PeerSpec::PlainZenoh { .. } => "plain zenoh publisher",
         }
     }
 }

@@ -382,3 +382,30 @@ pub(crate) fn measure_mirror(cx: &mut Ctx) -> Result<Option<MirrorSection>, Benc
     ));
     Ok(None)
 }
+
+/// The `ros2` section (issue 46), if the run measures it: `pheromone ros2` against a plain
+/// Zenoh publisher.
+#[cfg(feature = "zenoh")]
+pub(crate) fn measure_ros2(cx: &mut Ctx) -> Result<Option<ros2::Ros2Report>, BenchError> {
+    if !cx.runs(Section::Ros2) {
+        return Ok(None);
+    }
+    let run = ros2::Ros2Run::of(cx.opts.mode);
+    cx.say(&format!(
+        "ros2: a {w}x{w} field at {} Hz, `pheromone ros2` ({:.1} s with nobody subscribed, then \
+         {:.1} s with one subscriber) and a plain Zenoh publisher of the same bytes, CPU per MB",
+        run.rate_hz,
+        run.idle.as_secs_f64(),
+        run.window.as_secs_f64(),
+        w = run.width
+    ));
+    ros2::measure(&cx.opts.launcher, &cx.tag(), run).map(Some)
+}
+
+#[cfg(not(feature = "zenoh"))]
+pub(crate) fn measure_ros2(cx: &mut Ctx) -> Result<Option<ros2::Ros2Report>, BenchError> {
+    if cx.runs(Section::Ros2) {
+        cx.say("ros2: not built (--features zenoh)");
+    }
+    Ok(None)
+}

@@ -52,6 +52,7 @@ pub fn targets(r: &Report) -> Vec<Target> {
     gateway_targets(r, &mut t);
     mirror_targets(r, &mut t);
     c_abi_targets(r, &mut t);
+    ros2_targets(r, &mut t);
     t
 }
 
@@ -356,6 +357,21 @@ fn c_abi_targets(r: &Report, t: &mut Vec<Target>) {
             "<=",
             1.1,
             c.sample_batch_ratio,
+        ));
+    }
+}
+
+/// Issue 46: `pheromone ros2` costs at most 1.5 x a plain Zenoh publisher per published MB.
+fn ros2_targets(r: &Report, t: &mut Vec<Target>) {
+    if let Some(x) = &r.ros2 {
+        t.push(target(
+            &format!(
+                "pheromone ros2 CPU per published MB / plain Zenoh publisher's ({0}x{0}, {1} Hz)",
+                x.width, x.rate_hz
+            ),
+            "<=",
+            1.5,
+            x.cpu_per_mb_ratio,
         ));
     }
 }

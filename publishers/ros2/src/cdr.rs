@@ -95,19 +95,19 @@ impl CdrWriter {
     /// A `float32[]` of `n` elements, element `k` = `at(k)`, written in place.
     pub fn f32_seq_from(&mut self, n: usize, mut at: impl FnMut(usize) -> f32) {
         self.seq_len(n);
-        self.buf.reserve(n * 4);
-        for k in 0..n {
-            self.buf.extend_from_slice(&at(k).to_le_bytes());
+        let start = self.buf.len();
+        self.buf.resize(start + 4 * n, 0);
+        for (k, dst) in self.buf[start..].chunks_exact_mut(4).enumerate() {
+            dst.copy_from_slice(&at(k).to_le_bytes());
         }
     }
 
-    /// An `int8[]` (or `uint8[]`) from an iterator of exactly `n` bytes.
-    pub fn i8_seq_from(&mut self, n: usize, values: impl Iterator<Item = i8>) {
+    /// An `int8[]` (or `uint8[]`) of `n` bytes, written in place by `fill`.
+    pub fn byte_seq_with(&mut self, n: usize, fill: impl FnOnce(&mut [u8])) {
         self.seq_len(n);
-        self.buf.reserve(n);
-        let before = self.buf.len();
-        self.buf.extend(values.map(|v| v as u8));
-        debug_assert_eq!(self.buf.len() - before, n);
+        let start = self.buf.len();
+        self.buf.resize(start + n, 0);
+        fill(&mut self.buf[start..]);
     }
 
     /// The finished message.
