@@ -93,6 +93,20 @@ impl From<SectionArg> for Section {
     }
 }
 
+/// `--only` of a section that needs Zenoh (mirror, ros2), in a build without it: refused.
+fn check_zenoh_sections(only: &[SectionArg]) -> anyhow::Result<()> {
+    let zenoh_only = only
+        .iter()
+        .find(|s| matches!(s, SectionArg::Mirror | SectionArg::Ros2));
+    match (pheromone_bench::ZENOH_BUILT, zenoh_only) {
+        (false, Some(s)) => Err(bad(format!(
+            "--only {}: this build has no Zenoh: rebuild with `cargo build --release --features zenoh`",
+            serde_json::to_string(&Section::from(*s))?.trim_matches('"')
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// One peer process of a measurement (started by `pheromone bench`).
 #[derive(Args)]
 pub struct BenchPeerArgs {
@@ -102,16 +116,7 @@ pub struct BenchPeerArgs {
 
 pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     // --tick-hz and --visible-width: their parsers have checked the ranges.
-    let zenoh_only = a
-        .only
-        .iter()
-        .find(|s| matches!(s, SectionArg::Mirror | SectionArg::Ros2));
-    if let (false, Some(s)) = (pheromone_bench::ZENOH_BUILT, zenoh_only) {
-        return Err(bad(format!(
-            "--only {}: this build has no Zenoh: rebuild with `cargo build --release --features zenoh`",
-            serde_json::to_string(&Section::from(*s))?.trim_matches('"')
-        )));
-    }
+    check_zenoh_sections(&a.only)?;
     let program = std::env::current_exe().context("find this executable to start the peers")?;
     let opts = Options {
         mode: if a.smoke {
