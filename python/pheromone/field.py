@@ -677,7 +677,7 @@ class Field:
         self,
         x_m: float,
         y_m: float,
-        amount: float,
+        tau: Optional[float] = ...,
         cov: Optional[tuple[float, float, float]] = ...,
         kernel: str = ...,
         channel: int = ...,
@@ -688,6 +688,7 @@ class Field:
         plateau_m: Optional[float] = ...,
         slope_m: Optional[float] = ...,
         stamp_ns: Optional[int] = ...,
+        amount: Optional[float] = ...,
         wait: Literal[True] = ...,
         timeout_s: float = ...,
     ) -> Receipt: ...
@@ -697,7 +698,7 @@ class Field:
         self,
         x_m: float,
         y_m: float,
-        amount: float,
+        tau: Optional[float] = ...,
         cov: Optional[tuple[float, float, float]] = ...,
         kernel: str = ...,
         channel: int = ...,
@@ -708,6 +709,7 @@ class Field:
         plateau_m: Optional[float] = ...,
         slope_m: Optional[float] = ...,
         stamp_ns: Optional[int] = ...,
+        amount: Optional[float] = ...,
         wait: bool,
         timeout_s: float = ...,
     ) -> Optional[Receipt]: ...
@@ -716,7 +718,7 @@ class Field:
         self,
         x_m: float,
         y_m: float,
-        amount: float,
+        tau: Optional[float] = None,
         cov: Optional[tuple[float, float, float]] = None,
         kernel: str = "ellipse",
         channel: int = 0,
@@ -727,12 +729,20 @@ class Field:
         plateau_m: Optional[float] = None,
         slope_m: Optional[float] = None,
         stamp_ns: Optional[int] = None,
+        amount: Optional[float] = None,
         wait: bool = True,
         timeout_s: float = DEFAULT_RECEIPT_TIMEOUT_S,
     ) -> Optional[Receipt]:
         """Sends one deposit, built as Rust's constructor of that kernel builds it
         (`DepositMsg::ellipse`, `::saturating`, `::z_shape`; `paper` fills the ellipse's fields),
         and waits for the field's receipt.
+
+        `tau` is the deposit's strength as its kernel takes it (as `pheromone deposit --tau`),
+        negative for anti-pheromone: τ of the ellipse and paper kernels, the total before the
+        kernel divides by det Σxy (the peak is γ = τ / det Σxy capped at `gamma_max`: 0.2 with
+        the default cov makes a peak near 94), ρt of saturating, Q (the plateau's level) of
+        z-shape. `amount=`, its old name, is taken as the same value; giving both raises
+        `TypeError`.
 
         Parameters a kernel does not use are refused; omitted ones take `pheromone deposit`'s
         defaults (cov 0.01,0,0.01 m², range 1 m, γmax 100, σ 0.1 m, plateau 0.2 m, slope 0.3 m).
@@ -758,6 +768,8 @@ class Field:
         stream a loop sends every step) and returns None; `flush()` (and `close()`) then waits
         until the field has taken it."""
         self._check_open()
+        if (tau is None) == (amount is None):
+            raise TypeError("deposit() needs tau (or its old name amount), exactly once")
         given: dict[str, Any] = {
             "cov": cov,
             "range_m": range_m,
@@ -778,7 +790,7 @@ class Field:
         cov_t = tuple(d["cov"])
         if len(cov_t) != 3:
             raise ValueError("cov needs three values (xx, xy, yy)")
-        x, y, a = _finite("x_m", x_m), _finite("y_m", y_m), _finite("amount", amount)
+        x, y, a = _finite("x_m", x_m), _finite("y_m", y_m), _finite(*(("tau", tau) if tau is not None else ("amount", amount)))
         for i, part in enumerate(("xx", "xy", "yy")):
             _finite(f"cov {part}", cov_t[i])
         for k in ("range_m", "gamma_max", "sigma_m", "plateau_m", "slope_m"):

@@ -263,3 +263,15 @@ def test_a_sender_killed_while_it_waits_is_applied_at_most_once(start_field):
     assert sum(summary["deposits_rejected"].values()) == 0, summary
     print(f"\napplied: {sum(v > 0 for v in values[:3])} of 3 killed while waiting, "
           f"{sum(v > 0 for v in values[3:])} of 3 killed after the field answered")
+
+
+def test_tau_is_the_third_argument_and_amount_its_old_name(start_field):
+    f = start_field("tau", *GRID, "--tick-hz", "100")
+    with attach(f) as field:
+        assert field.deposit(1.0, 1.0, tau=0.005).status == "applied"
+        assert field.deposit(2.0, 2.0, amount=0.005).status == "applied"
+        for kwargs in [{}, {"tau": 0.005, "amount": 0.005}]:
+            with pytest.raises(TypeError, match="tau"):
+                field.deposit(3.0, 3.0, **kwargs)
+        with pytest.raises(ValueError, match="tau -inf"):
+            field.deposit(3.0, 3.0, -math.inf)

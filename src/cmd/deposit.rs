@@ -43,9 +43,13 @@ pub struct DepositArgs {
     /// World y of the centre (m).
     #[arg(long, value_parser = super::f32_any(), allow_negative_numbers = true)]
     pub y: f32,
-    /// τ (ellipse, paper), ρt (saturating) or Q (z-shape); negative for anti-pheromone.
-    #[arg(long, value_parser = super::f32_any(), allow_negative_numbers = true)]
-    pub amount: f32,
+    /// The deposit's strength as its kernel takes it, negative for anti-pheromone: τ of the
+    /// ellipse and paper kernels, the total before the kernel divides by det Σxy (the peak is
+    /// γ = τ / det Σxy capped at --gamma-max: --tau 0.2 with the default --cov makes a peak near
+    /// 94), ρt of saturating, Q (the plateau's level) of z-shape. `--amount`, its old name, is the
+    /// same value (not the peak).
+    #[arg(long = "tau", visible_alias = "amount", value_name = "TAU", value_parser = super::f32_any(), allow_negative_numbers = true)]
+    pub tau: f32,
     /// Position covariance Σxy as xx,xy,yy (m²).
     #[arg(long, value_parser = super::f32_any(), value_delimiter = ',', default_values_t = defaults::COV_M2, allow_negative_numbers = true)]
     pub cov: Vec<f32>,
@@ -90,7 +94,7 @@ impl DepositArgs {
         let numbers = [
             ("--x", self.x),
             ("--y", self.y),
-            ("--amount", self.amount),
+            ("--tau", self.tau),
             ("--cov xx", self.cov[0]),
             ("--cov xy", self.cov[1]),
             ("--cov yy", self.cov[2]),
@@ -115,17 +119,17 @@ impl DepositArgs {
             channel: self.channel,
             x_m: self.x,
             y_m: self.y,
-            kernel: pheromone_field::Kernel::from_params(self.kernel, self.amount, &params),
+            kernel: pheromone_field::Kernel::from_params(self.kernel, self.tau, &params),
         }))
     }
 
     fn what(&self) -> String {
         format!(
-            "{} at ({}, {}) amount {}",
+            "{} at ({}, {}) τ {}",
             self.kernel.name(),
             self.x,
             self.y,
-            self.amount
+            self.tau
         )
     }
 }

@@ -1,4 +1,6 @@
-//! Every invocation of `sim` and `sweep` writes a directory of its own (issue 51): by default
+//! Issue 51's command-line seams: the deposit's `--tau` (alias `--amount`), `--print-scenario`,
+//! negative numbers, and run directories. Every invocation of `sim` and `sweep` writes a
+//! directory of its own: by default
 //! `pheromone-out/<scenario>/<run-id>/` with `run.json` and `latest` links; `--out DIR` refused
 //! when it holds anything, unless `--force`.
 
@@ -206,4 +208,12 @@ fn a_negative_number_is_a_value_refused_by_its_flag_not_an_unknown_argument() {
             "{args:?}: {e}"
         );
     }
+}
+
+#[test]
+fn deposit_help_names_tau_and_its_old_name_amount() {
+    let o = run(&["deposit", "--help"]);
+    let h = stdout(&o);
+    assert!(h.contains("--tau <TAU>") && h.contains("--amount"), "{h}");
+    assert!(h.contains("det Σxy") && h.contains("not the peak"), "{h}");
 }

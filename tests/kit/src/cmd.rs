@@ -98,9 +98,9 @@ impl Cmd {
         self.opt("--x", x).opt("--y", y)
     }
 
-    /// `--amount A` (a deposit's amount).
+    /// `--tau A` (a deposit's τ; the tests that spell it `--amount` check its alias).
     pub fn amount(self, a: impl Display) -> Self {
-        self.opt("--amount", a)
+        self.opt("--tau", a)
     }
 
     /// `--timeout S` (seconds).
