@@ -14,11 +14,13 @@ use pheromone_world::scenario::DEFAULT_SCENARIO;
 /// Ctrl-C, or when one of them fails. `--single-process` runs the same role types in this
 /// process, deterministic bit for bit for a seed.
 ///
-/// Built-in scenarios: blind-leader (seed 000, the default), trail-following (seed 002), ias-ss
-/// (seed 004), evaporation (seed 000 Figs. 6–8) and trail; or a TOML file of your own
-/// (examples/scenarios/*.toml show every key).
+/// Built-in scenarios: blind-leader (paper 000, the default), wrong-area (paper 000),
+/// trail-following (paper 002), ias-ss, ias-ss-open, ias-ss-rooms (paper 004), evaporation
+/// (paper 000 Figs. 6–8) and trail; or a TOML file of your own (examples/scenarios/*.toml show
+/// every key; --print-scenario NAME prints one). "Paper" is one of the papers the models come
+/// from (docs/glossary.md); --seed is the random seed.
 ///
-/// Node-graph scenarios (seed 001): regions (a corridor with regions A–E; 2, 3 and 4 robots,
+/// Node-graph scenarios (paper 001): regions (a corridor with regions A–E; 2, 3 and 4 robots,
 /// region capture against the shortest-path baseline) and regions-skeleton (8 robots on a
 /// skeletonized map, 7 regions, one with Max-R 2). They run a `graph` writer and one
 /// `graph-robot` process per robot and print the paper's tables (captures, final link values,
