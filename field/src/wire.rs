@@ -244,7 +244,9 @@ pub const DEPOSIT_READY_EXTRA_NOTIFIERS: usize = 4;
 // ---- world `W` (lockstep runs) --------------------------------------------------------------
 
 /// Most processes one run may have: the limit of the clock, step-done and attach services.
-pub const MAX_PARTICIPANTS: usize = 512;
+/// A scenario's 256 robots (`MAX_ROBOTS`) with four roles each, the field, the world and the
+/// observer fit (issue 52: 512 refused every run above ~170 robots).
+pub const MAX_PARTICIPANTS: usize = 1040;
 
 /// The clock: one sender (and a spare), every participant a receiver; nothing is overwritten.
 pub const CLOCK_LINK: LinkOptions = LinkOptions {

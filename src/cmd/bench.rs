@@ -48,6 +48,16 @@ pub struct BenchArgs {
     /// "targets": [...]}). Default: 5 for the full run, 1 with --quick.
     #[arg(long, value_parser = super::int::<usize>(1, 100), value_name = "N")]
     repeats: Option<usize>,
+    /// `--only scale`: the robot counts (comma-separated; default 8,16,32,64,128,256, with
+    /// --quick 8,16).
+    #[arg(long, value_parser = super::int::<usize>(1, 256), value_delimiter = ',', value_name = "N,…")]
+    scale_robots: Vec<usize>,
+    /// `--only scale`: simulated seconds of each run (default 10, with --quick 5).
+    #[arg(long, value_parser = super::f64_pos(3600.0), value_name = "SECS")]
+    scale_duration_s: Option<f64>,
+    /// `--only scale`: draw the chart (a log-log panel per figure) into this PNG.
+    #[arg(long, value_parser = super::check::out_file(), value_name = "FILE.png")]
+    scale_chart: Option<std::path::PathBuf>,
 }
 
 /// A section of `pheromone bench` (`--only`).
@@ -67,6 +77,9 @@ enum SectionArg {
     Mirror,
     /// libpheromone's C reader against the Rust reader (frame latency, sampling cost).
     CAbi,
+    /// The cost of a bigger swarm: ias-ss at 8 … 256 robots as processes and in one process
+    /// (only when named: it takes long).
+    Scale,
     /// Tick-start lateness beside two busy loops, with and without real-time scheduling.
     Timing,
     /// Seed 004's map merge vs memcpy.
@@ -86,6 +99,7 @@ impl From<SectionArg> for Section {
             SectionArg::Gateway => Section::Gateway,
             SectionArg::Mirror => Section::Mirror,
             SectionArg::CAbi => Section::CAbi,
+            SectionArg::Scale => Section::Scale,
             SectionArg::Timing => Section::Timing,
             SectionArg::Merge => Section::Merge,
             SectionArg::Ros2 => Section::Ros2,
@@ -135,10 +149,19 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             program,
             args: vec!["bench-peer".into()],
         },
+        scale: pheromone_bench::scale::ScaleOptions {
+            robots: a.scale_robots.clone(),
+            duration_s: a.scale_duration_s,
+            chart: a.scale_chart.clone(),
+        },
     };
     let repeats = a
         .repeats
-        .unwrap_or(if opts.mode == Mode::Full { 5 } else { 1 });
+        .unwrap_or(if opts.mode == Mode::Full && !scale_only(&opts) {
+            5
+        } else {
+            1
+        });
     let mut runs = Vec::with_capacity(repeats);
     for i in 0..repeats {
         if repeats > 1 {
@@ -159,6 +182,48 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
         (false, []) => {}
     }
     Ok(())
+}
+
+/// `--only scale`: one run of it is long enough.
+fn scale_only(o: &Options) -> bool {
+    o.only.iter().all(|s| *s == Section::Scale) && !o.only.is_empty()
+}
+
+/// The scale section: a row per size and mode, then each figure's growth exponent.
+fn print_scale(x: &pheromone_bench::scale::ScaleReport) {
+    println!(
+        "\nscale: '{}' with N robots, {} simulated s per run ({} build)\n\
+         robots mode            start-up s  wall s/sim s  processes  services  RSS MiB  PSS MiB  shm MiB",
+        x.scenario, x.duration_s, x.build
+    );
+    let mib = |b: u64| b as f64 / 1048576.0;
+    for r in &x.rows {
+        let mode = serde_json::to_string(&r.mode).unwrap_or_default();
+        match &r.error {
+            Some(e) => println!("{:>6} {:<15} FAILED: {e}", r.robots, mode.trim_matches('"')),
+            None => println!(
+                "{:>6} {:<15} {:>10.2} {:>13.3} {:>10} {:>9} {:>8.0} {:>8.0} {:>8.1}",
+                r.robots,
+                mode.trim_matches('"'),
+                r.startup_s,
+                r.wall_per_sim_s,
+                r.processes,
+                r.services,
+                mib(r.peak_rss_bytes),
+                mib(r.peak_pss_bytes),
+                mib(r.shm_bytes)
+            ),
+        }
+    }
+    let b: Vec<String> = x
+        .growth
+        .iter()
+        .map(|(k, g)| format!("{k} {:.2}", g.exponent))
+        .collect();
+    println!("growth exponents (figure ∝ N^b): {}", b.join(", "));
+    if let Some(c) = &x.chart {
+        println!("chart: {}", c.display());
+    }
 }
 
 /// Every target's measured value over the runs: min / median / max, and how often it was met.
@@ -220,6 +285,9 @@ fn print_tables(r: &Report) {
     }
     if let Some(c) = &r.c_abi {
         print_c_abi(c);
+    }
+    if let Some(x) = &r.scale {
+        print_scale(x);
     }
     if let Some(x) = &r.ros2 {
         print_ros2(x);

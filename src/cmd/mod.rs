@@ -76,6 +76,10 @@ pub fn is_bad_input(e: &anyhow::Error) -> bool {
                 c.downcast_ref(),
                 Some(StartError::Name(NameError::Invalid { .. }))
             )
+            || matches!(
+                c.downcast_ref(),
+                Some(pheromone_sim::processes::ProcessRunError::HostLimit { .. })
+            )
     })
 }
 

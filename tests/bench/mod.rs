@@ -3,6 +3,8 @@
 //! A run with a few samples of everything: each latency is ordered (p50 ≤ p99 ≤ p99.9 ≤ max) and
 //! positive.
 
+mod scale;
+
 use std::time::Duration;
 
 use serde_json::Value;

@@ -261,7 +261,16 @@ pub fn create_node_in(name: &str, domain: Option<&str>) -> Result<Node<Svc>, Att
     create_node_with(name, domain_config_of(domain)?)
 }
 
-fn create_node_with(name: &str, domain: Config) -> Result<Node<Svc>, AttachError> {
+fn create_node_with(name: &str, mut domain: Config) -> Result<Node<Svc>, AttachError> {
+    let supervised = cleaned_by_supervisor();
+    if supervised {
+        // iceoryx2's own walks: of every node, as the node is created and dropped; of every
+        // node attached to a service, as the service is opened (the lockstep's clock and
+        // acknowledgement services have every participant attached).
+        domain.global.node.cleanup_dead_nodes_on_creation = false;
+        domain.global.node.cleanup_dead_nodes_on_destruction = false;
+        domain.global.service.cleanup_dead_nodes_on_open = false;
+    }
     let node_name = NodeName::new(name).map_err(|e| NameError::Iceoryx {
         name: name.to_string(),
         source: Box::new(Iceoryx(e)),
@@ -305,9 +314,25 @@ fn create_node_with(name: &str, domain: Config) -> Result<Node<Svc>, AttachError
         let _ = nix::sys::signal::raise(Signal::SIGTERM);
     }
     let node = node?;
-    cleanup_dead_nodes(&node);
-    remove_half_created_services(node.config());
+    if !supervised {
+        cleanup_dead_nodes(&node);
+        remove_half_created_services(node.config());
+    }
     Ok(node)
+}
+
+/// Set (to `1`) by a supervisor in the environment of the children it starts (`pheromone sim`'s
+/// roles, field and world): it has removed what dead nodes left before it started them and does
+/// so again after they stop, and a child that dies ends the run. Its children then skip the
+/// cleanup at node creation (ours and iceoryx2's, also iceoryx2's at the node's end and as a
+/// service is opened) and the field's periodic one: each walk reads the details of every
+/// node of the host (a TOML file each), so N children walking N nodes made a run's start-up grow
+/// as N² (issue 52: 64 robots, 194 processes, started in 226 s in a debug build, 67 s of it at 32).
+pub const CLEANED_BY_SUPERVISOR_ENV: &str = "PHEROMONE_CLEANED_BY_SUPERVISOR";
+
+/// Whether this process's supervisor removes what dead nodes leave ([`CLEANED_BY_SUPERVISOR_ENV`]).
+pub fn cleaned_by_supervisor() -> bool {
+    std::env::var_os(CLEANED_BY_SUPERVISOR_ENV).is_some_and(|v| v == "1")
 }
 
 /// Removes the ports and services that processes killed without cleaning up left behind (their

@@ -23,6 +23,10 @@
 //! - `ros2` (feature `zenoh`, issue 46): CPU per published megabyte of `pheromone ros2` against a
 //!   plain Zenoh publisher of the same bytes ([`ros2`]).
 //!
+//! - `scale` (issue 52, only when named: `--only scale`): `ias-ss` with 8 … 256 robots as
+//!   processes and in one process: start-up, wall time per simulated second, memory, `/dev/shm`,
+//!   processes, services, and each one's growth exponent ([`scale`]).
+//!
 //! `Options::only` runs a subset of these sections (`pheromone bench --only mirror`).
 //!
 //! Percentiles come from HdrHistogram. Performance is measured and reported, never asserted.
@@ -41,6 +45,8 @@ pub mod mirror;
 pub mod peer;
 pub mod raw_frames;
 pub mod ros2;
+pub mod scale;
+pub mod scale_probe;
 mod sections;
 pub mod stats;
 pub mod targets;
@@ -221,6 +227,8 @@ pub enum Section {
     Timing,
     /// `merge_vs_memcpy`: seed 004's map merge against a same-size memcpy.
     Merge,
+    /// `scale`: the cost of a bigger swarm (not in a run without `--only`: it takes long).
+    Scale,
     /// `ros2`: CPU per published MB of `pheromone ros2` against plain Zenoh (feature `zenoh`).
     Ros2,
 }
@@ -255,6 +263,8 @@ pub struct Options {
     /// Progress lines on stderr.
     pub progress: bool,
     pub launcher: Launcher,
+    /// The `scale` section's sizes and chart.
+    pub scale: scale::ScaleOptions,
 }
 
 /// Hop latency, ns.
@@ -382,6 +392,8 @@ pub struct Report {
     pub mirror: Option<MirrorSection>,
     /// Issue 29: libpheromone's C reader against the Rust reader.
     pub c_abi: Option<c_abi::CAbiReport>,
+    /// Issue 52: the cost of a bigger swarm; null unless `--only scale`.
+    pub scale: Option<scale::ScaleReport>,
     /// Issue 46: `pheromone ros2`'s CPU per published MB against plain Zenoh; null without Zenoh.
     pub ros2: Option<ros2::Ros2Report>,
     pub targets: Vec<Target>,
@@ -424,7 +436,8 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         machine.cores,
         if pin { ", pinned" } else { "" }
     ));
-    let sections: Vec<Section> = Section::ALL.into_iter().filter(|s| cx.runs(*s)).collect();
+    let mut sections: Vec<Section> = Section::ALL.into_iter().filter(|s| cx.runs(*s)).collect();
+    sections.extend(opts.only.iter().filter(|s| **s == Section::Scale));
     let mut tick_vs_memcpy = BTreeMap::new();
     for &w in plan.tick_widths.iter().filter(|_| cx.runs(Section::Tick)) {
         cx.say(&format!("tick vs memcpy at {w}x{w}"));
@@ -481,6 +494,16 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
     if pin {
         machine::unpin();
     }
+    // Unpinned: the sims' children run on every core.
+    let scale = match opts.only.contains(&Section::Scale) {
+        true => Some(scale::measure(
+            &opts.scale,
+            opts.mode,
+            &opts.launcher.program,
+            &mut |m| cx.say(m),
+        )?),
+        false => None,
+    };
     let mut report = Report {
         machine,
         mode: opts.mode,
@@ -499,6 +522,7 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         gateway_pir_loaded_rt,
         mirror,
         c_abi,
+        scale,
         ros2: sections::measure_ros2(&mut cx)?,
         targets: Vec::new(),
         elapsed_s: 0.0,

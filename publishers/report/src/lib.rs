@@ -27,6 +27,7 @@ pub mod filters;
 mod filters_plots;
 mod graph_png;
 mod heatmap;
+mod loglog;
 mod maps;
 mod marks;
 mod plots;
@@ -49,6 +50,7 @@ use pheromone_world::scenario::Scenario;
 pub use filters::{FilterRun, FilterSummary};
 pub use filters_plots::write_filter_comparison;
 pub use graph_png::write_graph_png;
+pub use loglog::{write_log_log_panels, LogLogPanel, LogLogSeries};
 pub use marks::{marks, Mark, Shape};
 pub use plots::{PLOT_H_PX, PLOT_W_PX};
 pub use sweep::{

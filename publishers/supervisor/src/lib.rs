@@ -139,6 +139,8 @@ pub struct Supervisor {
     exits: mpsc::Receiver<(usize, Option<ExitStatus>)>,
     /// Echo every child's stderr lines to ours, prefixed with its name.
     pub echo_stderr: bool,
+    /// Environment variables every child gets (beside ours).
+    pub env: Vec<(String, String)>,
 }
 
 impl Supervisor {
@@ -151,6 +153,7 @@ impl Supervisor {
             exits_tx,
             exits,
             echo_stderr: false,
+            env: Vec::new(),
         }
     }
 
@@ -176,6 +179,9 @@ impl Supervisor {
         }
         for var in &spec.env_remove {
             command.env_remove(var);
+        }
+        for (var, value) in &self.env {
+            command.env(var, value);
         }
         let mut child = command
             .args(&spec.args)

@@ -74,8 +74,12 @@ impl Housekeeping {
         self
     }
 
-    /// Removes what dead nodes left behind every [`CLEANUP_EVERY`], in [`Housekeeping::due`].
+    /// Removes what dead nodes left behind every [`CLEANUP_EVERY`], in [`Housekeeping::due`]
+    /// (not in a child of a supervisor that does it: `shm::cleaned_by_supervisor`).
     pub fn with_cleanup(mut self) -> Self {
+        if crate::shm::cleaned_by_supervisor() {
+            return self;
+        }
         self.cleanup = Cleanup::Inline {
             last: Instant::now(),
             cleaned: Cell::new(0),
@@ -87,6 +91,9 @@ impl Housekeeping {
     /// on a thread of its own (stopped when this is dropped): for a loop the cleanup must never
     /// delay. A thread that cannot be started leaves the cleanup undone (said on stderr).
     pub fn with_cleanup_thread(mut self, node: &Node<Svc>) -> Self {
+        if crate::shm::cleaned_by_supervisor() {
+            return self;
+        }
         self.cleanup = Cleanup::Thread(Housekeeper::start(node.config().clone(), CLEANUP_EVERY));
         self
     }

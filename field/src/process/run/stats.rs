@@ -60,7 +60,9 @@ impl TickStats {
     /// Keeps the totals on field `field`'s timing board from now on. Monitoring only: a field
     /// that cannot create it (e.g. a dead primary's is still there) runs without it, and says so.
     pub(crate) fn keep_timing_board(&mut self, node: &Node<Svc>, field: &str) {
-        cleanup_dead_nodes(node);
+        if !crate::shm::cleaned_by_supervisor() {
+            cleanup_dead_nodes(node);
+        }
         self.housekeeping = Housekeeping::new(LOG_EVERY).with_cleanup_thread(node);
         self.window = Window::new(Instant::now());
         self.board = TimingWriter::create(node, field)

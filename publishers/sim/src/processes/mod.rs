@@ -25,6 +25,7 @@ use pheromone_world::{lockstep_participants, mapper_robots, WorldOptions, WorldS
 
 mod children;
 mod interrupt;
+pub mod limits;
 
 use children::*;
 use interrupt::*;
@@ -108,6 +109,13 @@ pub enum ProcessRunError {
     Record(#[from] pheromone_ros2::record::RecordError),
     #[error("interrupted: stopped every process of the run")]
     Interrupted,
+    /// The run needs more than the host gives (`limits`): nothing was started.
+    #[error("the run needs {needed} but {limit} is {value}: nothing was started")]
+    HostLimit {
+        limit: String,
+        value: u64,
+        needed: u64,
+    },
     #[error("the run took longer than {timeout_s} s: stopped every process")]
     Timeout { timeout_s: f64 },
     #[error(
@@ -224,9 +232,21 @@ pub fn run_as_processes(
     scenario: &Scenario,
     o: ProcessRunOptions<'_>,
 ) -> Result<(RunSummary, Recording, ProcessRunInfo), ProcessRunError> {
+    limits::check(
+        lockstep_participants(scenario, true, true),
+        limits::nofile_soft(),
+        pheromone_field::shm::shm_available_bytes(),
+        pheromone_field::shm::frame_pool(&scenario.field).1,
+    )?;
     let tag = run_tag();
     let file = ScenarioFile::write(scenario, &tag)?;
     let mut sup = Supervisor::new(&o.exe);
+    // This process cleans up after dead nodes (its node's creation, `cleanup_after`), and a child
+    // that dies ends the run: the children skip the walk of every node (N² over a start-up).
+    sup.env.push((
+        pheromone_field::shm::CLEANED_BY_SUPERVISOR_ENV.to_string(),
+        "1".to_string(),
+    ));
     let result = supervise(scenario, o, &tag, &file.path, &mut sup);
     if result.is_err() {
         sup.stop_all(Duration::from_secs(5));
