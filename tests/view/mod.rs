@@ -10,6 +10,7 @@ use serde_json::Value;
 
 use crate::harness::*;
 
+mod limits;
 mod states;
 
 /// The browser the page test drives: Debian's `chromium` package.
@@ -34,10 +35,19 @@ fn request(port: u16, method: &str, path: &str) -> std::io::Result<(u16, String,
     )?;
     let mut raw = Vec::new();
     s.read_to_end(&mut raw)?;
+    // A connection closed before a whole head (the view closed it) is an error of this request.
     let split = raw
         .windows(4)
         .position(|w| w == b"\r\n\r\n")
-        .expect("a header ends with an empty line");
+        .ok_or_else(|| {
+            std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                format!(
+                    "closed after {} bytes, before a whole response head",
+                    raw.len()
+                ),
+            )
+        })?;
     let head = String::from_utf8_lossy(&raw[..split]).into_owned();
     let status = head
         .split(' ')

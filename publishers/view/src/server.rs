@@ -386,7 +386,7 @@ impl View {
             // A field not there yet: ask again in a second.
             headers.push(("Retry-After", "1"));
         }
-        request.respond(reply.status, &headers, &reply.body);
+        request.respond(reply.status, &headers, reply.body);
         Ok(())
     }
 }

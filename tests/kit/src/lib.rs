@@ -161,6 +161,11 @@ impl Proc {
         self.sup.signal(self.id, Signal::SIGINT);
     }
 
+    /// Sends SIGTERM (as a service manager stops it).
+    pub fn terminate(&self) {
+        self.sup.signal(self.id, Signal::SIGTERM);
+    }
+
     /// Kills the process (SIGKILL), as a crash would.
     pub fn kill(&self) {
         self.sup.signal(self.id, Signal::SIGKILL);
