@@ -55,8 +55,8 @@ fn refused(e: PoseRejection) -> Failure {
     crate::error::fail(BAD, format_args!("{e}"))
 }
 
-/// The deposit the Rust depositor makes for `pose` in mode `uncertainty-aware` (stamp and robot
-/// id are filled in when it is sent).
+/// The deposit the Rust depositor makes for `pose` in mode `uncertainty-aware` with `amount =
+/// "literal"` (stamp and robot id are filled in when it is sent).
 pub fn deposit_for(
     pose: &PheromonePoseEstimate,
     p: &PheromoneEllipseParams,
@@ -69,6 +69,8 @@ pub fn deposit_for(
         gamma_max: p.gamma_max,
         min_sigma_m: p.min_sigma_m,
         anti_pheromone: p.anti_pheromone != 0,
+        // The C struct has no key for it: eqs. 12 and 14 as printed (issue 48 part 2).
+        amount: pheromone_field::kernel::pose::DepositAmount::Literal,
     };
     Ok(rule.deposit(&estimate(pose)).map_err(refused)?.into())
 }

@@ -22,7 +22,7 @@
 pub mod defaults;
 pub mod pose;
 
-pub use pose::{EllipseRule, PoseEstimate, PoseRejectReason, PoseRejection};
+pub use pose::{DepositAmount, EllipseRule, PoseEstimate, PoseRejectReason, PoseRejection};
 
 use crate::messages::{DepositMsg, KernelKind};
 

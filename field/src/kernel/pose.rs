@@ -193,6 +193,67 @@ pub fn ellipse_cov_m2(cov: &[f64; 9], min_sigma_m: f32) -> Result<[f32; 3], Pose
     Ok([xx32, xy.clamp(-bound, bound) as f32, yy32])
 }
 
+/// How much an uncertainty-aware deposit leaves (issue 48 part 2; docs/localization.md).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DepositAmount {
+    /// Eqs. 12 and 14 as printed: the kernel's peak is γ = τ/det Σxy capped at γmax. While γ
+    /// is capped a growing ellipse spreads the same peak wider, so the trail *brightens* as
+    /// the robot gets lost.
+    Literal,
+    /// Eq. 11's intent, "amount of pheromones ∝ γ ∝ 1/uncertainty": γ (capped at γmax, "the
+    /// maximum number of pheromones which could be deposited") is the deposit's total, as a
+    /// count per reference ellipse of σ = `sigma_ref_m` on both axes. The peak is
+    /// γ·min(1, A_ref/A), A the kernel's area (√det Σxy for `ellipse`, det Σxy for `paper`,
+    /// A_ref the same at σ_ref), so it falls as the ellipse grows, capped or not, and the
+    /// deposit's integral stays γ·(the reference kernel's integral).
+    Intent {
+        /// σ of the reference ellipse (m, > 0); at or below it nothing changes.
+        sigma_ref_m: f32,
+    },
+}
+
+impl Default for DepositAmount {
+    /// The intent with σ_ref = 0.1 m.
+    fn default() -> Self {
+        DepositAmount::Intent { sigma_ref_m: 0.1 }
+    }
+}
+
+impl DepositAmount {
+    /// σ_ref of the intent forms, `None` for the literal one.
+    pub fn sigma_ref_m(self) -> Option<f32> {
+        match self {
+            DepositAmount::Literal => None,
+            DepositAmount::Intent { sigma_ref_m } => Some(sigma_ref_m),
+        }
+    }
+
+    /// The τ to send so that the field's min(γmax, τ'/det Σxy) is this form's peak, for the
+    /// ellipse `cov_m2` (as sent) and `kind`.
+    pub fn tau_to_send(self, kind: KernelKind, tau: f32, cov_m2: [f32; 3], gamma_max: f32) -> f32 {
+        let Some(sigma_ref) = self.sigma_ref_m() else {
+            return tau;
+        };
+        let [xx, xy, yy] = cov_m2.map(f64::from);
+        let det = xx * yy - xy * xy;
+        if det.is_nan() || det <= 0.0 || sigma_ref.is_nan() || sigma_ref <= 0.0 {
+            return tau;
+        }
+        let r2 = f64::from(sigma_ref).powi(2);
+        let shrink = match kind {
+            KernelKind::Paper => (r2 * r2 / det).min(1.0),
+            _ => (r2 / det.sqrt()).min(1.0),
+        };
+        let literal = (f64::from(tau) / det).clamp(-f64::from(gamma_max), f64::from(gamma_max));
+        let peak = literal * shrink;
+        if peak.abs() >= f64::from(gamma_max) {
+            tau
+        } else {
+            (peak * det) as f32
+        }
+    }
+}
+
 /// Seed 000's uncertainty-aware deposit (MODELS.md M1): amount τ (negative with
 /// `anti_pheromone`), the pose's error ellipse Σxy (floored at `min_sigma_m`), γ = τ/det Σxy
 /// capped at `gamma_max` by the field, cut at `range_m`.
@@ -213,6 +274,8 @@ pub struct EllipseRule {
     pub min_sigma_m: f32,
     /// Deposit −τ (anti-pheromone, on a signed channel) instead of τ.
     pub anti_pheromone: bool,
+    /// What γ measures: the peak (eq. 14 as printed) or the deposit's total (eq. 11's intent).
+    pub amount: DepositAmount,
 }
 
 impl EllipseRule {
@@ -223,6 +286,9 @@ impl EllipseRule {
         let y_m = fit_f32("y_m", pose.y_m)?;
         let cov_m2 = ellipse_cov_m2(&pose.cov, self.min_sigma_m)?;
         let sign = if self.anti_pheromone { -1.0 } else { 1.0 };
+        let tau = self
+            .amount
+            .tau_to_send(self.kernel, self.tau, cov_m2, self.gamma_max);
         let params = KernelParams {
             cov_m2,
             range_m: self.range_m,
@@ -233,7 +299,7 @@ impl EllipseRule {
             channel: self.channel,
             x_m,
             y_m,
-            kernel: Kernel::from_params(self.kernel, sign * self.tau, &params),
+            kernel: Kernel::from_params(self.kernel, sign * tau, &params),
         })
     }
 }
@@ -259,7 +325,67 @@ mod tests {
         gamma_max: 100.0,
         min_sigma_m: 0.0,
         anti_pheromone: false,
+        amount: DepositAmount::Literal,
     };
+
+    /// The peak the field makes of a deposit (γ = τ/det Σxy capped), as it computes it.
+    fn peak(d: &Deposit) -> f32 {
+        let Kernel::Ellipse {
+            tau,
+            cov_m2,
+            gamma_max,
+            ..
+        } = d.kernel
+        else {
+            panic!("not the ellipse kernel");
+        };
+        let e = crate::deposit::ErrorEllipse::from_cov(cov_m2[0], cov_m2[1], cov_m2[2]);
+        crate::deposit::gamma(tau, e.det(), gamma_max)
+    }
+
+    #[test]
+    fn the_intent_falls_as_the_ellipse_grows_while_the_literal_peak_stays_capped() {
+        let intent = EllipseRule {
+            amount: DepositAmount::Intent { sigma_ref_m: 0.1 },
+            min_sigma_m: 0.1,
+            ..RULE
+        };
+        let literal = EllipseRule {
+            min_sigma_m: 0.1,
+            ..RULE
+        };
+        let iso = |s: f64| [s * s, 0.0, 0.0, 0.0, s * s, 0.0, 0.0, 0.0, 0.01];
+        let mut last = f32::INFINITY;
+        for sigma in [0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.5, 1.0, 2.0] {
+            let (i, l) = (
+                peak(&intent.deposit(&pose(0.0, iso(sigma))).unwrap()),
+                peak(&literal.deposit(&pose(0.0, iso(sigma))).unwrap()),
+            );
+            let s = sigma.max(0.1);
+            // Literal: min(100, 0.2/σ⁴); intent: that times (0.1/σ)², so its total is fixed.
+            let want_l = (0.2 / s.powi(4)).min(100.0);
+            assert!(
+                (f64::from(l) - want_l).abs() <= 1e-3 * want_l,
+                "σ {sigma}: {l}"
+            );
+            let want_i = want_l * (0.01 / (s * s)).min(1.0);
+            assert!(
+                (f64::from(i) - want_i).abs() <= 1e-3 * want_i,
+                "σ {sigma}: {i}"
+            );
+            assert!(i <= l && i <= last, "σ {sigma}: {i} after {last}");
+            if sigma > 0.1 {
+                assert!(
+                    i < last,
+                    "σ {sigma}: the intent must fall, {i} after {last}"
+                );
+            }
+            last = i;
+        }
+        // Capped regime (0.1 < σ ≤ 0.21 m: 0.2/σ⁴ ≥ 100): the literal peak stays at 100.
+        let l = peak(&literal.deposit(&pose(0.0, iso(0.2))).unwrap());
+        assert_eq!(l, 100.0);
+    }
 
     #[test]
     fn the_xy_block_becomes_the_ellipse_and_theta_is_ignored() {

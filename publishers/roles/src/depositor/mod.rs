@@ -23,6 +23,7 @@
 //! by reason; no `DepositMsg` carrying a non-finite value is ever produced.
 
 use pheromone_field::kernel::defaults;
+use pheromone_field::kernel::pose::DepositAmount;
 use pheromone_field::{Deposit, DepositMsg, EllipseRule, Kernel, KernelKind};
 use serde::{Deserialize, Serialize};
 
@@ -116,6 +117,23 @@ pub struct DepositorConfig {
     /// trail is never narrower than the robot that lays it (a well-localized EKF can report
     /// σ of a few millimetres). 0 = off. While γ is capped at γmax this changes only the shape.
     pub min_sigma_m: f32,
+    /// `uncertainty-aware` mode: γ is the kernel's peak (`literal`, eqs. 12 and 14 as printed)
+    /// or the deposit's total (`intent`, eq. 11: the peak falls as the ellipse grows, also
+    /// where γ is capped). See docs/localization.md.
+    pub amount: AmountForm,
+    /// `intent`: σ of the reference ellipse (m, > 0) whose peak is γ.
+    pub amount_sigma_m: f32,
+}
+
+/// `amount` of a depositor (issue 48 part 2).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AmountForm {
+    /// γ is the deposit's total: the peak falls as the uncertainty grows (eq. 11's intent).
+    #[default]
+    Intent,
+    /// γ is the kernel's peak (eqs. 12 and 14 as printed).
+    Literal,
 }
 
 impl Default for DepositorConfig {
@@ -135,6 +153,8 @@ impl Default for DepositorConfig {
             rho_sigma0_m: 0.5,
             lambda_m: 0.05,
             min_sigma_m: 0.0,
+            amount: AmountForm::Intent,
+            amount_sigma_m: 0.1,
         }
     }
 }
@@ -163,6 +183,7 @@ impl DepositorConfig {
             ("constant_sigma_m", self.constant_sigma_m),
             ("rho_sigma0_m", self.rho_sigma0_m),
             ("lambda_m", self.lambda_m),
+            ("amount_sigma_m", self.amount_sigma_m),
         ];
         for (name, v) in positive32 {
             if !(v.is_finite() && v > 0.0) {
@@ -366,6 +387,12 @@ impl Depositor {
             gamma_max: c.gamma_max,
             min_sigma_m: c.min_sigma_m,
             anti_pheromone: c.anti_pheromone,
+            amount: match c.amount {
+                AmountForm::Intent => DepositAmount::Intent {
+                    sigma_ref_m: c.amount_sigma_m,
+                },
+                AmountForm::Literal => DepositAmount::Literal,
+            },
         }
     }
 }

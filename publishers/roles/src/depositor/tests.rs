@@ -46,7 +46,14 @@ fn peak_after_deposit(dep: &Depositor, p: &PoseMsg) -> f32 {
 
 #[test]
 fn deposited_peak_scales_as_one_over_det_until_the_cap() {
-    let dep = every_pose(DepositMode::UncertaintyAware);
+    // Eqs. 12 and 14 as printed (`amount = "literal"`): the peak is γ.
+    let dep = Depositor::new(DepositorConfig {
+        amount: AmountForm::Literal,
+        interval_m: 0.0,
+        interval_s: 0.0,
+        ..DepositorConfig::default()
+    })
+    .unwrap();
     let tau = dep.config().tau as f64;
     let gmax = dep.config().gamma_max;
     // (x, y) = (5.025, 5.025) is a cell centre, so the peak cell holds exactly γ.
@@ -275,12 +282,44 @@ fn saturating_mode_strength_falls_with_uncertainty() {
     assert!((-1.0..-0.99).contains(&v), "{v}");
 }
 
+/// Issue 48 part 2, eq. 11's intent (the default): what a robot leaves at its place falls as
+/// its uncertainty grows, also where γ = τ/det Σxy is still capped at γmax (σ ≤ 0.21 m with
+/// τ = 0.2), where the literal peak stays at γmax and a wider ellipse brightens the trail.
+#[test]
+fn the_intended_amount_falls_with_uncertainty_where_the_literal_one_is_capped() {
+    let intent = every_pose(DepositMode::UncertaintyAware);
+    assert_eq!(intent.config().amount, AmountForm::Intent);
+    let literal = Depositor::new(DepositorConfig {
+        amount: AmountForm::Literal,
+        interval_m: 0.0,
+        interval_s: 0.0,
+        ..DepositorConfig::default()
+    })
+    .unwrap();
+    let (mut last_i, mut last_l) = (f32::INFINITY, 0.0f32);
+    for sigma in [0.1f64, 0.12, 0.15, 0.18, 0.2] {
+        let v = sigma * sigma;
+        let p = pose(5.025, 5.025, v, 0.0, v);
+        let (i, l) = (
+            peak_after_deposit(&intent, &p),
+            peak_after_deposit(&literal, &p),
+        );
+        assert_relative_eq!(l, 100.0, max_relative = 1e-4); // capped
+                                                            // γmax per reference ellipse of σ = 0.1 m: the peak is 100·(0.1/σ)².
+        assert_relative_eq!(i as f64, 100.0 * 0.01 / v, max_relative = 1e-3);
+        assert!(i <= last_i && l >= last_l, "σ {sigma}: {i} / {l}");
+        (last_i, last_l) = (i, l);
+    }
+    assert!(last_i < 0.3 * last_l, "{last_i} vs {last_l}");
+}
+
 #[test]
 fn anti_pheromone_negates_the_ellipse_amount() {
     let dep = Depositor::new(DepositorConfig {
         anti_pheromone: true,
         channel: 3,
         kernel: EllipseKernel::Paper,
+        amount: AmountForm::Literal,
         ..DepositorConfig::default()
     })
     .unwrap();
