@@ -107,6 +107,12 @@ pub struct GradientConfig {
     /// the end of a trail is where its leader is, as far as a follower can tell (seed 000: Alice
     /// waits at A). The follower stays `Following` there.
     pub stop_at_trail_end: bool,
+    /// Issue 48 part 3: while following, never steer further than the fan's half angle from
+    /// the direction it travels along the trail (its heading smoothed over about 20
+    /// decisions), unless the trail ends outright ahead (the `turn_back_margin` test): a trail
+    /// that fades gradually never turns it back along the way it came; it drives on and
+    /// rejects the trail below the threshold. Off by default.
+    pub keep_direction: bool,
     /// The look-ahead fan spans ± this angle around the heading (degrees, ≤ 180).
     pub fan_half_angle_deg: f64,
     /// Rays in the fan (≥ 1).
@@ -132,6 +138,7 @@ impl Default for GradientConfig {
             lookahead_samples: 3,
             turn_back_margin: 0.5,
             stop_at_trail_end: false,
+            keep_direction: false,
             fan_half_angle_deg: 90.0,
             fan_rays: 17,
             heading_gain_per_s: 3.0,
@@ -227,6 +234,9 @@ pub struct GradientFollower {
     state: FollowerState,
     /// P0: the highest level sensed since the trail was acquired.
     peak_level: f32,
+    /// The direction it travels along the trail (rad; the heading, smoothed over about 20
+    /// decisions), set while following.
+    travel_rad: Option<f64>,
 }
 
 impl GradientFollower {
@@ -237,6 +247,7 @@ impl GradientFollower {
             config,
             state: FollowerState::Exploring,
             peak_level: 0.0,
+            travel_rad: None,
         })
     }
 
@@ -406,10 +417,37 @@ impl FollowerStrategy for GradientFollower {
         {
             return Decision::stop(self.state, level);
         }
+        let th = pose.theta_rad as f64;
+        let desired = self.desired_heading(frame, pose);
+        let keep = self.config.keep_direction;
+        let desired = match (self.state, self.travel_rad) {
+            (FollowerState::Following, Some(travel)) if keep => {
+                let t = wrap_angle(travel + 0.05 * wrap_angle(th - travel));
+                self.travel_rad = Some(t);
+                // Issue 48 part 3: a trail that fades never turns the follower back along the
+                // way it came; only where the trail ends outright (everything ahead below the
+                // `turn_back_margin` test) may it turn further than the fan from its travel.
+                let half = self.config.fan_half_angle_deg.to_radians();
+                desired.map(|phi| {
+                    let off = wrap_angle(phi - t);
+                    if off.abs() <= half || self.trail_ends_ahead(frame, pose) {
+                        phi
+                    } else {
+                        t + off.clamp(-half, half)
+                    }
+                })
+            }
+            (FollowerState::Following, None) if keep => {
+                self.travel_rad = Some(th);
+                desired
+            }
+            _ => {
+                self.travel_rad = None;
+                desired
+            }
+        };
         let c = &self.config;
-        let err = self
-            .desired_heading(frame, pose)
-            .map_or(0.0, |phi| wrap_angle(phi - pose.theta_rad as f64));
+        let err = desired.map_or(0.0, |phi| wrap_angle(phi - th));
         let omega =
             (c.heading_gain_per_s * err).clamp(-c.omega_max_rad_per_s, c.omega_max_rad_per_s);
         let v_base = match self.state {
@@ -429,6 +467,7 @@ impl FollowerStrategy for GradientFollower {
     fn reset(&mut self) {
         self.state = FollowerState::Exploring;
         self.peak_level = 0.0;
+        self.travel_rad = None;
     }
 }
 
@@ -722,7 +761,7 @@ mod tests {
     /// abandons it once it has faded below the threshold.
     #[test]
     fn gradient_follows_a_deposited_trail_until_it_fades() {
-        use crate::depositor::{Depositor, DepositorConfig};
+        use crate::depositor::{AmountForm, Depositor, DepositorConfig};
         use pheromone_messages::PoseMsg;
         let mut f = OwnedField::new(FieldConfig {
             width: 200,
@@ -738,6 +777,8 @@ mod tests {
         .unwrap();
         let mut leader = Depositor::new(DepositorConfig {
             interval_m: 0.3,
+            // γ as the peak (eqs. 12, 14 as printed): σ = 0.17 m is within the cap.
+            amount: AmountForm::Literal,
             ..DepositorConfig::default()
         })
         .unwrap();
@@ -791,5 +832,59 @@ mod tests {
         );
         let off = mean(offsets.iter().copied());
         assert!(off < 0.1, "mean offset {off:.3} m");
+    }
+
+    /// Issue 48 part 3: a lost leader's trail brightens where its ellipse first widens (γ still
+    /// capped), then fades and widens as its uncertainty grows. The follower keeps going along
+    /// it, never back toward the brighter part behind, and rejects it where it falls below
+    /// max(10, δ·P0) (seed 000 eqs. 24–26, T = δ·P0).
+    #[test]
+    fn gradient_never_turns_back_on_a_fading_trail_and_rejects_it_below_delta_p0() {
+        let crest = |x: f32| {
+            if x < 5.0 {
+                100.0
+            } else if x < 7.0 {
+                100.0 + 80.0 * ((x - 5.0) / 2.0)
+            } else {
+                (180.0 * (1.0 - (x - 7.0) / 10.0)).max(0.0)
+            }
+        };
+        let (g, cells) = synth(20.0, 10.0, 0.05, |x, y| {
+            let sigma = 0.2 + 0.08 * (x - 7.0).max(0.0);
+            gaussian_ridge(y - 5.0, crest(x), sigma)
+        });
+        let frame = FrameView::new(g, 1, &cells);
+        for (margin, stop) in [(0.9, true), (0.9, false), (0.5, false)] {
+            let cfg = GradientConfig {
+                keep_direction: true,
+                abandon_below: 10.0,
+                abandon_delta: Some(0.25),
+                speed_level_scale: 0.1,
+                turn_back_margin: margin,
+                stop_at_trail_end: stop,
+                fan_half_angle_deg: 60.0,
+                ..GradientConfig::default()
+            };
+            let trace = ridge_run(cfg, &frame, Robot::new(1.0, 5.0, 0.0), 2000);
+            let mut max_x = f64::NEG_INFINITY;
+            let mut abandoned = None;
+            for (r, d) in &trace {
+                max_x = max_x.max(r.x);
+                assert!(
+                    r.x > max_x - 0.2,
+                    "turned back at x = {:.2} (margin {margin})",
+                    r.x
+                );
+                if d.state == FollowerState::TrailAbandoned && abandoned.is_none() {
+                    abandoned = Some((r.x, d.sensed_level));
+                }
+            }
+            let (x, level) = abandoned.expect("never rejected the fading trail");
+            // P0 = 180 (the bright part): rejected below 45, where the crest is at x = 14.5.
+            assert!(
+                level < 45.0 && (13.5..15.5).contains(&x),
+                "rejected at x = {x:.2}, {level}"
+            );
+        }
     }
 }
