@@ -11,7 +11,9 @@ use super::seconds;
 /// service) and depositors (publishers of the deposit service), missed deadlines and the
 /// longest gap between two frames (ms) since the field started, and whether frames still come
 /// ("alive") or not ("stale": the field died, or it is paused waiting for its clock, or it is a
-/// mirror whose origin went silent: then it says for how long).
+/// mirror whose origin went silent: then it says for how long). A field whose process is there
+/// but sends no frame at all (stopped with SIGSTOP, or hung) is "stopped", its grid unknown
+/// ("-"; `null` in --json).
 #[derive(Args, Debug)]
 pub struct ListArgs {
     /// Seconds over which the tick rate is measured.
@@ -59,6 +61,9 @@ pub fn run(a: ListArgs) -> anyhow::Result<()> {
 
 fn row(f: &FieldInfo) -> String {
     let state = match (f.alive, f.publisher_alive, &f.mirror) {
+        (_, true, _) if f.sequence.is_none() => {
+            "stopped (its process is there but sent no frame: SIGSTOP, or hung)".to_string()
+        }
         (_, true, Some(m)) if m.stale => format!("stale ({})", m.describe()),
         (true, _, Some(_)) => "alive (mirror)".to_string(),
         (true, _, None) => "alive".to_string(),
@@ -73,14 +78,16 @@ fn row(f: &FieldInfo) -> String {
         ),
         None => ("-".to_string(), "-".to_string()),
     };
+    // A stopped field's frame facts are unknown: "-".
+    let known = |v: Option<String>| v.unwrap_or_else(|| "-".to_string());
+    let grid = known(f.width.zip(f.height).map(|(w, h)| format!("{w}×{h}")));
     format!(
-        "{:<24} {:>11} {:>3} {:>8} {:>9.1} {:>10} {:>7} {:>10} {missed:>6} {gap_ms:>8}  {state}",
+        "{:<24} {grid:>11} {:>3} {:>8} {:>9.1} {:>10} {:>7} {:>10} {missed:>6} {gap_ms:>8}  {state}",
         f.name,
-        format!("{}×{}", f.width, f.height),
-        f.channels,
-        f.cell_size_m,
+        known(f.channels.map(|c| c.to_string())),
+        known(f.cell_size_m.map(|c| c.to_string())),
         f.tick_hz,
-        f.sequence,
+        known(f.sequence.map(|c| c.to_string())),
         f.readers,
         f.depositors
     )

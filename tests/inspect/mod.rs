@@ -187,6 +187,53 @@ fn list_shows_two_fields_with_rates_and_readers_then_one_when_a_field_stops() {
     assert!(list(&run).is_empty());
 }
 
+/// A field stopped with SIGSTOP is listed as stopped (its process is there, no frame comes),
+/// not left out as if no field ran; after SIGCONT it is alive again with its grid.
+#[test]
+fn list_shows_a_stopped_field_as_stopped_not_gone() {
+    let run = Run::new("lstop");
+    let field = start_field(&run, "ls", ("24", "16"), "50");
+    eventually(WAIT, "list to show the field alive", || {
+        let f = list(&run);
+        (find(&f, "ls")?["alive"] == true).then_some(())
+    });
+    let pid = Pid::from_raw(field.pid() as i32);
+    kill(pid, Signal::SIGSTOP).unwrap();
+    let fields = list(&run);
+    let stopped =
+        find(&fields, "ls").unwrap_or_else(|| panic!("a stopped field is listed: {fields:?}"));
+    assert_eq!(stopped["alive"], false, "{stopped}");
+    assert_eq!(stopped["publisher_alive"], true, "{stopped}");
+    // A stopped field sends no frame: its grid is unknown, not made up.
+    assert!(
+        stopped["width"].is_null() && stopped["sequence"].is_null(),
+        "{stopped}"
+    );
+    assert_eq!(stopped["tick_hz"], 0.0, "{stopped}");
+    let o = run.run(&["list", "--window-s", "0.3"]);
+    let text = stdout(&o);
+    assert!(
+        text.lines()
+            .any(|l| l.starts_with("ls ") && l.contains("stopped (")),
+        "{text}"
+    );
+    kill(pid, Signal::SIGCONT).unwrap();
+    let alive = eventually(WAIT, "the field alive again", || {
+        let f = list(&run);
+        let f = find(&f, "ls")?.clone();
+        (f["alive"] == true).then_some(f)
+    });
+    assert_eq!(
+        (alive["width"].as_u64(), alive["height"].as_u64()),
+        (Some(24), Some(16))
+    );
+    field.interrupt();
+    let out = field.wait_exit(WAIT);
+    assert_eq!(out.status.code(), Some(130), "{}", run.log("ls"));
+    run.wait_nodes_gone(Duration::from_secs(10));
+    assert_eq!(run.shm_entries(), Vec::<String>::new());
+}
+
 #[test]
 fn probe_follow_prints_lines_until_ctrl_c_and_leaves_nothing() {
     let run = Run::new("pf");

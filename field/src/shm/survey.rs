@@ -19,18 +19,20 @@ use crate::wire;
 pub struct FieldInfo {
     /// The field's name (`F` of `pheromone/F/frame`).
     pub name: String,
-    /// Grid width in cells.
-    pub width: u32,
+    /// Grid width in cells. This and the other frame facts below are `None` (JSON `null`) for
+    /// a field whose process is there but sent the survey no frame (stopped with SIGSTOP, or
+    /// hung): only a frame says them.
+    pub width: Option<u32>,
     /// Grid height in cells.
-    pub height: u32,
+    pub height: Option<u32>,
     /// Channel planes per frame.
-    pub channels: u32,
+    pub channels: Option<u32>,
     /// Side of a square cell (m).
-    pub cell_size_m: f32,
+    pub cell_size_m: Option<f32>,
     /// Sequence of the newest frame seen.
-    pub sequence: u64,
+    pub sequence: Option<u64>,
     /// Field time of the newest frame (s).
-    pub sim_time_s: f64,
+    pub sim_time_s: Option<f64>,
     /// Frames published per second over the window: the sequence difference between the first
     /// and the last frame seen over the difference of their publish stamps.
     pub tick_hz: f64,
@@ -75,8 +77,9 @@ pub fn field_names(config: &Config) -> Result<Vec<String>, ServiceError> {
 /// Attaches to every field on the host, waits for each one's first frame (a new subscriber
 /// gets the current frame with the publisher's next send; at most `window`), then waits
 /// `window` on the node (Ctrl-C ends the wait early) and reports each one, its rate over the
-/// time between its first frame and the end. A field that goes away while it is being attached
-/// to, or that publishes no frame at all, is left out.
+/// time between its first frame and the end. A field whose process is there but that sent no
+/// frame (stopped, hung) is reported without its frame facts and `alive: false`; one that went
+/// away while it was being attached to, or whose process is gone and sent no frame, is left out.
 pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmError> {
     let mut open = Vec::new();
     for name in field_names(node.config()).map_err(AttachError::from)? {
@@ -107,8 +110,28 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
         let publisher_alive = reader.field_alive();
         let mirror = mirror_info(node, &name)?;
         let timing = field_timing(node, &name)?;
+        // The field and a standby each hold one frame subscriber and one deposit subscriber.
+        let own = status.deposit_subscribers + 1;
         let (Some(frame), Some((first_seq, first_stamp_ns, first_at))) = (reader.frame(), first)
         else {
+            if publisher_alive {
+                out.push(FieldInfo {
+                    name,
+                    width: None,
+                    height: None,
+                    channels: None,
+                    cell_size_m: None,
+                    sequence: None,
+                    sim_time_s: None,
+                    tick_hz: 0.0,
+                    readers: status.subscribers.saturating_sub(own),
+                    depositors: status.depositors,
+                    alive: false,
+                    publisher_alive,
+                    mirror,
+                    timing,
+                });
+            }
             continue;
         };
         let h = frame.header;
@@ -121,16 +144,14 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
         } else {
             first_at.elapsed().as_secs_f64().max(1e-9)
         };
-        // The field and a standby each hold one frame subscriber and one deposit subscriber.
-        let own = status.deposit_subscribers + 1;
         out.push(FieldInfo {
             name,
-            width: h.width,
-            height: h.height,
-            channels: h.channels,
-            cell_size_m: h.cell_size_m,
-            sequence: h.sequence,
-            sim_time_s: h.sim_time_s,
+            width: Some(h.width),
+            height: Some(h.height),
+            channels: Some(h.channels),
+            cell_size_m: Some(h.cell_size_m),
+            sequence: Some(h.sequence),
+            sim_time_s: Some(h.sim_time_s),
             tick_hz: ticks as f64 / elapsed_s,
             readers: status.subscribers.saturating_sub(own),
             depositors: status.depositors,
