@@ -117,6 +117,7 @@ fn scenario_of(a: &SimArgs) -> anyhow::Result<Scenario> {
             filter: a.filter,
             particles: a.particles,
             no_scripted_loss: a.no_scripted_loss,
+            scripted_loss: a.scripted_loss,
             steer_on: a.steer,
         })
         .map_err(|e| bad_in(a.scenario.as_str(), e))?;

@@ -195,6 +195,10 @@ pub struct SimArgs {
     /// Turn every localizer's scripted loss (`loss.after_s`) off.
     #[arg(long)]
     pub no_scripted_loss: bool,
+    /// The scenario's `[scripted_loss]` instead of its leader losing itself by its own filter
+    /// (`wrong-area-filter`: the old EKF loss script; docs/localization.md).
+    #[arg(long, conflicts_with = "no_scripted_loss")]
+    pub scripted_loss: bool,
     /// Node-graph scenarios: every robot localizes on landmarks with the EKF (seed 001
     /// Algorithm 1; a region holder matches only its region's landmarks, the others only the
     /// free areas') and deposits on a link its constant −1 (`constant`) or −1 × ρ_t of its

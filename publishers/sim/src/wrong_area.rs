@@ -24,6 +24,59 @@ pub struct WrongArea {
     pub followers_ended_in_a: usize,
     /// Followers that came within `b_radius_m` of B at some time.
     pub followers_reached_b: usize,
+    /// Whether a localizer ran a loss script (`--scripted-loss`); false: the leader's loss
+    /// came from its own filter.
+    pub scripted_loss: bool,
+    /// The leader at 15 points evenly spaced along its true path (seed 000 Figs. 22–23's
+    /// L1–L15): its σ and the deposit it made there.
+    pub checkpoints: Vec<Checkpoint>,
+}
+
+/// The leader at one of L1–L15.
+#[derive(Debug, Clone, Serialize)]
+pub struct Checkpoint {
+    /// `L1` … `L15`.
+    pub label: String,
+    pub t_s: f64,
+    /// Distance along its true path (m).
+    pub along_m: f64,
+    pub true_m: [f64; 2],
+    pub estimate_m: Option<[f64; 2]>,
+    /// √ of the largest eigenvalue of its Σxy (m).
+    pub sigma_m: Option<f64>,
+    /// The peak of its last deposit at or before this step (γ, or γ·shrink for `intent`).
+    pub deposit_peak: Option<f32>,
+}
+
+/// L1–L15: 15 points evenly spaced along `rows`' true path, first and last included.
+pub fn checkpoints(rows: &[RobotSample]) -> Vec<Checkpoint> {
+    let mut along = Vec::with_capacity(rows.len());
+    let mut total = 0.0;
+    for (k, r) in rows.iter().enumerate() {
+        if k > 0 {
+            total += dist(xy(rows[k - 1].true_pose), xy(r.true_pose));
+        }
+        along.push(total);
+    }
+    if rows.is_empty() {
+        return Vec::new();
+    }
+    (0..15)
+        .map(|i| {
+            let s = total * f64::from(i) / 14.0;
+            let k = along.partition_point(|a| *a < s).min(rows.len() - 1);
+            let r = &rows[k];
+            Checkpoint {
+                label: format!("L{}", i + 1),
+                t_s: r.t_s,
+                along_m: along[k],
+                true_m: xy(r.true_pose),
+                estimate_m: r.est_pose.map(xy),
+                sigma_m: r.est_sigma_m,
+                deposit_peak: rows[..=k].iter().rev().find_map(|r| r.deposit_peak),
+            }
+        })
+        .collect()
 }
 
 /// Where the leader truly was and where it believed it was.
@@ -87,9 +140,14 @@ pub fn wrong_area(scenario: &Scenario, m: &WrongAreaMetric, rec: &Recording) -> 
     let estimate = |r: &RobotSample| r.est_pose.map(xy);
 
     let leader = rows(m.leader);
+    // Scripted: when the script starts; otherwise when the leader's own σ reaches the level.
     let lost_at_s = scenario
         .roles(m.leader)
-        .and_then(|r| r.localizer.loss.after_s);
+        .and_then(|r| r.localizer.loss.after_s)
+        .or_else(|| {
+            let lost = |r: &&RobotSample| r.est_sigma_m.is_some_and(|s| s >= m.lost_sigma_m);
+            leader.iter().find(lost).map(|r| r.t_s)
+        });
     let lost_at_m = lost_at_s.and_then(|t| {
         leader
             .iter()
@@ -147,6 +205,8 @@ pub fn wrong_area(scenario: &Scenario, m: &WrongAreaMetric, rec: &Recording) -> 
         b_radius_m: m.b_radius_m,
         followers_ended_in_a: followers.iter().filter(|f| f.ended_in_a).count(),
         followers_reached_b: followers.iter().filter(|f| f.reached_b).count(),
+        scripted_loss: scenario.has_scripted_loss(),
+        checkpoints: checkpoints(leader),
         leader: leader_outcome,
         followers,
     }
@@ -164,6 +224,7 @@ mod tests {
             a_max_m: [16.0, 9.0],
             b_m: [20.0, 1.5],
             b_radius_m: 2.0,
+            lost_sigma_m: 1.5,
         }
     }
 

@@ -37,6 +37,11 @@ pub struct LaserConfig {
     /// Beyond `near_limit_m`, σ = this × the true range.
     pub far_sigma_fraction: f64,
     pub near_limit_m: f64,
+    /// A glass (or light-absorbing) stretch [min x, min y, max x, max y] (m): a beam whose
+    /// first wall lies inside it does not return (issue 48: a sensor blackout). The robots
+    /// still collide with those walls, and a particle filter's map leaves them out
+    /// ([`LaserConfig::sees`]).
+    pub glass_rect_m: Option<[f64; 4]>,
 }
 
 impl Default for LaserConfig {
@@ -49,6 +54,7 @@ impl Default for LaserConfig {
             near_sigma_m: 0.025,
             far_sigma_fraction: 0.025,
             near_limit_m: 1.0,
+            glass_rect_m: None,
         }
     }
 }
@@ -85,7 +91,22 @@ impl LaserConfig {
         if !(max.is_finite() && max > self.range_min_m && max <= 1e3) {
             return Err(bad("range_max_m", max, "finite, > range_min_m and <= 1000"));
         }
+        if let Some(g) = self.glass_rect_m {
+            if !(g.iter().all(|v| v.is_finite()) && g[0] < g[2] && g[1] < g[3]) {
+                return Err(bad(
+                    "glass_rect_m",
+                    g[2] - g[0],
+                    "finite [min x, min y, max x, max y] with min < max",
+                ));
+            }
+        }
         Ok(())
+    }
+
+    /// Whether the laser sees a wall at `p` (it is not behind glass).
+    pub fn sees(&self, p: [f64; 2]) -> bool {
+        self.glass_rect_m
+            .is_none_or(|g| !(g[0] <= p[0] && p[0] <= g[2] && g[1] <= p[1] && p[1] <= g[3]))
     }
 
     /// Angle between neighbouring beams.
@@ -134,7 +155,11 @@ impl Laser {
         for k in 0..c.beams as usize {
             let a = pose.theta_rad + angle_min_rad + k as f64 * c.step_rad();
             let n = self.rng.sample::<f64, _>(StandardNormal);
-            match walls.raycast([pose.x_m, pose.y_m], a, c.range_max_m) {
+            let seen = |d: &f64| c.sees([pose.x_m + d * a.cos(), pose.y_m + d * a.sin()]);
+            match walls
+                .raycast([pose.x_m, pose.y_m], a, c.range_max_m)
+                .filter(seen)
+            {
                 Some(d) => {
                     let r = (d + c.sigma_m(d) * n).clamp(c.range_min_m, c.range_max_m);
                     msg.ranges_m[k] = r as f32;

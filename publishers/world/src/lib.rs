@@ -36,6 +36,7 @@ mod laser;
 mod map;
 mod scan;
 mod sensors;
+mod slip;
 #[cfg(test)]
 mod test_support;
 mod walls;
@@ -46,6 +47,7 @@ pub use pheromone_messages::geometry::{
     sinc, sinc_derivative, Landmark, NoiseConfig, Segment, WorldPose,
 };
 pub use scan::ScanSensorConfig;
+pub use slip::SlipZone;
 pub use walls::{wall_segments, WallConfig};
 
 use std::f64::consts::TAU;
@@ -168,6 +170,9 @@ pub struct WorldConfig {
     /// particle-filter localizer needs it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub laser: Option<LaserConfig>,
+    /// Odometry slip zones (`slip.rs`): floor where odometry errs beyond the usual noise.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub slip: Vec<SlipZone>,
 }
 
 impl Default for WorldConfig {
@@ -187,6 +192,7 @@ impl Default for WorldConfig {
             landmarks: Vec::new(),
             map: None,
             laser: None,
+            slip: Vec::new(),
         }
     }
 }
@@ -330,10 +336,21 @@ impl World {
             self.poses[i] = new_pose;
 
             let noise = self.config.robots[i].noise.unwrap_or(self.config.noise);
+            let id = self.config.robots[i].id;
+            let zone = self
+                .config
+                .slip
+                .iter()
+                .find(|z| z.applies(id, pose.x_m, pose.y_m));
+            let (odo_noise, bias) = match zone {
+                Some(z) if executed_v != 0.0 => (z.odometry_noise(&noise), z.turn_bias_rad_per_s),
+                Some(z) => (z.odometry_noise(&noise), 0.0),
+                None => (noise, 0.0),
+            };
             // seed 001 Algorithm 1 line 5: the control noise the EKF models.
-            let (var_v, var_w) = noise.control_variances(executed_v, w);
+            let (var_v, var_w) = odo_noise.control_variances(executed_v, w);
             let odo_v = executed_v + var_v.sqrt() * self.normal();
-            let odo_w = w + var_w.sqrt() * self.normal();
+            let odo_w = w + bias + var_w.sqrt() * self.normal();
 
             let mut sensor = SensorMsg {
                 step: self.step,
@@ -451,6 +468,9 @@ fn validate_config(c: &WorldConfig) -> Result<(), WorldError> {
                 invalid(format!("robots[{i}].noise.{f}"), v, "finite and >= 0")
             })?;
         }
+    }
+    for (i, z) in c.slip.iter().enumerate() {
+        z.validate(i)?;
     }
     for (i, lm) in c.landmarks.iter().enumerate() {
         if !(lm.x_m.is_finite() && lm.y_m.is_finite()) {

@@ -13,8 +13,10 @@ use pheromone_roles::follower::{FollowerConfig, StrategyKind};
 use pheromone_roles::localizer::{EkfConfig, FilterKind, PfConfig, UkfConfig};
 
 mod error;
+pub use scripted_loss::ScriptedLoss;
 mod map;
 mod mapping;
+mod scripted_loss;
 mod setup;
 mod starts;
 mod validate;
@@ -59,6 +61,10 @@ pub const BUILTIN: &[(&str, &str)] = &[
     (
         "wrong-area",
         include_str!("../../../../examples/scenarios/wrong-area.toml"),
+    ),
+    (
+        "wrong-area-filter",
+        include_str!("../../../../examples/scenarios/wrong-area-filter.toml"),
     ),
 ];
 
@@ -116,6 +122,9 @@ pub struct Scenario {
     /// Robots start at random poses in this rectangle, drawn from the seed (`starts.rs`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub start_area: Option<StartArea>,
+    /// The loss script `--scripted-loss` applies (`scripted_loss.rs`); unused without it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scripted_loss: Option<ScriptedLoss>,
 }
 
 /// `mark_walls`: deposits every `spacing_m` along every wall segment.
@@ -235,6 +244,15 @@ pub struct WrongAreaMetric {
     /// Location B [x, y] (m) and the radius within which a robot has reached it.
     pub b_m: [f64; 2],
     pub b_radius_m: f64,
+    /// Without a loss script, the leader counts as lost from the first step its own filter's σ
+    /// (√ of the largest eigenvalue of Σxy) reaches this (m; default 1.5: the 1σ ellipse is
+    /// wider than a 3 m corridor, seed 000 Fig. 22).
+    #[serde(default = "default_lost_sigma_m")]
+    pub lost_sigma_m: f64,
+}
+
+fn default_lost_sigma_m() -> f64 {
+    1.5
 }
 
 impl WrongAreaMetric {
@@ -304,6 +322,8 @@ pub struct Overrides {
     pub particles: Option<usize>,
     /// `--no-scripted-loss`: every localizer's loss script (`localizer.loss.after_s`) is off.
     pub no_scripted_loss: bool,
+    /// `--scripted-loss`: the scenario's `[scripted_loss]` replaces its leader's own loss.
+    pub scripted_loss: bool,
     /// `--steer own-map|shared`: what the sector followers steer on (`[mapping] steer_on`).
     pub steer_on: Option<pheromone_roles::mapper::SteerOn>,
 }
@@ -532,6 +552,9 @@ impl Scenario {
                     d.mode = DepositMode::Constant;
                 }
             }
+        }
+        if o.scripted_loss {
+            self.apply_scripted_loss()?;
         }
         self.apply_localizers(o);
         self.validate()

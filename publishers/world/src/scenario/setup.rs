@@ -22,9 +22,16 @@ impl Scenario {
             .find(|r| r.id == robot)
             .ok_or(ProcessError::NotInWorld { robot })?
             .start;
-        // Only the particle filter's laser model reads the walls.
+        // Only the particle filter's laser model reads the walls: those its laser sees (a
+        // wall behind glass, both ends inside `laser.glass_rect_m`, is not on its map).
         let walls = match (slam, roles.filter) {
-            (false, FilterKind::Pf) => wall_segments(&self.world.walls)?,
+            (false, FilterKind::Pf) => {
+                let mut w = wall_segments(&self.world.walls)?;
+                if let Some(l) = &self.world.laser {
+                    w.retain(|s| l.sees(s.a_m) || l.sees(s.b_m));
+                }
+                w
+            }
             _ => Vec::new(),
         };
         Ok(LocalizerSetup {
