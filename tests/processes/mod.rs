@@ -211,6 +211,16 @@ fn wrong_area_as_processes_gives_the_single_process_metrics_through_leader_lost_
 }
 
 #[test]
+fn wrong_area_filter_as_processes_gives_the_single_process_metrics() {
+    // Issue 48: the leader's loss comes from its own particle filter, no script.
+    let aware = assert_same_in_both_modes("wrong-area-filter", &["--seed", "1"]);
+    let w = &aware["metrics"]["wrong_area"];
+    assert_eq!(w["scripted_loss"], false, "{w}");
+    assert_eq!(w["checkpoints"].as_array().map(Vec::len), Some(15), "{w}");
+    assert!(w["leader"]["lost_at_s"].is_number(), "{w}");
+}
+
+#[test]
 fn followers_that_spin_or_busy_poll_for_their_frame_give_the_single_process_metrics() {
     // trail-following: two followers read the field every step.
     let base = [
