@@ -234,7 +234,7 @@ pub enum Section {
 }
 
 impl Section {
-    pub const ALL: [Section; 10] = [
+    pub const ALL: [Section; 11] = [
         Section::Tick,
         Section::Hop,
         Section::Frames,
@@ -245,6 +245,7 @@ impl Section {
         Section::Timing,
         Section::Merge,
         Section::Ros2,
+        Section::Scale,
     ];
 }
 
@@ -436,18 +437,8 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         machine.cores,
         if pin { ", pinned" } else { "" }
     ));
-    let mut sections: Vec<Section> = Section::ALL.into_iter().filter(|s| cx.runs(*s)).collect();
-    sections.extend(opts.only.iter().filter(|s| **s == Section::Scale));
-    let mut tick_vs_memcpy = BTreeMap::new();
-    for &w in plan.tick_widths.iter().filter(|_| cx.runs(Section::Tick)) {
-        cx.say(&format!("tick vs memcpy at {w}x{w}"));
-        tick_vs_memcpy.insert(format!("{w}x{w}"), tick::measure(w, plan.tick_reps)?);
-    }
-    let mut merge_vs_memcpy = BTreeMap::new();
-    for &n in plan.merge_sides.iter().filter(|_| cx.runs(Section::Merge)) {
-        cx.say(&format!("merge vs memcpy at {n}x{n}"));
-        merge_vs_memcpy.insert(format!("{n}x{n}"), merge::measure(n, plan.tick_reps)?);
-    }
+    let sections: Vec<Section> = Section::ALL.into_iter().filter(|s| cx.runs(*s)).collect();
+    let (tick_vs_memcpy, merge_vs_memcpy) = sections::measure_in_process(&cx)?;
     let hop_ns = match cx.runs(Section::Hop) {
         true => Some(measure_hops(&mut cx)?),
         false => None,
@@ -494,16 +485,6 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
     if pin {
         machine::unpin();
     }
-    // Unpinned: the sims' children run on every core.
-    let scale = match opts.only.contains(&Section::Scale) {
-        true => Some(scale::measure(
-            &opts.scale,
-            opts.mode,
-            &opts.launcher.program,
-            &mut |m| cx.say(m),
-        )?),
-        false => None,
-    };
     let mut report = Report {
         machine,
         mode: opts.mode,
@@ -522,7 +503,7 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         gateway_pir_loaded_rt,
         mirror,
         c_abi,
-        scale,
+        scale: scale::section(opts, &mut |m| cx.say(m))?,
         ros2: sections::measure_ros2(&mut cx)?,
         targets: Vec::new(),
         elapsed_s: 0.0,

@@ -181,6 +181,18 @@ pub fn swarm(n: usize, duration_s: f64) -> Result<Scenario, BenchError> {
     Ok(s)
 }
 
+/// The `scale` section of a bench run: `None` unless `--only` names it. Runs after the bench
+/// has unpinned itself: the sims' children run on every core.
+pub(crate) fn section(
+    opts: &crate::Options,
+    say: &mut dyn FnMut(&str),
+) -> Result<Option<ScaleReport>, BenchError> {
+    match opts.only.contains(&crate::Section::Scale) {
+        true => measure(&opts.scale, opts.mode, &opts.launcher.program, say).map(Some),
+        false => Ok(None),
+    }
+}
+
 /// Runs every size of `o` in `mode` with `program` (`pheromone`), as processes and in one
 /// process, and draws the chart (progress through `say`).
 pub fn measure(
@@ -361,7 +373,7 @@ fn run_one(
             kill_tree(&mut child);
             break None;
         }
-        sampler.sample(sampler.samples() % full_every == 0);
+        sampler.sample(sampler.samples().is_multiple_of(full_every));
         std::thread::sleep(every);
     };
     let total_s = started.elapsed().as_secs_f64();

@@ -30,9 +30,31 @@ impl Ctx<'_> {
         format!("{}-{}", std::process::id(), self.serial)
     }
 
+    /// Whether section `s` runs: named by `--only`, or every one but `scale` (long) without it.
     pub(crate) fn runs(&self, s: Section) -> bool {
-        self.opts.only.is_empty() || self.opts.only.contains(&s)
+        (self.opts.only.is_empty() && s != Section::Scale) || self.opts.only.contains(&s)
     }
+}
+
+/// Rows keyed by a grid or map size (`"512x512"`).
+pub(crate) type BySize<T> = BTreeMap<String, T>;
+
+/// The sections measured in this process: `tick_vs_memcpy` and `merge_vs_memcpy`, keyed by size.
+pub(crate) fn measure_in_process(
+    cx: &Ctx,
+) -> Result<(BySize<TickRow>, BySize<MergeRow>), BenchError> {
+    let plan = cx.plan;
+    let mut tick_vs_memcpy = BTreeMap::new();
+    for &w in plan.tick_widths.iter().filter(|_| cx.runs(Section::Tick)) {
+        cx.say(&format!("tick vs memcpy at {w}x{w}"));
+        tick_vs_memcpy.insert(format!("{w}x{w}"), tick::measure(w, plan.tick_reps)?);
+    }
+    let mut merge_vs_memcpy = BTreeMap::new();
+    for &n in plan.merge_sides.iter().filter(|_| cx.runs(Section::Merge)) {
+        cx.say(&format!("merge vs memcpy at {n}x{n}"));
+        merge_vs_memcpy.insert(format!("{n}x{n}"), merge::measure(n, plan.tick_reps)?);
+    }
+    Ok((tick_vs_memcpy, merge_vs_memcpy))
 }
 
 /// The `c_abi` section: libpheromone's C reader against the Rust reader.

@@ -73,6 +73,12 @@ fn span(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo / 1.6, hi * 1.6)
 }
 
+/// A tick label with as many decimals as its size needs (1000, 25, 2.5, 0.25, 0.025).
+fn short(v: f64) -> String {
+    let decimals = (1.0 - v.abs().log10().floor()).clamp(0.0, 6.0) as usize;
+    format!("{v:.decimals$}")
+}
+
 fn draw_panel(area: &Area<'_>, panel: &LogLogPanel, x_label: &str) -> Result<(), String> {
     let points = |s: &LogLogSeries| -> Vec<(f64, f64)> {
         s.points
@@ -95,8 +101,9 @@ fn draw_panel(area: &Area<'_>, panel: &LogLogPanel, x_label: &str) -> Result<(),
         .x_desc(x_label)
         .x_label_style(text(12))
         .y_label_style(text(12))
+        .light_line_style(WHITE)
         .x_label_formatter(&|v| format!("{v:.0}"))
-        .y_label_formatter(&|v| format!("{v:.3}"))
+        .y_label_formatter(&|v| short(*v))
         .draw()
         .map_err(msg)?;
     if let Some(&(fx, fy)) = panel
@@ -142,6 +149,15 @@ fn draw_panel(area: &Area<'_>, panel: &LogLogPanel, x_label: &str) -> Result<(),
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tick_labels_carry_the_decimals_their_size_needs() {
+        assert_eq!(short(1000.0), "1000");
+        assert_eq!(short(25.0), "25");
+        assert_eq!(short(2.5), "2.5");
+        assert_eq!(short(0.25), "0.25");
+        assert_eq!(short(0.025), "0.025");
+    }
 
     #[test]
     fn panels_are_drawn_into_a_png_of_the_grid_size() {
