@@ -267,3 +267,53 @@ fn sigint_and_sigterm_of_a_regions_sim_write_the_runs_that_finished() {
         assert_eq!(run.shm_entries(), Vec::<String>::new());
     }
 }
+
+/// SIGTERM while a big run is still starting its children: the sim starts no more of them
+/// (at most the rest of one robot's roles), stops those it started, exits 143 and leaves
+/// nothing behind. Before, it went on to start every robot's roles first (issue 54, item 6).
+#[test]
+fn sigterm_during_a_sims_start_up_starts_no_more_children() {
+    let run = Run::new("su");
+    let out = run.dir.join("out");
+    // ias-ss with 120 robots (the scale bench's swarm): 361 children.
+    let scenario = run.dir.join("swarm120.toml");
+    let swarm = pheromone_bench::scale::swarm(120, DURATION_S).expect("the swarm scenario");
+    std::fs::write(&scenario, swarm.to_toml().expect("TOML")).unwrap();
+    let sim = run.spawn(
+        &[
+            "sim",
+            scenario.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        "sim",
+    );
+    let pid = sim.pid();
+    eventually(WAIT, "the sim to start 10 children", || {
+        (children_with(pid, "").len() >= 10).then_some(())
+    });
+    nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), Signal::SIGTERM).unwrap();
+    // Everything started before the signal arrived is counted here (or later, if slower).
+    let at_signal = children_with(pid, "").len();
+    let mut sim = sim;
+    let mut most = at_signal;
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while sim.runs_after(Duration::from_millis(10)) {
+        most = most.max(children_with(pid, "").len());
+        assert!(
+            Instant::now() < deadline,
+            "the sim still runs 60 s after SIGTERM"
+        );
+    }
+    let o = sim.wait_exit(WAIT);
+    let log = run.log("sim");
+    assert_eq!(o.status.code(), Some(143), "{log}");
+    // One robot's roles (and the next mapper) at most.
+    assert!(
+        most <= at_signal + 8,
+        "children after SIGTERM: {most}, {at_signal} when it was sent: {log}"
+    );
+    run.wait_nodes_gone(WAIT);
+    assert_eq!(run.shm_entries(), Vec::<String>::new());
+    println!("SIGTERM during start-up: {at_signal} children when sent, {most} at most after");
+}

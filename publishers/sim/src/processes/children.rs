@@ -188,17 +188,19 @@ impl Children {
             None
         };
         let (roles, remote_ids) =
-            spawn_robot_roles(scenario, o, a, gateway.as_ref(), &remote, sup)?;
+            spawn_robot_roles(scenario, o, a, gateway.as_ref(), &remote, start, sup)?;
         // Seed 004: one mapper per robot when the scenario maps, each publishing its map as field
         // `<run>-map-r<ID>` and merging its peers' maps from their frames.
         let mut mappers: Vec<ChildId> = Vec::new();
         for id in mapper_robots(scenario, true) {
+            not_stopping(start)?;
             mappers.push(sup.spawn(ChildSpec::new(
                 "mapper",
                 Some(id),
                 a.role("mapper", Some(id)),
             ))?);
         }
+        not_stopping(start)?;
         let world_args = a.world(start.attach_timeout, o.stall_timeout);
         let world = sup.spawn(ChildSpec::new("world", None, world_args))?;
         Ok(Self {
@@ -265,11 +267,13 @@ pub(super) fn spawn_robot_roles(
     a: &ChildArgs,
     gateway: Option<&(ChildId, String)>,
     remote: &[u32],
+    start: &RunStart<'_>,
     sup: &mut Supervisor,
 ) -> Result<(Vec<ChildId>, Vec<ChildId>), ProcessRunError> {
     let mut roles: Vec<ChildId> = Vec::new();
     let mut remote_ids: Vec<ChildId> = Vec::new();
     for r in &scenario.robots {
+        not_stopping(start)?;
         let mut loc = a.role("localizer", Some(r.id));
         if o.slam {
             loc.push("--slam".into());
@@ -298,6 +302,15 @@ pub(super) fn spawn_robot_roles(
         }
     }
     Ok((roles, remote_ids))
+}
+
+/// `Interrupted` once SIGINT/SIGTERM reached the run's node: a start-up stops spawning
+/// children at once (the caller stops those already started).
+fn not_stopping(start: &RunStart<'_>) -> Result<(), ProcessRunError> {
+    if pheromone_field::shm::should_stop(start.node) {
+        return Err(ProcessRunError::Interrupted);
+    }
+    Ok(())
 }
 
 /// Starts the gateway and waits until it serves; its id and address.
