@@ -237,6 +237,8 @@ const DOMAINS: &[(&str, &str, Domain)] = &[
     ("bench", "--tick-hz", pos(1e4)),
     ("bench", "--visible-width", int(16.0, 4096.0)),
     ("bench", "--repeats", int(1.0, 100.0)),
+    ("bench", "--scale-duration-s", pos(3600.0)),
+    ("bench", "--scale-robots", int(1.0, 256.0)),
 ];
 
 /// Text flags that hold numbers (lists), checked the same way with the domain of each item.
