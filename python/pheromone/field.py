@@ -790,7 +790,9 @@ class Field:
         cov_t = tuple(d["cov"])
         if len(cov_t) != 3:
             raise ValueError("cov needs three values (xx, xy, yy)")
-        x, y, a = _finite("x_m", x_m), _finite("y_m", y_m), _finite(*(("tau", tau) if tau is not None else ("amount", amount)))
+        # The error names the parameter the caller gave: tau, or its old name amount.
+        tau_name, tau_value = ("tau", tau) if tau is not None else ("amount", amount)
+        x, y, a = _finite("x_m", x_m), _finite("y_m", y_m), _finite(tau_name, tau_value)
         for i, part in enumerate(("xx", "xy", "yy")):
             _finite(f"cov {part}", cov_t[i])
         for k in ("range_m", "gamma_max", "sigma_m", "plateau_m", "slope_m"):
