@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::Args;
-use pheromone_roles::depositor::DepositorConfig;
+use pheromone_roles::depositor::{AmountForm, DepositorConfig};
 
 use super::{bad, bad_from};
 
@@ -43,6 +43,9 @@ impl RosDepositArgs {
             interval_m: self.interval_m,
             interval_s: self.interval_s,
             channel: self.channel,
+            // The peak is γ = τ/det Σxy capped at --gamma-max, as these flags and docs/ros2.md
+            // say (eqs. 12, 14 as printed), not the sim depositors' eq. 11 intent.
+            amount: AmountForm::Literal,
             ..DepositorConfig::default()
         }
     }
