@@ -116,14 +116,7 @@ fn clients_that_never_read_their_big_answers_do_not_hold_up_the_others() {
             .tick_hz(20)
             .argv(),
     );
-    let port = free_port();
-    let listen = format!("127.0.0.1:{port}");
-    let _view = Proc::spawn(&["view", "--field", &name, "--listen", &listen]);
-    eventually(Duration::from_secs(30), "the view to see the field", || {
-        let (status, _, body) = request(port, "GET", "/api/stats").ok()?;
-        let stats: Value = serde_json::from_slice(&body).ok()?;
-        (status == 200 && stats["attached"] == true).then_some(())
-    });
+    let (_view, port) = view_on(&name, &[]);
     let big = "/api/frame?max_side=2048";
     let stuck: Vec<TcpStream> = (0..6).map(|_| ask_and_never_read(port, big)).collect();
     let deadline = Instant::now() + Duration::from_secs(60);

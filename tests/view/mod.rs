@@ -97,9 +97,15 @@ fn field_and_view(tag: &str, view_args: &[&str]) -> (String, Proc, Proc, u16) {
             .tick_hz(50)
             .argv(),
     );
+    let (view, port) = view_on(&name, view_args);
+    (name, field, view, port)
+}
+
+/// A view of field `name` on a free port, once it has attached to the field; it and its port.
+fn view_on(name: &str, view_args: &[&str]) -> (Proc, u16) {
     let port = free_port();
     let listen = format!("127.0.0.1:{port}");
-    let mut args = vec!["view", "--field", &name, "--listen", &listen];
+    let mut args = vec!["view", "--field", name, "--listen", &listen];
     args.extend_from_slice(view_args);
     let view = Proc::spawn(&args);
     eventually(Duration::from_secs(30), "the view to see the field", || {
@@ -107,7 +113,7 @@ fn field_and_view(tag: &str, view_args: &[&str]) -> (String, Proc, Proc, u16) {
         let stats: Value = serde_json::from_slice(&body).ok()?;
         (status == 200 && stats["attached"] == true).then_some(())
     });
-    (name, field, view, port)
+    (view, port)
 }
 
 /// Deposits a blob at (x, y) and waits until the view's frame has it; returns that frame.
