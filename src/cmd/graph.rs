@@ -1,6 +1,7 @@
-//! `pheromone graph | graph-robot`, and `pheromone sim regions | regions-skeleton`: seed 001's
-//! node-graph signalling with area capture and conflict resolution, as processes (or in one
-//! process with `--single-process`).
+//! `pheromone graph | graph-robot`, and `pheromone sim regions | regions-skeleton | …`: seed
+//! 001's node-graph signalling with area capture and conflict resolution, as processes (or in
+//! one process with `--single-process`); `--trials T` pairs `--localize constant` and `rho` over
+//! T seeds.
 
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -213,6 +214,9 @@ pub fn run_sim(a: &SimArgs, out: &super::out::Output) -> anyhow::Result<()> {
         None => scenario.strategies.clone(),
     };
     super::stop::install()?;
+    if let Some(trials) = a.trials {
+        return run_trials(a, out, &scenario, (&counts, &strategies), seed, trials);
+    }
     let started = Instant::now();
     let (runs, mut text, interrupted) = run_each(a, &scenario, &counts, &strategies, seed)?;
     let comparison = compare(&runs);
@@ -256,7 +260,6 @@ fn refuse_grid_flags(a: &SimArgs) -> anyhow::Result<()> {
         (a.duration.is_some(), "--duration"),
         (a.realtime, "--realtime"),
         (a.constant, "--constant"),
-        (a.trials.is_some(), "--trials"),
         (a.slam, "--slam"),
         (a.map.is_some(), "--map"),
         (a.filter.is_some(), "--filter"),
@@ -271,6 +274,105 @@ fn refuse_grid_flags(a: &SimArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// `--trials T`: every run of the scenario on seeds S … S + T − 1, each with `--localize
+/// constant` and with `rho`, paired by seed (`trials` in `metrics.json`, the text in
+/// `tables.txt`): the paired t of rho − constant of the time to the goal and of the mean capture
+/// time.
+fn run_trials(
+    a: &SimArgs,
+    out: &super::out::Output,
+    scenario: &RegionsScenario,
+    (counts, strategies): (&[usize], &[GraphStrategy]),
+    seed: u64,
+    trials: u32,
+) -> anyhow::Result<()> {
+    if a.localize.is_some() {
+        return Err(bad(
+            "--trials on a regions scenario runs each seed with --localize constant and with rho: leave --localize out",
+        ));
+    }
+    let points: Vec<(usize, GraphStrategy)> = counts
+        .iter()
+        .flat_map(|&n| strategies.iter().map(move |&s| (n, s)))
+        .collect();
+    let started = Instant::now();
+    let run = |n, strategy, seed, weight| -> anyhow::Result<RunReport> {
+        let loc = localization(scenario, weight);
+        let r = if a.single_process {
+            simulate_with(scenario, strategy, n, seed, Some(&loc))?
+        } else {
+            run_as_processes(a, strategy, n, seed, Some(loc.config))?
+        };
+        match super::stop::requested() {
+            Some(_) => Err(super::stop::Stopped::by_requested().into()),
+            None => Ok(r),
+        }
+    };
+    let done = |r: &RunReport| {
+        let weight = r
+            .localization
+            .as_ref()
+            .map_or("", |l| l.config.deposit.name());
+        let finish = r
+            .finish_s
+            .map_or("not reached".into(), |t| format!("{t:.2} s"));
+        eprintln!(
+            "  seed {} {} robot(s) --localize {weight}: {finish}",
+            r.seed, r.robots
+        );
+    };
+    let trials = pheromone_sim::localize_trials::run_localize_trials(
+        &scenario.name,
+        &points,
+        seed,
+        trials,
+        run,
+        done,
+    )?;
+    let metrics = TrialsMetrics {
+        scenario: scenario.name.clone(),
+        mode: if a.single_process {
+            RunMode::SingleProcess
+        } else {
+            RunMode::Processes
+        },
+        wall_time_s: started.elapsed().as_secs_f64(),
+        trials,
+    };
+    write_trials(a, out, &metrics)
+}
+
+/// Prints the trials and writes them (`metrics.json`, `tables.txt`).
+fn write_trials(
+    a: &SimArgs,
+    out: &super::out::Output,
+    metrics: &TrialsMetrics,
+) -> anyhow::Result<()> {
+    let t = &metrics.trials;
+    let text = t.text();
+    eprint!("{text}");
+    let seeds: Vec<u64> = (t.seeds[0]..=t.seeds[1]).collect();
+    if let Some(dir) = out.dir(&t.scenario, &seeds)? {
+        let json = serde_json::to_string_pretty(metrics)?;
+        pheromone_field::outfile::write_file(&dir.join("metrics.json"), json.as_bytes())?;
+        pheromone_field::outfile::write_file(&dir.join("tables.txt"), text.as_bytes())?;
+        eprintln!("wrote metrics.json and tables.txt to {}", dir.display());
+    }
+    if a.json {
+        println!("{}", serde_json::to_string(metrics)?);
+    }
+    Ok(())
+}
+
+/// The metrics of `sim <regions scenario> --trials` (`--json`, `metrics.json`).
+#[derive(Debug, Serialize)]
+struct TrialsMetrics {
+    scenario: String,
+    mode: RunMode,
+    wall_time_s: f64,
+    trials: pheromone_sim::localize_trials::LocalizeTrials,
 }
 
 /// The robot counts to run (--robots, else the scenario's), each checked.

@@ -75,6 +75,8 @@ fn dispatch(a: &SimArgs, out: &Output) -> anyhow::Result<()> {
         }
         return super::graph::run_sim(a, out);
     }
+    // A name that is neither kind fails here, naming the built-in scenarios.
+    let scenario = scenario_of(a)?;
     if a.localize.is_some() {
         return Err(bad(format!(
             "--localize applies to node-graph scenarios only; '{}' is a grid scenario (its robots localize already)",
@@ -83,7 +85,6 @@ fn dispatch(a: &SimArgs, out: &Output) -> anyhow::Result<()> {
     }
     // From here SIGINT/SIGTERM end the run with what it has (exit status 130/143).
     super::stop::install()?;
-    let scenario = scenario_of(a)?;
     // `sim --merge` on one robot merges nothing (a sweep's one-robot point keeps it: its row is
     // the baseline).
     let robots = scenario.world.robots.len();

@@ -148,7 +148,9 @@ pub struct SimArgs {
     pub strategy: Option<String>,
     /// Run T trials (seeds S, S+1, …) with the strategy and with the other sector strategy
     /// (inverse vs uniform) and report mean, standard deviation and Welch's t of the
-    /// exploration (scenarios with an exploration metric).
+    /// exploration (scenarios with an exploration metric). Node-graph scenarios: each run on
+    /// each seed with `--localize constant` and with `rho`, and the paired t of rho − constant
+    /// of the time to the goal and of the mean capture time (`regions-loop`).
     #[arg(long, value_parser = super::int::<u32>(2, 100_000), value_name = "T")]
     pub trials: Option<u32>,
     /// Run on a ROS map_server map (map.yaml + its PGM): its occupied cells replace the

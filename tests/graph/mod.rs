@@ -262,11 +262,17 @@ fn sim_regions_localize_reports_the_landmark_work() {
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(stderr(&o).contains("η1 = 16.67 (eq. 13)"), "{}", stderr(&o));
+    // The timed ratio is labelled as the wall-clock figure it is, in the tables and the JSON.
+    assert!(stderr(&o).contains("wall clock"), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let l = &runs(&v)[0]["localization"];
     assert_eq!(l["config"]["deposit"], "rho");
     assert_eq!(l["all"]["landmarks"], 50);
     assert!(l["eta1_compared"].as_f64().unwrap() > 1.0, "{l}");
+    assert!(
+        l.get("eta1_time").is_none() && l["eta1_wall_clock"].is_number(),
+        "{l}"
+    );
     let held = &l["all"]["holding"];
     assert!(held["compared"].as_u64().unwrap() < held["compared_whole_map"].as_u64().unwrap());
     let path = std::env::temp_dir().join(format!("{}.toml", unique("bad-localize")));
@@ -285,11 +291,11 @@ fn sim_regions_localize_reports_the_landmark_work() {
 }
 
 /// Drops the wall-clock measurements of a localized run (the step times and the η measured
-/// from them: `*_ns`, `eta1_time`, `eta2_time`), which differ from run to run.
+/// from them: `*_ns`, `eta1_wall_clock`, `eta2_wall_clock`), which differ from run to run.
 fn without_step_times(v: &mut serde_json::Value) {
     match v {
         serde_json::Value::Object(m) => {
-            m.retain(|k, _| !(k.ends_with("_ns") || k == "eta1_time" || k == "eta2_time"));
+            m.retain(|k, _| !(k.ends_with("_ns") || k.ends_with("_wall_clock")));
             m.values_mut().for_each(without_step_times);
         }
         serde_json::Value::Array(a) => a.iter_mut().for_each(without_step_times),
@@ -320,22 +326,20 @@ fn nodes_named(tag: &str) -> Vec<String> {
 
 /// `--localize` as processes (each `graph-robot` owns its localizer) gives the runs of
 /// `--single-process` key by key: captures, link values, paths, deposits, ρ_t, landmark counts,
-/// comparisons and η1, η2 by count (all but the step times), for both deposit weights; and the
-/// run leaves no service and no node behind.
+/// comparisons and η1, η2 by count (all but the step times), for both deposit weights, on the
+/// built-in corridors and on the loop; and the run leaves no service and no node behind.
 #[test]
 fn sim_regions_localize_as_processes_matches_one_process() {
-    let sparse = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("examples/scenarios/regions-sparse.toml")
-        .display()
-        .to_string();
-    let cases: [(&str, &str, &[&str]); 3] = [
-        (&sparse, "rho", &[]),
-        (&sparse, "constant", &[]),
+    let cases: [(&str, &str, &[&str]); 5] = [
+        ("regions-sparse", "rho", &[]),
+        ("regions-sparse", "constant", &[]),
         (
             "regions",
             "rho",
             &["--robots", "3", "--strategy", "pheromone"],
         ),
+        ("regions-loop", "rho", &["--seed", LOOP_SEED]),
+        ("regions-loop", "constant", &["--seed", LOOP_SEED]),
     ];
     for (scenario, weight, extra) in cases {
         let mut args = vec!["sim", scenario, "--localize", weight, "--json", "--no-out"];
@@ -393,4 +397,69 @@ fn a_robot_process_follows_the_pheromone_of_another_to_its_goal() {
     };
     assert_eq!(path(1).as_array().unwrap().last().unwrap(), "E", "{m}");
     assert_eq!(path(2), path(1), "{m}");
+}
+
+/// A seed of `regions-loop` on which `--localize rho` changes the captures (tested below).
+const LOOP_SEED: &str = "1";
+
+/// `regions-loop` (two routes to every target, the left half unlit): ρ_t-weighted deposits
+/// change which robot captures what, and when, against constant ones on the same seed; `sim
+/// --trials` pairs the two weights per seed and reports the paired t; `--trials` with
+/// `--localize` is bad input.
+#[test]
+fn on_the_loop_rho_changes_a_capture_result_and_trials_report_the_paired_t() {
+    let captures = |weight: &str| {
+        let args = [
+            "sim",
+            "regions-loop",
+            "--single-process",
+            "--localize",
+            weight,
+            "--seed",
+            LOOP_SEED,
+            "--json",
+            "--no-out",
+        ];
+        let o = run(&args);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        let r = runs(&json(&o))[0].clone();
+        (r["captures"].clone(), r["finish_s"].clone())
+    };
+    let (constant, rho) = (captures("constant"), captures("rho"));
+    assert_ne!(constant.0, rho.0, "the same captures with both weights");
+    let o = run(&[
+        "sim",
+        "regions-loop",
+        "--single-process",
+        "--trials",
+        "2",
+        "--seed",
+        LOOP_SEED,
+        "--json",
+        "--no-out",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v = json(&o);
+    let p = &v["trials"]["points"][0];
+    let seeds = p["per_seed"].as_array().unwrap();
+    assert_eq!(seeds.len(), 2, "{v}");
+    assert_eq!(seeds[0]["seed"].as_u64().unwrap().to_string(), LOOP_SEED);
+    // The trial's runs are the runs above.
+    assert_eq!(seeds[0]["constant"]["finish_s"], constant.1, "{v}");
+    assert_eq!(seeds[0]["rho"]["finish_s"], rho.1, "{v}");
+    assert_eq!(seeds[0]["captures_differ"], true, "{v}");
+    assert!(p["captures_differ"].as_u64().unwrap() >= 1, "{v}");
+    assert_eq!(p["finish_s"]["pairs"], 2, "{v}");
+    assert!(stderr(&o).contains("paired t") || stderr(&o).contains("no difference"));
+    let o = run(&[
+        "sim",
+        "regions-loop",
+        "--trials",
+        "2",
+        "--localize",
+        "rho",
+        "--no-out",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--localize"), "{}", stderr(&o));
 }

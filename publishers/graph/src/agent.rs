@@ -488,11 +488,21 @@ pub const PAPER_SKELETON: &str = include_str!("../../../examples/scenarios/regio
 /// Seed 001 Sec. 6.2: R1 is sent to region E depositing pheromone; R2 follows it.
 pub const PAPER_BACKUP: &str = include_str!("../../../examples/scenarios/regions-backup.toml");
 
+/// Seed 001's corridor with few landmarks (one pair per 4 m, seen within 2 m): ρ_t varies,
+/// the captures do not (the corridor is a tree).
+pub const REGIONS_SPARSE: &str = include_str!("../../../examples/scenarios/regions-sparse.toml");
+
+/// A loop (two routes to every target) whose left half is unlit: the robots' localization
+/// degrades there, and `--localize rho` changes routes, captures and times.
+pub const REGIONS_LOOP: &str = include_str!("../../../examples/scenarios/regions-loop.toml");
+
 /// Built-in `regions` scenarios by name.
-pub const BUILTIN_REGIONS: [(&str, &str); 3] = [
+pub const BUILTIN_REGIONS: [(&str, &str); 5] = [
     ("regions", PAPER_CORRIDOR),
     ("regions-skeleton", PAPER_SKELETON),
     ("regions-backup", PAPER_BACKUP),
+    ("regions-sparse", REGIONS_SPARSE),
+    ("regions-loop", REGIONS_LOOP),
 ];
 
 impl RegionsScenario {

@@ -138,7 +138,8 @@ fn areas_table(s: &mut String, r: &RunReport) {
 }
 
 /// A localized run: the landmark comparisons per class of steps, η1 and η2 (eq. 13 from the
-/// landmark counts, from the comparisons, and measured as time per step), ρ_t and deposits.
+/// landmark counts and from the comparisons), the step times (wall clock, labelled as such:
+/// they move with the load), ρ_t and deposits.
 fn localization_lines(s: &mut String, r: &RunReport) {
     use std::fmt::Write;
     let Some(l) = &r.localization else {
@@ -173,21 +174,21 @@ fn localization_lines(s: &mut String, r: &RunReport) {
     }
     let _ = writeln!(
         s,
-        "  η1 = {} (eq. 13) · {} (comparisons) · {} (time: {} whole map / {} region)",
+        "  η1 = {} (eq. 13) · {} (comparisons)   η2 = {} (eq. 13) · {} (comparisons)",
         f(l.eta1_eq13),
         f(l.eta1_compared),
-        f(l.eta1_time),
-        us(l.holding_step_whole_map_ns),
-        us(l.holding_step_ns)
+        f(l.eta2_eq13),
+        f(l.eta2_compared)
     );
     let _ = writeln!(
         s,
-        "  η2 = {} (eq. 13) · {} (comparisons) · {} (time: {} whole map / {} free areas)",
-        f(l.eta2_eq13),
-        f(l.eta2_compared),
-        f(l.eta2_time),
+        "  wall clock (varies with the machine's load, not η): holder step {} ({} whole map, ratio {}), free step {} ({} whole map, ratio {})",
+        us(l.holding_step_ns),
+        us(l.holding_step_whole_map_ns),
+        f(l.eta1_wall_clock),
+        us(l.free_step_ns),
         us(l.free_step_whole_map_ns),
-        us(l.free_step_ns)
+        f(l.eta2_wall_clock)
     );
     let _ = writeln!(
         s,

@@ -5,9 +5,11 @@
 //! `wrong_area` in [`wrong_area`]), and seed 004's grid of experiments ([`sweep`], its statistics in
 //! [`sweep_stats`], the paper's own figures beside it in [`paper`], split over a scheduler's tasks
 //! and joined again in [`sweep_shard`]), and seed 004's comparison of
-//! two strategies over seeds ([`trials`], `sim --trials`).
+//! two strategies over seeds ([`trials`], `sim --trials`), and seed 001's constant against
+//! ρ_t-weighted link deposits over seeds ([`localize_trials`], `sim <regions scenario> --trials`).
 
 pub mod exploration;
+pub mod localize_trials;
 pub mod metrics;
 pub mod observer;
 pub mod paper;

@@ -150,3 +150,55 @@ mod skeleton_tests {
         assert_eq!(holders, (1..=8).collect::<Vec<u32>>());
     }
 }
+
+#[cfg(test)]
+mod loop_tests {
+    use super::super::*;
+    use crate::localize::{graph_landmarks, LocalizeConfig};
+
+    /// Every built-in scenario loads and validates (`regions-sparse` and `regions-loop` are
+    /// built in, not only files).
+    #[test]
+    fn every_builtin_regions_scenario_validates() {
+        for (name, _) in crate::agent::BUILTIN_REGIONS {
+            let sc = RegionsScenario::builtin(name).unwrap();
+            assert_eq!(sc.name, name);
+            sc.validate().unwrap();
+        }
+    }
+
+    /// `regions-loop` is what it is for: from the node the robots enter by, both ways round
+    /// reach every region (so a link's value chooses between two routes), and its bottom
+    /// stretch has no landmark.
+    #[test]
+    fn the_loop_has_two_routes_to_every_region_and_an_unlit_stretch() {
+        let sc = RegionsScenario::builtin("regions-loop").unwrap();
+        let s = sc.validate().unwrap();
+        let g = &s.graph;
+        let entry = g.find("S").unwrap();
+        let ways: Vec<usize> = g
+            .node(entry)
+            .unwrap()
+            .links()
+            .map(|(_, l)| l.to)
+            .filter(|&n| n != sc.dock_node(g).unwrap())
+            .collect();
+        assert_eq!(ways.len(), 2);
+        for r in s.regions.regions() {
+            for &w in &ways {
+                let d = g.distances_from(w, Some(entry));
+                assert!(
+                    d[r.node].is_finite(),
+                    "{} from {}",
+                    r.name,
+                    g.nodes()[w].name
+                );
+            }
+        }
+        let config = sc.localize.unwrap();
+        let lit = graph_landmarks(g, &LocalizeConfig::default());
+        let marks = graph_landmarks(g, &config);
+        assert!(marks.len() < lit.len());
+        assert!(marks.iter().all(|m| m.y_m > 4.0), "{marks:?}");
+    }
+}
