@@ -104,6 +104,7 @@ enum Command {
     /// Measure latency and throughput side by side with raw iceoryx2, a Unix socket and Zenoh.
     Bench(cmd::bench::BenchArgs),
     /// One peer process of `pheromone bench` (started by it).
+    #[cfg(feature = "bench")]
     #[command(hide = true)]
     BenchPeer(cmd::bench::BenchPeerArgs),
     /// Every value-taking flag of every subcommand with its type (for the flag-fuzzing test).
@@ -165,6 +166,7 @@ fn main() -> ExitCode {
         Command::Ros2(a) => cmd::ros2::run(*a),
         Command::Record(a) => cmd::ros2::run_record(a),
         Command::Bench(a) => cmd::bench::run(a),
+        #[cfg(feature = "bench")]
         Command::BenchPeer(a) => cmd::bench::run_peer(a),
         Command::Flags => cmd::flags::print(Cli::command()),
     };

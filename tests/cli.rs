@@ -1,5 +1,6 @@
 //! Integration tests that run the real `pheromone` binary as separate processes.
 
+#[cfg(feature = "bench")]
 mod bench;
 mod confirm;
 mod crash;

@@ -1,5 +1,6 @@
 //! One module per subcommand: argument parsing and a short loop over library types.
 
+#[cfg(feature = "bench")]
 pub mod bench;
 pub mod bridge;
 pub mod check;
@@ -24,6 +25,26 @@ pub mod sweep;
 pub mod tune;
 pub mod view;
 pub mod zenoh_args;
+
+/// `pheromone bench` in a build without the feature `bench` (its crate and the C ABI it measures
+/// were compiled last before the binary in a cold release build; docs/building.md): the
+/// subcommand says how to get it.
+#[cfg(not(feature = "bench"))]
+pub mod bench {
+    /// Takes any arguments: the real ones are in a build with `--features bench`.
+    #[derive(clap::Args)]
+    pub struct BenchArgs {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        args: Vec<std::ffi::OsString>,
+    }
+
+    pub fn run(_: BenchArgs) -> anyhow::Result<()> {
+        Err(super::bad(
+            "`pheromone bench` is not in this build: build with `--features bench` (or `zenoh`), \
+             e.g. `cargo run --release --features bench -- bench`",
+        ))
+    }
+}
 
 use std::error::Error;
 use std::fmt;

@@ -70,7 +70,8 @@ pub struct SimArgs {
     /// (docs/ros2.md). Not with --trials or node-graph scenarios.
     #[arg(long, value_name = "FILE.mcap", conflicts_with = "trials", value_parser = super::check::out_file())]
     pub record: Option<PathBuf>,
-    /// --record's chunk compression: none, zstd or lz4 (the readers of MCAP decompress either).
+    /// --record's chunk compression: none, zstd or lz4 (the readers of MCAP decompress either;
+    /// zstd and lz4 need a build with the feature `record-compression` or `zenoh`).
     #[arg(long, value_name = "CODEC", value_parser = pheromone_ros2::record::ChunkCompression::NAMES, default_value = "none", requires = "record")]
     pub record_compression: String,
     /// Print one JSON metrics object on stdout.

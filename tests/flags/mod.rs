@@ -515,6 +515,15 @@ fn base_line(path: &str, flag: &str) -> Vec<String> {
     argv
 }
 
+/// `DOMAINS` and `NUMERIC_TEXT` but the flags of `pheromone bench` in a build without it (the
+/// feature `bench`: there `bench` takes no flags and says how to get it).
+fn built_domains() -> impl Iterator<Item = &'static (&'static str, &'static str, Domain)> {
+    DOMAINS
+        .iter()
+        .chain(NUMERIC_TEXT)
+        .filter(|(path, _, _)| cfg!(feature = "bench") || !path.starts_with("bench"))
+}
+
 /// The cases of every numeric flag; panics naming the flags `DOMAINS` lacks.
 fn cases(flags: &[(String, String, String)]) -> Vec<Case> {
     let numeric: Vec<&(String, String, String)> =
@@ -542,9 +551,7 @@ fn cases(flags: &[(String, String, String)]) -> Vec<Case> {
         .iter()
         .map(|(p, f, _)| (p.as_str(), f.as_str()))
         .collect();
-    let stale: Vec<_> = DOMAINS
-        .iter()
-        .chain(NUMERIC_TEXT)
+    let stale: Vec<_> = built_domains()
         .filter(|(p, f, _)| !known.contains(&(*p, *f)))
         .collect();
     assert!(
@@ -552,7 +559,7 @@ fn cases(flags: &[(String, String, String)]) -> Vec<Case> {
         "DOMAINS names flags that no longer exist: {stale:?}"
     );
     let mut out = Vec::new();
-    for (path, flag, domain) in DOMAINS.iter().chain(NUMERIC_TEXT) {
+    for (path, flag, domain) in built_domains() {
         let above = domain.above();
         for value in VALUES.iter().copied().chain(above.as_deref()) {
             let mut argv = base_line(path, flag);
@@ -692,7 +699,7 @@ fn every_numeric_flag_of_every_subcommand_refuses_values_outside_its_domain_with
         "{} numeric flags ({} discovered lines), {} cases ({} inside the domain) in {:.1} s: \
          {panicked} panicked, {outside_not_2} outside the domain exited ≠ 2, {stopped} stopped \
          at the deadline, {} failures",
-        DOMAINS.len() + NUMERIC_TEXT.len(),
+        built_domains().count(),
         flags.len(),
         cases.len(),
         cases.iter().filter(|c| c.inside).count(),

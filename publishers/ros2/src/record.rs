@@ -114,6 +114,11 @@ pub enum ChunkCompression {
 impl ChunkCompression {
     pub const NAMES: [&'static str; 3] = ["none", "zstd", "lz4"];
 
+    /// Whether this build compresses chunks (the crate's feature `compression`, the binary's
+    /// `record-compression`): zstd and lz4 are C libraries whose build took ≈ 43 s of the
+    /// default release build's CPU (docs/building.md), for a choice most runs never make.
+    pub const BUILT: bool = cfg!(feature = "compression");
+
     pub fn from_name(name: &str) -> Option<Self> {
         match name {
             "none" => Some(Self::None),
@@ -123,12 +128,18 @@ impl ChunkCompression {
         }
     }
 
+    #[cfg(feature = "compression")]
     fn mcap(self) -> Option<mcap::Compression> {
         match self {
             Self::None => None,
             Self::Zstd => Some(mcap::Compression::Zstd),
             Self::Lz4 => Some(mcap::Compression::Lz4),
         }
+    }
+
+    #[cfg(not(feature = "compression"))]
+    fn mcap(self) -> Option<mcap::Compression> {
+        None
     }
 }
 
@@ -145,6 +156,13 @@ impl McapRecorder {
             action,
             detail: e.to_string(),
         };
+        if compression != ChunkCompression::None && !ChunkCompression::BUILT {
+            return Err(err(
+                "compress chunks",
+                &"this pheromone was built without zstd and lz4 (cargo feature \
+                  `record-compression`, or `zenoh`); record uncompressed or rebuild with it",
+            ));
+        }
         // A regular file or a new path only (never through a link, into a FIFO or a device).
         let file = pheromone_field::outfile::open_in_place(path).map_err(|e| err("create", &e))?;
         let writer = mcap::WriteOptions::new()

@@ -6,7 +6,7 @@
 //!   to a subset of landmarks (lines 10–14, [`Ekf::set_landmark_filter`]). A [`LossConfig`]
 //!   makes the filter lose its localization on purpose, as the leader of seed 000 does.
 //! - [`EkfSlam`]: the same models with unknown landmarks added to the state (3 + 2N), the large
-//!   covariance algebra in `faer`.
+//!   covariance algebra block by block on nalgebra's `DMatrix`.
 //!
 //! Bad input (non-finite or absurd odometry, a bad `dt`, non-finite or negative ranges) is
 //! rejected with a [`LocalizerError`] and counted by reason in [`EkfCounters`]; a rejected

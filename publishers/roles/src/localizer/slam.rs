@@ -1,11 +1,11 @@
 //! [`EkfSlam`]: EKF-SLAM with the models of seed 001 Algorithm 1. The robot pose and N
 //! landmarks form one state (3 + 2N); unknown landmarks join it from their first observation,
 //! and the large covariance algebra (prediction of the cross-covariances, the sparse-H
-//! correction in Joseph form, landmark initialisation) runs in `faer`.
+//! correction in Joseph form, landmark initialisation) runs on nalgebra's dynamic matrices,
+//! block by block (the robot's 3 rows or columns, a landmark's 2) so that no step costs more
+//! than O(n²).
 
-use faer::linalg::matmul::matmul;
-use faer::{Accum, Mat, MatRef, Par, Side};
-use nalgebra::{Matrix2, Matrix2x3, Matrix3, Matrix3x2, Vector2, Vector3};
+use nalgebra::{DMatrix, Matrix2, Matrix2x3, Matrix3, Matrix3x2, Vector2, Vector3};
 
 use super::models::{
     control_noise, innovation, measurement_noise, pose_msg, predict_measurement, score,
@@ -28,14 +28,14 @@ pub struct SlamLandmark {
     pub cov: [f64; 4],
 }
 
-/// EKF-SLAM: the robot pose and N landmarks in one state (3 + 2N), covariance in `faer`.
+/// EKF-SLAM: the robot pose and N landmarks in one state (3 + 2N), covariance a dense `DMatrix`.
 /// Prediction and correction use the models of seed 001 Algorithm 1; landmarks are initialised
 /// from their first observation with the inverse-measurement Jacobians.
 #[derive(Debug, Clone)]
 pub struct EkfSlam {
     config: EkfSlamConfig,
     mean: Vec<f64>,
-    cov: Mat<f64>,
+    cov: DMatrix<f64>,
     signatures: Vec<u32>,
     last_used: u32,
     counters: EkfCounters,
@@ -68,7 +68,7 @@ impl EkfSlam {
         Ok(Self {
             config,
             mean,
-            cov: Mat::from_fn(3, 3, |i, j| c[(i, j)]),
+            cov: DMatrix::from_fn(3, 3, |i, j| c[(i, j)]),
             signatures: Vec::new(),
             last_used: 0,
             counters: EkfCounters::default(),
@@ -150,43 +150,24 @@ impl EkfSlam {
         let Some(s_inv) = s.try_inverse() else {
             return;
         };
-        let n = self.mean.len();
         let li = 3 + 2 * j;
-        let hr_t = Mat::from_fn(3, 2, |i, k| hr[(k, i)]);
-        let hm_t = Mat::from_fn(2, 2, |i, k| hm[(k, i)]);
-        let mut p = Mat::<f64>::zeros(n, 2); // P = Σ Hᵀ
-        matmul(
-            &mut p,
-            Accum::Replace,
-            self.cov.submatrix(0, 0, n, 3),
-            &hr_t,
-            1.0,
-            Par::Seq,
-        );
-        matmul(
-            &mut p,
-            Accum::Add,
-            self.cov.submatrix(0, li, n, 2),
-            &hm_t,
-            1.0,
-            Par::Seq,
-        );
-        let s_inv_f = Mat::from_fn(2, 2, |i, k| s_inv[(i, k)]);
-        let s_f = Mat::from_fn(2, 2, |i, k| s[(i, k)]);
-        let k = &p * &s_inv_f; // K = P S⁻¹ (seed 001 Algorithm 1 line 22)
-        let ks = &k * &s_f;
+        // P = Σ Hᵀ (n × 2), from the robot's and the landmark's columns only.
+        let p = self.cov.fixed_columns::<3>(0) * hr.transpose()
+            + self.cov.fixed_columns::<2>(li) * hm.transpose();
+        let k = &p * s_inv; // K = P S⁻¹ (seed 001 Algorithm 1 line 22)
+        let ks = &k * s;
         let mut new_mean = self.mean.clone();
         for (i, m) in new_mean.iter_mut().enumerate() {
             *m += k[(i, 0)] * nu.x + k[(i, 1)] * nu.y; // line 23
         }
         new_mean[2] = wrap_angle(new_mean[2]);
         let mut cov = self.cov.clone();
-        matmul(&mut cov, Accum::Add, &k, p.transpose(), -1.0, Par::Seq);
-        matmul(&mut cov, Accum::Add, &p, k.transpose(), -1.0, Par::Seq);
-        matmul(&mut cov, Accum::Add, &ks, k.transpose(), 1.0, Par::Seq);
+        let (k_t, p_t) = (k.transpose(), p.transpose());
+        cov.gemm(-1.0, &k, &p_t, 1.0);
+        cov.gemm(-1.0, &p, &k_t, 1.0);
+        cov.gemm(1.0, &ks, &k_t, 1.0);
         symmetrize(&mut cov);
-        let finite = new_mean.iter().all(|v| v.is_finite())
-            && (0..n).all(|c| (0..n).all(|r| cov[(r, c)].is_finite()));
+        let finite = new_mean.iter().all(|v| v.is_finite()) && cov.iter().all(|v| v.is_finite());
         if finite {
             self.mean = new_mean;
             self.cov = cov;
@@ -212,21 +193,10 @@ impl EkfSlam {
         );
         let smm =
             symmetrize2(&(gr * self.robot_covariance() * gr.transpose() + gz * q * gz.transpose()));
-        let gr_f = Mat::from_fn(2, 3, |i, k| gr[(i, k)]);
-        let mut cross = Mat::<f64>::zeros(2, n);
-        matmul(
-            &mut cross,
-            Accum::Replace,
-            &gr_f,
-            self.cov.submatrix(0, 0, 3, n),
-            1.0,
-            Par::Seq,
-        );
-        self.cov.resize_with(n + 2, n + 2, |_, _| 0.0);
-        self.cov.submatrix_mut(n, 0, 2, n).copy_from(&cross);
-        self.cov
-            .submatrix_mut(0, n, n, 2)
-            .copy_from(cross.transpose());
+        let cross = gr * self.cov.fixed_rows::<3>(0); // Σm· = Gr Σr· (2 × n)
+        self.cov.resize_mut(n + 2, n + 2, 0.0);
+        self.cov.view_mut((n, 0), (2, n)).copy_from(&cross);
+        self.cov.view_mut((0, n), (n, 2)).tr_copy_from(&cross);
         for i in 0..2 {
             for k in 0..2 {
                 self.cov[(n + i, n + k)] = smm[(i, k)];
@@ -247,8 +217,8 @@ impl EkfSlam {
     }
 
     /// The full state covariance ((3 + 2N) × (3 + 2N)).
-    pub fn covariance(&self) -> MatRef<'_, f64> {
-        self.cov.as_ref()
+    pub fn covariance(&self) -> &DMatrix<f64> {
+        &self.cov
     }
 
     /// The full state (x, y, θ, m1x, m1y, …).
@@ -282,7 +252,7 @@ impl EkfSlam {
     pub fn covariance_is_spd(&self) -> bool {
         let n = self.mean.len();
         let symmetric = (0..n).all(|i| (0..i).all(|j| self.cov[(i, j)] == self.cov[(j, i)]));
-        symmetric && self.cov.llt(Side::Lower).is_ok()
+        symmetric && self.cov.clone().cholesky().is_some()
     }
 
     pub fn counters(&self) -> &EkfCounters {
@@ -321,20 +291,9 @@ impl CheckedFilter for EkfSlam {
         let srr = self.robot_covariance();
         let srr = symmetrize3(&(g * srr * g.transpose() + vj * m * vj.transpose()));
         if n > 3 {
-            let gf = Mat::from_fn(3, 3, |i, j| g[(i, j)]);
-            let mut cross = Mat::<f64>::zeros(3, n - 3);
-            matmul(
-                &mut cross,
-                Accum::Replace,
-                &gf,
-                self.cov.submatrix(0, 3, 3, n - 3),
-                1.0,
-                Par::Seq,
-            );
-            self.cov.submatrix_mut(0, 3, 3, n - 3).copy_from(&cross);
-            self.cov
-                .submatrix_mut(3, 0, n - 3, 3)
-                .copy_from(cross.transpose());
+            let cross = g * self.cov.view((0, 3), (3, n - 3)); // G Σr· (3 × (n − 3))
+            self.cov.view_mut((0, 3), (3, n - 3)).copy_from(&cross);
+            self.cov.view_mut((3, 0), (n - 3, 3)).tr_copy_from(&cross);
         }
         for i in 0..3 {
             for j in 0..3 {
@@ -392,7 +351,7 @@ fn symmetrize2(m: &Matrix2<f64>) -> Matrix2<f64> {
     (m + m.transpose()) * 0.5
 }
 
-fn symmetrize(cov: &mut Mat<f64>) {
+fn symmetrize(cov: &mut DMatrix<f64>) {
     let n = cov.nrows();
     for c in 0..n {
         for r in (c + 1)..n {
@@ -492,13 +451,13 @@ mod tests {
     fn slam_rejects_bad_input_without_touching_the_state() {
         let (mut slam, _) = run_slam(2, 50, EkfSlamConfig::default(), true);
         let state = slam.state().to_vec();
-        let cov = slam.covariance().to_owned();
+        let cov = slam.covariance().clone();
         let mut obs = some_obs();
         obs[0].range_m = f32::NAN;
         assert!(slam.update(&obs).is_err());
         assert!(slam.predict(0.1, f64::NAN, 0.1).is_err());
         assert_eq!(slam.state(), &state[..]);
-        assert!(slam.covariance() == cov.as_ref());
+        assert_eq!(slam.covariance(), &cov);
         assert_eq!(slam.counters().rejected_total(), 2);
     }
 }

@@ -108,7 +108,7 @@ pub fn run_localizer(
 }
 
 /// The localizer's filter: landmark-based EKF or UKF, a particle filter with the laser, or
-/// EKF-SLAM (faer) when the map is unknown.
+/// EKF-SLAM when the map is unknown.
 pub enum Filter {
     Ekf(Box<Ekf>),
     Ukf(Box<Ukf>),
