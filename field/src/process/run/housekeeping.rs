@@ -23,7 +23,7 @@ pub const CLEANUP_EVERY: Duration = Duration::from_secs(1);
 
 /// The periodic chores of a long-running loop, and its end:
 ///
-/// ```ignore
+/// ```text
 /// let mut chores = Housekeeping::new(Duration::from_secs(5)).with_cleanup().until(duration);
 /// while chores.running(&node) {
 ///     work.step(Duration::from_millis(20))?;

@@ -217,7 +217,7 @@ impl DistanceGrid {
 
     /// No wall crosses the ray from (`x_m`, `y_m`) along `angle_rad` over `length_m`: an exact
     /// ray–segment test against the walls whose bounding box meets the ray's. A crossing
-    /// within [`CORNER_TOLERANCE_M`] of a segment's end does not count: a beam that grazes a
+    /// within `CORNER_TOLERANCE_M` of a segment's end does not count: a beam that grazes a
     /// corner (where two walls meet, or a door post) may pass on either side of it within the
     /// laser's noise, and the true pose must not pay for it.
     pub fn ray_clear(&self, x_m: f64, y_m: f64, angle_rad: f64, length_m: f64) -> bool {
