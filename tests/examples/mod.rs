@@ -106,3 +106,26 @@ fn a_read_line_parses() {
     assert_eq!(parse_read_line(line), Some((54.552, 15.8, 12.8, 54.552)));
     assert_eq!(parse_read_line("t = 0.50 s  the field is empty"), None);
 }
+
+/// The README's Rust snippet is `examples/readme.rs` below its `//!` comment, so that it compiles
+/// (`cargo test` and clippy build the examples) and is a whole program (issue 51).
+#[test]
+fn the_readmes_rust_snippet_is_the_readme_example() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = std::fs::read_to_string(root.join("README.md")).expect("README.md");
+    let snippet = readme
+        .split("```rust\n")
+        .nth(1)
+        .and_then(|s| s.split("```").next())
+        .expect("a ```rust block in README.md");
+    let example = std::fs::read_to_string(root.join("examples/readme.rs")).expect("the example");
+    let body: String = example
+        .lines()
+        .skip_while(|l| l.starts_with("//!") || l.is_empty())
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert_eq!(
+        snippet, body,
+        "README.md's ```rust block is not examples/readme.rs"
+    );
+}
