@@ -1,6 +1,6 @@
 //! `pheromone bench --only scale` at small sizes reports every figure of every run in its JSON
 //! (no figure's value is asserted, only that it is there and sane), and a run above the host's
-//! open-file limit is refused before anything starts, naming the limit (issue 52).
+//! open-file limit or `/dev/shm` is refused before anything starts, naming the limit (issue 52).
 
 use std::process::Command;
 use std::time::Duration;
@@ -98,6 +98,35 @@ fn a_run_above_the_open_file_limit_is_refused_naming_it_before_anything_starts()
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(
         err.contains("RLIMIT_NOFILE") && err.contains(" is 200"),
+        "{err}"
+    );
+    assert!(err.contains("nothing was started"), "{err}");
+}
+
+/// A run whose field's frames cannot fit in `/dev/shm` is refused before anything starts,
+/// naming `/dev/shm`, its free bytes and the need (exit 2). The frames asked for (2 GiB each, a
+/// pool for 1000 readers: about 6 TB) fit on no host. (The other refusal, more processes than
+/// `MAX_PARTICIPANTS`, no scenario can reach: 256 robots at most, mappers only up to 17.)
+#[test]
+fn a_run_whose_frames_do_not_fit_in_dev_shm_is_refused_naming_it_before_anything_starts() {
+    let mut s = pheromone_bench::scale::swarm(4, 1.0).expect("the swarm scenario");
+    s.field.width = 16384;
+    s.field.height = 16384;
+    s.field.cell_size_m = 0.002;
+    s.field.max_readers = 1000;
+    let dir = std::env::temp_dir().join(unique("scale-shm"));
+    std::fs::create_dir(&dir).unwrap();
+    let path = dir.join("big-field.toml");
+    std::fs::write(&path, s.to_toml().expect("TOML")).unwrap();
+    let out = Command::new(bin())
+        .args(["sim", path.to_str().unwrap(), "--duration", "1", "--no-out"])
+        .output()
+        .expect("run pheromone sim");
+    std::fs::remove_dir_all(&dir).unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("free bytes in /dev/shm") && err.contains("the run needs "),
         "{err}"
     );
     assert!(err.contains("nothing was started"), "{err}");

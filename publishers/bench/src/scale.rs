@@ -11,9 +11,7 @@
 //! never a hang: each run has a deadline, after which it is killed.
 
 use std::collections::BTreeMap;
-use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use pheromone_world::scenario::Scenario;
@@ -21,6 +19,7 @@ use serde::Serialize;
 
 use crate::scale_probe::Sampler;
 use crate::BenchError;
+use pheromone_supervisor::{ChildSpec, Supervisor};
 
 /// The robot counts of a full run.
 pub const ROBOTS: [usize; 6] = [8, 16, 32, 64, 128, 256];
@@ -326,8 +325,9 @@ fn deadline(n: usize, duration_s: f64) -> Duration {
     Duration::from_secs_f64(120.0 + 3.0 * n as f64 + 20.0 * duration_s)
 }
 
-/// One `pheromone sim` child, sampled every 100 ms (memory and services every 500 ms; a run in
-/// one process every 2 ms).
+/// One `pheromone sim` child under a [`Supervisor`], sampled every 100 ms (memory and services
+/// every 500 ms; a run in one process every 2 ms): between samples this waits for the child's
+/// exit, so a run is over when it ends, not at the next sample.
 fn run_one(
     program: &Path,
     scenario: &Path,
@@ -335,25 +335,17 @@ fn run_one(
     mode: RunMode,
     duration_s: f64,
 ) -> Result<ScaleRow, BenchError> {
-    let mut cmd = Command::new(program);
-    cmd.arg("sim")
-        .arg(scenario)
-        .args(["--no-out", "--json", "--duration"])
-        .arg(duration_s.to_string())
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
+    let mut args: Vec<String> = vec!["sim".into(), scenario.display().to_string()];
+    args.extend(["--no-out", "--json", "--duration"].map(String::from));
+    args.push(duration_s.to_string());
     if mode == RunMode::SingleProcess {
-        cmd.arg("--single-process");
+        args.push("--single-process".into());
     }
+    let mut sup = Supervisor::new(program);
     let started = Instant::now();
-    let mut child = cmd.spawn().map_err(|source| BenchError::Io {
-        what: format!("start {} sim", program.display()),
-        source,
-    })?;
-    let pid = child.id() as i32;
+    let id = sup.spawn(ChildSpec::new("sim", None, args))?;
+    let pid = sup.pid(id) as i32;
     let tag = (mode == RunMode::Processes).then(|| format!("sim{pid}x0"));
-    let (out, err) = (drain(child.stdout.take()), drain(child.stderr.take()));
     let mut sampler = Sampler::new(pid, tag);
     // One process runs for milliseconds: its own memory, every 2 ms.
     sampler.root_only = mode == RunMode::SingleProcess;
@@ -363,21 +355,19 @@ fn run_one(
     };
     let limit = deadline(n, duration_s);
     let status = loop {
-        if let Some(status) = child.try_wait().map_err(|source| BenchError::Io {
-            what: "wait for the sim".into(),
-            source,
-        })? {
-            break Some(status);
+        sampler.sample(sampler.samples().is_multiple_of(full_every));
+        if sup.wait_exit(id, every) {
+            break sup.exit_status(id);
         }
         if started.elapsed() > limit {
-            kill_tree(&mut child);
+            // SIGTERM (the sim stops its children as on Ctrl-C), SIGKILL 10 s later (its
+            // children then get SIGTERM from the kernel: `PR_SET_PDEATHSIG`).
+            sup.stop_all(Duration::from_secs(10));
             break None;
         }
-        sampler.sample(sampler.samples().is_multiple_of(full_every));
-        std::thread::sleep(every);
     };
     let total_s = started.elapsed().as_secs_f64();
-    let (stdout, stderr) = (joined(out), joined(err));
+    let (stdout, stderr) = sup.output(id);
     let mut row = ScaleRow {
         robots: n,
         mode,
@@ -427,37 +417,6 @@ fn fill_from_json(row: &mut ScaleRow, stdout: &str) -> Result<(), BenchError> {
     row.startup_s = startup.max(0.0);
     row.wall_per_sim_s = (wall - num("startup_s").unwrap_or(0.0)).max(0.0) / sim;
     Ok(())
-}
-
-/// Reads a child's pipe to the end on a thread.
-fn drain<R: Read + Send + 'static>(pipe: Option<R>) -> std::thread::JoinHandle<String> {
-    std::thread::spawn(move || {
-        let mut s = String::new();
-        if let Some(mut p) = pipe {
-            let _ = p.read_to_string(&mut s);
-        }
-        s
-    })
-}
-
-fn joined(h: std::thread::JoinHandle<String>) -> String {
-    h.join().unwrap_or_default()
-}
-
-/// SIGTERM to the sim (it stops its children as on Ctrl-C), SIGKILL 10 s later if it is still
-/// there (its children get SIGTERM from the kernel then: `PR_SET_PDEATHSIG`).
-fn kill_tree(child: &mut Child) {
-    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
-    let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
-    let until = Instant::now() + Duration::from_secs(10);
-    while Instant::now() < until {
-        if let Ok(Some(_)) = child.try_wait() {
-            return;
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    let _ = child.kill();
-    let _ = child.wait();
 }
 
 /// The growth exponent of every figure in each mode (sizes with a positive, finite value; at

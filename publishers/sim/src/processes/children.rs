@@ -14,18 +14,25 @@ pub(super) struct ChildArgs {
     pub(super) world: String,
     /// The scenario file's path.
     pub(super) scenario: String,
+    /// Robot id → the file of its part of the scenario (its localizer, depositor, follower).
+    pub(super) parts: std::collections::BTreeMap<u32, String>,
     pub(super) realtime: bool,
     /// Real-time scheduling arguments of the control-loop children.
     pub(super) rt: Vec<String>,
 }
 
 impl ChildArgs {
-    /// A role's arguments: the scenario, world and field, the robot, `--realtime`.
+    /// A role's arguments: the scenario (a robot's own part, but for a mapper, which needs its
+    /// peers), world and field, the robot, `--realtime`.
     pub(super) fn role(&self, name: &str, robot: Option<u32>) -> Vec<String> {
+        let scenario = robot
+            .filter(|_| name != "mapper")
+            .and_then(|r| self.parts.get(&r))
+            .unwrap_or(&self.scenario);
         let mut v = args(&[
             name,
             "--scenario",
-            &self.scenario,
+            scenario,
             "--world",
             &self.world,
             "--field",

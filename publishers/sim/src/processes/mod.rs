@@ -4,6 +4,7 @@
 //! process that records what a single-process run records. The result is the single-process
 //! run's for the same seed, key by key.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -149,11 +150,16 @@ pub struct ProcessRunInfo {
     pub interrupted: bool,
 }
 
-/// The effective scenario (after the flags) as a file every process reads, in a private
-/// temporary directory: a random name, mode 0700, created exclusively (`tempfile`), so nobody
-/// can plant a symlink where it goes or read it. Removed with its directory on drop.
+/// The effective scenario (after the flags) as a file the field, the world, the mappers and the
+/// view read, and each robot's part of it ([`Scenario::robot_part`]) as a file its localizer,
+/// depositor and follower read (one robot to parse and validate, not N: issue 52), in a private
+/// temporary directory: a random name, mode 0700, each file created exclusively (`tempfile`,
+/// `create_new`), so nobody can plant a symlink where they go or read them. Removed with its
+/// directory on drop.
 struct ScenarioFile {
     path: PathBuf,
+    /// Robot id → the file of its part.
+    parts: BTreeMap<u32, PathBuf>,
     dir: Option<tempfile::TempDir>,
 }
 
@@ -171,19 +177,31 @@ impl ScenarioFile {
             .tempdir_in(&tmp)
             .map_err(io(&tmp))?;
         let path = dir.path().join("scenario.toml");
-        let text = scenario.to_toml()?;
-        // create_new: O_EXCL, so not even a file that appeared in the fresh directory is followed.
-        let mut file = std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&path)
-            .map_err(io(&path))?;
-        std::io::Write::write_all(&mut file, text.as_bytes()).map_err(io(&path))?;
+        write_new(&path, &scenario.to_toml()?).map_err(io(&path))?;
+        let mut parts = BTreeMap::new();
+        for r in &scenario.robots {
+            if let Some(part) = scenario.robot_part(r.id) {
+                let file = dir.path().join(format!("robot-{}.toml", r.id));
+                write_new(&file, &part.to_toml()?).map_err(io(&file))?;
+                parts.insert(r.id, file);
+            }
+        }
         Ok(Self {
             path,
+            parts,
             dir: Some(dir),
         })
     }
+}
+
+/// Writes `text` to the new file `path`: `create_new` (O_EXCL), so not even a file that
+/// appeared in the fresh directory is followed.
+fn write_new(path: &Path, text: &str) -> std::io::Result<()> {
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(path)?;
+    std::io::Write::write_all(&mut file, text.as_bytes())
 }
 
 impl Drop for ScenarioFile {
@@ -247,7 +265,7 @@ pub fn run_as_processes(
         pheromone_field::shm::CLEANED_BY_SUPERVISOR_ENV.to_string(),
         "1".to_string(),
     ));
-    let result = supervise(scenario, o, &tag, &file.path, &mut sup);
+    let result = supervise(scenario, o, &tag, &file, &mut sup);
     if result.is_err() {
         sup.stop_all(Duration::from_secs(5));
     }
@@ -262,13 +280,18 @@ fn supervise(
     scenario: &Scenario,
     mut o: ProcessRunOptions<'_>,
     tag: &str,
-    scenario_file: &Path,
+    file: &ScenarioFile,
     sup: &mut Supervisor,
 ) -> Result<(RunSummary, Recording, ProcessRunInfo), ProcessRunError> {
     let args = ChildArgs {
         field: tag.to_string(),
         world: tag.to_string(),
-        scenario: scenario_file.display().to_string(),
+        scenario: file.path.display().to_string(),
+        parts: file
+            .parts
+            .iter()
+            .map(|(id, p)| (*id, p.display().to_string()))
+            .collect(),
         realtime: o.realtime,
         rt: o.rt_args.clone(),
     };
@@ -472,6 +495,12 @@ pub fn run_graph_as_processes(
         RUN.fetch_add(1, Ordering::Relaxed)
     );
     let mut sup = Supervisor::new(exe);
+    // As in `run_as_processes`: this process cleans (its node's creation, `cleanup_after`) and a
+    // child that dies ends the run, so the robots skip the walks of every node.
+    sup.env.push((
+        pheromone_field::shm::CLEANED_BY_SUPERVISOR_ENV.to_string(),
+        "1".to_string(),
+    ));
     let result = (|| {
         let node = create_node(&format!("{tag}-sim"))?;
         let common = |role: &str| -> Vec<String> {

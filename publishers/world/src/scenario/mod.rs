@@ -1,6 +1,7 @@
 //! Scenarios: one TOML file describes the field, the world, each robot's roles and scripted
-//! deposits. Every process of a run reads the same scenario and takes its own part. Built-in
-//! scenarios are embedded in the binary and shipped under `examples/scenarios/`.
+//! deposits. Every process of a run reads the scenario and takes its own part (in a run as
+//! processes a robot's roles read only their robot's part, `part.rs`). Built-in scenarios are
+//! embedded in the binary and shipped under `examples/scenarios/`.
 
 use std::path::Path;
 
@@ -16,6 +17,7 @@ mod error;
 pub use scripted_loss::ScriptedLoss;
 mod map;
 mod mapping;
+mod part;
 mod scripted_loss;
 mod setup;
 mod starts;
