@@ -83,6 +83,11 @@ pub enum Shape {
         /// Width σ of the linear fall-off beyond the plateau (m, ≥ 0).
         slope_m: f32,
     },
+    /// Seed 002 on a source channel: the whole amount to the one node in `cells`.
+    Node {
+        /// Added to the node's counter (signed).
+        amount: f32,
+    },
 }
 
 /// The 2×2 position covariance, its eigen-decomposition and the γ of seed 000 eq. 12.
@@ -154,6 +159,9 @@ pub fn prepare(
         KernelKind::Saturating => saturating_shape(msg, lengths)?,
         KernelKind::ZShape => z_shape_kernel(msg, h, lengths)?,
     };
+    if channels[channel].sources.is_some() {
+        return node_deposit(msg, channel, geometry);
+    }
     Ok(PreparedDeposit {
         channel,
         cells: cells_reached(msg, geometry, extent_m)?,
@@ -365,6 +373,37 @@ fn z_shape_kernel(msg: &DepositMsg, h: f32, lengths: Lengths) -> Result<(Shape, 
 }
 
 /// The cells within `extent_m` of the deposit's centre; a deposit that reaches none is refused.
+/// On a source channel (MODELS.md M3), a deposit, checked as its kernel, adds its amount to the
+/// counter of the node nearest to (x, y) (`sources`: the node at a cell's corner).
+fn node_deposit(
+    msg: &DepositMsg,
+    channel: usize,
+    geometry: &GridGeometry,
+) -> Result<PreparedDeposit, Rejection> {
+    let Some((i, j)) = crate::sources::nearest_node(geometry, msg.x_m, msg.y_m) else {
+        return Err(reject(
+            RejectReason::OutsideGrid,
+            format!(
+                "({}, {}) m: its nearest node is not one of the grid's {} × {} source nodes",
+                msg.x_m, msg.y_m, geometry.width, geometry.height
+            ),
+        ));
+    };
+    Ok(PreparedDeposit {
+        channel,
+        cells: CellBox {
+            x0: i,
+            y0: j,
+            x1: i,
+            y1: j,
+        },
+        x_m: msg.x_m,
+        y_m: msg.y_m,
+        range2_m2: f32::INFINITY,
+        shape: Shape::Node { amount: msg.amount },
+    })
+}
+
 fn cells_reached(
     msg: &DepositMsg,
     geometry: &GridGeometry,
@@ -427,6 +466,7 @@ impl PreparedDeposit {
                         plateau_m,
                         slope_m,
                     } => amount * z_shape(d2.sqrt(), plateau_m, slope_m),
+                    Shape::Node { amount } => amount,
                 };
                 // Last line of defence for absurd geometries (cells of 1e-20 m or 1e30 m make
                 // f32 kernel arithmetic overflow into ∞ − ∞): a NaN never reaches the frame.

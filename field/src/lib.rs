@@ -30,6 +30,7 @@ pub mod process;
 mod reject;
 pub mod sample;
 pub mod shm;
+pub mod sources;
 mod simd;
 pub mod tune;
 pub mod wire;

@@ -83,6 +83,11 @@ pub struct ChannelSpec {
     /// Signed channels hold pheromone (> 0) and anti-pheromone (< 0).
     #[serde(default)]
     pub signed: bool,
+    /// Seed 002's sources (MODELS.md M3): the plane holds one counter per grid node, read as
+    /// eq. 4 with this Z-shape by directional antennas; a deposit adds to the nearest node's
+    /// counter. Needs the `quantum` model and no diffusion. Unset: the plane holds values.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sources: Option<crate::sources::SourceSensing>,
 }
 
 impl ChannelSpec {
@@ -93,6 +98,7 @@ impl ChannelSpec {
             evaporation,
             diffusion_m2_per_s: 0.0,
             signed: false,
+            sources: None,
         }
     }
 
@@ -157,6 +163,9 @@ impl ChannelSpec {
             }
         }
         finite_nonneg("diffusion_m2_per_s", self.diffusion_m2_per_s)?;
+        if let Some(s) = &self.sources {
+            self.validate_sources(s)?;
+        }
         let kappa = self.diffusion_m2_per_s * dt_s / (cell_size_m * cell_size_m);
         if kappa > 0.25 {
             return Err(ConfigError::invalid(
@@ -166,6 +175,27 @@ impl ChannelSpec {
                     "unstable: D·dt/h² = {kappa:.3} > 0.25 (dt = {dt_s} s, h = {cell_size_m} m); \
                      lower D or dt, or raise the cell size"
                 ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// A source channel's counters lose a quantum per τ (eqs. 2–3) and do not diffuse.
+    fn validate_sources(&self, s: &crate::sources::SourceSensing) -> Result<(), ConfigError> {
+        let n = &self.name;
+        s.validate(n)?;
+        if !matches!(self.evaporation, Evaporation::Quantum { .. }) {
+            return Err(ConfigError::invalid(
+                format!("channel '{n}' sources"),
+                "set",
+                "source counters need the quantum model (eqs. 2–3)",
+            ));
+        }
+        if self.diffusion_m2_per_s != 0.0 {
+            return Err(ConfigError::invalid(
+                format!("channel '{n}' diffusion_m2_per_s"),
+                self.diffusion_m2_per_s,
+                "a source channel's counters do not diffuse (must be 0)",
             ));
         }
         Ok(())

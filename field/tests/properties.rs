@@ -24,6 +24,7 @@ fn channel(evaporation: Evaporation, diffusion_m2_per_s: f32, signed: bool) -> C
         evaporation,
         diffusion_m2_per_s,
         signed,
+        sources: None,
     }
 }
 

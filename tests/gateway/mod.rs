@@ -11,6 +11,7 @@ mod follower_backup;
 mod refusals;
 mod remote;
 mod serial;
+mod sources;
 
 use std::net::UdpSocket;
 use std::time::Duration;

@@ -11,7 +11,7 @@ use super::*;
 
 /// Waits until the gateway has seen two frames newer than the first one it answers with: the
 /// field has published its configuration to the gateway's subscriber by then.
-fn wait_config(c: &Client) {
+pub(super) fn wait_config(c: &Client) {
     let seq = |c: &Client| {
         let (_, op, data) = c.ask(1, 0x03, &[]);
         assert_eq!(op, 0x83);

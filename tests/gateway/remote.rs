@@ -78,10 +78,9 @@ fn remote_antenna_robots_follow_through_a_gateway_as_well_as_in_shared_memory() 
             .unwrap();
         println!("{path}: mean path error {a:.4} m in shared memory, {b:.4} m remote");
         assert!(a > 0.0 && b > 0.0, "{path}: {a} {b}");
-        assert!(
-            (b - a).abs() <= 0.1 * a,
-            "{path}: remote {b:.4} m vs shared memory {a:.4} m differ by more than 10 %"
-        );
+        // A PIR reply carries the readings a shared-memory follower reads from the same frame
+        // (on the scenario's source channels, the gateway's directional eq. 4 is the follower's).
+        assert_eq!(a, b, "{path}: remote {b} m vs shared memory {a} m");
     }
 }
 

@@ -154,6 +154,17 @@ impl InputsPublisher {
         })
     }
 
+    /// Connects subscribers that attached since the last send, handing them the configuration
+    /// (its history): an idle lockstep field calls it, so a gateway that attached before the
+    /// first clock knows the channels (their `sources`) before it answers for the first frame.
+    pub fn serve_new_subscribers(&self) -> Result<(), TickError> {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        self.config
+            .update_connections()
+            .map_err(|e| service_err(&self.service, "update connections", e))?;
+        Ok(())
+    }
+
     /// Publishes the inputs of one frame.
     pub fn send(&self, mut header: InputsHeader, deposits: &[DepositMsg]) -> Result<(), TickError> {
         header.epoch = self.epoch;

@@ -391,10 +391,13 @@ impl FieldServer {
     }
 
     /// Connects readers that attached since the last frame and hands them the current frame
-    /// (the history). Call it while idle (e.g. a lockstep field waiting for its clock), so a late
-    /// reader does not wait for the next tick.
+    /// (the history), and the configuration to its new subscribers. Call it while idle (e.g. a
+    /// lockstep field waiting for its clock), so a late reader does not wait for the next tick.
     pub fn serve_new_readers(&self) -> Result<(), TickError> {
         use iceoryx2::port::update_connections::UpdateConnections;
+        if let Some(inputs) = &self.inputs {
+            inputs.serve_new_subscribers()?;
+        }
         Ok(self
             .publisher
             .update_connections()

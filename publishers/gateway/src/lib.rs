@@ -32,6 +32,7 @@ use iceoryx2::node::Node;
 use pheromone_field::shm::{
     ConfigSubscriber, DepositPublisher, FieldReader, SendError, ShmError, Svc,
 };
+use pheromone_field::sources::SourceSensing;
 use pheromone_field::{Deposit, FieldConfig, Kernel, RejectReason, SamplePose};
 use pheromone_gateway_codec::{
     DecodeError, DepositReply, DepositRequest, DepositStatus, ErrorReason, Frame, Message,
@@ -247,6 +248,9 @@ pub struct Gateway {
     /// gateway attached): its channels and limits check each deposit as the field will.
     field_config: Option<FieldConfig>,
     config_sub: Option<ConfigSubscriber>,
+    /// Each channel's sources, from `field_config`: a PIR on a source channel reads eq. 4 with
+    /// directional antennas (M3).
+    sources: Vec<Option<SourceSensing>>,
 }
 
 impl Gateway {
@@ -291,6 +295,7 @@ impl Gateway {
             counters: GatewayCounters::default(),
             field_config: None,
             config_sub,
+            sources: Vec::new(),
         })
     }
 
@@ -354,7 +359,7 @@ impl Gateway {
         // Take whatever frame has arrived since the last request.
         self.reader.update()?;
         let reply = match frame.message {
-            Message::Pir(p) => self.pir(id, p),
+            Message::Pir(p) => self.pir(id, p)?,
             Message::Deposit(d) => return self.deposit(id, d),
             Message::Ping => self.ping(id),
             // A reply sent to the server is no request.
@@ -377,7 +382,32 @@ impl Gateway {
         from.is_some_and(|from| bound.any(|(_, s)| s.admits(from)))
     }
 
-    fn pir(&mut self, id: u8, p: PirRequest) -> Frame {
+    fn pir(&mut self, id: u8, p: PirRequest) -> Result<Frame, GatewayError> {
+        self.refresh_sources()?;
+        Ok(self.pir_reply(id, p))
+    }
+
+    /// Each channel's sources (M3), from the field's configuration once it has arrived.
+    fn refresh_sources(&mut self) -> Result<(), GatewayError> {
+        if let Some(c) = self.field_config()? {
+            self.sources = c.channels.iter().map(|c| c.sources).collect();
+        }
+        Ok(())
+    }
+
+    /// The quantum Q of channel `ch` when it is a source channel (M3), once the field's
+    /// configuration has arrived.
+    fn quantum_of(&mut self, ch: usize) -> Result<Option<f32>, GatewayError> {
+        let spec = self.field_config()?.and_then(|c| c.channels.get(ch));
+        Ok(spec
+            .filter(|c| c.sources.is_some())
+            .and_then(|c| match c.evaporation {
+                pheromone_field::Evaporation::Quantum { quantum, .. } => Some(quantum),
+                _ => None,
+            }))
+    }
+
+    fn pir_reply(&mut self, id: u8, p: PirRequest) -> Frame {
         let Some(f) = self.reader.frame() else {
             return self.error(id, ErrorReason::BadValue);
         };
@@ -388,9 +418,11 @@ impl Gateway {
             return self.error(id, ErrorReason::BadValue);
         }
         let pose = SamplePose::new(p.x_m, p.y_m, p.theta_rad);
-        let (p_left, p_right) =
-            f.view
-                .antennas(p.channel as usize, pose, 2.0 * p.half_wheel_base_m);
+        let (ch, b) = (p.channel as usize, 2.0 * p.half_wheel_base_m);
+        let (p_left, p_right) = match self.sources.get(ch).copied().flatten() {
+            Some(s) => pheromone_field::sources::antennas(&f.view, ch, pose, b, &s),
+            None => f.view.antennas(ch, pose, b),
+        };
         let frame_seq = f.header.sequence as u32;
         self.counters.pirs += 1;
         Frame {
@@ -408,12 +440,14 @@ impl Gateway {
             client_id: id,
             message: Message::DepositReply(DepositReply { seq: d.seq, status }),
         };
+        // On a source channel a DEPOSIT is one quantum Q to the nearest node's counter (M3).
+        let amount = self.quantum_of(d.channel as usize)?.unwrap_or(d.amount);
         let deposit = Deposit {
             channel: d.channel as u32,
             x_m: d.x_m,
             y_m: d.y_m,
             kernel: Kernel::ZShape {
-                amount: d.amount,
+                amount,
                 plateau_m: self.config.plateau_m,
                 slope_m: self.config.slope_m,
             },

@@ -2,6 +2,7 @@
 //! (eq. 5 with the MODELS.md M3 convention), turn toward the stronger one, forward speed
 //! K·(1 − |P_L − P_R|) (the evident intent of eq. 6).
 
+use pheromone_field::sources::SourceSensing;
 use pheromone_field::{FrameView, SamplePose};
 use serde::{Deserialize, Serialize};
 
@@ -35,6 +36,11 @@ pub struct AntennaConfig {
     /// Forward speed while exploring (m/s); 0 = stop.
     #[serde(alias = "explore_v_mps")]
     pub explore_v_m_per_s: f64,
+    /// The channel's sources (MODELS.md M3) when it has them: the readings are then eq. 4 seen
+    /// by directional antennas (`pheromone_field::sources::antennas`). Not a key of the
+    /// scenario's follower: the scenario copies its channel's `sources` here.
+    #[serde(skip)]
+    pub sources: Option<SourceSensing>,
 }
 
 impl Default for AntennaConfig {
@@ -48,6 +54,7 @@ impl Default for AntennaConfig {
             omega_max_rad_per_s: 2.0,
             min_level: 1e-3,
             explore_v_m_per_s: 0.1,
+            sources: None,
         }
     }
 }
@@ -84,6 +91,9 @@ impl AntennaConfig {
 /// antennas on its head). On the axis (0, eq. 5) the difference measures only the lateral
 /// offset, so the loop is an undamped oscillator about the trail; a forward offset also
 /// measures the heading error and damps it (the "follow the carrot" remark of seed 002).
+/// On a source channel (`sources`, M3) the antennas are directional: on the axis they see only
+/// the sources ahead, which measures the heading error as well, so `trail-following` keeps
+/// them on the axis (`antenna_ahead_m = 0`, eq. 5).
 #[derive(Debug, Clone)]
 pub struct AntennaFollower {
     channel: usize,
@@ -110,8 +120,13 @@ impl AntennaFollower {
     }
 
     /// Raw readings (P_L, P_R) at the antenna points.
+    /// On a source channel, each antenna sees only its field of view (M3).
     pub fn readings(&self, frame: &FrameView<'_>, pose: SamplePose) -> (f32, f32) {
-        frame.antennas(self.channel, self.head(pose), self.config.wheel_base_m)
+        let (head, b) = (self.head(pose), self.config.wheel_base_m);
+        match &self.config.sources {
+            Some(s) => pheromone_field::sources::antennas(frame, self.channel, head, b, s),
+            None => frame.antennas(self.channel, head, b),
+        }
     }
 
     /// The decision from the two readings, wherever they were read (a frame in shared memory or

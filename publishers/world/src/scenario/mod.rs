@@ -590,6 +590,11 @@ impl Scenario {
             .wrapping_add(self.seed.rotate_left(17))
             .wrapping_add(robot as u64);
         self.steer_on_own_map(&mut f);
+        f.antenna.sources = self
+            .field
+            .channels
+            .get(f.channel as usize)
+            .and_then(|c| c.sources);
         Some(f)
     }
 
