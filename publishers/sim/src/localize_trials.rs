@@ -119,7 +119,7 @@ impl PairedStat {
         };
         let t = match (self.paired_t, self.mean_difference) {
             (Some(t), _) => format!("paired t = {:.2} (df {:.0})", t.t, t.df),
-            (None, Some(d)) if d == 0.0 => "no difference on any seed".into(),
+            (None, Some(0.0)) => "no difference on any seed".into(),
             _ => "paired t undefined".into(),
         };
         format!(
