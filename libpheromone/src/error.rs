@@ -91,9 +91,10 @@ impl Status for AttachError {
             AttachError::Layout { .. } => PheromoneStatus::Layout,
             AttachError::Name(e) => e.status(),
             AttachError::Interrupted { .. } => PheromoneStatus::Interrupted,
-            AttachError::Node { .. } | AttachError::BadFrame { .. } | AttachError::Service(_) => {
-                PheromoneStatus::ShmError
-            }
+            AttachError::Node { .. }
+            | AttachError::Domain(_)
+            | AttachError::BadFrame { .. }
+            | AttachError::Service(_) => PheromoneStatus::ShmError,
         }
     }
 }

@@ -9,6 +9,7 @@ Rust side first (its layout version is the one place to bump), then this file.
 
 import ctypes
 from collections.abc import Sequence
+from typing import Optional
 
 #: Layout version of every wire type (`field::wire::LAYOUT_VERSION`); part of every type name.
 LAYOUT_VERSION = 1
@@ -73,6 +74,29 @@ def deposit_ready_service(field: str) -> str:
 
 # The environment variable naming a process's iceoryx2 domain (`shm::IOX_DOMAIN_ENV`).
 IOX_DOMAIN_ENV = "PHEROMONE_IOX_DOMAIN"
+
+# iceoryx2's built-in prefix and root directory, which a non-root user's domain replaces.
+ICEORYX2_PREFIX = "iox2_"
+ICEORYX2_ROOT = "/tmp/iceoryx2/"
+
+
+def iox_names(
+    domain: Optional[str], uid: int, base_prefix: str = ICEORYX2_PREFIX
+) -> tuple[str, Optional[str]]:
+    """The iceoryx2 prefix and root directory of `domain` (None: the default one) for user `uid`,
+    as `shm::domain_config_for` sets them (a domain belongs to one user): root keeps iceoryx2's
+    `iox2_` and its root directory (None: unchanged); another user gets `iox2u<uid>_` and
+    `/tmp/iceoryx2-u<uid>/`; domain D puts `D_` before the prefix. `base_prefix` is the prefix of
+    iceoryx2's own configuration, kept for the default domain if a config file changed it."""
+    user_prefix = ICEORYX2_PREFIX if uid == 0 else f"iox2u{uid}_"
+    if domain:
+        prefix = f"{domain}_{user_prefix}"
+    elif base_prefix == ICEORYX2_PREFIX:
+        prefix = user_prefix
+    else:
+        prefix = base_prefix
+    root = None if uid == 0 else f"/tmp/iceoryx2-u{uid}/"
+    return prefix, root
 
 
 def check_name(name: str, what: str = "field name") -> None:

@@ -336,6 +336,37 @@ _RETRIED_OPEN_ERRORS = (
 )
 
 
+def _domain_config(domain: Optional[str]) -> Any:
+    """iceoryx2's configuration for this user's domain `domain` (`_wire.iox_names`). A non-root
+    user's root directory is made 0700 here, before iceoryx2 would make it 0750, and must be a
+    directory of theirs that nobody else can enter (`shm::domain`'s check)."""
+    config = iox2.config.global_config()
+    uid = os.geteuid()
+    base = str(config.global_cfg.prefix)
+    base = base[base.find('"') + 1 : base.rfind('"')] if '"' in base else base
+    prefix, root = _wire.iox_names(domain, uid, base)
+    config.global_cfg.prefix = iox2.FileName.new(prefix)
+    if root is not None and _wire.ICEORYX2_ROOT in str(config.global_cfg.root_path):
+        with contextlib.suppress(FileExistsError):
+            os.mkdir(root, 0o700)
+        st = os.lstat(root)
+        if not os.path.isdir(root) or os.path.islink(root):
+            problem = "is not a directory"
+        elif st.st_uid != uid:
+            problem = f"belongs to uid {st.st_uid}, not to uid {uid}"
+        elif st.st_mode & 0o077:
+            problem = f"is mode {st.st_mode & 0o777:o}, not 700"
+        else:
+            problem = ""
+        if problem:
+            raise PheromoneError(
+                f"{root} {problem}: another user could read or change this user's iceoryx2 "
+                "domain; remove it (as its owner or root) or pick another domain"
+            )
+        config.global_cfg.root_path = iox2.Path.new(root)
+    return config
+
+
 class Field:
     """A process's access to a running field: reads frames (zero-copy) and sends deposits.
 
@@ -431,11 +462,9 @@ class Field:
         self._deposit_service = _wire.deposit_service(name)
         self._confirm_service = _wire.deposit_confirm_service(name)
         # Python keeps Ctrl-C (KeyboardInterrupt): iceoryx2 installs no signal handler.
-        # iceoryx2's configuration (a config/iceoryx2.toml if there is one), with the prefix
-        # `<D>_iox2_` of domain D as `shm::domain_config_of` sets it.
-        config = iox2.config.global_config()
-        if self.domain is not None:
-            config.global_cfg.prefix = iox2.FileName.new(f"{self.domain}_iox2_")
+        # iceoryx2's configuration (a config/iceoryx2.toml if there is one), with this user's
+        # prefix and root directory of domain D as `shm::domain_config_of` sets them.
+        config = _domain_config(self.domain)
         self._node: Any = (
             iox2.NodeBuilder.new()
             .name(iox2.NodeName.new(f"pheromone-py-{os.getpid()}"))

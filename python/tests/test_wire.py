@@ -165,3 +165,13 @@ def test_deposit_constructors_fill_the_rust_fields():
     )
     z = _wire.z_shape(0, 1.0, 1.0, 3.0, 0.25, 0.5)
     assert (z.kernel, z.amount, z.plateau_m, z.slope_m, z.range_m) == (3, 3.0, 0.25, 0.5, 0)
+
+
+def test_iox_names_give_each_user_their_own_domain_as_the_rust_side_does():
+    # The same values as field/src/shm/domain.rs's unit test (a domain belongs to one user).
+    assert _wire.iox_names(None, 0) == ("iox2_", None)
+    assert _wire.iox_names(None, 1001) == ("iox2u1001_", "/tmp/iceoryx2-u1001/")
+    assert _wire.iox_names("lab", 1001) == ("lab_iox2u1001_", "/tmp/iceoryx2-u1001/")
+    assert _wire.iox_names("lab", 0) == ("lab_iox2_", None)
+    # A prefix set by the user's own iceoryx2 config file is kept for the default domain.
+    assert _wire.iox_names(None, 1001, "mine_") == ("mine_", "/tmp/iceoryx2-u1001/")

@@ -8,6 +8,8 @@ use std::time::Duration;
 
 use crate::harness::*;
 
+mod users;
+
 /// A fresh directory of this test, removed when dropped.
 pub struct Scratch(pub PathBuf);
 
@@ -221,6 +223,33 @@ fn a_write_error_leaves_whole_files_or_none_and_no_temporary_file() {
     }
     let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
     serde_json::from_str::<serde_json::Value>(&metrics).expect("metrics.json is whole");
+}
+
+#[test]
+fn an_mcap_recording_cut_by_a_write_error_is_left_as_partial_not_under_its_name() {
+    // As above, 40 blocks: the recording's first frames pass the limit.
+    let dir = Scratch::new("efbig-mcap");
+    let rec = dir.join("run.mcap");
+    let o = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(
+            "trap '' XFSZ; ulimit -f 40; \
+             exec \"$0\" sim trail --single-process --record \"$1\" --no-out",
+        )
+        .arg(bin())
+        .arg(&rec)
+        .output()
+        .unwrap();
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(!e.contains("panicked"), "{e}");
+    let partial = dir.join("run.mcap.partial");
+    assert!(e.contains(&partial.display().to_string()), "{e}");
+    assert!(
+        !rec.exists(),
+        "an incomplete recording is left under the name asked for"
+    );
+    assert!(std::fs::metadata(&partial).unwrap().len() > 0);
 }
 
 #[test]

@@ -75,6 +75,9 @@ pub enum AttachError {
     /// A field, node or service name that cannot be used.
     #[error(transparent)]
     Name(#[from] NameError),
+    /// The iceoryx2 domain holds another user's directory or management segment.
+    #[error(transparent)]
+    Domain(#[from] super::domain::DomainError),
     /// iceoryx2 could not create the process's node.
     #[error("cannot create the iceoryx2 node '{name}'")]
     Node {

@@ -40,6 +40,7 @@ mod board;
 mod config;
 mod confirm;
 mod deposit;
+mod domain;
 mod error;
 mod half_created;
 mod inputs;
@@ -66,6 +67,7 @@ use crate::wire;
 pub use config::ConfigSubscriber;
 pub use confirm::{DepositClient, Receipt};
 pub use deposit::DepositPublisher;
+pub use domain::{domain_config, domain_config_for, domain_config_of, DomainError, IOX_DOMAIN_ENV};
 pub(crate) use error::service_err;
 pub use error::{
     AttachError, Cause, Iceoryx, NameError, ReceiveError, SendError, ServiceError, ShmError,
@@ -223,31 +225,6 @@ pub(crate) fn service_name(name: &str) -> Result<ServiceName, NameError> {
     })
 }
 
-/// The environment variable naming this process's iceoryx2 domain (`--iox-domain`).
-pub const IOX_DOMAIN_ENV: &str = "PHEROMONE_IOX_DOMAIN";
-
-/// The iceoryx2 configuration of this process's domain: iceoryx2's global configuration, with
-/// the prefix `<D>_iox2_` when `PHEROMONE_IOX_DOMAIN` is `D` (two domains on one host share
-/// nothing, as two hosts would). `D` follows the field-name rules.
-pub fn domain_config() -> Result<Config, NameError> {
-    domain_config_of(std::env::var(IOX_DOMAIN_ENV).ok().as_deref())
-}
-
-/// The iceoryx2 configuration of domain `domain` (`None` or empty: iceoryx2's own).
-pub fn domain_config_of(domain: Option<&str>) -> Result<Config, NameError> {
-    let mut config = Config::global_config().clone();
-    if let Some(d) = domain.filter(|d| !d.is_empty()) {
-        check_name(d)?;
-        let prefix = format!("{d}_iox2_");
-        config.global.prefix =
-            FileName::new(prefix.as_bytes()).map_err(|e| NameError::Iceoryx {
-                name: prefix.clone(),
-                source: Box::new(Iceoryx(e)),
-            })?;
-    }
-    Ok(config)
-}
-
 /// Creates an iceoryx2 node and first removes what dead nodes left behind. The node installs no
 /// signal handler, unless the program called [`handle_termination_requests`]: then it stops on
 /// SIGINT/SIGTERM (`node.wait` returns an error).
@@ -291,6 +268,7 @@ fn create_node_with(name: &str, mut domain: Config) -> Result<Node<Svc>, AttachE
         Some(&mut previous),
     )
     .is_ok();
+    domain::guard_domain(&domain)?;
     let node = NodeBuilder::new()
         .name(&node_name)
         .config(&domain)
@@ -314,6 +292,7 @@ fn create_node_with(name: &str, mut domain: Config) -> Result<Node<Svc>, AttachE
         let _ = nix::sys::signal::raise(Signal::SIGTERM);
     }
     let node = node?;
+    domain::seal_management_segments(node.config());
     if !supervised {
         cleanup_dead_nodes(&node);
         remove_half_created_services(node.config());
@@ -484,6 +463,25 @@ fn cleanup_listed_dead_nodes(config: &Config) -> u64 {
                 failed.retain(|f| *f != id);
             }
         }
+    }
+    // Killed while it created or dropped its node (or emptied by a cleaner of another prefix):
+    // a dead monitor token whose node directory is missing or empty, nothing to read or hold,
+    // which iceoryx2 lists for good. The directory and the token files go.
+    for view in dead_nodes(config) {
+        let id = view.id().value().to_string();
+        let dir = node_dir.join(&id);
+        if std::fs::read_dir(&dir).is_ok_and(|mut d| d.next().is_some())
+            || (dir.exists() && std::fs::remove_dir(&dir).is_err())
+        {
+            continue;
+        }
+        let token = format!("{}{id}.node_monitor", config.global.prefix);
+        for e in std::fs::read_dir(&node_dir).into_iter().flatten().flatten() {
+            if e.file_name().to_string_lossy().starts_with(&token) {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+        cleaned += 1;
     }
     cleaned
 }

@@ -96,6 +96,31 @@ pub struct McapRecorder {
     span: Option<(u64, u64)>,
     pub messages: u64,
     pub bytes: u64,
+    /// Whether a write failed and the file was renamed to `<path>.partial`.
+    partial: std::cell::Cell<bool>,
+}
+
+/// `<path>.partial`: where an incomplete recording is left.
+pub fn partial_path(path: &Path) -> PathBuf {
+    let mut name = path.as_os_str().to_owned();
+    name.push(".partial");
+    PathBuf::from(name)
+}
+
+/// Renames `path` to [`partial_path`] once (`done` remembers), returning the sentence the error
+/// ends with.
+fn mark_partial(path: &Path, done: &std::cell::Cell<bool>) -> Option<String> {
+    if done.replace(true) {
+        return None;
+    }
+    let to = partial_path(path);
+    Some(match std::fs::rename(path, &to) {
+        Ok(()) => format!("; the incomplete recording was renamed to {}", to.display()),
+        Err(e) => format!(
+            "; the file is incomplete (renaming it to {} failed: {e})",
+            to.display()
+        ),
+    })
 }
 
 /// How the file's chunks are compressed (`--record-compression`, `record --compression`).
@@ -170,7 +195,10 @@ impl McapRecorder {
             .library("pheromone-ros2")
             .compression(compression.mcap())
             .create(BufWriter::new(file))
-            .map_err(|e| err("write header", &e))?;
+            .map_err(|e| {
+                let note = mark_partial(path, &std::cell::Cell::new(false)).unwrap_or_default();
+                err("write header", &format!("{e}{note}"))
+            })?;
         Ok(Self {
             path: path.to_path_buf(),
             writer,
@@ -179,6 +207,7 @@ impl McapRecorder {
             span: None,
             messages: 0,
             bytes: 0,
+            partial: std::cell::Cell::new(false),
         })
     }
 
@@ -187,11 +216,18 @@ impl McapRecorder {
         &self.path
     }
 
+    /// The error of a failed write. The file is left incomplete (no summary, maybe a cut
+    /// record): it is renamed to `<path>.partial` at the first error, so nothing that looks
+    /// like a whole recording is left under the name asked for, and the error says so.
     fn err(&self, action: &'static str, e: impl std::fmt::Display) -> RecordError {
+        let mut detail = e.to_string();
+        if let Some(note) = mark_partial(&self.path, &self.partial) {
+            detail.push_str(&note);
+        }
         RecordError {
             path: self.path.clone(),
             action,
-            detail: e.to_string(),
+            detail,
         }
     }
 

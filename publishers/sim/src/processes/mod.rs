@@ -170,6 +170,7 @@ impl ScenarioFile {
             move |source| ProcessRunError::ScenarioFile { path, source }
         };
         let tmp = std::env::temp_dir();
+        remove_stale_scenario_dirs(&tmp);
         let private = std::os::unix::fs::PermissionsExt::from_mode(0o700);
         let dir = tempfile::Builder::new()
             .prefix(&format!("pheromone-{tag}-"))
@@ -202,6 +203,45 @@ fn write_new(path: &Path, text: &str) -> std::io::Result<()> {
         .create_new(true)
         .open(path)?;
     std::io::Write::write_all(&mut file, text.as_bytes())
+}
+
+/// Removes the scenario directories that sims killed with SIGKILL could not remove: entries
+/// `pheromone-sim<PID>x<N>-…` of `tmp` that are real directories of this user's and whose sim
+/// (PID) no longer runs. A PID reused by another process keeps its directory until a later run.
+fn remove_stale_scenario_dirs(tmp: &std::path::Path) {
+    use std::os::unix::fs::MetadataExt;
+    let uid = nix::unistd::geteuid().as_raw();
+    let Ok(entries) = std::fs::read_dir(tmp) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name.to_str().and_then(scenario_dir_pid) else {
+            continue;
+        };
+        let Ok(meta) = std::fs::symlink_metadata(entry.path()) else {
+            continue;
+        };
+        let alive = !matches!(
+            nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid), None),
+            Err(nix::errno::Errno::ESRCH)
+        );
+        if meta.is_dir() && meta.uid() == uid && !alive {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
+    }
+}
+
+/// The sim's PID in a scenario directory's name (`pheromone-sim<PID>x<N>-<random>`).
+fn scenario_dir_pid(name: &str) -> Option<i32> {
+    let rest = name.strip_prefix("pheromone-sim")?;
+    let (pid, rest) = rest.split_once('x')?;
+    let (run, random) = rest.split_once('-')?;
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    (digits(pid) && digits(run) && !random.is_empty())
+        .then(|| pid.parse().ok())
+        .flatten()
+        .filter(|&p: &i32| p > 0)
 }
 
 impl Drop for ScenarioFile {

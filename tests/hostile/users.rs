@@ -1,0 +1,228 @@
+//! Issue 54 item 4: a second local user (made with `useradd` here, removed after) runs
+//! `pheromone` beside root's field and cannot disturb root's nodes; a management segment
+//! another user planted in a domain is refused, naming it. Needs root (CI runs as root): as
+//! another user it says so and checks nothing.
+
+use std::os::unix::fs::{MetadataExt, PermissionsExt};
+use std::path::PathBuf;
+use std::process::{Child, Command, Output, Stdio};
+use std::time::Duration;
+
+use super::Scratch;
+use crate::harness::*;
+
+/// A system user of this test, with no home and no shell; deleted, with every iceoryx2 entry of
+/// theirs, when dropped.
+struct TestUser {
+    name: String,
+    uid: u32,
+    gid: u32,
+}
+
+impl TestUser {
+    fn add() -> Self {
+        let name = format!("phmu{}", std::process::id() % 100_000);
+        let o = Command::new("useradd")
+            .args([
+                "--system",
+                "--no-create-home",
+                "--shell",
+                "/usr/sbin/nologin",
+            ])
+            .arg(&name)
+            .output()
+            .expect("useradd");
+        assert!(o.status.success(), "useradd {name}: {}", stderr(&o));
+        let id = |flag: &str| -> u32 {
+            let o = Command::new("id").args([flag, &name]).output().unwrap();
+            stdout(&o).trim().parse().unwrap()
+        };
+        let (uid, gid) = (id("-u"), id("-g"));
+        Self { name, uid, gid }
+    }
+
+    /// `program ARGS` as this user (`setpriv`: their uid and gid, no supplementary group of
+    /// root's), with /tmp as TMPDIR and nothing else of root's environment.
+    fn command(&self, program: &std::path::Path) -> Command {
+        let mut c = Command::new("setpriv");
+        c.env_clear()
+            .env("PATH", "/usr/bin:/bin")
+            .env("TMPDIR", "/tmp")
+            .arg(format!("--reuid={}", self.uid))
+            .arg(format!("--regid={}", self.gid))
+            .arg("--clear-groups")
+            .arg("--")
+            .arg(program);
+        c
+    }
+
+    fn output(&self, program: &std::path::Path, args: &[&str]) -> Output {
+        self.command(program).args(args).output().unwrap()
+    }
+}
+
+impl Drop for TestUser {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(format!("/tmp/iceoryx2-u{}", self.uid));
+        let prefix = format!("iox2u{}_", self.uid);
+        for entry in shm_entries() {
+            if entry.starts_with(&prefix) {
+                let _ = std::fs::remove_file(PathBuf::from("/dev/shm").join(entry));
+            }
+        }
+        let _ = Command::new("userdel").arg(&self.name).output();
+    }
+}
+
+/// A child killed and reaped when dropped.
+struct Killed(Child);
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Root's management segments of iceoryx2's default domain (`iox2_…global_mgmt`).
+fn root_management_segments() -> Vec<PathBuf> {
+    shm_entries()
+        .into_iter()
+        .filter(|n| n.starts_with("iox2_") && n.ends_with(".global_mgmt"))
+        .map(|n| PathBuf::from("/dev/shm").join(n))
+        .collect()
+}
+
+#[test]
+fn a_second_user_runs_beside_root_and_cannot_write_to_roots_domain() {
+    if !nix::unistd::geteuid().is_root() {
+        eprintln!("needs root (useradd); not checked as another user");
+        return;
+    }
+    let user = TestUser::add();
+    // The binary, where the other user can run it (the build directory may be private).
+    let dir = Scratch::new("mu-bin");
+    std::fs::set_permissions(&dir.0, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let theirs = dir.join("pheromone");
+    std::fs::copy(bin(), &theirs).unwrap();
+    std::fs::set_permissions(&theirs, std::fs::Permissions::from_mode(0o755)).unwrap();
+
+    let ours = unique("mu-root");
+    let _field = Proc::spawn(
+        &Cmd::field(&ours)
+            .grid(16, 16)
+            .tick_hz(20)
+            .duration(120)
+            .argv(),
+    );
+    let o = run(&Cmd::probe(&ours).timeout(30).json().argv());
+    assert!(o.status.success(), "root's probe: {}", stderr(&o));
+
+    // Root's management segment is root's alone: the other user cannot write a byte into it.
+    let segments = root_management_segments();
+    assert!(
+        !segments.is_empty(),
+        "no iox2_ management segment in /dev/shm"
+    );
+    for s in &segments {
+        let mode = std::fs::metadata(s).unwrap().mode() & 0o777;
+        assert_eq!(mode, 0o600, "{} is mode {mode:o}", s.display());
+        let dd = user.output(
+            std::path::Path::new("/bin/dd"),
+            &[
+                "if=/dev/zero",
+                &format!("of={}", s.display()),
+                "bs=16",
+                "count=1",
+                "conv=notrunc",
+            ],
+        );
+        assert!(
+            !dd.status.success(),
+            "the other user wrote into {}",
+            s.display()
+        );
+    }
+
+    // The other user runs a field of their own, in their own domain, and reads it.
+    let theirs_name = unique("mu-user");
+    let field = user
+        .command(&theirs)
+        .args(
+            Cmd::field(&theirs_name)
+                .grid(16, 16)
+                .tick_hz(20)
+                .duration(120)
+                .argv(),
+        )
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut field = Killed(field);
+    let probe = Cmd::probe(&theirs_name).timeout(30).json();
+    let o = user.output(&theirs, &probe.argv());
+    assert!(o.status.success(), "the other user's probe: {}", stderr(&o));
+    let root_dir = std::fs::symlink_metadata(format!("/tmp/iceoryx2-u{}", user.uid)).unwrap();
+    assert!(root_dir.is_dir() && root_dir.uid() == user.uid);
+    assert_eq!(root_dir.mode() & 0o777, 0o700);
+    // Two users share no iceoryx2 resource: root's field is not theirs to see.
+    let o = user.output(
+        &theirs,
+        &["probe", "--field", &ours, "--timeout", "1", "--json"],
+    );
+    assert!(!o.status.success(), "the other user saw root's field");
+
+    // Root's field still serves root.
+    let o = run(&Cmd::probe(&ours).timeout(30).json().argv());
+    assert!(o.status.success(), "root's probe after: {}", stderr(&o));
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(field.0.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .unwrap();
+    let status = eventually(Duration::from_secs(20), "their field to stop", || {
+        field.0.try_wait().unwrap()
+    });
+    // A field stopped by SIGTERM exits 143 (128 + 15), as every long-running command.
+    assert_eq!(status.code(), Some(143), "their field: {status}");
+}
+
+#[test]
+fn a_management_segment_planted_by_another_user_is_refused_naming_it() {
+    if !nix::unistd::geteuid().is_root() {
+        eprintln!("needs root (useradd); not checked as another user");
+        return;
+    }
+    let user = TestUser::add();
+    let domain = format!("squat{}", std::process::id() % 100_000);
+    let planted = PathBuf::from(format!(
+        "/dev/shm/{domain}_iox2_planted_node.0_10_0.global_mgmt"
+    ));
+    let touch = user.output(
+        std::path::Path::new("/usr/bin/touch"),
+        &[&planted.display().to_string()],
+    );
+    assert!(
+        touch.status.success(),
+        "touch as the user: {}",
+        stderr(&touch)
+    );
+    let o = run(&[
+        "--iox-domain",
+        &domain,
+        "probe",
+        "--field",
+        "x",
+        "--timeout",
+        "1",
+    ]);
+    let _ = std::fs::remove_file(&planted);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains(&planted.display().to_string())
+            && err.contains(&format!("belongs to uid {}", user.uid)),
+        "{err}"
+    );
+}
