@@ -50,7 +50,8 @@ struct Cli {
     /// Show iceoryx2's own log output.
     #[arg(long, global = true)]
     verbose: bool,
-    /// iceoryx2 domain: services and nodes use the prefix `<D>_iox2_` instead of `iox2_`, so
+    /// iceoryx2 domain: services and nodes use the prefix `<D>_iox2_` instead of `iox2_`
+    /// (`<D>_iox2u<uid>_` for a user other than root: a domain belongs to one user), so
     /// processes of two domains on one host share nothing (as on two hosts). Also taken from
     /// the environment variable PHEROMONE_IOX_DOMAIN, which children inherit.
     #[arg(long, global = true, value_name = "D", value_parser = cmd::check::iox_domain())]
