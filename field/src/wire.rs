@@ -249,10 +249,15 @@ pub const DEPOSIT_READY_EXTRA_NOTIFIERS: usize = 4;
 pub const MAX_PARTICIPANTS: usize = 1040;
 
 /// The clock: one sender (and a spare), every participant a receiver; nothing is overwritten.
+/// In lockstep a receiver is a step or two behind at most; on wall time (`--realtime`) the buffer
+/// holds 128 steps (12.8 s at 10 Hz) for a receiver that falls behind. Not more: iceoryx2 sizes
+/// the sender's memory and every receiver's connection by `max_subscribers` × buffer samples
+/// (with 1024, 1.07 M samples, which the world initialised for each of the N participants'
+/// connections at start-up: issue 52).
 pub const CLOCK_LINK: LinkOptions = LinkOptions {
     max_publishers: 2,
     max_subscribers: MAX_PARTICIPANTS,
-    buffer: 1024,
+    buffer: 128,
     keep_latest: false,
 };
 
