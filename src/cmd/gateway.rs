@@ -17,6 +17,14 @@ use super::bad;
 /// unknown channels, out-of-range values, clients not on --allow and clients over --rate-hz
 /// get an error reply and are never applied. Counters go to stderr once a second; --json prints
 /// them as one JSON object at the end (Ctrl-C or SIGTERM stops the gateway).
+///
+/// What a loopback bind protects: other hosts cannot reach it. It does not keep out other users
+/// of this host: any local process may send to the port under any client ID (the wire carries
+/// no key). `--allow ID@IP:PORT` serves an ID only from the socket its client holds (another
+/// user cannot send from it while the client runs, but can take the port while it is down).
+/// Each client ID has a rate bucket per source, so a flood under a real client's ID from
+/// another socket is limited without starving that client. To keep local users out, serve on a
+/// serial line or in a network namespace of your own (docs/reliability.md).
 #[derive(Args, Debug)]
 pub struct GatewayArgs {
     /// Field name.
@@ -39,7 +47,8 @@ pub struct GatewayArgs {
     /// IP:PORT) serves ID only from that UDP source (repeat it for several sources).
     #[arg(long, value_delimiter = ',')]
     pub allow: Vec<String>,
-    /// Requests per second each client may send (0 = unlimited).
+    /// Requests per second each client ID may send from each source (UDP address or the
+    /// serial line; 0 = unlimited).
     #[arg(long, value_parser = super::f64_in(0.0, 1e6), default_value_t = 100.0)]
     pub rate_hz: f64,
     /// Plateau c of the Z-shape deposit (m).

@@ -260,6 +260,69 @@ fn a_thin_client_reads_antennas_deposits_once_and_gets_each_documented_error() {
 }
 
 #[test]
+fn a_flood_under_a_clients_id_from_another_socket_does_not_starve_it() {
+    let field = unique("gw-flood");
+    let field_proc = Proc::spawn(&Cmd::field(&field).tick_hz(20).argv());
+    let (gateway, c) = start_gateway(&field, free_port(), &["--rate-hz", "20"]);
+    let port = c.socket.peer_addr().unwrap().port();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flood = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let s = UdpSocket::bind("127.0.0.1:0").unwrap();
+            let ping = frame(3, 0x03, &[]);
+            let mut sent = 0u64;
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                let _ = s.send_to(&ping, ("127.0.0.1", port));
+                sent += 1;
+                if sent % 64 == 0 {
+                    std::thread::yield_now();
+                }
+            }
+            sent
+        })
+    };
+    // The real client of ID 3 asks about 5 times a second, well under its 20, and retries a
+    // request whose reply does not come (as the thin client does, up to 3 tries): the flood
+    // fills the socket's queue, which drops datagrams of every sender alike.
+    let (mut answered, mut limited) = (0, 0);
+    for _ in 0..10 {
+        std::thread::park_timeout(Duration::from_millis(200));
+        for _ in 0..3 {
+            c.send(&frame(3, 0x03, &[]));
+            match c.reply() {
+                Some((_, 0xFF, data)) if data == vec![5] => limited += 1,
+                Some((_, op, _)) if op != 0xFF => {
+                    answered += 1;
+                    break;
+                }
+                _ => {}
+            }
+        }
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let sent = flood.join().unwrap();
+    println!("flood of {sent} datagrams: {answered} of 10 answered, {limited} rate-limited");
+    assert!(sent > 1000, "the flood sent only {sent}");
+    assert_eq!(
+        limited, 0,
+        "the flood's requests took the real client's bucket"
+    );
+    assert!(
+        answered >= 8,
+        "{answered} of 10 answered during a flood of {sent}"
+    );
+    gateway.interrupt();
+    let out = gateway.wait_exit(Duration::from_secs(30));
+    assert!(
+        json(&out)["errors_sent"][5].as_u64().unwrap() > 0,
+        "the flood was limited"
+    );
+    field_proc.interrupt();
+    field_proc.wait_exit(Duration::from_secs(30));
+}
+
+#[test]
 fn a_client_over_its_rate_is_told_so() {
     let field = unique("gw-rate");
     let field_proc = Proc::spawn(&Cmd::field(&field).tick_hz(20).argv());

@@ -58,8 +58,9 @@ pub struct GatewayConfig {
     /// port, or IP:PORT); a frame with such an ID from elsewhere, or on a serial line, gets
     /// reason 6. An ID may be bound to several sources.
     pub bound: Vec<(u8, Source)>,
-    /// Requests per second each client may send (a bucket of as many, refilled continuously);
-    /// 0 = unlimited. Over it: reason 5.
+    /// Requests per second each client ID may send from each source (a bucket of as many,
+    /// refilled continuously; one per ID and UDP address, so another socket using the ID has
+    /// its own); 0 = unlimited. Over it: reason 5.
     pub rate_per_s: f64,
     /// Plateau c of the Z-shape deposit (m).
     pub plateau_m: f32,
@@ -187,23 +188,31 @@ impl GatewayCounters {
 /// What one client has used of its rate and which deposit seqs it has applied.
 #[derive(Debug, Clone, Copy)]
 struct Client {
-    tokens: f64,
-    last_ns: u64,
     seqs: [u8; SEQ_MEMORY],
     seq_count: usize,
     seq_next: usize,
 }
 
-impl Client {
-    const NEW: Client = Client {
+/// Rate buckets kept at most; past it, the bucket idle longest is dropped (it starts full again
+/// when its sender comes back, as after a second of silence).
+pub const MAX_RATE_BUCKETS: usize = 4096;
+
+/// The request bucket of one client ID *from one source* (a UDP address, or the serial line):
+/// a flood that borrows a real client's ID from another socket empties only its own bucket, so
+/// it cannot starve that client (issue 54 item 5).
+#[derive(Debug, Clone, Copy)]
+struct Bucket {
+    tokens: f64,
+    last_ns: u64,
+}
+
+impl Bucket {
+    const NEW: Bucket = Bucket {
         tokens: f64::NAN,
         last_ns: 0,
-        seqs: [0; SEQ_MEMORY],
-        seq_count: 0,
-        seq_next: 0,
     };
 
-    /// Takes one request from the bucket; false when the client is over its rate.
+    /// Takes one request from the bucket; false when the sender is over its rate.
     fn admit(&mut self, rate_per_s: f64, now_ns: u64) -> bool {
         if rate_per_s <= 0.0 {
             return true;
@@ -223,6 +232,46 @@ impl Client {
             false
         }
     }
+}
+
+/// Every sender's [`Bucket`], by client ID and source, at most [`MAX_RATE_BUCKETS`].
+#[derive(Default)]
+struct Buckets(std::collections::HashMap<(u8, Option<std::net::SocketAddr>), Bucket>);
+
+impl Buckets {
+    fn admit(
+        &mut self,
+        id: u8,
+        from: Option<std::net::SocketAddr>,
+        rate_per_s: f64,
+        now_ns: u64,
+    ) -> bool {
+        if rate_per_s <= 0.0 {
+            return true;
+        }
+        if self.0.len() >= MAX_RATE_BUCKETS && !self.0.contains_key(&(id, from)) {
+            let idlest = self
+                .0
+                .iter()
+                .min_by_key(|(_, b)| b.last_ns)
+                .map(|(k, _)| *k);
+            if let Some(k) = idlest {
+                self.0.remove(&k);
+            }
+        }
+        self.0
+            .entry((id, from))
+            .or_insert(Bucket::NEW)
+            .admit(rate_per_s, now_ns)
+    }
+}
+
+impl Client {
+    const NEW: Client = Client {
+        seqs: [0; SEQ_MEMORY],
+        seq_count: 0,
+        seq_next: 0,
+    };
 
     fn applied(&self, seq: u8) -> bool {
         self.seqs[..self.seq_count].contains(&seq)
@@ -243,6 +292,7 @@ pub struct Gateway {
     config: GatewayConfig,
     allowed: [bool; 256],
     clients: Box<[Client; 256]>,
+    buckets: Buckets,
     counters: GatewayCounters,
     /// The field's configuration once it has published it (with its next frame after the
     /// gateway attached): its channels and limits check each deposit as the field will.
@@ -292,6 +342,7 @@ impl Gateway {
             config,
             allowed,
             clients: Box::new([Client::NEW; 256]),
+            buckets: Buckets::default(),
             counters: GatewayCounters::default(),
             field_config: None,
             config_sub,
@@ -353,7 +404,7 @@ impl Gateway {
         if !self.allowed[id as usize] || !self.source_admitted(id, from) {
             return Ok(Some(self.error(id, ErrorReason::ClientNotAllowed)));
         }
-        if !self.clients[id as usize].admit(self.config.rate_per_s, now_ns) {
+        if !self.buckets.admit(id, from, self.config.rate_per_s, now_ns) {
             return Ok(Some(self.error(id, ErrorReason::RateLimited)));
         }
         // Take whatever frame has arrived since the last request.
@@ -594,14 +645,36 @@ mod tests {
 
     #[test]
     fn the_rate_bucket_admits_its_burst_then_refills_at_the_rate() {
-        let mut c = Client::NEW;
+        let mut c = Bucket::NEW;
         let t0 = 1_000_000_000;
         let admitted = (0..15).filter(|_| c.admit(10.0, t0)).count();
         assert_eq!(admitted, 10, "a burst of one second's worth");
         assert!(!c.admit(10.0, t0 + 50_000_000), "half a token after 50 ms");
         assert!(c.admit(10.0, t0 + 100_000_000), "one token after 100 ms");
-        let mut unlimited = Client::NEW;
-        assert!((0..1000).all(|_| unlimited.admit(0.0, t0)), "0 = unlimited");
+        let mut unlimited = Buckets::default();
+        assert!(
+            (0..1000).all(|_| unlimited.admit(1, None, 0.0, t0)),
+            "0 = unlimited"
+        );
+    }
+
+    #[test]
+    fn a_flood_under_a_clients_id_from_another_source_empties_only_its_own_bucket() {
+        let mut b = Buckets::default();
+        let real: std::net::SocketAddr = "127.0.0.1:4000".parse().unwrap();
+        let flood: std::net::SocketAddr = "127.0.0.1:4001".parse().unwrap();
+        let t0 = 1_000_000_000;
+        let through = (0..1000)
+            .filter(|_| b.admit(7, Some(flood), 10.0, t0))
+            .count();
+        assert_eq!(through, 10);
+        assert!((0..10).all(|_| b.admit(7, Some(real), 10.0, t0)));
+        // Bounded: the idlest bucket goes when a new sender comes past the limit.
+        for port in 0..MAX_RATE_BUCKETS as u16 + 10 {
+            let from = std::net::SocketAddr::from(([127, 0, 0, 2], port));
+            b.admit(9, Some(from), 10.0, t0 + 1 + u64::from(port));
+        }
+        assert_eq!(b.0.len(), MAX_RATE_BUCKETS);
     }
 
     #[test]
