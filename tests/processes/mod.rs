@@ -417,8 +417,8 @@ fn a_sigkilled_sim_takes_every_child_with_it() {
         run.shm_entries().is_empty().then_some(())
     });
     // A killed sim cannot remove its scenario directory: the next sim of the same user does
-    // (issue 54 item 9), as it makes its own.
-    assert!(dir.is_dir(), "{}", dir.display());
+    // (issue 54 item 9), as it makes its own (a sim of a test running beside this one may be
+    // that next sim).
     let o = run.run(&["sim", "evaporation", "--duration", "0.5", "--no-out"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!dir.exists(), "the killed sim's {} is left", dir.display());
