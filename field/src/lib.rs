@@ -30,8 +30,8 @@ pub mod process;
 mod reject;
 pub mod sample;
 pub mod shm;
-pub mod sources;
 mod simd;
+pub mod sources;
 pub mod tune;
 pub mod wire;
 
