@@ -206,8 +206,13 @@ pub fn field_of_frame_service(service: &str) -> Option<&str> {
 /// Inputs lists a subscriber (the bridge) buffers; older ones are dropped (the mirror sees a gap
 /// and asks for a keyframe).
 pub const INPUTS_SUBSCRIBER_BUFFER: usize = 256;
-/// Subscribers (bridges) of the inputs and config services.
+/// Subscribers (bridges) of the inputs service.
 pub const INPUTS_SUBSCRIBERS: usize = 4;
+/// Subscribers of the config service: bridges, gateways and every `deposit` command (which
+/// checks its deposit against the channels while it waits for its receipt). With the inputs'
+/// 4, five waiting deposits kept a bridge from starting (issue 54); one per default depositor
+/// slot, readers and bridges, each a 1-sample buffer and history.
+pub const CONFIG_SUBSCRIBERS: usize = 128;
 
 /// Most confirmed deposits one client may have waiting for their receipts.
 pub const CONFIRM_ACTIVE_REQUESTS: usize = 4;

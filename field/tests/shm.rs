@@ -161,6 +161,25 @@ fn a_second_field_with_the_same_name_is_refused() {
     assert!(matches!(err, StartError::AlreadyRunning { .. }), "{err}");
 }
 
+#[test]
+fn many_waiting_deposit_commands_leave_room_for_a_bridge() {
+    // Each `deposit` command holds a config subscriber while it waits for its receipt; with 4
+    // slots, five of them kept a bridge (whose InputsSubscriber takes one) from starting.
+    pheromone_field::shm::set_verbose(false);
+    let name = unique("cfgsubs");
+    let node = create_node(&name).unwrap();
+    let _field = FieldServer::start(&node, &name, small_config(Evaporation::None), None).unwrap();
+    let deposits: Vec<_> = (0..64)
+        .map(|i| {
+            pheromone_field::shm::ConfigSubscriber::attach(&node, &name)
+                .unwrap_or_else(|e| panic!("deposit {i}'s config subscriber: {e}"))
+        })
+        .collect();
+    let bridge = pheromone_field::shm::InputsSubscriber::attach(&node, &name);
+    assert!(bridge.is_ok(), "{}", bridge.err().unwrap());
+    drop(deposits);
+}
+
 /// `DepositMsg` as a build with the next layout version would declare it: the same bytes, the
 /// type name of another layout.
 #[derive(Debug, Clone, Copy)]

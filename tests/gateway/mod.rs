@@ -275,7 +275,7 @@ fn a_flood_under_a_clients_id_from_another_socket_does_not_starve_it() {
             while !stop.load(std::sync::atomic::Ordering::Relaxed) {
                 let _ = s.send_to(&ping, ("127.0.0.1", port));
                 sent += 1;
-                if sent % 64 == 0 {
+                if sent.is_multiple_of(64) {
                     std::thread::yield_now();
                 }
             }

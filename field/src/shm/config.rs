@@ -16,7 +16,7 @@ pub struct ConfigSubscriber {
 }
 
 impl ConfigSubscriber {
-    /// Subscribes to field `field`'s configuration (one of `wire::INPUTS_SUBSCRIBERS` slots).
+    /// Subscribes to field `field`'s configuration (one of `wire::CONFIG_SUBSCRIBERS` slots).
     pub fn attach(node: &iceoryx2::node::Node<Svc>, field: &str) -> Result<Self, AttachError> {
         let names = FieldServices::new(field)?;
         let subscriber = config_service::<AttachError>(node, &names)?

@@ -101,7 +101,7 @@ pub(super) fn config_service<E: From<NameError> + From<ServiceError>>(
         .publish_subscribe::<[u8]>()
         .history_size(1)
         .subscriber_max_buffer_size(1)
-        .max_subscribers(wire::INPUTS_SUBSCRIBERS)
+        .max_subscribers(wire::CONFIG_SUBSCRIBERS)
         .max_publishers(wire::FRAME_PUBLISHERS)
         .open_or_create()
         .map_err(|e| service_err(&names.config, "open or create", e))?)
