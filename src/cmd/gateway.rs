@@ -18,10 +18,12 @@ use super::bad;
 /// get an error reply and are never applied. Counters go to stderr once a second; --json prints
 /// them as one JSON object at the end (Ctrl-C or SIGTERM stops the gateway).
 ///
-/// What a loopback bind protects: other hosts cannot reach it. It does not keep out other users
-/// of this host: any local process may send to the port under any client ID (the wire carries
-/// no key). `--allow ID@IP:PORT` serves an ID only from the socket its client holds (another
-/// user cannot send from it while the client runs, but can take the port while it is down).
+/// What a loopback bind protects: other hosts cannot reach it. Other users of this host can
+/// send to it under any client ID (the wire carries no key): by default a loopback datagram is
+/// served only if the socket it came from belongs to the gateway's user or root
+/// (`--local-users`). `--allow ID@IP:PORT` serves an ID only from the socket its client holds
+/// (another user cannot send from it while the client runs, but can take the port while it is
+/// down).
 /// Each client ID has a rate bucket per source, so a flood under a real client's ID from
 /// another socket is limited without starving that client. To keep local users out, serve on a
 /// serial line or in a network namespace of your own (docs/reliability.md).
@@ -47,6 +49,11 @@ pub struct GatewayArgs {
     /// IP:PORT) serves ID only from that UDP source (repeat it for several sources).
     #[arg(long, value_delimiter = ',')]
     pub allow: Vec<String>,
+    /// Local users served from loopback sources, by the owner of the sending socket (the
+    /// kernel's /proc/net/udp): `owner` (the gateway's own user and root), `any`, or uids
+    /// (`1000,1001`). Others get reason 6; sources on other hosts are not checked.
+    #[arg(long, value_delimiter = ',', default_value = "owner")]
+    pub local_users: Vec<String>,
     /// Requests per second each client ID may send from each source (UDP address or the
     /// serial line; 0 = unlimited).
     #[arg(long, value_parser = super::f64_in(0.0, 1e6), default_value_t = 100.0)]
@@ -148,9 +155,27 @@ fn gateway_config(a: &GatewayArgs) -> anyhow::Result<GatewayConfig> {
         allow,
         bound,
         rate_per_s: a.rate_hz,
+        local_users: local_users(&a.local_users)?,
         plateau_m: a.plateau_m,
         slope_m: a.slope_m,
     })
+}
+
+/// `--local-users`: `owner`, `any` or uids.
+fn local_users(v: &[String]) -> anyhow::Result<pheromone_gateway::peer::LocalUsers> {
+    use pheromone_gateway::peer::LocalUsers;
+    match v {
+        [one] if one == "owner" => Ok(LocalUsers::owner()),
+        [one] if one == "any" => Ok(LocalUsers::Any),
+        uids => uids
+            .iter()
+            .map(|u| {
+                u.parse::<u32>()
+                    .map_err(|_| bad(format!("--local-users {u}: not 'owner', 'any' or a uid")))
+            })
+            .collect::<anyhow::Result<Vec<u32>>>()
+            .map(LocalUsers::Only),
+    }
 }
 
 /// The serial line of `--serial` or the socket of `--udp`.

@@ -21,7 +21,10 @@ struct TestUser {
 
 impl TestUser {
     fn add() -> Self {
-        let name = format!("phmu{}", std::process::id() % 100_000);
+        // One user per test, even for tests of one process running at once.
+        static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let name = format!("phmu{}x{n}", std::process::id() % 100_000);
         let o = Command::new("useradd")
             .args([
                 "--system",
@@ -225,4 +228,86 @@ fn a_management_segment_planted_by_another_user_is_refused_naming_it() {
             && err.contains(&format!("belongs to uid {}", user.uid)),
         "{err}"
     );
+}
+
+/// One PING from a loopback socket of `user` (Python, as that user; `None`: as this process's
+/// user) to the gateway at `port`: the reply decoded, `None` if none came within 2 s.
+fn ping_as(user: Option<&TestUser>, port: u16) -> Option<pheromone_gateway_codec::Message> {
+    let mut buf = [0u8; pheromone_gateway_codec::MAX_ENCODED_BYTES];
+    let n = pheromone_gateway_codec::encode(&pheromone_gateway_codec::Message::Ping, 3, &mut buf)
+        .unwrap();
+    let hex: String = buf[..n].iter().map(|b| format!("{b:02x}")).collect();
+    let script = "import socket, sys\n\
+                  s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n\
+                  s.bind(('127.0.0.1', 0)); s.settimeout(2)\n\
+                  s.sendto(bytes.fromhex(sys.argv[1]), ('127.0.0.1', int(sys.argv[2])))\n\
+                  try: print(s.recv(512).hex())\n\
+                  except OSError: print('none')\n";
+    let python = std::path::Path::new("/usr/bin/python3");
+    let args = ["-c", script, &hex, &port.to_string()];
+    let o = match user {
+        Some(user) => user.output(python, &args),
+        None => Command::new(python).args(args).output().unwrap(),
+    };
+    assert!(o.status.success(), "python3 as the user: {}", stderr(&o));
+    let reply = stdout(&o).trim().to_string();
+    if reply == "none" {
+        return None;
+    }
+    let bytes: Vec<u8> = (0..reply.len() / 2)
+        .map(|i| u8::from_str_radix(&reply[2 * i..2 * i + 2], 16).unwrap())
+        .collect();
+    Some(pheromone_gateway_codec::decode(&bytes)?.ok()?.message)
+}
+
+#[test]
+fn a_loopback_gateway_serves_its_own_user_and_refuses_another_users_socket() {
+    if !nix::unistd::geteuid().is_root() {
+        eprintln!("needs root (useradd); not checked as another user");
+        return;
+    }
+    use pheromone_gateway_codec::{ErrorReason, Message};
+    let user = TestUser::add();
+    let field = unique("mu-gw");
+    let _field = Proc::spawn(
+        &Cmd::field(&field)
+            .grid(16, 16)
+            .tick_hz(20)
+            .duration(120)
+            .argv(),
+    );
+    let gateway = |extra: &[&str]| -> (Proc, u16) {
+        let port = std::net::UdpSocket::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let udp = format!("127.0.0.1:{port}");
+        let mut args = vec!["gateway", "--field", &field, "--udp", &udp];
+        args.extend_from_slice(extra);
+        (Proc::spawn(&args), port)
+    };
+    // Root's own ping is served (once the gateway is up)...
+    let (_owner_only, port) = gateway(&[]);
+    let served = eventually(
+        Duration::from_secs(30),
+        "the gateway to answer root",
+        || ping_as(None, port),
+    );
+    assert!(!matches!(served, Message::Error(_)), "{served:?}");
+    // ...the other user's, from a socket of theirs, is refused with reason 6.
+    let refused = ping_as(Some(&user), port).expect("a reply to the other user");
+    assert!(
+        matches!(refused, Message::Error(ErrorReason::ClientNotAllowed)),
+        "{refused:?}"
+    );
+    // A gateway told to serve that user does.
+    let uids = format!("0,{}", user.uid);
+    let (_both, port) = gateway(&["--local-users", &uids]);
+    let served = eventually(
+        Duration::from_secs(30),
+        "the gateway to answer the user",
+        || ping_as(Some(&user), port),
+    );
+    assert!(!matches!(served, Message::Error(_)), "{served:?}");
 }

@@ -23,6 +23,7 @@
 
 pub mod client;
 pub mod line;
+pub mod peer;
 pub mod serial;
 pub mod udp;
 
@@ -62,6 +63,9 @@ pub struct GatewayConfig {
     /// refilled continuously; one per ID and UDP address, so another socket using the ID has
     /// its own); 0 = unlimited. Over it: reason 5.
     pub rate_per_s: f64,
+    /// Which local users are served from loopback sources, by the owner of the source socket
+    /// ([`peer`]); others get reason 6. Default: the gateway's own user and root.
+    pub local_users: peer::LocalUsers,
     /// Plateau c of the Z-shape deposit (m).
     pub plateau_m: f32,
     /// Slope width σ of the Z-shape deposit (m).
@@ -104,6 +108,7 @@ impl Default for GatewayConfig {
             allow: (1..=255).collect(),
             bound: Vec::new(),
             rate_per_s: 100.0,
+            local_users: peer::LocalUsers::owner(),
             plateau_m: 0.2,
             slope_m: 0.3,
         }
@@ -293,6 +298,7 @@ pub struct Gateway {
     allowed: [bool; 256],
     clients: Box<[Client; 256]>,
     buckets: Buckets,
+    owners: peer::Owners,
     counters: GatewayCounters,
     /// The field's configuration once it has published it (with its next frame after the
     /// gateway attached): its channels and limits check each deposit as the field will.
@@ -343,6 +349,7 @@ impl Gateway {
             allowed,
             clients: Box::new([Client::NEW; 256]),
             buckets: Buckets::default(),
+            owners: peer::Owners::default(),
             counters: GatewayCounters::default(),
             field_config: None,
             config_sub,
@@ -401,7 +408,10 @@ impl Gateway {
     ) -> Result<Option<Frame>, GatewayError> {
         self.counters.frames += 1;
         let id = frame.client_id;
-        if !self.allowed[id as usize] || !self.source_admitted(id, from) {
+        if !self.allowed[id as usize]
+            || !self.source_admitted(id, from)
+            || !self.local_user_admitted(from, now_ns)
+        {
             return Ok(Some(self.error(id, ErrorReason::ClientNotAllowed)));
         }
         if !self.buckets.admit(id, from, self.config.rate_per_s, now_ns) {
@@ -417,6 +427,20 @@ impl Gateway {
             _ => self.error(id, ErrorReason::UnknownOpcode),
         };
         Ok(Some(reply))
+    }
+
+    /// Whether a loopback source's socket belongs to a user `local_users` admits (another
+    /// host's source, or the serial line, has no local owner to check).
+    fn local_user_admitted(&mut self, from: Option<std::net::SocketAddr>, now_ns: u64) -> bool {
+        let (Some(from), peer::LocalUsers::Only(uids)) = (from, &self.config.local_users) else {
+            return true;
+        };
+        if !from.ip().is_loopback() {
+            return true;
+        }
+        self.owners
+            .of(from, now_ns)
+            .is_some_and(|uid| uids.contains(&uid))
     }
 
     /// Whether client `id` may send from `from`: any source unless it is bound.
