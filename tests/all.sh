@@ -31,12 +31,13 @@ python3 .ci/thin_binary.py
 # 1.10.2, as the Rust zenoh crate in Cargo.lock; zstandard, xxhash) is for
 # python/tests/test_zenoh_frames.py: a bridge's --frames decoded in Python; the `ros2` extra
 # (rosbags, mcap, mcap-ros2-support) is for python/tests/test_ros2*.py and test_sim_record.py:
-# our ROS 2 messages, hashes and MCAP files read by ROS 2's own Python tools.
-echo "== python: venv .venv, pip install ./python[test,zenoh,ros2]"
+# our ROS 2 messages, hashes and MCAP files read by ROS 2's own Python tools; the `peers` extra
+# (OpenCV, SciPy) is for python/tests/test_bench_peers.py: `pheromone bench --only peers`.
+echo "== python: venv .venv, pip install ./python[test,zenoh,ros2,peers]"
 if [ ! -x .venv/bin/python ]; then
     python3 -m venv .venv
 fi
-.venv/bin/python -m pip install -q --upgrade './python[test,zenoh,ros2]'
+.venv/bin/python -m pip install -q --upgrade './python[test,zenoh,ros2,peers]'
 
 # python/tests/test_ros2_router.py also starts a router on the oldest Zenoh 1.x that rmw_zenoh
 # releases shipped (rmw_zenoh 0.2.0/0.1.0 era): eclipse-zenoh 1.1.0 in a venv of its own, as

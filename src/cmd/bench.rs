@@ -58,6 +58,10 @@ pub struct BenchArgs {
     /// `--only scale`: draw the chart (a log-log panel per figure) into this PNG.
     #[arg(long, value_parser = super::check::out_file(), value_name = "FILE.png")]
     scale_chart: Option<std::path::PathBuf>,
+    /// The `peers` section: the Python interpreter that runs OpenCV, SciPy and NumPy (e.g.
+    /// `.venv/bin/python` after `pip install ./python[peers]`).
+    #[arg(long, default_value = "python3", value_name = "PYTHON")]
+    peers_python: String,
 }
 
 /// A section of `pheromone bench` (`--only`).
@@ -87,6 +91,8 @@ enum SectionArg {
     /// CPU per published MB of `pheromone ros2` against a plain Zenoh publisher (a build with
     /// --features zenoh).
     Ros2,
+    /// The ambient tick and the merge against OpenCV, SciPy and NumPy (--peers-python).
+    Peers,
 }
 
 impl From<SectionArg> for Section {
@@ -103,6 +109,7 @@ impl From<SectionArg> for Section {
             SectionArg::Timing => Section::Timing,
             SectionArg::Merge => Section::Merge,
             SectionArg::Ros2 => Section::Ros2,
+            SectionArg::Peers => Section::Peers,
         }
     }
 }
@@ -154,6 +161,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             duration_s: a.scale_duration_s,
             chart: a.scale_chart.clone(),
         },
+        peers_python: a.peers_python.clone(),
     };
     let repeats = a
         .repeats
@@ -291,6 +299,9 @@ fn print_tables(r: &Report) {
     }
     if let Some(x) = &r.ros2 {
         print_ros2(x);
+    }
+    if let Some(x) = &r.peers {
+        print_peers(x);
     }
     print_targets(r);
 }
@@ -479,13 +490,56 @@ fn print_gateway(r: &Report) {
 fn print_targets(r: &Report) {
     println!("\ntargets");
     for t in &r.targets {
+        match &t.unavailable {
+            Some(why) => println!("  n/a  {}: {why}", t.name),
+            None => println!(
+                "  {:<4} {} {} {}: measured {}",
+                if t.met { "met" } else { "MISS" },
+                t.name,
+                t.op,
+                t.limit,
+                t.measured
+            ),
+        }
+    }
+}
+
+/// A peer's time, ours / its, and its largest difference from ours against the bound.
+fn peer_cell(f: &pheromone_bench::peers::PeerFigure) -> String {
+    match (f.us, f.ratio) {
+        (Some(us), Some(ratio)) => format!(
+            "{us:>10.1} µs  ours/peer {ratio:>6.3}  max diff {:.2e} (bound {:.2e})",
+            f.max_abs_diff.unwrap_or(f64::NAN),
+            f.bound.unwrap_or(f64::NAN)
+        ),
+        _ => format!("unavailable: {}", f.unavailable.as_deref().unwrap_or("?")),
+    }
+}
+
+/// The `peers` section (issue 53): each case, ours beside each peer.
+fn print_peers(x: &pheromone_bench::peers::PeersReport) {
+    println!(
+        "\npeers (Python {}, {:?})",
+        x.python_version.as_deref().unwrap_or("unavailable"),
+        x.versions
+    );
+    for a in &x.ambient {
         println!(
-            "  {:<4} {} {} {}: measured {}",
-            if t.met { "met" } else { "MISS" },
-            t.name,
-            t.op,
-            t.limit,
-            t.measured
+            "ambient {0}x{0} r={1:<3} ours {2:>10.1} µs\n  OpenCV boxFilter        {3}\n  SciPy uniform_filter    {4}",
+            a.side,
+            a.radius_cells,
+            a.ours_us,
+            peer_cell(&a.opencv_box),
+            peer_cell(&a.scipy_uniform)
+        );
+    }
+    for m in &x.merge {
+        println!(
+            "merge {0}x{0} {1:<13} ours {2:>10.1} µs\n  OpenCV warpAffine+NumPy {3}",
+            m.side,
+            m.rule,
+            m.ours_us,
+            peer_cell(&m.opencv_numpy)
         );
     }
 }

@@ -3,6 +3,7 @@
 //! A run with a few samples of everything: each latency is ordered (p50 ≤ p99 ≤ p99.9 ≤ max) and
 //! positive.
 
+mod peers;
 mod scale;
 
 use std::time::Duration;

@@ -23,6 +23,9 @@
 //! - `ros2` (feature `zenoh`, issue 46): CPU per published megabyte of `pheromone ros2` against a
 //!   plain Zenoh publisher of the same bytes ([`ros2`]).
 //!
+//! - `peers` (issue 53): the ambient tick against OpenCV's box
+//!   filter and SciPy's `uniform_filter`, the merge against OpenCV's `warpAffine` and the same
+//!   rule in NumPy, through a Python process ([`peers`]).
 //! - `scale` (issue 52, only when named: `--only scale`): `ias-ss` with 8 … 256 robots as
 //!   processes and in one process: start-up, wall time per simulated second, memory, `/dev/shm`,
 //!   processes, services, and each one's growth exponent ([`scale`]).
@@ -43,6 +46,7 @@ pub mod merge;
 #[cfg(feature = "zenoh")]
 pub mod mirror;
 pub mod peer;
+pub mod peers;
 pub mod raw_frames;
 pub mod ros2;
 pub mod scale;
@@ -117,6 +121,11 @@ struct Plan {
     tick_reps: usize,
     /// Map sides of the merge section (its repetitions: `tick_reps`).
     merge_sides: &'static [u32],
+    /// The `peers` section: grid sides, radii (cells) and map sides.
+    peer_sides: &'static [u32],
+    peer_radii: &'static [u32],
+    peer_merge_sides: &'static [u32],
+    peer_reps: usize,
     hop_warmup: usize,
     hop_count: usize,
     /// (frames recorded, frames skipped) at 1 MiB and 16 MiB.
@@ -146,6 +155,10 @@ impl Mode {
                 tick_widths: &[512, 1024, 2048, 4096],
                 tick_reps: 31,
                 merge_sides: &[256, 512, 1024],
+                peer_sides: &[512, 1024, 2048, 4096],
+                peer_radii: &[1, 10, 40],
+                peer_merge_sides: &[256, 512, 1024],
+                peer_reps: 15,
                 hop_warmup: 2_000,
                 hop_count: 50_000,
                 frames_1mib: (300, 5),
@@ -165,6 +178,10 @@ impl Mode {
                 tick_widths: &[512, 1024, 2048, 4096],
                 tick_reps: 7,
                 merge_sides: &[256, 512, 1024],
+                peer_sides: &[512, 2048],
+                peer_radii: &[1, 10, 40],
+                peer_merge_sides: &[256, 1024],
+                peer_reps: 5,
                 hop_warmup: 500,
                 hop_count: 5_000,
                 frames_1mib: (60, 3),
@@ -184,6 +201,10 @@ impl Mode {
                 tick_widths: &[512],
                 tick_reps: 3,
                 merge_sides: &[256],
+                peer_sides: &[96],
+                peer_radii: &[1, 10],
+                peer_merge_sides: &[96],
+                peer_reps: 1,
                 hop_warmup: 20,
                 hop_count: 200,
                 frames_1mib: (4, 1),
@@ -231,10 +252,13 @@ pub enum Section {
     Scale,
     /// `ros2`: CPU per published MB of `pheromone ros2` against plain Zenoh (feature `zenoh`).
     Ros2,
+    /// `peers`: the ambient tick and the merge against OpenCV, SciPy and NumPy (through a
+    /// Python process; without it or its modules, rows that say so).
+    Peers,
 }
 
 impl Section {
-    pub const ALL: [Section; 11] = [
+    pub const ALL: [Section; 12] = [
         Section::Tick,
         Section::Hop,
         Section::Frames,
@@ -246,6 +270,7 @@ impl Section {
         Section::Merge,
         Section::Ros2,
         Section::Scale,
+        Section::Peers,
     ];
 }
 
@@ -266,6 +291,8 @@ pub struct Options {
     pub launcher: Launcher,
     /// The `scale` section's sizes and chart.
     pub scale: scale::ScaleOptions,
+    /// The Python interpreter of the `peers` section.
+    pub peers_python: String,
 }
 
 /// Hop latency, ns.
@@ -397,6 +424,8 @@ pub struct Report {
     pub scale: Option<scale::ScaleReport>,
     /// Issue 46: `pheromone ros2`'s CPU per published MB against plain Zenoh; null without Zenoh.
     pub ros2: Option<ros2::Ros2Report>,
+    /// Issue 53: the ambient tick and the merge beside OpenCV, SciPy and NumPy.
+    pub peers: Option<peers::PeersReport>,
     pub targets: Vec<Target>,
     pub elapsed_s: f64,
 }
@@ -505,6 +534,7 @@ pub fn run(opts: &Options) -> Result<Report, BenchError> {
         c_abi,
         scale: scale::section(opts, &mut |m| cx.say(m))?,
         ros2: sections::measure_ros2(&mut cx)?,
+        peers: sections::measure_peers(&cx)?,
         targets: Vec::new(),
         elapsed_s: 0.0,
     };

@@ -35,7 +35,7 @@ pub struct MergeRow {
 
 const CELL_M: f32 = 0.2;
 
-fn map(side: u32, salt: u32) -> Result<LocalMap, BenchError> {
+pub(crate) fn map(side: u32, salt: u32) -> Result<LocalMap, BenchError> {
     let config = MappingConfig {
         enabled: true,
         cell_size_m: CELL_M,
@@ -54,14 +54,19 @@ fn map(side: u32, salt: u32) -> Result<LocalMap, BenchError> {
     Ok(m)
 }
 
-/// Measures one size, `reps` times each.
-pub fn measure(side: u32, reps: usize) -> Result<MergeRow, BenchError> {
-    let t = MergeTransform {
+/// The source's transform into the destination: rotated by 0.3 rad and moved 2 m.
+pub(crate) fn transform() -> MergeTransform {
+    MergeTransform {
         theta_ij_rad: 0.3,
         d_ij_m: 2.0,
         alpha_ji_rad: 0.7,
         ..MergeTransform::default()
-    };
+    }
+}
+
+/// Measures one size, `reps` times each.
+pub fn measure(side: u32, reps: usize) -> Result<MergeRow, BenchError> {
+    let t = transform();
     let src = map(side, 1)?;
     let dst = map(side, 2)?;
     let cells = 2 * side as usize * side as usize;

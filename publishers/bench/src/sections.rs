@@ -57,6 +57,27 @@ pub(crate) fn measure_in_process(
     Ok((tick_vs_memcpy, merge_vs_memcpy))
 }
 
+/// The `peers` section (issue 53), if the run measures it.
+pub(crate) fn measure_peers(cx: &Ctx) -> Result<Option<peers::PeersReport>, BenchError> {
+    if !cx.runs(Section::Peers) {
+        return Ok(None);
+    }
+    let plan = cx.plan;
+    cx.say(&format!(
+        "peers: ambient tick at {:?} cells, radii {:?}, against OpenCV boxFilter and SciPy \
+         uniform_filter; merge at {:?} against OpenCV warpAffine + NumPy ({})",
+        plan.peer_sides, plan.peer_radii, plan.peer_merge_sides, cx.opts.peers_python
+    ));
+    peers::measure(&peers::PeersRun {
+        python: &cx.opts.peers_python,
+        ambient_sides: plan.peer_sides,
+        radii_cells: plan.peer_radii,
+        merge_sides: plan.peer_merge_sides,
+        reps: plan.peer_reps,
+    })
+    .map(Some)
+}
+
 /// The `c_abi` section: libpheromone's C reader against the Rust reader.
 pub(crate) fn measure_c_abi(cx: &mut Ctx) -> Result<c_abi::CAbiReport, BenchError> {
     let plan = cx.plan;

@@ -14,6 +14,10 @@ pub struct Target {
     pub limit: f64,
     pub measured: f64,
     pub met: bool,
+    /// Why nothing was measured (a peer of `--only peers` that could not run); `measured` is
+    /// then NaN (null in JSON) and `met` false.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unavailable: Option<String>,
 }
 
 pub(crate) fn target(name: &str, op: &'static str, limit: f64, measured: f64) -> Target {
@@ -37,6 +41,7 @@ pub(crate) fn target(name: &str, op: &'static str, limit: f64, measured: f64) ->
         } else {
             measured <= limit
         },
+        unavailable: None,
     }
 }
 
@@ -53,7 +58,42 @@ pub fn targets(r: &Report) -> Vec<Target> {
     mirror_targets(r, &mut t);
     c_abi_targets(r, &mut t);
     ros2_targets(r, &mut t);
+    peer_targets(r, &mut t);
     t
+}
+
+/// Issue 53: ours at or below each peer's time (ours / peer ≤ 1), or why the peer did not run.
+fn peer_targets(r: &Report, t: &mut Vec<Target>) {
+    let Some(p) = &r.peers else { return };
+    let mut push = |name: String, f: &crate::peers::PeerFigure| {
+        t.push(match (f.ratio, &f.unavailable) {
+            (Some(ratio), _) => target(&name, "<=", 1.0, ratio),
+            (None, why) => Target {
+                unavailable: Some(why.clone().unwrap_or_else(|| "no figure".into())),
+                ..target(&name, "<=", 1.0, f64::NAN)
+            },
+        })
+    };
+    for a in &p.ambient {
+        let at = format!("{0}x{0}, radius {1} cells", a.side, a.radius_cells);
+        push(
+            format!("ambient tick / OpenCV boxFilter at {at}"),
+            &a.opencv_box,
+        );
+        push(
+            format!("ambient tick / SciPy uniform_filter at {at}"),
+            &a.scipy_uniform,
+        );
+    }
+    for m in &p.merge {
+        push(
+            format!(
+                "merge ({}) / OpenCV warpAffine + NumPy at {1}x{1}",
+                m.rule, m.side
+            ),
+            &m.opencv_numpy,
+        );
+    }
 }
 
 /// One target over several runs: its measured value's min / median / max and how often it was
