@@ -22,6 +22,7 @@ pub mod sim_filters;
 pub mod sim_run;
 pub mod stop;
 pub mod sweep;
+pub mod sweep_trail;
 pub mod tune;
 pub mod view;
 pub mod zenoh_args;

@@ -15,9 +15,27 @@ use pheromone_world::scenario::Scenario;
 
 use super::out::Output;
 use super::roles::load_scenario;
+use super::sweep_trail::{is_trail, TrailArgs};
 use super::{bad, bad_from};
 
-/// Run seed 004's grid of experiments: exploration with and without map merging.
+/// Run seed 004's grid of experiments (exploration with and without map merging), or seed 002's
+/// parameter study of trail following.
+///
+/// Seed 002 (`pheromone sweep trail-following`, a scenario with [[metrics.paths]] and antenna
+/// robots): the robots' settings varied one at a time about the scenario's own, --omega-gain,
+/// --wheel-base, --fov, --splay, --speed, --normalize (none given: the study of docs/gateway.md,
+/// 23 settings); each value on seeds 1..=--trials, each run as separate processes (the default;
+/// --single-process: in this one, the same figures). The scenario's own value of each setting is
+/// always a point (run once). Writes sweep.csv (param, value, shipped, seed, path,
+/// mean_path_error_m, turning_share: a row per run and path), sweep.json (the runs, the points
+/// with mean ± sd, the scenario's values) and sweep_trail.png (a panel per setting: mean path
+/// error ± sd against its value, a line per path, the scenario's value dotted). The mapping
+/// flags (--rc-m, --merge, --steer, --duration, --shard, …) are refused. Time (debug build, 2
+/// cores): a simulation takes ~0.7 s as processes, ~0.02 s in one process; `--trials 2` of one
+/// setting with two values takes ~5 s. CI-sized: `pheromone sweep trail-following --trials 2
+/// --single-process`.
+///
+/// Seed 004 (`pheromone sweep ias-ss`):
 ///
 /// Every combination of --robots × --rc-m × merge {on, off} × --strategies × --steer runs
 /// --trials times (seeds 1..=T), each run the single-process simulation of the scenario
@@ -118,8 +136,9 @@ pub struct SweepArgs {
     pub trials: u32,
     /// Simulated seconds per run (one IAS-SS iteration a second: the paper's 1000 iterations).
     /// (`--duration-s`, its old name, is taken too.)
-    #[arg(long = "duration", alias = "duration-s", value_parser = super::secs(), value_name = "SECS", default_value_t = 1000.0)]
-    pub duration_s: f64,
+    /// [default: 1000; not for the trail study, which runs the scenario's duration]
+    #[arg(long = "duration", alias = "duration-s", value_parser = super::secs(), value_name = "SECS")]
+    pub duration_s: Option<f64>,
     /// Worker threads [default: the available parallelism].
     #[arg(long, value_parser = super::int::<usize>(1, 1024), value_name = "N")]
     pub jobs: Option<usize>,
@@ -141,6 +160,8 @@ pub struct SweepArgs {
     /// Print sweep.json on stdout as well (with --shard: shard.json).
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub trail: TrailArgs,
 }
 
 fn parse_shard(s: &str) -> Result<Shard, String> {
@@ -181,10 +202,10 @@ pub struct MergeArgs {
 /// The grid of `a`, every list checked before the scenario is loaded; `--merge-rule` and
 /// `--merge-idle` are combined with the scenario's settings by [`with_integration`].
 fn grid(a: &SweepArgs) -> anyhow::Result<(SweepGrid, Vec<MergeRule>, Vec<u32>)> {
-    if !(a.duration_s.is_finite() && a.duration_s > 0.0) {
+    let duration_s = a.duration_s.unwrap_or(1000.0);
+    if !(duration_s.is_finite() && duration_s > 0.0) {
         return Err(bad(format!(
-            "--duration {}: must be a number of seconds > 0",
-            a.duration_s
+            "--duration {duration_s}: must be a number of seconds > 0"
         )));
     }
     if a.trials == 0 {
@@ -221,7 +242,7 @@ fn grid(a: &SweepArgs) -> anyhow::Result<(SweepGrid, Vec<MergeRule>, Vec<u32>)> 
         },
         integration: Vec::new(),
         trials: a.trials,
-        duration_s: a.duration_s,
+        duration_s,
         figure: a.figure,
     };
     Ok((grid, rules, idle))
@@ -252,8 +273,19 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
 
 /// The sweep (or its shard) run and written.
 fn sweep(a: &SweepArgs, out: &Output) -> anyhow::Result<()> {
-    let (grid, rules, idle) = grid(a)?;
     let base = load_scenario(&a.scenario)?;
+    if is_trail(&base) {
+        return super::sweep_trail::sweep(a, &base, out);
+    }
+    if a.trail.any() {
+        return Err(bad(format!(
+            "--omega-gain, --wheel-base, --fov, --splay, --speed, --normalize and \
+             --single-process are for a trail study (a scenario with [[metrics.paths]], \
+             trail-following), not '{}'",
+            base.name
+        )));
+    }
+    let (grid, rules, idle) = grid(a)?;
     let grid = with_integration(grid, &base, (&rules, &idle));
     let jobs = match a.jobs {
         Some(0) => return Err(bad("--jobs 0: needs at least 1 worker")),

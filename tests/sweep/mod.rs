@@ -9,6 +9,7 @@ use std::path::Path;
 use crate::harness::*;
 
 mod shards;
+mod trail;
 
 fn is_png(path: &Path) -> bool {
     let b = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));

@@ -37,6 +37,7 @@ pub mod series;
 mod style;
 mod sweep;
 mod sweep_shard;
+mod trail_sweep;
 
 use std::fmt::Write as _;
 use std::fs;
@@ -58,6 +59,7 @@ pub use sweep::{
     SWEEP_TIMES_CSV_HEADER,
 };
 pub use sweep_shard::{parse_sweep_csv, read_shard, write_shard, ShardFileError};
+pub use trail_sweep::{trail_csv, trail_table, write_trail_sweep, TRAIL_CSV_HEADER};
 
 /// Writing the outputs of a run failed.
 #[derive(Debug, thiserror::Error)]

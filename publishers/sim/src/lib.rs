@@ -21,5 +21,6 @@ pub mod single;
 pub mod sweep;
 pub mod sweep_shard;
 pub mod sweep_stats;
+pub mod trail_sweep;
 pub mod trials;
 pub mod wrong_area;
