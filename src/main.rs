@@ -64,7 +64,8 @@ struct Cli {
 enum Command {
     /// Run a whole scenario as separate processes and report what happened.
     Sim(Box<cmd::sim::SimArgs>),
-    /// Run seed 004's grid of experiments on all cores: exploration vs robots, R_C, merging.
+    /// Run seed 004's grid of experiments on all cores (exploration vs robots, R_C, merging), or
+    /// seed 002's parameter study of trail following (`sweep trail-following`).
     Sweep(cmd::sweep::SweepArgs),
     /// Run a field process: owns the grid, ticks, publishes frames, applies deposits.
     Field(Box<cmd::field::FieldArgs>),

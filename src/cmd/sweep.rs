@@ -29,11 +29,11 @@ use super::{bad, bad_from};
 /// always a point (run once). Writes sweep.csv (param, value, shipped, seed, path,
 /// mean_path_error_m, turning_share: a row per run and path), sweep.json (the runs, the points
 /// with mean ± sd, the scenario's values) and sweep_trail.png (a panel per setting: mean path
-/// error ± sd against its value, a line per path, the scenario's value dotted). The mapping
-/// flags (--rc-m, --merge, --steer, --duration, --shard, …) are refused. Time (debug build, 2
-/// cores): a simulation takes ~0.7 s as processes, ~0.02 s in one process; `--trials 2` of one
-/// setting with two values takes ~5 s. CI-sized: `pheromone sweep trail-following --trials 2
-/// --single-process`.
+/// error ± sd against its value, a line per path, the scenario's value dotted). One run at a
+/// time; the mapping flags (--rc-m, --merge, --steer, --duration, --shard, --jobs, …) are
+/// refused. Time (debug build, 2 cores): a simulation takes ~0.7–1.2 s as processes, ~15 ms in
+/// one process (the whole study at --trials 8: 220 s and 3 s). CI-sized: `pheromone sweep
+/// trail-following --trials 2 --single-process`.
 ///
 /// Seed 004 (`pheromone sweep ias-ss`):
 ///
@@ -80,7 +80,8 @@ use super::{bad, bad_from};
 pub struct SweepArgs {
     #[command(subcommand)]
     pub command: Option<SweepCommand>,
-    /// Scenario: a built-in name or a TOML file; it needs [metrics.exploration] (ias-ss).
+    /// Scenario: a built-in name or a TOML file; it needs [metrics.exploration] (ias-ss), or
+    /// [[metrics.paths]] and antenna robots for the trail study (trail-following).
     #[arg(default_value = "ias-ss")]
     pub scenario: String,
     /// Robot counts, comma-separated (each ≥ 1, at most the robots the scenario places).
@@ -273,6 +274,9 @@ pub fn run(a: SweepArgs) -> anyhow::Result<()> {
 
 /// The sweep (or its shard) run and written.
 fn sweep(a: &SweepArgs, out: &Output) -> anyhow::Result<()> {
+    // Every list checked before the scenario is loaded (an error names its flag).
+    let (grid, rules, idle) = grid(a)?;
+    a.trail.study()?;
     let base = load_scenario(&a.scenario)?;
     if is_trail(&base) {
         return super::sweep_trail::sweep(a, &base, out);
@@ -285,7 +289,6 @@ fn sweep(a: &SweepArgs, out: &Output) -> anyhow::Result<()> {
             base.name
         )));
     }
-    let (grid, rules, idle) = grid(a)?;
     let grid = with_integration(grid, &base, (&rules, &idle));
     let jobs = match a.jobs {
         Some(0) => return Err(bad("--jobs 0: needs at least 1 worker")),

@@ -50,7 +50,7 @@ pub struct TrailArgs {
 
 impl TrailArgs {
     /// The lists given, each parsed ([`default_study`] when none is).
-    fn study(&self) -> anyhow::Result<Vec<(TrailParam, Vec<f64>)>> {
+    pub fn study(&self) -> anyhow::Result<Vec<(TrailParam, Vec<f64>)>> {
         let given = [
             (TrailParam::OmegaGain, &self.omega_gain),
             (TrailParam::WheelBase, &self.wheel_base),
@@ -101,6 +101,7 @@ fn refuse_mapping_flags(a: &SweepArgs) -> anyhow::Result<()> {
         ("--merge-idle", a.merge_idle.is_some()),
         ("--duration", a.duration_s.is_some()),
         ("--shard", a.shard.is_some()),
+        ("--jobs", a.jobs.is_some()),
     ];
     match given.iter().find(|(_, g)| *g) {
         Some((flag, _)) => Err(bad(format!(

@@ -168,7 +168,8 @@ fn panel(area: &Area<'_>, r: &TrailSweep, param: TrailParam) -> Result<(), Strin
         if param == TrailParam::Normalize && *x == 0.0 {
             "max".to_string()
         } else {
-            format!("{x}")
+            let s = format!("{x:.3}");
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
         }
     };
     chart

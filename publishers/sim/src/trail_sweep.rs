@@ -99,11 +99,11 @@ impl TrailParam {
         };
         Ok(match self {
             TrailParam::OmegaGain => a.omega_gain_rad_per_s,
-            TrailParam::WheelBase => f64::from(a.wheel_base_m),
-            TrailParam::Fov => f64::from(sources()?.fov_deg),
-            TrailParam::Splay => f64::from(sources()?.splay_deg),
+            TrailParam::WheelBase => decimal(a.wheel_base_m),
+            TrailParam::Fov => decimal(sources()?.fov_deg),
+            TrailParam::Splay => decimal(sources()?.splay_deg),
             TrailParam::Speed => a.k_v_m_per_s,
-            TrailParam::Normalize => a.normalize_max.map_or(0.0, f64::from),
+            TrailParam::Normalize => a.normalize_max.map_or(0.0, decimal),
         })
     }
 
@@ -162,6 +162,12 @@ impl TrailParam {
         out.dedup();
         Ok(out)
     }
+}
+
+/// `x` as the shortest decimal that reads back as it (0.3, not 0.30000001192092896), so a
+/// list's `0.3` is the scenario's `0.3`.
+fn decimal(x: f32) -> f64 {
+    x.to_string().parse().unwrap_or(f64::from(x))
 }
 
 /// Seed 002's study as issue 49 ran it by hand (docs/gateway.md), each list with the
@@ -423,8 +429,8 @@ mod tests {
         });
         for p in TrailParam::ALL {
             let mut s = base.clone();
-            p.apply(&mut s, 7.0);
-            assert_eq!(p.shipped(&s).unwrap(), 7.0, "{p:?}");
+            p.apply(&mut s, 7.3);
+            assert_eq!(p.shipped(&s).unwrap(), 7.3, "{p:?}");
         }
         let none = Scenario::load("ias-ss").unwrap();
         assert!(plan(&none, &default_study()).is_err());
