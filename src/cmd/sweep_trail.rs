@@ -5,7 +5,7 @@
 use std::time::Duration;
 
 use clap::Args;
-use pheromone_sim::processes::{run_as_processes, ProcessRunOptions};
+use pheromone_sim::processes::{run_as_processes, ProcessRunError, ProcessRunOptions};
 use pheromone_sim::recording::Recording;
 use pheromone_sim::single::{run_single_process, SingleProcessOptions};
 use pheromone_sim::trail_sweep::{
@@ -116,6 +116,7 @@ fn refuse_mapping_flags(a: &SweepArgs) -> anyhow::Result<()> {
 /// The study of `base` run and written.
 pub fn sweep(a: &SweepArgs, base: &Scenario, out: &Output) -> anyhow::Result<()> {
     refuse_mapping_flags(a)?;
+    stop::install()?;
     let study = a.trail.study()?;
     let planned = plan(base, &study).map_err(bad_from)?;
     let trials = a.trials;
@@ -169,7 +170,14 @@ fn one_run(s: &Scenario, single: bool) -> anyhow::Result<Recording> {
             follower_wait: None,
             record: None,
         };
-        run_as_processes(s, options)?.1
+        match run_as_processes(s, options) {
+            Ok(r) => r.1,
+            Err(ProcessRunError::Interrupted) => {
+                eprintln!("sweep: stopped: nothing written");
+                return Err(Stopped::by_requested().into());
+            }
+            Err(e) => return Err(e.into()),
+        }
     };
     if stopped() {
         eprintln!("sweep: stopped: nothing written");
