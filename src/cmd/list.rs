@@ -61,6 +61,7 @@ pub fn run(a: ListArgs) -> anyhow::Result<()> {
 
 fn row(f: &FieldInfo) -> String {
     let state = match (f.alive, f.publisher_alive, &f.mirror) {
+        _ if f.readers_full => "full (every reader slot is taken: its --max-readers)".to_string(),
         (_, true, _) if f.sequence.is_none() => {
             "stopped (its process is there but sent no frame: SIGSTOP, or hung)".to_string()
         }

@@ -235,6 +235,45 @@ fn list_shows_a_stopped_field_as_stopped_not_gone() {
 }
 
 #[test]
+fn list_shows_a_field_whose_reader_slots_are_all_taken_and_does_not_fail() {
+    // Seen in CI: another test's field with every reader slot taken made `list` fail for the
+    // whole host ("create subscriber failed: ExceedsMaxSupportedSubscribers").
+    let run = Run::new("lfull");
+    let field = Cmd::field("lf")
+        .grid(24, 16)
+        .tick_hz(50)
+        .opt("--max-readers", 1)
+        .json();
+    let field = run.spawn(&field.argv(), "lf");
+    let reader = run.spawn(
+        &Cmd::probe("lf").opt("--above", "1e9").timeout(60).argv(),
+        "reader",
+    );
+    let full = eventually(WAIT, "list to show the field full", || {
+        let f = list(&run);
+        let f = find(&f, "lf")?.clone();
+        (f["readers_full"] == true).then_some(f)
+    });
+    assert!(full["width"].is_null(), "{full}");
+    assert_eq!(full["publisher_alive"], true, "{full}");
+    let o = run.run(&["list", "--window-s", "0.3"]);
+    assert!(
+        stdout(&o)
+            .lines()
+            .any(|l| l.starts_with("lf ") && l.contains("full (")),
+        "{}",
+        stdout(&o)
+    );
+    reader.interrupt();
+    reader.wait_exit(WAIT);
+    field.interrupt();
+    let out = field.wait_exit(WAIT);
+    assert_eq!(out.status.code(), Some(130), "{}", run.log("lf"));
+    run.wait_nodes_gone(Duration::from_secs(10));
+    assert_eq!(run.shm_entries(), Vec::<String>::new());
+}
+
+#[test]
 fn probe_follow_prints_lines_until_ctrl_c_and_leaves_nothing() {
     let run = Run::new("pf");
     let field = start_field(&run, "pf", ("30", "20"), "50");

@@ -315,15 +315,30 @@ impl DepositClient {
         // Frame events from before this request say nothing about it; a broken listener shows
         // in the wait below.
         let _ = self.frame_ready.try_wait(|_| {});
-        let pending = self
-            .client
-            .send_copy(msg)
-            .map_err(|e| service_err(service, "send", e))?;
-        if pending.number_of_server_connections() == 0 {
-            return Err(SendError::NoSubscriber {
-                service: service.clone(),
-            });
-        }
+        // A field that is starting has its service before its server is connected: a request
+        // that reached no server reached nobody, so it is sent again (for at most
+        // SERVER_GRACE) after the field's next frame.
+        let grace_end = Instant::now() + timeout.min(SERVER_GRACE);
+        let pending = loop {
+            let pending = self
+                .client
+                .send_copy(msg)
+                .map_err(|e| service_err(service, "send", e))?;
+            if pending.number_of_server_connections() > 0 {
+                break pending;
+            }
+            drop(pending);
+            if Instant::now() >= grace_end {
+                return Err(SendError::NoSubscriber {
+                    service: service.clone(),
+                });
+            }
+            if wait_interruptible(&self.frame_ready, RECEIPT_POLL, service)? == Woken::Interrupted {
+                return Err(SendError::Interrupted {
+                    service: service.clone(),
+                });
+            }
+        };
         if let Some(n) = &self.deposit_ready {
             // A failed wake-up only delays the deposit to the field's next regular tick.
             let _ = n.notify();
@@ -374,3 +389,6 @@ fn wait_receipt(
 
 /// How long a deposit client waits for a frame before it looks for its receipt again.
 const RECEIPT_POLL: Duration = Duration::from_millis(20);
+
+/// How long a deposit that reached no server is sent again (a field starting up).
+const SERVER_GRACE: Duration = Duration::from_secs(1);

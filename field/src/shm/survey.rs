@@ -52,6 +52,9 @@ pub struct FieldInfo {
     /// How well the field keeps its period: missed deadlines, the latest tick start, the
     /// longest gap between frames (`null` for a field that keeps no timing, e.g. a mirror).
     pub timing: Option<TimingInfo>,
+    /// Every reader slot of the field is taken (`--max-readers`), so the survey could not read
+    /// it: its frame facts are unknown (`null`), its port counts are the services' own.
+    pub readers_full: bool,
 }
 
 /// Names of the fields whose frame service exists on this host, sorted.
@@ -82,6 +85,7 @@ pub fn field_names(config: &Config) -> Result<Vec<String>, ServiceError> {
 /// away while it was being attached to, or whose process is gone and sent no frame, is left out.
 pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmError> {
     let mut open = Vec::new();
+    let mut full = Vec::new();
     for name in field_names(node.config()).map_err(AttachError::from)? {
         match (
             FieldReader::attach(node, &name),
@@ -89,6 +93,8 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
         ) {
             (Ok(reader), Ok(watch)) => open.push((name, reader, watch, None)),
             (Err(AttachError::NoField { .. }), _) | (_, Err(AttachError::NoField { .. })) => {}
+            // Every reader slot taken (or another port limit): listed without its frame.
+            (Err(AttachError::Service(_)), Ok(watch)) => full.push((name, watch)),
             (Err(e), _) | (_, Err(e)) => return Err(e.into()),
         }
     }
@@ -130,6 +136,7 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
                     publisher_alive,
                     mirror,
                     timing,
+                    readers_full: false,
                 });
             }
             continue;
@@ -159,7 +166,31 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
             publisher_alive,
             mirror,
             timing,
+            readers_full: false,
         });
     }
+    for (name, watch) in full {
+        let status = watch.status();
+        out.push(FieldInfo {
+            mirror: mirror_info(node, &name)?,
+            timing: field_timing(node, &name)?,
+            name,
+            width: None,
+            height: None,
+            channels: None,
+            cell_size_m: None,
+            sequence: None,
+            sim_time_s: None,
+            tick_hz: 0.0,
+            readers: status
+                .subscribers
+                .saturating_sub(status.deposit_subscribers),
+            depositors: status.depositors,
+            alive: false,
+            publisher_alive: status.publishers > 0,
+            readers_full: true,
+        });
+    }
+    out.sort_by(|a, b| a.name.cmp(&b.name));
     Ok(out)
 }
