@@ -57,6 +57,37 @@ pub struct FieldInfo {
     pub readers_full: bool,
 }
 
+/// The fields whose every reader slot is taken: what their services say, without a frame.
+fn listed_full(
+    node: &Node<Svc>,
+    full: Vec<(String, FieldWatch)>,
+) -> Result<Vec<FieldInfo>, ShmError> {
+    let mut out = Vec::with_capacity(full.len());
+    for (name, watch) in full {
+        let status = watch.status();
+        out.push(FieldInfo {
+            mirror: mirror_info(node, &name)?,
+            timing: field_timing(node, &name)?,
+            name,
+            width: None,
+            height: None,
+            channels: None,
+            cell_size_m: None,
+            sequence: None,
+            sim_time_s: None,
+            tick_hz: 0.0,
+            readers: status
+                .subscribers
+                .saturating_sub(status.deposit_subscribers),
+            depositors: status.depositors,
+            alive: false,
+            publisher_alive: status.publishers > 0,
+            readers_full: true,
+        });
+    }
+    Ok(out)
+}
+
 /// Names of the fields whose frame service exists on this host, sorted.
 pub fn field_names(config: &Config) -> Result<Vec<String>, ServiceError> {
     let mut names = Vec::new();
@@ -169,28 +200,7 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
             readers_full: false,
         });
     }
-    for (name, watch) in full {
-        let status = watch.status();
-        out.push(FieldInfo {
-            mirror: mirror_info(node, &name)?,
-            timing: field_timing(node, &name)?,
-            name,
-            width: None,
-            height: None,
-            channels: None,
-            cell_size_m: None,
-            sequence: None,
-            sim_time_s: None,
-            tick_hz: 0.0,
-            readers: status
-                .subscribers
-                .saturating_sub(status.deposit_subscribers),
-            depositors: status.depositors,
-            alive: false,
-            publisher_alive: status.publishers > 0,
-            readers_full: true,
-        });
-    }
+    out.extend(listed_full(node, full)?);
     out.sort_by(|a, b| a.name.cmp(&b.name));
     Ok(out)
 }
