@@ -1,6 +1,7 @@
 //! `pheromone sweep trail-following` (seed 002's parameter study): a tiny study as processes
 //! writes its CSV columns, a metric that moves with the parameter, the chart; `--single-process`
-//! gives the same CSV; bad lists and the mapping sweep's flags exit with status 2.
+//! gives the same CSV; bad lists and the mapping sweep's flags exit with status 2; SIGTERM stops
+//! it with 143.
 
 use std::path::Path;
 
@@ -91,4 +92,37 @@ fn trail_study_refuses_bad_lists_and_the_mapping_flags_with_status_2() {
         assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
         assert!(e.contains(names), "{args:?}: {e}");
     }
+}
+
+/// SIGTERM during a study as processes: it stops, exits 143, writes nothing and leaves nothing
+/// in /dev/shm.
+#[test]
+fn sigterm_stops_a_trail_study_with_143_and_nothing_written() {
+    use crate::crash::{Run, WAIT};
+    let run = Run::new("trs");
+    let out = run.dir.join("out");
+    let sweep = run.spawn(
+        &[
+            "sweep",
+            "trail-following",
+            "--omega-gain",
+            "1,2,4,5,6,8",
+            "--trials",
+            "5",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        "sweep",
+    );
+    eventually(WAIT, "the study to start its runs", || {
+        run.log("sweep").contains("as processes").then_some(())
+    });
+    let pid = nix::unistd::Pid::from_raw(sweep.pid() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).unwrap();
+    let o = sweep.wait_exit(WAIT);
+    let log = run.log("sweep");
+    assert_eq!(o.status.code(), Some(143), "{log}");
+    assert!(!out.join("sweep.csv").exists(), "{log}");
+    run.wait_nodes_gone(WAIT);
+    assert_eq!(run.shm_entries(), Vec::<String>::new(), "{log}");
 }
