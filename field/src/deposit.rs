@@ -5,6 +5,8 @@ use crate::geometry::{CellBox, GridGeometry};
 use crate::messages::{DepositMsg, KernelKind};
 use crate::models::ChannelSpec;
 pub use crate::reject::{RejectReason, Rejection, REJECT_REASONS};
+/// Seed 002 eq. 1 (defined beside the source channels that read with it).
+pub use crate::sources::z_shape;
 
 fn reject(reason: RejectReason, detail: impl Into<String>) -> Rejection {
     Rejection {
@@ -481,17 +483,6 @@ impl PreparedDeposit {
             }
         }
         added
-    }
-}
-
-/// Seed 002 eq. 1: μ(x) = 1 for x ≤ c; 1 − (x − c)/σ for c < x ≤ c + σ; 0 beyond.
-pub fn z_shape(x: f32, c: f32, sigma: f32) -> f32 {
-    if x <= c {
-        1.0
-    } else if x <= c + sigma && sigma > 0.0 {
-        1.0 - (x - c) / sigma
-    } else {
-        0.0
     }
 }
 

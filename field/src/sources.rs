@@ -148,7 +148,7 @@ pub fn reading(
                     continue;
                 }
             }
-            sum += c as f64 * crate::deposit::z_shape(d, s.plateau_m, s.slope_m) as f64;
+            sum += c as f64 * z_shape(d, s.plateau_m, s.slope_m) as f64;
         }
     }
     sum as f32
@@ -173,6 +173,17 @@ pub fn antennas(
         reading(view, channel, l, dir(pose.theta_rad + splay), s),
         reading(view, channel, r, dir(pose.theta_rad - splay), s),
     )
+}
+
+/// Seed 002 eq. 1: μ(x) = 1 for x ≤ c; 1 − (x − c)/σ for c < x ≤ c + σ; 0 beyond.
+pub fn z_shape(x: f32, c: f32, sigma: f32) -> f32 {
+    if x <= c {
+        1.0
+    } else if x <= c + sigma && sigma > 0.0 {
+        1.0 - (x - c) / sigma
+    } else {
+        0.0
+    }
 }
 
 #[cfg(test)]

@@ -279,7 +279,8 @@ fn sweep(a: &SweepArgs, out: &Output) -> anyhow::Result<()> {
     a.trail.study()?;
     let base = load_scenario(&a.scenario)?;
     if is_trail(&base) {
-        return super::sweep_trail::sweep(a, &base, out);
+        refuse_mapping_flags(a)?;
+        return super::sweep_trail::sweep(&a.trail, a.trials, a.json, &base, out);
     }
     if a.trail.any() {
         return Err(bad(format!(
@@ -424,5 +425,29 @@ fn print_summary(r: &SweepResult) {
             t(c.welch),
             t(c.paired)
         );
+    }
+}
+
+/// The mapping sweep's flags a trail study refuses (named in the error).
+fn refuse_mapping_flags(a: &SweepArgs) -> anyhow::Result<()> {
+    let given = [
+        ("--rc-m", a.rc_m.is_some()),
+        ("--merge", a.merge),
+        ("--no-merge", a.no_merge),
+        ("--uniform", a.uniform),
+        ("--steer", a.steer.is_some()),
+        ("--merge-rule", a.merge_rule.is_some()),
+        ("--merge-idle", a.merge_idle.is_some()),
+        ("--duration", a.duration_s.is_some()),
+        ("--shard", a.shard.is_some()),
+        ("--jobs", a.jobs.is_some()),
+    ];
+    match given.iter().find(|(_, g)| *g) {
+        Some((flag, _)) => Err(bad(format!(
+            "{flag}: not for the trail study of '{}' (its flags: --omega-gain, --wheel-base, \
+             --fov, --splay, --speed, --normalize, --trials, --single-process)",
+            a.scenario
+        ))),
+        None => Ok(()),
     }
 }

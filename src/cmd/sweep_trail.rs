@@ -15,7 +15,6 @@ use pheromone_world::scenario::Scenario;
 
 use super::out::Output;
 use super::stop::{self, Stopped};
-use super::sweep::SweepArgs;
 use super::{bad, bad_from};
 
 /// The flags of seed 002's study (a scenario with `[[metrics.paths]]` and antenna robots).
@@ -89,40 +88,20 @@ pub fn is_trail(s: &Scenario) -> bool {
     !s.metrics.paths.is_empty() && s.metrics.exploration.is_none()
 }
 
-/// The mapping sweep's flags a trail study refuses (named in the error).
-fn refuse_mapping_flags(a: &SweepArgs) -> anyhow::Result<()> {
-    let given = [
-        ("--rc-m", a.rc_m.is_some()),
-        ("--merge", a.merge),
-        ("--no-merge", a.no_merge),
-        ("--uniform", a.uniform),
-        ("--steer", a.steer.is_some()),
-        ("--merge-rule", a.merge_rule.is_some()),
-        ("--merge-idle", a.merge_idle.is_some()),
-        ("--duration", a.duration_s.is_some()),
-        ("--shard", a.shard.is_some()),
-        ("--jobs", a.jobs.is_some()),
-    ];
-    match given.iter().find(|(_, g)| *g) {
-        Some((flag, _)) => Err(bad(format!(
-            "{flag}: not for the trail study of '{}' (its flags: --omega-gain, --wheel-base, \
-             --fov, --splay, --speed, --normalize, --trials, --single-process)",
-            a.scenario
-        ))),
-        None => Ok(()),
-    }
-}
-
 /// The study of `base` run and written.
-pub fn sweep(a: &SweepArgs, base: &Scenario, out: &Output) -> anyhow::Result<()> {
-    refuse_mapping_flags(a)?;
+pub fn sweep(
+    trail: &TrailArgs,
+    trials: u32,
+    json: bool,
+    base: &Scenario,
+    out: &Output,
+) -> anyhow::Result<()> {
     stop::install()?;
-    let study = a.trail.study()?;
+    let study = trail.study()?;
     let planned = plan(base, &study).map_err(bad_from)?;
-    let trials = a.trials;
     let sims = (planned.iter().map(|(_, _, v)| v.len()).sum::<usize>() + 1 - planned.len())
         * trials as usize;
-    let mode = if a.trail.single_process {
+    let mode = if trail.single_process {
         "in one process"
     } else {
         "as processes"
@@ -132,14 +111,14 @@ pub fn sweep(a: &SweepArgs, base: &Scenario, out: &Output) -> anyhow::Result<()>
         base.name
     );
     let bar = super::sim::progress_bar_of(sims as u64, "runs");
-    let run = |s: &Scenario| one_run(s, a.trail.single_process);
+    let run = |s: &Scenario| one_run(s, trail.single_process);
     let result = match run_trail_sweep(base, &planned, trials, run, || bar.inc(1)) {
         Ok(r) => r,
         Err(TrailSweepError::Run { source, .. }) => return Err(source),
         Err(e) => return Err(bad(e.to_string())),
     };
     bar.finish_and_clear();
-    write(a, &result, out)
+    write(json, &result, out)
 }
 
 /// One simulation of the study (processes or this one); a stop request ends the study.
@@ -187,7 +166,7 @@ fn one_run(s: &Scenario, single: bool) -> anyhow::Result<Recording> {
 }
 
 /// The study's lines on stderr and its files.
-fn write(a: &SweepArgs, r: &TrailSweep, out: &Output) -> anyhow::Result<()> {
+fn write(json: bool, r: &TrailSweep, out: &Output) -> anyhow::Result<()> {
     eprintln!(
         "sweep '{}' done: {} simulation(s), seeds 1–{}",
         r.scenario, r.simulations, r.trials
@@ -199,7 +178,7 @@ fn write(a: &SweepArgs, r: &TrailSweep, out: &Output) -> anyhow::Result<()> {
         let files = pheromone_report::write_trail_sweep(&dir, r)?;
         eprintln!("wrote {} file(s) to {}", files.len(), dir.display());
     }
-    if a.json {
+    if json {
         println!("{}", serde_json::to_string(r)?);
     }
     Ok(())

@@ -22,7 +22,7 @@ use std::path::{Path as StdPath, PathBuf};
 
 use iceoryx2::prelude::*;
 
-use super::error::{Iceoryx, NameError};
+use super::error::{DomainError, Iceoryx, NameError};
 
 /// The environment variable naming this process's iceoryx2 domain (`--iox-domain`).
 pub const IOX_DOMAIN_ENV: &str = "PHEROMONE_IOX_DOMAIN";
@@ -33,31 +33,6 @@ const ICEORYX2_ROOT: &str = "/tmp/iceoryx2/";
 
 /// Where POSIX shared memory lives on Linux (iceoryx2's segments among it).
 const SHM_DIR: &str = "/dev/shm";
-
-/// Why a domain cannot be used by this user.
-#[derive(Debug, thiserror::Error)]
-pub enum DomainError {
-    /// The domain's root directory, or one of its management segments, is not this user's own.
-    #[error(
-        "{path} {problem}: another user could read or change this user's iceoryx2 domain; \
-         remove it (as its owner or root) or pick another domain with --iox-domain"
-    )]
-    NotPrivate {
-        /// The directory or segment.
-        path: PathBuf,
-        /// What is wrong with it ("belongs to uid 1001, not to uid 1000", "is mode 777").
-        problem: String,
-    },
-    /// The domain's root directory could not be made or read.
-    #[error("cannot prepare iceoryx2's directory {path}: {source}")]
-    Io {
-        /// The directory.
-        path: PathBuf,
-        /// The operating system's error.
-        #[source]
-        source: std::io::Error,
-    },
-}
 
 /// The iceoryx2 configuration of this process's domain (`PHEROMONE_IOX_DOMAIN`, else the
 /// default one) for the user running it.

@@ -9,6 +9,8 @@
 //! Another crate's error that holds a `ShmError` gets the same conversions with
 //! [`from_shm_errors!`](crate::from_shm_errors) (`?` applies one `From`, not two).
 
+use std::path::PathBuf;
+
 use crate::wire::LAYOUT_VERSION;
 
 /// The cause of a failed iceoryx2 operation: iceoryx2's own error, kept as the source of a
@@ -77,7 +79,7 @@ pub enum AttachError {
     Name(#[from] NameError),
     /// The iceoryx2 domain holds another user's directory or management segment.
     #[error(transparent)]
-    Domain(#[from] super::domain::DomainError),
+    Domain(#[from] DomainError),
     /// iceoryx2 could not create the process's node.
     #[error("cannot create the iceoryx2 node '{name}'")]
     Node {
@@ -399,4 +401,29 @@ macro_rules! from_shm_errors {
             }
         )+
     };
+}
+
+/// Why a domain cannot be used by this user.
+#[derive(Debug, thiserror::Error)]
+pub enum DomainError {
+    /// The domain's root directory, or one of its management segments, is not this user's own.
+    #[error(
+        "{path} {problem}: another user could read or change this user's iceoryx2 domain; \
+         remove it (as its owner or root) or pick another domain with --iox-domain"
+    )]
+    NotPrivate {
+        /// The directory or segment.
+        path: PathBuf,
+        /// What is wrong with it ("belongs to uid 1001, not to uid 1000", "is mode 777").
+        problem: String,
+    },
+    /// The domain's root directory could not be made or read.
+    #[error("cannot prepare iceoryx2's directory {path}: {source}")]
+    Io {
+        /// The directory.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
 }

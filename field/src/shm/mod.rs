@@ -67,11 +67,11 @@ use crate::wire;
 pub use config::ConfigSubscriber;
 pub use confirm::{DepositClient, Receipt};
 pub use deposit::DepositPublisher;
-pub use domain::{domain_config, domain_config_for, domain_config_of, DomainError, IOX_DOMAIN_ENV};
+pub use domain::{domain_config, domain_config_for, domain_config_of, IOX_DOMAIN_ENV};
 pub(crate) use error::service_err;
 pub use error::{
-    AttachError, Cause, Iceoryx, NameError, ReceiveError, SendError, ServiceError, ShmError,
-    StandbyError, StartError, TickError,
+    AttachError, Cause, DomainError, Iceoryx, NameError, ReceiveError, SendError, ServiceError,
+    ShmError, StandbyError, StartError, TickError,
 };
 pub use half_created::remove_half_created_services;
 pub use inputs::{
