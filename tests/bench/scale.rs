@@ -19,7 +19,7 @@ fn bench_scale_reports_every_figure_of_each_size_and_mode_in_json() {
         "--scale-robots",
         "2,3",
         "--scale-duration-s",
-        "1",
+        "3",
     ])
     .wait_exit(Duration::from_secs(300));
     assert!(out.status.success(), "bench failed: {}", stderr(&out));

@@ -326,7 +326,7 @@ fn deadline(n: usize, duration_s: f64) -> Duration {
 }
 
 /// One `pheromone sim` child under a [`Supervisor`], sampled every 100 ms (memory and services
-/// every 500 ms; a run in one process every 2 ms): between samples this waits for the child's
+/// every 500 ms after the first second; a run in one process every 2 ms): between samples this waits for the child's
 /// exit, so a run is over when it ends, not at the next sample.
 fn run_one(
     program: &Path,
@@ -355,7 +355,10 @@ fn run_one(
     };
     let limit = deadline(n, duration_s);
     let status = loop {
-        sampler.sample(sampler.samples().is_multiple_of(full_every));
+        // Services and /dev/shm every sample over the first second (a small run is over in
+        // less than a second: its few full samples could all fall before or after it).
+        let full = sampler.samples() < 10 || sampler.samples().is_multiple_of(full_every);
+        sampler.sample(full);
         if sup.wait_exit(id, every) {
             break sup.exit_status(id);
         }
