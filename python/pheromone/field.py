@@ -349,6 +349,7 @@ def _domain_config(domain: Optional[str]) -> Any:
     if root is not None and _wire.ICEORYX2_ROOT in str(config.global_cfg.root_path):
         with contextlib.suppress(FileExistsError):
             os.mkdir(root, 0o700)
+            os.chmod(root, 0o700)  # exactly 0700, whatever the umask
         st = os.lstat(root)
         if not os.path.isdir(root) or os.path.islink(root):
             problem = "is not a directory"

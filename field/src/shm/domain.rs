@@ -143,7 +143,10 @@ fn private_root(root: &StdPath, uid: u32) -> Result<(), DomainError> {
         source,
     };
     match std::fs::DirBuilder::new().mode(0o700).create(root) {
-        Ok(()) => {}
+        // Exactly 0700 whatever the umask (0700 less a umask of, e.g., 177 cannot be entered).
+        Ok(()) => {
+            std::fs::set_permissions(root, std::fs::Permissions::from_mode(0o700)).map_err(io)?
+        }
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
         Err(e) => return Err(io(e)),
     }
