@@ -154,9 +154,11 @@ pub struct SimArgs {
     /// of the time to the goal and of the mean capture time (`regions-loop`).
     #[arg(long, value_parser = super::int::<u32>(2, 100_000), value_name = "T")]
     pub trials: Option<u32>,
-    /// Run on a ROS map_server map (map.yaml + its PGM): its occupied cells replace the
-    /// scenario's walls, and the field and the exploration sectors cover the map.
-    #[arg(long, value_name = "FILE.yaml")]
+    /// Run on a ROS map_server map (map.yaml + its PGM), or on a built-in map by name (from
+    /// any directory): `rooms` (examples/maps/rooms.yaml, 30 m × 20 m, four rooms around a
+    /// hall). A file of that name wins. Its occupied cells replace the scenario's walls, and
+    /// the field and the exploration sectors cover the map.
+    #[arg(long, value_name = "FILE.yaml|NAME")]
     pub map: Option<PathBuf>,
     /// Seed 004's local maps with integration: every robot maps with its range sensor and
     /// merges the maps of the robots it meets within R_C (`[mapping]`); adds

@@ -212,3 +212,75 @@ fn a_scenario_map_is_relative_to_the_scenario_and_malformed_maps_exit_2_naming_f
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The `pheromone sim` and `pheromone sweep` lines of README.md and docs/ros-maps.md (their
+/// ```sh blocks, comments dropped), each without its placeholder paths (`my/…`).
+fn readme_sim_and_sweep_lines() -> Vec<Vec<String>> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut lines = Vec::new();
+    for doc in ["README.md", "docs/ros-maps.md"] {
+        let text = std::fs::read_to_string(root.join(doc)).unwrap();
+        for block in text.split("```sh\n").skip(1) {
+            let block = block.split("```").next().unwrap_or_default();
+            for line in block.lines() {
+                let line = line.split(" #").next().unwrap_or_default().trim();
+                if (line.starts_with("pheromone sim") || line.starts_with("pheromone sweep"))
+                    && !line.contains(" my/")
+                {
+                    lines.push(line.split_whitespace().skip(1).map(String::from).collect());
+                }
+            }
+        }
+    }
+    lines
+}
+
+/// Issue 51: every README command works verbatim from any directory. The README's `sim` and
+/// `sweep` lines (the map a built-in name, not a path from the repository's root) run in an
+/// empty working directory outside the repository, shortened (`--single-process`, 1 simulated s;
+/// sweeps 2 trials of 2 s), and write their runs below it.
+#[test]
+fn the_readmes_sim_and_sweep_lines_run_from_an_empty_directory() {
+    let lines = readme_sim_and_sweep_lines();
+    assert!(
+        lines.iter().any(|l| l.contains(&"--map".to_string())),
+        "{lines:?}"
+    );
+    let cwd = std::env::temp_dir().join(unique("readme-cwd"));
+    std::fs::create_dir_all(&cwd).unwrap();
+    for line in &lines {
+        let mut args = line.clone();
+        if args[0] == "sim" {
+            if !args.contains(&"--single-process".to_string()) {
+                args.push("--single-process".into());
+            }
+            if !args[1].starts_with("regions") {
+                args.extend(["--duration".into(), "1".into()]);
+            }
+        } else {
+            args.extend(["--trials", "2", "--duration", "2"].map(String::from));
+        }
+        let o = pheromone_testkit::Cli::new(&bin())
+            .args(&args)
+            .current_dir(&cwd)
+            .output();
+        assert!(
+            o.status.success(),
+            "{args:?} in {}: {}",
+            cwd.display(),
+            stderr(&o)
+        );
+        let scenario = if args[0] == "sim" {
+            args[1].clone()
+        } else {
+            format!("sweep-{}", args[1])
+        };
+        let latest = cwd.join("pheromone-out").join(scenario).join("latest");
+        assert!(
+            latest.join("run.json").is_file(),
+            "{args:?}: no run.json in {}",
+            latest.display()
+        );
+    }
+    std::fs::remove_dir_all(&cwd).unwrap();
+}

@@ -42,7 +42,7 @@ mod test_support;
 mod walls;
 
 pub use laser::LaserConfig;
-pub use map::{MapError, OccupancyMap};
+pub use map::{builtin_map_names, MapError, OccupancyMap, BUILTIN_MAPS};
 pub use pheromone_messages::geometry::{
     sinc, sinc_derivative, Landmark, NoiseConfig, Segment, WorldPose,
 };
@@ -161,9 +161,10 @@ pub struct WorldConfig {
     pub robots: Vec<RobotConfig>,
     pub walls: Vec<WallConfig>,
     pub landmarks: Vec<Landmark>,
-    /// A ROS map_server map (`map.yaml` + its PGM) whose occupied cells are walls too. A
-    /// scenario loads it (`Scenario::load`, relative to the scenario file), adds its walls to
-    /// `walls` and clears this key, so a [`World`] never sees it set.
+    /// A ROS map_server map (`map.yaml` + its PGM, or a built-in map's name, [`BUILTIN_MAPS`])
+    /// whose occupied cells are walls too. A scenario loads it (`Scenario::load`, relative to
+    /// the scenario file), adds its walls to `walls` and clears this key, so a [`World`] never
+    /// sees it set.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub map: Option<String>,
     /// Seed 000's laser range scanner on every robot (`laser.rs`); `None` = no laser. A

@@ -39,6 +39,26 @@ pub enum MapError {
     /// The image, at byte offset `byte` of the PGM file.
     #[error("pgm image byte {byte}: {reason}")]
     Pgm { byte: usize, reason: String },
+    /// Neither a file nor the name of a built-in map ([`BUILTIN_MAPS`]).
+    #[error("{name}: no such file, and no built-in map of that name (built-in: {builtin})")]
+    Unknown { name: String, builtin: String },
+}
+
+/// Built-in maps: (name, YAML text, PGM bytes), usable by name wherever a map file is taken
+/// (`sim --map rooms`), from any directory. The files are in `examples/maps/`.
+pub const BUILTIN_MAPS: &[(&str, &str, &[u8])] = &[(
+    "rooms",
+    include_str!("../../../examples/maps/rooms.yaml"),
+    include_bytes!("../../../examples/maps/rooms.pgm"),
+)];
+
+/// The names of the built-in maps, comma-separated.
+pub fn builtin_map_names() -> String {
+    BUILTIN_MAPS
+        .iter()
+        .map(|(n, _, _)| *n)
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 impl MapError {
@@ -97,6 +117,26 @@ impl OccupancyMap {
             })?;
         let image = parse_pgm(&bytes).map_err(|e| e.in_file(&image_path))?;
         Ok(Self::from_yaml_and_image(&yaml, image))
+    }
+
+    /// A map file (as [`OccupancyMap::load`]) or, if `name_or_path` is not a file, the built-in
+    /// map of that name ([`BUILTIN_MAPS`]). A file wins over a built-in of the same name.
+    pub fn open(name_or_path: &Path) -> Result<Self, MapError> {
+        if name_or_path.is_file() {
+            return Self::load(name_or_path);
+        }
+        let name = name_or_path.to_string_lossy();
+        match BUILTIN_MAPS.iter().find(|(n, _, _)| *n == name) {
+            Some((n, yaml, pgm)) => Self::from_parts(yaml, pgm).map_err(|e| MapError::File {
+                path: PathBuf::from(format!("built-in map '{n}'")),
+                source: Box::new(e),
+            }),
+            None if name_or_path.exists() => Self::load(name_or_path),
+            None => Err(MapError::Unknown {
+                name: name.into_owned(),
+                builtin: builtin_map_names(),
+            }),
+        }
     }
 
     /// The world rectangle the map covers: `[min_x, min_y]`, `[max_x, max_y]` (m).
@@ -570,6 +610,36 @@ mod tests {
 
     fn example_map() -> std::path::PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/maps/rooms.yaml")
+    }
+
+    #[test]
+    fn a_built_in_map_is_the_file_and_a_name_that_is_neither_says_so() {
+        let dir =
+            std::env::temp_dir().join(format!("pheromone-builtin-map-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // Opened by name from another directory's point of view: no file called "rooms" here.
+        assert!(!Path::new("rooms").exists());
+        let named = OccupancyMap::open(Path::new("rooms")).unwrap();
+        assert_eq!(named, OccupancyMap::load(&example_map()).unwrap());
+        // A file wins over the built-in name.
+        let mut pgm = b"P5 2 1 255\n".to_vec();
+        pgm.extend([0u8, 254]);
+        std::fs::write(dir.join("m.pgm"), pgm).unwrap();
+        std::fs::write(
+            dir.join("rooms"),
+            "image: m.pgm\nresolution: 0.5\norigin: [0, 0, 0]\n",
+        )
+        .unwrap();
+        let file = OccupancyMap::open(&dir.join("rooms")).unwrap();
+        assert_eq!((file.width, file.height), (2, 1));
+        let e = OccupancyMap::open(Path::new("no-such-map"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("no-such-map") && e.contains("built-in: rooms"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -1,6 +1,8 @@
 //! ROS map_server maps in scenarios: `[world] map = "map.yaml"` (relative to the scenario
 //! file) adds the map's occupied cells to the world's walls; `pheromone sim … --map FILE.yaml`
-//! ([`Overrides::map`](super::Overrides)) puts a scenario on a user's map.
+//! ([`Overrides::map`](super::Overrides)) puts a scenario on a user's map. Both also take the
+//! name of a built-in map ([`BUILTIN_MAPS`](crate::BUILTIN_MAPS), e.g. `rooms`) when no file
+//! of that name exists.
 //!
 //! A map is loaded once, where the scenario is loaded: its walls (occupied cells merged into
 //! rectangles, [`OccupancyMap::to_walls`]) go into `world.walls` and `world.map` is cleared, so
@@ -13,22 +15,30 @@ use super::{Scenario, ScenarioError};
 use crate::OccupancyMap;
 
 fn load(key: &'static str, path: &Path) -> Result<OccupancyMap, ScenarioError> {
-    OccupancyMap::load(path).map_err(|source| ScenarioError::Map { key, source })
+    OccupancyMap::open(path).map_err(|source| ScenarioError::Map { key, source })
 }
 
 impl Scenario {
     /// Loads `[world] map` (a relative path is relative to `base_dir`, the scenario file's
-    /// directory) and adds its walls to the scenario's. Does nothing without a map.
+    /// directory; a built-in map's name if no such file exists) and adds its walls to the
+    /// scenario's. Does nothing without a map.
     pub(super) fn load_world_map(&mut self, base_dir: &Path) -> Result<(), ScenarioError> {
         let Some(map) = self.world.map.take() else {
             return Ok(());
         };
-        let map = load("world.map", &base_dir.join(map))?;
+        let in_dir = base_dir.join(&map);
+        let builtin = crate::BUILTIN_MAPS.iter().any(|(n, _, _)| *n == map);
+        let path = if builtin && !in_dir.exists() {
+            Path::new(&map)
+        } else {
+            &in_dir
+        };
+        let map = load("world.map", path)?;
         self.world.walls.extend(map.to_walls());
         Ok(())
     }
 
-    /// `--map FILE`: the map's walls replace the scenario's, and the field and the exploration
+    /// `--map FILE` (or a built-in map's name): the map's walls replace the scenario's, and the field and the exploration
     /// sectors (if any) cover the map's extent: the field's origin is the map's, its size the
     /// map's extent in the field's cells (rounded up); the sectors keep their count. The robots
     /// keep their start poses: one that starts in a wall of the map is refused by `validate`.
