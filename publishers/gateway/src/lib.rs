@@ -24,6 +24,7 @@
 pub mod client;
 pub mod line;
 pub mod peer;
+pub mod radio;
 pub mod serial;
 pub mod udp;
 
