@@ -212,12 +212,20 @@ fn wrong_area_as_processes_gives_the_single_process_metrics_through_leader_lost_
 
 #[test]
 fn wrong_area_filter_as_processes_gives_the_single_process_metrics() {
-    // Issue 48: the leader's loss comes from its own particle filter, no script.
+    // Issue 48: the leader's loss comes from its own particle filter, no script. Aware: Alice
+    // gives the fading trail up, explores, reaches B; constant: both followers end in A.
     let aware = assert_same_in_both_modes("wrong-area-filter", &["--seed", "1"]);
     let w = &aware["metrics"]["wrong_area"];
     assert_eq!(w["scripted_loss"], false, "{w}");
     assert_eq!(w["checkpoints"].as_array().map(Vec::len), Some(15), "{w}");
     assert!(w["leader"]["lost_at_s"].is_number(), "{w}");
+    assert!(w["followers"][0]["exploring_from_s"].is_number(), "{w}");
+    assert_eq!(w["followers"][0]["reached_b"], true, "{w}");
+    assert_eq!(w["followers_ended_in_a"], 0, "{w}");
+    let constant = assert_same_in_both_modes("wrong-area-filter", &["--seed", "1", "--constant"]);
+    let w = &constant["metrics"]["wrong_area"];
+    assert_eq!(w["scripted_loss"], false, "{w}");
+    assert_eq!(w["followers_ended_in_a"], 2, "{w}");
 }
 
 #[test]
