@@ -20,7 +20,10 @@ needs `eclipse-zenoh` (`pip install './python[zenoh]'`). Nothing here touches sh
 
 import collections
 import dataclasses
+import ipaddress
 import json
+import os
+import stat
 import struct
 import threading
 import time
@@ -240,16 +243,69 @@ def config_key(field: str) -> str:
     return f"pheromone/{field}/config"
 
 
+def is_loopback(endpoint: str) -> bool:
+    """Whether a Zenoh endpoint (`tcp/127.0.0.1:7447`, `tcp/[::1]:0`, `tcp/localhost:7447`)
+    names a loopback address only, as the bridge decides it (`pheromone_bridge::owner`)."""
+    _, sep, address = endpoint.partition("/")
+    host, colon, _port = address.split("?")[0].split("#")[0].rpartition(":")
+    if not sep or not colon:
+        return False
+    host = host.strip("[]")
+    if host.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def owner_key_path() -> str:
+    """`$TMPDIR/pheromone-<uid>/zenoh/owner.key`: this user's key for loopback sessions, made by
+    the first bridge or mirror that needed it (docs/mirrors.md, "Security")."""
+    tmp = os.environ.get("TMPDIR") or "/tmp"
+    return os.path.join(tmp, f"pheromone-{os.geteuid()}", "zenoh", "owner.key")
+
+
+def owner_key() -> Optional[tuple[str, str]]:
+    """This user's `(user, password)` for a loopback bridge, or None when no key exists yet.
+    A key that is not this user's private regular file raises `PheromoneError`, naming it."""
+    path = owner_key_path()
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
+    except FileNotFoundError:
+        return None
+    except OSError as e:
+        raise PheromoneError(f"the owner key {path}: {e}") from None
+    with os.fdopen(fd, "rb") as f:
+        st = os.fstat(f.fileno())
+        if not stat.S_ISREG(st.st_mode) or st.st_uid != os.geteuid() or st.st_mode & 0o077:
+            raise PheromoneError(
+                f"the owner key {path}: not a regular file of uid {os.geteuid()} with mode 600 "
+                f"(uid {st.st_uid}, mode {stat.S_IMODE(st.st_mode):o})"
+            )
+        line = f.read(256).decode("ascii", "replace").split("\n")[0]
+    user, sep, password = line.partition(":")
+    if not sep or user != f"pheromone-u{os.geteuid()}" or len(password) != 64:
+        raise PheromoneError(f"the owner key {path}: not one `user:<64 hex digits>` line")
+    return user, password
+
+
 def session_config(
     connect: Union[str, Sequence[str]], mode: str = "client", timeout_s: float = 5.0
 ) -> Any:
     """A Zenoh configuration that connects to the bridge's `--listen` endpoints (no multicast
-    scouting, as the bridge), waiting up to `timeout_s` for it and retrying every 100–500 ms."""
+    scouting, as the bridge), waiting up to `timeout_s` for it and retrying every 100–500 ms.
+    On loopback endpoints only it presents this user's owner key (`owner_key`), as a bridge
+    listening on loopback without `--users-file` admits only its own user's sessions."""
     import zenoh
 
     if isinstance(connect, str):
         connect = [connect]
     conf = zenoh.Config()
+    key = owner_key() if connect and all(is_loopback(e) for e in connect) else None
+    if key is not None:
+        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(key[0]))
+        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(key[1]))
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("scouting/multicast/enabled", "false")

@@ -284,3 +284,34 @@ def test_decoder_reads_a_message_built_from_the_documented_bytes():
     with pytest.raises(zf.WireError, match="zstd"):
         zf.decode_frame(_message(zf.KIND_FRAME, 1, 1, 1, body[:16] + b"not zstd at all"))
     assert zf.decode_config(_message(zf.KIND_CONFIG, 0, 1, 0, b"width = 8\n")) == "width = 8\n"
+
+
+def test_a_loopback_session_presents_this_users_owner_key_and_refuses_a_readable_one(
+        tmp_path, monkeypatch):
+    """No process: the owner key a loopback bridge requires (docs/mirrors.md, "Security") is
+    read from $TMPDIR/pheromone-<uid>/zenoh/owner.key, presented only on loopback endpoints, and
+    a key file that others may read, or another user's line, is refused naming the file."""
+    for e in ["tcp/127.0.0.1:7447", "tcp/[::1]:0", "tcp/localhost:7447", "tls/127.0.0.9:1"]:
+        assert zf.is_loopback(e), e
+    for e in ["tcp/0.0.0.0:7447", "tcp/10.0.0.1:7447", "tcp/127.0.0.1", "127.0.0.1:7447"]:
+        assert not zf.is_loopback(e), e
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    assert zf.owner_key() is None
+    key_dir = tmp_path / f"pheromone-{os.geteuid()}" / "zenoh"
+    key_dir.mkdir(parents=True, mode=0o700)
+    path = key_dir / "owner.key"
+    user, password = f"pheromone-u{os.geteuid()}", "ab" * 32
+    path.write_text(f"{user}:{password}\n")
+    path.chmod(0o600)
+    assert zf.owner_key() == (user, password)
+    conf = zf.session_config("tcp/127.0.0.1:7447")
+    assert user in conf.get_json("transport/auth/usrpwd/user")
+    conf = zf.session_config("tcp/10.0.0.1:7447")
+    assert "pheromone-u" not in conf.get_json("transport/auth/usrpwd/user")
+    path.chmod(0o644)
+    with pytest.raises(pheromone.PheromoneError, match="owner.key.*mode 644"):
+        zf.owner_key()
+    path.chmod(0o600)
+    path.write_text(f"pheromone-u1:{password}\n")
+    with pytest.raises(pheromone.PheromoneError, match="owner.key"):
+        zf.owner_key()

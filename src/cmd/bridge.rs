@@ -27,7 +27,10 @@ pub struct BridgeArgs {
     /// Zenoh endpoint to listen on (repeatable). Loopback by default: mirrors on other hosts
     /// need an address they reach, e.g. tls/10.0.0.1:7447 with --tls-cert/--tls-key and
     /// --users-file (plain tcp/ has no encryption and, without --users-file, no
-    /// authentication: only on a network you trust).
+    /// authentication: only on a network you trust). On loopback endpoints only and without
+    /// credentials, the bridge admits only its own user's sessions: they present the key in
+    /// $TMPDIR/pheromone-<uid>/zenoh/owner.key (made 0600 by the first that needs it), which
+    /// other local users cannot read.
     #[arg(
         long,
         value_name = "ENDPOINT",
@@ -109,6 +112,7 @@ pub fn run(a: BridgeArgs) -> anyhow::Result<()> {
     } else {
         eprintln!("bridge '{}': listening on {:?}", a.field, a.listen);
     }
+    eprintln!("bridge '{}': {}", a.field, admits_text(bridge.admits()));
     let stats = bridge.run(&node, a.duration.map(Duration::from_secs_f64))?;
     if a.json {
         println!(
@@ -117,6 +121,23 @@ pub fn run(a: BridgeArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Whom the bridge admits, for its start-up line.
+#[cfg(feature = "zenoh")]
+fn admits_text(admits: &pheromone_bridge::owner::Admits) -> String {
+    use pheromone_bridge::owner::Admits;
+    match admits {
+        Admits::Owner(key) => format!(
+            "admits only this user's sessions (owner key {}); other local users need \
+             --users-file credentials",
+            key.display()
+        ),
+        Admits::Dictionary => "admits the sessions that present a user of its dictionary".into(),
+        Admits::Anyone => "admits anyone who reaches its endpoints: no authentication (not \
+             loopback only, and no --users-file)"
+            .into(),
+    }
 }
 
 #[cfg(not(feature = "zenoh"))]

@@ -1,7 +1,8 @@
 //! Issue 54 item 4: a second local user (made with `useradd` here, removed after) runs
 //! `pheromone` beside root's field and cannot disturb root's nodes; a management segment
-//! another user planted in a domain is refused, naming it. Needs root (CI runs as root): as
-//! another user it says so and checks nothing.
+//! another user planted in a domain is refused, naming it. Item 5: a loopback gateway and a
+//! loopback bridge serve only their own user. Needs root (CI runs as root): as another user it
+//! says so and checks nothing.
 
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::path::PathBuf;
@@ -67,6 +68,8 @@ impl TestUser {
 impl Drop for TestUser {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(format!("/tmp/iceoryx2-u{}", self.uid));
+        // Their state under TMPDIR (the owner key of their Zenoh sessions).
+        let _ = std::fs::remove_dir_all(format!("/tmp/pheromone-{}", self.uid));
         let prefix = format!("iox2u{}_", self.uid);
         for entry in shm_entries() {
             if entry.starts_with(&prefix) {
@@ -310,4 +313,78 @@ fn a_loopback_gateway_serves_its_own_user_and_refuses_another_users_socket() {
         || ping_as(Some(&user), port),
     );
     assert!(!matches!(served, Message::Error(_)), "{served:?}");
+}
+
+/// Issue 54 item 5: a bridge on loopback without `--users-file` admits only its own user's
+/// sessions (the owner key, `pheromone_bridge::owner`). Root's mirror goes live; another local
+/// user's mirror is refused for good, the refusal naming the owner key, and never goes live.
+#[cfg(feature = "zenoh")]
+#[test]
+fn a_loopback_bridge_admits_its_own_users_mirror_and_refuses_another_users() {
+    use pheromone_supervisor::{ChildSpec, Supervisor};
+    if !nix::unistd::geteuid().is_root() {
+        eprintln!("needs root (useradd); not checked as another user");
+        return;
+    }
+    let user = TestUser::add();
+    let field = unique("mu-br");
+    let _field = Proc::spawn(
+        &Cmd::field(&field)
+            .grid(16, 16)
+            .tick_hz(20)
+            .duration(120)
+            .argv(),
+    );
+    let mut sup = Supervisor::new(&bin());
+    let args = [
+        "bridge",
+        "--field",
+        &field,
+        "--listen",
+        "tcp/127.0.0.1:0",
+        "--print-address",
+        "--duration",
+        "120",
+    ];
+    let id = sup
+        .spawn(ChildSpec::new(
+            "bridge",
+            None,
+            args.iter().map(|a| a.to_string()).collect(),
+        ))
+        .expect("spawn the bridge");
+    let endpoint = sup
+        .next_line(id, Duration::from_secs(30))
+        .expect("the bridge runs")
+        .expect("the bridge prints its endpoint within 30 s")
+        .trim()
+        .to_string();
+    let mirror_args = |domain: Option<&'static str>| {
+        let mut v = vec!["field".to_string(), "--name".into(), field.clone()];
+        if let Some(d) = domain {
+            v.extend(["--iox-domain".into(), d.into()]);
+        }
+        v.extend(["--mirror".into(), format!("zenoh:{endpoint}")]);
+        v.extend(["--duration".into(), "10".into(), "--json".into()]);
+        v
+    };
+    // Root's mirror (another iceoryx2 domain: the field's name is taken in root's) goes live.
+    let own = Command::new(bin())
+        .args(mirror_args(Some("mutestB")))
+        .output()
+        .unwrap();
+    let own_err = stderr(&own);
+    assert!(own.status.success(), "{own_err}");
+    assert!(own_err.contains("live at frame"), "{own_err}");
+    // The other user's mirror (their own domain) is refused, naming why.
+    let args = mirror_args(None);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let theirs = user.output(&bin(), &args);
+    let err = stderr(&theirs);
+    assert!(!theirs.status.success(), "{err}");
+    assert!(
+        err.contains("refused the connection") && err.contains("owner key"),
+        "{err}"
+    );
+    assert!(!err.contains("live at frame"), "{err}");
 }

@@ -67,6 +67,7 @@ pub struct BridgeStats {
 
 pub struct Bridge {
     o: BridgeOptions,
+    admits: super::owner::Admits,
     keys: Keys,
     session: zenoh::Session,
     inputs_pub: zenoh::pubsub::Publisher<'static>,
@@ -124,6 +125,7 @@ impl Bridge {
         if o.admin_space {
             config = super::with_admin_space(config)?;
         }
+        let admits = super::owner::admits(&config);
         let session = zenoh::open(config)
             .wait()
             .map_err(|e| zerr(&format!("listen on {:?}", o.listen), e))?;
@@ -161,6 +163,7 @@ impl Bridge {
             .map_err(|e| zerr(&format!("subscribe {}", keys.deposit), e))?;
         Ok(Self {
             o,
+            admits,
             keys,
             session,
             inputs_pub,
@@ -465,6 +468,12 @@ impl Bridge {
     /// `admin_space`).
     pub fn listen_locators(&self) -> Result<Vec<String>, BridgeError> {
         super::listen_locators(&self.session)
+    }
+
+    /// Whom it admits: this user's sessions only (the owner key, on loopback endpoints without
+    /// credentials), the users of a dictionary, or anyone who reaches it.
+    pub fn admits(&self) -> &super::owner::Admits {
+        &self.admits
     }
 
     /// The options it was started with.

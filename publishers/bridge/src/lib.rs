@@ -10,6 +10,7 @@ mod bridge;
 pub mod codec;
 mod journal;
 mod mirror;
+pub mod owner;
 pub mod run;
 mod security;
 
@@ -104,6 +105,8 @@ pub fn session_config_as(
 
 /// As [`session_config_as`], over the base configuration of `security` (TLS, credentials,
 /// access control): its mode, scouting, endpoints and connection retry are the ones set here.
+/// On loopback endpoints only, without credentials of its own, the session uses this user's
+/// owner key ([`owner`]): other local users' sessions cannot open one with it.
 pub fn session_config_with(
     security: &Security,
     mode: &str,
@@ -130,6 +133,7 @@ pub fn session_config_with(
         "connect/retry",
         "{period_init_ms: 100, period_max_ms: 500, period_increase_factor: 2}".into(),
     )?;
+    owner::apply(&mut c, listen, connect)?;
     Ok(c)
 }
 

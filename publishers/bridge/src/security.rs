@@ -137,8 +137,9 @@ pub fn refusal(zenoh_error: &str) -> Option<String> {
         || e.contains("invalid password");
     auth.then(|| {
         format!(
-            "the bridge refused this side's credentials (a wrong --user or --password-file, or \
-             credentials missing where the bridge requires them) ({zenoh_error})"
+            "the bridge refused this side's credentials (a wrong --user or --password-file, \
+             credentials missing where the bridge requires them, or a loopback bridge of another \
+             user: it admits only sessions with its user's owner key) ({zenoh_error})"
         )
     })
 }
@@ -161,6 +162,7 @@ pub fn try_connect(security: &Security, endpoint: &str) -> Result<(), String> {
     ] {
         c.insert_json5(k, v).map_err(|e| e.to_string())?;
     }
+    super::owner::apply(&mut c, &[], &[endpoint.to_string()]).map_err(|e| e.to_string())?;
     let session = zenoh::open(c).wait().map_err(|e| e.to_string())?;
     let _ = session.close().wait();
     Ok(())
