@@ -253,7 +253,8 @@ fn a_node_directory_left_by_a_killed_process_is_removed_and_a_live_ones_kept() {
     // details (naming the process) and no monitor token, so no listing shows it.
     use iceoryx2::prelude::*;
     let mut config = iceoryx2::config::Config::default();
-    let prefix = format!("iox2_o{}_", std::process::id() % 100_000);
+    // Not under the default prefix `iox2_`: a default-domain process would take these for its own.
+    let prefix = format!("o{}_iox2_", std::process::id() % 100_000);
     config.global.prefix = FileName::new(prefix.as_bytes()).unwrap();
     let node_dir = std::path::PathBuf::from(config.global.node_dir().to_string());
     let orphan = |id: u128, pid: u32| {

@@ -70,9 +70,11 @@ impl Run {
     pub fn new(tag: &str) -> Self {
         let dir = std::env::temp_dir().join(unique(tag));
         std::fs::create_dir_all(dir.join("config")).unwrap();
-        // Short: iceoryx2 file names are limited.
+        // Short: iceoryx2 file names are limited. `<tag><n>_iox2_`, as `--iox-domain` names
+        // one: it matches CI's leftover check, and it does not begin with the default prefix
+        // `iox2_`, so a default-domain process never takes this run's files for its own.
         let prefix = format!(
-            "iox2_{tag}{}_",
+            "t{tag}{}_iox2_",
             std::process::id() % 100_000 * 100 + next_id()
         );
         let mut config = Config::default();
