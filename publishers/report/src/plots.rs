@@ -305,8 +305,39 @@ pub(super) fn path_distance_chart(paths: &[PathDistance], end_s: f64) -> Result<
     Ok(pic)
 }
 
+/// The vertical marks of [`leader_deposits_chart`]: (distance along the path (m), t_s, what,
+/// colour) where the leader got lost (scripted), where its deposit first fell below the
+/// follower's threshold, and where the follower gave the trail up.
+fn leader_deposit_marks(d: &LeaderDeposits) -> Vec<(Option<f64>, Option<f64>, String, Rgb)> {
+    let below = d.below_threshold_at();
+    vec![
+        (
+            d.metric.leader_lost_at_m,
+            d.metric.leader_lost_at_s,
+            "leader lost its localization".into(),
+            [200, 0, 0],
+        ),
+        (
+            below.map(|b| b.0),
+            below.map(|b| b.1),
+            format!(
+                "leader's deposit below the threshold ({})",
+                d.threshold.unwrap_or_default()
+            ),
+            [0, 120, 0],
+        ),
+        (
+            d.metric.follower_abandoned_at_m,
+            d.metric.follower_abandoned_at_s,
+            "follower gave the trail up".into(),
+            [90, 90, 90],
+        ),
+    ]
+}
+
 /// `blind-leader`: the peak of each of the leader's deposits by distance along its path, the
-/// point where it lost its localization and where the follower gave up marked (seed 000).
+/// point where it lost its localization, where its deposit fell below the follower's threshold
+/// (drawn as a line) and where the follower gave up marked (seed 000, Fig. 23).
 pub(super) fn leader_deposits_chart(d: &LeaderDeposits) -> Result<Picture, String> {
     let x_max = d
         .deposits
@@ -329,8 +360,8 @@ pub(super) fn leader_deposits_chart(d: &LeaderDeposits) -> Result<Picture, Strin
         let area = titled(
             root,
             &format!("Deposits of the leader (R{}) along its path", d.leader),
-            "peak of each deposit, γ = τ / det Σxy capped at γmax (seed 000 eq. 12), against the \
-             distance the leader travelled",
+            "peak of each deposit (seed 000 eqs. 11-12: it falls as the leader's uncertainty \
+             grows), against the distance the leader travelled",
         )?;
         let mut chart = ChartBuilder::on(&area)
             .x_label_area_size(44)
@@ -374,21 +405,19 @@ pub(super) fn leader_deposits_chart(d: &LeaderDeposits) -> Result<Picture, Strin
                 points.len()
             ))
             .legend(legend!(rgb, 4));
-        let marks = [
-            (
-                d.metric.leader_lost_at_m,
-                d.metric.leader_lost_at_s,
-                "leader lost its localization",
-                [200, 0, 0],
-            ),
-            (
-                d.metric.follower_abandoned_at_m,
-                d.metric.follower_abandoned_at_s,
-                "follower gave the trail up",
-                [90, 90, 90],
-            ),
-        ];
-        for (at_m, at_s, what, mark_rgb) in marks {
+        if let Some(t) = d.threshold.filter(|t| (lo..hi).contains(t)) {
+            chart
+                .draw_series(std::iter::once(DashedPathElement::new(
+                    vec![(0.0, t), (x_max * 1.02, t)],
+                    4,
+                    4,
+                    colour([0, 120, 0]).stroke_width(2),
+                )))
+                .map_err(msg)?
+                .label(format!("the follower's threshold: {t}"))
+                .legend(legend!([0, 120, 0], 0));
+        }
+        for (at_m, at_s, what, mark_rgb) in leader_deposit_marks(d) {
             let (Some(m), Some(s)) = (at_m, at_s) else {
                 continue;
             };

@@ -7,12 +7,14 @@
 //! - [`path_distances`]: each path-following robot's distance to its path at each step
 //!   (seed 002);
 //! - [`leader_deposits`]: the peak of each deposit the leader made, by distance along its path,
-//!   with where it got lost (seed 000's corridor).
+//!   with where it got lost and where its deposit fell below the follower's threshold (seed
+//!   000's corridor, Fig. 23).
 
 use std::collections::BTreeMap;
 
 use pheromone_field::Evaporation;
 
+use pheromone_roles::follower::StrategyKind;
 use pheromone_sim::metrics::{
     blind_leader, distance_to_polyline_m, mean_path_error_m, BlindLeader,
 };
@@ -236,6 +238,21 @@ pub struct LeaderDeposits {
     pub deposits: Vec<(f64, f32, f64)>,
     /// The run's `blind_leader` metric (where the leader got lost, where the follower gave up).
     pub metric: BlindLeader,
+    /// The follower's trail threshold (`gradient.abandon_below`, seed 000's 10) when it follows
+    /// by gradient: the level below which it rejects a trail.
+    pub threshold: Option<f64>,
+}
+
+impl LeaderDeposits {
+    /// The first deposit whose peak fell below the follower's threshold: (distance along the
+    /// leader's path (m), t_s).
+    pub fn below_threshold_at(&self) -> Option<(f64, f64)> {
+        let t = self.threshold?;
+        self.deposits
+            .iter()
+            .find(|p| f64::from(p.1) < t)
+            .map(|p| (p.0, p.2))
+    }
 }
 
 pub fn leader_deposits(
@@ -257,9 +274,17 @@ pub fn leader_deposits(
             }
         }
     }
+    let threshold = scenario
+        .robots
+        .iter()
+        .find(|r| r.id == m.follower)
+        .and_then(|r| r.follower.as_ref())
+        .filter(|f| f.strategy == StrategyKind::Gradient)
+        .map(|f| f64::from(f.gradient.abandon_below));
     LeaderDeposits {
         leader: m.leader,
         deposits,
         metric: blind_leader(scenario, m, rec),
+        threshold,
     }
 }

@@ -301,3 +301,29 @@ fn io_errors_name_the_path() {
         "{err}"
     );
 }
+
+/// Fig. 23's threshold: the leader's deposits chart knows the follower's threshold (10 in
+/// `wrong-area-filter`) and the first deposit below it, and draws them.
+#[test]
+fn the_leader_deposits_chart_marks_where_the_deposit_fell_below_the_followers_threshold() {
+    let scenario = Scenario::load("wrong-area-filter").unwrap();
+    let m = scenario.metrics.blind_leader.clone().unwrap();
+    let mut rec = Recording::default();
+    let peaks = [100.0f32, 50.0, 12.0, 8.0, 3.0, 11.0];
+    let rows = (0..peaks.len()).map(|i| RobotSample {
+        deposit_peak: Some(peaks[i]),
+        ..sample(i as f64, 1.0 + i as f64, 1.5)
+    });
+    rec.robots.insert(m.leader, rows.collect());
+    let d = series::leader_deposits(&scenario, &m, &rec);
+    assert_eq!(d.threshold, Some(10.0));
+    // The fourth deposit (8 < 10), 3 m along the path, at t = 3 s; not the later 3 or 11.
+    assert_eq!(d.below_threshold_at(), Some((3.0, 3.0)));
+    let pic = plots::leader_deposits_chart(&d).unwrap();
+    // The threshold line and the mark are drawn in their own green.
+    let green = pic.rgb.chunks(3).filter(|p| *p == [0, 120, 0]).count();
+    assert!(green > 100, "{green} green pixels");
+    let mut none = d.clone();
+    none.threshold = None;
+    assert_eq!(none.below_threshold_at(), None);
+}
