@@ -17,6 +17,19 @@ pub(super) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
     Ok(())
 }
 
+/// Writes `value` as pretty JSON, as [`write_file`] does; a value JSON cannot hold is an error
+/// naming the path.
+pub(super) fn write_json<T: serde::Serialize + ?Sized>(
+    path: &Path,
+    value: &T,
+) -> Result<(), ReportError> {
+    let json = serde_json::to_string_pretty(value).map_err(|source| ReportError::Json {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    write_file(path, json.as_bytes())
+}
+
 pub(super) fn robot_csv(rows: &[RobotSample]) -> String {
     fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
         v.map(|v| v.to_string()).unwrap_or_default()

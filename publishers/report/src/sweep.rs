@@ -22,7 +22,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
-use super::files::{write_file, write_png};
+use super::files::{write_file, write_json, write_png};
 use super::plots::{blank, series_labels, text, titled};
 use super::style::{colour, msg, series_rgb, Picture, Rgb};
 use super::ReportError;
@@ -110,11 +110,7 @@ pub fn write_sweep(
     write_file(&path, sweep_times_csv(r).as_bytes())?;
     written.push(path);
     let path = dir.join("sweep.json");
-    let json = serde_json::to_string_pretty(r).map_err(|source| ReportError::Json {
-        path: path.clone(),
-        source,
-    })?;
-    write_file(&path, json.as_bytes())?;
+    write_json(&path, r)?;
     written.push(path);
     let path = dir.join("sweep_paper.md");
     write_file(&path, paper_table(r, paper).as_bytes())?;

@@ -7,7 +7,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use super::files::write_file;
+use super::files::{write_file, write_json};
 use super::sweep::{sweep_csv, SWEEP_CSV_HEADER};
 use super::ReportError;
 use pheromone_sim::sweep::{Integration, PointKey, RunResult, SweepResult};
@@ -49,11 +49,7 @@ pub fn write_shard(
     let csv = dir.join("sweep.csv");
     write_file(&csv, sweep_csv(r).as_bytes())?;
     let json = dir.join("shard.json");
-    let text = serde_json::to_string_pretty(record).map_err(|source| ReportError::Json {
-        path: json.clone(),
-        source,
-    })?;
-    write_file(&json, text.as_bytes())?;
+    write_json(&json, record)?;
     Ok(vec![csv, json])
 }
 

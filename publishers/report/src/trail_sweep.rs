@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
-use super::files::{write_file, write_png};
+use super::files::{write_file, write_json, write_png};
 use super::plots::{text, PLOT_H_PX, PLOT_W_PX};
 use super::style::{colour, msg, series_rgb, Picture};
 use super::ReportError;
@@ -81,11 +81,7 @@ pub fn write_trail_sweep(dir: &Path, r: &TrailSweep) -> Result<Vec<PathBuf>, Rep
     write_file(&path, trail_csv(r).as_bytes())?;
     let mut written = vec![path];
     let path = dir.join("sweep.json");
-    let json = serde_json::to_string_pretty(r).map_err(|source| ReportError::Json {
-        path: path.clone(),
-        source,
-    })?;
-    write_file(&path, json.as_bytes())?;
+    write_json(&path, r)?;
     written.push(path);
     let path = dir.join("sweep_trail.png");
     let pic = chart(r).map_err(|detail| ReportError::Draw {
