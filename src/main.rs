@@ -124,7 +124,17 @@ fn parse_cli() -> Cli {
     Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
 }
 
-fn main() -> ExitCode {
+/// What the process does before its command: the death signal its supervisor asked for, the
+/// signal handling, the command line, the iceoryx2 domain. `Err`: exit with this status.
+fn start() -> Result<Cli, ExitCode> {
+    // Started by a supervisor that asked it (before any thread exists): SIGTERM when the
+    // supervisor dies; the request is not passed on to this process's own children.
+    let gone = pheromone_supervisor::die_with_parent_as_asked();
+    std::env::remove_var(pheromone_supervisor::DIE_WITH_PARENT_ENV);
+    if let Err(e) = gone {
+        eprintln!("error: {e}");
+        return Err(ExitCode::from(1));
+    }
     // This program owns its process: its nodes stop on SIGINT/SIGTERM through iceoryx2's handler
     // (the library's default is to install none, for programs that embed it).
     pheromone_field::shm::handle_termination_requests();
@@ -135,7 +145,7 @@ fn main() -> ExitCode {
         if let Ok(d) = std::env::var(pheromone_field::shm::IOX_DOMAIN_ENV) {
             if let Err(e) = cmd::check::parse_iox_domain(&d) {
                 eprintln!("error: {}={d}: {e}", pheromone_field::shm::IOX_DOMAIN_ENV);
-                return ExitCode::from(2);
+                return Err(ExitCode::from(2));
             }
         }
     }
@@ -143,6 +153,14 @@ fn main() -> ExitCode {
         // Single-threaded here: every node this process creates reads it (`domain_config`).
         std::env::set_var(pheromone_field::shm::IOX_DOMAIN_ENV, d);
     }
+    Ok(cli)
+}
+
+fn main() -> ExitCode {
+    let cli = match start() {
+        Ok(cli) => cli,
+        Err(code) => return code,
+    };
     let result = match cli.command {
         Command::Sim(a) => cmd::sim::run(*a),
         Command::Sweep(a) => cmd::sweep::run(a),

@@ -441,6 +441,32 @@ fn a_sigkilled_sim_takes_every_child_with_it() {
     });
 }
 
+/// A sim starts its children without a fork of itself (`posix_spawn`, issue 52): each asks for
+/// its death signal itself, first thing, naming its supervisor in `PHEROMONE_DIE_WITH_PARENT`.
+/// A child whose supervisor is already gone (it is someone else's child by then) does not start.
+#[test]
+fn a_child_whose_supervisor_is_gone_before_it_starts_does_not_run() {
+    let with_parent = |pid: String| {
+        std::process::Command::new(bin())
+            .arg("--version")
+            .env(pheromone_supervisor::DIE_WITH_PARENT_ENV, pid)
+            .output()
+            .unwrap()
+    };
+    // This test's process is the child's parent: it runs.
+    let o = with_parent(std::process::id().to_string());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("pheromone"), "{}", stdout(&o));
+    // PID 1 is not its parent: as if its supervisor died and it was re-parented.
+    let o = with_parent("1".to_string());
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("the supervising process 1 ended before this process started"),
+        "{}",
+        stderr(&o)
+    );
+}
+
 /// The static config files in iceoryx2's service directory that name `tag`: the finished
 /// services, and the half-made ones no listing shows.
 fn service_files_naming(tag: &str) -> Vec<String> {

@@ -82,13 +82,19 @@ pub fn domain_config_for(domain: Option<&str>, uid: u32) -> Result<Config, NameE
 }
 
 /// Checks, before a node of `config`'s domain is created, that what the domain already has is
-/// this user's own: the root directory (a non-root user's is made here, 0700) and the
-/// management segments under its prefix.
-pub(crate) fn guard_domain(config: &Config) -> Result<(), DomainError> {
+/// this user's own: the root directory (a non-root user's is made here, 0700) and, with
+/// `segments`, the management segments under its prefix. A sim's children skip the segments
+/// (`CLEANED_BY_SUPERVISOR_ENV`): the sim checked and sealed them as it created its node, before
+/// it started them, and each walk lists all of `/dev/shm`, which holds every connection of the
+/// run (N walks of N-sized listings: issue 52).
+pub(crate) fn guard_domain(config: &Config, segments: bool) -> Result<(), DomainError> {
     let uid = nix::unistd::geteuid().as_raw();
     if uid != 0 {
         let root = PathBuf::from(config.global.root_path().to_string());
         private_root(&root, uid)?;
+    }
+    if !segments {
+        return Ok(());
     }
     for segment in management_segments(config) {
         let meta = match std::fs::symlink_metadata(&segment) {

@@ -268,7 +268,7 @@ fn create_node_with(name: &str, mut domain: Config) -> Result<Node<Svc>, AttachE
         Some(&mut previous),
     )
     .is_ok();
-    domain::guard_domain(&domain)?;
+    domain::guard_domain(&domain, !supervised)?;
     let node = NodeBuilder::new()
         .name(&node_name)
         .config(&domain)
@@ -292,8 +292,8 @@ fn create_node_with(name: &str, mut domain: Config) -> Result<Node<Svc>, AttachE
         let _ = nix::sys::signal::raise(Signal::SIGTERM);
     }
     let node = node?;
-    domain::seal_management_segments(node.config());
     if !supervised {
+        domain::seal_management_segments(node.config());
         cleanup_dead_nodes(&node);
         remove_half_created_services(node.config());
     }

@@ -22,6 +22,8 @@ use serde::de::DeserializeOwned;
 
 mod death;
 
+pub use death::{die_with_parent_as_asked, ParentGone, DIE_WITH_PARENT_ENV};
+
 /// Lines of a child's stderr shown in its error report.
 const STDERR_TAIL_LINES: usize = 12;
 
@@ -141,6 +143,11 @@ pub struct Supervisor {
     pub echo_stderr: bool,
     /// Environment variables every child gets (beside ours).
     pub env: Vec<(String, String)>,
+    /// The children are `pheromone` processes, which request their death signal themselves
+    /// ([`die_with_parent_as_asked`], asked by [`DIE_WITH_PARENT_ENV`]): they are started by
+    /// `posix_spawn`, without a `fork` that copies this process's page tables. Otherwise (the
+    /// default, for any program) the request is made between fork and exec.
+    pub death_signal_by_child: bool,
 }
 
 impl Supervisor {
@@ -154,6 +161,7 @@ impl Supervisor {
             exits,
             echo_stderr: false,
             env: Vec::new(),
+            death_signal_by_child: false,
         }
     }
 
@@ -173,7 +181,11 @@ impl Supervisor {
             None => None,
         };
         let mut command = Command::new(&self.exe);
-        death::die_with_parent(&mut command);
+        if self.death_signal_by_child {
+            death::ask_child_to_die_with_parent(&mut command);
+        } else {
+            death::die_with_parent(&mut command);
+        }
         if let Some(dir) = &spec.cwd {
             command.current_dir(dir);
         }

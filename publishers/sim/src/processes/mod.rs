@@ -305,6 +305,8 @@ pub fn run_as_processes(
         pheromone_field::shm::CLEANED_BY_SUPERVISOR_ENV.to_string(),
         "1".to_string(),
     ));
+    // The children are `pheromone`: started without a fork of this process (issue 52).
+    sup.death_signal_by_child = true;
     let result = supervise(scenario, o, &tag, &file, &mut sup);
     if result.is_err() {
         sup.stop_all(Duration::from_secs(5));
@@ -541,6 +543,8 @@ pub fn run_graph_as_processes(
         pheromone_field::shm::CLEANED_BY_SUPERVISOR_ENV.to_string(),
         "1".to_string(),
     ));
+    // The children are `pheromone`: started without a fork of this process (issue 52).
+    sup.death_signal_by_child = true;
     let result = (|| {
         let node = create_node(&format!("{tag}-sim"))?;
         let common = |role: &str| -> Vec<String> {
