@@ -474,6 +474,7 @@ fn run_remote_follower(
         }),
         frame_timeout: std::time::Duration::from_secs_f64(a.frame_timeout),
         dt_s: scenario.world.dt_s,
+        radio: scenario.radio.clone().map(|r| (r, scenario.seed)),
     };
     let node = create_node(&format!("follower-r{}-{}", a.robot, std::process::id()))?;
     let summary = run_remote_follower(&node, &a.common.role_options(a.robot), config, &remote)

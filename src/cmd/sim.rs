@@ -120,6 +120,7 @@ fn scenario_of(a: &SimArgs) -> anyhow::Result<Scenario> {
             no_scripted_loss: a.no_scripted_loss,
             scripted_loss: a.scripted_loss,
             steer_on: a.steer,
+            clients: a.clients,
         })
         .map_err(|e| bad_in(a.scenario.as_str(), e))?;
     Ok(scenario)
@@ -130,6 +131,12 @@ fn run_scenario(a: &SimArgs, scenario: &Scenario, out: &Output) -> anyhow::Resul
     if a.remote && pheromone_sim::processes::remote_robots(scenario).is_empty() {
         return Err(bad(format!(
             "--remote: scenario '{}' has no robot with an antenna follower (try trail-following)",
+            scenario.name
+        )));
+    }
+    if scenario.radio.is_some() && !a.remote {
+        return Err(bad(format!(
+            "scenario '{}' has [radio]: the shared air is the gateway's thin clients', run it with --remote",
             scenario.name
         )));
     }

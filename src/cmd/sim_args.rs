@@ -96,6 +96,14 @@ pub struct SimArgs {
     /// (`--single-process` has no processes to put a gateway between).
     #[arg(long, conflicts_with = "single_process")]
     pub remote: bool,
+    /// With --remote: N thin clients share one simulated radio channel (seed 002's shared air:
+    /// listen-before-talk, random back-off, collisions, airtime at 9600 bit/s; the scenario's
+    /// `[radio]` or its defaults, docs/gateway.md). The antenna robots are clients 0..R−1 (by
+    /// ID), the rest send the same PIRs at the same rate; a step whose request the air loses
+    /// keeps the robot's last command. metrics.radio reports delivered/sent, collisions and
+    /// latency.
+    #[arg(long, value_name = "N", requires = "remote")]
+    pub clients: Option<u32>,
     /// Show the run in ROS 2 while it runs (a build with --features zenoh; separate processes
     /// only): starts `pheromone ros2 --field F --world W --robots IDS --connect ENDPOINT` as a
     /// child, stopped with the run, which publishes the field (/pheromone/grid_map,

@@ -9,6 +9,7 @@ mod backup;
 mod bound;
 mod follower_backup;
 mod refusals;
+mod radio;
 mod remote;
 mod serial;
 mod sources;

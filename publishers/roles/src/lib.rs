@@ -13,6 +13,8 @@ pub mod follower;
 pub mod localizer;
 pub mod mapper;
 pub mod process;
+/// Seed 002's shared air between a gateway's thin clients (the remote antenna robot's radio).
+pub use pheromone_gateway::radio;
 
 pub use process::depositor::run_depositor;
 pub use process::follower::{run_follower, OwnMap};

@@ -14,6 +14,7 @@ pub mod metrics;
 pub mod observer;
 pub mod paper;
 pub mod processes;
+pub mod radio;
 pub mod recording;
 pub mod ros_feed;
 pub mod ros_record;

@@ -13,6 +13,8 @@
 //!   paper's count; `sectors`, `per_robot`, `mean`, `team`), `exploration_known` (sectors
 //!   mapped by the sensor in the final map, same shape), `steer_on`, `known_threshold`, `known_logodds`, `merge`, `rc_m`, `merges`, `merges_rejected`,
 //!   `exchanges_refused_lost`, `merge_alignment_error_m` (`mean`, `max`).
+//! - `radio` (seed 002, `sim --remote` with `[radio]` or `--clients N`; [`crate::radio`]): the
+//!   shared air's requests sent and delivered, collisions, losses and mean latency.
 
 use std::collections::BTreeMap;
 
@@ -47,6 +49,10 @@ pub struct ScenarioMetrics {
     /// Seed 000's wrong area.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub wrong_area: Option<WrongArea>,
+    /// `sim --remote` with `[radio]` (`--clients N`): what seed 002's shared air did to the
+    /// thin clients' requests ([`crate::radio`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radio: Option<crate::radio::RadioMetrics>,
     /// With `[mapping]` on: its keys sit beside the others (`exploration_known`, `merges`…).
     #[serde(flatten)]
     pub mapping: Option<MappingMetrics>,
@@ -78,6 +84,7 @@ pub fn scenario_metrics(scenario: &Scenario, rec: &Recording) -> ScenarioMetrics
             .as_ref()
             .map(|w| crate::wrong_area::wrong_area(scenario, w, rec)),
         mapping: crate::exploration::mapping_metrics(scenario, rec),
+        radio: None,
     }
 }
 
@@ -139,7 +146,16 @@ impl RunMetrics {
             field: s.field.clone(),
             robots: s.robots.clone(),
             probes: rec.probes.clone(),
-            metrics: scenario_metrics(scenario, rec),
+            metrics: ScenarioMetrics {
+                // Only thin clients share the air.
+                radio: (mode == RunMode::ProcessesRemote)
+                    .then(|| {
+                        let robots = crate::processes::remote_robots(scenario);
+                        crate::radio::radio_metrics(scenario, &robots, s.steps)
+                    })
+                    .flatten(),
+                ..scenario_metrics(scenario, rec)
+            },
             mode,
             interrupted: false,
             wall_time_s,

@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::follower::antenna_source::{AntennaRobot, AntennaSource, AntennaStepError, SourceStats};
 use crate::follower::PoseSource;
+use crate::radio::{Exchange, RadioConfig, RadioConfigError, SharedAir};
 use crate::{
     receiver, role_loop, sender, summary_of, ProcessError, RobotServices, RoleOptions, RoleSummary,
 };
@@ -29,13 +30,90 @@ pub struct RemoteDeposits {
 }
 
 /// How an antenna robot runs.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct AntennaRunOptions {
     pub steer_by: PoseSource,
     pub dt_s: f64,
     /// Lockstep: how long a step may wait for the frame of its step before the robot fails.
     pub frame_timeout: Duration,
     pub deposits: Option<RemoteDeposits>,
+    /// The simulated shared air (`[radio]`): a step whose request the air does not deliver
+    /// reads nothing and keeps the last command.
+    pub air: Option<ClientAir>,
+}
+
+/// One thin client's view of the simulated shared air ([`SharedAir`]): whether its request of
+/// each step gets its reply. Every process that builds it from the same configuration, period
+/// and seed sees the same outcomes (the sim's `metrics.radio` too).
+#[derive(Debug, Clone)]
+pub struct ClientAir {
+    air: SharedAir,
+    client: u32,
+    /// The periods resolved so far.
+    resolved: u64,
+    last: Exchange,
+    stats: RadioClientStats,
+}
+
+/// What the air did to one client's requests.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct RadioClientStats {
+    /// The client's index on the air (its robot ID).
+    pub client: u32,
+    /// Requests (one per step).
+    pub sent: u64,
+    pub delivered: u64,
+    /// Sum of the delivered requests' latencies (ns).
+    pub latency_sum_ns: u64,
+}
+
+impl ClientAir {
+    /// Client `client` of the air of `config` for a control period of `period_s`, from `seed`.
+    pub fn new(
+        config: &RadioConfig,
+        client: u32,
+        period_s: f64,
+        seed: u64,
+    ) -> Result<Self, RadioConfigError> {
+        if client >= config.clients {
+            return Err(RadioConfigError {
+                key: "clients",
+                value: config.clients.to_string(),
+                expected: "more clients than the highest ID of a robot through the gateway",
+            });
+        }
+        Ok(Self {
+            air: SharedAir::new(config, period_s, seed)?,
+            client,
+            resolved: 0,
+            last: Exchange::default(),
+            stats: RadioClientStats {
+                client,
+                ..RadioClientStats::default()
+            },
+        })
+    }
+
+    /// This client's exchange of `step` (period `step` of the air); steps come in order, a
+    /// step asked again gets the same answer and is counted once.
+    pub fn exchange(&mut self, step: u64) -> Exchange {
+        while self.resolved <= step {
+            self.last = self.air.next_period()[self.client as usize];
+            self.resolved += 1;
+            if self.resolved == step + 1 {
+                self.stats.sent += 1;
+                if self.last.delivered {
+                    self.stats.delivered += 1;
+                    self.stats.latency_sum_ns += self.last.latency_ns;
+                }
+            }
+        }
+        self.last
+    }
+
+    pub fn stats(&self) -> RadioClientStats {
+        self.stats
+    }
 }
 
 /// An antenna robot's summary: the role's counters and its source's.
@@ -43,6 +121,9 @@ pub struct AntennaRunOptions {
 pub struct AntennaRobotSummary {
     pub role: RoleSummary,
     pub source: SourceStats,
+    /// With `[radio]`: what the simulated air did to the robot's requests.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radio: Option<RadioClientStats>,
 }
 
 /// The antenna robot process: pose (estimate, or the world's truth) → readings from `robot`'s
@@ -86,7 +167,7 @@ fn drive<
     node: &Node<Svc>,
     o: &RoleOptions,
     mut robot: AntennaRobot<S>,
-    run: AntennaRunOptions,
+    mut run: AntennaRunOptions,
     poses: Receiver<T>,
     to_pose: impl Fn(&T) -> PoseMsg,
 ) -> Result<AntennaRobotSummary, ProcessError> {
@@ -98,6 +179,7 @@ fn drive<
     let mut summary = summary_of(id, "follower");
     let last = std::cell::Cell::new(None::<CmdMsg>);
     let mut rejected = 0u64;
+    let mut air = run.air.take();
     role_loop(
         node,
         &end,
@@ -106,6 +188,21 @@ fn drive<
         &mut summary,
         |m| {
             let p = to_pose(m);
+            // The air lost this step's request (or its reply): nothing read, the last command
+            // held, as a microcontroller keeps its set-points.
+            if air.as_mut().is_some_and(|a| !a.exchange(p.step).delivered) {
+                let held = last.get().unwrap_or(CmdMsg {
+                    robot_id: id,
+                    ..Default::default()
+                });
+                return crate::process::follower::send_step(
+                    &cmds,
+                    &statuses,
+                    &last,
+                    p.step,
+                    (held, None),
+                );
+            }
             // Lockstep: the frame the field computed for this step, and no older one.
             let want = if o.lockstep { p.step + 1 } else { 0 };
             let give_up = Instant::now() + run.frame_timeout;
@@ -174,5 +271,6 @@ fn drive<
     Ok(AntennaRobotSummary {
         role: summary,
         source: robot.source().stats(),
+        radio: air.map(|a| a.stats()),
     })
 }

@@ -10,10 +10,11 @@ use pheromone_gateway::client::{
 };
 
 use super::follower_antenna::{
-    run_antenna_robot, AntennaRobotSummary, AntennaRunOptions, RemoteDeposits,
+    run_antenna_robot, AntennaRobotSummary, AntennaRunOptions, ClientAir, RemoteDeposits,
 };
 use crate::follower::antenna_source::{AntennaRobot, GatewaySource};
 use crate::follower::{AntennaFollower, FollowerConfig, FollowerConfigError};
+use crate::radio::{RadioConfig, RadioConfigError};
 use crate::{ProcessError, RoleOptions};
 
 /// How a remote antenna robot reaches its gateway.
@@ -33,6 +34,9 @@ pub struct RemoteFollowerOptions {
     pub frame_timeout: Duration,
     /// The world's step (s).
     pub dt_s: f64,
+    /// The simulated shared air (`[radio]`) and its seed (the scenario's): the robot is client
+    /// `o.robot` on it.
+    pub radio: Option<(RadioConfig, u64)>,
 }
 
 /// Why a remote antenna robot failed.
@@ -45,6 +49,8 @@ pub enum RemoteFollowerError {
     Config(#[from] FollowerConfigError),
     #[error(transparent)]
     Process(#[from] ProcessError),
+    #[error(transparent)]
+    Radio(#[from] RadioConfigError),
 }
 
 impl RemoteFollowerError {
@@ -78,11 +84,17 @@ pub fn run_remote_follower(
     }
     let strategy = AntennaFollower::new(config.channel as usize, config.antenna.clone())?;
     let robot = AntennaRobot::new(o.robot, strategy, GatewaySource::new(client));
+    let air = r
+        .radio
+        .as_ref()
+        .map(|(radio, seed)| ClientAir::new(radio, o.robot, r.dt_s, *seed))
+        .transpose()?;
     let run = AntennaRunOptions {
         steer_by: config.steer_by,
         dt_s: r.dt_s,
         frame_timeout: r.frame_timeout,
         deposits: r.deposits,
+        air,
     };
     Ok(run_antenna_robot(node, o, robot, run)?)
 }

@@ -127,6 +127,11 @@ pub struct Scenario {
     /// The loss script `--scripted-loss` applies (`scripted_loss.rs`); unused without it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scripted_loss: Option<ScriptedLoss>,
+    /// Seed 002's shared air between the gateway and its thin clients
+    /// (`pheromone_gateway::radio`; `sim --remote` only, `--clients N` sets it); none: an ideal
+    /// link.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radio: Option<pheromone_roles::radio::RadioConfig>,
 }
 
 /// `mark_walls`: deposits every `spacing_m` along every wall segment.
@@ -328,6 +333,9 @@ pub struct Overrides {
     pub scripted_loss: bool,
     /// `--steer own-map|shared`: what the sector followers steer on (`[mapping] steer_on`).
     pub steer_on: Option<pheromone_roles::mapper::SteerOn>,
+    /// `--clients N`: N thin clients share the air (`[radio]`, its defaults if the scenario
+    /// has none).
+    pub clients: Option<u32>,
 }
 
 /// What runs for one robot: a localizer always, a depositor and a follower if configured.
@@ -557,6 +565,9 @@ impl Scenario {
         }
         if o.scripted_loss {
             self.apply_scripted_loss()?;
+        }
+        if let Some(n) = o.clients {
+            self.radio.get_or_insert_with(Default::default).clients = n;
         }
         self.apply_localizers(o);
         self.validate()

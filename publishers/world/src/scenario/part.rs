@@ -32,6 +32,7 @@ impl Scenario {
             mapping: self.mapping.clone(),
             start_area: None,
             scripted_loss: None,
+            radio: self.radio.clone(),
         })
     }
 }

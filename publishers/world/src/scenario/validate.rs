@@ -30,7 +30,31 @@ impl Scenario {
         }
         self.validate_follower_channels(channels)?;
         self.validate_mapping()?;
+        self.validate_radio()?;
         self.validate_exploration()
+    }
+
+    /// `[radio]` in range, with a client on the air for every antenna robot (client = its ID).
+    fn validate_radio(&self) -> Result<(), ScenarioError> {
+        let Some(r) = &self.radio else {
+            return Ok(());
+        };
+        r.validate()
+            .map_err(|e| ScenarioError::value(format!("radio.{}", e.key), e.value, e.expected))?;
+        let antenna = self.robots.iter().filter(|rr| {
+            self.follower_config(rr.id)
+                .is_some_and(|f| f.strategy == pheromone_roles::follower::StrategyKind::Antenna)
+        });
+        if let Some(top) = antenna.map(|rr| rr.id).max() {
+            if top >= r.clients {
+                return Err(ScenarioError::value(
+                    "radio.clients",
+                    r.clients.to_string(),
+                    "must be more than the highest antenna robot's ID (each is client ID on the air)",
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// What a file can claim, bounded (issue 54): a name without control characters, at most
