@@ -57,17 +57,18 @@ pub struct FieldInfo {
     pub readers_full: bool,
 }
 
-/// The fields whose every reader slot is taken: what their services say, without a frame.
-fn listed_full(
-    node: &Node<Svc>,
-    full: Vec<(String, FieldWatch)>,
-) -> Result<Vec<FieldInfo>, ShmError> {
-    let mut out = Vec::with_capacity(full.len());
-    for (name, watch) in full {
-        let status = watch.status();
-        out.push(FieldInfo {
-            mirror: mirror_info(node, &name)?,
-            timing: field_timing(node, &name)?,
+impl FieldInfo {
+    /// A field the survey got no frame of: its frame facts `None`, not alive; `readers` and
+    /// `depositors` are its services' counts.
+    fn without_frame(
+        name: String,
+        (readers, depositors): (usize, usize),
+        publisher_alive: bool,
+        readers_full: bool,
+        mirror: Option<MirrorInfo>,
+        timing: Option<TimingInfo>,
+    ) -> Self {
+        Self {
             name,
             width: None,
             height: None,
@@ -76,14 +77,36 @@ fn listed_full(
             sequence: None,
             sim_time_s: None,
             tick_hz: 0.0,
-            readers: status
-                .subscribers
-                .saturating_sub(status.deposit_subscribers),
-            depositors: status.depositors,
+            readers,
+            depositors,
             alive: false,
-            publisher_alive: status.publishers > 0,
-            readers_full: true,
-        });
+            publisher_alive,
+            mirror,
+            timing,
+            readers_full,
+        }
+    }
+}
+
+/// The fields whose every reader slot is taken: what their services say, without a frame.
+fn listed_full(
+    node: &Node<Svc>,
+    full: Vec<(String, FieldWatch)>,
+) -> Result<Vec<FieldInfo>, ShmError> {
+    let mut out = Vec::with_capacity(full.len());
+    for (name, watch) in full {
+        let status = watch.status();
+        let readers = status
+            .subscribers
+            .saturating_sub(status.deposit_subscribers);
+        out.push(FieldInfo::without_frame(
+            name.clone(),
+            (readers, status.depositors),
+            status.publishers > 0,
+            true,
+            mirror_info(node, &name)?,
+            field_timing(node, &name)?,
+        ));
     }
     Ok(out)
 }
@@ -152,23 +175,14 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
         let (Some(frame), Some((first_seq, first_stamp_ns, first_at))) = (reader.frame(), first)
         else {
             if publisher_alive {
-                out.push(FieldInfo {
+                out.push(FieldInfo::without_frame(
                     name,
-                    width: None,
-                    height: None,
-                    channels: None,
-                    cell_size_m: None,
-                    sequence: None,
-                    sim_time_s: None,
-                    tick_hz: 0.0,
-                    readers: status.subscribers.saturating_sub(own),
-                    depositors: status.depositors,
-                    alive: false,
+                    (status.subscribers.saturating_sub(own), status.depositors),
                     publisher_alive,
+                    false,
                     mirror,
                     timing,
-                    readers_full: false,
-                });
+                ));
             }
             continue;
         };
