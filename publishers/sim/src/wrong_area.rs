@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use crate::recording::{Recording, RobotSample};
 use pheromone_messages::FollowerState;
+use pheromone_roles::follower::StrategyKind;
 use pheromone_world::scenario::{Scenario, WrongAreaMetric};
 
 /// The outcome of a run, for the leader and each follower. Positions are [x, y] in metres.
@@ -30,6 +31,43 @@ pub struct WrongArea {
     /// The leader at 15 points evenly spaced along its true path (seed 000 Figs. 22–23's
     /// L1–L15): its σ and the deposit it made there.
     pub checkpoints: Vec<Checkpoint>,
+    /// The leader's first deposit whose peak fell below the first follower's trail threshold
+    /// (its `gradient.abandon_below`; seed 000 L12: 8.15 < 10), if it follows by gradient.
+    pub deposit_below_threshold: Option<ThresholdCrossing>,
+}
+
+/// Where the leader's deposit first fell below the follower's threshold.
+#[derive(Debug, Clone, Serialize)]
+pub struct ThresholdCrossing {
+    pub threshold: f64,
+    pub t_s: f64,
+    /// Distance along its true path (m), as the checkpoints' `along_m`.
+    pub along_m: f64,
+    pub true_m: [f64; 2],
+    /// Its σ then (m), as the checkpoints' `sigma_m`.
+    pub sigma_m: Option<f64>,
+    pub deposit_peak: f32,
+}
+
+/// The first of `rows`' deposits below `threshold`.
+pub fn deposit_below_threshold(rows: &[RobotSample], threshold: f64) -> Option<ThresholdCrossing> {
+    let mut along_m = 0.0;
+    for (k, r) in rows.iter().enumerate() {
+        if k > 0 {
+            along_m += dist(xy(rows[k - 1].true_pose), xy(r.true_pose));
+        }
+        if let Some(peak) = r.deposit_peak.filter(|p| f64::from(*p) < threshold) {
+            return Some(ThresholdCrossing {
+                threshold,
+                t_s: r.t_s,
+                along_m,
+                true_m: xy(r.true_pose),
+                sigma_m: r.est_sigma_m,
+                deposit_peak: peak,
+            });
+        }
+    }
+    None
 }
 
 /// The leader at one of L1–L15.
@@ -130,6 +168,12 @@ fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
+/// The first follower's trail threshold (`gradient.abandon_below`), if it follows by gradient.
+fn follower_threshold(scenario: &Scenario, m: &WrongAreaMetric) -> Option<f64> {
+    let f = scenario.roles(*m.followers.first()?)?.follower.as_ref()?;
+    (f.strategy == StrategyKind::Gradient).then(|| f64::from(f.gradient.abandon_below))
+}
+
 pub fn wrong_area(scenario: &Scenario, m: &WrongAreaMetric, rec: &Recording) -> WrongArea {
     let dt = scenario.world.dt_s;
     let rows = |id: u32| rec.robots.get(&id).map(Vec::as_slice).unwrap_or(&[]);
@@ -207,6 +251,8 @@ pub fn wrong_area(scenario: &Scenario, m: &WrongAreaMetric, rec: &Recording) -> 
         followers_reached_b: followers.iter().filter(|f| f.reached_b).count(),
         scripted_loss: scenario.has_scripted_loss(),
         checkpoints: checkpoints(leader),
+        deposit_below_threshold: follower_threshold(scenario, m)
+            .and_then(|t| deposit_below_threshold(leader, t)),
         leader: leader_outcome,
         followers,
     }
@@ -308,5 +354,43 @@ mod tests {
         assert_eq!(b.abandoned_straight_from_loss_m, Some(1.0));
         assert_eq!(b.exploring_from_m, Some([14.0, 1.5]));
         assert_eq!((w.followers_ended_in_a, w.followers_reached_b), (1, 1));
+    }
+
+    #[test]
+    fn the_first_deposit_below_the_threshold_is_found_with_its_distance_along_the_path() {
+        let peaks = [
+            Some(100.0f32),
+            None,
+            Some(12.0),
+            Some(9.5),
+            Some(3.0),
+            Some(11.0),
+        ];
+        let rows: Vec<RobotSample> = peaks
+            .iter()
+            .enumerate()
+            .map(|(k, p)| RobotSample {
+                deposit_peak: *p,
+                est_sigma_m: Some(0.1 * k as f64),
+                ..sample(
+                    k as f64,
+                    2.0 + k as f64,
+                    1.5,
+                    [0.0, 0.0],
+                    FollowerState::Following,
+                )
+            })
+            .collect();
+        let c = deposit_below_threshold(&rows, 10.0).expect("9.5 < 10");
+        assert_eq!((c.t_s, c.along_m, c.true_m), (3.0, 3.0, [5.0, 1.5]));
+        assert_eq!(
+            (c.deposit_peak, c.sigma_m, c.threshold),
+            (9.5, Some(0.1 * 3.0), 10.0)
+        );
+        assert!(deposit_below_threshold(&rows, 2.0).is_none());
+        // The built-in scenario's first follower rejects a trail below 10.
+        let s = Scenario::load("wrong-area-filter").unwrap();
+        let m = s.metrics.wrong_area.clone().unwrap();
+        assert_eq!(follower_threshold(&s, &m), Some(10.0));
     }
 }

@@ -64,6 +64,15 @@ fn with_uncertainty_aware_deposits_the_trail_fades_before_the_door_and_alice_rea
     let cps = w["checkpoints"].as_array().unwrap();
     assert!(f64_at(&cps[0], "deposit_peak") > 99.0, "{w}");
     let faded = first_along(&w, |c| f64_at(c, "deposit_peak") < THRESHOLD).expect("fades");
+    // The first deposit below the threshold, as metrics.json gives it: before that checkpoint.
+    let crossed = &w["deposit_below_threshold"];
+    assert_eq!(f64_at(crossed, "threshold"), THRESHOLD, "{crossed}");
+    assert!(f64_at(crossed, "deposit_peak") < THRESHOLD, "{crossed}");
+    let along = f64_at(crossed, "along_m");
+    assert!(
+        along <= faded && along > faded - 2.0,
+        "{crossed} vs {faded}"
+    );
     let wide = first_along(&w, |c| 4.0 * f64_at(c, "sigma_m") > CORRIDOR_WIDTH_M).expect("wide");
     assert!(
         (faded - wide).abs() <= 4.0,
