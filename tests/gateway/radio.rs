@@ -150,5 +150,25 @@ fn radio_settings_out_of_range_are_refused_by_key_and_value() {
     let o = run(&["sim", path.to_str().unwrap(), "--no-out"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--remote"), "{}", stderr(&o));
+    // Without `clients`, one client per robot through the gateway; --clients overrides it.
+    std::fs::write(&path, format!("{text}\n[radio]\nbitrate_bps = 38400.0\n")).unwrap();
+    let file = path.to_str().unwrap();
+    let m = sim(&["sim", file, "--remote", "--no-out", "--json"]);
+    assert_eq!(
+        m["metrics"]["radio"]["config"]["clients"], 2,
+        "{}",
+        m["metrics"]
+    );
+    assert_eq!(m["metrics"]["radio"]["config"]["bitrate_bps"], 38400.0);
+    let m = sim(&[
+        "sim",
+        file,
+        "--remote",
+        "--clients",
+        "3",
+        "--no-out",
+        "--json",
+    ]);
+    assert_eq!(m["metrics"]["radio"]["config"]["clients"], 3);
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -51,6 +51,7 @@ pub const FRAME_OVERHEAD_BYTES: u32 = 8;
 pub struct RadioConfig {
     /// Thin clients on the channel. A scenario's robots through the gateway are clients
     /// 0..R−1 (by robot ID); the rest send the same PIRs at the same rate (air traffic only).
+    /// A scenario's `[radio]` without it has one client per robot through the gateway.
     pub clients: u32,
     /// The channel's rate (bits/s); the paper's modems ran at 9600 baud.
     pub bitrate_bps: f64,

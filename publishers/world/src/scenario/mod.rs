@@ -503,6 +503,14 @@ impl Scenario {
         })?;
         // It parsed as a scenario, so it parses as a table.
         let table: toml::Table = toml::from_str(text).unwrap_or_default();
+        // `[radio]` without `clients`: one client per robot through the gateway.
+        let antenna_robots = s.antenna_robots().len().max(1) as u32;
+        if let Some(r) = &mut s.radio {
+            let radio = table.get("radio").and_then(|t| t.as_table());
+            if !radio.is_some_and(|t| t.contains_key("clients")) {
+                r.clients = antenna_robots;
+            }
+        }
         check_numbers(&table, "")
             .and_then(|()| s.load_world_map(base_dir))
             .and_then(|()| s.place_random_starts())

@@ -34,6 +34,19 @@ impl Scenario {
         self.validate_exploration()
     }
 
+    /// The robots whose follower has the antenna strategy (those `sim --remote` runs through
+    /// the gateway), by ID.
+    pub fn antenna_robots(&self) -> Vec<u32> {
+        self.robots
+            .iter()
+            .filter(|r| {
+                self.follower_config(r.id)
+                    .is_some_and(|f| f.strategy == pheromone_roles::follower::StrategyKind::Antenna)
+            })
+            .map(|r| r.id)
+            .collect()
+    }
+
     /// `[radio]` in range, with a client on the air for every antenna robot (client = its ID).
     fn validate_radio(&self) -> Result<(), ScenarioError> {
         let Some(r) = &self.radio else {
@@ -41,11 +54,7 @@ impl Scenario {
         };
         r.validate()
             .map_err(|e| ScenarioError::value(format!("radio.{}", e.key), e.value, e.expected))?;
-        let antenna = self.robots.iter().filter(|rr| {
-            self.follower_config(rr.id)
-                .is_some_and(|f| f.strategy == pheromone_roles::follower::StrategyKind::Antenna)
-        });
-        if let Some(top) = antenna.map(|rr| rr.id).max() {
+        if let Some(top) = self.antenna_robots().into_iter().max() {
             if top >= r.clients {
                 return Err(ScenarioError::value(
                     "radio.clients",
