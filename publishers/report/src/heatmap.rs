@@ -138,7 +138,8 @@ fn coord((x, y): (f64, f64)) -> Option<(i32, i32)> {
         .then(|| (x.round() as i32, y.round() as i32))
 }
 
-/// The picture of channel `c` of `snap`, with walls, the robots' trajectories up to the
+/// The picture of channel `c` of `snap` in colour scale `map` (the run's for that channel),
+/// with walls, the robots' trajectories up to the
 /// snapshot's time and the `marks` due by then (outlines under the trajectories, labels and
 /// crosses over them, robot markers over everything).
 pub(super) fn render_snapshot(
@@ -146,13 +147,13 @@ pub(super) fn render_snapshot(
     snap: &Snapshot,
     c: usize,
     marks: &[Mark],
+    map: &ColourMap,
 ) -> Result<Picture, String> {
     let layout = Layout::for_grid(snap.width, snap.height, snap.cell_size_m);
     let plane = snap.plane(c);
-    let map = ColourMap::for_plane(plane);
     let (w, h) = layout.picture_px();
     let mut pic = Picture::new(w, h, STRIP_RGB);
-    fill_cells(&mut pic, &layout, plane, &map);
+    fill_cells(&mut pic, &layout, plane, map);
     pic.draw(|root| {
         draw_axes(root, &layout)?;
         let (x0, y0) = (LEFT_PX as i32, TOP_PX as i32);
@@ -208,8 +209,17 @@ pub(super) fn render_snapshot(
                 markers.push((id, rgb, last.true_pose, last.est_pose));
             }
         }
+        // The robots' own labels (drawn last, at their markers) are taken places too.
+        let mut placed: Vec<[i32; 4]> = markers
+            .iter()
+            .filter_map(|(id, _, pose, _)| {
+                let p = px(pose[0], pose[1])?;
+                let tw = text_width(&format!("R{id}"));
+                Some([p.0 + 5, p.1 - 31, p.0 + 13 + tw, p.1 - 6])
+            })
+            .collect();
         for m in &marks {
-            draw_mark_label(&field, &layout, m, &px)?;
+            draw_mark_label(&field, &layout, m, &px, &mut placed)?;
         }
         // Markers last, so no trajectory hides them.
         for (id, rgb, pose, est) in markers {
@@ -231,7 +241,7 @@ pub(super) fn render_snapshot(
             (0, (TOP_PX + layout.field_h_px() as u32 + AXIS_PX) as i32),
             (w, STRIP_PX),
         );
-        draw_strip(&strip, &map, &snap.channels[c], snap.t_s, rec)
+        draw_strip(&strip, map, &snap.channels[c], snap.t_s, rec)
     })?;
     Ok(pic)
 }
@@ -300,16 +310,31 @@ fn draw_outline(
 }
 
 /// A mark's label, kept inside the field: inside a rectangle's top-left corner, above a circle
-/// (under it if there is no room), right of a cross (drawn here, over the trajectories).
+/// (under it if there is no room), beside a cross (drawn here, over the trajectories): right
+/// and under it, else right and above, left and under, left and above, or further down,
+/// whichever first overlaps no label in `placed` (the labels drawn so far, to which it adds).
 fn draw_mark_label(
     field: &Field<'_>,
     layout: &Layout,
     m: &Mark,
     px: &impl Fn(f64, f64) -> Option<(i32, i32)>,
+    placed: &mut Vec<[i32; 4]>,
 ) -> Result<(), String> {
     let (tw, th) = (FONT, 15).into_font().box_size(&m.label).map_err(msg)?;
     let (tw, th) = (tw as i32, th as i32);
     let (fw, fh) = (layout.field_w_px() as i32, layout.field_h_px() as i32);
+    let clamp = |(x, y): (i32, i32)| {
+        (
+            x.clamp(6, (fw - tw - 6).max(6)),
+            y.clamp(8, (fh - th - 4).max(8)),
+        )
+    };
+    let free = |(x, y): (i32, i32)| {
+        let r = [x - 4, y - 7, x + tw + 4, y + th + 1];
+        placed
+            .iter()
+            .all(|p| r[2] <= p[0] || p[2] <= r[0] || r[3] <= p[1] || p[3] <= r[1])
+    };
     let at = match m.shape {
         Shape::Rect { min_m, max_m } => px(min_m[0], max_m[1]).map(|p| (p.0 + 10, p.1 + 14)),
         Shape::Circle { centre_m, radius_m } => px(centre_m[0], centre_m[1]).map(|c| {
@@ -329,14 +354,24 @@ fn draw_mark_label(
                         field.draw(&PathElement::new(seg, style)).map_err(msg)?;
                     }
                 }
-                Some((p.0 + 12, p.1 + 8))
+                let (right, left) = (p.0 + 12, p.0 - 12 - tw);
+                let (under, above) = (p.1 + 8, p.1 - th - 14);
+                let step = th + 10;
+                let tries = [(right, under), (right, above), (left, under), (left, above)]
+                    .into_iter()
+                    .chain(
+                        (1..8).flat_map(|k| [(right, under + k * step), (right, above - k * step)]),
+                    );
+                let mut tries = tries.map(clamp);
+                let first = clamp((right, under));
+                Some(tries.find(|&t| free(t)).unwrap_or(first))
             }
             None => None,
         },
     };
-    if let Some((x, y)) = at {
-        let x = x.clamp(6, (fw - tw - 6).max(6));
-        let y = y.clamp(8, (fh - th - 4).max(8));
+    if let Some(at) = at {
+        let (x, y) = clamp(at);
+        placed.push([x - 4, y - 7, x + tw + 4, y + th + 1]);
         boxed_label(field, &m.label, (x, y), m.rgb)?;
     }
     Ok(())

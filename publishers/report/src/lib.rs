@@ -47,6 +47,7 @@ use files::{robot_csv, write_file, write_png};
 use heatmap::render_snapshot;
 use pheromone_sim::recording::{Recording, Snapshot};
 use pheromone_world::scenario::Scenario;
+use style::ColourMap;
 
 pub use filters::{FilterRun, FilterSummary};
 pub use filters_plots::write_filter_comparison;
@@ -163,9 +164,13 @@ pub fn write_outputs(
         last_pngs.clear();
         for (c, name) in snap.channels.iter().enumerate() {
             let path = dir.join(snapshot_file_name(name, snap.t_s));
-            let pic = render_snapshot(rec, snap, c, marks).map_err(|detail| ReportError::Draw {
-                path: path.clone(),
-                detail,
+            // One colour scale per channel for the whole run, so that snapshots compare.
+            let scale = run_scale(rec, name);
+            let pic = render_snapshot(rec, snap, c, marks, &scale).map_err(|detail| {
+                ReportError::Draw {
+                    path: path.clone(),
+                    detail,
+                }
             })?;
             write_png(&path, &pic)?;
             last_pngs.push((name.clone(), path.clone()));
@@ -203,10 +208,13 @@ fn write_final_pngs(
                 written.push(copy(png, dir.join(final_file_name(name)))?);
             }
             let path = dir.join("field_final.png");
-            let all = all_channels(last);
-            let pic = render_snapshot(rec, &all, 0, marks).map_err(|detail| ReportError::Draw {
-                path: path.clone(),
-                detail,
+            let all = all_channels(last, rec.wall_channel);
+            let scale = ColourMap::for_plane(all.plane(0));
+            let pic = render_snapshot(rec, &all, 0, marks, &scale).map_err(|detail| {
+                ReportError::Draw {
+                    path: path.clone(),
+                    detail,
+                }
             })?;
             write_png(&path, &pic)?;
             written.push(path);
@@ -221,12 +229,28 @@ pub fn final_file_name(channel: &str) -> String {
     format!("field_final_{}.png", file_safe(channel))
 }
 
-/// One plane holding every channel of `snap`: per cell the value of largest magnitude (a cell
-/// on any channel's trail shows), named after the channels it combines.
-fn all_channels(snap: &Snapshot) -> Snapshot {
+/// The colour scale of channel `name` over every snapshot of the run: 0 … the largest level
+/// any snapshot holds (−max … max for a signed channel).
+fn run_scale(rec: &Recording, name: &str) -> ColourMap {
+    ColourMap::for_planes(rec.snapshots.iter().filter_map(|s| {
+        let c = s.channels.iter().position(|n| n == name)?;
+        Some(s.plane(c))
+    }))
+}
+
+/// One plane holding every channel of `snap` but the walls' marks (`wall_channel`, drawn as
+/// walls anyway: their level would swamp the pheromone's scale): per cell the value of largest
+/// magnitude (a cell on any channel's trail shows), named after the channels it combines.
+fn all_channels(snap: &Snapshot, wall_channel: Option<usize>) -> Snapshot {
     let n = snap.width as usize * snap.height as usize;
-    let mut plane = snap.plane(0).to_vec();
-    for c in 1..snap.channels.len() {
+    let mut shown: Vec<usize> = (0..snap.channels.len())
+        .filter(|&c| Some(c) != wall_channel)
+        .collect();
+    if shown.is_empty() {
+        shown = (0..snap.channels.len()).collect();
+    }
+    let mut plane = snap.plane(shown[0]).to_vec();
+    for &c in &shown[1..] {
         for (v, &w) in plane.iter_mut().zip(snap.plane(c)) {
             if w.is_nan() || w.abs() > v.abs() {
                 *v = w;
@@ -234,12 +258,17 @@ fn all_channels(snap: &Snapshot) -> Snapshot {
         }
     }
     debug_assert_eq!(plane.len(), n);
+    let names: Vec<&str> = shown.iter().map(|&c| snap.channels[c].as_str()).collect();
+    let name = match names.as_slice() {
+        [one] => (*one).to_string(),
+        several => format!("{} (largest |level|)", several.join(" + ")),
+    };
     Snapshot {
         t_s: snap.t_s,
         width: snap.width,
         height: snap.height,
         cell_size_m: snap.cell_size_m,
-        channels: vec![format!("{} (largest |level|)", snap.channels.join(" + "))],
+        channels: vec![name],
         planes: plane,
     }
 }

@@ -1,11 +1,14 @@
 //! What a heat map marks besides the field and the robots: the places the scenario's metrics
-//! name. Today `wrong_area` (seed 000 Figs. 1 and 24): area A (an outlined rectangle), location
-//! B (a circle of the radius within which a robot has reached it) and, in each follower's
-//! colour, a cross where it gave the trail up and explored on its own (from the metric computed
-//! on the run, so only in the pictures from that time on).
+//! name (paper 000). `blind_leader` and `wrong_area`: in the leader's colour, a cross where the
+//! leader lost its localization, labelled with its world x and the time. `blind_leader`: a cross
+//! where the follower gave the trail up. `wrong_area` (Figs. 1 and 24): area A (an outlined
+//! rectangle), location B (a circle of the radius within which a robot has reached it) and, in
+//! each follower's colour, a cross where it gave the trail up and explored on its own. The
+//! crosses come from the metrics computed on the run, so they are in the pictures from their
+//! time on.
 
 use super::style::{robot_rgb, Rgb};
-use pheromone_sim::recording::Recording;
+use pheromone_sim::recording::{Recording, RobotSample};
 use pheromone_sim::wrong_area::wrong_area;
 use pheromone_world::scenario::Scenario;
 
@@ -36,9 +39,46 @@ pub struct Mark {
     pub from_s: f64,
 }
 
+/// The true position of `robot` at its first sample at or after `t_s`.
+fn position_at(rec: &Recording, robot: u32, t_s: f64) -> Option<[f64; 2]> {
+    rec.robots
+        .get(&robot)?
+        .iter()
+        .find(|r: &&RobotSample| r.t_s >= t_s - 1e-9)
+        .map(|r| [r.true_pose[0], r.true_pose[1]])
+        .filter(|p| p[0].is_finite() && p[1].is_finite())
+}
+
+/// A cross at `at_m` in robot `id`'s colour from `t_s` on, labelled `what` with the world x and
+/// the time ("R0 lost at x = 15.5 m (t = 25.0 s)").
+fn event(id: u32, what: &str, at_m: [f64; 2], t_s: f64) -> Mark {
+    Mark {
+        shape: Shape::Point { at_m },
+        label: format!("R{id} {what} x = {:.1} m (t = {t_s:.1} s)", at_m[0]),
+        rgb: robot_rgb(id),
+        from_s: t_s,
+    }
+}
+
+/// The leader's loss of its localization: the scripted time (`[robot.localizer.loss]
+/// after_s`) where the scenario has one.
+fn leader_lost(scenario: &Scenario, rec: &Recording, leader: u32) -> Option<Mark> {
+    let t = scenario.roles(leader)?.localizer.loss.after_s?;
+    let at = position_at(rec, leader, t)?;
+    Some(event(leader, "lost at", at, t))
+}
+
 /// The marks the scenario's metrics call for, in drawing order (none if they name no place).
 pub fn marks(scenario: &Scenario, rec: &Recording) -> Vec<Mark> {
     let mut out = Vec::new();
+    if let Some(m) = &scenario.metrics.blind_leader {
+        out.extend(leader_lost(scenario, rec, m.leader));
+        if let Some(t) = rec.trail_abandoned_at_s(m.follower) {
+            if let Some(at) = position_at(rec, m.follower, t) {
+                out.push(event(m.follower, "gave up at", at, t));
+            }
+        }
+    }
     if let Some(m) = &scenario.metrics.wrong_area {
         out.push(Mark {
             shape: Shape::Rect {
@@ -58,16 +98,25 @@ pub fn marks(scenario: &Scenario, rec: &Recording) -> Vec<Mark> {
             rgb: AREA_B_RGB,
             from_s: f64::NEG_INFINITY,
         });
-        for f in wrong_area(scenario, m, rec).followers {
+        let outcome = wrong_area(scenario, m, rec);
+        if let (Some(t), Some(at)) = (outcome.leader.lost_at_s, outcome.leader.lost_at_m) {
+            out.push(event(m.leader, "lost at", at, t));
+        }
+        for f in outcome.followers {
             if let (Some(t), Some(at_m)) = (f.exploring_from_s, f.exploring_from_m) {
-                out.push(Mark {
-                    shape: Shape::Point { at_m },
-                    label: format!("R{} explores", f.id),
-                    rgb: robot_rgb(f.id),
-                    from_s: t,
-                });
+                out.push(event(f.id, "explores from", at_m, t));
             }
         }
     }
-    out
+    // A scenario with both metrics names one event twice (the leader's loss; a follower
+    // giving up where it starts exploring): one cross per robot and place.
+    let mut kept: Vec<Mark> = Vec::new();
+    for m in out {
+        let twice = matches!(m.shape, Shape::Point { .. })
+            && kept.iter().any(|k| k.shape == m.shape && k.rgb == m.rgb);
+        if !twice {
+            kept.push(m);
+        }
+    }
+    kept
 }

@@ -215,8 +215,14 @@ impl ColourMap {
     /// Unsigned planes (no negative value) map 0 … max to viridis; signed planes map
     /// −max|v| … +max|v| to the diverging map. Non-finite values do not count for the max.
     pub(super) fn for_plane(plane: &[f32]) -> ColourMap {
+        Self::for_planes(std::iter::once(plane))
+    }
+
+    /// One scale for several planes (a channel's snapshots over a run), as [`Self::for_plane`]
+    /// of all their values.
+    pub(super) fn for_planes<'a>(planes: impl IntoIterator<Item = &'a [f32]>) -> ColourMap {
         let (mut lo, mut hi) = (0.0f32, 0.0f32);
-        for &v in plane {
+        for &v in planes.into_iter().flatten() {
             if v.is_finite() {
                 lo = lo.min(v);
                 hi = hi.max(v);

@@ -245,6 +245,51 @@ fn every_channel_has_a_final_picture_and_field_final_shows_them_all() {
     assert_eq!(at(&all, 50, 45), VIRIDIS[0]);
 }
 
+/// Issue 51: a channel's snapshots share one colour scale (the run's max), so a trail that
+/// grows looks it; `field_final.png` leaves out the walls' channel (`wall_channel`), whose
+/// level would swamp the pheromone's, and scales the pheromone on its own.
+#[test]
+fn snapshots_share_the_runs_scale_and_the_final_picture_leaves_the_walls_out() {
+    let tmp = TempDir::new("scale");
+    let mut rec = scene();
+    let mut early = rec.snapshots[0].clone();
+    early.t_s = 5.0;
+    early.planes.iter_mut().for_each(|v| *v /= 7.0); // max 1 of the run's 7
+    rec.snapshots.insert(0, early);
+    write_outputs(&tmp.0, &rec, &serde_json::json!({}), &[]).unwrap();
+    let at = |img: &(u32, u32, Vec<u8>), x: usize, y: usize| {
+        pixel(img, 48 + 8 * x + 4, 28 + (49 - y) * 8 + 4)
+    };
+    let first = decode(&tmp.0.join(snapshot_file_name("trail", 5.0)));
+    let last = decode(&tmp.0.join(snapshot_file_name("trail", 10.0)));
+    assert_eq!(at(&last, 80, 40), VIRIDIS[9]);
+    let c = at(&first, 80, 40);
+    assert!(
+        c != VIRIDIS[9] && c != VIRIDIS[0],
+        "1 of 7 is low on the run's scale: {c:?}"
+    );
+
+    // Walls marked at 12 on channel 1, pheromone up to 0.5 on channel 0.
+    let tmp = TempDir::new("walls");
+    let mut rec = scene();
+    let snap = &mut rec.snapshots[0];
+    snap.planes.iter_mut().for_each(|v| *v /= 14.0);
+    let n = (snap.width * snap.height) as usize;
+    let mut walls = vec![0.0f32; n];
+    walls[20 * snap.width as usize + 20] = 12.0;
+    snap.planes.extend(walls);
+    snap.channels.push("walls".into());
+    rec.wall_channel = Some(1);
+    write_outputs(&tmp.0, &rec, &serde_json::json!({}), &[]).unwrap();
+    let all = decode(&tmp.0.join("field_final.png"));
+    assert_eq!(at(&all, 80, 40), VIRIDIS[9], "the pheromone's max on top");
+    assert_eq!(at(&all, 20, 20), VIRIDIS[0], "the walls' mark left out");
+    assert_eq!(
+        at(&decode(&tmp.0.join("field_final_walls.png")), 20, 20),
+        VIRIDIS[9]
+    );
+}
+
 #[test]
 fn nan_cells_get_their_own_colour_without_panicking() {
     let tmp = TempDir::new("nan");
@@ -323,6 +368,11 @@ fn the_leader_deposits_chart_marks_where_the_deposit_fell_below_the_followers_th
     // The threshold line and the mark are drawn in their own green.
     let green = pic.rgb.chunks(3).filter(|p| *p == [0, 120, 0]).count();
     assert!(green > 100, "{green} green pixels");
+    // Seed 000's stated L11 and L12 at this run's L11, L12 (15 evenly spaced points on 5 m).
+    let at = |l: f64| 5.0 * (l - 1.0) / 14.0;
+    assert_eq!(d.paper.len(), 2);
+    assert!((d.paper[0].0 - at(11.0)).abs() <= 1.0 && d.paper[0].1 == 11.35);
+    assert!((d.paper[1].0 - at(12.0)).abs() <= 1.0 && d.paper[1].1 == 8.15);
     let mut none = d.clone();
     none.threshold = None;
     assert_eq!(none.below_threshold_at(), None);

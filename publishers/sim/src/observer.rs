@@ -288,9 +288,10 @@ impl Observer {
         (self.last_frame_time_s >= 0.0).then_some(self.last_frame_time_s)
     }
 
-    /// Sets the walls to draw.
-    pub fn set_walls(&mut self, walls: Vec<([f64; 2], [f64; 2])>) {
+    /// Sets the walls to draw and the channel they are marked on (if any).
+    pub fn set_walls(&mut self, walls: Vec<([f64; 2], [f64; 2])>, wall_channel: Option<usize>) {
         self.rec.walls = walls;
+        self.rec.wall_channel = wall_channel;
     }
 }
 

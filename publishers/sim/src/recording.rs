@@ -83,6 +83,9 @@ pub struct Recording {
     pub probes: Vec<ProbeReading>,
     /// Wall segments of the world, ([x0, y0], [x1, y1]) in metres, to draw on the pictures.
     pub walls: Vec<([f64; 2], [f64; 2])>,
+    /// The channel the world marks its walls on (`[mark_walls]`), if any: the pictures scale
+    /// the pheromone channels on their own, without it.
+    pub wall_channel: Option<usize>,
     /// Seed 004's final local maps and merges, when the scenario maps.
     pub mapping: Option<pheromone_world::team::MappingRecord>,
 }

@@ -303,6 +303,7 @@ impl<'a> SingleRun<'a> {
                 .iter()
                 .map(|s| (s.a_m, s.b_m))
                 .collect(),
+            wall_channel: scenario.mark_walls.as_ref().map(|m| m.channel as usize),
             ..Recording::default()
         };
         let commands = vec![(0.0, 0.0); robots.len()];

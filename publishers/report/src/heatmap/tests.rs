@@ -5,11 +5,17 @@ use super::*;
 use pheromone_messages::FollowerState;
 use pheromone_world::scenario::Scenario;
 
+/// The first snapshot's channel 0, in its own colour scale.
+fn draw_first(rec: &Recording, marks: &[Mark]) -> Result<Picture, String> {
+    let snap = &rec.snapshots[0];
+    render_snapshot(rec, snap, 0, marks, &ColourMap::for_plane(snap.plane(0)))
+}
+
 #[test]
 fn trajectories_stop_at_the_snapshot_time() {
     let mut rec = scene();
     rec.snapshots[0].t_s = 4.0; // robot 0 is at x = 3 m then
-    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &[]).unwrap();
+    let pic = draw_first(&rec, &[]).unwrap();
     let layout = Layout::for_grid(100, 50, 0.1);
     let at = |x_m: f64, y_m: f64| {
         let (x, y) = layout.pixel_from_world(x_m, y_m);
@@ -29,7 +35,7 @@ fn a_gap_in_the_estimates_breaks_the_dashed_line() {
     for r in &mut rows[4..=6] {
         r.est_pose = None; // x = 3 … 4 m
     }
-    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &[]).unwrap();
+    let pic = draw_first(&rec, &[]).unwrap();
     let layout = Layout::for_grid(100, 50, 0.1);
     let row = |x0_m: f64, x1_m: f64| -> Vec<Rgb> {
         let (x0, y) = layout.pixel_from_world(x0_m, 2.5);
@@ -52,7 +58,7 @@ fn paths_are_anti_aliased() {
     for (i, r) in rows.iter_mut().enumerate() {
         r.true_pose = [1.0 + 0.3 * i as f64, 0.5 + 0.2 * i as f64, 0.0];
     }
-    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &[]).unwrap();
+    let pic = draw_first(&rec, &[]).unwrap();
     let layout = Layout::for_grid(100, 50, 0.1);
     let (a, b) = (ROBOT_RGB[0], VIRIDIS[0]);
     let mut full = 0;
@@ -178,7 +184,7 @@ fn wrong_area_marks_a_b_and_where_a_follower_explored() {
     let layout = Layout::for_grid(s.field.width, s.field.height, s.field.cell_size_m);
     let draw = |t_s: f64| {
         let rec = blank_run(&s, t_s);
-        render_snapshot(&rec, &rec.snapshots[0], 0, &marks(&s, &rec)).unwrap()
+        draw_first(&rec, &marks(&s, &rec)).unwrap()
     };
     let pic = draw(80.0);
     let at = |x_m: f64, y_m: f64| {
@@ -219,12 +225,14 @@ fn wrong_area_marks_a_b_and_where_a_follower_explored() {
         VIRIDIS[0]
     );
 
-    // A scenario without `wrong_area` marks nothing: neither colour anywhere.
+    // A scenario without `wrong_area` marks neither A nor B: neither colour anywhere.
     let plain = Scenario::load("blind-leader").unwrap();
     assert!(plain.metrics.wrong_area.is_none());
     let rec = blank_run(&plain, 80.0);
-    assert!(marks(&plain, &rec).is_empty());
-    let pic = render_snapshot(&rec, &rec.snapshots[0], 0, &marks(&plain, &rec)).unwrap();
+    assert!(marks(&plain, &rec)
+        .iter()
+        .all(|m| matches!(m.shape, Shape::Point { .. })));
+    let pic = draw_first(&rec, &marks(&plain, &rec)).unwrap();
     let (pw, ph) = (pic.width as usize, pic.height as usize);
     for y in 0..ph {
         for x in 0..pw {
@@ -235,4 +243,87 @@ fn wrong_area_marks_a_b_and_where_a_follower_explored() {
             );
         }
     }
+}
+
+/// Issue 51: blind-leader's pictures mark where the leader (R0) got lost, at its true position
+/// at the scripted loss (25 s), labelled with its world x and the time, and where the follower
+/// (R1) gave the trail up; each from its time on, the two labels apart.
+#[test]
+fn blind_leader_marks_where_the_leader_got_lost_and_where_the_follower_gave_up() {
+    let s = Scenario::load("blind-leader").unwrap();
+    let layout = Layout::for_grid(s.field.width, s.field.height, s.field.cell_size_m);
+    let run = |t_s: f64| {
+        let mut rec = blank_run(&s, t_s);
+        let leader = (0..=60)
+            .map(|k| super::super::tests::sample(k as f64, 3.0 + 0.5 * k as f64, 1.5))
+            .collect();
+        rec.robots.insert(0, leader);
+        rec
+    };
+    let rec = run(80.0);
+    let m = marks(&s, &rec);
+    let labels: Vec<&str> = m.iter().map(|m| m.label.as_str()).collect();
+    assert_eq!(
+        labels,
+        [
+            "R0 lost at x = 15.5 m (t = 25.0 s)",
+            "R1 gave up at x = 15.0 m (t = 30.0 s)"
+        ]
+    );
+    assert_eq!(m[0].shape, Shape::Point { at_m: [15.5, 1.5] });
+    assert_eq!((m[0].rgb, m[1].rgb), (ROBOT_RGB[0], ROBOT_RGB[1]));
+    let pic = draw_first(&rec, &m).unwrap();
+    let at = |pic: &Picture, x_m: f64, y_m: f64| {
+        let (x, y) = layout.pixel_from_world(x_m, y_m);
+        pic.get(x.round() as usize, y.round() as usize)
+    };
+    // The leader's cross: its colour on the cross's arm, 3 px from its centre.
+    let (cx, cy) = layout.pixel_from_world(15.5, 1.5);
+    assert_eq!(
+        pic.get(cx.round() as usize + 3, cy.round() as usize + 3),
+        ROBOT_RGB[0]
+    );
+    // Before the loss neither cross is drawn.
+    let early = run(20.0);
+    let pic = draw_first(&early, &marks(&s, &early)).unwrap();
+    assert_ne!(
+        pic.get(cx.round() as usize + 3, cy.round() as usize + 3),
+        ROBOT_RGB[0]
+    );
+    assert_eq!(at(&pic, 15.0 + 0.03, 1.5 + 0.03), VIRIDIS[0]);
+}
+
+/// Two crosses at one place: their labels do not overlap (the second moves).
+#[test]
+fn labels_of_crosses_at_one_place_do_not_overlap() {
+    let s = Scenario::load("blind-leader").unwrap();
+    let rec = blank_run(&s, 80.0);
+    let layout = Layout::for_grid(s.field.width, s.field.height, s.field.cell_size_m);
+    let cross = |label: &str, rgb: Rgb| Mark {
+        shape: Shape::Point { at_m: [10.0, 1.5] },
+        label: label.into(),
+        rgb,
+        from_s: 0.0,
+    };
+    let m = [
+        cross("first label here", ROBOT_RGB[2]),
+        cross("second label here", ROBOT_RGB[3]),
+    ];
+    let pic = draw_first(&rec, &m).unwrap();
+    // The rows that hold each label's text colour, within the field.
+    let rows_of = |rgb: Rgb| -> Vec<usize> {
+        let (x0, _) = layout.pixel_from_world(0.0, 0.0);
+        let x1 = x0 as usize + layout.field_w_px();
+        (0..pic.height as usize)
+            .filter(|&y| (x0 as usize..x1).any(|x| pic.get(x, y) == rgb))
+            .collect()
+    };
+    let (a, b) = (rows_of(ROBOT_RGB[2]), rows_of(ROBOT_RGB[3]));
+    assert!(!a.is_empty() && !b.is_empty());
+    let text_a: Vec<usize> = a.iter().copied().filter(|y| !b.contains(y)).collect();
+    let text_b: Vec<usize> = b.iter().copied().filter(|y| !a.contains(y)).collect();
+    assert!(
+        !text_a.is_empty() && !text_b.is_empty(),
+        "each label has rows of its own: {a:?} {b:?}"
+    );
 }

@@ -353,7 +353,10 @@ fn supervise(
     let mut observer = join_observer(scenario, &args, &start, sup)?;
     let world = World::new(scenario.world.clone(), scenario.seed).ok();
     let segments = world.as_ref().map_or(&[][..], |w| w.wall_segments());
-    observer.set_walls(segments.iter().map(|s| (s.a_m, s.b_m)).collect());
+    observer.set_walls(
+        segments.iter().map(|s| (s.a_m, s.b_m)).collect(),
+        scenario.mark_walls.as_ref().map(|m| m.channel as usize),
+    );
     if let Some(out) = o.record.take() {
         let scripted = scenario.scripted(segments)?;
         observer.record_to(McapFeed::new(out, scenario, scripted));
