@@ -5,7 +5,6 @@
 
 use std::io::{Read, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
-use std::path::PathBuf;
 use std::time::Duration;
 
 use iceoryx2::prelude::*;
@@ -76,12 +75,16 @@ pub fn measure(launcher: &Launcher, tag: &str, run: FrameRun) -> Result<FrameSam
             })
         }
         FrameTransport::UdsSerde => {
-            let path = SocketPath(std::env::temp_dir().join(format!("pheromone-bench-{tag}.sock")));
-            // A socket left by an earlier run; none is the usual case.
-            let _ = std::fs::remove_file(&path.0);
+            // A private directory of its own (0700, removed when dropped): nobody else can
+            // plant or squat the socket's name.
+            let dir = tempfile::Builder::new()
+                .prefix("pheromone-bench-")
+                .tempdir()
+                .map_err(io("create the socket's directory"))?;
+            let path = dir.path().join(format!("{tag}.sock"));
             let listener =
-                UnixListener::bind(&path.0).map_err(io(format!("bind {}", path.0.display())))?;
-            let source = path.0.to_string_lossy().into_owned();
+                UnixListener::bind(&path).map_err(io(format!("bind {}", path.display())))?;
+            let source = path.to_string_lossy().into_owned();
             let mut peers = spawn_readers(launcher, &run, &source)?;
             let mut streams = Vec::with_capacity(run.readers);
             for _ in 0..run.readers {
@@ -120,16 +123,6 @@ pub fn measure(launcher: &Launcher, tag: &str, run: FrameRun) -> Result<FrameSam
         }
         FrameTransport::Zenoh => zenoh_side::measure(&node, launcher, tag, &run),
         FrameTransport::RawIceoryx => crate::raw_frames::measure(&node, launcher, tag, &run),
-    }
-}
-
-/// Removes the socket file when dropped.
-struct SocketPath(PathBuf);
-
-impl Drop for SocketPath {
-    fn drop(&mut self) {
-        // Already gone is what this wants; a drop cannot report anyway.
-        let _ = std::fs::remove_file(&self.0);
     }
 }
 

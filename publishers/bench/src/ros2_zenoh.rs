@@ -5,7 +5,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use pheromone_bridge::{listen_locators, session_config_as, with_admin_space};
+use pheromone_bridge::{listen_locators, plain_session_config, with_admin_space};
 use pheromone_field::shm::{create_node, should_stop, Svc};
 use pheromone_supervisor::{ChildSpec, Supervisor};
 use zenoh::Wait;
@@ -47,7 +47,8 @@ struct Subscriber {
 impl Subscriber {
     fn open() -> Result<Self, BenchError> {
         let listen = ["tcp/127.0.0.1:0".to_string()];
-        let config = session_config_as("peer", &listen, &[])
+        // It stands for a ROS 2 subscriber: `pheromone ros2` presents no owner key.
+        let config = plain_session_config("peer", &listen, &[])
             .and_then(with_admin_space)
             .map_err(|e| BenchError::Zenoh(e.to_string()))?;
         let session = zenoh::open(config)
@@ -320,7 +321,7 @@ pub fn plain_publisher(connect: &str, topic_bytes: &[u64], rate_hz: f64) -> Resu
         )));
     }
     let node = create_node(&format!("bench-plain-zenoh-{}", std::process::id()))?;
-    let config = session_config_as("peer", &[], &[connect.to_string()])
+    let config = plain_session_config("peer", &[], &[connect.to_string()])
         .map_err(|e| BenchError::Zenoh(e.to_string()))?;
     let session = zenoh::open(config).wait().map_err(zerr("open"))?;
     let mut publishers = Vec::new();

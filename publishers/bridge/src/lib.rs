@@ -103,11 +103,34 @@ pub fn session_config_as(
     session_config_with(&Security::default(), mode, listen, connect)
 }
 
+/// As [`session_config_as`] without the owner key, even on loopback: for a session that stands
+/// for another ecosystem's node (a ROS 2 subscriber that `pheromone ros2` connects to with
+/// rmw_zenoh's settings, which present no key), never for one that carries a field's deposits.
+pub fn plain_session_config(
+    mode: &str,
+    listen: &[String],
+    connect: &[String],
+) -> Result<zenoh::Config, BridgeError> {
+    session_config_base(&Security::default(), mode, listen, connect)
+}
+
 /// As [`session_config_as`], over the base configuration of `security` (TLS, credentials,
 /// access control): its mode, scouting, endpoints and connection retry are the ones set here.
 /// On loopback endpoints only, without credentials of its own, the session uses this user's
 /// owner key ([`owner`]): other local users' sessions cannot open one with it.
 pub fn session_config_with(
+    security: &Security,
+    mode: &str,
+    listen: &[String],
+    connect: &[String],
+) -> Result<zenoh::Config, BridgeError> {
+    let mut c = session_config_base(security, mode, listen, connect)?;
+    owner::apply(&mut c, listen, connect)?;
+    Ok(c)
+}
+
+/// The session's configuration without the owner key.
+fn session_config_base(
     security: &Security,
     mode: &str,
     listen: &[String],
@@ -133,7 +156,6 @@ pub fn session_config_with(
         "connect/retry",
         "{period_init_ms: 100, period_max_ms: 500, period_increase_factor: 2}".into(),
     )?;
-    owner::apply(&mut c, listen, connect)?;
     Ok(c)
 }
 
