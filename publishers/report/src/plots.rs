@@ -2,6 +2,8 @@
 //! closed forms, exploration over time, distance to the path over time, and the leader's
 //! deposits along its path. Their data are the [`super::series`] of the run.
 
+use plotters::coord::combinators::LogCoord;
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
@@ -305,6 +307,44 @@ pub(super) fn path_distance_chart(paths: &[PathDistance], end_s: f64) -> Result<
     Ok(pic)
 }
 
+/// The deposits chart's axes: distance (m) against a log level.
+type DepositChart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, LogCoord<f64>>>;
+
+/// Seed 000 Fig. 23's stated values (crosses) and the follower's threshold (a line to `x_end`)
+/// on the deposits chart whose levels span `lo..hi`.
+fn draw_paper_and_threshold<'a, 'b: 'a>(
+    chart: &mut DepositChart<'a, 'b>,
+    d: &LeaderDeposits,
+    x_end: f64,
+    (lo, hi): (f64, f64),
+) -> Result<(), String> {
+    if !d.paper.is_empty() {
+        chart
+            .draw_series(
+                d.paper
+                    .iter()
+                    .map(|&p| Cross::new(p, 7, colour([0, 0, 0]).stroke_width(2))),
+            )
+            .map_err(msg)?
+            .label("paper 000 Fig. 23 (L11 11.35, L12 8.15) at this run's L11, L12")
+            .legend(|(x, y)| Cross::new((x + 12, y), 5, colour([0, 0, 0]).stroke_width(2)));
+    }
+    if let Some(t) = d.threshold.filter(|t| (lo..hi).contains(t)) {
+        chart
+            .draw_series(std::iter::once(DashedPathElement::new(
+                vec![(0.0, t), (x_end, t)],
+                4,
+                4,
+                colour([0, 120, 0]).stroke_width(2),
+            )))
+            .map_err(msg)?
+            .label(format!("the follower's threshold: {t}"))
+            .legend(legend!([0, 120, 0], 0));
+    }
+    Ok(())
+}
+
 /// The vertical marks of [`leader_deposits_chart`]: (distance along the path (m), t_s, what,
 /// colour) where the leader got lost (scripted), where its deposit first fell below the
 /// follower's threshold, and where the follower gave the trail up.
@@ -405,18 +445,7 @@ pub(super) fn leader_deposits_chart(d: &LeaderDeposits) -> Result<Picture, Strin
                 points.len()
             ))
             .legend(legend!(rgb, 4));
-        if let Some(t) = d.threshold.filter(|t| (lo..hi).contains(t)) {
-            chart
-                .draw_series(std::iter::once(DashedPathElement::new(
-                    vec![(0.0, t), (x_max * 1.02, t)],
-                    4,
-                    4,
-                    colour([0, 120, 0]).stroke_width(2),
-                )))
-                .map_err(msg)?
-                .label(format!("the follower's threshold: {t}"))
-                .legend(legend!([0, 120, 0], 0));
-        }
+        draw_paper_and_threshold(&mut chart, d, x_max * 1.02, (lo, hi))?;
         for (at_m, at_s, what, mark_rgb) in leader_deposit_marks(d) {
             let (Some(m), Some(s)) = (at_m, at_s) else {
                 continue;

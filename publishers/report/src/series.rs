@@ -19,6 +19,7 @@ use pheromone_sim::metrics::{
     blind_leader, distance_to_polyline_m, mean_path_error_m, BlindLeader,
 };
 use pheromone_sim::recording::Recording;
+use pheromone_sim::wrong_area::checkpoints;
 use pheromone_world::scenario::{BlindLeaderMetric, ExplorationMetric, Scenario};
 
 /// The closed form a probe's readings are compared with: the level `p0` read at `t0_s`,
@@ -241,7 +242,13 @@ pub struct LeaderDeposits {
     /// The follower's trail threshold (`gradient.abandon_below`, seed 000's 10) when it follows
     /// by gradient: the level below which it rejects a trail.
     pub threshold: Option<f64>,
+    /// Seed 000 Fig. 23's stated deposits ([`PAPER_FIG23`]) placed at this run's checkpoints of
+    /// the same label: (distance along the path (m), value); empty without a `wrong_area` metric.
+    pub paper: Vec<(f64, f64)>,
 }
+
+/// The deposits seed 000 states for Fig. 23 (by checkpoint, L1 = 1): 11.35 at L11, 8.15 at L12.
+pub const PAPER_FIG23: [(usize, f64); 2] = [(11, 11.35), (12, 8.15)];
 
 impl LeaderDeposits {
     /// The first deposit whose peak fell below the follower's threshold: (distance along the
@@ -281,10 +288,22 @@ pub fn leader_deposits(
         .and_then(|r| r.follower.as_ref())
         .filter(|f| f.strategy == StrategyKind::Gradient)
         .map(|f| f64::from(f.gradient.abandon_below));
+    let paper = match (&scenario.metrics.wrong_area, rec.robots.get(&m.leader)) {
+        (Some(_), Some(rows)) => {
+            let cps = checkpoints(rows);
+            let at = |l: usize| cps.get(l - 1).map(|c| c.along_m);
+            PAPER_FIG23
+                .iter()
+                .filter_map(|&(l, v)| at(l).map(|a| (a, v)))
+                .collect()
+        }
+        _ => Vec::new(),
+    };
     LeaderDeposits {
         leader: m.leader,
         deposits,
         metric: blind_leader(scenario, m, rec),
         threshold,
+        paper,
     }
 }
