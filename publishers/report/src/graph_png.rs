@@ -14,10 +14,98 @@ use super::ReportError;
 
 /// Text on the graph's light background.
 const GRAPH_TEXT_RGB: [u8; 3] = [30, 30, 35];
+/// Node colours: the dock, terminal nodes, the others.
+const DOCK_RGB: [u8; 3] = [245, 150, 30];
+const TERMINAL_RGB: [u8; 3] = [210, 40, 40];
+const NODE_RGB: [u8; 3] = [40, 160, 70];
+/// Region fills: held, served (no longer held), never captured.
+const HELD_RGB: [u8; 3] = [170, 220, 170];
+const SERVED_RGB: [u8; 3] = [205, 205, 205];
+const OPEN_RGB: [u8; 3] = [230, 240, 200];
+/// Height (px) of a row of the legend under the graph.
+const LEGEND_ROW_PX: i32 = 26;
+
+/// One entry of the legend: what its swatch looks like, and what it means.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Swatch {
+    Node([u8; 3]),
+    Region([u8; 3]),
+    Link([u8; 3]),
+    DashedLink,
+}
+
+/// The legend of every graph picture, in order.
+fn legend() -> Vec<(Swatch, &'static str)> {
+    vec![
+        (Swatch::Node(DOCK_RGB), "dock"),
+        (Swatch::Node(TERMINAL_RGB), "terminal node"),
+        (Swatch::Node(NODE_RGB), "node"),
+        (Swatch::Region(HELD_RGB), "region held (by R<id>)"),
+        (Swatch::Region(SERVED_RGB), "region served"),
+        (Swatch::Region(OPEN_RGB), "region never captured"),
+        (
+            Swatch::Link(link_rgb(-1.0, 1.0)),
+            "link < 0 (anti-pheromone)",
+        ),
+        (Swatch::Link(link_rgb(0.0, 1.0)), "link 0"),
+        (Swatch::Link(link_rgb(1.0, 1.0)), "link > 0 (pheromone)"),
+        (Swatch::DashedLink, "link −∞ (closed)"),
+    ]
+}
+
+/// The legend's rows (entries wrapped to the picture's width `w`) as (x, row) per entry.
+fn legend_layout(w: i32) -> Vec<(i32, i32)> {
+    let mut at = Vec::new();
+    let (mut x, mut row) = (8, 0);
+    for (_, label) in legend() {
+        let need = 34 + super::heatmap::text_width(label) + 18;
+        if x > 8 && x + need > w {
+            (x, row) = (8, row + 1);
+        }
+        at.push((x, row));
+        x += need;
+    }
+    at
+}
+
+/// Draws the legend under the graph, from `top` (px): each entry's swatch and its meaning.
+fn draw_legend(root: &Root<'_>, top: i32, w: i32) -> Result<(), String> {
+    let text = (FONT, 14).into_font().color(&colour(GRAPH_TEXT_RGB));
+    for ((swatch, label), (x, row)) in legend().into_iter().zip(legend_layout(w)) {
+        let y = top + 14 + row * LEGEND_ROW_PX;
+        match swatch {
+            Swatch::Node(rgb) => root.draw(&Circle::new((x + 13, y), 7, colour(rgb).filled())),
+            Swatch::Region(rgb) => root.draw(&Rectangle::new(
+                [(x + 2, y - 8), (x + 26, y + 8)],
+                colour(rgb).filled(),
+            )),
+            Swatch::Link(rgb) => root.draw(&PathElement::new(
+                vec![(x, y), (x + 28, y)],
+                colour(rgb).stroke_width(4),
+            )),
+            Swatch::DashedLink => root.draw(&DashedPathElement::new(
+                vec![(x, y), (x + 28, y)],
+                8,
+                6,
+                colour([0, 0, 0]).stroke_width(4),
+            )),
+        }
+        .map_err(msg)?;
+        root.draw_text(label, &text, (x + 34, y - 8)).map_err(msg)?;
+    }
+    Ok(())
+}
+
+/// Height (px) of the legend in a picture `w` px wide.
+fn legend_h_px(w: i32) -> i32 {
+    let rows = legend_layout(w).last().map_or(0, |&(_, r)| r) + 1;
+    rows * LEGEND_ROW_PX + 8
+}
 
 /// Writes a picture of a node-graph run: regions (green while held, grey once served, labelled
 /// with their holders), links coloured by their final value (red anti-pheromone, blue
-/// pheromone, dashed black −∞), terminal nodes red, the others green, the dock orange.
+/// pheromone, dashed black −∞), terminal nodes red, the others green, the dock orange; a
+/// legend under the graph says so.
 pub fn write_graph_png(
     path: &Path,
     state: &pheromone_graph::GraphState,
@@ -28,8 +116,10 @@ pub fn write_graph_png(
     let regions = state.regions.regions();
     let frame = Frame::around(nodes, regions);
     let max_abs = max_abs_value(report);
-    let mut pic = Picture::new(frame.w as u32, frame.h as u32, [250, 250, 250]);
+    let (w, h) = (frame.w as i32, frame.h as i32);
+    let mut pic = Picture::new(w as u32, (h + legend_h_px(w)) as u32, [250, 250, 250]);
     pic.draw(|root| {
+        draw_legend(root, h, w)?;
         let text = (FONT, 16).into_font().color(&colour(GRAPH_TEXT_RGB));
         draw_regions(root, &frame, regions, report, &text)?;
         draw_links(root, &frame, nodes, report, max_abs)?;
@@ -151,11 +241,11 @@ fn draw_regions(
         let (px0, py1) = frame.to_px(a as f64, b as f64);
         let (px1, py0) = frame.to_px(c as f64, d as f64);
         let fill = if !area.held_by.is_empty() {
-            [170, 220, 170]
+            HELD_RGB
         } else if area.served {
-            [205, 205, 205]
+            SERVED_RGB
         } else {
-            [230, 240, 200]
+            OPEN_RGB
         };
         root.draw(&Rectangle::new(
             [(px0, py0), (px1, py1)],
@@ -228,11 +318,11 @@ fn draw_nodes(
     for (i, n) in nodes.iter().enumerate() {
         let p = frame.to_px(n.x_m as f64, n.y_m as f64);
         let rgb = if i == dock {
-            [245, 150, 30]
+            DOCK_RGB
         } else if n.terminal {
-            [210, 40, 40]
+            TERMINAL_RGB
         } else {
-            [40, 160, 70]
+            NODE_RGB
         };
         root.draw(&Circle::new(p, 7, colour(rgb).filled()))
             .map_err(msg)?;
@@ -290,5 +380,41 @@ mod tests {
         write_graph_png(&path, &state, &r, dock).unwrap();
         assert_eq!(&fs::read(&path).unwrap()[..4], b"\x89PNG");
         fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Issue 51: every graph picture has a legend under the graph: each colour the graph uses
+    /// is drawn there, with what it means, inside the picture.
+    #[test]
+    fn the_legend_names_every_colour_inside_the_picture() {
+        let regions = RegionsScenario::builtin("regions").unwrap();
+        let state = regions.validate().unwrap();
+        let frame = Frame::around(state.graph.nodes(), state.regions.regions());
+        let (w, h) = (frame.w as i32, frame.h as i32);
+        let legend_h = legend_h_px(w);
+        let mut pic = Picture::new(w as u32, (h + legend_h) as u32, [250, 250, 250]);
+        pic.draw(|root| draw_legend(root, h, w)).unwrap();
+        let labels: Vec<&str> = legend().iter().map(|(_, l)| *l).collect();
+        for word in ["dock", "terminal", "held", "served", "pheromone", "−∞"] {
+            assert!(
+                labels.iter().any(|l| l.contains(word)),
+                "{word}: {labels:?}"
+            );
+        }
+        for ((swatch, label), (x, row)) in legend().into_iter().zip(legend_layout(w)) {
+            let y = h + 14 + row * LEGEND_ROW_PX;
+            assert!(
+                x >= 0 && y + 10 <= h + legend_h,
+                "{label} outside the picture"
+            );
+            let (px, rgb) = match swatch {
+                Swatch::Node(rgb) => ((x + 13, y), rgb),
+                Swatch::Region(rgb) => ((x + 14, y), rgb),
+                Swatch::Link(rgb) => ((x + 14, y), rgb),
+                Swatch::DashedLink => ((x + 2, y), [0, 0, 0]),
+            };
+            assert_eq!(pic.get(px.0 as usize, px.1 as usize), rgb, "{label}");
+        }
+        // A narrow picture wraps the legend onto more rows.
+        assert!(legend_h_px(300) > legend_h_px(1200));
     }
 }
