@@ -3,7 +3,8 @@
 //! leader lost its localization, labelled with its world x and the time. `blind_leader`: a cross
 //! where the follower gave the trail up. `wrong_area` (Figs. 1 and 24): area A (an outlined
 //! rectangle), location B (a circle of the radius within which a robot has reached it) and, in
-//! each follower's colour, a cross where it gave the trail up and explored on its own. The
+//! each follower's colour, a cross where it gave the trail up and explored on its own; in the
+//! leader's, a cross where its deposit first fell below the follower's threshold (Fig. 23). The
 //! crosses come from the metrics computed on the run, so they are in the pictures from their
 //! time on.
 
@@ -101,6 +102,10 @@ pub fn marks(scenario: &Scenario, rec: &Recording) -> Vec<Mark> {
         let outcome = wrong_area(scenario, m, rec);
         if let (Some(t), Some(at)) = (outcome.leader.lost_at_s, outcome.leader.lost_at_m) {
             out.push(event(m.leader, "lost at", at, t));
+        }
+        if let Some(c) = &outcome.deposit_below_threshold {
+            let what = format!("deposit < {} at", c.threshold);
+            out.push(event(m.leader, &what, c.true_m, c.t_s));
         }
         for f in outcome.followers {
             if let (Some(t), Some(at_m)) = (f.exploring_from_s, f.exploring_from_m) {

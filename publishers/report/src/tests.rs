@@ -377,3 +377,25 @@ fn the_leader_deposits_chart_marks_where_the_deposit_fell_below_the_followers_th
     none.threshold = None;
     assert_eq!(none.below_threshold_at(), None);
 }
+
+/// Issue 48: the field picture of `wrong-area-filter` marks where the leader's deposit first
+/// fell below the follower's threshold (10), in the leader's colour, from that time on.
+#[test]
+fn the_field_marks_where_the_leaders_deposit_fell_below_the_threshold() {
+    let scenario = Scenario::load("wrong-area-filter").unwrap();
+    let mut rec = Recording::default();
+    let peaks = [100.0f32, 50.0, 12.0, 8.0, 3.0];
+    let rows = (0..peaks.len()).map(|i| RobotSample {
+        deposit_peak: Some(peaks[i]),
+        ..sample(i as f64, 1.0 + i as f64, 1.5)
+    });
+    rec.robots.insert(0, rows.collect());
+    let all = marks(&scenario, &rec);
+    let m = all
+        .iter()
+        .find(|m| m.label.starts_with("R0 deposit < 10 at"))
+        .unwrap_or_else(|| panic!("no threshold mark in {all:?}"));
+    assert_eq!(m.label, "R0 deposit < 10 at x = 4.0 m (t = 3.0 s)");
+    assert_eq!(m.shape, Shape::Point { at_m: [4.0, 1.5] });
+    assert_eq!((m.rgb, m.from_s), (ROBOT_RGB[0], 3.0));
+}
