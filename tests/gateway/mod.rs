@@ -8,8 +8,8 @@
 mod backup;
 mod bound;
 mod follower_backup;
-mod refusals;
 mod radio;
+mod refusals;
 mod remote;
 mod serial;
 mod sources;
