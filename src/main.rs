@@ -64,12 +64,12 @@ struct Cli {
 enum Command {
     /// Run a whole scenario as separate processes and report what happened.
     Sim(Box<cmd::sim::SimArgs>),
-    /// Run seed 004's grid of experiments on all cores (exploration vs robots, R_C, merging), or
-    /// seed 002's parameter study of trail following (`sweep trail-following`).
+    /// Run paper 004's grid of experiments on all cores (exploration vs robots, R_C, merging), or
+    /// paper 002's parameter study of trail following (`sweep trail-following`).
     Sweep(cmd::sweep::SweepArgs),
     /// Run a field process: owns the grid, ticks, publishes frames, applies deposits.
     Field(Box<cmd::field::FieldArgs>),
-    /// Closed-form tuning of the evaporation rate (seed 000 eqs. 23 and 26).
+    /// Closed-form tuning of the evaporation rate (paper 000 eqs. 23 and 26).
     Tune(cmd::tune::TuneArgs),
     /// Run the simulator process (true poses, sensors, scripted deposits, the lockstep clock).
     World(cmd::roles::WorldArgs),
@@ -93,7 +93,7 @@ enum Command {
     List(cmd::list::ListArgs),
     /// Save a running field's next frame as NumPy .npy or as a ROS map_server map (PGM + YAML).
     Export(cmd::export::ExportArgs),
-    /// Serve a field to thin radio clients (seed 002's DLE/CRC frames over UDP).
+    /// Serve a field to thin radio clients (paper 002's DLE/CRC frames over UDP).
     Gateway(cmd::gateway::GatewayArgs),
     /// Serve a live web page of a running field: heat map, robots, statistics.
     View(cmd::view::ViewArgs),

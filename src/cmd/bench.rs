@@ -11,7 +11,7 @@ use super::{bad, bad_from};
 ///
 /// Hop latency (ours vs raw iceoryx2), frame delivery of 1 MiB and 16 MiB fields to 1 and 8
 /// reader processes (ours vs a Unix socket with serde, and Zenoh on loopback in a build with
-/// `--features zenoh`), deposit-to-visible latency, the tick/memcpy ratio at each size, and seed
+/// `--features zenoh`), deposit-to-visible latency, the tick/memcpy ratio at each size, and paper
 /// 002's PIR round trip to a `pheromone gateway` over UDP loopback beside a direct shared-memory
 /// read of the same antennas, with the PIRs per second one gateway core serves. With `--features
 /// zenoh`, a field mirror over Zenoh (a 1024² origin at 100 Hz in one iceoryx2 domain, a bridge,
@@ -75,7 +75,7 @@ enum SectionArg {
     Frames,
     /// Deposit to visible, and the field's CPU.
     Visible,
-    /// Seed 002's PIR through a gateway.
+    /// Paper 002's PIR through a gateway.
     Gateway,
     /// A field mirror over Zenoh (a build with --features zenoh).
     Mirror,
@@ -86,7 +86,7 @@ enum SectionArg {
     Scale,
     /// Tick-start lateness beside two busy loops, with and without real-time scheduling.
     Timing,
-    /// Seed 004's map merge vs memcpy.
+    /// Paper 004's map merge vs memcpy.
     Merge,
     /// CPU per published MB of `pheromone ros2` against a plain Zenoh publisher (a build with
     /// --features zenoh).
@@ -459,10 +459,10 @@ fn print_timing(r: &Report) {
     }
 }
 
-/// Seed 002's PIR through a gateway: round trip, the shared-memory read and the flood.
+/// Paper 002's PIR through a gateway: round trip, the shared-memory read and the flood.
 fn print_gateway(r: &Report) {
     if let Some(g) = &r.gateway_pir {
-        println!("\ngateway (seed 002 PIR)           p50       p99     p99.9       max");
+        println!("\ngateway (paper 002 PIR)           p50       p99     p99.9       max");
         println!(
             "PIR round trip, UDP    {}",
             lat(&g.pir_round_trip_ns, 1e-3, "µs")

@@ -17,11 +17,11 @@ pub enum ModelArg {
     None,
     /// P' = P·e^(−K·dt).
     Exponential,
-    /// Seed 000 ambient-aware: P' = P·e + (1 − e)·min(P, α·Pa).
+    /// Paper 000 ambient-aware: P' = P·e + (1 − e)·min(P, α·Pa).
     Ambient,
     /// Seeds 001/004: ξ' = (1 − ρ)·ξ, deposits saturate at ±1.
     Saturating,
-    /// Seed 002 counters: lose Q every τ seconds.
+    /// Paper 002 counters: lose Q every τ seconds.
     Quantum,
 }
 
@@ -35,7 +35,7 @@ pub enum ModelArg {
 /// default 512 × 512 × 1 grid with 8 readers uses 29 MiB of /dev/shm. The field refuses to start
 /// if /dev/shm has less free space.
 ///
-/// Without --config the field has one channel, 'trail', with the seed 000 ambient-aware model
+/// Without --config the field has one channel, 'trail', with the paper 000 ambient-aware model
 /// (K = 0.0057/s, α = 0.5, ambient radius 0.5 m). Flags override the file.
 ///
 /// Reliability: --checkpoint FILE saves the frame every --checkpoint-every seconds and at exit

@@ -1,4 +1,4 @@
-//! `pheromone gateway`: seed 002's pheromone server for thin radio clients (DLE/CRC frames over
+//! `pheromone gateway`: paper 002's pheromone server for thin radio clients (DLE/CRC frames over
 //! UDP or a serial line), in front of a running field.
 
 use std::time::Duration;
@@ -10,7 +10,7 @@ use pheromone_gateway::{serial, Gateway, GatewayConfig, Source};
 
 use super::bad;
 
-/// Serve a field to thin clients (seed 002): robots send DLE/CRC frames (docs/gateway-wire.md)
+/// Serve a field to thin clients (paper 002): robots send DLE/CRC frames (docs/gateway-wire.md)
 /// with their pose and get back the two virtual-antenna readings (PIR), send deposits, or ping.
 ///
 /// Binds loopback unless told otherwise. Bad CRCs are dropped and counted; malformed frames,

@@ -1,4 +1,4 @@
-//! `pheromone graph | graph-robot`, and `pheromone sim regions | regions-skeleton | …`: seed
+//! `pheromone graph | graph-robot`, and `pheromone sim regions | regions-skeleton | …`: paper
 //! 001's node-graph signalling with area capture and conflict resolution, as processes (or in
 //! one process with `--single-process`); `--trials T` pairs `--localize constant` and `rho` over
 //! T seeds.
@@ -149,7 +149,7 @@ pub struct GraphRobotArgs {
     /// Number of robots of the run.
     #[arg(long, value_parser = super::int::<usize>(1, 512), value_name = "N")]
     pub robots: usize,
-    /// pheromone (seed 001: anti-pheromone on links and region capture) or shortest-path
+    /// pheromone (paper 001: anti-pheromone on links and region capture) or shortest-path
     /// (A* to the nearest region, conflicts resolved on arrival).
     #[arg(long, default_value = "pheromone")]
     pub strategy: String,
@@ -159,7 +159,7 @@ pub struct GraphRobotArgs {
     /// Seconds to wait for the other robots and for each step.
     #[arg(long, value_parser = super::secs(), default_value_t = 30.0, value_name = "SECS")]
     pub timeout: f64,
-    /// Localize on landmarks with the EKF (seed 001 Algorithm 1, the scenario's `[localize]`
+    /// Localize on landmarks with the EKF (paper 001 Algorithm 1, the scenario's `[localize]`
     /// table): this robot owns its filter and its simulated sensors, seeded per robot as in
     /// `sim --single-process`; as a region holder it matches only its region's landmarks, else
     /// only the free areas'. Its link deposits are its constant −1 (`constant`) or −1 × ρ_t of

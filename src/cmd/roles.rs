@@ -126,7 +126,7 @@ pub fn run_world_cmd(a: WorldArgs) -> anyhow::Result<()> {
     print_json(a.common.json, &summary)
 }
 
-/// Run the localizer of one robot: the EKF of seed 001 Algorithm 1 (velocity motion model,
+/// Run the localizer of one robot: the EKF of paper 001 Algorithm 1 (velocity motion model,
 /// maximum-likelihood landmark association) over the world's sensor messages; publishes pose +
 /// covariance (pheromone/<WORLD>/r<ID>/pose) for every step. Settings come from the scenario's
 /// `[robot.localizer]` (noise α1..α4, gate, the `loss` knob that makes a robot lose its
@@ -142,7 +142,7 @@ pub struct LocalizerArgs {
     #[arg(long)]
     pub slam: bool,
     /// Associate observations only with the map landmarks inside this box (m): the captured
-    /// area of seed 001 Algorithm 1 lines 10–14. Overrides the scenario's
+    /// area of paper 001 Algorithm 1 lines 10–14. Overrides the scenario's
     /// `[robot.localizer] landmark_region_m`.
     #[arg(
         long,
@@ -152,7 +152,7 @@ pub struct LocalizerArgs {
         conflicts_with = "slam"
     )]
     pub landmark_region: Option<[f64; 4]>,
-    /// The filter: ekf (landmarks, the default), ukf (landmarks, seed 000 eqs. 6–8) or pf
+    /// The filter: ekf (landmarks, the default), ukf (landmarks, paper 000 eqs. 6–8) or pf
     /// (particle filter with the world's laser). Overrides the scenario's `filter` of the robot.
     #[arg(long, value_name = "ekf|ukf|pf", value_parser = parse_filter, conflicts_with = "slam")]
     pub filter: Option<pheromone_roles::localizer::FilterKind>,
@@ -197,7 +197,7 @@ pub fn run_localizer_cmd(a: LocalizerArgs) -> anyhow::Result<()> {
     print_json(a.common.json, &summary)
 }
 
-/// Run the mapper of one robot (seed 004, MODELS.md M4): integrates the robot's range scans
+/// Run the mapper of one robot (paper 004, MODELS.md M4): integrates the robot's range scans
 /// (sim/<WORLD>/r<ID>/scan) at its pose estimate (pheromone/<WORLD>/r<ID>/pose) into an
 /// occupancy grid (log-odds) and keeps its pheromone map, both in the robot's own frame (origin
 /// = its start pose), and publishes them every step as a frame of the field
@@ -235,7 +235,7 @@ pub fn run_mapper_cmd(a: MapperArgs) -> anyhow::Result<()> {
 
 #[derive(Clone, Copy, ValueEnum, Debug)]
 pub enum ModeArg {
-    /// Seed 000: γ = τ/det Σxy (capped), error-ellipse shape.
+    /// Paper 000: γ = τ/det Σxy (capped), error-ellipse shape.
     UncertaintyAware,
     /// Seeds 001/004: saturating deposit, ρt from the covariance.
     Saturating,
@@ -244,7 +244,7 @@ pub enum ModeArg {
 }
 
 /// Run the depositor of one robot: turns each pose + covariance into deposits on the field —
-/// seed 000 (amount ∝ 1/det Σxy, error-ellipse shape, only within z_rng, at intervals), or the
+/// paper 000 (amount ∝ 1/det Σxy, error-ellipse shape, only within z_rng, at intervals), or the
 /// saturating M2/M4 deposit, or constant. Settings come from the scenario's `[robot.depositor]`;
 /// flags override.
 #[derive(Args, Debug)]
@@ -257,7 +257,7 @@ pub struct DepositorArgs {
     /// Deposit mode.
     #[arg(long, value_enum)]
     pub mode: Option<ModeArg>,
-    /// Shorthand for --mode constant (the scheme seed 000 argues against).
+    /// Shorthand for --mode constant (the scheme paper 000 argues against).
     #[arg(long, conflicts_with = "mode")]
     pub constant: bool,
     /// Field channel to deposit into.
@@ -272,7 +272,7 @@ pub struct DepositorArgs {
     /// Deposit after this much time (s); 0 = off.
     #[arg(long, value_parser = super::secs0(), value_name = "SECS")]
     pub interval_s: Option<f64>,
-    /// τ of seed 000 eq. 12.
+    /// τ of paper 000 eq. 12.
     #[arg(long, value_parser = super::f32_pos(1e9))]
     pub tau: Option<f32>,
     /// Sensor range z_rng (m).
@@ -325,11 +325,11 @@ pub fn run_depositor_cmd(a: DepositorArgs) -> anyhow::Result<()> {
 
 /// Run the follower of one robot: reads the newest frame and the robot's pose, publishes a
 /// motion command (pheromone/<WORLD>/r<ID>/cmd) and a status (following / trail abandoned / exploring).
-/// Strategies: gradient (seed 000: climb ∇P, trail rejection, speed table), antenna (seed 002),
-/// inverse (seed 004 IAS-SS), uniform (seed 004's random baseline). Settings come from the
+/// Strategies: gradient (paper 000: climb ∇P, trail rejection, speed table), antenna (paper 002),
+/// inverse (paper 004 IAS-SS), uniform (paper 004's random baseline). Settings come from the
 /// scenario's `[robot.follower]`; flags override. With --gateway an antenna robot reads its two
-/// antennas only through PIR requests to `pheromone gateway` (seed 002's thin client), with an
-/// optional --backup gateway. With the scenario's `[mapping] steer_on = "own-map"` (seed 004)
+/// antennas only through PIR requests to `pheromone gateway` (paper 002's thin client), with an
+/// optional --backup gateway. With the scenario's `[mapping] steer_on = "own-map"` (paper 004)
 /// a sector follower reads its robot's map, field `<WORLD>-map-r<ID>` published by `pheromone
 /// mapper`, at its estimate in the map's frame, instead of the shared field.
 #[derive(Args, Debug)]

@@ -9,10 +9,10 @@ use pheromone_roles::depositor::{AmountForm, DepositorConfig};
 
 use super::{bad, bad_from};
 
-/// Depositor settings of `--deposit-from` (seed 000's uncertainty-aware deposit).
+/// Depositor settings of `--deposit-from` (paper 000's uncertainty-aware deposit).
 #[derive(Args, Debug, Clone)]
 pub struct RosDepositArgs {
-    /// τ of seed 000 (pheromone·m⁴): a pose deposits γ = τ / det Σxy at its peak, capped at
+    /// τ of paper 000 (pheromone·m⁴): a pose deposits γ = τ / det Σxy at its peak, capped at
     /// --gamma-max.
     #[arg(long, value_parser = super::f32_pos(1e9), default_value_t = 0.2)]
     pub tau: f32,
@@ -107,7 +107,7 @@ impl OccupancyArgs {
 /// lower-left corner; both transient local with a one-sample cache (a late subscriber gets the
 /// newest map at once). Each
 /// --deposit-from TOPIC[=ROBOT_ID] subscribes a geometry_msgs/msg/PoseWithCovarianceStamped
-/// topic (AMCL's /amcl_pose, robot_localization's pose) and turns each pose into seed 000's
+/// topic (AMCL's /amcl_pose, robot_localization's pose) and turns each pose into paper 000's
 /// deposit: γ = τ / det Σxy at the pose, the shape of its error ellipse, again once the robot
 /// moved --interval-m. Poses with a NaN or non-positive-definite covariance, another frame_id,
 /// another type or hash, or truncated CDR are refused and counted, never deposited.

@@ -375,7 +375,7 @@ impl indicatif::style::ProgressTracker for Eta {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Trials (seed 004's comparison)
+// Trials (paper 004's comparison)
 
 fn run_trials(a: &SimArgs, scenario: &Scenario, trials: u32, out: &Output) -> anyhow::Result<()> {
     if trials < 2 {

@@ -89,14 +89,14 @@ pub struct SimArgs {
     #[arg(long, value_name = "ADDR", value_parser = super::check::socket_addr(), num_args = 0..=1, default_missing_value = "127.0.0.1:8080",
           conflicts_with = "single_process")]
     pub view: Option<String>,
-    /// Seed 002's thin clients: the antenna robots read the field only through a `pheromone
+    /// Paper 002's thin clients: the antenna robots read the field only through a `pheromone
     /// gateway` this run starts (UDP on a loopback port the system picks), by PIR requests, with
     /// no shared memory of the field; the other roles are unchanged. Lockstep holds: a robot asks
     /// again until the PIR reply comes from the frame of its step. Separate processes only
     /// (`--single-process` has no processes to put a gateway between).
     #[arg(long, conflicts_with = "single_process")]
     pub remote: bool,
-    /// With --remote: N thin clients share one simulated radio channel (seed 002's shared air:
+    /// With --remote: N thin clients share one simulated radio channel (paper 002's shared air:
     /// listen-before-talk, random back-off, collisions, airtime at 9600 bit/s; the scenario's
     /// `[radio]` or its defaults, docs/gateway.md). The antenna robots are clients 0..R−1 (by
     /// ID), the rest send the same PIRs at the same rate; a step whose request the air loses
@@ -148,7 +148,7 @@ pub struct SimArgs {
     #[arg(long, requires = "rt_priority")]
     pub rt_best_effort: bool,
     /// Every depositor deposits a constant amount, whatever its localization (the traditional
-    /// scheme seed 000 argues against).
+    /// scheme paper 000 argues against).
     #[arg(long)]
     pub constant: bool,
     /// Strategy of every follower that is not a route-driven leader: gradient, antenna,
@@ -168,19 +168,19 @@ pub struct SimArgs {
     /// the field and the exploration sectors cover the map.
     #[arg(long, value_name = "FILE.yaml|NAME")]
     pub map: Option<PathBuf>,
-    /// Seed 004's local maps with integration: every robot maps with its range sensor and
+    /// Paper 004's local maps with integration: every robot maps with its range sensor and
     /// merges the maps of the robots it meets within R_C (`[mapping]`); adds
     /// `exploration_known` (sectors a robot knows, visited or merged) and the merge figures to
     /// the metrics.
     #[arg(long, conflicts_with = "no_merge")]
     pub merge: bool,
-    /// Seed 004's local maps without integration: every robot maps, none exchanges.
+    /// Paper 004's local maps without integration: every robot maps, none exchanges.
     #[arg(long)]
     pub no_merge: bool,
     /// The communication radius R_C of --merge (m, finite and > 0).
     #[arg(long, value_parser = super::f64_pos(1e6), value_name = "R", allow_negative_numbers = true)]
     pub rc_m: Option<f64>,
-    /// What the sector followers steer on (seed 004, `[mapping] steer_on`): `own-map`, each
+    /// What the sector followers steer on (paper 004, `[mapping] steer_on`): `own-map`, each
     /// robot's own local map, merged maps included (needs --merge or --no-merge), or `shared`,
     /// the shared field [default: the scenario's, shared].
     #[arg(long, value_name = "own-map|shared")]
@@ -189,13 +189,13 @@ pub struct SimArgs {
     #[arg(long)]
     pub slam: bool,
     /// Every localizer's filter: ekf (default), ukf, or pf (particle filter; turns the world's
-    /// laser of seed 000 Table 1 on).
+    /// laser of paper 000 Table 1 on).
     #[arg(long, value_name = "ekf|ukf|pf", value_parser = super::roles::parse_filter, conflicts_with = "slam")]
     pub filter: Option<pheromone_roles::localizer::FilterKind>,
     /// Particles of every particle filter (10..=100000).
     #[arg(long, value_name = "N", value_parser = super::roles::parse_particles)]
     pub particles: Option<usize>,
-    /// Seed 000's comparison of filters (Figs. 13–18): run the scenario once with each of ekf,
+    /// Paper 000's comparison of filters (Figs. 13–18): run the scenario once with each of ekf,
     /// ukf and pf (same seed, scripted loss off; --particles applies to the PF) and write, for
     /// one robot, `filters.csv`, the error in x, y, φ and combined against time, the deposits
     /// against time, σ against deposit (log–log) and `filters.json` (RMS errors, σ, deposits,
@@ -212,7 +212,7 @@ pub struct SimArgs {
     /// (`wrong-area-filter`: the old EKF loss script; docs/localization.md).
     #[arg(long, conflicts_with = "no_scripted_loss")]
     pub scripted_loss: bool,
-    /// Node-graph scenarios: every robot localizes on landmarks with the EKF (seed 001
+    /// Node-graph scenarios: every robot localizes on landmarks with the EKF (paper 001
     /// Algorithm 1; a region holder matches only its region's landmarks, the others only the
     /// free areas') and deposits on a link its constant −1 (`constant`) or −1 × ρ_t of its
     /// covariance (`rho`); the run reports the landmark comparisons and η1, η2 (eq. 13,

@@ -1,4 +1,4 @@
-//! `pheromone sim --compare-filters`: seed 000's comparison of localization filters (Figs.
+//! `pheromone sim --compare-filters`: paper 000's comparison of localization filters (Figs.
 //! 13–18). The scenario runs once per filter (EKF, UKF, PF), on the same seed and without its
 //! scripted loss, in the mode `sim` would use; one robot's estimation errors, deposits and σ
 //! from each run become `filters.csv`, six charts and `filters.json`.

@@ -1,4 +1,4 @@
-//! `pheromone sweep`: seed 004's grid of experiments (`pheromone_sim::sweep`) on all cores,
+//! `pheromone sweep`: paper 004's grid of experiments (`pheromone_sim::sweep`) on all cores,
 //! with a progress bar, a summary on stderr and the files of `pheromone_report::write_sweep`.
 
 use std::path::PathBuf;
@@ -18,10 +18,10 @@ use super::roles::load_scenario;
 use super::sweep_trail::{is_trail, TrailArgs};
 use super::{bad, bad_from};
 
-/// Run seed 004's grid of experiments (exploration with and without map merging), or seed 002's
+/// Run paper 004's grid of experiments (exploration with and without map merging), or paper 002's
 /// parameter study of trail following.
 ///
-/// Seed 002 (`pheromone sweep trail-following`, a scenario with [[metrics.paths]] and antenna
+/// Paper 002 (`pheromone sweep trail-following`, a scenario with [[metrics.paths]] and antenna
 /// robots): the robots' settings varied one at a time about the scenario's own, --omega-gain,
 /// --wheel-base, --fov, --splay, --speed, --normalize (none given: the study of docs/gateway.md,
 /// 23 settings); each value on seeds 1..=--trials, each run as separate processes (the default;
@@ -35,7 +35,7 @@ use super::{bad, bad_from};
 /// one process (the whole study at --trials 8: 220 s and 3 s). CI-sized: `pheromone sweep
 /// trail-following --trials 2 --single-process`.
 ///
-/// Seed 004 (`pheromone sweep ias-ss`):
+/// Paper 004 (`pheromone sweep ias-ss`):
 ///
 /// Every combination of --robots × --rc-m × merge {on, off} × --strategies × --steer runs
 /// --trials times (seeds 1..=T), each run the single-process simulation of the scenario
@@ -47,7 +47,7 @@ use super::{bad, bad_from};
 /// uniform on --figure's mean per robot (Welch's t and its df; the paired t, the seeds match).
 ///
 /// Steering (--steer) is a dimension like the others: `shared` steers every robot on the
-/// shared field (every robot's deposits, at any range), `own-map` on its own merged map (seed
+/// shared field (every robot's deposits, at any range), `own-map` on its own merged map (paper
 /// 004's Algorithm 2); each is its own point (CSV column steer_on, a chart line of its own).
 ///
 /// Writes into --out: sweep.csv (one row per run: what it computed, the same bytes on any host
@@ -58,7 +58,7 @@ use super::{bad, bad_from};
 /// the paper's peak as a dotted line; one radius makes no line, so no chart), mean ± sd error
 /// bars. A progress bar shows on a terminal only.
 ///
-/// Seed 004's Table 9: `pheromone sweep ias-ss-open --robots 5 --rc-m 4,8,16,24,32,40 --merge
+/// Paper 004's Table 9: `pheromone sweep ias-ss-open --robots 5 --rc-m 4,8,16,24,32,40 --merge
 /// --steer own-map,shared --figure merged` (30 m × 20 m, no inner walls, random starts in the
 /// top-left 5 m × 5 m, 1000 iterations, 10 seeds).
 ///
@@ -113,17 +113,17 @@ pub struct SweepArgs {
     /// Also the uniform strategy (the same as --strategies inverse,uniform).
     #[arg(long, conflicts_with = "strategies")]
     pub uniform: bool,
-    /// What the robots steer on, comma-separated: own-map (each robot's own merged map, seed
+    /// What the robots steer on, comma-separated: own-map (each robot's own merged map, paper
     /// 004's Algorithm 2), shared (the shared field: every robot's deposits at any range)
     /// [default: the scenario's [mapping] steer_on: shared in ias-ss, own-map in ias-ss-open].
     #[arg(long, value_name = "LIST", allow_hyphen_values = true)]
     pub steer: Option<String>,
-    /// Seed 004's ablation: how merges combine two maps, comma-separated: average (seed
+    /// Paper 004's ablation: how merges combine two maps, comma-separated: average (paper
     /// 004's mean), max (the larger occupancy and pheromone), adopt-unknown [default: the
     /// scenario's [mapping] merge_rule, average]. Each is a point (and chart line) of its own.
     #[arg(long = "merge-rule", value_name = "LIST", allow_hyphen_values = true)]
     pub merge_rule: Option<String>,
-    /// Seed 004's ablation, the cost of an integration: iterations a robot stands still after
+    /// Paper 004's ablation, the cost of an integration: iterations a robot stands still after
     /// each merge, comma-separated (e.g. 0,10,50) [default: the scenario's [mapping]
     /// merge_idle_iterations, 0]. Combined with every --merge-rule.
     #[arg(long = "merge-idle", value_name = "LIST", allow_hyphen_values = true)]

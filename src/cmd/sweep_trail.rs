@@ -1,4 +1,4 @@
-//! `pheromone sweep trail-following`: seed 002's parameter study
+//! `pheromone sweep trail-following`: paper 002's parameter study
 //! (`pheromone_sim::trail_sweep`), each run as processes by default (`--single-process`: in
 //! this one), and the files of `pheromone_report::write_trail_sweep`.
 
@@ -17,10 +17,10 @@ use super::out::Output;
 use super::stop::{self, Stopped};
 use super::{bad, bad_from};
 
-/// The flags of seed 002's study (a scenario with `[[metrics.paths]]` and antenna robots).
+/// The flags of paper 002's study (a scenario with `[[metrics.paths]]` and antenna robots).
 #[derive(Args, Debug, Default)]
 pub struct TrailArgs {
-    /// Trail study (seed 002): turn gains k of ω = k·(P_L − P_R) (rad/s), comma-separated,
+    /// Trail study (paper 002): turn gains k of ω = k·(P_L − P_R) (rad/s), comma-separated,
     /// each in (0, 100].
     #[arg(long = "omega-gain", value_name = "LIST", allow_hyphen_values = true)]
     pub omega_gain: Option<String>,
@@ -107,7 +107,7 @@ pub fn sweep(
         "as processes"
     };
     eprintln!(
-        "sweep '{}': seed 002's study, {sims} simulation(s) {mode}",
+        "sweep '{}': paper 002's study, {sims} simulation(s) {mode}",
         base.name
     );
     let bar = super::sim::progress_bar_of(sims as u64, "runs");

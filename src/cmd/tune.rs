@@ -1,4 +1,4 @@
-//! `pheromone tune`: seed 000 eqs. 23 and 26.
+//! `pheromone tune`: paper 000 eqs. 23 and 26.
 
 use clap::{Args, Subcommand};
 

@@ -237,7 +237,8 @@ fn readme_sim_and_sweep_lines() -> Vec<Vec<String>> {
 
 /// Issue 51: every README command works verbatim from any directory. The README's `sim` and
 /// `sweep` lines (the map a built-in name, not a path from the repository's root) run in an
-/// empty working directory outside the repository, shortened (`--single-process`, 1 simulated s;
+/// empty working directory outside the repository, shortened (`--single-process` where it
+/// applies, 1 simulated s;
 /// sweeps 2 trials of 2 s), and write their runs below it.
 #[test]
 fn the_readmes_sim_and_sweep_lines_run_from_an_empty_directory() {
@@ -251,7 +252,9 @@ fn the_readmes_sim_and_sweep_lines_run_from_an_empty_directory() {
     for line in &lines {
         let mut args = line.clone();
         if args[0] == "sim" {
-            if !args.contains(&"--single-process".to_string()) {
+            // --remote (a gateway and its clients) runs as processes only.
+            let single = ["--single-process", "--remote"];
+            if !args.iter().any(|a| single.contains(&a.as_str())) {
                 args.push("--single-process".into());
             }
             if !args[1].starts_with("regions") {

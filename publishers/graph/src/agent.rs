@@ -19,7 +19,7 @@ use super::{
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum GraphStrategy {
-    /// Seed 001: anti-pheromone on links, region capture, eq. 8 + eq. 9.
+    /// Paper 001: anti-pheromone on links, region capture, eq. 8 + eq. 9.
     Pheromone,
     /// Baseline: A* to the nearest region, no signalling, conflicts resolved on arrival.
     ShortestPath,
@@ -363,7 +363,7 @@ impl NodeRef {
 }
 
 /// `[map]` of a `regions` scenario: an occupancy map as text rows, skeletonized into the graph
-/// (seed 001 Fig. 7). The first row is the top (largest y); `#` is a wall, anything else free.
+/// (paper 001 Fig. 7). The first row is the top (largest y); `#` is a wall, anything else free.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MapConfig {
@@ -478,17 +478,17 @@ fn default_robots() -> Vec<usize> {
     vec![2, 3, 4]
 }
 
-/// Seed 001 Fig. 4: a 25 m corridor, regions B, C, A, D, E in increasing distance from the dock
+/// Paper 001 Fig. 4: a 25 m corridor, regions B, C, A, D, E in increasing distance from the dock
 /// (A twice the area of the others), two dead-end side passages.
 pub const PAPER_CORRIDOR: &str = include_str!("../../../examples/scenarios/regions.toml");
 
-/// Seed 001 Fig. 7: a map skeletonized into the graph, 8 robots, 7 regions, C with Max-R 2.
+/// Paper 001 Fig. 7: a map skeletonized into the graph, 8 robots, 7 regions, C with Max-R 2.
 pub const PAPER_SKELETON: &str = include_str!("../../../examples/scenarios/regions-skeleton.toml");
 
-/// Seed 001 Sec. 6.2: R1 is sent to region E depositing pheromone; R2 follows it.
+/// Paper 001 Sec. 6.2: R1 is sent to region E depositing pheromone; R2 follows it.
 pub const PAPER_BACKUP: &str = include_str!("../../../examples/scenarios/regions-backup.toml");
 
-/// Seed 001's corridor with few landmarks (one pair per 4 m, seen within 2 m): ρ_t varies,
+/// Paper 001's corridor with few landmarks (one pair per 4 m, seen within 2 m): ρ_t varies,
 /// the captures do not (the corridor is a tree).
 pub const REGIONS_SPARSE: &str = include_str!("../../../examples/scenarios/regions-sparse.toml");
 

@@ -1,4 +1,4 @@
-//! Region capture against the shortest-path baseline (seed 001 Fig. 4c): per robot count, the
+//! Region capture against the shortest-path baseline (paper 001 Fig. 4c): per robot count, the
 //! time to the goal with each strategy, their conflicts and the ratio.
 
 use serde::Serialize;

@@ -1,4 +1,4 @@
-//! Conflict resolution (seed 001 Sec. 5.1): robots contending for a region exchange the JSON
+//! Conflict resolution (paper 001 Sec. 5.1): robots contending for a region exchange the JSON
 //! message of Listing 1 and every robot computes the same winner from the same messages.
 //!
 //! Order (the paper's): the higher task priority wins; then more battery; then the lower

@@ -1,4 +1,4 @@
-//! Node-graph signalling (seed 001, MODELS.md M2): the passages of the map as a graph of nodes
+//! Node-graph signalling (paper 001, MODELS.md M2): the passages of the map as a graph of nodes
 //! with up to [`MAX_LINKS`] diverging links (up, down, left, right), each carrying an `f32`
 //! pheromone value (positive attracts, negative repels, −∞ marks a dead end), plus a table of
 //! service regions that robots capture, serve and release.

@@ -1,4 +1,4 @@
-//! Seed 001 Sec. 5 (Algorithm 1) coupled to area capture: graph robots localize on landmarks.
+//! Paper 001 Sec. 5 (Algorithm 1) coupled to area capture: graph robots localize on landmarks.
 //!
 //! - [`graph_landmarks`] places the world's landmarks along the links of the graph (both sides
 //!   of each passage, every `landmark_spacing_m`), each with a signature.

@@ -182,7 +182,7 @@ pub struct RobotOptions<'a> {
     pub seed: u64,
     /// How long to wait for the other robots and for each step.
     pub timeout: Duration,
-    /// The robot localizes on landmarks (seed 001 Algorithm 1): it owns its filter and its
+    /// The robot localizes on landmarks (paper 001 Algorithm 1): it owns its filter and its
     /// sensors, seeded per robot as in one process, and weighs its link deposits by ρ_t
     /// before they go out in its update messages.
     pub localization: Option<Localization<'a>>,

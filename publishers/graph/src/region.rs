@@ -1,4 +1,4 @@
-//! The region table (seed 001 Sec. 4.2): service regions that robots capture, serve and
+//! The region table (paper 001 Sec. 4.2): service regions that robots capture, serve and
 //! release. A region never holds more than its Max-R robots; a capture lowers its value by 1
 //! (anti-pheromone: served or being served), and eq. 9 sends a robot to the nearest region with
 //! room and the largest value.
@@ -340,7 +340,7 @@ impl RegionTable {
         }
     }
 
-    /// Seed 001 Algorithm 1 lines 10–14: the landmarks a robot matches observations against.
+    /// Paper 001 Algorithm 1 lines 10–14: the landmarks a robot matches observations against.
     /// A robot holding a region: the landmarks inside it, l(A_c). Otherwise: every landmark
     /// not inside a region captured by someone, l(A) − l(A_c). Indices into `landmarks_m`,
     /// for `localizer::Ekf::set_landmark_filter`.

@@ -96,7 +96,7 @@ pub struct GraphRobot {
     pub captured: u32,
     /// Nodes reached, in order (the dock first).
     pub path: Vec<usize>,
-    /// Seed 001 Algorithm 1 on landmarks, when the run localizes ([`GraphRobot::localize`]).
+    /// Paper 001 Algorithm 1 on landmarks, when the run localizes ([`GraphRobot::localize`]).
     pub localizer: Option<Box<RobotLocalizer>>,
 }
 
@@ -158,7 +158,7 @@ impl GraphRobot {
         })
     }
 
-    /// Gives this robot a landmark localizer (seed 001 Algorithm 1), starting at the dock.
+    /// Gives this robot a landmark localizer (paper 001 Algorithm 1), starting at the dock.
     pub fn localize(
         &mut self,
         loc: &Localization,
@@ -327,7 +327,7 @@ impl GraphRobot {
         Ok(out)
     }
 
-    /// Seed 001 Sec. 5.1: the claimants of a region exchange their messages; every robot sorts
+    /// Paper 001 Sec. 5.1: the claimants of a region exchange their messages; every robot sorts
     /// them in the paper's order, and the first `room` win.
     fn resolve(
         &mut self,
@@ -699,7 +699,7 @@ pub fn simulate(
 }
 
 /// [`simulate`], with every robot localizing on landmarks when `localization` is given
-/// (seed 001 Algorithm 1 coupled to area capture, [`super::localize`]).
+/// (paper 001 Algorithm 1 coupled to area capture, [`super::localize`]).
 pub fn simulate_with(
     scenario: &RegionsScenario,
     strategy: GraphStrategy,

@@ -150,7 +150,7 @@ fn localization_lines(s: &mut String, r: &RunReport) {
     let us = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{:.1} µs", v / 1e3));
     let _ = writeln!(
         s,
-        "\nLocalization (seed 001 Algorithm 1, deposits {}): {} landmarks, {} observations, {} used",
+        "\nLocalization (paper 001 Algorithm 1, deposits {}): {} landmarks, {} observations, {} used",
         l.config.deposit.name(),
         a.landmarks,
         a.observations,

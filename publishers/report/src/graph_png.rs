@@ -1,4 +1,4 @@
-//! The picture of a node-graph run (seed 001 Figs. 4b, 5 and 7): regions, links coloured by
+//! The picture of a node-graph run (paper 001 Figs. 4b, 5 and 7): regions, links coloured by
 //! their final value, nodes and the dock.
 
 use std::fs;

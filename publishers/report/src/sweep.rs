@@ -152,7 +152,7 @@ fn figure_words(f: pheromone_sim::sweep::Figure) -> &'static str {
 /// ours beside it (what the sweep has no point for says so).
 pub fn paper_table(r: &SweepResult, paper: &[PaperValue]) -> String {
     let mut text = format!(
-        "# Seed 004 beside sweep '{}' ({} s, {} trial(s), figure: {})\n\n| table | paper | ours |\n| --- | --- | --- |\n",
+        "# Paper 004 beside sweep '{}' ({} s, {} trial(s), figure: {})\n\n| table | paper | ours |\n| --- | --- | --- |\n",
         r.scenario,
         r.duration_s,
         r.trials,

@@ -1,4 +1,4 @@
-//! What `pheromone sweep trail-following` writes (seed 002's parameter study,
+//! What `pheromone sweep trail-following` writes (paper 002's parameter study,
 //! `pheromone_sim::trail_sweep`): `sweep.csv` (one row per run and path: the parameter, its
 //! value, whether it is the scenario's, the seed, the mean path error and the turning share),
 //! `sweep.json` (the runs and the points, mean ± sd over the seeds) and `sweep_trail.png`: a
@@ -117,7 +117,7 @@ fn chart(r: &TrailSweep) -> Result<Picture, String> {
     {
         let root = pic.area()?;
         root.draw_text(
-            &format!("Seed 002's parameter study: '{}'", r.scenario),
+            &format!("Paper 002's parameter study: '{}'", r.scenario),
             &text(22),
             (16, 10),
         )

@@ -1,4 +1,4 @@
-//! Seed 004's grid of experiments (`pheromone sweep`): robots × R_C × merge {on, off} ×
+//! Paper 004's grid of experiments (`pheromone sweep`): robots × R_C × merge {on, off} ×
 //! strategy × steering (shared field, own map) × trials, each run the single-process runner ([`run_single_process`]) on the
 //! scenario with its overrides and the seeds 1..=T, in parallel on a work queue
 //! (`std::thread::scope`, one worker per job). Per run: `exploration_known` (team, mean per
@@ -131,7 +131,7 @@ pub struct SweepGrid {
     pub strategies: Vec<StrategyKind>,
     /// Empty: the scenario's `[mapping] steer_on` only.
     pub steer: Vec<SteerOn>,
-    /// How merges combine and what they cost (seed 004's ablations); empty: the scenario's
+    /// How merges combine and what they cost (paper 004's ablations); empty: the scenario's
     /// `[mapping] merge_rule` and `merge_idle_iterations` only.
     pub integration: Vec<Integration>,
     pub trials: u32,
@@ -141,7 +141,7 @@ pub struct SweepGrid {
 }
 
 /// How a point's merges combine two maps and what one costs: `[mapping] merge_rule` and
-/// `merge_idle_iterations` (seed 004's ablations: merge by max; k idle iterations per merge).
+/// `merge_idle_iterations` (paper 004's ablations: merge by max; k idle iterations per merge).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 pub struct Integration {
     #[serde(serialize_with = "rule_name")]
@@ -154,7 +154,7 @@ fn rule_name<S: serde::Serializer>(k: &MergeRule, s: S) -> Result<S::Ok, S::Erro
 }
 
 impl Integration {
-    /// `max, 10 idle`; empty for seed 004's own (average, free).
+    /// `max, 10 idle`; empty for paper 004's own (average, free).
     pub fn words(self) -> String {
         let mut w = Vec::new();
         if self.merge_rule != MergeRule::Average {

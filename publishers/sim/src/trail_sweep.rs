@@ -1,4 +1,4 @@
-//! Seed 002's parameter study (`pheromone sweep trail-following`, issue 49 part 4): the
+//! Paper 002's parameter study (`pheromone sweep trail-following`, issue 49 part 4): the
 //! antenna robots' settings varied one at a time about the scenario's own — the turn gain, the
 //! antenna spacing b, each antenna's field of view and splay, the forward speed K and the
 //! normalisation of the readings — each value run on seeds 1..=T by the caller's runner (as
@@ -170,7 +170,7 @@ fn decimal(x: f32) -> f64 {
     x.to_string().parse().unwrap_or(f64::from(x))
 }
 
-/// Seed 002's study as issue 49 ran it by hand (docs/gateway.md), each list with the
+/// Paper 002's study as issue 49 ran it by hand (docs/gateway.md), each list with the
 /// scenario's value added: what `sweep trail-following` runs when no list is given.
 pub fn default_study() -> Vec<(TrailParam, Vec<f64>)> {
     vec![
