@@ -312,6 +312,8 @@ pub struct SharedAir {
     pending: Vec<Pending>,
     /// Resolved exchanges of periods not returned yet: `(period, client, exchange)`.
     resolved: Vec<(u64, u32, Exchange)>,
+    /// How many of `resolved` belong to period `next`.
+    resolved_next: usize,
     next: u64,
     stats: AirStats,
 }
@@ -349,6 +351,7 @@ impl SharedAir {
                 config.clients as usize
             ],
             resolved: Vec::new(),
+            resolved_next: 0,
             next: 0,
             stats: AirStats::default(),
             phases_ns,
@@ -373,9 +376,8 @@ impl SharedAir {
     /// Every client's exchange of the next period (0, 1, 2, …), indexed by client.
     pub fn next_period(&mut self) -> Vec<Exchange> {
         let k = self.next;
-        self.next += 1;
         let n = self.config.clients as usize;
-        while self.resolved.iter().filter(|r| r.0 == k).count() < n {
+        while self.resolved_next < n {
             let Some(Reverse((t, _, event))) = self.queue.pop() else {
                 break;
             };
@@ -391,6 +393,8 @@ impl SharedAir {
                 true
             }
         });
+        self.next += 1;
+        self.resolved_next = self.resolved.iter().filter(|r| r.0 == self.next).count();
         // Frames that ended before now matter to no one any more (their end events are past).
         while self.txs.front().is_some_and(|tx| tx.end_ns < self.now_ns) {
             self.txs.pop_front();
@@ -554,6 +558,9 @@ impl SharedAir {
         if p.exchange.delivered {
             self.stats.delivered += 1;
             self.stats.latency_sum_ns += p.exchange.latency_ns;
+        }
+        if p.period == self.next {
+            self.resolved_next += 1;
         }
         self.resolved.push((p.period, client, p.exchange));
     }

@@ -250,3 +250,13 @@ fn bad_values_are_refused_by_key_and_value() {
     assert!(e.starts_with("radio.period_s = 0"), "{e}");
     assert!(RadioConfig::default().validate().is_ok());
 }
+
+#[test]
+fn the_most_clients_are_resolved_every_period() {
+    let (out, stats) = run(&config(1024), 11, 3);
+    assert!(out.iter().all(|p| p.len() == 1024));
+    // Two exchanges fit in a period: most of 1024 clients get nothing, none is lost track of.
+    let delivered: usize = out.iter().flatten().filter(|e| e.delivered).count();
+    assert!(delivered <= 3 * 2, "{delivered}");
+    assert!(stats.requests >= 3 * 1024, "{stats:?}");
+}
