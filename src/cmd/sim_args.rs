@@ -102,7 +102,7 @@ pub struct SimArgs {
     /// ID), the rest send the same PIRs at the same rate; a step whose request the air loses
     /// keeps the robot's last command. metrics.radio reports delivered/sent, collisions and
     /// latency.
-    #[arg(long, value_name = "N", requires = "remote")]
+    #[arg(long, value_name = "N", requires = "remote", value_parser = super::int::<u32>(1, 1024))]
     pub clients: Option<u32>,
     /// Show the run in ROS 2 while it runs (a build with --features zenoh; separate processes
     /// only): starts `pheromone ros2 --field F --world W --robots IDS --connect ENDPOINT` as a

@@ -84,6 +84,7 @@ const ANY_U64: Domain = int(0.0, u64::MAX as f64);
 /// numeric but missing here fails the test.
 const DOMAINS: &[(&str, &str, Domain)] = &[
     ("sim", "--robots", int(1.0, 512.0)),
+    ("sim", "--clients", int(1.0, 1024.0)),
     ("sim", "--seed", ANY_U64),
     ("sim", "--duration", SECS),
     ("sim", "--trials", int(2.0, 100_000.0)),
