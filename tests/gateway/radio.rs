@@ -121,7 +121,7 @@ fn a_lone_client_gets_every_reply_and_follows_as_without_a_radio() {
 fn radio_settings_out_of_range_are_refused_by_key_and_value() {
     let o = run(&["sim", "trail-following", "--remote", "--clients", "0"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(stderr(&o).contains("radio.clients = 0"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--clients 0"), "{}", stderr(&o));
     // Both robots are clients on the air: one client is too few.
     let o = run(&["sim", "trail-following", "--remote", "--clients", "1"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
@@ -137,6 +137,7 @@ fn radio_settings_out_of_range_are_refused_by_key_and_value() {
         ("bitrate_bps = -5.0", "radio.bitrate_bps = -5"),
         ("loss_probability = 2.0", "radio.loss_probability = 2"),
         ("slot_s = 0.0", "radio.slot_s = 0"),
+        ("backoff_slots = 0", "radio.backoff_slots = 0"),
     ] {
         let path = dir.join("radio.toml");
         std::fs::write(&path, format!("{text}\n[radio]\nclients = 4\n{line}\n")).unwrap();
