@@ -330,6 +330,9 @@ fn chart(
     let figure = r.figure;
     let lines = lines(&r.points, axis);
     let (lo, hi) = x_span(&lines, axis);
+    // The axis holds the paper's marks too, so that none is cut at the edge.
+    let (plo, phi) = paper_x_span(r, paper, axis).unwrap_or((lo, hi));
+    let (lo, hi) = (lo.min(plo), hi.max(phi));
     let pad = ((hi - lo) * 0.06).max(0.5);
     let (title, x_desc) = titles(axis);
     let mut pic = blank();
@@ -356,15 +359,91 @@ fn chart(
             .map_err(msg)?;
         // One colour per line whatever its merge setting; merge off dashed.
         let mut colours: Vec<PointKey> = Vec::new();
+        let mut labels = Vec::new();
+        let mut occupied = Vec::new();
         for l in &lines {
             let rgb: Rgb = series_rgb(colour_index(&mut colours, axis, &l.key));
-            draw_line(&mut chart, l, axis, rgb, (lo, hi), pad, figure)?;
+            labels.push(draw_line(&mut chart, l, axis, rgb, (lo, hi), pad, figure)?);
+            // A no-merge point drawn across the R_C axis covers the whole width.
+            let across = axis == Axis::Rc && !l.key.merge && l.points.len() == 1;
+            for p in &l.points {
+                let (m, s) = (p.figure(figure).mean, p.figure(figure).sd);
+                for y in [m - s, m, m + s] {
+                    occupied.push((axis.x(&p.key), 100.0 * y));
+                    if across {
+                        occupied.extend(
+                            (0..=20).map(|k| (lo + (hi - lo) * k as f64 / 20.0, 100.0 * y)),
+                        );
+                    }
+                }
+            }
         }
-        draw_paper(&mut chart, r, paper, axis)?;
-        series_labels(&mut chart, SeriesLabelPosition::LowerRight)?;
+        for (label, points) in draw_paper(&mut chart, r, paper, axis)? {
+            labels.push(label);
+            occupied.extend(points);
+        }
+        let pixels: Vec<(i32, i32)> = occupied
+            .iter()
+            .map(|&(x, y)| chart.backend_coord(&(x, y)))
+            .collect();
+        let corner = legend_corner(chart.plotting_area().get_pixel_range(), &labels, &pixels);
+        series_labels(&mut chart, corner)?;
         root.present().map_err(msg)?;
     }
     Ok(pic)
+}
+
+/// The legend's place: the first corner of the plotting area (`x` × `y` px) where its box
+/// (estimated from the `labels`) covers none of the data's `pixels` (means, mean ± sd, the
+/// paper's marks); lower right if every corner covers some.
+fn legend_corner(
+    (x, y): (std::ops::Range<i32>, std::ops::Range<i32>),
+    labels: &[String],
+    pixels: &[(i32, i32)],
+) -> SeriesLabelPosition {
+    let w = labels
+        .iter()
+        .map(|l| super::heatmap::text_width(l))
+        .max()
+        .unwrap_or(0)
+        + 60;
+    let h = labels.len() as i32 * 20 + 20;
+    let (m, pad) = (10, 8); // plotters' margin from the area's edge; points' radius
+    let boxes = [
+        (
+            SeriesLabelPosition::LowerRight,
+            x.end - m - w,
+            y.end - m - h,
+        ),
+        (SeriesLabelPosition::UpperRight, x.end - m - w, y.start + m),
+        (SeriesLabelPosition::LowerLeft, x.start + m, y.end - m - h),
+        (SeriesLabelPosition::UpperLeft, x.start + m, y.start + m),
+    ];
+    boxes
+        .into_iter()
+        .find(|&(_, bx, by)| {
+            !pixels.iter().any(|&(px, py)| {
+                px + pad >= bx && px - pad <= bx + w && py + pad >= by && py - pad <= by + h
+            })
+        })
+        .map_or(SeriesLabelPosition::LowerRight, |(c, _, _)| c)
+}
+
+/// The lowest and highest x of the paper's marks [`draw_paper`] draws on `axis`, if any.
+fn paper_x_span(r: &SweepResult, paper: &[PaperValue], axis: Axis) -> Option<(f64, f64)> {
+    let ran = |p: &&PaperValue| r.points.iter().any(|x| x.key.strategy == p.strategy);
+    let xs = paper
+        .iter()
+        .filter(ran)
+        .filter_map(|p| match (axis, p.kind, p.robots) {
+            (Axis::Robots, PaperKind::MeanPct | PaperKind::MaxPct, Some(n)) => Some(n as f64),
+            (Axis::Rc, PaperKind::PeakRcM, _) => Some(p.value),
+            _ => None,
+        });
+    xs.fold(None, |span, x| match span {
+        None => Some((x, x)),
+        Some((a, b)) => Some((x.min(a), x.max(b))),
+    })
 }
 
 /// The lowest and highest x of the lines' points ((0, 1) if there is none).
@@ -431,7 +510,8 @@ macro_rules! legend_sample {
     }};
 }
 
-/// Draws one line (dashed without merging), its legend entry, error bars and dots.
+/// Draws one line (dashed without merging), its legend entry, error bars and dots; returns the
+/// legend entry's text.
 fn draw_line<'a, 'b: 'a>(
     chart: &mut Chart<'a, 'b>,
     l: &Line<'_>,
@@ -440,7 +520,7 @@ fn draw_line<'a, 'b: 'a>(
     (lo, hi): (f64, f64),
     pad: f64,
     figure: pheromone_sim::sweep::Figure,
-) -> Result<(), String> {
+) -> Result<String, String> {
     let style = colour(rgb).stroke_width(2);
     let mut xy: Vec<(f64, f64)> = l
         .points
@@ -466,7 +546,8 @@ fn draw_line<'a, 'b: 'a>(
             .map_err(msg)?
     };
     let merge = l.key.merge;
-    anno.label(line_label(l, axis, across))
+    let label = line_label(l, axis, across);
+    anno.label(label.clone())
         .legend(move |(x, y)| legend_sample!(merge, rgb, (x, y)));
     draw_error_bars(chart, l, axis, style, 0.12 * pad, figure)?;
     // The dots: filled with merging, rings (white inside) without.
@@ -487,7 +568,7 @@ fn draw_line<'a, 'b: 'a>(
             )
             .map_err(msg)?;
     }
-    Ok(())
+    Ok(label)
 }
 
 /// A line's legend text; a no-merge line drawn across the R_C axis says so.
@@ -529,15 +610,20 @@ fn draw_error_bars<'a, 'b: 'a>(
     Ok(())
 }
 
+/// A paper value's legend text and the chart points its mark covers.
+type PaperMark = (String, Vec<(f64, f64)>);
+
 /// The paper's values on a chart, in black: on the robots axis a cross at each percentage of a
 /// strategy the sweep ran (Tables 2 and 6); on the R_C axis a dotted vertical line at its peak
-/// (Table 9). Each has a legend entry citing its table.
+/// (Table 9). Each has a legend entry citing its table. Returns each entry's text and the
+/// points its mark covers.
 fn draw_paper<'a, 'b: 'a>(
     chart: &mut Chart<'a, 'b>,
     r: &SweepResult,
     paper: &[PaperValue],
     axis: Axis,
-) -> Result<(), String> {
+) -> Result<Vec<PaperMark>, String> {
+    let mut drawn = Vec::new();
     let black = colour([0, 0, 0]).stroke_width(2);
     let ran = |p: &PaperValue| r.points.iter().any(|x| x.key.strategy == p.strategy);
     for p in paper.iter().filter(|p| ran(p)) {
@@ -549,15 +635,17 @@ fn draw_paper<'a, 'b: 'a>(
                 } else {
                     "at most"
                 };
+                let label = format!(
+                    "paper, Table {}: {}, {n} robots, {words} {} %",
+                    p.table,
+                    p.strategy.name(),
+                    p.value
+                );
+                drawn.push((label.clone(), vec![at]));
                 chart
                     .draw_series(std::iter::once(Cross::new(at, 6, black)))
                     .map_err(msg)?
-                    .label(format!(
-                        "paper, Table {}: {}, {n} robots, {words} {} %",
-                        p.table,
-                        p.strategy.name(),
-                        p.value
-                    ))
+                    .label(label)
                     .legend(move |(x, y)| Cross::new((x + 12, y), 6, black));
             }
             (Axis::Rc, PaperKind::PeakRcM, _) => {
@@ -569,10 +657,13 @@ fn draw_paper<'a, 'b: 'a>(
                         black,
                     )))
                     .map_err(msg)?
-                    .label(format!(
-                        "paper, Table {}: peak at R_C = {} m",
-                        p.table, p.value
-                    ))
+                    .label({
+                        let label =
+                            format!("paper, Table {}: peak at R_C = {} m", p.table, p.value);
+                        let line = (0..=21).map(|k| (p.value, 5.0 * k as f64)).collect();
+                        drawn.push((label.clone(), line));
+                        label
+                    })
                     // Dotted like the line: three dashes.
                     .legend(move |(x, y)| {
                         EmptyElement::at((x, y))
@@ -584,7 +675,7 @@ fn draw_paper<'a, 'b: 'a>(
             _ => {}
         }
     }
-    Ok(())
+    Ok(drawn)
 }
 
 #[cfg(test)]
@@ -615,6 +706,26 @@ mod tests {
             alignment_error_m: merge.then_some(0.25),
             wall_s: 0.1,
         }
+    }
+
+    /// Issue 51: the legend goes to a corner where it covers no data: data in the lower
+    /// right sends it to the upper right; data in every corner leaves it lower right.
+    #[test]
+    fn the_legend_takes_a_corner_free_of_data() {
+        let area = (0..800, 0..400);
+        let labels = vec!["merge: inverse, 5 robot(s)".to_string(); 3];
+        let corner = |pixels: &[(i32, i32)]| legend_corner(area.clone(), &labels, pixels);
+        assert!(matches!(corner(&[]), SeriesLabelPosition::LowerRight));
+        assert!(matches!(
+            corner(&[(780, 380)]),
+            SeriesLabelPosition::UpperRight
+        ));
+        assert!(matches!(
+            corner(&[(780, 380), (780, 20)]),
+            SeriesLabelPosition::LowerLeft
+        ));
+        let all = [(780, 380), (780, 20), (20, 380), (20, 20)];
+        assert!(matches!(corner(&all), SeriesLabelPosition::LowerRight));
     }
 
     #[test]
