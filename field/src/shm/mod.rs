@@ -247,6 +247,9 @@ fn create_node_with(name: &str, mut domain: Config) -> Result<Node<Svc>, AttachE
         domain.global.node.cleanup_dead_nodes_on_creation = false;
         domain.global.node.cleanup_dead_nodes_on_destruction = false;
         domain.global.service.cleanup_dead_nodes_on_open = false;
+        // 3N processes start at once: at 256 robots on 2 cores one try at opening or creating a
+        // service took iceoryx2's whole 1 s and a follower gave up (issue 52).
+        domain.global.creation_timeout = domain.global.creation_timeout.max(RUN_CREATION_TIMEOUT);
     }
     let node_name = NodeName::new(name).map_err(|e| NameError::Iceoryx {
         name: name.to_string(),
@@ -308,6 +311,9 @@ fn create_node_with(name: &str, mut domain: Config) -> Result<Node<Svc>, AttachE
 /// node of the host (a TOML file each), so N children walking N nodes made a run's start-up grow
 /// as N² (issue 52: 64 robots, 194 processes, started in 226 s in a debug build, 67 s of it at 32).
 pub const CLEANED_BY_SUPERVISOR_ENV: &str = "PHEROMONE_CLEANED_BY_SUPERVISOR";
+
+/// How long a process of a sim's run retries opening or creating a service another creates.
+const RUN_CREATION_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// Whether this process's supervisor removes what dead nodes leave ([`CLEANED_BY_SUPERVISOR_ENV`]).
 pub fn cleaned_by_supervisor() -> bool {

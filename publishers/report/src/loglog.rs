@@ -79,6 +79,20 @@ fn short(v: f64) -> String {
     format!("{v:.decimals$}")
 }
 
+/// The label of a log axis's tick: only 1, 2 and 5 times a power of ten are labelled (the ticks
+/// between them are dense enough that their labels run into each other: "60708090100").
+fn log_tick(v: f64, label: impl Fn(f64) -> String) -> String {
+    if !(v.is_finite() && v > 0.0) {
+        return String::new();
+    }
+    let mantissa = v / 10f64.powf(v.log10().floor());
+    let lead = mantissa.round();
+    match [1.0, 2.0, 5.0, 10.0].contains(&lead) && (mantissa - lead).abs() < 0.01 * lead {
+        true => label(v),
+        false => String::new(),
+    }
+}
+
 fn draw_panel(area: &Area<'_>, panel: &LogLogPanel, x_label: &str) -> Result<(), String> {
     let points = |s: &LogLogSeries| -> Vec<(f64, f64)> {
         s.points
@@ -102,8 +116,8 @@ fn draw_panel(area: &Area<'_>, panel: &LogLogPanel, x_label: &str) -> Result<(),
         .x_label_style(text(12))
         .y_label_style(text(12))
         .light_line_style(WHITE)
-        .x_label_formatter(&|v| format!("{v:.0}"))
-        .y_label_formatter(&|v| short(*v))
+        .x_label_formatter(&|v| log_tick(*v, |v| format!("{v:.0}")))
+        .y_label_formatter(&|v| log_tick(*v, short))
         .draw()
         .map_err(msg)?;
     if let Some(&(fx, fy)) = panel
@@ -149,6 +163,19 @@ fn draw_panel(area: &Area<'_>, panel: &LogLogPanel, x_label: &str) -> Result<(),
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_one_two_and_five_times_a_power_of_ten_are_labelled() {
+        let l = |v: f64| log_tick(v, short);
+        assert_eq!(l(10.0), "10");
+        assert_eq!(l(20.0), "20");
+        assert_eq!(l(500.0), "500");
+        assert_eq!(l(0.05), "0.050");
+        assert_eq!(l(1000.0000001), "1000");
+        for v in [30.0, 60.0, 70.0, 80.0, 90.0, 0.3, 4000.0, 0.0, f64::NAN] {
+            assert_eq!(l(v), "", "{v}");
+        }
+    }
 
     #[test]
     fn tick_labels_carry_the_decimals_their_size_needs() {
