@@ -128,7 +128,7 @@ fn scenario_of(a: &SimArgs) -> anyhow::Result<Scenario> {
 
 /// One run of the scenario, its summary, metrics and files.
 fn run_scenario(a: &SimArgs, scenario: &Scenario, out: &Output) -> anyhow::Result<()> {
-    if a.remote && pheromone_sim::processes::remote_robots(scenario).is_empty() {
+    if a.remote && scenario.antenna_robots().is_empty() {
         return Err(bad(format!(
             "--remote: scenario '{}' has no robot with an antenna follower (try trail-following)",
             scenario.name

@@ -150,7 +150,7 @@ impl RunMetrics {
                 // Only thin clients share the air.
                 radio: (mode == RunMode::ProcessesRemote)
                     .then(|| {
-                        let robots = crate::processes::remote_robots(scenario);
+                        let robots = scenario.antenna_robots();
                         crate::radio::radio_metrics(scenario, &robots, s.steps)
                     })
                     .flatten(),

@@ -180,7 +180,7 @@ impl Children {
         }
         // --remote: the gateway serves the field to the antenna robots; they start once it serves.
         let remote = if o.remote {
-            remote_robots(scenario)
+            scenario.antenna_robots()
         } else {
             Vec::new()
         };

@@ -68,21 +68,6 @@ pub struct ProcessRunOptions<'a> {
     pub record: Option<SimMcap>,
 }
 
-/// The robots of `scenario` whose follower uses the antenna strategy: the ones a `--remote` run
-/// serves through a gateway.
-pub fn remote_robots(scenario: &Scenario) -> Vec<u32> {
-    scenario
-        .robots
-        .iter()
-        .filter(|r| {
-            scenario
-                .follower_config(r.id)
-                .is_some_and(|f| f.strategy == pheromone_roles::follower::StrategyKind::Antenna)
-        })
-        .map(|r| r.id)
-        .collect()
-}
-
 /// Why a run as processes failed. Every process of the run has been stopped by then.
 #[derive(Debug, thiserror::Error)]
 pub enum ProcessRunError {
