@@ -309,9 +309,9 @@ def test_a_loopback_session_presents_this_users_owner_key_and_refuses_a_readable
     conf = zf.session_config("tcp/10.0.0.1:7447")
     assert "pheromone-u" not in conf.get_json("transport/auth/usrpwd/user")
     path.chmod(0o644)
-    with pytest.raises(pheromone.PheromoneError, match="owner.key.*mode 644"):
+    with pytest.raises(pheromone.PheromoneError, match=r"owner\.key.*mode 644"):
         zf.owner_key()
     path.chmod(0o600)
     path.write_text(f"pheromone-u1:{password}\n")
-    with pytest.raises(pheromone.PheromoneError, match="owner.key"):
+    with pytest.raises(pheromone.PheromoneError, match=r"owner\.key"):
         zf.owner_key()
