@@ -342,7 +342,7 @@ fn the_view_shows_robot_poses_and_their_recent_paths() {
     let sender =
         Sender::<PoseMsg>::create(&node, &pose, &ready_service(&pose), ROBOT_LINK).unwrap();
     let mut k = 0u64;
-    let robots = eventually(Duration::from_secs(20), "robot r2 with a path", || {
+    let robots = eventually(Duration::from_secs(60), "robot r2 with a path", || {
         k += 1;
         sender
             .send(PoseMsg {
