@@ -102,18 +102,35 @@ fn field_and_view(tag: &str, view_args: &[&str]) -> (String, Proc, Proc, u16) {
 }
 
 /// A view of field `name` on a free port, once it has attached to the field; it and its port.
+///
+/// `free_port` releases the port before the view binds it, so a test running beside this one can
+/// take it meanwhile: the view then exits, and another port is tried.
 fn view_on(name: &str, view_args: &[&str]) -> (Proc, u16) {
-    let port = free_port();
-    let listen = format!("127.0.0.1:{port}");
-    let mut args = vec!["view", "--field", name, "--listen", &listen];
-    args.extend_from_slice(view_args);
-    let view = Proc::spawn(&args);
-    eventually(Duration::from_secs(30), "the view to see the field", || {
-        let (status, _, body) = request(port, "GET", "/api/stats").ok()?;
-        let stats: Value = serde_json::from_slice(&body).ok()?;
-        (status == 200 && stats["attached"] == true).then_some(())
-    });
-    (view, port)
+    for _ in 0..5 {
+        let port = free_port();
+        let listen = format!("127.0.0.1:{port}");
+        let mut args = vec!["view", "--field", name, "--listen", &listen];
+        args.extend_from_slice(view_args);
+        let mut view = Proc::spawn(&args);
+        let seen = eventually(
+            Duration::from_secs(60),
+            "the view to see the field (or to exit)",
+            || {
+                if !view.is_running() {
+                    return Some(false);
+                }
+                let (status, _, body) = request(port, "GET", "/api/stats").ok()?;
+                let stats: Value = serde_json::from_slice(&body).ok()?;
+                (status == 200 && stats["attached"] == true).then_some(true)
+            },
+        );
+        if seen && view.is_running() {
+            return (view, port);
+        }
+        let out = view.wait_exit(Duration::from_secs(10));
+        eprintln!("the view on port {port} exited: {}", stderr(&out));
+    }
+    panic!("the view exited on 5 ports in a row");
 }
 
 /// Deposits a blob at (x, y) and waits until the view's frame has it; returns that frame.
