@@ -186,25 +186,7 @@ pub(super) fn render_snapshot(
             let rows: Vec<&RobotSample> =
                 rows.iter().filter(|r| r.t_s <= snap.t_s + 1e-9).collect();
             let rgb = robot_rgb(id);
-            let truth: Vec<Option<(i32, i32)>> = rows
-                .iter()
-                .map(|r| px(r.true_pose[0], r.true_pose[1]))
-                .collect();
-            for run in runs(&truth) {
-                let style = colour(rgb).stroke_width(PATH_PX);
-                field.draw(&PathElement::new(run, style)).map_err(msg)?;
-            }
-            // A gap in the estimates (None) breaks the dashed line; it starts again at the next.
-            let est: Vec<Option<(i32, i32)>> = rows
-                .iter()
-                .map(|r| r.est_pose.and_then(|e| px(e[0], e[1])))
-                .collect();
-            for run in runs(&est) {
-                let style = colour(lighter(rgb)).stroke_width(PATH_PX);
-                field
-                    .draw(&DashedPathElement::new(run, 7, 5, style))
-                    .map_err(msg)?;
-            }
+            draw_trajectory(&field, &rows, rgb, &px)?;
             if let Some(last) = rows.last() {
                 markers.push((id, rgb, last.true_pose, last.est_pose));
             }
@@ -222,21 +204,7 @@ pub(super) fn render_snapshot(
             draw_mark_label(&field, &layout, m, &px, &mut placed)?;
         }
         // Markers last, so no trajectory hides them.
-        for (id, rgb, pose, est) in markers {
-            if let Some(e) = est.and_then(|e| px(e[0], e[1])) {
-                let ring = colour(lighter(rgb)).stroke_width(2);
-                field.draw(&Circle::new(e, 5, ring)).map_err(msg)?;
-            }
-            if let Some(p) = px(pose[0], pose[1]) {
-                field
-                    .draw(&Circle::new(p, 7, colour(OUTLINE_RGB).filled()))
-                    .map_err(msg)?;
-                field
-                    .draw(&Circle::new(p, 5, colour(rgb).filled()))
-                    .map_err(msg)?;
-                boxed_label(&field, &format!("R{id}"), (p.0 + 9, p.1 - 24), rgb)?;
-            }
-        }
+        draw_markers(&field, markers, &px)?;
         let strip = root.clone().shrink(
             (0, (TOP_PX + layout.field_h_px() as u32 + AXIS_PX) as i32),
             (w, STRIP_PX),
@@ -247,6 +215,62 @@ pub(super) fn render_snapshot(
 }
 
 type Field<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+
+/// A robot's true trajectory (solid) and its estimate (dashed, lighter; a gap in the estimates
+/// breaks the line, which starts again at the next).
+fn draw_trajectory(
+    field: &Field<'_>,
+    rows: &[&RobotSample],
+    rgb: [u8; 3],
+    px: &impl Fn(f64, f64) -> Option<(i32, i32)>,
+) -> Result<(), String> {
+    let truth: Vec<Option<(i32, i32)>> = rows
+        .iter()
+        .map(|r| px(r.true_pose[0], r.true_pose[1]))
+        .collect();
+    for run in runs(&truth) {
+        let style = colour(rgb).stroke_width(PATH_PX);
+        field.draw(&PathElement::new(run, style)).map_err(msg)?;
+    }
+    let est: Vec<Option<(i32, i32)>> = rows
+        .iter()
+        .map(|r| r.est_pose.and_then(|e| px(e[0], e[1])))
+        .collect();
+    for run in runs(&est) {
+        let style = colour(lighter(rgb)).stroke_width(PATH_PX);
+        field
+            .draw(&DashedPathElement::new(run, 7, 5, style))
+            .map_err(msg)?;
+    }
+    Ok(())
+}
+
+/// A robot's ID, colour, last true pose and last estimate.
+type RobotMarker = (u32, [u8; 3], [f64; 3], Option<[f64; 3]>);
+
+/// Each robot's marker at its last true pose (labelled `R<id>`) and a ring at its estimate.
+fn draw_markers(
+    field: &Field<'_>,
+    markers: Vec<RobotMarker>,
+    px: &impl Fn(f64, f64) -> Option<(i32, i32)>,
+) -> Result<(), String> {
+    for (id, rgb, pose, est) in markers {
+        if let Some(e) = est.and_then(|e| px(e[0], e[1])) {
+            let ring = colour(lighter(rgb)).stroke_width(2);
+            field.draw(&Circle::new(e, 5, ring)).map_err(msg)?;
+        }
+        if let Some(p) = px(pose[0], pose[1]) {
+            field
+                .draw(&Circle::new(p, 7, colour(OUTLINE_RGB).filled()))
+                .map_err(msg)?;
+            field
+                .draw(&Circle::new(p, 5, colour(rgb).filled()))
+                .map_err(msg)?;
+            boxed_label(field, &format!("R{id}"), (p.0 + 9, p.1 - 24), rgb)?;
+        }
+    }
+    Ok(())
+}
 
 /// Stroke width (px) of the marks' outlines and crosses.
 const MARK_PX: u32 = 3;

@@ -160,6 +160,73 @@ pub fn run_antenna_robot<S: AntennaSource>(
 /// at again.
 const WAIT_SLICE: Duration = Duration::from_millis(100);
 
+/// What one step's wait for its frame gave.
+enum StepRead {
+    /// The follower's output for this step.
+    Out(crate::follower::FollowOutput),
+    /// The step's input was refused (the robot stops for this step).
+    Rejected(String),
+    /// Ctrl-C, or the world ended, while waiting.
+    Stop,
+}
+
+/// Waits, in slices of [`WAIT_SLICE`], for the reading of frame `want` and the follower's output
+/// for pose `p`; no reading within the run's frame timeout is an error naming the source.
+fn read_step<S: AntennaSource>(
+    robot: &mut AntennaRobot<S>,
+    (node, end): (&Node<Svc>, &Participant),
+    p: &PoseMsg,
+    run: &AntennaRunOptions,
+    want: u64,
+) -> Result<StepRead, ProcessError> {
+    let give_up = Instant::now() + run.frame_timeout;
+    loop {
+        let slice = (Instant::now() + WAIT_SLICE).min(give_up);
+        match robot.step_pose(p, run.dt_s, want, slice) {
+            Ok(Some((out, _))) => return Ok(StepRead::Out(out)),
+            Ok(None) if Instant::now() < give_up => {
+                if end.conductor_gone() || pheromone_field::shm::should_stop(node) {
+                    return Ok(StepRead::Stop);
+                }
+            }
+            Ok(None) => {
+                return Err(ProcessError::AntennaSource(format!(
+                    "{}: no reading from frame {want} (step {}) within {:.1} s",
+                    robot.source().name(),
+                    p.step,
+                    run.frame_timeout.as_secs_f64()
+                )))
+            }
+            Err(AntennaStepError::Input(e)) => return Ok(StepRead::Rejected(e.to_string())),
+            Err(AntennaStepError::Source(e)) => {
+                return Err(ProcessError::AntennaSource(e.to_string()))
+            }
+        }
+    }
+}
+
+/// The run's deposit at pose `p` when this step is one of every `every_steps`. Applied at most
+/// once (the client never resends a deposit to the other gateway); a deposit that got no answer
+/// is counted by the source, and the robot goes on.
+fn deposit_if_due<S: AntennaSource>(
+    robot: &mut AntennaRobot<S>,
+    run: &AntennaRunOptions,
+    p: &PoseMsg,
+) {
+    let Some(d) = run.deposits else {
+        return;
+    };
+    if d.every_steps > 0 && p.step.is_multiple_of(d.every_steps) {
+        let channel = robot.channel();
+        if let Err(e) = robot
+            .source_mut()
+            .deposit(p.x_m as f32, p.y_m as f32, d.amount, channel)
+        {
+            eprintln!("follower r{}: step {}: deposit: {e}", p.robot_id, p.step);
+        }
+    }
+}
+
 fn drive<
     S: AntennaSource,
     T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend + Copy + 'static,
@@ -205,33 +272,14 @@ fn drive<
             }
             // Lockstep: the frame the field computed for this step, and no older one.
             let want = if o.lockstep { p.step + 1 } else { 0 };
-            let give_up = Instant::now() + run.frame_timeout;
-            let out = loop {
-                let slice = (Instant::now() + WAIT_SLICE).min(give_up);
-                match robot.step_pose(&p, run.dt_s, want, slice) {
-                    Ok(Some((out, _))) => break Some(out),
-                    Ok(None) if Instant::now() < give_up => {
-                        if end.conductor_gone() || pheromone_field::shm::should_stop(node) {
-                            return Ok(());
-                        }
-                    }
-                    Ok(None) => {
-                        return Err(ProcessError::AntennaSource(format!(
-                            "{}: no reading from frame {want} (step {}) within {:.1} s",
-                            robot.source().name(),
-                            p.step,
-                            run.frame_timeout.as_secs_f64()
-                        )))
-                    }
-                    Err(AntennaStepError::Input(e)) => {
-                        rejected += 1;
-                        eprintln!("follower r{id}: step {}: {e}; stopping the robot", p.step);
-                        break None;
-                    }
-                    Err(AntennaStepError::Source(e)) => {
-                        return Err(ProcessError::AntennaSource(e.to_string()))
-                    }
+            let out = match read_step(&mut robot, (node, &end), &p, &run, want)? {
+                StepRead::Out(out) => Some(out),
+                StepRead::Rejected(e) => {
+                    rejected += 1;
+                    eprintln!("follower r{id}: step {}: {e}; stopping the robot", p.step);
+                    None
                 }
+                StepRead::Stop => return Ok(()),
             };
             let (cmd, status) = match out {
                 Some(out) => (out.cmd, Some(out.status)),
@@ -244,19 +292,8 @@ fn drive<
                 ),
             };
             crate::process::follower::send_step(&cmds, &statuses, &last, p.step, (cmd, status))?;
-            if let (Some(d), true) = (run.deposits, status.is_some()) {
-                if d.every_steps > 0 && p.step.is_multiple_of(d.every_steps) {
-                    // Applied at most once (the client never resends a deposit to the other
-                    // gateway); a deposit that got no answer is counted, and the robot goes on.
-                    let channel = robot.channel();
-                    if let Err(e) =
-                        robot
-                            .source_mut()
-                            .deposit(p.x_m as f32, p.y_m as f32, d.amount, channel)
-                    {
-                        eprintln!("follower r{id}: step {}: deposit: {e}", p.step);
-                    }
-                }
+            if status.is_some() {
+                deposit_if_due(&mut robot, &run, &p);
             }
             Ok(())
         },
