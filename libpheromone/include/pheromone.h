@@ -170,7 +170,9 @@ typedef enum {
    * the frame event, `pheromone_deposit_confirmed` waiting for its receipt (the deposit may
    * still be applied, once), `pheromone_field_attach` between retries. The program's handler
    * ran; the library installs, replaces and consumes no signal handler. Call again to go on
-   * waiting.
+   * waiting. Rarely, a signal the program ignores also cuts a wait short (a child's SIGCHLD
+   * queued while the thread that forked it blocked every signal): the same status, no handler
+   * ran.
    */
   PHEROMONE_STATUS_INTERRUPTED = 11,
   /**

@@ -65,7 +65,10 @@ class Interrupted(PheromoneError, InterruptedError):
     program's handler has run (Python runs it before this is raised; a handler that raises, as
     the default SIGINT one raises `KeyboardInterrupt`, wins instead); this package installs and
     consumes no signal handler. Call again to go on waiting. From `deposit`: the deposit may still
-    be applied, once, or not at all (as after `DepositUnconfirmed`)."""
+    be applied, once, or not at all (as after `DepositUnconfirmed`). Rarely, a signal the program
+    ignores also cuts a wait short (a child's SIGCHLD queued while the thread that started it
+    blocked every signal, as `subprocess` does for a few microseconds): `Interrupted` without a
+    handler run."""
 
 
 class DepositNotDelivered(PheromoneError):

@@ -2,13 +2,19 @@
 
 The test installs its own SIGTERM handler, blocks in `Field.wait_frame` on a live field that
 ticks once per 100 s (so only a signal ends a wait early), and a thread (that blocks SIGTERM
-itself) sends SIGTERMs to this process with the `kill` command: each wait raises
+itself) has another process send SIGTERMs to this one: each wait raises
 `pheromone.Interrupted` after the handler ran, so does a confirmed deposit waiting for its
-receipt, and the handler sees every SIGTERM sent."""
+receipt, and the handler sees every SIGTERM sent.
+
+One long-lived sender process sends them all, not a `kill` command per signal: a child that
+exits while its parent thread still blocks every signal (the few microseconds around `vfork`)
+queues a SIGCHLD that the kernel may wake this process's waiting thread for, and a socket wait
+with a timeout then fails with EINTR although no handler runs (CI run of stop 58)."""
 
 import os
 import signal
 import subprocess
+import sys
 import threading
 import time
 
@@ -19,15 +25,27 @@ import pheromone
 WAITS = 4
 
 
-def _send_until(progress, target, sent):
-    """Sends SIGTERM to this process until `progress[0]` reaches `target`: one, then another
-    every 0.5 s while the step it waits for has not come (a SIGTERM that lands between two waits
-    runs the handler without interrupting a wait). Counts them in `sent[0]`."""
+#: Sends SIGTERM to the pid on each line it reads, and answers each with one line.
+SENDER = (
+    "import os, signal, sys\n"
+    "for line in sys.stdin:\n"
+    "    os.kill(int(line), signal.SIGTERM)\n"
+    "    print('sent', flush=True)\n"
+)
+
+
+def _send_until(progress, target, sent, sender):
+    """Has `sender` (a `SENDER` process) send SIGTERM to this process until `progress[0]`
+    reaches `target`: one, then another every 0.5 s while the step it waits for has not come (a
+    SIGTERM that lands between two waits runs the handler without interrupting a wait). Counts
+    them in `sent[0]`."""
     signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
     deadline = time.monotonic() + 60
     while progress[0] < target and time.monotonic() < deadline:
         step = progress[0]
-        subprocess.run(["kill", "-TERM", str(os.getpid())], check=True)
+        sender.stdin.write(f"{os.getpid()}\n")
+        sender.stdin.flush()
+        assert sender.stdout.readline() == "sent\n", "the sender process died"
         sent[0] += 1
         resend = time.monotonic() + 0.5
         while progress[0] == step and time.monotonic() < resend:
@@ -42,12 +60,15 @@ def test_the_programs_sigterm_handler_runs_and_waits_raise_interrupted(start_fie
     def handler(signum, _frame):
         seen.append(signum)
 
+    sender = subprocess.Popen([sys.executable, "-c", SENDER], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True)
     previous = signal.signal(signal.SIGTERM, handler)
     progress, sent = [0], [0]
     try:
         with pheromone.Field.attach(f.name, timeout_s=10) as field:
-            sender = threading.Thread(target=_send_until, args=(progress, WAITS + 1, sent))
-            sender.start()
+            sending = threading.Thread(target=_send_until,
+                                       args=(progress, WAITS + 1, sent, sender))
+            sending.start()
             try:
                 for i in range(1, WAITS + 1):
                     at_start = len(seen)
@@ -61,9 +82,11 @@ def test_the_programs_sigterm_handler_runs_and_waits_raise_interrupted(start_fie
                 assert len(seen) > at_start, "deposit: the handler did not run"
             finally:
                 progress[0] = WAITS + 1
-                sender.join()
+                sending.join()
         assert sent[0] >= WAITS + 1
         assert len(seen) == sent[0], f"the handler saw {len(seen)} of {sent[0]} SIGTERMs"
         assert signal.getsignal(signal.SIGTERM) is handler
     finally:
         signal.signal(signal.SIGTERM, previous)
+        sender.stdin.close()
+        sender.wait(timeout=10)
