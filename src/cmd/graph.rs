@@ -472,9 +472,15 @@ fn write_sim_out(
         ));
         pheromone_report::write_graph_png(&png, &state, r, dock)?;
     }
+    let summary = pheromone_report::write_graph_summary(dir, &state, runs, dock)?;
     eprintln!(
-        "wrote metrics.json, tables.txt and {} picture(s) of the graph to {}",
+        "wrote metrics.json, tables.txt, {} picture(s) of the graph and {} to {}",
         runs.len(),
+        if summary.is_some() {
+            "summary.png"
+        } else {
+            "no summary (no run)"
+        },
         dir.display()
     );
     Ok(())

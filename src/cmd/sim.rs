@@ -187,18 +187,15 @@ fn write_outputs(
     metrics: &RunMetrics,
 ) -> anyhow::Result<()> {
     if let Some(dir) = out.dir(&scenario.name, &[scenario.seed])? {
-        let mut files = pheromone_report::write_outputs(
-            &dir,
-            rec,
-            metrics,
-            &pheromone_report::marks(scenario, rec),
-        )?;
+        let marks = pheromone_report::marks(scenario, rec);
+        let mut files = pheromone_report::write_outputs(&dir, rec, metrics, &marks)?;
         files.extend(pheromone_report::write_plots(&dir, scenario, rec)?);
+        let summary = pheromone_report::write_summary(&dir, scenario, rec, metrics, &marks)?;
         eprintln!(
-            "wrote {} file(s) to {} (the picture: {})",
-            files.len(),
+            "wrote {} file(s) to {} (the result at a glance: {})",
+            files.len() + 1,
             dir.display(),
-            dir.join("field_final.png").display()
+            summary.display()
         );
     }
     if a.json {

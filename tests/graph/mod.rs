@@ -194,6 +194,8 @@ fn eight_robot_processes_capture_the_skeleton_map() {
     assert!(dir.join("metrics.json").is_file());
     let png = std::fs::read(dir.join("graph_pheromone_8robots.png")).unwrap();
     assert!(png.starts_with(b"\x89PNG"), "a PNG picture of the graph");
+    let summary = std::fs::read(dir.join("summary.png")).unwrap();
+    assert!(summary.starts_with(b"\x89PNG"), "the run's summary picture");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

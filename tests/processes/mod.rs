@@ -188,6 +188,7 @@ fn the_leader_deposits_chart_draws_the_same_deposits_as_processes_and_in_one_pro
         let o = run(&args);
         assert!(o.status.success(), "{args:?}: {}", stderr(&o));
         assert!(dir.join("leader_deposits.png").is_file(), "{args:?}");
+        assert!(dir.join("summary.png").is_file(), "{args:?}");
     }
     let (pa, pb) = (
         deposits_in(&a.join("robot_0.csv")),

@@ -112,6 +112,25 @@ pub fn write_graph_png(
     report: &pheromone_graph::run::RunReport,
     dock: usize,
 ) -> Result<(), ReportError> {
+    let pic = graph_picture(state, report, dock).map_err(|detail| ReportError::Draw {
+        path: path.to_path_buf(),
+        detail,
+    })?;
+    if let Some(dir) = path.parent() {
+        fs::create_dir_all(dir).map_err(|source| ReportError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+    }
+    write_png(path, &pic)
+}
+
+/// The picture of [`write_graph_png`].
+fn graph_picture(
+    state: &pheromone_graph::GraphState,
+    report: &pheromone_graph::run::RunReport,
+    dock: usize,
+) -> Result<Picture, String> {
     let nodes = state.graph.nodes();
     let regions = state.regions.regions();
     let frame = Frame::around(nodes, regions);
@@ -126,18 +145,64 @@ pub fn write_graph_png(
         draw_nodes(root, &frame, nodes, dock, &text)?;
         let style = (FONT, 20).into_font().color(&colour(GRAPH_TEXT_RGB));
         root.draw_text(&title(report), &style, (8, 14)).map_err(msg)
-    })
-    .map_err(|detail| ReportError::Draw {
-        path: path.to_path_buf(),
+    })?;
+    Ok(pic)
+}
+
+/// Writes `summary.png` of a regions run (`runs`: by robot count then strategy) into `dir`:
+/// its headline ([`graph_headline`]) over the first run's picture.
+pub fn write_graph_summary(
+    dir: &Path,
+    state: &pheromone_graph::GraphState,
+    runs: &[pheromone_graph::run::RunReport],
+    dock: usize,
+) -> Result<Option<std::path::PathBuf>, ReportError> {
+    let Some(first) = runs.first() else {
+        return Ok(None);
+    };
+    let pic = graph_picture(state, first, dock).map_err(|detail| ReportError::Draw {
+        path: dir.join(super::summary::SUMMARY_PNG),
         detail,
     })?;
-    if let Some(dir) = path.parent() {
-        fs::create_dir_all(dir).map_err(|source| ReportError::Io {
-            path: dir.to_path_buf(),
-            source,
-        })?;
+    super::summary::write_summary_of(dir, &graph_headline(runs), &pic).map(Some)
+}
+
+/// A regions run's headline: the first run's goal (every region served or captured, and when),
+/// the conflicts; a line per further run, and the strategies' ratio where both ran.
+pub fn graph_headline(runs: &[pheromone_graph::run::RunReport]) -> super::summary::Headline {
+    let goal = |r: &pheromone_graph::run::RunReport| {
+        use pheromone_graph::agent::Until;
+        let done = match (r.until, r.finish_s) {
+            (Until::Served, Some(t)) => format!("every region served at t = {t:.1} s"),
+            (Until::Captured, Some(t)) => format!("every region captured at t = {t:.1} s"),
+            (Until::Time, Some(t)) => format!("ran {t:.1} s, {} captures", r.captures.len()),
+            (Until::Served | Until::Captured, None) => "goal not reached".to_string(),
+            (Until::Time, None) => "stopped early".to_string(),
+        };
+        format!(
+            "{}, {} robots: {done} ({} conflicts)",
+            r.strategy.name(),
+            r.robots,
+            r.conflicts
+        )
+    };
+    let mut details: Vec<String> = runs.iter().skip(1).map(goal).collect();
+    for c in pheromone_graph::compare::compare(runs) {
+        if let Some(ratio) = c.shortest_path_over_pheromone {
+            details.push(format!(
+                "{} robots: shortest-path takes {ratio:.2} × pheromone's time",
+                c.robots
+            ));
+        }
     }
-    write_png(path, &pic)
+    let (scenario, seed) = runs
+        .first()
+        .map_or((String::new(), 0), |r| (r.scenario.clone(), r.seed));
+    super::summary::Headline {
+        title: format!("{scenario} · seed {seed} · {} run(s)", runs.len()),
+        headline: runs.first().map_or("no run".to_string(), goal),
+        details,
+    }
 }
 
 /// The drawing area the graph picture is drawn on.

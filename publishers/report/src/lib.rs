@@ -15,7 +15,8 @@
 //!
 //! Submodules: `style` the font, palette, colour maps and picture buffer; `heatmap` a snapshot's
 //! picture; `marks` the places it marks (from the scenario's metrics: `wrong_area`'s A and B); `series` the data of the charts, from the run; `plots` the charts; `graph_png` the
-//! picture of a node-graph run; `files` writes the CSV and PNG files; `sweep` the files of
+//! picture of a node-graph run; `summary` a run's `summary.png` (its headline over its final
+//! picture); `files` writes the CSV and PNG files; `sweep` the files of
 //! `pheromone sweep` (CSV, JSON, exploration against robots and against R_C); `filters` and
 //! `filters_plots` the comparison of localization filters (`sim --compare-filters`, seed 000
 //! Figs. 13–18); `probe` and `export::live` read a running field (`pheromone probe`,
@@ -35,6 +36,7 @@ pub mod probe;
 pub mod rundir;
 pub mod series;
 mod style;
+mod summary;
 mod sweep;
 mod sweep_shard;
 mod trail_sweep;
@@ -51,10 +53,11 @@ use style::ColourMap;
 
 pub use filters::{FilterRun, FilterSummary};
 pub use filters_plots::write_filter_comparison;
-pub use graph_png::write_graph_png;
+pub use graph_png::{graph_headline, write_graph_png, write_graph_summary};
 pub use loglog::{write_log_log_panels, LogLogPanel, LogLogSeries};
 pub use marks::{marks, Mark, Shape};
 pub use plots::{PLOT_H_PX, PLOT_W_PX};
+pub use summary::{write_summary, Headline, SUMMARY_PNG};
 pub use sweep::{
     paper_table, rc_values, sweep_csv, sweep_times_csv, write_sweep, SWEEP_CSV_HEADER,
     SWEEP_TIMES_CSV_HEADER,
@@ -208,13 +211,9 @@ fn write_final_pngs(
                 written.push(copy(png, dir.join(final_file_name(name)))?);
             }
             let path = dir.join("field_final.png");
-            let all = all_channels(last, rec.wall_channel);
-            let scale = ColourMap::for_plane(all.plane(0));
-            let pic = render_snapshot(rec, &all, 0, marks, &scale).map_err(|detail| {
-                ReportError::Draw {
-                    path: path.clone(),
-                    detail,
-                }
+            let pic = final_of_several(rec, last, marks).map_err(|detail| ReportError::Draw {
+                path: path.clone(),
+                detail,
             })?;
             write_png(&path, &pic)?;
             written.push(path);
@@ -222,6 +221,28 @@ fn write_final_pngs(
         _ => {}
     }
     Ok(written)
+}
+
+/// `field_final.png` of a field with several channels: every channel at once but the walls'.
+fn final_of_several(
+    rec: &Recording,
+    last: &Snapshot,
+    marks: &[Mark],
+) -> Result<style::Picture, String> {
+    let all = all_channels(last, rec.wall_channel);
+    let scale = ColourMap::for_plane(all.plane(0));
+    render_snapshot(rec, &all, 0, marks, &scale)
+}
+
+/// The picture of `field_final.png` (none without a snapshot): the last snapshot's only
+/// channel in the run's scale, or every channel at once ([`final_of_several`]).
+fn final_picture(rec: &Recording, marks: &[Mark]) -> Option<Result<style::Picture, String>> {
+    let last = rec.snapshots.last()?;
+    Some(match last.channels.as_slice() {
+        [] => return None,
+        [only] => render_snapshot(rec, last, 0, marks, &run_scale(rec, only)),
+        _ => final_of_several(rec, last, marks),
+    })
 }
 
 /// `field_final_<channel>.png`, the channel name as in [`snapshot_file_name`].

@@ -41,7 +41,7 @@ pub struct Mark {
 }
 
 /// The true position of `robot` at its first sample at or after `t_s`.
-fn position_at(rec: &Recording, robot: u32, t_s: f64) -> Option<[f64; 2]> {
+pub(super) fn position_at(rec: &Recording, robot: u32, t_s: f64) -> Option<[f64; 2]> {
     rec.robots
         .get(&robot)?
         .iter()

@@ -11,10 +11,10 @@ use super::style::{lighter, Rgb, NAN_RGB, ROBOT_RGB, VIRIDIS};
 use pheromone_sim::recording::RobotSample;
 
 /// A directory under the system temp dir, unique per test and process, removed on drop.
-struct TempDir(PathBuf);
+pub(super) struct TempDir(pub(super) PathBuf);
 
 impl TempDir {
-    fn new(tag: &str) -> TempDir {
+    pub(super) fn new(tag: &str) -> TempDir {
         static COUNTER: AtomicU32 = AtomicU32::new(0);
         let nanos = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
@@ -83,7 +83,7 @@ pub(super) fn scene() -> Recording {
     rec
 }
 
-fn decode(path: &Path) -> (u32, u32, Vec<u8>) {
+pub(super) fn decode(path: &Path) -> (u32, u32, Vec<u8>) {
     let file = File::open(path).unwrap();
     let mut reader = png::Decoder::new(BufReader::new(file)).read_info().unwrap();
     let mut buf = vec![0u8; reader.output_buffer_size().unwrap()];
