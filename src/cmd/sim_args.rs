@@ -209,7 +209,7 @@ pub struct SimArgs {
     #[arg(long)]
     pub no_scripted_loss: bool,
     /// The scenario's `[scripted_loss]` instead of its leader losing itself by its own filter
-    /// (`wrong-area-filter`: the old EKF loss script; docs/localization.md).
+    /// (`wrong-area`: the old EKF loss script at 20 s; docs/localization.md).
     #[arg(long, conflicts_with = "no_scripted_loss")]
     pub scripted_loss: bool,
     /// Node-graph scenarios: every robot localizes on landmarks with the EKF (paper 001

@@ -200,32 +200,37 @@ fn the_leader_deposits_chart_draws_the_same_deposits_as_processes_and_in_one_pro
 }
 
 #[test]
-fn wrong_area_as_processes_gives_the_single_process_metrics_through_leader_lost_in_both_modes() {
-    // The whole run: the loss at 20 s, Alice's switch to exploring, Carol's arrival at B.
-    let aware = assert_same_in_both_modes("wrong-area", &["--seed", "1"]);
-    let w = &aware["metrics"]["wrong_area"];
-    assert!(w["followers"][0]["exploring_from_s"].is_number(), "{w}");
-    assert_eq!(w["followers_reached_b"], 2, "{w}");
-    let constant = assert_same_in_both_modes("wrong-area", &["--seed", "1", "--constant"]);
-    let w = &constant["metrics"]["wrong_area"];
-    assert_eq!(w["followers_ended_in_a"], 2, "{w}");
-}
-
-#[test]
-fn wrong_area_filter_as_processes_gives_the_single_process_metrics() {
+fn wrong_area_as_processes_gives_the_single_process_metrics() {
     // Issue 48: the leader's loss comes from its own particle filter, no script. Aware: Alice
     // gives the fading trail up, explores, reaches B; constant: both followers end in A.
-    let aware = assert_same_in_both_modes("wrong-area-filter", &["--seed", "1"]);
+    let aware = assert_same_in_both_modes("wrong-area", &["--seed", "1"]);
     let w = &aware["metrics"]["wrong_area"];
     assert_eq!(w["scripted_loss"], false, "{w}");
     assert_eq!(w["checkpoints"].as_array().map(Vec::len), Some(15), "{w}");
     assert!(w["leader"]["lost_at_s"].is_number(), "{w}");
+    let b = &aware["metrics"]["blind_leader"];
+    assert_eq!(b["leader_lost_at_s"], w["leader"]["lost_at_s"], "{b}");
     assert!(w["followers"][0]["exploring_from_s"].is_number(), "{w}");
     assert_eq!(w["followers"][0]["reached_b"], true, "{w}");
     assert_eq!(w["followers_ended_in_a"], 0, "{w}");
-    let constant = assert_same_in_both_modes("wrong-area-filter", &["--seed", "1", "--constant"]);
+    let constant = assert_same_in_both_modes("wrong-area", &["--seed", "1", "--constant"]);
     let w = &constant["metrics"]["wrong_area"];
     assert_eq!(w["scripted_loss"], false, "{w}");
+    assert_eq!(w["followers_ended_in_a"], 2, "{w}");
+}
+
+#[test]
+fn wrong_area_with_its_loss_script_as_processes_gives_the_single_process_metrics() {
+    // `--scripted-loss`: the old EKF leader lost at 20 s; Alice's switch to exploring, both
+    // followers' arrival at B; with --constant both end in A.
+    let aware = assert_same_in_both_modes("wrong-area", &["--seed", "1", "--scripted-loss"]);
+    let w = &aware["metrics"]["wrong_area"];
+    assert_eq!(w["scripted_loss"], true, "{w}");
+    assert!(w["followers"][0]["exploring_from_s"].is_number(), "{w}");
+    assert_eq!(w["followers_reached_b"], 2, "{w}");
+    let args = ["--seed", "1", "--scripted-loss", "--constant"];
+    let constant = assert_same_in_both_modes("wrong-area", &args);
+    let w = &constant["metrics"]["wrong_area"];
     assert_eq!(w["followers_ended_in_a"], 2, "{w}");
 }
 

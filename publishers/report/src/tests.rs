@@ -348,10 +348,10 @@ fn io_errors_name_the_path() {
 }
 
 /// Fig. 23's threshold: the leader's deposits chart knows the follower's threshold (10 in
-/// `wrong-area-filter`) and the first deposit below it, and draws them.
+/// `wrong-area`) and the first deposit below it, and draws them.
 #[test]
 fn the_leader_deposits_chart_marks_where_the_deposit_fell_below_the_followers_threshold() {
-    let scenario = Scenario::load("wrong-area-filter").unwrap();
+    let scenario = Scenario::load("wrong-area").unwrap();
     let m = scenario.metrics.blind_leader.clone().unwrap();
     let mut rec = Recording::default();
     let peaks = [100.0f32, 50.0, 12.0, 8.0, 3.0, 11.0];
@@ -378,11 +378,11 @@ fn the_leader_deposits_chart_marks_where_the_deposit_fell_below_the_followers_th
     assert_eq!(none.below_threshold_at(), None);
 }
 
-/// Issue 48: the field picture of `wrong-area-filter` marks where the leader's deposit first
+/// Issue 48: the field picture of `wrong-area` marks where the leader's deposit first
 /// fell below the follower's threshold (10), in the leader's colour, from that time on.
 #[test]
 fn the_field_marks_where_the_leaders_deposit_fell_below_the_threshold() {
-    let scenario = Scenario::load("wrong-area-filter").unwrap();
+    let scenario = Scenario::load("wrong-area").unwrap();
     let mut rec = Recording::default();
     let peaks = [100.0f32, 50.0, 12.0, 8.0, 3.0];
     let rows = (0..peaks.len()).map(|i| RobotSample {

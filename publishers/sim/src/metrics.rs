@@ -286,7 +286,9 @@ pub fn exploration(m: &ExplorationMetric, rec: &Recording) -> Exploration {
 /// lengths from where the leader started (m).
 #[derive(Debug, Clone, Serialize)]
 pub struct BlindLeader {
-    /// When the leader's localizer was made to lose its localization (s), if it was.
+    /// When the leader lost its localization (s), if it did: the loss script's start, or
+    /// without one the first step its own σ reached `wrong_area`'s `lost_sigma_m`
+    /// ([`crate::wrong_area::leader_lost_at_s`], the same figure as `wrong_area.leader`).
     pub leader_lost_at_s: Option<f64>,
     /// How far along its path the leader was then (m).
     pub leader_lost_at_m: Option<f64>,
@@ -328,9 +330,7 @@ pub fn blind_leader(scenario: &Scenario, m: &BlindLeaderMetric, rec: &Recording)
             project_on_polyline([p[0], p[1]], &path)
         }
     };
-    let lost_at_s = scenario
-        .roles(m.leader)
-        .and_then(|r| r.localizer.loss.after_s);
+    let lost_at_s = crate::wrong_area::leader_lost_at_s(scenario, m.leader, leader);
     let lost_at_m = lost_at_s.and_then(|t| {
         leader
             .iter()

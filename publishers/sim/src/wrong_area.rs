@@ -120,7 +120,8 @@ pub fn checkpoints(rows: &[RobotSample]) -> Vec<Checkpoint> {
 /// Where the leader truly was and where it believed it was.
 #[derive(Debug, Clone, Serialize)]
 pub struct LeaderOutcome {
-    /// When its localizer was made to lose its localization (s), if it was.
+    /// When it lost its localization (s), if it did ([`leader_lost_at_s`]: the script's start,
+    /// or the first step its own σ reached `lost_sigma_m`).
     pub lost_at_s: Option<f64>,
     /// Its true position then.
     pub lost_at_m: Option<[f64; 2]>,
@@ -168,6 +169,26 @@ fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
+/// When `leader` lost its localization (s), the one figure `wrong_area` and `blind_leader`
+/// give: where a loss script runs, when it starts; otherwise, with a `wrong_area` metric for
+/// this leader, the first step its own filter's σ reaches that metric's `lost_sigma_m`;
+/// otherwise never (`rows`: the leader's recorded samples).
+pub fn leader_lost_at_s(scenario: &Scenario, leader: u32, rows: &[RobotSample]) -> Option<f64> {
+    if let Some(t) = scenario
+        .roles(leader)
+        .and_then(|r| r.localizer.loss.after_s)
+    {
+        return Some(t);
+    }
+    let m = scenario
+        .metrics
+        .wrong_area
+        .as_ref()
+        .filter(|m| m.leader == leader)?;
+    let lost = |r: &&RobotSample| r.est_sigma_m.is_some_and(|s| s >= m.lost_sigma_m);
+    rows.iter().find(lost).map(|r| r.t_s)
+}
+
 /// The first follower's trail threshold (`gradient.abandon_below`), if it follows by gradient.
 fn follower_threshold(scenario: &Scenario, m: &WrongAreaMetric) -> Option<f64> {
     let f = scenario.roles(*m.followers.first()?)?.follower.as_ref()?;
@@ -184,14 +205,7 @@ pub fn wrong_area(scenario: &Scenario, m: &WrongAreaMetric, rec: &Recording) -> 
     let estimate = |r: &RobotSample| r.est_pose.map(xy);
 
     let leader = rows(m.leader);
-    // Scripted: when the script starts; otherwise when the leader's own σ reaches the level.
-    let lost_at_s = scenario
-        .roles(m.leader)
-        .and_then(|r| r.localizer.loss.after_s)
-        .or_else(|| {
-            let lost = |r: &&RobotSample| r.est_sigma_m.is_some_and(|s| s >= m.lost_sigma_m);
-            leader.iter().find(lost).map(|r| r.t_s)
-        });
+    let lost_at_s = leader_lost_at_s(scenario, m.leader, leader);
     let lost_at_m = lost_at_s.and_then(|t| {
         leader
             .iter()
@@ -261,6 +275,7 @@ pub fn wrong_area(scenario: &Scenario, m: &WrongAreaMetric, rec: &Recording) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use pheromone_world::scenario::Overrides;
 
     fn metric() -> WrongAreaMetric {
         WrongAreaMetric {
@@ -301,6 +316,11 @@ mod tests {
     #[test]
     fn a_follower_in_a_and_one_that_explored_to_b() {
         let mut s = Scenario::load("wrong-area").unwrap();
+        s.apply(&Overrides {
+            scripted_loss: true,
+            ..Overrides::default()
+        })
+        .unwrap();
         s.world.dt_s = 1.0;
         let mut m = metric();
         m.followers = vec![1, 2];
@@ -389,8 +409,48 @@ mod tests {
         );
         assert!(deposit_below_threshold(&rows, 2.0).is_none());
         // The built-in scenario's first follower rejects a trail below 10.
-        let s = Scenario::load("wrong-area-filter").unwrap();
+        let s = Scenario::load("wrong-area").unwrap();
         let m = s.metrics.wrong_area.clone().unwrap();
         assert_eq!(follower_threshold(&s, &m), Some(10.0));
+    }
+
+    /// One loss time for both metrics: the script's start where one runs; otherwise the first
+    /// step the leader's σ reaches `wrong_area.lost_sigma_m` (0.24 m in `wrong-area`).
+    #[test]
+    fn the_leader_is_lost_when_its_script_starts_or_when_its_own_sigma_reaches_the_level() {
+        let rows: Vec<RobotSample> = [0.02, 0.1, 0.23, 0.24, 0.5, 0.1]
+            .iter()
+            .enumerate()
+            .map(|(k, sigma)| RobotSample {
+                est_sigma_m: Some(*sigma),
+                ..sample(
+                    k as f64,
+                    k as f64,
+                    1.5,
+                    [0.0, 0.0],
+                    FollowerState::Following,
+                )
+            })
+            .collect();
+        let mut s = Scenario::load("wrong-area").unwrap();
+        assert!(!s.has_scripted_loss());
+        assert_eq!(leader_lost_at_s(&s, 0, &rows), Some(3.0));
+        // Another robot than the metric's leader is never lost by σ.
+        assert_eq!(leader_lost_at_s(&s, 1, &rows), None);
+        s.apply(&Overrides {
+            scripted_loss: true,
+            ..Overrides::default()
+        })
+        .unwrap();
+        assert_eq!(leader_lost_at_s(&s, 0, &rows), Some(20.0));
+        let mut rec = Recording::default();
+        rec.robots.insert(0, rows);
+        let m = s.metrics.wrong_area.clone().unwrap();
+        let b = s.metrics.blind_leader.clone().unwrap();
+        let blind = crate::metrics::blind_leader(&s, &b, &rec);
+        assert_eq!(
+            blind.leader_lost_at_s,
+            wrong_area(&s, &m, &rec).leader.lost_at_s
+        );
     }
 }

@@ -64,10 +64,6 @@ pub const BUILTIN: &[(&str, &str)] = &[
         "wrong-area",
         include_str!("../../../../examples/scenarios/wrong-area.toml"),
     ),
-    (
-        "wrong-area-filter",
-        include_str!("../../../../examples/scenarios/wrong-area-filter.toml"),
-    ),
 ];
 
 /// The scenario `pheromone sim` runs when none is named.
