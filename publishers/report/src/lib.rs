@@ -15,7 +15,8 @@
 //!
 //! Submodules: `style` the font, palette, colour maps and picture buffer; `heatmap` a snapshot's
 //! picture; `marks` the places it marks (from the scenario's metrics: `wrong_area`'s A and B); `series` the data of the charts, from the run; `plots` the charts; `graph_png` the
-//! picture of a node-graph run; `summary` a run's `summary.png` (its headline over its final
+//! picture of a node-graph run; `legend` a chart's legend drawn in a band outside its axes;
+//! `summary` a run's `summary.png` (its headline over its final
 //! picture); `files` writes the CSV and PNG files; `sweep` the files of
 //! `pheromone sweep` (CSV, JSON, exploration against robots and against R_C); `filters` and
 //! `filters_plots` the comparison of localization filters (`sim --compare-filters`, seed 000
@@ -28,6 +29,7 @@ pub mod filters;
 mod filters_plots;
 mod graph_png;
 mod heatmap;
+mod legend;
 mod loglog;
 mod maps;
 mod marks;

@@ -29,12 +29,19 @@ pub(super) fn blank() -> Picture {
     Picture::new(PLOT_W_PX, PLOT_H_PX, [255, 255, 255])
 }
 
-/// Title and subtitle at the top; the rest of the picture for the chart.
+/// Title and subtitle at the top (the subtitle wrapped onto more lines if it is wider than the
+/// picture); the rest of the picture for the chart.
 pub(super) fn titled<'a>(root: &Root<'a>, title: &str, subtitle: &str) -> Result<Root<'a>, String> {
     root.draw_text(title, &text(22), (16, 10)).map_err(msg)?;
-    root.draw_text(subtitle, &text(14).color(&RGBColor(80, 80, 80)), (16, 40))
-        .map_err(msg)?;
-    Ok(root.margin(64, 10, 10, 20))
+    let width = root.dim_in_pixel().0 as i32 - 32;
+    let lines = super::summary::wrap(subtitle, 14, width);
+    for (i, line) in lines.iter().enumerate() {
+        let y = 40 + 18 * i as i32;
+        root.draw_text(line, &text(14).color(&RGBColor(80, 80, 80)), (16, y))
+            .map_err(msg)?;
+    }
+    let extra = 18 * (lines.len() as u32).saturating_sub(1);
+    Ok(root.margin(64 + extra, 10, 10, 20))
 }
 
 /// A span of values with some room above, never empty.

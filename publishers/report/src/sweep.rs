@@ -8,8 +8,9 @@
 //! robot, mean ± sd over the trials (error bars); merge on is a solid line with filled dots,
 //! merge off a dashed line with hollow dots, each legend entry starts with "merge" or "no
 //! merge" and names the steering; the paper's own values (`pheromone_sim::paper`) are black crosses
-//! (robots chart) and its peak R_C a dotted vertical line (R_C chart). `sweep_paper.md` puts
-//! each of the paper's values beside what the sweep measured.
+//! (robots chart) and its peak R_C a dotted vertical line (R_C chart), inside the axes; the
+//! legend is drawn in a band under the chart (`legend.rs`), clear of the data. `sweep_paper.md`
+//! puts each of the paper's values beside what the sweep measured.
 
 use std::fmt::Write as _;
 use std::fs;
@@ -23,7 +24,8 @@ use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
 use super::files::{write_file, write_json, write_png};
-use super::plots::{blank, series_labels, text, titled};
+use super::legend::{with_legend, Sample};
+use super::plots::{blank, text, titled};
 use super::style::{colour, msg, series_rgb, Picture, Rgb};
 use super::ReportError;
 use pheromone_sim::paper::{PaperKind, PaperValue};
@@ -129,7 +131,7 @@ pub fn write_sweep(
     }
     for (name, axis) in charts {
         let path = dir.join(name);
-        let pic = chart(r, paper, axis, &subtitle).map_err(|detail| ReportError::Draw {
+        let (pic, ..) = chart(r, paper, axis, &subtitle).map_err(|detail| ReportError::Draw {
             path: path.clone(),
             detail,
         })?;
@@ -194,7 +196,7 @@ pub fn rc_values(r: &SweepResult) -> Vec<f64> {
     v
 }
 
-#[derive(Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 enum Axis {
     Robots,
     Rc,
@@ -319,14 +321,18 @@ fn lines(points: &[Point], axis: Axis) -> Vec<Line<'_>> {
 /// A sweep chart: exploration (%) against the axis' setting.
 type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<Ticked, RangedCoordf64>>;
 
+/// What [`chart`] drew: the picture, its plotting area (x and y pixel ranges), the legend's box
+/// under it (x0, y0, x1, y1) and the pixels of the paper's marks.
+type Drawn = (Picture, (Range<i32>, Range<i32>), [i32; 4], Vec<(i32, i32)>);
+
 /// The chart of one axis: each line's mean ± sd against the axis' setting, the paper's values
-/// in black.
+/// in black, the legend in a band under the chart (it covers no data).
 fn chart(
     r: &SweepResult,
     paper: &[PaperValue],
     axis: Axis,
     subtitle: &str,
-) -> Result<Picture, String> {
+) -> Result<Drawn, String> {
     let figure = r.figure;
     let lines = lines(&r.points, axis);
     let (lo, hi) = x_span(&lines, axis);
@@ -335,9 +341,10 @@ fn chart(
     let (lo, hi) = (lo.min(plo), hi.max(phi));
     let pad = ((hi - lo) * 0.06).max(0.5);
     let (title, x_desc) = titles(axis);
-    let mut pic = blank();
-    {
-        let root = pic.area()?;
+    let mut top = blank();
+    let mut entries = Vec::new();
+    let (plot, paper_px) = {
+        let root = top.area()?;
         let root = &root;
         let area = titled(root, title, subtitle)?;
         let mut chart = ChartBuilder::on(&area)
@@ -359,74 +366,23 @@ fn chart(
             .map_err(msg)?;
         // One colour per line whatever its merge setting; merge off dashed.
         let mut colours: Vec<PointKey> = Vec::new();
-        let mut labels = Vec::new();
-        let mut occupied = Vec::new();
         for l in &lines {
             let rgb: Rgb = series_rgb(colour_index(&mut colours, axis, &l.key));
-            labels.push(draw_line(&mut chart, l, axis, rgb, (lo, hi), pad, figure)?);
-            // A no-merge point drawn across the R_C axis covers the whole width.
-            let across = axis == Axis::Rc && !l.key.merge && l.points.len() == 1;
-            for p in &l.points {
-                let (m, s) = (p.figure(figure).mean, p.figure(figure).sd);
-                for y in [m - s, m, m + s] {
-                    occupied.push((axis.x(&p.key), 100.0 * y));
-                    if across {
-                        occupied.extend(
-                            (0..=20).map(|k| (lo + (hi - lo) * k as f64 / 20.0, 100.0 * y)),
-                        );
-                    }
-                }
-            }
+            let label = draw_line(&mut chart, l, axis, rgb, (lo, hi), pad, figure)?;
+            let solid = l.key.merge;
+            entries.push((Sample::Line { solid, rgb }, label));
         }
-        for (label, points) in draw_paper(&mut chart, r, paper, axis)? {
-            labels.push(label);
-            occupied.extend(points);
+        let mut paper_px = Vec::new();
+        for (sample, label, points) in draw_paper(&mut chart, r, paper, axis)? {
+            entries.push((sample, label));
+            paper_px.extend(points.iter().map(|p| chart.backend_coord(p)));
         }
-        let pixels: Vec<(i32, i32)> = occupied
-            .iter()
-            .map(|&(x, y)| chart.backend_coord(&(x, y)))
-            .collect();
-        let corner = legend_corner(chart.plotting_area().get_pixel_range(), &labels, &pixels);
-        series_labels(&mut chart, corner)?;
+        let plot = chart.plotting_area().get_pixel_range();
         root.present().map_err(msg)?;
-    }
-    Ok(pic)
-}
-
-/// The legend's place: the first corner of the plotting area (`x` × `y` px) where its box
-/// (estimated from the `labels`) covers none of the data's `pixels` (means, mean ± sd, the
-/// paper's marks); lower right if every corner covers some.
-fn legend_corner(
-    (x, y): (std::ops::Range<i32>, std::ops::Range<i32>),
-    labels: &[String],
-    pixels: &[(i32, i32)],
-) -> SeriesLabelPosition {
-    let w = labels
-        .iter()
-        .map(|l| super::heatmap::text_width(l))
-        .max()
-        .unwrap_or(0)
-        + 60;
-    let h = labels.len() as i32 * 20 + 20;
-    let (m, pad) = (10, 8); // plotters' margin from the area's edge; points' radius
-    let boxes = [
-        (
-            SeriesLabelPosition::LowerRight,
-            x.end - m - w,
-            y.end - m - h,
-        ),
-        (SeriesLabelPosition::UpperRight, x.end - m - w, y.start + m),
-        (SeriesLabelPosition::LowerLeft, x.start + m, y.end - m - h),
-        (SeriesLabelPosition::UpperLeft, x.start + m, y.start + m),
-    ];
-    boxes
-        .into_iter()
-        .find(|&(_, bx, by)| {
-            !pixels.iter().any(|&(px, py)| {
-                px + pad >= bx && px - pad <= bx + w && py + pad >= by && py - pad <= by + h
-            })
-        })
-        .map_or(SeriesLabelPosition::LowerRight, |(c, _, _)| c)
+        (plot, paper_px)
+    };
+    let (pic, legend) = with_legend(&top, &entries)?;
+    Ok((pic, plot, legend, paper_px))
 }
 
 /// The lowest and highest x of the paper's marks [`draw_paper`] draws on `axis`, if any.
@@ -493,25 +449,8 @@ fn colour_index(colours: &mut Vec<PointKey>, axis: Axis, key: &PointKey) -> usiz
     }
 }
 
-/// The legend's sample of a line at `$at`, 24 px wide: solid with a filled dot (merge), two
-/// dashes with a ring (no merge). A macro: both are the same composed element type, which
-/// plotters' legend closure needs.
-macro_rules! legend_sample {
-    ($merge:expr, $rgb:expr, $at:expr) => {{
-        let (merge, rgb): (bool, Rgb) = ($merge, $rgb);
-        let st = colour(rgb).stroke_width(2);
-        let (left, right) = if merge { (12, 12) } else { (3, 21) };
-        let fill = if merge { colour(rgb) } else { WHITE };
-        EmptyElement::at($at)
-            + PathElement::new(vec![(0, 0), (left, 0)], st)
-            + PathElement::new(vec![(right, 0), (24, 0)], st)
-            + Circle::new((12, 0), 4, fill.filled())
-            + Circle::new((12, 0), 4, st)
-    }};
-}
-
-/// Draws one line (dashed without merging), its legend entry, error bars and dots; returns the
-/// legend entry's text.
+/// Draws one line (dashed without merging), its error bars and dots; returns the legend entry's
+/// text.
 fn draw_line<'a, 'b: 'a>(
     chart: &mut Chart<'a, 'b>,
     l: &Line<'_>,
@@ -531,10 +470,10 @@ fn draw_line<'a, 'b: 'a>(
     if across {
         xy = vec![(lo, xy[0].1), (hi, xy[0].1)];
     }
-    let anno = if l.key.merge {
+    if l.key.merge {
         chart
             .draw_series(LineSeries::new(xy.clone(), style))
-            .map_err(msg)?
+            .map_err(msg)?;
     } else {
         chart
             .draw_series(std::iter::once(DashedPathElement::new(
@@ -543,12 +482,10 @@ fn draw_line<'a, 'b: 'a>(
                 5,
                 style,
             )))
-            .map_err(msg)?
-    };
+            .map_err(msg)?;
+    }
     let merge = l.key.merge;
     let label = line_label(l, axis, across);
-    anno.label(label.clone())
-        .legend(move |(x, y)| legend_sample!(merge, rgb, (x, y)));
     draw_error_bars(chart, l, axis, style, 0.12 * pad, figure)?;
     // The dots: filled with merging, rings (white inside) without.
     let xy: Vec<(f64, f64)> = l
@@ -610,13 +547,13 @@ fn draw_error_bars<'a, 'b: 'a>(
     Ok(())
 }
 
-/// A paper value's legend text and the chart points its mark covers.
-type PaperMark = (String, Vec<(f64, f64)>);
+/// A paper value's legend sample and text, and the chart points its mark covers.
+type PaperMark = (Sample, String, Vec<(f64, f64)>);
 
 /// The paper's values on a chart, in black: on the robots axis a cross at each percentage of a
 /// strategy the sweep ran (Tables 2 and 6); on the R_C axis a dotted vertical line at its peak
-/// (Table 9). Each has a legend entry citing its table. Returns each entry's text and the
-/// points its mark covers.
+/// (Table 9). Each has a legend entry citing its table. Returns each entry's sample and text and
+/// the points its mark covers.
 fn draw_paper<'a, 'b: 'a>(
     chart: &mut Chart<'a, 'b>,
     r: &SweepResult,
@@ -641,12 +578,10 @@ fn draw_paper<'a, 'b: 'a>(
                     p.strategy.name(),
                     p.value
                 );
-                drawn.push((label.clone(), vec![at]));
+                drawn.push((Sample::Cross, label, vec![at]));
                 chart
                     .draw_series(std::iter::once(Cross::new(at, 6, black)))
-                    .map_err(msg)?
-                    .label(label)
-                    .legend(move |(x, y)| Cross::new((x + 12, y), 6, black));
+                    .map_err(msg)?;
             }
             (Axis::Rc, PaperKind::PeakRcM, _) => {
                 chart
@@ -656,21 +591,10 @@ fn draw_paper<'a, 'b: 'a>(
                         4,
                         black,
                     )))
-                    .map_err(msg)?
-                    .label({
-                        let label =
-                            format!("paper, Table {}: peak at R_C = {} m", p.table, p.value);
-                        let line = (0..=21).map(|k| (p.value, 5.0 * k as f64)).collect();
-                        drawn.push((label.clone(), line));
-                        label
-                    })
-                    // Dotted like the line: three dashes.
-                    .legend(move |(x, y)| {
-                        EmptyElement::at((x, y))
-                            + PathElement::new(vec![(0, 0), (4, 0)], black)
-                            + PathElement::new(vec![(10, 0), (14, 0)], black)
-                            + PathElement::new(vec![(20, 0), (24, 0)], black)
-                    });
+                    .map_err(msg)?;
+                let label = format!("paper, Table {}: peak at R_C = {} m", p.table, p.value);
+                let line = (0..=21).map(|k| (p.value, 5.0 * k as f64)).collect();
+                drawn.push((Sample::Dotted, label, line));
             }
             _ => {}
         }
@@ -708,24 +632,90 @@ mod tests {
         }
     }
 
-    /// Issue 51: the legend goes to a corner where it covers no data: data in the lower
-    /// right sends it to the upper right; data in every corner leaves it lower right.
+    /// A sweep of 1 and 4 robots with and without merging at R_C = 8 m, two seeds each; with
+    /// `rc_m` = 4 m too if `two_radii`.
+    fn small_sweep(two_radii: bool) -> SweepResult {
+        let mut runs = Vec::new();
+        for (robots, merge, known) in [
+            (1, true, 0.5),
+            (1, false, 0.5),
+            (4, true, 0.95),
+            (4, false, 0.55),
+        ] {
+            for seed in 1..=2 {
+                runs.push(run(robots, merge, seed, known + 0.05 * seed as f64));
+            }
+        }
+        if two_radii {
+            for x in runs.clone() {
+                runs.push(RunResult {
+                    point: PointKey {
+                        rc_m: 4.0,
+                        ..x.point
+                    },
+                    ..x
+                });
+            }
+        }
+        let pts = points(&runs);
+        SweepResult {
+            scenario: "ias-ss".into(),
+            duration_s: 10.0,
+            trials: 2,
+            sectors: 24,
+            jobs: 2,
+            figure: Figure::Known,
+            wall_s: 1.0,
+            comparisons: comparisons(&runs, &pts, Figure::Known),
+            points: pts,
+            runs,
+        }
+    }
+
+    /// Issue 51: the legend sits in a band under the chart, its box clear of the plotting
+    /// area; every entry's sample is inside the box; the paper's marks (Table 6's 5 robots on a
+    /// 1–4 robot sweep, Table 9's peak at 24 m on a 4–8 m one) are inside the axes; a subtitle
+    /// too long for one line wraps instead of running off the picture.
     #[test]
-    fn the_legend_takes_a_corner_free_of_data() {
-        let area = (0..800, 0..400);
-        let labels = vec!["merge: inverse, 5 robot(s)".to_string(); 3];
-        let corner = |pixels: &[(i32, i32)]| legend_corner(area.clone(), &labels, pixels);
-        assert!(matches!(corner(&[]), SeriesLabelPosition::LowerRight));
-        assert!(matches!(
-            corner(&[(780, 380)]),
-            SeriesLabelPosition::UpperRight
-        ));
-        assert!(matches!(
-            corner(&[(780, 380), (780, 20)]),
-            SeriesLabelPosition::LowerLeft
-        ));
-        let all = [(780, 380), (780, 20), (20, 380), (20, 20)];
-        assert!(matches!(corner(&all), SeriesLabelPosition::LowerRight));
+    fn the_legend_sits_under_the_plot_and_the_papers_marks_inside_it() {
+        let paper = pheromone_sim::paper::seed004().unwrap();
+        let long = "a subtitle of many words ".repeat(8);
+        for (axis, r) in [
+            (Axis::Robots, small_sweep(false)),
+            (Axis::Rc, small_sweep(true)),
+        ] {
+            let (pic, (xs, ys), b, paper_px) = chart(&r, &paper, axis, &long).unwrap();
+            assert!(
+                ys.end <= b[1],
+                "{axis:?}: the legend box {b:?} overlaps the plot {ys:?}"
+            );
+            assert!(
+                b[0] >= 0 && b[2] < pic.width as i32 && b[3] < pic.height as i32,
+                "{axis:?}: {b:?} outside the picture"
+            );
+            assert!(!paper_px.is_empty(), "{axis:?}: the paper's mark is drawn");
+            for (x, y) in paper_px {
+                assert!(
+                    xs.contains(&x) && ys.contains(&y),
+                    "{axis:?}: the paper at ({x}, {y})"
+                );
+            }
+            // The first line's colour (merge, solid) in the box: its sample.
+            let first = series_rgb(0);
+            let in_box = (b[1]..b[3])
+                .any(|y| (b[0]..b[2]).any(|x| pic.get(x as usize, y as usize) == first));
+            assert!(in_box, "{axis:?}: no sample in the legend");
+            // The subtitle wraps: nothing drawn in the picture's last 4 columns above the plot.
+            for y in 0..ys.start as usize {
+                for x in pic.width as usize - 4..pic.width as usize {
+                    assert_eq!(
+                        pic.get(x, y),
+                        [255, 255, 255],
+                        "{axis:?}: text at ({x}, {y})"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
@@ -856,28 +846,5 @@ mod tests {
             Axis::Robots.label(&off),
             "no merge: inverse, own-map, R_C = 8 m"
         );
-    }
-
-    /// The legend tells the two apart in pixels too: merge's sample is a solid line through a
-    /// filled dot, no merge's two dashes around a ring with a white centre.
-    #[test]
-    fn merge_and_no_merge_samples_differ() {
-        let mut pics = Vec::new();
-        for merge in [true, false] {
-            let mut pic = Picture::new(40, 20, [255, 255, 255]);
-            pic.draw(|root| {
-                root.draw(&legend_sample!(merge, [200, 0, 0], (8, 10)))
-                    .map_err(msg)
-            })
-            .unwrap();
-            pics.push(pic);
-        }
-        let red = |p: &Picture, x: usize| p.get(x, 10)[1] < 100;
-        // Between the dash and the ring (x = 8 + 5): line on, gap off.
-        assert!(red(&pics[0], 13) && !red(&pics[1], 13));
-        // The dot's centre (x = 20): filled on, white off.
-        assert!(red(&pics[0], 20) && !red(&pics[1], 20));
-        // Both have their ends.
-        assert!(red(&pics[0], 9) && red(&pics[1], 9));
     }
 }
