@@ -1,7 +1,9 @@
-//! The Rust examples as a new user runs them (issue 51): `pheromone field`, then
-//! `examples/deposit` and `examples/read` as processes of their own; the reader must show the
-//! depositor's trail (its peak on the depositor's 3 m circle, a value at the circle's start)
-//! soon after both start. The examples are built by `cargo test` (or `cargo build --examples`).
+//! The Rust examples as a new user runs them (issue 51): `pheromone field`, then the `deposit`
+//! and `read` examples (`examples/rust`, package `pheromone-examples`) as processes of their own;
+//! the reader must show the depositor's trail (its peak on the depositor's 3 m circle, a value at
+//! the circle's start) soon after both start. `cargo test --workspace` builds the examples (or
+//! `cargo build -p pheromone-examples --examples`), as `cargo run -p pheromone-examples --example
+//! read` does for a user, into `target/<profile>/examples/`.
 
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
@@ -25,7 +27,8 @@ impl Example {
             .join(name);
         assert!(
             path.exists(),
-            "{} is missing: `cargo test` builds the examples (or run `cargo build --examples`)",
+            "{} is missing: `cargo test --workspace` builds the examples (or run \
+             `cargo build -p pheromone-examples --examples`)",
             path.display()
         );
         let mut child = Command::new(&path)
@@ -107,8 +110,9 @@ fn a_read_line_parses() {
     assert_eq!(parse_read_line("t = 0.50 s  the field is empty"), None);
 }
 
-/// The README's Rust snippet is `examples/readme.rs` below its `//!` comment, so that it compiles
-/// (`cargo test` and clippy build the examples) and is a whole program (issue 51).
+/// The README's Rust snippet is `examples/rust/readme.rs` below its `//!` comment, so that it
+/// compiles (`cargo test --workspace` and clippy build the examples) and is a whole program
+/// (issue 51).
 #[test]
 fn the_readmes_rust_snippet_is_the_readme_example() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -118,7 +122,8 @@ fn the_readmes_rust_snippet_is_the_readme_example() {
         .nth(1)
         .and_then(|s| s.split("```").next())
         .expect("a ```rust block in README.md");
-    let example = std::fs::read_to_string(root.join("examples/readme.rs")).expect("the example");
+    let example =
+        std::fs::read_to_string(root.join("examples/rust/readme.rs")).expect("the example");
     let body: String = example
         .lines()
         .skip_while(|l| l.starts_with("//!") || l.is_empty())
@@ -126,6 +131,6 @@ fn the_readmes_rust_snippet_is_the_readme_example() {
         .collect();
     assert_eq!(
         snippet, body,
-        "README.md's ```rust block is not examples/readme.rs"
+        "README.md's ```rust block is not examples/rust/readme.rs"
     );
 }

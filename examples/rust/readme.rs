@@ -1,5 +1,6 @@
-//! The README's Rust snippet, as a whole program: `cargo run --release --example readme` beside
-//! `pheromone field`. `tests/examples` checks that the README shows this file below this comment.
+//! The README's Rust snippet, as a whole program, beside `pheromone field`:
+//! `cargo run --release -p pheromone-examples --example readme`. `tests/examples` checks that
+//! the README shows this file below this comment.
 
 // Cargo.toml: pheromone-field = { path = "<this repository>/field" }
 use std::time::Duration;

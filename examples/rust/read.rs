@@ -1,11 +1,11 @@
 //! A reading process: attaches to the field `main` and prints, about twice a second, where the
 //! trail is strongest (the depositor's track: `deposit.rs` walks a 3 m circle around the field's
 //! centre) with its value and gradient there, and the value at the circle's start, where the
-//! depositor's first deposit lands. Run beside `pheromone field` and `cargo run --example deposit`:
+//! depositor's first deposit lands. Run beside `pheromone field` and the `deposit` example:
 //!
-//!     cargo run --release -- field            # terminal 1
-//!     cargo run --release --example read      # terminal 2 (or `read NAME` for field NAME)
-//!     cargo run --release --example deposit   # terminal 3
+//!     cargo run --release -- field                                # terminal 1
+//!     cargo run --release -p pheromone-examples --example read     # terminal 2 (`-- NAME`: field NAME)
+//!     cargo run --release -p pheromone-examples --example deposit  # terminal 3
 //!
 //! Within a second of the depositor starting, `peak` moves onto its circle and `start` rises.
 
@@ -56,7 +56,7 @@ fn main() -> anyhow::Result<()> {
                 );
         let t = h.sim_time_s;
         if peak <= 0.0 {
-            println!("t = {t:>7.2} s  the field is empty: is `--example deposit` running?");
+            println!("t = {t:>7.2} s  the field is empty: is the `deposit` example running?");
             continue;
         }
         let g = view.geometry;
