@@ -4,7 +4,7 @@
 //! `sweep.json` (the runs and the points, mean ± sd over the seeds) and `sweep_trail.png`: a
 //! panel per parameter studied, the mean path error (mm, mean ± sd over the seeds) against
 //! the parameter's value, a line per path, the scenario's own value a dotted black vertical
-//! line and a larger dot on each path.
+//! line and a larger dot on each path; one legend for all panels in a band under them.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -13,6 +13,7 @@ use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
 use super::files::{write_file, write_json, write_png};
+use super::legend::{with_legend, Sample};
 use super::plots::{text, PLOT_H_PX, PLOT_W_PX};
 use super::style::{colour, msg, series_rgb, Picture};
 use super::ReportError;
@@ -126,16 +127,33 @@ fn chart(r: &TrailSweep) -> Result<Picture, String> {
             "mean path error, mean ± sd over seeds 1–{}; one setting varied at a time; dotted: the scenario's value",
             r.trials
         );
-        root.draw_text(&sub, &text(14).color(&RGBColor(80, 80, 80)), (16, 40))
-            .map_err(msg)?;
-        let body = root.margin(70, 0, 0, 0);
+        let lines = super::summary::wrap(&sub, 14, w.max(PLOT_W_PX) as i32 - 32);
+        for (i, line) in lines.iter().enumerate() {
+            let y = 40 + 18 * i as i32;
+            root.draw_text(line, &text(14).color(&RGBColor(80, 80, 80)), (16, y))
+                .map_err(msg)?;
+        }
+        let body = root.margin(70 + 18 * (lines.len() as u32 - 1), 0, 0, 0);
         let panels = body.split_evenly((rows, cols));
         for (param, area) in params.iter().zip(panels.iter()) {
             panel(area, r, *param)?;
         }
         root.present().map_err(msg)?;
     }
-    Ok(pic)
+    // One legend for every panel, in a band under them (outside every plotting area).
+    let mut entries: Vec<(Sample, String)> = paths(r)
+        .into_iter()
+        .enumerate()
+        .map(|(i, path)| {
+            let rgb = series_rgb(i);
+            (Sample::Line { solid: true, rgb }, format!("path '{path}'"))
+        })
+        .collect();
+    entries.push((
+        Sample::Dotted,
+        "the scenario's own value (larger dot)".into(),
+    ));
+    Ok(with_legend(&pic, &entries)?.0)
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
@@ -196,17 +214,12 @@ fn panel(area: &Area<'_>, r: &TrailSweep, param: TrailParam) -> Result<(), Strin
             .filter(|p| p.path == path)
             .filter_map(|p| mm(p).map(|(m, s)| (p.value, m, s, p.shipped)))
             .collect();
-        let rgb = series_rgb(i);
         chart
             .draw_series(LineSeries::new(
                 xy.iter().map(|&(x, m, _, _)| (x, m)),
                 style,
             ))
-            .map_err(msg)?
-            .label(path)
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 16, y)], colour(rgb).stroke_width(2))
-            });
+            .map_err(msg)?;
         let cap = 0.15 * pad;
         for &(x, m, s, shipped) in &xy {
             let (y0, y1) = ((m - s).max(0.0), m + s);
@@ -223,13 +236,60 @@ fn panel(area: &Area<'_>, r: &TrailSweep, param: TrailParam) -> Result<(), Strin
                 .map_err(msg)?;
         }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(200, 200, 200))
-        .label_font(text(12))
-        .draw()
-        .map_err(msg)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pheromone_sim::sweep_stats::MeanSd;
+    use pheromone_sim::trail_sweep::TrailRun;
+
+    /// Issue 51: one legend for every panel, under them: each path's colour in the band below
+    /// the panels (outside every plotting area).
+    #[test]
+    fn the_legend_sits_under_the_panels() {
+        let mut r = TrailSweep {
+            scenario: "trail-following".into(),
+            trials: 2,
+            shipped: [(TrailParam::OmegaGain, 3.0)].into_iter().collect(),
+            runs: Vec::new(),
+            points: Vec::new(),
+            simulations: 0,
+        };
+        for path in ["straight", "curved"] {
+            for (value, err) in [(1.0, 0.03), (3.0, 0.01), (5.0, 0.02)] {
+                r.runs.push(TrailRun {
+                    param: TrailParam::OmegaGain,
+                    value,
+                    shipped: value == 3.0,
+                    seed: 1,
+                    path: path.into(),
+                    mean_path_error_m: Some(err),
+                    turning_share: Some(0.5),
+                });
+                r.points.push(TrailPoint {
+                    param: TrailParam::OmegaGain,
+                    value,
+                    shipped: value == 3.0,
+                    path: path.into(),
+                    mean_path_error_m: Some(MeanSd {
+                        mean: err,
+                        sd: 0.002,
+                        n: 2,
+                    }),
+                    turning_share: None,
+                });
+            }
+        }
+        let pic = chart(&r).unwrap();
+        let panels_h = 70 + PLOT_H_PX as usize * 3 / 4;
+        assert!(pic.height as usize > panels_h, "no band under the panels");
+        for i in 0..2 {
+            let rgb = series_rgb(i);
+            let below = (panels_h..pic.height as usize)
+                .any(|y| (0..pic.width as usize).any(|x| pic.get(x, y) == rgb));
+            assert!(below, "path {i}'s sample is not under the panels");
+        }
+    }
 }
