@@ -18,6 +18,14 @@
 //!   and leaving the window, which are cache-hot for small radii) and each cell of `next` is
 //!   written once.
 //!
+//! Small radii (`r ≤ DIRECT_RADIUS_MAX`, windows up to 5 × 5) take the *direct* pass instead
+//! (`band_direct`): no running sums and no prefix sums, but each row's column sums added afresh
+//! in f32 from its `2r + 1` window rows (`kernels::column_sums`, all rows in one pass over the
+//! row) and each cell's window sum from its `2r + 1` column sums (`kernels::decay_direct`, fused
+//! with the decay as above), eight cells per AVX2 instruction. For a 3 × 3 window that is four
+//! f32 adds per cell where the running sums cost an f64 swap, a prefix pass and a difference per
+//! cell, and nothing carries from one row to the next.
+//!
 //! Every band restarts its column sums from the rows of its first window. The band height
 //! (`band_rows`) depends only on the grid height and the radius, never on the thread count, so
 //! any number of threads computes exactly the same bits as one thread.
@@ -38,11 +46,29 @@
 //! 1e10 times larger than its neighbours' (then the small means are absolutely, not relatively,
 //! accurate). A window sum that round-off pushes below 0 is clamped to 0.
 //!
+//! The direct pass adds the `n ≤ (2r + 1)²` cells of a clipped window in f32 (u₃₂ = 2⁻²⁴) in a
+//! fixed tree, vertical then horizontal, in which every cell passes through at most
+//! `d = 2·⌈log₂(2r + 1)⌉` additions (0, 4, 6 for r = 0, 1, 2), so its window sum is within
+//! `γ_d·S_w` of the exact one (γ_d = d·u₃₂ / (1 − d·u₃₂), `S_w` the sum of |cells| of that
+//! window alone: Higham, *Accuracy and Stability of Numerical Algorithms*, §4.2, for any
+//! summation tree). 1 / n is computed in f64 and rounded once to f32, and the product rounded
+//! once more, so the mean is within `(d + 3)·u₃₂·S_w / n` of the exact window mean (the third
+//! u₃₂ covers the second-order terms), plus 2⁻¹⁴⁹ where the product underflows — for
+//! non-negative cells at most 4.2·10⁻⁷ (r = 1) and 5.4·10⁻⁷ (r = 2) of the mean itself, inside
+//! the peers' and the property tests' tolerances; beside the reference pass's bound it is the
+//! larger term. `field/tests/ambient_fast.rs` checks it against a compensated sum of each
+//! window and against the reference pass (within the sum of both bounds).
+//!
 //! # SIMD
 //! The row kernels (`crate::simd::kernels`) are plain Rust written so that they vectorize;
 //! `crate::simd` runs them compiled for AVX2 when the CPU has it (detected once at run time) and for the baseline
 //! otherwise. Both compile the same operations in the same order without FMA contraction, so the
 //! two paths give bit-identical results (`field/tests/properties.rs` checks it).
+//!
+//! On planes of at least `STREAM_CELLS_MIN` cells (16 MiB) the fast passes make each output row
+//! in a row buffer and copy it to the plane with non-temporal stores (`simd::stream_copy`, then
+//! one `sfence` per band): the next frame is not read into the caches before it is written, and
+//! does not evict the rows still to be read. The bits are the same.
 
 use crate::plan::PlanePlan;
 use crate::simd::kernels::{diffuse_row, scale, subtract_toward_zero};
@@ -57,6 +83,10 @@ pub const BAND_ROWS_MIN: usize = 256;
 pub fn band_rows(height: usize, r: usize) -> usize {
     BAND_ROWS_MIN.max(4 * r).min(height).max(1)
 }
+
+/// The largest radius the direct pass serves (`band_direct`: a window of at most 5 × 5 cells,
+/// each cell's sum added from its own cells); larger radii take the running sums.
+pub const DIRECT_RADIUS_MAX: usize = 2;
 
 /// Rows the fast pass sums horizontally at once (one per SIMD lane, `Dispatch::prefix_rows4`).
 const GROUP_ROWS: usize = 4;
@@ -73,6 +103,11 @@ pub struct BandScratch {
     prefix: [Vec<f64>; GROUP_ROWS],
     inv_count: [Vec<f64>; GROUP_ROWS],
     inv_count_rows: [usize; GROUP_ROWS],
+    /// The direct pass's column sums (padded by the radius) and 1 / (cells of each window).
+    direct_cols: Vec<f32>,
+    direct_inv: Vec<f32>,
+    /// A fast pass's output row before it is streamed to the plane (`Rows::write_out`).
+    direct_out: Vec<f32>,
 }
 
 /// What a band pass writes for each cell.
@@ -115,6 +150,7 @@ pub(crate) fn band(
         width,
         prev,
         y0,
+        stream: prev.len() >= STREAM_CELLS_MIN,
     };
     match radius {
         None if kappa == 0.0 => no_window(output, &prev[y0 * width..y1 * width], out),
@@ -122,7 +158,7 @@ pub(crate) fn band(
             for y in y0..y1 {
                 rows.write(
                     y,
-                    None,
+                    Window::None,
                     &mut out[(y - y0) * width..(y - y0 + 1) * width],
                     s,
                     0,
@@ -131,7 +167,11 @@ pub(crate) fn band(
             }
         }
         Some(r) if dispatch.is_reference() => band_reference(&rows, r, y1, out, s, dispatch),
+        Some(r) if r <= DIRECT_RADIUS_MAX => band_direct(&rows, r, y1, out, s, dispatch),
         Some(r) => band_grouped(&rows, r, y1, out, s, dispatch),
+    }
+    if rows.stream {
+        crate::simd::store_fence();
     }
 }
 
@@ -173,12 +213,12 @@ fn band_reference(
     let rx = sums.radius_x;
     for y in y0..y1 {
         let rows_in = sums.advance(y, y0, rows.prev, s, d);
-        sums.set_inv_count(s, 0, rows_in);
+        set_inv_count(s, 0, rows_in);
         let prefix = &mut s.prefix[0];
         d.prefix_sum(&s.col_sum, &mut prefix[rx..=rx + w]);
         pad(prefix, rx, w);
         let o = &mut out[(y - y0) * w..(y - y0 + 1) * w];
-        rows.write(y, Some(rx), o, s, 0, d);
+        rows.write(y, Window::Prefix(rx), o, s, 0, d);
     }
 }
 
@@ -214,7 +254,7 @@ fn band_grouped(
                 _ => &before[k - 1],
             };
             let rows_in = sums.advance_into(y + k, y0, rows.prev, src, dst, d);
-            sums.set_inv_count(s, k, rows_in);
+            set_inv_count(s, k, rows_in);
         }
         // A short last group repeats its last row in the unused lanes (results unused).
         let [c0, c1, c2, c3] = &s.cols;
@@ -225,16 +265,75 @@ fn band_grouped(
         for k in 0..g {
             pad(&mut s.prefix[k], rx, w);
             let o = &mut out[(y + k - y0) * w..(y + k - y0 + 1) * w];
-            rows.write(y + k, Some(rx), o, s, k, d);
+            rows.write_out(y + k, Window::Prefix(rx), o, s, k, d);
         }
         y += g;
     }
 }
 
+/// The direct pass of small radii (`r ≤ DIRECT_RADIUS_MAX`): each row's column sums over its
+/// window rows added afresh in f32 (`Dispatch::column_sums`, into `direct_cols` between `r`
+/// zeros on each side), then each cell's window sum from its `2r + 1` column sums
+/// (`Dispatch::decay_direct`).
+/// No state carries from one row to the next, so bands and threads change nothing.
+fn band_direct(
+    rows: &Rows<'_>,
+    r: usize,
+    y1: usize,
+    out: &mut [f32],
+    s: &mut BandScratch,
+    d: Dispatch,
+) {
+    let (w, y0, prev) = (rows.width, rows.y0, rows.prev);
+    let h = prev.len() / w;
+    s.direct_cols.clear();
+    s.direct_cols.resize(w + 2 * r, 0.0);
+    set_inv_count_x(s, w, r.min(w));
+    for y in y0..y1 {
+        let (top, bottom) = (y.saturating_sub(r), (y + r).min(h - 1));
+        // The row that enters the next row's window is fetched from memory while this row is
+        // computed (a hint: no result changes; `kernels::swap_row` says why it pays).
+        if y + r + 1 < h {
+            for v in prev[(y + r + 1) * w..(y + r + 2) * w].iter().step_by(16) {
+                crate::simd::prefetch(v);
+            }
+        }
+        d.column_sums(
+            &mut s.direct_cols[r..r + w],
+            &prev[top * w..(bottom + 1) * w],
+        );
+        let rows_in = bottom + 1 - top;
+        if s.inv_count_rows[0] != rows_in {
+            set_inv_count(s, 0, rows_in);
+            s.direct_inv.clear();
+            s.direct_inv
+                .extend(s.inv_count[0].iter().map(|&c| c as f32));
+        }
+        let o = &mut out[(y - y0) * w..(y - y0 + 1) * w];
+        rows.write_out(y, Window::Direct(r), o, s, 0, d);
+    }
+}
+
+/// Planes of at least this many cells are written by the fast passes with non-temporal stores
+/// (`simd::stream_copy`): 4 Mi cells, 16 MiB, beyond what the caches keep of a frame beside the
+/// one it is read from.
+const STREAM_CELLS_MIN: usize = 1 << 22;
+
 /// Fills the right pad of a prefix row with the row's total (the left pad stays 0).
 fn pad(prefix: &mut [f64], rx: usize, w: usize) {
     let total = prefix[rx + w];
     prefix[rx + w + 1..].fill(total);
+}
+
+/// Where a row's window sums come from.
+#[derive(Debug, Clone, Copy)]
+enum Window {
+    /// No window (diffusion or a plan without a mean).
+    None,
+    /// Prefix sums of group row `k` padded by this many columns (`s.prefix[k]`).
+    Prefix(usize),
+    /// The direct pass's column sums padded by this radius (`s.direct_cols`).
+    Direct(usize),
 }
 
 /// What every row of a band shares.
@@ -244,15 +343,37 @@ struct Rows<'a> {
     width: usize,
     prev: &'a [f32],
     y0: usize,
+    /// The fast passes write through `write_out` with non-temporal stores (large planes).
+    stream: bool,
 }
 
 impl Rows<'_> {
-    /// Writes output row `y` into `o`, from the window sums of group row `k` of `s` (prefix
-    /// sums padded by `radius_x`, or no window).
+    /// As `write`; on a large plane (`stream`) the row is made in `s.direct_out` and streamed
+    /// to `o` (`simd::stream_copy`, the same bits; `band` fences after the last row).
+    fn write_out(
+        &self,
+        y: usize,
+        window: Window,
+        o: &mut [f32],
+        s: &mut BandScratch,
+        k: usize,
+        d: Dispatch,
+    ) {
+        if !self.stream {
+            return self.write(y, window, o, s, k, d);
+        }
+        let mut row = std::mem::take(&mut s.direct_out);
+        row.resize(o.len(), 0.0);
+        self.write(y, window, &mut row, s, k, d);
+        crate::simd::stream_copy(o, &row);
+        s.direct_out = row;
+    }
+
+    /// Writes output row `y` into `o`, from the window sums `window` of group row `k` of `s`.
     fn write(
         &self,
         y: usize,
-        radius_x: Option<usize>,
+        window: Window,
         o: &mut [f32],
         s: &mut BandScratch,
         k: usize,
@@ -278,20 +399,29 @@ impl Rows<'_> {
         } else {
             row
         };
-        let span = 2 * radius_x.unwrap_or(0) + 1;
         let (prefix, inv) = (&s.prefix[k], &s.inv_count[k]);
-        match self.output {
-            Output::Mean { .. } => d.mean_row(prefix, inv, span, o),
-            Output::Step { plan, .. } => match plan {
+        match (self.output, window) {
+            (Output::Mean { .. }, Window::Prefix(rx)) => d.mean_row(prefix, inv, 2 * rx + 1, o),
+            (Output::Mean { .. }, Window::Direct(r)) => {
+                d.mean_direct(&s.direct_cols, &s.direct_inv, 2 * r + 1, o)
+            }
+            (Output::Mean { .. }, Window::None) => unreachable!("the mean always has a window"),
+            (Output::Step { plan, .. }, _) => match plan {
                 PlanePlan::Scale { factor } => scale(src, o, factor),
                 PlanePlan::Subtract { loss } => {
                     for (c, &p) in o.iter_mut().zip(src) {
                         *c = subtract_toward_zero(p, loss);
                     }
                 }
-                PlanePlan::Ambient { factor, alpha, .. } => match radius_x {
-                    Some(_) => d.decay_row(prefix, inv, span, src, o, factor, alpha),
-                    None => ambient_no_mean(src, o, factor),
+                PlanePlan::Ambient { factor, alpha, .. } => match window {
+                    Window::Prefix(rx) => {
+                        d.decay_row(prefix, inv, 2 * rx + 1, src, o, factor, alpha)
+                    }
+                    Window::Direct(r) => {
+                        let (cols, inv) = (&s.direct_cols, &s.direct_inv);
+                        d.decay_direct(cols, inv, 2 * r + 1, src, o, factor, alpha)
+                    }
+                    Window::None => ambient_no_mean(src, o, factor),
                 },
             },
         }
@@ -333,16 +463,7 @@ impl ColumnSums {
             p.clear();
             p.resize(width + 2 * radius_x + 1, 0.0);
         }
-        s.inv_count_x.clear();
-        s.inv_count_x
-            .extend((0..width).map(|x| {
-                1.0 / ((x + radius_x + 1).min(width) - x.saturating_sub(radius_x)) as f64
-            }));
-        for (c, rows) in s.inv_count.iter_mut().zip(&mut s.inv_count_rows) {
-            c.clear();
-            c.resize(width, 0.0);
-            *rows = 0;
-        }
+        set_inv_count_x(s, width, radius_x);
         // The window of row y0 without its last row (row y0 + r enters in `advance`).
         for y in y0.saturating_sub(radius_y)..(y0 + radius_y).min(height) {
             dispatch.add_row(&mut s.col_sum, &prev[y * width..(y + 1) * width]);
@@ -418,19 +539,34 @@ impl ColumnSums {
         }
         (y + r).min(self.height - 1) - y.saturating_sub(r) + 1
     }
+}
 
-    /// Makes `s.inv_count[k]` 1 / (cells of each window of a row whose window has `rows_in`
-    /// rows).
-    fn set_inv_count(&self, s: &mut BandScratch, k: usize, rows_in: usize) {
-        if s.inv_count_rows[k] == rows_in {
-            return;
-        }
-        let inv_rows = 1.0 / rows_in as f64;
-        for (c, &cx) in s.inv_count[k].iter_mut().zip(&s.inv_count_x) {
-            *c = cx * inv_rows;
-        }
-        s.inv_count_rows[k] = rows_in;
+/// Makes `s.inv_count_x[x]` 1 / (columns of the window of column `x`, half-width `radius_x`
+/// clipped to the row) and resets every `s.inv_count[k]` (`set_inv_count` fills them).
+fn set_inv_count_x(s: &mut BandScratch, width: usize, radius_x: usize) {
+    s.inv_count_x.clear();
+    s.inv_count_x.extend(
+        (0..width)
+            .map(|x| 1.0 / ((x + radius_x + 1).min(width) - x.saturating_sub(radius_x)) as f64),
+    );
+    for (c, rows) in s.inv_count.iter_mut().zip(&mut s.inv_count_rows) {
+        c.clear();
+        c.resize(width, 0.0);
+        *rows = 0;
     }
+}
+
+/// Makes `s.inv_count[k]` 1 / (cells of each window of a row whose window has `rows_in`
+/// rows).
+fn set_inv_count(s: &mut BandScratch, k: usize, rows_in: usize) {
+    if s.inv_count_rows[k] == rows_in {
+        return;
+    }
+    let inv_rows = 1.0 / rows_in as f64;
+    for (c, &cx) in s.inv_count[k].iter_mut().zip(&s.inv_count_x) {
+        *c = cx * inv_rows;
+    }
+    s.inv_count_rows[k] = rows_in;
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -7,7 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::ambient::{self, BandScratch, Output};
-pub use crate::ambient::{band_rows, BAND_ROWS_MIN};
+pub use crate::ambient::{band_rows, BAND_ROWS_MIN, DIRECT_RADIUS_MAX};
 use crate::error::ConfigError;
 pub use crate::plan::PlanePlan;
 pub use crate::simd::Dispatch;

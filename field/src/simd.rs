@@ -181,4 +181,57 @@ dispatch! {
         factor: f32,
         alpha: f32
     );
+    fn column_sums(col: &mut [f32], rows: &[f32]);
+    fn mean_direct(col: &[f32], inv_count: &[f32], span: usize, out: &mut [f32]);
+    fn decay_direct(
+        col: &[f32],
+        inv_count: &[f32],
+        span: usize,
+        src: &[f32],
+        out: &mut [f32],
+        factor: f32,
+        alpha: f32
+    );
+}
+
+/// `dst.copy_from_slice(src)` with non-temporal stores for the 16-byte-aligned body (plain
+/// stores for the few cells before and after it): the cells go to memory without first reading
+/// their cache lines and without evicting what the pass still reads. Same bits as a copy. The
+/// caller ends the pass with [`store_fence`] before anyone else may read `dst`.
+pub(crate) fn stream_copy(dst: &mut [f32], src: &[f32]) {
+    assert_eq!(dst.len(), src.len(), "stream_copy: lengths");
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_loadu_ps, _mm_stream_ps};
+        // Cells before the first 16-byte boundary of `dst`, and the aligned body (whole vectors).
+        let head = dst.as_ptr().align_offset(16).min(dst.len());
+        let body = (dst.len() - head) / 4 * 4;
+        dst[..head].copy_from_slice(&src[..head]);
+        let (d, s) = (
+            dst[head..head + body].as_mut_ptr(),
+            src[head..head + body].as_ptr(),
+        );
+        for k in (0..body).step_by(4) {
+            // SAFETY: k + 4 ≤ body, so the load reads `src[head + k..head + k + 4]` and the store
+            // writes `dst[head + k..head + k + 4]`, both in bounds (the two slices have one
+            // length, asserted above); `dst` + head is 16-byte aligned (`align_offset`) and k is
+            // a multiple of 4 cells (16 bytes), as `_mm_stream_ps` requires; `dst` is a
+            // `&mut` slice, so it aliases `src` nowhere. SSE is part of the x86-64 baseline.
+            unsafe { _mm_stream_ps(d.add(k), _mm_loadu_ps(s.add(k))) };
+        }
+        dst[head + body..].copy_from_slice(&src[head + body..]);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    dst.copy_from_slice(src);
+}
+
+/// Orders every earlier non-temporal store ([`stream_copy`]) before any later store (`sfence`),
+/// so that a frame written with them is complete before it is published.
+pub(crate) fn store_fence() {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: `sfence` only orders stores; SSE, its one requirement, is part of the x86-64
+    // baseline.
+    unsafe {
+        std::arch::x86_64::_mm_sfence()
+    };
 }

@@ -224,3 +224,122 @@ pub(crate) fn decay_row(
         *o = p - one_minus * (p - m);
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// The direct pass of small radii (`crate::ambient`'s `band_direct`): each window sum added up
+// from its own cells in f32, in a fixed tree (every cell passes through at most
+// `2·⌈log₂(2r + 1)⌉` additions: the bound of `crate::ambient`), no running sums and no prefix
+// sums.
+
+/// `col[x] = Σ_k rows[k][x]` over the `n = rows.len() / col.len()` consecutive rows (1 ≤ n ≤ 5),
+/// in f32 in a tree: `(r0 + r1) + r2` for three rows, `((r0 + r1) + (r2 + r3)) + r4` for five
+/// (each cell through at most ⌈log₂ n⌉ additions).
+#[inline(always)]
+pub(crate) fn column_sums(col: &mut [f32], rows: &[f32]) {
+    let w = col.len();
+    let n = rows.len() / w;
+    let row = |k: usize| &rows[k * w..(k + 1) * w];
+    match n {
+        1 => col.copy_from_slice(row(0)),
+        2 => {
+            for ((c, &a), &b) in col.iter_mut().zip(row(0)).zip(row(1)) {
+                *c = a + b;
+            }
+        }
+        3 => {
+            for (((c, &a), &b), &e) in col.iter_mut().zip(row(0)).zip(row(1)).zip(row(2)) {
+                *c = (a + b) + e;
+            }
+        }
+        4 => {
+            let rows4 = row(0).iter().zip(row(1)).zip(row(2)).zip(row(3));
+            for (c, (((&a, &b), &e), &f)) in col.iter_mut().zip(rows4) {
+                *c = (a + b) + (e + f);
+            }
+        }
+        5 => {
+            let rows4 = row(0).iter().zip(row(1)).zip(row(2)).zip(row(3));
+            for ((c, (((&a, &b), &e), &f)), &g) in col.iter_mut().zip(rows4).zip(row(4)) {
+                *c = ((a + b) + (e + f)) + g;
+            }
+        }
+        _ => unreachable!("the direct pass sums 1 to 5 rows"),
+    }
+}
+
+/// The window sum of `S` (1, 3 or 5) consecutive column sums from `col[x]`, in the tree of
+/// `column_sums`, clamped at 0 as `window_mean` clamps.
+#[inline(always)]
+fn direct_sum<const S: usize>(col: &[f32], x: usize) -> f32 {
+    let sum = match S {
+        1 => col[x],
+        3 => (col[x] + col[x + 1]) + col[x + 2],
+        _ => ((col[x] + col[x + 1]) + (col[x + 2] + col[x + 3])) + col[x + 4],
+    };
+    if sum > 0.0 {
+        sum
+    } else {
+        0.0
+    }
+}
+
+#[inline(always)]
+fn mean_direct_span<const S: usize>(col: &[f32], inv_count: &[f32], out: &mut [f32]) {
+    let w = out.len();
+    let (col, inv_count) = (&col[..w + S - 1], &inv_count[..w]);
+    for (x, (o, &inv)) in out.iter_mut().zip(inv_count).enumerate() {
+        *o = direct_sum::<S>(col, x) * inv;
+    }
+}
+
+#[inline(always)]
+fn decay_direct_span<const S: usize>(
+    col: &[f32],
+    inv_count: &[f32],
+    src: &[f32],
+    out: &mut [f32],
+    factor: f32,
+    alpha: f32,
+) {
+    let w = out.len();
+    let (col, inv_count, src) = (&col[..w + S - 1], &inv_count[..w], &src[..w]);
+    let one_minus = 1.0 - factor;
+    for (x, ((o, &p), &inv)) in out.iter_mut().zip(src).zip(inv_count).enumerate() {
+        // The same expression as `decay_row`, from the window's own mean.
+        let m = alpha * (direct_sum::<S>(col, x) * inv);
+        let m = if m < p { m } else { p };
+        *o = p - one_minus * (p - m);
+    }
+}
+
+/// The window mean of each cell of a row: `out[x] = (Σ col[x..x + span]) · inv_count[x]`, `col`
+/// the column sums with `(span − 1) / 2` zeros on each side; span 1, 3 or 5.
+#[inline(always)]
+pub(crate) fn mean_direct(col: &[f32], inv_count: &[f32], span: usize, out: &mut [f32]) {
+    match span {
+        1 => mean_direct_span::<1>(col, inv_count, out),
+        3 => mean_direct_span::<3>(col, inv_count, out),
+        5 => mean_direct_span::<5>(col, inv_count, out),
+        _ => unreachable!("the direct pass serves spans 1, 3 and 5"),
+    }
+}
+
+/// As `decay_row` from the direct window sums (`mean_direct`'s `col` and `inv_count`).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn decay_direct(
+    col: &[f32],
+    inv_count: &[f32],
+    span: usize,
+    src: &[f32],
+    out: &mut [f32],
+    factor: f32,
+    alpha: f32,
+) {
+    match span {
+        1 => decay_direct_span::<1>(col, inv_count, src, out, factor, alpha),
+        3 => decay_direct_span::<3>(col, inv_count, src, out, factor, alpha),
+        5 => decay_direct_span::<5>(col, inv_count, src, out, factor, alpha),
+        _ => unreachable!("the direct pass serves spans 1, 3 and 5"),
+    }
+}
