@@ -21,7 +21,7 @@ fn the_loop_ends_after_its_duration_with_a_status_line_due_once_a_period() {
             due += 1;
         }
         // A loop's work, paced as the commands pace theirs: on the node.
-        let _ = node.wait(Duration::from_millis(1));
+        let _ = pheromone_field::shm::node_wait(&node, Duration::from_millis(1));
     }
     let took = started.elapsed();
     assert!(took >= Duration::from_millis(300), "{took:?}");

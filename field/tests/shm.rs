@@ -305,7 +305,7 @@ fn every_wait_policy_sees_the_next_frame_and_honours_its_timeout() {
             while !stop.load(std::sync::atomic::Ordering::Relaxed) {
                 server.tick().unwrap();
                 // Node wait: 5 ms between frames.
-                let _ = node.wait(Duration::from_millis(5));
+                let _ = pheromone_field::shm::node_wait(&node, Duration::from_millis(5));
             }
         })
     };

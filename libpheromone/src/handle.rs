@@ -431,7 +431,7 @@ fn wait_alive(
                  process publishes its frames: the field process died; restart it"
             );
         }
-        match node.wait(left.min(Duration::from_millis(20))) {
+        match pheromone_field::shm::node_wait(node, left.min(Duration::from_millis(20))) {
             Ok(()) => {}
             Err(NodeWaitFailure::Interrupt | NodeWaitFailure::TerminationRequest) => bail!(
                 PheromoneStatus::Interrupted,

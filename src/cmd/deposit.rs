@@ -239,7 +239,9 @@ fn refusal_detail(
             break;
         }
         let left = deadline.saturating_duration_since(std::time::Instant::now());
-        if left.is_zero() || node.wait(left.min(Duration::from_millis(50))).is_err() {
+        if left.is_zero()
+            || pheromone_field::shm::node_wait(node, left.min(Duration::from_millis(50))).is_err()
+        {
             break;
         }
     }

@@ -109,7 +109,7 @@ pub(super) fn until_mirror(
                 Some(())
             } else {
                 // The mirror updates its state every round (20 ms).
-                let _ = node.wait(Duration::from_millis(20));
+                let _ = pheromone_field::shm::node_wait(node, Duration::from_millis(20));
                 None
             }
         },
@@ -161,7 +161,10 @@ fn a_partitioned_mirror_is_stale_meanwhile_and_bit_identical_again_after_the_lin
     let stale_after = cut.elapsed();
     deposit(ORIGIN, &name, "3.2", "3.2");
     let during = hosts.origin_sequence();
-    let _ = node.wait(Duration::from_secs(5).saturating_sub(cut.elapsed()));
+    let _ = pheromone_field::shm::node_wait(
+        &node,
+        Duration::from_secs(5).saturating_sub(cut.elapsed()),
+    );
     link.set(true);
     let healed = Instant::now();
     // Bit-identical again, with the partition's deposit, on frames newer than the partition.
@@ -237,9 +240,15 @@ fn deposits_made_on_a_partitioned_mirror_are_applied_once_after_the_link_heals()
         "the first deposit came {early:?} after the cut, when the mirror may be stale"
     );
     // Past the lease: the mirror's session has dropped the bridge.
-    let _ = node.wait(Duration::from_secs(11).saturating_sub(cut.elapsed()));
+    let _ = pheromone_field::shm::node_wait(
+        &node,
+        Duration::from_secs(11).saturating_sub(cut.elapsed()),
+    );
     deposit_on_mirror_host(&link, &name, "4.0");
-    let _ = node.wait(Duration::from_secs(12).saturating_sub(cut.elapsed()));
+    let _ = pheromone_field::shm::node_wait(
+        &node,
+        Duration::from_secs(12).saturating_sub(cut.elapsed()),
+    );
     link.set(true);
     let healed = Instant::now();
     let both = hosts.common(5, |f| {

@@ -301,7 +301,7 @@ fn sim_gives_its_control_loops_the_rt_priority_and_the_same_metrics() {
             }
         }
         // A child's policy is read while the run goes on: /proc tells no one of a change.
-        let _ = node.wait(Duration::from_millis(5));
+        let _ = pheromone_field::shm::node_wait(&node, Duration::from_millis(5));
     }
     let out = child.wait_with_output().unwrap();
     assert!(out.status.success(), "{}", stderr(&out));

@@ -44,7 +44,8 @@ fn pubsub<T: Debug + ZeroCopySend>(
             // created by another and then gone (or not yet complete) when it opens it. Another
             // try sees it settled; a termination request ends the retries.
             Err(E::PublishSubscribeOpenError(OpenErr::DoesNotExist))
-                if attempt < OPEN_OR_CREATE_ATTEMPTS && node.wait(RETRY_WAIT).is_ok() =>
+                if attempt < OPEN_OR_CREATE_ATTEMPTS
+                    && crate::shm::node_wait(node, RETRY_WAIT).is_ok() =>
             {
                 attempt += 1;
             }

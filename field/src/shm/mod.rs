@@ -85,8 +85,8 @@ pub use reader::{
 };
 pub use server::{FieldServer, TickOutcome};
 pub use signals::{
-    handle_termination_requests, handles_termination_requests, should_stop, stop_requested,
-    stop_when,
+    handle_termination_requests, handles_termination_requests, node_wait, should_stop,
+    stop_requested, stop_when,
 };
 pub use standby::{Standby, StandbyEvent, Takeover};
 pub use survey::{field_names, survey, FieldInfo};
@@ -107,7 +107,7 @@ const FRAME_READY: EventId = EventId::new(0);
 /// it as an interrupt.
 pub fn wait_or_stop(node: &Node<Svc>, d: Duration) -> bool {
     use iceoryx2::node::NodeWaitFailure;
-    match node.wait(d) {
+    match node_wait(node, d) {
         Ok(()) => !should_stop(node),
         Err(NodeWaitFailure::TerminationRequest) => false,
         Err(NodeWaitFailure::Interrupt) => !stop_requested(),
@@ -282,17 +282,16 @@ fn create_node_with(name: &str, mut domain: Config) -> Result<Node<Svc>, AttachE
             source: e,
         });
     // Where the program asked for iceoryx2's handling: installs its signal handler (installed on
-    // first use). A wait that fails took a termination request an earlier node of this process
-    // had not yet seen: raised again below. Elsewhere nothing is installed or consumed.
-    let seen_before = handles_termination_requests()
-        && node.as_ref().is_ok_and(|n| n.wait(Duration::ZERO).is_err());
+    // first use); a request it already recorded is latched (`node_wait`). Elsewhere nothing is
+    // installed or consumed.
+    if handles_termination_requests() {
+        if let Ok(n) = &node {
+            let _ = node_wait(n, Duration::ZERO);
+        }
+    }
     if blocked {
         // Restoring the mask the thread had cannot fail with a valid `how`.
         let _ = pthread_sigmask(SigmaskHow::SIG_SETMASK, Some(&previous), None);
-    }
-    if seen_before {
-        // Raising a signal the process handles cannot fail.
-        let _ = nix::sys::signal::raise(Signal::SIGTERM);
     }
     let node = node?;
     if !supervised {
@@ -773,7 +772,7 @@ fn retry_attach<T, E: From<AttachError>>(
                 if left.is_zero() {
                     return Err(e);
                 }
-                match node.wait(left.min(Duration::from_millis(20))) {
+                match node_wait(node, left.min(Duration::from_millis(20))) {
                     Ok(()) => {}
                     Err(NodeWaitFailure::Interrupt) if !handles_termination_requests() => {
                         return Err(AttachError::Interrupted {

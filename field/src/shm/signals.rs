@@ -17,6 +17,12 @@
 //! calls [`handle_termination_requests`] once, first thing in `main`: from then on every node
 //! this process creates handles termination requests (its `wait` fails on SIGINT/SIGTERM), the
 //! waits treat other interruptions as spurious wake-ups, and [`stop_requested`] reports Ctrl-C.
+//!
+//! iceoryx2 keeps one record of the last signal and every `Node::wait` that looks at it clears
+//! it: a wait whose error a caller ignores (a sleep) swallowed the request, and the loop's next
+//! check saw nothing (a field at 0.4 Hz then ran on after SIGINT). So a request, once seen by
+//! any of this module's functions, is latched for the life of the process, and the library
+//! waits on a node only through [`node_wait`] (clippy's `disallowed-methods` keeps it so).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
@@ -27,6 +33,9 @@ use iceoryx2::node::Node;
 use super::Svc;
 
 static PROCESS_HANDLES_TERMINATION: AtomicBool = AtomicBool::new(false);
+
+/// A termination request was seen (iceoryx2's record, read and cleared by a node's wait).
+static TERMINATION_SEEN: AtomicBool = AtomicBool::new(false);
 
 /// The program's stop flag ([`stop_when`]).
 static PROGRAM_STOP_FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
@@ -49,7 +58,27 @@ pub(crate) fn program_stop_flag_set() -> bool {
 /// Whether a loop on `node` should end now: a termination request (in a program that called
 /// [`handle_termination_requests`]) or the program's stop flag ([`stop_when`]). Waits nothing.
 pub fn should_stop(node: &Node<Svc>) -> bool {
-    node.wait(Duration::ZERO).is_err() || program_stop_flag_set()
+    node_wait(node, Duration::ZERO).is_err() || program_stop_flag_set()
+}
+
+/// `node.wait(d)` that loses no termination request: a request it reads is latched, and once
+/// one was seen every later call still sleeps its `d` (a caller that ignores the result to
+/// sleep never spins) and then reports `TerminationRequest`. `Interrupt`: another signal cut
+/// the sleep short (the request, if it was one, is seen by the next check).
+pub fn node_wait(node: &Node<Svc>, d: Duration) -> Result<(), iceoryx2::node::NodeWaitFailure> {
+    use iceoryx2::node::NodeWaitFailure;
+    #[allow(clippy::disallowed_methods)] // the one place that calls it
+    let waited = node.wait(d);
+    match waited {
+        Err(NodeWaitFailure::TerminationRequest) => {
+            TERMINATION_SEEN.store(true, Ordering::SeqCst);
+            waited
+        }
+        Ok(()) if TERMINATION_SEEN.load(Ordering::SeqCst) => {
+            Err(NodeWaitFailure::TerminationRequest)
+        }
+        _ => waited,
+    }
 }
 
 /// For a program's `main`, never for a library: from now on this process's nodes install
@@ -67,12 +96,18 @@ pub fn handles_termination_requests() -> bool {
 }
 
 /// Whether this process was asked to stop: SIGINT or SIGTERM in a process that called
-/// [`handle_termination_requests`] (reading it consumes iceoryx2's handler's record), or the
+/// [`handle_termination_requests`] (once seen, for the life of the process), or the
 /// program's stop flag ([`stop_when`]). Never asks iceoryx2's handler otherwise.
 pub fn stop_requested() -> bool {
-    program_stop_flag_set()
-        || (handles_termination_requests()
-            && iceoryx2_bb_posix::signal::SignalHandler::termination_requested())
+    if program_stop_flag_set() || TERMINATION_SEEN.load(Ordering::SeqCst) {
+        return true;
+    }
+    let seen = handles_termination_requests()
+        && iceoryx2_bb_posix::signal::SignalHandler::termination_requested();
+    if seen {
+        TERMINATION_SEEN.store(true, Ordering::SeqCst);
+    }
+    seen
 }
 
 /// The iceoryx2 signal handling of a node this process creates.

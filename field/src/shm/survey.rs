@@ -162,7 +162,7 @@ pub fn survey(node: &Node<Svc>, window: Duration) -> Result<Vec<FieldInfo>, ShmE
             .frame()
             .map(|f| (f.header.sequence, f.header.stamp_ns, Instant::now()));
     }
-    let _ = node.wait(window);
+    let _ = crate::shm::node_wait(node, window);
     let mut out = Vec::with_capacity(open.len());
     for (name, mut reader, watch, first) in open {
         reader.update()?;

@@ -39,7 +39,7 @@ pub(crate) fn test_plane(width: u32) -> Vec<f32> {
 
 /// Waits `period` on the node (returns early with an error on Ctrl-C).
 pub(crate) fn pause(node: &Node<Svc>, period: Duration) -> Result<(), BenchError> {
-    node.wait(period).map_err(|_| BenchError::Interrupted)
+    pheromone_field::shm::node_wait(node, period).map_err(|_| BenchError::Interrupted)
 }
 
 /// What the readers of one frame-delivery measurement recorded.

@@ -267,7 +267,7 @@ fn wait_for(
                 "mirror bench: {what} within {timeout:?}"
             )));
         }
-        node.wait(Duration::from_millis(10))
+        pheromone_field::shm::node_wait(node, Duration::from_millis(10))
             .map_err(|_| BenchError::Interrupted)?;
     }
 }
@@ -496,8 +496,7 @@ impl Rig<'_> {
             next += interval;
             let now = Instant::now();
             if next > now {
-                self.node
-                    .wait(next - now)
+                pheromone_field::shm::node_wait(self.node, next - now)
                     .map_err(|_| BenchError::Interrupted)?;
             }
             self.bridge.check()?;

@@ -132,7 +132,7 @@ fn wait_until(
                 "ros2 bench: {what} within {timeout:?}"
             )));
         }
-        node.wait(Duration::from_millis(10))
+        pheromone_field::shm::node_wait(node, Duration::from_millis(10))
             .map_err(|_| BenchError::Interrupted)?;
     }
     Ok(())
@@ -239,7 +239,7 @@ fn measure_node(
             || Ok(sub.tokens_seen.load(Ordering::Relaxed)),
         )?;
         let (cpu0, started) = (thread_cpu_ns(pid)?, Instant::now());
-        node.wait(run.idle).map_err(|_| BenchError::Interrupted)?;
+        pheromone_field::shm::node_wait(node, run.idle).map_err(|_| BenchError::Interrupted)?;
         let idle_cpu_s = cpu_since(&cpu0, &thread_cpu_ns(pid)?);
         let idle_s = started.elapsed().as_secs_f64();
         sub.subscribe()?;
@@ -293,7 +293,7 @@ fn cpu_window(
     })?;
     let (m0, b0, _) = sub.totals(prefix);
     let (cpu0, started) = (thread_cpu_ns(pid)?, Instant::now());
-    node.wait(run.window).map_err(|_| BenchError::Interrupted)?;
+    pheromone_field::shm::node_wait(node, run.window).map_err(|_| BenchError::Interrupted)?;
     let (m1, b1, keys) = sub.totals(prefix);
     let cpu_s = cpu_since(&cpu0, &thread_cpu_ns(pid)?);
     let window_s = started.elapsed().as_secs_f64();
@@ -359,7 +359,7 @@ pub fn plain_publisher(connect: &str, topic_bytes: &[u64], rate_hz: f64) -> Resu
         } else {
             now + period
         };
-        if node.wait(next - now).is_err() {
+        if pheromone_field::shm::node_wait(&node, next - now).is_err() {
             break;
         }
     }

@@ -203,7 +203,7 @@ fn deposits_to_visible(
         }
         // Deposits land at every phase of the tick: spread them over the period.
         let phase = period.mul_f64(((i * 37) % 100) as f64 / 100.0);
-        node.wait(phase).map_err(|_| BenchError::Interrupted)?;
+        pheromone_field::shm::node_wait(node, phase).map_err(|_| BenchError::Interrupted)?;
         reader.update()?;
         let before = reader
             .frame()
@@ -315,7 +315,8 @@ fn cpu_at_rate(
         next += interval;
         let now = Instant::now();
         if next > now {
-            node.wait(next - now).map_err(|_| BenchError::Interrupted)?;
+            pheromone_field::shm::node_wait(node, next - now)
+                .map_err(|_| BenchError::Interrupted)?;
         }
     }
     let elapsed_s = started.elapsed().as_secs_f64();
@@ -375,7 +376,7 @@ pub fn field(name: &str, width: u32, tick_hz: f32, wall: WallField) -> Result<()
         if next < now {
             next = now;
         }
-        if node.wait(next - now).is_err() {
+        if pheromone_field::shm::node_wait(&node, next - now).is_err() {
             break;
         }
         server.tick()?;

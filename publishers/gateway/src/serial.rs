@@ -172,7 +172,7 @@ pub fn serve(
             Ok(0) => {
                 // End of file (a hung-up line): nothing to read; wait on the node (which also
                 // sees Ctrl-C) rather than spin.
-                if node.wait(RECEIVE_SLICE).is_err() {
+                if pheromone_field::shm::node_wait(node, RECEIVE_SLICE).is_err() {
                     break;
                 }
                 continue;

@@ -130,7 +130,7 @@ pub fn follow(
             Some(frame) => println!("{}", probe_line(&frame, p)),
             None => eprintln!("field '{field}': no frame yet"),
         }
-        if node.wait(period).is_err() {
+        if pheromone_field::shm::node_wait(node, period).is_err() {
             return Ok(());
         }
     }

@@ -397,10 +397,11 @@ impl<'a> WorldRun<'a> {
     fn realtime_commands(&mut self, k: u64) -> Result<bool, ProcessError> {
         self.conductor.tick(k, self.world.sim_time_s(), self.dt)?;
         self.next_wall += Duration::from_secs_f64(self.dt);
-        if self
-            .node
-            .wait(self.next_wall.saturating_duration_since(Instant::now()))
-            .is_err()
+        if pheromone_field::shm::node_wait(
+            self.node,
+            self.next_wall.saturating_duration_since(Instant::now()),
+        )
+        .is_err()
         {
             return Ok(true);
         }

@@ -345,6 +345,6 @@ fn wait_serving_readers(
 /// Waits on the node until `until` (a termination request ends it early; the caller's next
 /// check sees it).
 fn continue_until(node: &Node<Svc>, until: Instant) {
-    // Interrupted or not, the caller's next `node.wait(ZERO)` sees a termination request.
-    let _ = node.wait(until.saturating_duration_since(Instant::now()));
+    // Interrupted or not, the caller's next `should_stop` sees a termination request (latched).
+    let _ = crate::shm::node_wait(node, until.saturating_duration_since(Instant::now()));
 }
