@@ -28,6 +28,10 @@ fn a_request_read_by_a_sleep_that_ignores_it_still_stops_every_later_check() {
     // Later waits still sleep (a loop that ignores them never spins) and report the request.
     let start = Instant::now();
     assert!(node_wait(&node, Duration::from_millis(20)).is_err());
-    assert!(start.elapsed() >= Duration::from_millis(20), "{:?}", start.elapsed());
+    assert!(
+        start.elapsed() >= Duration::from_millis(20),
+        "{:?}",
+        start.elapsed()
+    );
     assert!(should_stop(&node));
 }
