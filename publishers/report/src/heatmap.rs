@@ -344,6 +344,9 @@ fn draw_mark_label(
     px: &impl Fn(f64, f64) -> Option<(i32, i32)>,
     placed: &mut Vec<[i32; 4]>,
 ) -> Result<(), String> {
+    if m.label.is_empty() && !matches!(m.shape, Shape::Point { .. }) {
+        return Ok(()); // an outline with no label (the leader's σ circles but the last)
+    }
     let (tw, th) = (FONT, 15).into_font().box_size(&m.label).map_err(msg)?;
     let (tw, th) = (tw as i32, th as i32);
     let (fw, fh) = (layout.field_w_px() as i32, layout.field_h_px() as i32);

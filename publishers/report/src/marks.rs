@@ -4,13 +4,13 @@
 //! where the follower gave the trail up. `wrong_area` (Figs. 1 and 24): area A (an outlined
 //! rectangle), location B (a circle of the radius within which a robot has reached it) and, in
 //! each follower's colour, a cross where it gave the trail up and explored on its own; in the
-//! leader's, a cross where its deposit first fell below the follower's threshold (Fig. 23). The
-//! crosses come from the metrics computed on the run, so they are in the pictures from their
-//! time on.
+//! leader's, a cross where its deposit first fell below the follower's threshold (Fig. 23) and
+//! a circle of radius σ at its estimate at each of L1–L15 (Fig. 22). The crosses and circles
+//! come from the metrics computed on the run, so they are in the pictures from their time on.
 
 use super::style::{robot_rgb, Rgb};
 use pheromone_sim::recording::{Recording, RobotSample};
-use pheromone_sim::wrong_area::wrong_area;
+use pheromone_sim::wrong_area::{wrong_area, Checkpoint};
 use pheromone_world::scenario::Scenario;
 
 /// Outline of area A (`wrong_area`): magenta, apart from the robots' colours, the walls' grey
@@ -69,6 +69,34 @@ fn leader_lost(scenario: &Scenario, rec: &Recording, leader: u32) -> Option<Mark
     Some(event(leader, "lost at", at, t))
 }
 
+/// Seed 000 Fig. 22: the leader's uncertainty along its path, a circle of radius σ (√ of its
+/// Σxy's largest eigenvalue: the 1σ ellipse's major semi-axis) at its estimate at each of
+/// L1–L15, each from its time on; the last one labelled.
+fn sigma_circles(leader: u32, checkpoints: &[Checkpoint]) -> Vec<Mark> {
+    let n = checkpoints.len();
+    checkpoints
+        .iter()
+        .enumerate()
+        .filter_map(|(k, c)| {
+            let (at, sigma) = (c.estimate_m?, c.sigma_m?);
+            let label = if k + 1 == n {
+                format!("R{leader} σ at L1–L{n} (estimate)")
+            } else {
+                String::new()
+            };
+            Some(Mark {
+                shape: Shape::Circle {
+                    centre_m: at,
+                    radius_m: sigma,
+                },
+                label,
+                rgb: robot_rgb(leader),
+                from_s: c.t_s,
+            })
+        })
+        .collect()
+}
+
 /// The marks the scenario's metrics call for, in drawing order (none if they name no place).
 pub fn marks(scenario: &Scenario, rec: &Recording) -> Vec<Mark> {
     let mut out = Vec::new();
@@ -107,6 +135,7 @@ pub fn marks(scenario: &Scenario, rec: &Recording) -> Vec<Mark> {
             let what = format!("deposit < {} at", c.threshold);
             out.push(event(m.leader, &what, c.true_m, c.t_s));
         }
+        out.extend(sigma_circles(m.leader, &outcome.checkpoints));
         for f in outcome.followers {
             if let (Some(t), Some(at_m)) = (f.exploring_from_s, f.exploring_from_m) {
                 out.push(event(f.id, "explores from", at_m, t));

@@ -245,6 +245,63 @@ fn wrong_area_marks_a_b_and_where_a_follower_explored() {
     }
 }
 
+/// Issue 48 part 5 (seed 000 Fig. 22): wrong-area's pictures draw the leader's σ as a circle
+/// of that radius at its estimate at each of L1–L15, each from its checkpoint's time on, in its
+/// colour; only the last is labelled.
+#[test]
+fn wrong_area_draws_the_leaders_sigma_circles_along_its_path() {
+    let s = Scenario::load("wrong-area").unwrap();
+    let layout = Layout::for_grid(s.field.width, s.field.height, s.field.cell_size_m);
+    // The leader drives along y = 1.5 m from x = 3.5 to 25.5 m, its estimate on its true path,
+    // its σ growing from 0.1 to 2 m.
+    let n = 221;
+    let rows: Vec<RobotSample> = (0..n)
+        .map(|k| {
+            let f = k as f64 / (n - 1) as f64;
+            let mut r = super::super::tests::sample(0.2 * k as f64, 3.5 + 0.1 * k as f64, 1.5);
+            r.est_pose = Some(r.true_pose);
+            r.est_sigma_m = Some(0.1 + 1.9 * f * f);
+            r
+        })
+        .collect();
+    let mut rec = blank_run(&s, 80.0);
+    rec.robots.insert(0, rows);
+    let all = marks(&s, &rec);
+    let circles: Vec<&Mark> = all
+        .iter()
+        .filter(|m| m.rgb == ROBOT_RGB[0] && matches!(m.shape, Shape::Circle { .. }))
+        .collect();
+    assert_eq!(circles.len(), 15, "{all:?}");
+    let labelled: Vec<&str> = circles.iter().map(|m| m.label.as_str()).collect();
+    assert_eq!(labelled[14], "R0 σ at L1–L15 (estimate)");
+    assert!(labelled[..14].iter().all(|l| l.is_empty()), "{labelled:?}");
+    // A point of each ring: σ above L8's estimate, and L15's at 150° (B's label, above B,
+    // hides its top).
+    let on_circle = |m: &Mark, deg: f64| match m.shape {
+        Shape::Circle { centre_m, radius_m } => (
+            centre_m[0] + radius_m * deg.to_radians().cos(),
+            centre_m[1] + radius_m * deg.to_radians().sin(),
+            radius_m,
+        ),
+        _ => unreachable!(),
+    };
+    let (x8, y8, r8) = on_circle(circles[7], 90.0);
+    let (x15, y15, r15) = on_circle(circles[14], 150.0);
+    assert!((r8 - (0.1 + 1.9 * 0.25)).abs() < 0.05 && (r15 - 2.0).abs() < 1e-9);
+    // The ring (3 px in the leader's colour over a 5 px dark edge) passes within 2 px.
+    let on_ring = |pic: &Picture, x_m: f64, y_m: f64| {
+        let (x, y) = layout.pixel_from_world(x_m, y_m);
+        let (x, y) = (x.round() as usize, y.round() as usize);
+        (y - 2..=y + 2).any(|y| (x - 2..=x + 2).any(|x| pic.get(x, y) == ROBOT_RGB[0]))
+    };
+    let pic = draw_first(&rec, &all).unwrap();
+    assert!(on_ring(&pic, x8, y8) && on_ring(&pic, x15, y15));
+    // At L7's time (the robot, its "R0" label with it, 1.6 m short of L8) neither is drawn.
+    rec.snapshots[0].t_s = circles[6].from_s;
+    let early = draw_first(&rec, &all).unwrap();
+    assert!(!on_ring(&early, x8, y8) && !on_ring(&early, x15, y15));
+}
+
 /// Issue 51: blind-leader's pictures mark where the leader (R0) got lost, at its true position
 /// at the scripted loss (25 s), labelled with its world x and the time, and where the follower
 /// (R1) gave the trail up; each from its time on, the two labels apart.
