@@ -19,7 +19,7 @@ use pheromone_sim::metrics::{
     blind_leader, distance_to_polyline_m, mean_path_error_m, BlindLeader,
 };
 use pheromone_sim::recording::Recording;
-use pheromone_sim::wrong_area::checkpoints;
+use pheromone_sim::wrong_area::{checkpoints, deposit_below_threshold, ThresholdCrossing};
 use pheromone_world::scenario::{BlindLeaderMetric, ExplorationMetric, Scenario};
 
 /// The closed form a probe's readings are compared with: the level `p0` read at `t0_s`,
@@ -242,6 +242,9 @@ pub struct LeaderDeposits {
     /// The follower's trail threshold (`gradient.abandon_below`, seed 000's 10) when it follows
     /// by gradient: the level below which it rejects a trail.
     pub threshold: Option<f64>,
+    /// The leader's first deposit below `threshold`, found as `metrics.wrong_area`'s
+    /// `deposit_below_threshold` is (the same function on the same rows).
+    pub below_threshold: Option<ThresholdCrossing>,
     /// Seed 000 Fig. 23's stated deposits ([`PAPER_FIG23`]) placed at this run's checkpoints of
     /// the same label: (distance along the path (m), value); empty without a `wrong_area` metric.
     pub paper: Vec<(f64, f64)>,
@@ -254,11 +257,7 @@ impl LeaderDeposits {
     /// The first deposit whose peak fell below the follower's threshold: (distance along the
     /// leader's path (m), t_s).
     pub fn below_threshold_at(&self) -> Option<(f64, f64)> {
-        let t = self.threshold?;
-        self.deposits
-            .iter()
-            .find(|p| f64::from(p.1) < t)
-            .map(|p| (p.0, p.2))
+        self.below_threshold.as_ref().map(|c| (c.along_m, c.t_s))
     }
 }
 
@@ -299,11 +298,15 @@ pub fn leader_deposits(
         }
         _ => Vec::new(),
     };
+    let below_threshold = threshold
+        .zip(rec.robots.get(&m.leader))
+        .and_then(|(t, rows)| deposit_below_threshold(rows, t));
     LeaderDeposits {
         leader: m.leader,
         deposits,
         metric: blind_leader(scenario, m, rec),
         threshold,
+        below_threshold,
         paper,
     }
 }

@@ -373,9 +373,24 @@ fn the_leader_deposits_chart_marks_where_the_deposit_fell_below_the_followers_th
     assert_eq!(d.paper.len(), 2);
     assert!((d.paper[0].0 - at(11.0)).abs() <= 1.0 && d.paper[0].1 == 11.35);
     assert!((d.paper[1].0 - at(12.0)).abs() <= 1.0 && d.paper[1].1 == 8.15);
-    let mut none = d.clone();
-    none.threshold = None;
-    assert_eq!(none.below_threshold_at(), None);
+    // The same crossing as metrics.wrong_area gives for the run (its first follower is this one).
+    let w = pheromone_sim::wrong_area::wrong_area(
+        &scenario,
+        scenario.metrics.wrong_area.as_ref().unwrap(),
+        &rec,
+    );
+    let c = w.deposit_below_threshold.expect("the metric's crossing");
+    assert_eq!(d.below_threshold_at(), Some((c.along_m, c.t_s)));
+    // A follower that does not follow by gradient has no threshold, and so no crossing.
+    let mut other = scenario.clone();
+    let f = other
+        .robots
+        .iter_mut()
+        .find(|r| r.id == m.follower)
+        .unwrap();
+    f.follower.as_mut().unwrap().strategy = pheromone_roles::follower::StrategyKind::Inverse;
+    let none = series::leader_deposits(&other, &m, &rec);
+    assert_eq!((none.threshold, none.below_threshold_at()), (None, None));
 }
 
 /// Issue 48: the field picture of `wrong-area` marks where the leader's deposit first
