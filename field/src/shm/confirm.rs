@@ -356,6 +356,9 @@ fn wait_receipt(
     timeout: Duration,
 ) -> Result<Receipt, SendError> {
     let deadline = Instant::now() + timeout;
+    // Only a request made while it waits cuts it short: a flush on drop after the loop ended on
+    // Ctrl-C still waits for the field.
+    let mark = super::signals::stop_mark();
     loop {
         if let Some(r) = pending
             .receive()
@@ -371,7 +374,7 @@ fn wait_receipt(
             });
         }
         let left = deadline.saturating_duration_since(Instant::now());
-        if left.is_zero() || super::stop_requested() {
+        if left.is_zero() || super::signals::stopped_since(mark) {
             return Err(SendError::Unconfirmed {
                 service: service.to_string(),
                 timeout_s: timeout.as_secs_f64(),

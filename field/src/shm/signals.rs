@@ -24,7 +24,7 @@
 //! any of this module's functions, is latched for the life of the process, and the library
 //! waits on a node only through [`node_wait`] (clippy's `disallowed-methods` keeps it so).
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
@@ -34,8 +34,13 @@ use super::Svc;
 
 static PROCESS_HANDLES_TERMINATION: AtomicBool = AtomicBool::new(false);
 
-/// A termination request was seen (iceoryx2's record, read and cleared by a node's wait).
-static TERMINATION_SEEN: AtomicBool = AtomicBool::new(false);
+/// How many termination requests this process has seen (iceoryx2's record, read and cleared by
+/// a node's wait or by [`stop_requested`]); more than 0: latched.
+static TERMINATIONS: AtomicU64 = AtomicU64::new(0);
+
+fn termination_seen() -> bool {
+    TERMINATIONS.load(Ordering::SeqCst) > 0
+}
 
 /// The program's stop flag ([`stop_when`]).
 static PROGRAM_STOP_FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
@@ -71,12 +76,10 @@ pub fn node_wait(node: &Node<Svc>, d: Duration) -> Result<(), iceoryx2::node::No
     let waited = node.wait(d);
     match waited {
         Err(NodeWaitFailure::TerminationRequest) => {
-            TERMINATION_SEEN.store(true, Ordering::SeqCst);
+            TERMINATIONS.fetch_add(1, Ordering::SeqCst);
             waited
         }
-        Ok(()) if TERMINATION_SEEN.load(Ordering::SeqCst) => {
-            Err(NodeWaitFailure::TerminationRequest)
-        }
+        Ok(()) if termination_seen() => Err(NodeWaitFailure::TerminationRequest),
         _ => waited,
     }
 }
@@ -99,15 +102,39 @@ pub fn handles_termination_requests() -> bool {
 /// [`handle_termination_requests`] (once seen, for the life of the process), or the
 /// program's stop flag ([`stop_when`]). Never asks iceoryx2's handler otherwise.
 pub fn stop_requested() -> bool {
-    if program_stop_flag_set() || TERMINATION_SEEN.load(Ordering::SeqCst) {
+    if program_stop_flag_set() || termination_seen() {
         return true;
     }
     let seen = handles_termination_requests()
         && iceoryx2_bb_posix::signal::SignalHandler::termination_requested();
     if seen {
-        TERMINATION_SEEN.store(true, Ordering::SeqCst);
+        TERMINATIONS.fetch_add(1, Ordering::SeqCst);
     }
     seen
+}
+
+/// Where the stop requests stood when a wait began ([`stop_mark`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct StopMark {
+    terminations: u64,
+    flag: bool,
+}
+
+/// The stop requests seen so far, for a wait that only a request made during it may cut
+/// short ([`stopped_since`]): a publisher's flush when it is dropped, after its loop ended on
+/// the request, still waits for the field (a second Ctrl-C cuts it).
+pub(crate) fn stop_mark() -> StopMark {
+    StopMark {
+        terminations: TERMINATIONS.load(Ordering::SeqCst),
+        flag: program_stop_flag_set(),
+    }
+}
+
+/// Whether a stop was requested after `mark`: a termination request not yet seen then (a
+/// record not read yet counts), or the program's flag set since.
+pub(crate) fn stopped_since(mark: StopMark) -> bool {
+    (program_stop_flag_set() && !mark.flag)
+        || (stop_requested() && TERMINATIONS.load(Ordering::SeqCst) > mark.terminations)
 }
 
 /// The iceoryx2 signal handling of a node this process creates.
