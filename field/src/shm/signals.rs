@@ -22,7 +22,9 @@
 //! it: a wait whose error a caller ignores (a sleep) swallowed the request, and the loop's next
 //! check saw nothing (a field at 0.4 Hz then ran on after SIGINT). So a request, once seen by
 //! any of this module's functions, is latched for the life of the process, and the library
-//! waits on a node only through [`node_wait`] (clippy's `disallowed-methods` keeps it so).
+//! waits on a node only through [`node_wait`] (clippy's `disallowed-methods` keeps it so). A
+//! wait that belongs to an orderly end (a publisher's flush when dropped, after its loop ended
+//! on the request) is cut only by a request made while it waits (`stop_mark`).
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
