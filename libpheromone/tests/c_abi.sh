@@ -22,6 +22,10 @@
 # binary; default target/debug/pheromone, built if missing).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
+# Hermetic against the caller's shell (issue 51): the tests name their domains themselves (the
+# default one, `capi-other-domain`); a PHEROMONE_IOX_DOMAIN from the shell would move every field
+# and handle into it.
+unset PHEROMONE_IOX_DOMAIN
 
 for tool in cc c++ cmake pkg-config valgrind python3 readelf; do
     command -v "$tool" >/dev/null || { echo "c_abi.sh: '$tool' is missing (.ci/run installs it)" >&2; exit 1; }

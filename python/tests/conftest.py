@@ -21,6 +21,11 @@ BIN = Path(os.environ.get("PHEROMONE_BIN", REPO / "target" / "debug" / "pheromon
 if not BIN.is_absolute():
     BIN = REPO / BIN
 
+# Hermetic against the caller's shell (issue 51): a `PHEROMONE_IOX_DOMAIN` set there would put
+# the spawned fields and this process's clients in that domain, with other /dev/shm names and
+# node directories than the tests look for. The tests of domains set it themselves.
+os.environ.pop("PHEROMONE_IOX_DOMAIN", None)
+
 #: Unique to this pytest run: every field name starts with it.
 RUN = f"pyt{os.getpid()}{uuid.uuid4().hex[:6]}"
 
