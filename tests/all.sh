@@ -71,6 +71,11 @@ echo "== python: pytest python/tests"
 echo "== libpheromone: C and C++ (libpheromone/tests/c_abi.sh)"
 bash libpheromone/tests/c_abi.sh
 
+# The release tarball's recipe, used as without a compiler (issue 51): packed from the tests'
+# binary, unpacked, a sim from an empty directory, a C program through pkg-config.
+echo "== release tarball (packaging/test_tarball.sh)"
+bash packaging/test_tarball.sh
+
 # A sweep spread by a real scheduler (issue 52): a one-node Slurm (Debian's slurm-wlm, munge) on
 # private ports, an array of 4 shards and the dependent merge, equal to the unsharded sweep.
 echo "== sweep under Slurm (tests/slurm/slurm_sweep.sh)"
