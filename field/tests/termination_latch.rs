@@ -10,7 +10,8 @@ use std::time::{Duration, Instant};
 
 use nix::sys::signal::{raise, Signal};
 use pheromone_field::shm::{
-    create_node, handle_termination_requests, node_wait, should_stop, stop_requested,
+    create_node, handle_termination_requests, node_wait, should_stop, stop_mark, stop_requested,
+    stopped_since,
 };
 use pheromone_testkit::unique;
 
@@ -34,4 +35,16 @@ fn a_request_read_by_a_sleep_that_ignores_it_still_stops_every_later_check() {
         start.elapsed()
     );
     assert!(should_stop(&node));
+    // A wait of the orderly end (a publisher's flush on drop) is cut only by a request made
+    // while it waits: not by the latched one, by a second Ctrl-C.
+    let mark = stop_mark();
+    assert!(
+        !stopped_since(mark),
+        "the latched request cut the end's wait"
+    );
+    raise(Signal::SIGTERM).unwrap();
+    assert!(
+        stopped_since(mark),
+        "a second request did not cut the end's wait"
+    );
 }

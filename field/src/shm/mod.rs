@@ -85,8 +85,8 @@ pub use reader::{
 };
 pub use server::{FieldServer, TickOutcome};
 pub use signals::{
-    handle_termination_requests, handles_termination_requests, node_wait, should_stop,
-    stop_requested, stop_when,
+    handle_termination_requests, handles_termination_requests, node_wait, should_stop, stop_mark,
+    stop_requested, stop_when, stopped_since, StopMark,
 };
 pub use standby::{Standby, StandbyEvent, Takeover};
 pub use survey::{field_names, survey, FieldInfo};

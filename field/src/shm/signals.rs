@@ -24,7 +24,7 @@
 //! any of this module's functions, is latched for the life of the process, and the library
 //! waits on a node only through [`node_wait`] (clippy's `disallowed-methods` keeps it so). A
 //! wait that belongs to an orderly end (a publisher's flush when dropped, after its loop ended
-//! on the request) is cut only by a request made while it waits (`stop_mark`).
+//! on the request) is cut only by a request made while it waits ([`stop_mark`]).
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
@@ -104,9 +104,12 @@ pub fn handles_termination_requests() -> bool {
 /// [`handle_termination_requests`] (once seen, for the life of the process), or the
 /// program's stop flag ([`stop_when`]). Never asks iceoryx2's handler otherwise.
 pub fn stop_requested() -> bool {
-    if program_stop_flag_set() || termination_seen() {
-        return true;
-    }
+    program_stop_flag_set() || termination_seen() || read_termination_record()
+}
+
+/// Reads (and clears) iceoryx2's record of a termination request, in a process that asked for
+/// its handling, counting one it finds; whether it found one.
+fn read_termination_record() -> bool {
     let seen = handles_termination_requests()
         && iceoryx2_bb_posix::signal::SignalHandler::termination_requested();
     if seen {
@@ -117,15 +120,16 @@ pub fn stop_requested() -> bool {
 
 /// Where the stop requests stood when a wait began ([`stop_mark`]).
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct StopMark {
+pub struct StopMark {
     terminations: u64,
     flag: bool,
 }
 
 /// The stop requests seen so far, for a wait that only a request made during it may cut
 /// short ([`stopped_since`]): a publisher's flush when it is dropped, after its loop ended on
-/// the request, still waits for the field (a second Ctrl-C cuts it).
-pub(crate) fn stop_mark() -> StopMark {
+/// the request, still waits for the field (a second Ctrl-C cuts it). For a program's own wait
+/// at its end, too.
+pub fn stop_mark() -> StopMark {
     StopMark {
         terminations: TERMINATIONS.load(Ordering::SeqCst),
         flag: program_stop_flag_set(),
@@ -134,9 +138,10 @@ pub(crate) fn stop_mark() -> StopMark {
 
 /// Whether a stop was requested after `mark`: a termination request not yet seen then (a
 /// record not read yet counts), or the program's flag set since.
-pub(crate) fn stopped_since(mark: StopMark) -> bool {
+pub fn stopped_since(mark: StopMark) -> bool {
+    read_termination_record();
     (program_stop_flag_set() && !mark.flag)
-        || (stop_requested() && TERMINATIONS.load(Ordering::SeqCst) > mark.terminations)
+        || TERMINATIONS.load(Ordering::SeqCst) > mark.terminations
 }
 
 /// The iceoryx2 signal handling of a node this process creates.
