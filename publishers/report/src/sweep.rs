@@ -657,6 +657,11 @@ mod tests {
                 });
             }
         }
+        sweep_of(runs)
+    }
+
+    /// The sweep result of `runs` (ias-ss, 10 s, 2 seeds, the known figure).
+    fn sweep_of(runs: Vec<RunResult>) -> SweepResult {
         let pts = points(&runs);
         SweepResult {
             scenario: "ias-ss".into(),
@@ -730,19 +735,7 @@ mod tests {
             run(4, false, 1, 0.5),
             run(4, false, 2, 0.6),
         ];
-        let pts = points(&runs);
-        let r = SweepResult {
-            scenario: "ias-ss".into(),
-            duration_s: 10.0,
-            trials: 2,
-            sectors: 24,
-            jobs: 2,
-            figure: Figure::Known,
-            wall_s: 1.0,
-            comparisons: comparisons(&runs, &pts, Figure::Known),
-            points: pts,
-            runs,
-        };
+        let r = sweep_of(runs);
         assert_eq!(r.points.len(), 4);
         assert!((r.points[0].known_mean.mean - 0.55).abs() < 1e-12);
         // 4 robots: on 0.95 ± 0.0707, off 0.55 ± 0.0707: Welch t = 0.4 / 0.0707 = 5.657, df 2.
